@@ -1,0 +1,52 @@
+"""Architecture boundaries and the command line's contract (SPEC §2)."""
+
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from training.cli import COMMANDS
+
+ROOT = Path(__file__).resolve().parents[1]
+SPEC_COMMANDS = ["simulate-layers", "simulate", "lut", "dataset", "fit", "train", "export", "validate", "report", "bench"]
+
+
+def run(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, *args], cwd=ROOT, capture_output=True, text=True, timeout=120)
+
+
+def test_exporters_import_without_torch_or_bpy():
+    code = (
+        "import sys; sys.modules['torch'] = None; sys.modules['bpy'] = None; import exporters, pkgutil, importlib\n"
+        "for m in pkgutil.iter_modules(exporters.__path__): importlib.import_module('exporters.' + m.name)\n"
+        "assert 'torch' not in [k for k, v in sys.modules.items() if v is not None]"
+    )
+    result = run("-c", code)
+    assert result.returncode == 0, result.stderr
+
+
+def test_help_lists_every_spec_command():
+    result = run("-m", "training", "--help")
+    assert result.returncode == 0
+    for name in SPEC_COMMANDS:
+        assert f"  {name} " in result.stdout, name
+
+
+def test_unbuilt_commands_say_so_and_exit_2():
+    unbuilt = [name for name, (module, _) in COMMANDS.items() if module is None]
+    for name in unbuilt:
+        result = run("-m", "training", name)
+        assert result.returncode == 2 and "not implemented yet" in result.stderr, name
+
+
+def test_unknown_command_exits_2():
+    result = run("-m", "training", "no-such-command")
+    assert result.returncode == 2 and "unknown command" in result.stderr
+
+
+@pytest.mark.parametrize("name", [n for n, (m, _) in COMMANDS.items() if m is not None])
+def test_built_commands_have_help(name):
+    result = run("-m", "training", name, "--help")
+    assert result.returncode == 0, result.stderr
+    assert "usage:" in result.stdout
