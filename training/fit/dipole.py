@@ -1,0 +1,79 @@
+"""Classical diffusion-dipole tables: an analytic, physically shaped stand-in for the MC lookup tables.
+
+ONLY A TEST / REFERENCE TABLE.  The fits of the project use the Monte Carlo LUT of
+``python -m training lut``.  This module exists so that the interpolation and fitting code can be
+tested against a table whose every value is known in closed form and which has the right physical
+shape (a peak of width ~1 mfp, an exponential tail whose length grows as albedo -> 1).
+
+Formulas (sigma_t = 1, so mu_a = 1 - alpha, mu_s = alpha, lengths in mfp):
+
+* reduced coefficients mu_s' = alpha (1 - g), sigma_t' = mu_a + mu_s', alpha' = mu_s' / sigma_t';
+* sigma_tr = sqrt(3 mu_a sigma_t'), z_r = 1 / sigma_t', z_v = z_r (1 + 4 A / 3), with the internal
+  reflection parameter A = (1 + F_dr) / (1 - F_dr) and Egan & Hilgeman's
+  F_dr = -1.440 / n^2 + 0.710 / n + 0.668 + 0.0636 n (Jensen et al. 2001, SIGGRAPH, eq. 5-6);
+* R_d(r) = alpha' / (4 pi) * sum_{j in {r, v}} z_j (sigma_tr d_j + 1) exp(-sigma_tr d_j) / d_j^3,
+  d_j = sqrt(r^2 + z_j^2) (Farrell, Patterson & Wilson 1992; Jensen et al. 2001 eq. 4);
+* total R = alpha' / 2 (1 + exp(-4/3 A sqrt(3 (1 - alpha')))) exp(-sqrt(3 (1 - alpha'))) (Jensen
+  et al. 2001, eq. 8).
+
+The table's P is R_d(r) at the bin centres (``bin_centres``), renormalised so that sum P * area = 1
+over the tabulated radii, as the SPEC requires of the MC table.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from exporters.constants import N_TISSUE, radial_edges
+from training.sim.lut_interp import bin_centres
+
+
+def fresnel_a(n: float = N_TISSUE) -> float:
+    """Internal reflection parameter A of the dipole boundary condition (Jensen et al. 2001)."""
+    f_dr = -1.440 / n**2 + 0.710 / n + 0.668 + 0.0636 * n
+    return (1.0 + f_dr) / (1.0 - f_dr)
+
+
+def dipole_profile_shape(
+    r_mfp: np.ndarray, alpha: np.ndarray, g: np.ndarray, n: float = N_TISSUE
+) -> np.ndarray:
+    """Dipole R_d(r) / alpha' at sigma_t = 1 (mfp^-2); ``alpha``, ``g`` broadcast against ``r_mfp``."""
+    mu_a = 1.0 - alpha
+    sig_tp = mu_a + alpha * (1.0 - g)
+    sig_tr = np.sqrt(3.0 * mu_a * sig_tp)
+    z_r = 1.0 / sig_tp
+    z_v = z_r * (1.0 + 4.0 * fresnel_a(n) / 3.0)
+    out = np.zeros(np.broadcast(r_mfp, alpha, g).shape)
+    for z in (z_r, z_v):
+        d = np.sqrt(r_mfp**2 + z**2)
+        out = out + z * (sig_tr * d + 1.0) * np.exp(-sig_tr * d) / d**3
+    return out / (4.0 * np.pi)
+
+
+def dipole_reflectance(alpha: np.ndarray, g: np.ndarray, n: float = N_TISSUE) -> np.ndarray:
+    """Dipole total diffuse reflectance (dimensionless) of a semi-infinite medium."""
+    alpha_p = alpha * (1.0 - g) / (1.0 - alpha * g)
+    s = np.sqrt(3.0 * (1.0 - alpha_p))
+    return 0.5 * alpha_p * (1.0 + np.exp(-4.0 / 3.0 * fresnel_a(n) * s)) * np.exp(-s)
+
+
+def dipole_lut(
+    albedo: np.ndarray | None = None, g: np.ndarray | None = None, r_edges_mfp: np.ndarray | None = None
+) -> dict[str, np.ndarray]:
+    """A LUT dict with the SPEC §2 keys, filled from the dipole (test/reference table only).
+
+    Defaults: 41 albedos denser near 1 (0, then 1 - geomspace(1 - 0.05, 1e-4)... and 1), 12 g values in
+    [-0.9, 0.95], the SPEC radial edges (513) read in mfp.
+    """
+    if albedo is None:
+        albedo = np.concatenate([[0.0], 1.0 - np.geomspace(0.95, 1e-4, 39), [1.0]])
+    if g is None:
+        g = np.linspace(-0.9, 0.95, 12)
+    if r_edges_mfp is None:
+        r_edges_mfp = radial_edges()
+    a, gg = np.meshgrid(albedo, g, indexing="ij")
+    c = bin_centres(r_edges_mfp)
+    shape = dipole_profile_shape(c[None, None, :], a[..., None], gg[..., None])
+    area = np.pi * np.diff(r_edges_mfp**2)
+    P = shape / (shape * area).sum(-1, keepdims=True)
+    return {"albedo": albedo, "g": g, "r_edges_mfp": r_edges_mfp, "R": dipole_reflectance(a, gg), "P": P}
