@@ -17,7 +17,7 @@ NaN or Inf input instead of returning NaN.
 
 from __future__ import annotations
 
-from functools import lru_cache
+from functools import cache
 from typing import Literal
 
 import numpy as np
@@ -47,7 +47,7 @@ def _check_illuminant(illuminant: str) -> None:
         raise ValueError(f"unknown illuminant {illuminant!r}; use one of {ILLUMINANTS}.")
 
 
-@lru_cache(maxsize=None)
+@cache
 def illuminant_spd(illuminant: Illuminant) -> np.ndarray:
     """Relative spectral power of ``illuminant`` on the visible part of the grid, shape (236,)."""
     _check_illuminant(illuminant)
@@ -66,7 +66,7 @@ def illuminant_spd(illuminant: Illuminant) -> np.ndarray:
     return np.interp(wl, sd.wavelengths, sd.values)
 
 
-@lru_cache(maxsize=None)
+@cache
 def xyz_weights(illuminant: Illuminant) -> np.ndarray:
     """Weights W (3, 376) such that ``XYZ = W @ R`` for a reflectance spectrum R on the full grid.
 
@@ -85,14 +85,14 @@ def xyz_weights(illuminant: Illuminant) -> np.ndarray:
     return full
 
 
-@lru_cache(maxsize=None)
+@cache
 def white_xy(illuminant: Illuminant) -> np.ndarray:
     """Chromaticity (x, y) of the illuminant's white, computed from the same weights as the spectra."""
     xyz = xyz_weights(illuminant).sum(axis=1)
     return xyz[:2] / xyz.sum()
 
 
-@lru_cache(maxsize=None)
+@cache
 def xyz_to_linear_srgb_matrix(illuminant: Illuminant) -> np.ndarray:
     """3x3 matrix: XYZ seen under ``illuminant`` -> linear sRGB (D65), with CAT02 for A and E."""
     import colour

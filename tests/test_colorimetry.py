@@ -35,7 +35,7 @@ def test_xyz_matches_colour_science_integration(illuminant):
     ill = _reference_illuminant(illuminant)
     lam_1nm = np.arange(360, 831, dtype=float)
     for spectrum in _smooth_spectra():
-        sd = colour.SpectralDistribution(dict(zip(lam_1nm, spectrum(lam_1nm))))
+        sd = colour.SpectralDistribution(dict(zip(lam_1nm, spectrum(lam_1nm), strict=True)))
         reference = colour.sd_to_XYZ(sd, cmfs, ill, method="Integration") / 100.0
         ours = c.spectrum_to_xyz(spectrum(WAVELENGTHS_NM), illuminant)
         np.testing.assert_allclose(ours, reference, rtol=2e-4, atol=2e-5)

@@ -9,7 +9,9 @@ import pytest
 from training.cli import COMMANDS
 
 ROOT = Path(__file__).resolve().parents[1]
-SPEC_COMMANDS = ["simulate-layers", "simulate", "lut", "dataset", "fit", "train", "export", "validate", "report", "bench"]
+SPEC_COMMANDS = [
+    "simulate-layers", "simulate", "lut", "dataset", "fit", "train", "export", "validate", "report", "bench"
+]
 
 
 def run(*args: str) -> subprocess.CompletedProcess:
