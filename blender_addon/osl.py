@@ -1,0 +1,120 @@
+"""OSL source and Script-node helpers for the mixture (Cycles CPU / OptiX only).
+
+The pip ``bpy`` module compiles OSL with its built-in ``_cycles.osl_compile`` but Cycles' ``osl.py`` then
+imports ``oslquery``, which the wheel ships outside ``sys.path`` (notes/blender_cycles.md §1);
+:func:`ensure_oslquery` adds that directory.  ``oslquery`` returns OpenImageIO ``TypeDesc`` objects, whose
+Python type is registered by Blender's *bundled* OpenImageIO (3.0.9 in bpy 5.0.1); in our venv ``import
+OpenImageIO`` finds the pip OpenImageIO instead (3.0.21, another pybind11 registry), so the bundled one is
+loaded under a private alias just to register the type (found by trial: without it socket creation fails
+with "Unregistered type : OpenImageIO_v3_0::TypeDesc").  A real Blender binary needs none of this.
+"""
+
+from __future__ import annotations
+
+import glob
+import importlib.util
+import os
+import sys
+
+import bpy
+
+#: OSL parameter suffix for each map kind of nodes.KINDS.
+_PARAM_SUFFIX = {"Color": "color", "Radius": "radius", "Weight": "weight", "Anisotropy": "anisotropy"}
+
+
+def param_name(k: int, kind: str) -> str:
+    """OSL parameter for component k and map kind, e.g. ``k2_radius``."""
+    return f"k{k}_{_PARAM_SUFFIX[kind]}"
+
+
+_OIIO_ALIAS = "_spectral_skin_sss_bundled.OpenImageIO"
+
+
+def _bundled_site_packages() -> list[str]:
+    pattern = os.path.join(bpy.utils.resource_path("LOCAL"), "python", "lib", "python3*", "site-packages")
+    return glob.glob(pattern)
+
+
+def _register_bundled_oiio_types(site_packages: list[str]) -> None:
+    """Load Blender's bundled OpenImageIO under a private name (registers TypeDesc for oslquery)."""
+    if _OIIO_ALIAS in sys.modules:
+        return
+    for path in site_packages:
+        for so in glob.glob(os.path.join(path, "OpenImageIO", "OpenImageIO*.so")) + glob.glob(
+            os.path.join(path, "OpenImageIO", "OpenImageIO*.pyd")
+        ):
+            spec = importlib.util.spec_from_file_location(_OIIO_ALIAS, so)
+            module = importlib.util.module_from_spec(spec)
+            spec.loader.exec_module(module)
+            sys.modules[_OIIO_ALIAS] = module
+            return
+
+
+def ensure_oslquery() -> None:
+    """Make Cycles' Script-node compilation work in the pip bpy module (no-op in a real Blender)."""
+    if importlib.util.find_spec("oslquery") is not None:
+        return
+    site_packages = _bundled_site_packages()
+    for path in site_packages:
+        if path not in sys.path:
+            sys.path.append(path)
+    if importlib.util.find_spec("oslquery") is None:
+        raise RuntimeError("OSL: module 'oslquery' not found; this Blender build cannot compile Script nodes")
+    _register_bundled_oiio_types(site_packages)
+
+
+def mixture_source(k_count: int) -> str:
+    """OSL shader: sum over k of ``(w_k * A_k) * bssrdf("random_walk", N, r_k, A_k, ...)``.
+
+    The factor A_k cancels the kernel's division of the throughput by the albedo, so the expected
+    contribution of component k in channel c is w_kc times the walk in medium k (see nodes.py).
+    """
+    params = []
+    terms = []
+    for k in range(1, k_count + 1):
+        c, r, w, g = (param_name(k, kind) for kind in ("Color", "Radius", "Weight", "Anisotropy"))
+        params += [f"    color {c} = 0.0,", f"    color {r} = 0.0,", f"    color {w} = {1.0 / k_count!r},",
+                   f"    float {g} = 0.0,"]
+        terms.append(
+            f"    BSSRDF += ({w} * {c}) * bssrdf(\"random_walk\", N, vector({r}), {c},\n"
+            f"        \"ior\", ior, \"anisotropy\", {g}, \"roughness\", roughness);"
+        )
+    return "\n".join(
+        [
+            "// Spectral Skin SSS: mixture of K random-walk media with per-channel weights (generated).",
+            '#include "stdcycles.h"',
+            "",
+            f"shader spectral_skin_sss_k{k_count}(",
+            *params,
+            "    float ior = 1.4,",
+            "    float roughness = 0.0,",
+            "    output closure color BSSRDF = 0)",
+            "{",
+            "    BSSRDF = 0;",
+            *terms,
+            "}",
+            "",
+        ]
+    )
+
+
+def script_node(nodes, source: str, text_name: str) -> bpy.types.Node:
+    """An internal Script node compiled from ``source``; RuntimeError if compilation failed."""
+    ensure_oslquery()
+    text = bpy.data.texts.get(text_name) or bpy.data.texts.new(text_name)
+    text.clear()
+    text.write(source)
+    node = nodes.new("ShaderNodeScript")
+    node.mode = "INTERNAL"
+    # Assigning the text compiles it through the *current* render engine's update_script_node, so
+    # Cycles must be the scene's engine at that moment (restored afterwards).
+    render = bpy.context.scene.render
+    engine = render.engine
+    render.engine = "CYCLES"
+    try:
+        node.script = text  # compiles (Cycles' osl.update_script_node) and creates the sockets
+    finally:
+        render.engine = engine
+    if not node.bytecode or "BSSRDF" not in node.outputs:
+        raise RuntimeError(f"OSL script {text_name!r} did not compile (compiler messages are on stderr)")
+    return node

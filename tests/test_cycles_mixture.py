@@ -1,0 +1,105 @@
+"""The Spectral Skin SSS Mixture node group (SVM and OSL) rendered in Cycles with the real bpy.
+
+Linearity: a 2-component mixture with per-channel weights must render as the weight-sum of the
+single-component renders (the closure-pick argument in blender_addon/nodes.py), the OSL group must match
+the SVM group, and a single component through the group must match an independent adding-doubling
+reference (iadpython UR1, n = 1: see tests/test_cycles_render.py for why).
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import bpy
+import iadpython
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from blender_addon import nodes, osl, probe  # noqa: E402
+from exporters import cycles  # noqa: E402
+
+SAMPLES = 1024
+UNIT_SCALE_M = 0.01
+MEDIA = [  # (alpha per channel, sigma_t cm^-1 per channel, g)
+    (np.array([0.95, 0.9, 0.8]), np.array([20.0, 40.0, 80.0]), 0.5),
+    (np.array([0.995, 0.99, 0.97]), np.array([50.0, 30.0, 20.0]), 0.0),
+]
+W1 = np.array([0.3, 0.6, 0.8])
+
+
+def component(alpha, sigma_t, g, weight) -> dict:
+    cin = cycles.medium_to_cycles(alpha, sigma_t, np.full(3, g), unit_scale_m=UNIT_SCALE_M)
+    return {"Color": cin.color, "Radius": cin.radius, "Weight": weight, "Anisotropy": float(cin.g[0])}
+
+
+def render_group(weights, backend="SVM"):
+    scene = probe.new_scene(samples=SAMPLES, resolution=16, seed=5)
+    if backend == "OSL":
+        scene.cycles.shading_system = True
+        group = nodes.build_osl_group(2)
+    else:
+        group = nodes.build_svm_group(2)
+    mat = probe.slab_material()
+    gnode = nodes.wire_into_material(mat, group)
+    nodes.set_constant_inputs(gnode, [component(*m, w) for m, w in zip(MEDIA, weights, strict=True)])
+    return probe.render_mean(scene)
+
+
+def close(a, ea, b, eb, tol=0.01):
+    rel = a / b - 1.0
+    bound = tol + 4.0 * np.hypot(ea / b, eb / b)
+    return bool(np.all(np.abs(rel) <= bound)), rel
+
+
+def test_mixture_is_weighted_sum_svm_and_osl():
+    ones, zeros = np.ones(3), np.zeros(3)
+    r1, e1, t1 = render_group([ones, zeros])
+    r2, e2, t2 = render_group([zeros, ones])
+    mix, emix, tmix = render_group([W1, 1.0 - W1])
+    mix_osl, emix_osl, tosl = render_group([W1, 1.0 - W1], backend="OSL")
+    expect = W1 * r1 + (1.0 - W1) * r2
+    eexp = np.hypot(W1 * e1, (1.0 - W1) * e2)
+    ok_svm, rel_svm = close(mix, emix, expect, eexp)
+    ok_osl, rel_osl = close(mix_osl, emix_osl, expect, eexp)
+    ok_pair, rel_pair = close(mix_osl, emix_osl, mix, emix)
+    refs = [np.array([iadpython.Sample(a=a, b=np.inf, g=m[2], n=1.0, quad_pts=16).rt()[0] for a in m[0]])
+            for m in MEDIA]
+    ok_r1, rel_r1 = close(r1, e1, refs[0], 0.0)
+    ok_r2, rel_r2 = close(r2, e2, refs[1], 0.0)
+    print(f"\nsingle k1={np.round(r1, 4)} vs iad {np.round(refs[0], 4)} rel={np.round(rel_r1 * 100, 2)}% ({t1:.1f}s)")
+    print(f"single k2={np.round(r2, 4)} vs iad {np.round(refs[1], 4)} rel={np.round(rel_r2 * 100, 2)}% ({t2:.1f}s)")
+    print(f"SVM mix={np.round(mix, 4)} vs sum {np.round(expect, 4)} rel={np.round(rel_svm * 100, 2)}% ({tmix:.1f}s)")
+    print(f"OSL mix={np.round(mix_osl, 4)} rel={np.round(rel_osl * 100, 2)}% vs SVM {np.round(rel_pair * 100, 2)}%"
+          f" ({tosl:.1f}s)")
+    assert ok_r1 and ok_r2, (rel_r1, rel_r2)
+    assert ok_svm, rel_svm
+    assert ok_osl, rel_osl
+    assert ok_pair, rel_pair
+
+
+def test_wiring_keeps_user_nodes_and_records_previous_surface():
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    mat = bpy.data.materials.new("UserSkin")  # comes with Principled BSDF -> Material Output
+    before = {n.name for n in mat.node_tree.nodes}
+    links_before = len(mat.node_tree.links)
+    image = bpy.data.images.new("k1_color", 4, 4, float_buffer=True)
+    gnode = nodes.wire_into_material(mat, nodes.build_svm_group(1), images={(1, "Color"): image})
+    tree = mat.node_tree
+    assert before <= {n.name for n in tree.nodes}
+    assert mat[nodes.PREVIOUS_SURFACE_PROP] == "Principled BSDF"
+    out = next(n for n in tree.nodes if n.bl_idname == "ShaderNodeOutputMaterial")
+    assert out.inputs["Surface"].links[0].from_node == gnode
+    assert len(tree.links) == links_before + 1  # surface link replaced, image link added
+    assert image.colorspace_settings.name == "Non-Color"
+    assert gnode.inputs["k1 Color"].links[0].from_node.image == image
+
+
+def test_osl_source_compiles_for_several_k():
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    for k in (1, 3):
+        group = nodes.build_osl_group(k)
+        script = next(n for n in group.nodes if n.bl_idname == "ShaderNodeScript")
+        assert script.bytecode
+        assert {osl.param_name(k, "Radius"), "ior", "roughness"} <= set(script.inputs.keys())
