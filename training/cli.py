@@ -15,7 +15,7 @@ COMMANDS: dict[str, tuple[str | None, str]] = {
     "simulate-layers": ("training.sim.cli_layers", "Monte Carlo of a generic layered medium; prints JSON."),
     "simulate": ("training.sim.cli_tone", "Monte Carlo of one skin tone at all 376 wavelengths -> .npz."),
     "lut": ("training.sim.cli_lut", "Homogeneous semi-infinite lookup tables R(alpha, g), P(r | alpha, g)."),
-    "dataset": (None, "Halton training / random validation tones, sharded and resumable."),
+    "dataset": ("training.data.cli", "Halton training / random validation tones, sharded and resumable."),
     "fit": (None, "Fit mixtures of K homogeneous media through the LUTs."),
     "train": (None, "Staged training of Enc, Dec_R, Dec_T."),
     "export": (None, "Export the ONNX graphs and the model card."),

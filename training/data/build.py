@@ -1,0 +1,108 @@
+"""Build one dataset split per shard, resumably, and merge shards (``python -m training dataset``)."""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+import h5py
+import numpy as np
+from tqdm import tqdm
+
+from exporters.colorimetry import spectrum_to_linear_srgb
+from training.data import store
+from training.data.presets import Preset
+from training.data.sampling import training_tones, validation_tones
+
+#: simulate(tones (B, 5), photons, seed, device) -> {"R_d": (B, W), "R_d_stderr": (B, W), "profile": (B, W, 512)}
+SimulateFn = Callable[[np.ndarray, int, int, str], dict[str, np.ndarray]]
+SPLITS = ("train", "validation")
+
+
+def split_tones(preset: Preset, split: str) -> tuple[np.ndarray, int]:
+    """All tones of a split and the seed that drew them."""
+    if split == "train":
+        return training_tones(preset.n_train, preset.train_seed), preset.train_seed
+    if split == "validation":
+        return validation_tones(preset.n_validation, preset.validation_seed), preset.validation_seed
+    raise ValueError(f"unknown split {split!r}; use one of {SPLITS}")
+
+
+def shard_path(out: Path, split: str, shard: tuple[int, int]) -> Path:
+    i, n = shard
+    return out / (f"{split}.h5" if n == 1 else f"{split}.shard{i}of{n}.h5")
+
+
+def build_split(
+    preset: Preset, split: str, out: Path, simulate: SimulateFn, *, method: str,
+    shard: tuple[int, int] = (0, 1), device: str = "cpu", progress: bool = True,
+) -> Path:
+    """Simulate this shard's tones of ``split`` into ``out``; resumes a partial file of the same run."""
+    tones, seed = split_tones(preset, split)
+    i, n = shard
+    index = np.arange(len(tones))[i::n]  # round-robin: every shard gets the same mix of tones
+    attrs = {"preset": preset.name, "split": split, "photons": preset.photons, "seed": seed,
+             "shard": f"{i}/{n}", "method": method, "n_total": len(tones), "created_by": "python -m training dataset"}
+    path = shard_path(out, split, shard)
+    out.mkdir(parents=True, exist_ok=True)
+    if path.exists():
+        store.check_matches(path, tones[index], attrs)
+    else:
+        store.create(path, tones[index], index, attrs)
+    todo = store.pending(path)
+    bar = tqdm(total=len(index), initial=len(index) - len(todo), desc=f"{split} {i}/{n}", disable=not progress)
+    for start in range(0, len(todo), preset.chunk_tones):
+        rows = todo[start : start + preset.chunk_tones]
+        t0 = time.perf_counter()
+        # per-tone seeds derive from the global index: results do not depend on sharding or resuming
+        values = simulate(tones[index[rows]], preset.photons, seed * 1_000_003 + int(index[rows[0]]), device)
+        values["albedo_rgb"] = spectrum_to_linear_srgb(values["R_d"], "D65")
+        store.write_rows(path, rows, values)
+        bar.set_postfix(s_per_tone=f"{(time.perf_counter() - t0) / len(rows):.2f}")
+        bar.update(len(rows))
+    bar.close()
+    return path
+
+
+def merge(out: Path, split: str) -> Path:
+    """Check that the shards of ``split`` in ``out`` are complete and consistent, and join them."""
+    shards = sorted(out.glob(f"{split}.shard*of*.h5"))
+    if not shards:
+        raise ValueError(f"no shards of {split!r} in {out}")
+    counts = {int(p.name.split("of")[1].split(".")[0]) for p in shards}
+    if len(counts) != 1 or len(shards) != counts.pop():
+        raise ValueError(f"shards of {split!r} in {out} are missing or mixed: {[p.name for p in shards]}")
+    with h5py.File(shards[0], "r") as f:
+        attrs = dict(f.attrs)
+    n_total = int(attrs["n_total"])
+    parts = []
+    for p in shards:
+        with h5py.File(p, "r") as f:
+            if not f["done"][:].all():
+                raise ValueError(f"{p} is incomplete: finish it (run its --shard again) before merging.")
+            for key in ("preset", "photons", "seed", "method", "n_total"):
+                if f.attrs[key] != attrs[key]:
+                    raise ValueError(f"{p} differs from {shards[0]} in {key}")
+            parts.append((p, f["index"][:]))
+    if sorted(np.concatenate([ix for _, ix in parts]).tolist()) != list(range(n_total)):
+        raise ValueError(f"the shards of {split!r} do not cover tones 0..{n_total - 1} exactly once")
+    target = out / f"{split}.h5"
+    if target.exists():
+        raise ValueError(f"{target} exists already; move it away to merge again.")
+    tones, _ = split_tones_from_attrs(attrs)
+    store.create(target, tones, np.arange(n_total), {**attrs, "shard": "0/1"})
+    with h5py.File(target, "r+") as dst:
+        for p, ix in parts:
+            with h5py.File(p, "r") as src:
+                for name in store.FIELDS:
+                    for local, global_row in enumerate(ix):
+                        dst[name][global_row] = src[name][local]
+        dst["done"][:] = True
+    return target
+
+
+def split_tones_from_attrs(attrs: dict) -> tuple[np.ndarray, int]:
+    from training.data.presets import PRESETS
+
+    return split_tones(PRESETS[str(attrs["preset"])], str(attrs["split"]))

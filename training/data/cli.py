@@ -1,0 +1,67 @@
+"""``python -m training dataset``: build (or merge) the skin-tone dataset.
+
+  python -m training dataset --preset ci|laptop|paper --out DIR [--shard I/N] [--split train|validation|both]
+  python -m training dataset --merge --out DIR        # after every shard I/N has finished
+
+Killing the job loses at most the chunk in flight: run the same command again to resume.  N machines
+(or N processes) each run one ``--shard I/N``; ``--merge`` checks the shards and joins them.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from training.data.build import SPLITS, build_split, merge
+from training.data.presets import PRESETS
+
+
+def parse_shard(text: str) -> tuple[int, int]:
+    try:
+        i, n = (int(v) for v in text.split("/"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"--shard must look like I/N (e.g. 0/4), got {text!r}") from None
+    if not (n >= 1 and 0 <= i < n):
+        raise argparse.ArgumentTypeError(f"--shard I/N needs 0 <= I < N, got {text!r}")
+    return i, n
+
+
+def main(argv: list[str]) -> int:
+    parser = argparse.ArgumentParser(prog="python -m training dataset", description=__doc__.splitlines()[0],
+                                     formatter_class=argparse.RawDescriptionHelpFormatter, epilog=__doc__)
+    parser.add_argument("--preset", choices=sorted(PRESETS), default="ci")
+    parser.add_argument("--out", type=Path, required=True, help="dataset folder")
+    parser.add_argument("--shard", type=parse_shard, default=(0, 1), help="I/N: this process's share")
+    parser.add_argument("--split", choices=[*SPLITS, "both"], default="both")
+    parser.add_argument("--method", choices=["direct", "reweighted"], default="direct",
+                        help="estimator (reweighted: not built yet)")
+    parser.add_argument("--merge", action="store_true", help="join finished shards in --out")
+    parser.add_argument("--seed", type=int, default=None, help="override the preset's sampling seeds")
+    parser.add_argument("--device", default="cpu", help="cpu or cuda")
+    parser.add_argument("--no-progress", action="store_true")
+    args = parser.parse_args(argv)
+    splits = SPLITS if args.split == "both" else (args.split,)
+    try:
+        if args.merge:
+            for split in splits:
+                print(merge(args.out, split))
+            return 0
+        if args.method == "reweighted":
+            print("error: --method reweighted is not implemented yet; use --method direct.", file=sys.stderr)
+            return 2
+        from training.data.simulate import simulate_direct
+
+        preset = PRESETS[args.preset]
+        if args.seed is not None:
+            from dataclasses import replace
+
+            preset = replace(preset, train_seed=args.seed, validation_seed=args.seed + 1)
+        for split in splits:
+            path = build_split(preset, split, args.out, simulate_direct, method=args.method, shard=args.shard,
+                               device=args.device, progress=not args.no_progress)
+            print(path)
+    except ValueError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    return 0

@@ -1,0 +1,49 @@
+"""``make demo``: the best end-to-end path that exists today, saying what it did.
+
+Today (no trained model yet): simulate one representative skin tone with the Monte Carlo simulator at
+all 376 wavelengths, print its reflectance and colour, and plot the swatches of the shipped tones.
+Once the model and the add-on exist this becomes: bake the bundled sample albedo and render a preview.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+from pathlib import Path
+
+import numpy as np
+
+from exporters.colorimetry import spectrum_to_lab, spectrum_to_srgb
+from exporters.constants import WAVELENGTHS_NM
+from training.skin.swatches import plot_swatches, simulate_spectra
+from training.skin.tones import load_tones
+
+
+def main(argv: list[str]) -> int:
+    parser = argparse.ArgumentParser(prog="python -m training demo", description=__doc__.splitlines()[0])
+    parser.add_argument("--out", type=Path, default=Path("demo/out"))
+    parser.add_argument("--photons", type=int, default=300, help="photons per wavelength (swatches: a fifth)")
+    parser.add_argument("--seed", type=int, default=0)
+    args = parser.parse_args(argv)
+    tones = load_tones()
+    name = "R05"
+    tone = tones.values[tones.names.index(name)]
+    print(f"[demo] No trained model is shipped yet, so this demo runs the physics that exists:\n"
+          f"[demo] Monte Carlo of tone {name} (f_mel, f_blood, t_epi cm, so2, b_mel) = {tone.tolist()},\n"
+          f"[demo] two-layer skin under a Fresnel boundary, {args.photons} photons x 376 wavelengths.")
+    start = time.perf_counter()
+    spectrum = simulate_spectra(tone[None], args.photons, args.seed)[0]
+    seconds = time.perf_counter() - start
+    for nm in (250, 400, 450, 500, 550, 600, 650, 700, 800, 1000):
+        print(f"  R_d({nm} nm) = {spectrum[np.searchsorted(WAVELENGTHS_NM, nm)]:.4f}")
+    srgb = spectrum_to_srgb(spectrum, "D65")
+    lab = spectrum_to_lab(spectrum, "D65")
+    print(f"[demo] colour under D65: sRGB {np.round(np.clip(srgb, 0, 1) * 255).astype(int).tolist()}, "
+          f"Lab {np.round(lab, 2).tolist()}  ({seconds:.1f} s of simulation)")
+    swatches = args.out / "swatches.png"
+    spectra = simulate_spectra(tones.values, max(args.photons // 5, 20), args.seed)
+    plot_swatches(tones, spectrum_to_srgb(spectra, "D65"), swatches,
+                  f"Simulated skin colours (D65), {max(args.photons // 5, 20)} photons per wavelength")
+    print(f"[demo] wrote {swatches}: the 10 representative and 10 outlier tones.")
+    print("[demo] Not done yet (see README status table): model, bake of the sample albedo, Cycles preview.")
+    return 0
