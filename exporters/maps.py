@@ -1,0 +1,297 @@
+"""Image I/O for baking (SPEC §4): float EXR maps out, albedo images in, and the ``S_maps.json`` record.
+
+All file access goes through OpenImageIO.  Nothing existing is overwritten unless ``overwrite=True``
+(files are written to a temporary name in the target folder, then hard-linked into place, which fails
+atomically if the name was taken meanwhile).
+
+Conventions:
+* Maps are float32 EXR, scene-independent data (Blender must load them as Non-Color); the EXR header
+  carries ``spectral_skin_sss:colorspace = "Non-Color"`` and ``spectral_skin_sss:units`` (OpenImageIO
+  reports every EXR as ``lin_rec709`` on reading, whatever was written).
+* Channel names: RGB maps ``R, G, B``; one-channel maps ``Y``; the biophysical map the names of SPEC §4
+  (``f_mel, f_blood, t_epi, so2, b_mel, exposure``).
+* Albedo input: returned as linear sRGB float64 (H, W, 3) plus alpha (H, W) or None.  Colour space
+  ``auto`` follows SPEC §1: sRGB-encoded unless the file says linear / Non-Color, or it stores floats.
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import hashlib
+import json
+import os
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Literal
+
+import numpy as np
+import OpenImageIO as oiio
+
+from exporters.colorimetry import srgb_decode
+
+ColorSpace = Literal["auto", "srgb", "linear"]
+
+RGB_CHANNELS: tuple[str, ...] = ("R", "G", "B")
+SINGLE_CHANNEL: tuple[str, ...] = ("Y",)
+BIOPHYSICAL_CHANNELS: tuple[str, ...] = ("f_mel", "f_blood", "t_epi", "so2", "b_mel", "exposure")
+#: Colour-space names (lower case, as OpenImageIO / OCIO configs spell them) that mean "not sRGB-encoded".
+_LINEAR_NAMES = {"linear", "scene_linear", "lin_rec709", "lin_srgb", "linear rec.709", "linear rec.709 (srgb)",
+                 "srgb-linear", "lin_rec709_scene", "raw", "non-color", "data", "acescg", "aces2065-1",
+                 "linear_srgb", "srgb_linear", "rec709_linear"}
+_FLOAT_TYPES = {"half", "float", "double"}
+_INT_MAX = {"uint8": 255.0, "uint16": 65535.0, "uint32": 4294967295.0}
+
+
+class ImageError(ValueError):
+    """An input image that cannot be used (unreadable, non-finite, negative ...); message says why."""
+
+
+def _ensure_writable_dir(folder: Path) -> None:
+    if not folder.is_dir():
+        raise FileNotFoundError(f"output folder does not exist: {folder}")
+    if not os.access(folder, os.W_OK | os.X_OK):
+        raise PermissionError(f"output folder is not writable: {folder}")
+
+
+def _publish(tmp: Path, final: Path, overwrite: bool) -> None:
+    """Move the finished temporary file to ``final``; never replaces an existing file unless asked."""
+    try:
+        if overwrite:
+            os.replace(tmp, final)
+        else:
+            os.link(tmp, final)  # fails with FileExistsError if ``final`` exists
+    except FileExistsError:
+        raise FileExistsError(f"{final} exists; pass overwrite=True (--overwrite) to replace it") from None
+    finally:
+        if tmp.exists():
+            tmp.unlink()
+
+
+def _refuse_existing(path: Path, overwrite: bool) -> None:
+    if path.exists() and not overwrite:
+        raise FileExistsError(f"{path} exists; pass overwrite=True (--overwrite) to replace it")
+
+
+def write_exr(path: str | os.PathLike, data: np.ndarray, channels: tuple[str, ...] | list[str],
+              units: str, overwrite: bool = False) -> Path:
+    """Write ``data`` (H, W) or (H, W, C) as a float32 EXR with the given channel names; returns the path.
+
+    ``units`` is stored in the header (e.g. "Blender units", "cm^-1", "1").  Non-finite data raises
+    ValueError (nothing is written); an existing file raises FileExistsError unless ``overwrite``.
+    """
+    path = Path(path)
+    arr = np.asarray(data, dtype=np.float64)
+    if arr.ndim == 2:
+        arr = arr[..., None]
+    if arr.ndim != 3 or arr.shape[0] < 1 or arr.shape[1] < 1:
+        raise ValueError(f"map data must be (H, W) or (H, W, C), got shape {np.shape(data)}")
+    if arr.shape[2] != len(channels):
+        raise ValueError(f"{arr.shape[2]} channels of data but {len(channels)} channel names {list(channels)}")
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(f"map {path.name}: {int(np.size(arr) - np.isfinite(arr).sum())} NaN/Inf values")
+    if np.any(np.abs(arr) > np.finfo(np.float32).max):
+        raise ValueError(f"map {path.name}: values overflow float32")
+    _ensure_writable_dir(path.parent)
+    _refuse_existing(path, overwrite)
+    h, w, c = arr.shape
+    spec = oiio.ImageSpec(w, h, c, "float")
+    spec.channelnames = tuple(channels)
+    spec.attribute("oiio:ColorSpace", "Non-Color")
+    spec.attribute("spectral_skin_sss:colorspace", "Non-Color")
+    spec.attribute("compression", "zip")
+    spec.attribute("spectral_skin_sss:units", units)
+    fd, tmp_name = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=".exr", dir=path.parent)
+    os.close(fd)
+    tmp = Path(tmp_name)
+    try:
+        out = oiio.ImageOutput.create(str(tmp))
+        if out is None or not out.open(str(tmp), spec):
+            raise OSError(f"cannot write {path}: {oiio.geterror() or (out.geterror() if out else '')}")
+        ok = out.write_image(np.ascontiguousarray(arr, dtype=np.float32))
+        err = out.geterror()
+        out.close()
+        if not ok:
+            raise OSError(f"cannot write {path}: {err}")
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+    _publish(tmp, path, overwrite)
+    return path
+
+
+@dataclass(frozen=True)
+class AlbedoImage:
+    """A decoded albedo image.
+
+    ``rgb``: (H, W, 3) float64 linear sRGB (grayscale replicated); ``alpha``: (H, W) in [0, 1] or None,
+    unassociated (colour is never divided or multiplied by it); ``colorspace``: "srgb" or "linear" as
+    used; ``source_format``: OpenImageIO pixel type of the file ("uint8", "uint16", "half", "float", ...);
+    ``n_clamped``: texels whose negative values were clamped to 0 (only with ``clamp_negative``).
+    """
+
+    rgb: np.ndarray
+    alpha: np.ndarray | None
+    colorspace: Literal["srgb", "linear"]
+    source_format: str
+    n_clamped: int
+
+
+def _detect_colorspace(spec: oiio.ImageSpec) -> Literal["srgb", "linear"]:
+    """SPEC §1: sRGB-encoded unless the file says linear / Non-Color, or stores float pixels."""
+    name = str(spec.getattribute("oiio:ColorSpace") or "").strip().lower()
+    if name in _LINEAR_NAMES or name.startswith("lin"):
+        return "linear"
+    if name in {"srgb", "srgb_texture", "srgb - texture", "srgb_rec709_scene", "srgb_tx"}:
+        return "srgb"
+    gamma = spec.getattribute("oiio:Gamma")
+    if gamma is not None and abs(float(gamma) - 1.0) < 1e-3:
+        return "linear"
+    return "linear" if str(spec.format) in _FLOAT_TYPES else "srgb"
+
+
+def _split_channels(pixels: np.ndarray, spec: oiio.ImageSpec, path: Path) -> tuple[np.ndarray, np.ndarray | None]:
+    names = [n.upper() for n in spec.channelnames]
+    c = pixels.shape[2]
+    alpha_idx = spec.alpha_channel if spec.alpha_channel >= 0 else (names.index("A") if "A" in names else -1)
+    if c == 1:
+        return np.repeat(pixels, 3, axis=2), None
+    if c == 2:  # gray + alpha
+        return np.repeat(pixels[..., :1], 3, axis=2), pixels[..., 1]
+    if c >= 3:
+        colour_idx = [i for i in range(c) if i != alpha_idx][:3]
+        if len(colour_idx) < 3:
+            raise ImageError(f"{path}: cannot find three colour channels in {spec.channelnames}")
+        alpha = pixels[..., alpha_idx] if alpha_idx >= 0 else None
+        return pixels[..., colour_idx], alpha
+    raise ImageError(f"{path}: unsupported channel layout {spec.channelnames}")
+
+
+def read_albedo(path: str | os.PathLike, colorspace: ColorSpace = "auto",
+                clamp_negative: bool = False) -> AlbedoImage:
+    """Read an albedo image (8/16-bit PNG or TIFF, float EXR, ...) as linear sRGB float64.
+
+    * Missing file: FileNotFoundError; unreadable / not an image: :class:`ImageError`.
+    * ``colorspace``: "auto" (SPEC §1 rule, see :func:`_detect_colorspace`), "srgb" (decode with the
+      IEC 61966-2-1 curve) or "linear" (use values as they are).
+    * 1 channel: gray replicated to RGB; 2 channels: gray + alpha; 4 channels: RGB + alpha (unassociated:
+      OpenImageIO is asked not to premultiply); more channels: the first three non-alpha ones.
+    * NaN/Inf texels: ImageError with the count and the first texel.  Negative texels (float files only):
+      ImageError, or clamped to 0 and counted when ``clamp_negative``.
+    """
+    path = Path(path)
+    if colorspace not in ("auto", "srgb", "linear"):
+        raise ValueError(f"colorspace must be auto, srgb or linear, not {colorspace!r}")
+    if not path.is_file():
+        raise FileNotFoundError(f"albedo image not found: {path}")
+    config = oiio.ImageSpec()
+    config.attribute("oiio:UnassociatedAlpha", 1)
+    inp = oiio.ImageInput.open(str(path), config)
+    if inp is None:
+        raise ImageError(f"cannot read image {path}: {oiio.geterror()}")
+    try:
+        spec = inp.spec()
+        fmt = str(spec.format)
+        # Integer files are read in their own type and scaled in float64 (OIIO's float conversion is float32).
+        native = fmt if fmt in _INT_MAX else "float"
+        pixels = inp.read_image(0, 0, 0, spec.nchannels, native)
+        err = inp.geterror()
+    finally:
+        inp.close()
+    if pixels is None or err:
+        raise ImageError(f"cannot read pixels of {path}: {err}")
+    pixels = np.asarray(pixels, dtype=np.float64).reshape(spec.height, spec.width, spec.nchannels)
+    if native in _INT_MAX:
+        pixels /= _INT_MAX[native]
+    bad = ~np.isfinite(pixels)
+    if bad.any():
+        y, x, _ = np.argwhere(bad)[0]
+        raise ImageError(f"{path}: {int(bad.any(axis=2).sum())} texel(s) with NaN/Inf, first at (x={x}, y={y})")
+    rgb, alpha = _split_channels(pixels, spec, path)
+    neg = rgb < 0.0
+    n_clamped = int(neg.any(axis=2).sum())
+    if n_clamped and not clamp_negative:
+        y, x, _ = np.argwhere(neg)[0]
+        raise ImageError(f"{path}: {n_clamped} texel(s) with negative values, first at (x={x}, y={y}); "
+                         "albedo cannot be negative (use clamp_negative to clamp them to 0)")
+    rgb = np.maximum(rgb, 0.0)
+    used = _detect_colorspace(spec) if colorspace == "auto" else colorspace
+    if used == "srgb":
+        rgb = np.asarray(srgb_decode(rgb), dtype=np.float64)
+    alpha = None if alpha is None else np.clip(alpha, 0.0, 1.0)
+    return AlbedoImage(rgb=rgb, alpha=alpha, colorspace=used, source_format=str(spec.format),
+                       n_clamped=n_clamped if clamp_negative else 0)
+
+
+def sha256_file(path: str | os.PathLike) -> str:
+    """Hex SHA-256 of a file (used for the model files in S_maps.json)."""
+    digest = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for block in iter(lambda: fh.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()
+
+
+def write_maps_json(path: str | os.PathLike, files: dict[str, dict], k: int, model_sha256: dict[str, str],
+                    input_image: str, input_colorspace: str, timings_s: dict[str, float],
+                    unit_scale_m: float | None = None, overwrite: bool = False) -> Path:
+    """Write ``S_maps.json`` (SPEC §4): every file written with its units/channels, K, model SHA-256s,
+    the input image and colour space used, and timings in seconds.
+
+    ``files`` maps file name -> {"units": str, "channels": [...], ...}; every listed file must exist next to
+    the JSON.  Non-finite timings raise ValueError.
+    """
+    path = Path(path)
+    if k < 1:
+        raise ValueError("K must be >= 1")
+    for name in files:
+        if not (path.parent / name).is_file():
+            raise FileNotFoundError(f"S_maps.json lists {name}, which is not in {path.parent}")
+    if not all(np.isfinite(v) for v in timings_s.values()):
+        raise ValueError("timings must be finite")
+    _ensure_writable_dir(path.parent)
+    _refuse_existing(path, overwrite)
+    record = {
+        "format": "spectral_skin_sss maps v1",
+        "created_utc": _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds"),
+        "K": int(k),
+        "input": {"image": input_image, "colorspace": input_colorspace},
+        "unit_scale_m_per_blender_unit": unit_scale_m,
+        "model_sha256": dict(model_sha256),
+        "files": files,
+        "timings_s": {key: float(v) for key, v in timings_s.items()},
+    }
+    fd, tmp_name = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=".json", dir=path.parent)
+    with os.fdopen(fd, "w", encoding="utf-8") as fh:
+        json.dump(record, fh, indent=2, sort_keys=False)
+        fh.write("\n")
+    _publish(Path(tmp_name), path, overwrite)
+    return path
+
+
+def read_exr(path: str | os.PathLike, channels: tuple[str, ...] | list[str] | None = None
+             ) -> tuple[np.ndarray, tuple[str, ...], dict[str, str]]:
+    """Read a map back: (H, W, C) float32 array, channel names, and the string header attributes.
+
+    EXR stores channels sorted by name (other than R, G, B, A), so a map written as
+    ``BIOPHYSICAL_CHANNELS`` comes back alphabetically; pass ``channels`` to get them in that order
+    (KeyError naming the missing channel otherwise).
+    """
+    inp = oiio.ImageInput.open(str(path))
+    if inp is None:
+        raise ImageError(f"cannot read {path}: {oiio.geterror()}")
+    try:
+        spec = inp.spec()
+        data = inp.read_image(0, 0, 0, spec.nchannels, "float")
+    finally:
+        inp.close()
+    attrs = {p.name: str(p.value) for p in spec.extra_attribs}
+    arr = np.asarray(data, dtype=np.float32).reshape(spec.height, spec.width, spec.nchannels)
+    names = tuple(spec.channelnames)
+    if channels is not None:
+        missing = [c for c in channels if c not in names]
+        if missing:
+            raise KeyError(f"{path}: no channel(s) {missing}; it has {list(names)}")
+        arr = arr[..., [names.index(c) for c in channels]]
+        names = tuple(channels)
+    return arr, names, attrs
