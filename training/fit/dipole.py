@@ -34,9 +34,7 @@ def fresnel_a(n: float = N_TISSUE) -> float:
     return (1.0 + f_dr) / (1.0 - f_dr)
 
 
-def dipole_profile_shape(
-    r_mfp: np.ndarray, alpha: np.ndarray, g: np.ndarray, n: float = N_TISSUE
-) -> np.ndarray:
+def dipole_profile_shape(r_mfp: np.ndarray, alpha: np.ndarray, g: np.ndarray, n: float = N_TISSUE) -> np.ndarray:
     """Dipole R_d(r) / alpha' at sigma_t = 1 (mfp^-2); ``alpha``, ``g`` broadcast against ``r_mfp``."""
     mu_a = 1.0 - alpha
     sig_tp = mu_a + alpha * (1.0 - g)

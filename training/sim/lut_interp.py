@@ -60,20 +60,23 @@ def bin_centres(edges: np.ndarray | torch.Tensor) -> np.ndarray | torch.Tensor:
     return lib.where(r0 > 0, geo, r1 / math.sqrt(2.0))
 
 
-def _axis_weights(grid: torch.Tensor, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-    """Lower index and fractional position of ``x`` on the increasing 1-D ``grid`` (linear interp).
+def _axis_weights(grid: torch.Tensor, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
+    """Lower index, fractional position, inside-indicator and 1/spacing of ``x`` on the increasing ``grid``.
 
-    Returns ``(idx, t)`` with idx in [0, len(grid) - 2] and t in [0, 1]; outside the grid t is clamped
-    so the edge value is held.  ``t`` is differentiable w.r.t. ``x`` in the interior.
+    Returns ``(idx, t, inside, inv_h)``: idx in [0, len(grid) - 2], t in [0, 1] (clamped outside the grid
+    so that the edge value is held), ``inside`` 1.0 where ``x`` lies within the grid (else 0.0, where
+    the derivative of the interpolant is 0) and ``inv_h`` = 1 / (grid[idx + 1] - grid[idx]).  ``t`` is
+    differentiable w.r.t. ``x`` in the interior.
     """
     n = grid.shape[0]
     xd = x.detach().contiguous()
     idx = torch.searchsorted(grid, xd, right=True) - 1
     idx = idx.clamp(0, n - 2)
     g0 = grid[idx]
-    g1 = grid[idx + 1]
-    t = ((x - g0) / (g1 - g0)).clamp(0.0, 1.0)
-    return idx, t
+    inv_h = 1.0 / (grid[idx + 1] - g0)
+    raw = (x - g0) * inv_h
+    inside = ((xd >= grid[0]) & (xd <= grid[-1])).to(grid.dtype)
+    return idx, raw.clamp(0.0, 1.0), inside, inv_h
 
 
 @dataclass
@@ -145,8 +148,8 @@ class LookupTables:
 
     # ------------------------------------------------------------------ lookups
     def _corners(self, alpha: torch.Tensor, g: torch.Tensor):
-        ia, ta = _axis_weights(self.albedo, alpha)
-        ig, tg = _axis_weights(self.g, g)
+        ia, ta, _, _ = _axis_weights(self.albedo, alpha)
+        ig, tg, _, _ = _axis_weights(self.g, g)
         return ia, ta, ig, tg
 
     def reflectance(self, alpha: torch.Tensor, g: torch.Tensor) -> torch.Tensor:
@@ -171,9 +174,7 @@ class LookupTables:
         p1 = P[ia + 1, ig] * (1 - tg) + P[ia + 1, ig + 1] * tg
         return p0 * (1 - ta) + p1 * ta
 
-    def profile(
-        self, r_cm: torch.Tensor, alpha: torch.Tensor, g: torch.Tensor, sigma_t: torch.Tensor
-    ) -> torch.Tensor:
+    def profile(self, r_cm: torch.Tensor, alpha: torch.Tensor, g: torch.Tensor, sigma_t: torch.Tensor) -> torch.Tensor:
         """Normalised radial profile P(r | alpha, g, sigma_t) = sigma_t^2 P_LUT(sigma_t r | alpha, g), cm^-2.
 
         ``r_cm``: radii in cm, shape (..., M) (r >= 0); ``alpha``, ``g``, ``sigma_t`` (cm^-1): shapes
@@ -187,7 +188,7 @@ class LookupTables:
         # log radius in mfp; r = 0 maps to a huge negative number (holds the first bin).
         log_r = torch.log(r_cm.clamp_min(1e-300)).expand(*lead, r_cm.shape[-1])
         x = log_r + torch.log(sig)[..., None]
-        ir, tr = _axis_weights(self.log_centres, x)
+        ir, tr, _, _ = _axis_weights(self.log_centres, x)
         v0 = torch.gather(rows, -1, ir)
         v1 = torch.gather(rows, -1, ir + 1)
         val = v0 * (1 - tr) + v1 * tr
@@ -215,6 +216,58 @@ class LookupTables:
         r_sub = torch.sqrt(u0[:, None] + (u1 - u0)[:, None] * frac)  # (M, n_sub)
         vals = self.profile(r_sub.reshape(-1), alpha, g, sigma_t)
         return vals.reshape(*vals.shape[:-1], -1, n_sub).mean(-1)
+
+    # ------------------------------------------------------------------ explicit derivatives
+    def reflectance_grad(self, alpha: torch.Tensor, g: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """(R, dR/dalpha, dR/dg) of the bilinear interpolant, without autograd (for Gauss-Newton).
+
+        ``alpha`` and ``g`` must already have the same shape, dtype and device as the table.
+        """
+        ia, ta, qa, ha = _axis_weights(self.albedo, alpha)
+        ig, tg, qg, hg = _axis_weights(self.g, g)
+        R = self.R
+        r00, r01, r10, r11 = R[ia, ig], R[ia, ig + 1], R[ia + 1, ig], R[ia + 1, ig + 1]
+        lo = r00 + (r01 - r00) * tg
+        hi = r10 + (r11 - r10) * tg
+        val = lo + (hi - lo) * ta
+        d_a = (hi - lo) * ha * qa
+        d_g = ((r01 - r00) * (1 - ta) + (r11 - r10) * ta) * hg * qg
+        return val, d_a, d_g
+
+    def profile_grad(
+        self, r_cm: torch.Tensor, alpha: torch.Tensor, g: torch.Tensor, sigma_t: torch.Tensor
+    ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
+        """``profile`` and its derivatives w.r.t. alpha, g and log(sigma_t), without autograd.
+
+        Forward-mode derivatives written out for the Gauss-Newton fitter (autograd's forward mode goes
+        through slow Python decompositions here).  ``r_cm`` (M,); ``alpha``, ``g``, ``sigma_t`` of one
+        common shape (...) with the table's dtype/device.  Each output has shape (..., M); units cm^-2
+        (per unit of the differentiated parameter).  Piecewise derivatives: one-sided at knots, 0
+        where a value is held.
+        """
+        ia, ta, qa, ha = _axis_weights(self.albedo, alpha)
+        ig, tg, qg, hg = _axis_weights(self.g, g)
+        P = self.P
+        p00, p01, p10, p11 = P[ia, ig], P[ia, ig + 1], P[ia + 1, ig], P[ia + 1, ig + 1]
+        tg_, ta_ = tg[..., None], ta[..., None]
+        lo = p00 + (p01 - p00) * tg_
+        hi = p10 + (p11 - p10) * tg_
+        rows = lo + (hi - lo) * ta_
+        rows_a = (hi - lo) * (ha * qa)[..., None]
+        rows_g = ((p01 - p00) * (1 - ta_) + (p11 - p10) * ta_) * (hg * qg)[..., None]
+        log_s = torch.log(sigma_t)
+        x = torch.log(r_cm.clamp_min(1e-300)) + log_s[..., None]
+        ir, tr, qr, hr = _axis_weights(self.log_centres, x)
+        support = (x <= self.log_r_max).to(x.dtype)
+        s2 = (sigma_t * sigma_t)[..., None] * support
+
+        def radial(rows_):
+            v0, v1 = torch.gather(rows_, -1, ir), torch.gather(rows_, -1, ir + 1)
+            return v0, v1, v0 + (v1 - v0) * tr
+
+        v0, v1, val = radial(rows)
+        d_log_s = (2.0 * val + (v1 - v0) * hr * qr) * s2
+        return val * s2, radial(rows_a)[2] * s2, radial(rows_g)[2] * s2, d_log_s
 
     def _as_tensors(self, *xs) -> list[torch.Tensor]:
         """Convert inputs to tensors on the table's device and dtype; reject NaN / Inf."""
