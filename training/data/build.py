@@ -76,7 +76,7 @@ def merge(out: Path, split: str) -> Path:
     with h5py.File(shards[0], "r") as f:
         attrs = dict(f.attrs)
     n_total = int(attrs["n_total"])
-    parts = []
+    parts, tone_parts = [], []
     for p in shards:
         with h5py.File(p, "r") as f:
             if not f["done"][:].all():
@@ -85,12 +85,15 @@ def merge(out: Path, split: str) -> Path:
                 if f.attrs[key] != attrs[key]:
                     raise ValueError(f"{p} differs from {shards[0]} in {key}")
             parts.append((p, f["index"][:]))
-    if sorted(np.concatenate([ix for _, ix in parts]).tolist()) != list(range(n_total)):
+            tone_parts.append(f["tone"][:])
+    index = np.concatenate([ix for _, ix in parts])
+    if sorted(index.tolist()) != list(range(n_total)):
         raise ValueError(f"the shards of {split!r} do not cover tones 0..{n_total - 1} exactly once")
     target = out / f"{split}.h5"
     if target.exists():
         raise ValueError(f"{target} exists already; move it away to merge again.")
-    tones, _ = split_tones_from_attrs(attrs)
+    tones = np.empty((n_total, 5))
+    tones[index] = np.concatenate(tone_parts)
     store.create(target, tones, np.arange(n_total), {**attrs, "shard": "0/1"})
     with h5py.File(target, "r+") as dst:
         for p, ix in parts:
@@ -101,8 +104,3 @@ def merge(out: Path, split: str) -> Path:
         dst["done"][:] = True
     return target
 
-
-def split_tones_from_attrs(attrs: dict) -> tuple[np.ndarray, int]:
-    from training.data.presets import PRESETS
-
-    return split_tones(PRESETS[str(attrs["preset"])], str(attrs["split"]))
