@@ -25,6 +25,7 @@ BENCH_MODULES = [
     "training.data.bench",
     "training.fit.bench",
     "training.train.bench",
+    "blender_addon.bench",
     "exporters.bench",
 ]
 COLUMNS = ["workload", "ours", "anchor", "ratio", "error", "notes"]
