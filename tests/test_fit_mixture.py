@@ -14,7 +14,7 @@ import torch
 
 from exporters.constants import R_EDGES_CM
 from training.fit import loss as L
-from training.fit.dipole import dipole_lut, dipole_profile_shape, dipole_reflectance
+from training.fit.dipole import dipole_lut, dipole_mixture_profile
 from training.fit.mixture import Mixture, n_params, pack, unpack
 from training.fit.optimize import fit_schedule
 from training.sim.lut_interp import LookupTables, bin_centres
@@ -40,22 +40,9 @@ def lut() -> LookupTables:
 
 
 def _dipole_mixture_target(alpha, g, sigma_t, w):
-    """MC-like target (profile cm^-2 (B, 512), R (B,)) of a dipole mixture, in closed form.
-
-    Each component's normalised profile is sigma_t^2 * shape(sigma_t r) / (its area integral over the
-    table's radial range in mfp), matching the normalisation the LUT uses.
-    """
-    alpha, g, sigma_t, w = (np.asarray(x, dtype=np.float64) for x in (alpha, g, sigma_t, w))
-    c_mfp = bin_centres(WIDE_EDGES_MFP)
-    a_mfp = np.pi * np.diff(WIDE_EDGES_MFP**2)
-    norm = (dipole_profile_shape(c_mfp, alpha[..., None], g[..., None]) * a_mfp).sum(-1)  # (B, K)
-    x = sigma_t[..., None] * CENTRES_CM  # (B, K, 512) in mfp
-    p_k = sigma_t[..., None] ** 2 * dipole_profile_shape(x, alpha[..., None], g[..., None]) / norm[..., None]
-    p_k = np.where(x <= WIDE_EDGES_MFP[-1], p_k, 0.0)
-    r_k = dipole_reflectance(alpha, g)
-    p_hat = (w[..., None] * p_k).sum(-2)
-    r_hat = (w * r_k).sum(-1)
-    return torch.tensor(p_hat * r_hat[:, None]), torch.tensor(r_hat)
+    """MC-like target (profile cm^-2 (B, 512), R (B,)) of a dipole mixture, in closed form."""
+    p, r = dipole_mixture_profile(R_EDGES_CM, WIDE_EDGES_MFP, alpha, g, sigma_t, w)
+    return torch.tensor(p), torch.tensor(r)
 
 
 def _reduced(alpha, g, sigma_t):

@@ -75,3 +75,32 @@ def dipole_lut(
     area = np.pi * np.diff(r_edges_mfp**2)
     P = shape / (shape * area).sum(-1, keepdims=True)
     return {"albedo": albedo, "g": g, "r_edges_mfp": r_edges_mfp, "R": dipole_reflectance(a, gg), "P": P}
+
+
+def dipole_mixture_profile(
+    r_edges_cm: np.ndarray,
+    r_edges_mfp: np.ndarray,
+    alpha: np.ndarray,
+    g: np.ndarray,
+    sigma_t: np.ndarray,
+    w: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
+    """MC-like target of a dipole mixture in closed form (test/reference only).
+
+    ``alpha``, ``g``, ``sigma_t`` (cm^-1), ``w``: shape (B, K).  Each component's normalised profile is
+    sigma_t^2 shape(sigma_t r) / (the area integral of the shape over the table's radii ``r_edges_mfp``),
+    i.e. the normalisation a LUT built by ``dipole_lut(r_edges_mfp=...)`` uses, evaluated at the bin
+    centres of ``r_edges_cm`` and zero beyond the table's last radius.  Returns (profile (B, M) cm^-2
+    = R_hat P_hat as in the paper's loss, R (B,)).
+    """
+    alpha, g, sigma_t, w = (np.asarray(x, dtype=np.float64) for x in (alpha, g, sigma_t, w))
+    c_mfp = bin_centres(r_edges_mfp)
+    a_mfp = np.pi * np.diff(r_edges_mfp**2)
+    norm = (dipole_profile_shape(c_mfp, alpha[..., None], g[..., None]) * a_mfp).sum(-1)  # (B, K)
+    x = sigma_t[..., None] * bin_centres(r_edges_cm)  # (B, K, M), mfp
+    p_k = sigma_t[..., None] ** 2 * dipole_profile_shape(x, alpha[..., None], g[..., None]) / norm[..., None]
+    p_k = np.where(x <= r_edges_mfp[-1], p_k, 0.0)
+    r_k = dipole_reflectance(alpha, g)
+    p_hat = (w[..., None] * p_k).sum(-2)
+    r_hat = (w * r_k).sum(-1)
+    return p_hat * r_hat[:, None], r_hat

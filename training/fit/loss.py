@@ -67,6 +67,10 @@ class Target:
             self.R.repeat(n),
         )
 
+    def rows(self, idx: torch.Tensor) -> Target:
+        """The targets of a subset of the problems (indices into the first axis)."""
+        return Target(self.r_cm, self.log_p[idx], self.mask[idx], self.n_used[idx], self.floor[idx], self.R[idx])
+
     def subset(self, idx: torch.Tensor) -> Target:
         """The same targets on a subset of the radial bins (indices into the last axis)."""
         mask = self.mask[..., idx]

@@ -1,0 +1,123 @@
+"""Benchmarks of the mixture fitter: our Levenberg-Marquardt vs the paper's Adam schedule, same problems.
+
+Problems: Monte Carlo profiles of two skin tones (training/fit/data/mc_*.npz: the project's simulator,
+16 wavelengths 250-1000 nm each, 50k photons; how they were made is in training/fit/data/README.md).
+LUT: the file named by $SKIN_SSS_LUT if set (the MC tables of ``python -m training lut``), otherwise the
+diffusion-dipole table of training/fit/dipole.py on a 1e-3..1e4 mfp radial grid (a stand-in: the
+comparison of optimisers is on identical problems either way, but the absolute losses depend on it).
+
+Both methods run the same schedule from the same start, batched over all problems in one call, on
+one CPU thread.  Reported per (tone, wavelength): wall time up to and including each K, and the mean
+joint loss reached; "reached" counts the problems where LM's joint loss is within 1 % (or 1e-3) of
+the paper schedule's.  The paper's schedule: Adam lr 1e-2 with cosine decay, K=1 1,000 + 1,000 steps
+(shape only, then joint; the paper does not give these), K=2 3,000 steps, K=3 10,000 steps.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from exporters.constants import anisotropy
+from training.fit.dipole import dipole_lut
+from training.fit.optimize import fit_schedule
+from training.sim.lut_interp import LookupTables
+
+DATA = Path(__file__).parent / "data"
+#: The stand-in table's axes: albedo denser near 1, wide radial range (mfp).
+DIPOLE_ALBEDO = np.concatenate([[0.0], 1.0 - np.geomspace(0.95, 1e-5, 60), [1.0]])
+DIPOLE_EDGES_MFP = np.concatenate([[0.0], np.geomspace(1e-3, 1e4, 512)])
+
+
+def bench_lut() -> tuple[LookupTables, str]:
+    """The LUT for the benchmark and a line saying which one it is."""
+    path = os.environ.get("SKIN_SSS_LUT")
+    if path and Path(path).is_file():
+        return LookupTables.load(path), f"MC LUT {path}"
+    lut = LookupTables.from_arrays(**dipole_lut(albedo=DIPOLE_ALBEDO, r_edges_mfp=DIPOLE_EDGES_MFP))
+    return lut, "dipole stand-in LUT (no $SKIN_SSS_LUT)"
+
+
+def bench_problems(quick: bool) -> dict[str, torch.Tensor]:
+    """Stack the MC fixture problems: profile (B, 512), R (B,), edges (513,), photons, g_init (B,)."""
+    files = sorted(DATA.glob("mc_*.npz"))
+    if quick:
+        files = files[-1:]
+    prof, R, g0, wl = [], [], [], []
+    for f in files:
+        with np.load(f) as d:
+            sel = slice(None, None, 3) if quick else slice(None)
+            prof.append(d["profile"][sel])
+            R.append(d["R_d"][sel])
+            wl.append(d["wavelength_nm"][sel])
+            edges, photons = d["r_edges_cm"], float(d["photons"])
+    wl_all = np.concatenate(wl)
+    g0 = anisotropy(wl_all)
+    return {
+        "profile": torch.tensor(np.concatenate(prof)),
+        "R": torch.tensor(np.concatenate(R)),
+        "edges": torch.tensor(edges),
+        "photons": photons,
+        "g_init": torch.tensor(g0),
+        "names": [f.stem for f in files],
+    }
+
+
+def _run(lut, pr, method):
+    t0 = time.perf_counter()
+    fits = fit_schedule(lut, pr["profile"], pr["R"], pr["edges"], pr["photons"], pr["g_init"], method=method)
+    return fits, time.perf_counter() - t0
+
+
+def benchmarks(quick: bool) -> list[dict]:
+    """Rows for bench/results.md (see module docstring)."""
+    n_threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    try:
+        lut, lut_note = bench_lut()
+        pr = bench_problems(quick)
+        B = pr["profile"].shape[0]
+        ours, t_ours = _run(lut, pr, "lm")
+        paper, t_paper = _run(lut, pr, "paper")
+    finally:
+        torch.set_num_threads(n_threads)
+    rows = []
+    for k in (1, 2, 3):
+        o, a = ours[k], paper[k]
+        reached = (o.joint <= a.joint * 1.01 + 1e-3).sum().item()
+        ms_o, ms_a = 1e3 * o.seconds / B, 1e3 * a.seconds / B
+        rows.append(
+            {
+                "workload": f"fit K={k} ({4 * k - 1} params) per (tone, wavelength), stages up to K={k}, 1 thread",
+                "ours": f"{ms_o:.0f} ms, joint loss {o.joint.mean():.4f} (LM, {o.work:.0f} evals)",
+                "anchor": f"{ms_a:.0f} ms, joint loss {a.joint.mean():.4f} (paper Adam, {a.work:.0f} evals)",
+                "ratio": f"{ms_a / ms_o:.1f}x faster ({a.work / o.work:.1f}x fewer evals)",
+                "error": (
+                    f"LM reaches the paper's loss on {reached}/{B}; shape RMSE {o.shape_rmse.mean():.3f} vs "
+                    f"{a.shape_rmse.mean():.3f}, |dR|/R {o.refl_rel_err.mean():.3f} vs {a.refl_rel_err.mean():.3f}"
+                ),
+                "notes": f"{B} MC problems ({', '.join(pr['names'])}); {lut_note}; batched in one call",
+            }
+        )
+    rows.append(
+        {
+            "workload": "fit K=1,2,3 schedule, all problems (total wall time)",
+            "ours": f"{t_ours:.1f} s",
+            "anchor": f"{t_paper:.1f} s",
+            "ratio": f"{t_paper / t_ours:.1f}x",
+            "error": "",
+            "notes": "includes the shared K=1 initial search",
+        }
+    )
+    return rows
+
+
+if __name__ == "__main__":
+    import sys
+
+    for row in benchmarks(quick="--quick" in sys.argv):
+        print(row)

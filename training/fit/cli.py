@@ -1,0 +1,163 @@
+"""``python -m training fit``: fit mixtures of K homogeneous media to simulated tones (SPEC §2).
+
+    python -m training fit --tone-file TONE.npz --lut LUT.npz --k 1,2,3 --json
+        prints {"fits": [{"K": 1, "shape_rmse": ..., "refl_rel_err": ...}, ...]}: means over the
+        wavelengths of the tone file (376 for ``python -m training simulate``).
+    python -m training fit --dataset DIR --lut LUT.npz --k 1,2,3 --out DIR
+        (not implemented yet: exits 2).
+
+The LUT is ``--lut`` or, if not given, the file named by the environment variable SKIN_SSS_LUT.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from exporters.constants import anisotropy
+from training.fit.optimize import fit_schedule
+from training.sim.lut_interp import LookupTables
+
+TONE_KEYS = ("wavelength_nm", "R_d", "r_edges_cm", "profile", "photons")
+
+
+def _parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="python -m training fit",
+        description="Fit mixtures of K homogeneous media to MC profiles through the lookup tables (paper §4).",
+    )
+    src = p.add_mutually_exclusive_group(required=True)
+    src.add_argument("--tone-file", type=Path, help="output of `python -m training simulate` (.npz)")
+    src.add_argument("--dataset", type=Path, help="dataset folder (not implemented yet)")
+    p.add_argument("--lut", type=Path, default=None, help="LUT .npz of `python -m training lut` (or $SKIN_SSS_LUT)")
+    p.add_argument("--k", default="1,2,3", help="comma-separated K values among 1, 2, 3 (default 1,2,3)")
+    p.add_argument(
+        "--method",
+        choices=("lm", "paper"),
+        default="lm",
+        help="lm: Levenberg-Marquardt (default, fast); paper: the paper's Adam schedule",
+    )
+    p.add_argument("--json", action="store_true", help="print the summary as one JSON object")
+    p.add_argument("--out", type=Path, default=None, help="write the fitted parameters (.npz for --tone-file)")
+    p.add_argument("--device", choices=("cpu", "cuda"), default="cpu")
+    p.add_argument("--seed", type=int, default=0, help="torch seed (the fit itself is deterministic)")
+    p.add_argument(
+        "--threads",
+        type=int,
+        default=1,
+        help="torch CPU threads (default 1: the problems are small; more threads mostly contend)",
+    )
+    return p
+
+
+def _parse_k(text: str) -> tuple[int, ...]:
+    try:
+        ks = tuple(sorted({int(x) for x in text.split(",") if x.strip()}))
+    except ValueError:
+        raise ValueError(f"--k must be comma-separated integers, got {text!r}") from None
+    if not ks or any(k not in (1, 2, 3) for k in ks):
+        raise ValueError(f"--k values must be among 1, 2, 3, got {text!r}")
+    return ks
+
+
+def load_tone(path: Path) -> dict[str, np.ndarray]:
+    """Read a tone file and check its keys and shapes (ValueError with the problem otherwise)."""
+    with np.load(path) as d:
+        missing = [k for k in TONE_KEYS if k not in d]
+        if missing:
+            raise ValueError(f"{path}: not a tone file of `python -m training simulate`, missing {missing}")
+        out = {k: np.asarray(d[k], dtype=np.float64) for k in TONE_KEYS}
+    w, nb = out["wavelength_nm"].shape[0], out["r_edges_cm"].shape[0] - 1
+    if out["R_d"].shape != (w,) or out["profile"].shape != (w, nb):
+        raise ValueError(f"{path}: inconsistent shapes R_d {out['R_d'].shape}, profile {out['profile'].shape}")
+    return out
+
+
+def fit_tone_file(
+    tone_path: Path, lut: LookupTables, ks: tuple[int, ...], method: str = "lm"
+) -> tuple[list[dict], dict]:
+    """Fit one tone file; returns (summary rows per K, arrays of fitted parameters per K)."""
+    d = load_tone(tone_path)
+    dt, dev = lut.P.dtype, lut.P.device
+    fits = fit_schedule(
+        lut,
+        torch.tensor(d["profile"], dtype=dt, device=dev),
+        torch.tensor(d["R_d"], dtype=dt, device=dev),
+        torch.tensor(d["r_edges_cm"], dtype=dt, device=dev),
+        float(d["photons"]),
+        g_init=torch.tensor(anisotropy(d["wavelength_nm"]), dtype=dt, device=dev),
+        ks=ks,
+        method=method,
+    )
+    rows, arrays = [], {"wavelength_nm": d["wavelength_nm"]}
+    for k in ks:
+        f = fits[k]
+        rows.append(
+            {
+                "K": k,
+                "shape_rmse": float(f.shape_rmse.mean()),
+                "refl_rel_err": float(f.refl_rel_err.mean()),
+                "joint_loss": float(f.joint.mean()),
+                "seconds": round(f.seconds, 3),
+            }
+        )
+        m = f.mixture
+        for name in ("alpha", "g", "sigma_t", "w"):
+            arrays[f"k{k}_{name}"] = getattr(m, name).T.cpu().numpy()  # (K, W)
+        arrays[f"k{k}_shape_rmse"] = f.shape_rmse.cpu().numpy()
+        arrays[f"k{k}_refl_rel_err"] = f.refl_rel_err.cpu().numpy()
+    return rows, arrays
+
+
+def main(argv: list[str]) -> int:
+    args = _parser().parse_args(argv)
+    torch.manual_seed(args.seed)
+    if args.device == "cpu":
+        torch.set_num_threads(max(1, args.threads))
+    try:
+        ks = _parse_k(args.k)
+        if args.dataset is not None:
+            raise NotImplementedError("`fit --dataset` is not implemented yet (the dataset format is not fixed)")
+        if args.device == "cuda" and not torch.cuda.is_available():
+            raise ValueError("--device cuda: no CUDA device available")
+        lut_path = args.lut or (Path(os.environ["SKIN_SSS_LUT"]) if os.environ.get("SKIN_SSS_LUT") else None)
+        if lut_path is None:
+            raise ValueError("give --lut LUT.npz (from `python -m training lut`) or set SKIN_SSS_LUT")
+        for p in (args.tone_file, lut_path):
+            if not p.is_file():
+                raise ValueError(f"no such file: {p}")
+        lut = LookupTables.load(lut_path, dtype=torch.float64, device=args.device)
+        t0 = time.perf_counter()
+        rows, arrays = fit_tone_file(args.tone_file, lut, ks, args.method)
+        seconds = time.perf_counter() - t0
+    except NotImplementedError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    except ValueError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    if args.out is not None:
+        if args.out.exists():
+            print(f"error: {args.out} exists; not overwriting", file=sys.stderr)
+            return 2
+        np.savez(args.out, **arrays)
+    if args.json:
+        print(json.dumps({"fits": rows, "method": args.method, "seconds": round(seconds, 3)}))
+    else:
+        for r in rows:
+            print(
+                f"K={r['K']}: shape RMSE {r['shape_rmse']:.4f}, |dR|/R {r['refl_rel_err']:.4f} "
+                f"(joint {r['joint_loss']:.4f}, {r['seconds']:.1f} s)"
+            )
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main(sys.argv[1:]))
