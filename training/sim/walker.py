@@ -59,8 +59,9 @@ class WalkConfig:
     roulette_threshold, roulette_boost: weight roulette (MCML: 1e-4 and 10).
     path_roulette_n0, path_roulette_keep: optional collision-count roulette for non-absorbing runs:
         a packet whose collision count passes n0 * 2^k (k = 0, 1, ...) survives with probability
-        ``keep`` and weight / keep.  Unbiased (the decision uses only the past); it bounds the cost
-        of the heavy-tailed walks of albedo-1 runs at the price of more variance in the long-path tail.
+        ``keep`` and weight / keep (n0: one value, or one per channel).  Unbiased (the decision
+        uses only the past); it bounds the cost of the heavy-tailed walks of albedo-1 runs at the
+        price of more variance in the long-path tail.
     record_paths: track the path length in each layer (for absorption reweighting).
     check_every: steps between flush / roulette / compaction passes.
     """
@@ -70,7 +71,7 @@ class WalkConfig:
     max_steps: int = 100_000
     roulette_threshold: float = 1e-4
     roulette_boost: float = 10.0
-    path_roulette_n0: int | None = None
+    path_roulette_n0: float | list[float] | None = None
     path_roulette_keep: float = 0.5**0.5
     record_paths: bool = False
     check_every: int = 8
@@ -241,7 +242,9 @@ class Walker:
         if idx.numel():
             self._roulette(idx, 1.0 / cfg.roulette_boost)
         if cfg.path_roulette_n0 is not None and cfg.path_roulette_keep < 1.0:
-            thresh = cfg.path_roulette_n0 * torch.pow(2, st["stage"].to(torch.int64))
+            n0 = torch.as_tensor(cfg.path_roulette_n0, dtype=torch.float64, device=self.device)
+            n0 = n0[st["ch"]] if n0.ndim else n0
+            thresh = n0 * torch.pow(2.0, st["stage"].to(torch.float64))
             idx = (st["alive"] & (st["ncoll"] >= thresh)).nonzero().squeeze(1)
             if idx.numel():
                 st["stage"][idx] += 1

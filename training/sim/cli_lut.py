@@ -1,0 +1,62 @@
+"""``python -m training lut``: the homogeneous semi-infinite lookup tables (SPEC §2, paper §4.2).
+
+Example (small)::
+
+    python -m training lut --albedo-n 64 --g-n 8 --photons 20000 --out runs/lut_small.npz
+
+Resumable: columns are kept in ``<out>.parts/``; rerun the same command after a kill.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from training.sim.lut import ALBEDO_MAX, ALBEDO_MIN, G_MAX, G_MIN, MAX_STEPS, build_lut
+
+
+def _parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="python -m training lut",
+        description="R(albedo, g) and P(r | albedo, g) of a semi-infinite medium at sigma_t = 1, n = 1.4, "
+        "diffuse illumination, by absorption reweighting of one non-absorbing run per g.",
+    )
+    p.add_argument("--albedo-n", type=int, required=True, help="albedo samples (1 - albedo log-spaced)")
+    p.add_argument("--g-n", type=int, required=True, help="anisotropy samples (linear)")
+    p.add_argument("--photons", type=int, required=True, help="photons per g column")
+    p.add_argument("--out", required=True, help="output .npz")
+    p.add_argument("--albedo-min", type=float, default=ALBEDO_MIN)
+    p.add_argument("--albedo-max", type=float, default=ALBEDO_MAX)
+    p.add_argument("--g-min", type=float, default=G_MIN)
+    p.add_argument("--g-max", type=float, default=G_MAX)
+    p.add_argument("--max-steps", type=int, default=MAX_STEPS, help="walk cap per photon")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--device", choices=("cpu", "cuda"), default="cpu")
+    p.add_argument("--compile", choices=("auto", "on", "off"), default="auto",
+                   help="torch.compile the walker step (auto: when photons x g-n > 4M)")
+    p.add_argument("--no-progress", action="store_true")
+    return p
+
+
+def main(argv: list[str]) -> int:
+    """Run the command; returns the exit status (2 for bad input)."""
+    args = _parser().parse_args(argv)
+    compile_ = {"on": True, "off": False, "auto": args.photons * args.g_n > (1 << 22)}[args.compile]
+    try:
+        if args.device == "cuda":
+            import torch
+
+            if not torch.cuda.is_available():
+                raise ValueError("device 'cuda' requested but CUDA is not available")
+        if args.max_steps < 1:
+            raise ValueError("--max-steps must be >= 1")
+        build_lut(
+            args.out, args.albedo_n, args.g_n, args.photons, seed=args.seed, device=args.device,
+            albedo_range=(args.albedo_min, args.albedo_max), g_range=(args.g_min, args.g_max),
+            max_steps=args.max_steps, compile=compile_, progress=not args.no_progress,
+            log=lambda s: print(s, file=sys.stderr),
+        )
+    except ValueError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    return 0

@@ -1,0 +1,256 @@
+"""Homogeneous semi-infinite lookup tables R(albedo, g) and P(r | albedo, g) (paper §4.2), by reweighting.
+
+Medium: semi-infinite, sigma_t = 1 (so radii are in mean free paths), n = 1.4 below air, diffuse
+(cosine-weighted) illumination through the Fresnel boundary, specular reflection excluded.
+
+Absorption reweighting (exact): at fixed sigma_t, a packet that left the medium after n collisions in
+a NON-absorbing run carries weight albedo^n in the run at that albedo (implicit capture multiplies by
+the albedo at each collision; trajectories do not depend on it).  So one albedo-1 run per g serves
+every albedo: each exiting packet is histogrammed by (radial bin, collision count n) and every albedo
+follows from a matrix product with albedo^n.
+
+Collision-count bins: exact for n < N_EXACT; above, geometric bins of relative width DELTA_N.  Each
+bin keeps sum w and sum w n per radial bin, and albedo^n is expanded to first order about the bin's
+mean count nbar (a^n ~ a^nbar (1 + (n - nbar) ln a)); the remainder is below
+(n delta ln a)^2 / 2 * a^n <= 0.54 DELTA_N^2 / 2 ~ 3e-5 relative for DELTA_N = 1 %.
+
+Cost control (both unbiased): the walk cap (max_steps; packets alive at the cap are reported as a
+bias bound, sum w a^n_cap / N, stored as ``R_trunc_bound``) and a collision-count roulette (a packet
+passing n0 * 2^k collisions survives with probability 1/sqrt(2), weight x sqrt(2); n0 = PATH_C / (1 - g)
+so that it starts in the diffusive regime): it bounds the heavy-tailed cost of albedo-1 walks while
+the variance grows only logarithmically with the largest albedo.
+
+Grids (the table stores both): albedo with 1 - albedo log-spaced from 1 - albedo_min to
+1 - albedo_max (dense near 1, where profiles change fastest); g linear.  Radial edges: the numbers of
+R_EDGES_CM (SPEC §2) in mean free paths; the light beyond the last edge is in R but not in P
+(``frac_inside`` = the fraction of R inside).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from exporters.constants import N_TISSUE, R_EDGES_CM
+from training.sim.kernel import KIND_REFLECTED, KIND_TRUNCATED, fmix32_int
+from training.sim.medium import LayeredMedium
+from training.sim.walker import Source, WalkConfig, Walker
+
+N_EXACT = 256  #: collision counts below this are histogrammed exactly
+DELTA_N = 0.01  #: relative width of the collision-count bins above N_EXACT
+PATH_C = 32.0  #: collision-count roulette starts at PATH_C / (1 - g) collisions
+ALBEDO_MIN, ALBEDO_MAX = 0.01, 0.9999  #: default albedo range
+G_MIN, G_MAX = 0.0, 0.95  #: default anisotropy range
+MAX_STEPS = 100_000  #: default walk cap (0.9999^1e5 = 4.5e-5)
+
+
+def albedo_grid(n: int, a_min: float = ALBEDO_MIN, a_max: float = ALBEDO_MAX) -> np.ndarray:
+    """(n,) increasing albedos with 1 - albedo log-spaced from 1 - a_min to 1 - a_max."""
+    if n < 2 or not (0.0 < a_min < a_max < 1.0):
+        raise ValueError(f"need n >= 2 and 0 < albedo_min < albedo_max < 1, got {n}, {a_min}, {a_max}")
+    return 1.0 - np.geomspace(1.0 - a_min, 1.0 - a_max, n)
+
+
+def g_grid(n: int, g_min: float = G_MIN, g_max: float = G_MAX) -> np.ndarray:
+    """(n,) linearly spaced anisotropies in [g_min, g_max] within [-0.99, 0.99]."""
+    if n < 2 or not (-0.99 <= g_min < g_max <= 0.99):
+        raise ValueError(f"need n >= 2 and -0.99 <= g_min < g_max <= 0.99, got {n}, {g_min}, {g_max}")
+    return np.linspace(g_min, g_max, n)
+
+
+@dataclass
+class CountBins:
+    """Collision-count binning: exact below N_EXACT, geometric (ratio 1 + DELTA_N) above, up to n_max."""
+
+    n_max: int
+
+    @property
+    def n_bins(self) -> int:
+        return N_EXACT + int(math.ceil(math.log(max(self.n_max, N_EXACT) / N_EXACT) / math.log1p(DELTA_N))) + 1
+
+    def index(self, n: torch.Tensor) -> torch.Tensor:
+        nf = n.to(torch.float64).clamp_min(1.0)
+        log_bin = N_EXACT + torch.floor(torch.log(nf / N_EXACT) / math.log1p(DELTA_N)).to(torch.int64)
+        return torch.where(n < N_EXACT, n.to(torch.int64), log_bin).clamp_(0, self.n_bins - 1)
+
+    def centres(self) -> np.ndarray:
+        """Fallback representative counts (used only for empty bins)."""
+        k = np.arange(self.n_bins - N_EXACT)
+        return np.concatenate([np.arange(N_EXACT, dtype=float), N_EXACT * (1 + DELTA_N) ** (k + 0.5)])
+
+
+class _Histograms:
+    """Sink: per channel, sums of w and w n over (radial bin incl. overflow, count bin); sum w^2 per count bin."""
+
+    def __init__(self, n_ch: int, edges: torch.Tensor, bins: CountBins, device: torch.device) -> None:
+        self.edges, self.bins, self.nr, self.nb = edges, bins, edges.shape[0], bins.n_bins
+        self.hw = torch.zeros(n_ch * self.nr * self.nb, dtype=torch.float64, device=device)
+        self.hwn = torch.zeros_like(self.hw)
+        self.hw2 = torch.zeros(n_ch * self.nb, dtype=torch.float64, device=device)
+        self.trunc: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
+
+    def __call__(self, rec: dict[str, torch.Tensor]) -> None:
+        m = rec["kind"] == KIND_REFLECTED
+        ch, w, n = rec["ch"][m], rec["w"][m].double(), rec["ncoll"][m]
+        r = torch.hypot(rec["x"][m].double(), rec["y"][m].double())
+        rb = (torch.searchsorted(self.edges, r, right=True) - 1).clamp_(0, self.nr - 1)
+        nb = self.bins.index(n)
+        flat = (ch * self.nr + rb) * self.nb + nb
+        self.hw.index_add_(0, flat, w)
+        self.hwn.index_add_(0, flat, w * n.double())
+        self.hw2.index_add_(0, ch * self.nb + nb, w * w)
+        t = rec["kind"] == KIND_TRUNCATED
+        if bool(t.any()):
+            self.trunc.append((rec["ch"][t].cpu().numpy(), rec["w"][t].double().cpu().numpy(),
+                               rec["ncoll"][t].cpu().numpy()))
+
+    def channel(self, c: int) -> dict[str, np.ndarray]:
+        sl = slice(c * self.nr * self.nb, (c + 1) * self.nr * self.nb)
+        tw = [(w[ch == c], n[ch == c]) for ch, w, n in self.trunc]
+        return {
+            "hw": self.hw[sl].reshape(self.nr, self.nb).cpu().numpy(),
+            "hwn": self.hwn[sl].reshape(self.nr, self.nb).cpu().numpy(),
+            "hw2": self.hw2[c * self.nb:(c + 1) * self.nb].cpu().numpy(),
+            "trunc_w": np.concatenate([t[0] for t in tw]) if tw else np.zeros(0),
+            "trunc_n": np.concatenate([t[1] for t in tw]).astype(np.float64) if tw else np.zeros(0),
+        }
+
+
+def reweight(hist: dict[str, np.ndarray], albedo: np.ndarray, photons: int, r_edges: np.ndarray,
+             bins: CountBins) -> dict[str, np.ndarray]:
+    """Tables of one g column from its histograms.
+
+    Returns R (NA,), R_stderr (NA,), P (NA, NB) (per unit area, sum P area = 1 inside the last edge),
+    frac_inside (NA,) and R_trunc_bound (NA,) (upper bound of the reflectance the capped walks could
+    still have added).
+    """
+    hw, hwn, hw2 = hist["hw"], hist["hwn"], hist["hw2"]
+    tot_w = hw.sum(0)
+    nbar = np.where(tot_w > 0, hwn.sum(0) / np.where(tot_w > 0, tot_w, 1.0), bins.centres())
+    nbar[:N_EXACT] = np.arange(N_EXACT)
+    log_a = np.log(albedo)
+    e = np.exp(np.outer(nbar, log_a))  # (NB, NA): albedo^nbar
+    dev = hwn - hw * nbar[None, :]  # first-order term: sum w (n - nbar)
+    praw = (hw @ e + (dev @ e) * log_a[None, :]) / photons  # (NR + 1, NA), overflow bin last
+    r_tot = praw.sum(0)
+    ev2 = (hw2 @ np.exp(np.outer(nbar, 2.0 * log_a))) / photons
+    r_se = np.sqrt(np.clip(ev2 - r_tot**2, 0.0, None) / max(photons - 1, 1))
+    inside = praw[:-1].sum(0)
+    area = math.pi * np.diff(r_edges**2)
+    safe = np.where(inside > 0, inside, 1.0)
+    p = np.where(inside[:, None] > 0, praw[:-1].T / safe[:, None] / area[None, :], 0.0)
+    trunc = (hist["trunc_w"][:, None] * np.exp(np.outer(hist["trunc_n"], log_a))).sum(0) / photons
+    return {"R": r_tot, "R_stderr": r_se, "P": p, "frac_inside": inside / np.where(r_tot > 0, r_tot, 1.0),
+            "R_trunc_bound": trunc}
+
+
+def simulate_columns(
+    g_values: np.ndarray,
+    albedo: np.ndarray,
+    photons: int,
+    *,
+    seed: int = 0,
+    device: str | torch.device = "cpu",
+    dtype: torch.dtype = torch.float32,
+    max_steps: int = MAX_STEPS,
+    path_c: float | None = PATH_C,
+    n_medium: float = N_TISSUE,
+    r_edges_mfp: np.ndarray = R_EDGES_CM,
+    compile: bool = False,
+    pool_packets: int | None = None,
+    progress=None,
+) -> list[dict[str, np.ndarray]]:
+    """One non-absorbing run over the g columns ``g_values`` (as channels); tables for each column."""
+    dev = torch.device(device)
+    g_values = np.asarray(g_values, dtype=np.float64)
+    ng = g_values.size
+    medium = LayeredMedium(
+        torch.zeros(1, ng), torch.ones(1, ng), torch.tensor(g_values)[None], torch.tensor([math.inf]),
+        n_medium=n_medium,
+    )
+    n0 = None if path_c is None else [path_c / (1.0 - g) for g in g_values]
+    pool = pool_packets or (1 << 18 if dev.type == "cpu" else 1 << 22)
+    cfg = WalkConfig(illumination="diffuse", pool_packets=pool, max_steps=max_steps, path_roulette_n0=n0)
+    walker = Walker(medium, cfg, seed=seed, device=dev, dtype=dtype, compile=compile)
+    bins = CountBins(max_steps + 1)
+    edges = np.asarray(r_edges_mfp, dtype=np.float64)
+    hist = _Histograms(ng, torch.tensor(edges, device=dev), bins, dev)
+    walker.run(Source(int(photons), ng), hist, progress=progress)
+    return [reweight(hist.channel(c), albedo, photons, edges, bins) for c in range(ng)]
+
+
+def column_seed(seed: int, j: int) -> int:
+    """Seed of g column j: independent of how columns are batched."""
+    return fmix32_int(seed * 1_000_003 + j) & 0x7FFFFFFF
+
+
+def build_lut(
+    out: str | Path,
+    albedo_n: int,
+    g_n: int,
+    photons: int,
+    *,
+    seed: int = 0,
+    device: str = "cpu",
+    albedo_range: tuple[float, float] = (ALBEDO_MIN, ALBEDO_MAX),
+    g_range: tuple[float, float] = (G_MIN, G_MAX),
+    max_steps: int = MAX_STEPS,
+    compile: bool = False,
+    progress: bool = False,
+    log=print,
+) -> Path:
+    """Build the LUT file ``out`` (.npz, SPEC §2 keys plus R_stderr, R_trunc_bound, frac_inside, photons).
+
+    Resumable: each g column is written to ``<out>.parts/g_XXXX.npz`` as soon as it is done; a rerun
+    with the same arguments skips finished columns (a kill loses at most the column in progress).
+    """
+    out = Path(out)
+    if photons < 2:
+        raise ValueError("photons must be >= 2")
+    albedo = albedo_grid(albedo_n, *albedo_range)
+    gs = g_grid(g_n, *g_range)
+    parts = out.with_name(out.name + ".parts")
+    parts.mkdir(parents=True, exist_ok=True)
+    manifest = {"albedo": albedo.tolist(), "g": gs.tolist(), "photons": int(photons), "seed": int(seed),
+                "max_steps": int(max_steps), "r_edges_mfp": R_EDGES_CM.tolist(), "n": N_TISSUE,
+                "path_c": PATH_C, "delta_n": DELTA_N, "n_exact": N_EXACT}
+    mpath = parts / "manifest.json"
+    if mpath.exists() and json.loads(mpath.read_text()) != manifest:
+        raise ValueError(f"{parts} holds columns of a different LUT build; remove it or change --out")
+    mpath.write_text(json.dumps(manifest))
+    bar = None
+    if progress:
+        from tqdm import tqdm
+
+        bar = tqdm(total=g_n * photons, unit="photon", unit_scale=True, smoothing=0.05)
+    t0 = time.perf_counter()
+    for j, g in enumerate(gs):
+        path = parts / f"g_{j:04d}.npz"
+        if path.exists():
+            if bar:
+                bar.update(photons)
+            continue
+        (col,) = simulate_columns(np.array([g]), albedo, photons, seed=column_seed(seed, j), device=device,
+                                  max_steps=max_steps, compile=compile, progress=bar.update if bar else None)
+        tmp = path.with_suffix(".tmp.npz")
+        np.savez(tmp, **col)
+        tmp.replace(path)
+    if bar:
+        bar.close()
+    cols = [np.load(parts / f"g_{j:04d}.npz") for j in range(g_n)]
+    stack = lambda k: np.stack([c[k] for c in cols], axis=1)  # noqa: E731  (NA, NG, ...)
+    tmp = out.with_name(out.name + ".tmp.npz")
+    np.savez(
+        tmp, albedo=albedo, g=gs, r_edges_mfp=np.array(R_EDGES_CM), R=stack("R"), P=stack("P"),
+        R_stderr=stack("R_stderr"), R_trunc_bound=stack("R_trunc_bound"), frac_inside=stack("frac_inside"),
+        photons=np.int64(photons), n_medium=np.float64(N_TISSUE),
+    )
+    tmp.replace(out)
+    log(f"LUT {albedo_n}x{g_n}, {photons} photons per g column -> {out} ({time.perf_counter() - t0:.1f} s)")
+    return out
