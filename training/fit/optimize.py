@@ -8,7 +8,8 @@ Both methods share the same initialisation and the same schedule of K (paper §4
 2. K = 1 joint (L_shape + 5 L_R), from step 1: the row reported as "K = 1" (the paper's tables use the
    joint-optimised K = 1).
 3. K = 2 joint, 7 parameters, from step 1 split into two copies at sigma_t x f and / f, w = 1/2 each
-   (f = 1.5 for the paper's method; LM tries every f of ``K2_SPLITS`` and keeps the best).
+   (f = 1.5 for the paper's method; LM also tries the other starts of ``K2_SPLITS``, some giving the
+   new copy another albedo, and keeps the best).
 4. K = 3 joint, 11 parameters, from step 3 by splitting the dominant component (largest w) into two
    copies at sigma_t x 1.5 and / 1.5 sharing its weight (LM: every start of ``K3_SPLITS``, and K = 2
    itself, as a duplicated component, where no K = 3 start does better).
@@ -49,8 +50,29 @@ PAPER_LR: float = 1e-2
 LM_ITERS: dict[str, int] = {"k1_shape": 30, "k1_joint": 30, "k2": 60, "k3": 80}
 #: Starts of the K = 2 and K = 3 stages: sigma_t split factors (the paper's method uses the first only)
 #: and, for K = 3, (rank of the component split, factor).  LM runs all starts and keeps the best.
-K2_SPLITS: tuple[float, ...] = (1.5, 3.0, 10.0, 30.0, 100.0)
-K3_SPLITS: tuple[tuple[int, float], ...] = ((0, 1.5), (1, 1.5), (0, 4.0), (1, 4.0), (0, 15.0))
+#: LM with several starts: every start gets this many iterations, then only the best one per problem
+#: goes on (successive halving in one round).
+LM_PROBE_ITERS: int = 30
+#: Each start is (rank of the component split, sigma_t factor, albedo of the new copy or None = same).
+#: The loss is multimodal (a low-albedo second medium is often the better basin), hence the spread.
+K2_SPLITS: tuple[tuple[int, float, float | None], ...] = (
+    (0, 1.5, None),
+    (0, 10.0, None),
+    (0, 1.0, 0.1),
+    (0, 1.0, 0.9),
+    (0, 3.0, 0.9),
+    (0, 10.0, 0.5),
+)
+K3_SPLITS: tuple[tuple[int, float, float | None], ...] = (
+    (0, 1.5, None),
+    (0, 3.0, None),
+    (0, 1.0, 0.5),
+    (0, 1.0, 0.9),
+    (0, 3.0, 0.9),
+    (1, 1.0, 0.1),
+    (1, 10.0, 0.5),
+    (1, 10.0, None),
+)
 
 
 @dataclass
@@ -187,27 +209,29 @@ def initial_k1(
     return best_theta
 
 
-def split(theta: torch.Tensor, k: int, prob: Problem, factor: float, rank: int = 0) -> torch.Tensor:
+def split(
+    theta: torch.Tensor, k: int, prob: Problem, factor: float, rank: int = 0, alpha_new: float | None = None
+) -> torch.Tensor:
     """K -> K + 1 components: a component becomes two copies at sigma_t x / factor sharing its weight.
 
     ``rank`` 0 splits the dominant component (largest w, the paper's rule), 1 the second largest, ...
+    ``alpha_new``: if given, the albedo of the new copy (a start in another basin of the loss).
+    Works on the raw parameters, so with ``factor`` 1 the mixture is exactly the K-component one.
     """
-    m = prob.mixture(theta, k)
-    j = m.w.argsort(-1, descending=True)[..., rank : rank + 1]  # (B, 1)
+    a, b, s = theta[:, :k], theta[:, k : 2 * k], theta[:, 2 * k : 3 * k]
+    logits = torch.cat([torch.zeros_like(a[:, :1]), theta[:, 3 * k :]], dim=-1)
+    j = logits.argsort(-1, descending=True)[:, rank : rank + 1]  # (B, 1)
 
     def take(x):
         return torch.gather(x, -1, j)
 
-    lf = math.log(factor)
-    sig = m.sigma_t.scatter(-1, j, take(m.sigma_t) * math.exp(lf))
-    w = m.w.scatter(-1, j, take(m.w) / 2)
-    new = Mixture(
-        torch.cat([m.alpha, take(m.alpha)], -1),
-        torch.cat([m.g, take(m.g)], -1),
-        torch.cat([sig, take(m.sigma_t) * math.exp(-lf)], -1),
-        torch.cat([w, take(m.w) / 2], -1),
-    )
-    return pack(new, prob.g_lo, prob.g_hi)
+    lf, half = math.log(factor), math.log(2.0)
+    a_add = take(a) if alpha_new is None else torch.full_like(take(a), math.log(alpha_new / (1 - alpha_new)))
+    s_new = s.scatter(-1, j, take(s) + lf)
+    logits = logits.scatter(-1, j, take(logits) - half)
+    logits = torch.cat([logits, take(logits)], -1)
+    z = logits[:, 1:] - logits[:, :1]
+    return torch.cat([a, a_add, b, take(b), s_new, take(s) - lf, z], dim=-1)
 
 
 # ------------------------------------------------------------------ optimisers
@@ -238,6 +262,17 @@ def adam(
     return theta.detach(), trace
 
 
+#: LM keeps the raw albedo / anisotropy / weight parameters within +-RAW_BOX: beyond it the sigmoid and
+#: softmax saturate (alpha within 6e-6 of 1), the Jacobian column vanishes and a problem cannot come back.
+RAW_BOX: float = 12.0
+
+
+def _box(theta: torch.Tensor, k: int) -> torch.Tensor:
+    """Clamp the raw alpha, g and weight parameters to +-RAW_BOX (log sigma_t stays unbounded)."""
+    ab, s, z = theta[:, : 2 * k], theta[:, 2 * k : 3 * k], theta[:, 3 * k :]
+    return torch.cat([ab.clamp(-RAW_BOX, RAW_BOX), s, z.clamp(-RAW_BOX, RAW_BOX)], dim=-1)
+
+
 def levenberg_marquardt(
     prob: Problem,
     theta0: torch.Tensor,
@@ -254,7 +289,7 @@ def levenberg_marquardt(
     loss by less than ``rtol`` (relative), or once rejected steps drove its damping above 1e8.
     """
     t = prob.target if t is None else t
-    theta = theta0.detach().clone()
+    theta = _box(theta0.detach(), k)
     B, P = theta.shape
     mu = torch.full((B,), 1e-2, dtype=theta.dtype, device=theta.device)
     stall = torch.zeros(B, dtype=torch.long, device=theta.device)
@@ -273,7 +308,7 @@ def levenberg_marquardt(
             lhs = A + (m_a[:, None] * D)[:, :, None] * eye + 1e-12 * eye
             step = torch.linalg.solve(lhs, -grad[..., None])[..., 0]
             step = torch.nan_to_num(step, nan=0.0, posinf=0.0, neginf=0.0).clamp(-5.0, 5.0)
-            cand = th + step
+            cand = _box(th + step, k)
             val = prob.merit(cand, k, shape_only, ta)
             c_a = cur[act]
             ok = torch.isfinite(val) & (val < c_a)
@@ -331,11 +366,13 @@ def fit_schedule(
         if method == "paper" or len(starts) == 1:
             return run(starts[0], k, key, False)
         ns, B = len(starts), starts[0].shape[0]
-        th = levenberg_marquardt(prob, torch.cat(starts), k, n[key], False, t=t_fit.repeat(ns))
+        probe = min(LM_PROBE_ITERS, n[key])
+        th = levenberg_marquardt(prob, torch.cat(starts), k, probe, False, t=t_fit.repeat(ns))
         with torch.no_grad():
             val = prob.merit(th, k, False, t_fit.repeat(ns)).reshape(ns, B)
         best = val.argmin(0)
-        return th.reshape(ns, B, -1)[best, torch.arange(B, device=th.device)]
+        th = th.reshape(ns, B, -1)[best, torch.arange(B, device=th.device)]
+        return levenberg_marquardt(prob, th, k, n[key] - probe, False, t=t_fit)
 
     out: dict[int, FitResult] = {}
     t0 = time.perf_counter()
@@ -357,11 +394,11 @@ def fit_schedule(
     if kmax >= 2:
         prob.evals = base_evals
         t2 = time.perf_counter()
-        th2 = run_multi([split(theta1s, 1, prob, f) for f in K2_SPLITS], 2, "k2")
+        th2 = run_multi([split(theta1s, 1, prob, f, r, a) for r, f, a in K2_SPLITS], 2, "k2")
         record(2, th2, prob.evals, base_time + time.perf_counter() - t2)
         if kmax >= 3:
             t3 = time.perf_counter()
-            th3 = run_multi([split(th2, 2, prob, f, rank) for rank, f in K3_SPLITS], 3, "k3")
+            th3 = run_multi([split(th2, 2, prob, f, r, a) for r, f, a in K3_SPLITS], 3, "k3")
             if method == "lm":  # keep K = 2 (as a duplicated component) where K = 3 ended worse
                 with torch.no_grad():
                     dup = split(th2, 2, prob, 1.0)
