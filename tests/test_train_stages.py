@@ -1,0 +1,100 @@
+"""Staged training on a tiny synthetic dataset in the real file formats: it learns, stages stay frozen,
+a killed run resumes to the uninterrupted result, and the CLI refuses inconsistent runs."""
+
+import json
+
+import pytest
+import torch
+
+from training.model import ModelConfig
+from training.train.cli import SIZES
+from training.train.cli import main as train_main
+from training.train.data import load_split
+from training.train.loop import checkpoint_path, load_checkpoint
+from training.train.run import TrainConfig, train
+from training.train.toy import write_toy
+
+TCFG = dict(epochs=[3, 3, 3], batch=[8, 64, 8], lr=[3e-3, 3e-3, 1e-3], synthetic=256)
+
+
+@pytest.fixture(scope="module")
+def toy(tmp_path_factory):
+    return write_toy(tmp_path_factory.mktemp("toy"), n_train=24, n_validation=6)
+
+
+def _train(rundir, toy, want=(1, 2, 3), stop=None, tcfg=None):
+    data, fits, lut = toy
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)  # the same reduction order in both runs
+    try:
+        return train(rundir, data, fits, lut, want=want, mcfg=ModelConfig(**SIZES["tiny"]),
+                     tcfg=TrainConfig(**(tcfg or TCFG)), progress=False, stop_after_epochs=stop)
+    finally:
+        torch.set_num_threads(threads)
+
+
+def _states(rundir):
+    return {s: load_checkpoint(checkpoint_path(rundir, s))["model"] for s in (1, 2, 3)}
+
+
+def test_fits_are_read_sorted_by_sigma_t(toy):
+    data, fits, _ = toy
+    split = load_split(data, "train", fits, k=3)
+    assert split.targets["sigma_t"].shape == (24, 3, 376)
+    assert (torch.diff(split.targets["sigma_t"], dim=1) >= 0).all()
+    torch.testing.assert_close(split.targets["weight"].sum(1), torch.ones(24, 376), atol=1e-5, rtol=0)
+
+
+def test_staged_training_learns_freezes_and_resumes_exactly(toy, tmp_path):
+    full = tmp_path / "full"
+    rec = _train(full, toy)
+    assert (full / "model.pt").is_file() and rec["metrics"]["validation"]["n_tones"] == 6
+    states = _states(full)
+    # each stage changes only its own networks (frozen predecessors and successors)
+    for name, t in states[1].items():
+        if name.startswith("dec_r."):
+            torch.testing.assert_close(states[2][name], t, rtol=0, atol=0)
+            torch.testing.assert_close(states[3][name], t, rtol=0, atol=0)
+    for name, t in states[2].items():
+        if name.startswith("enc."):
+            torch.testing.assert_close(states[3][name], t, rtol=0, atol=0)
+        if name.startswith("enc.net."):
+            assert not torch.equal(states[1][name], t)  # stage 2 did train Enc
+    # losses went down within each stage
+    for s in (1, 2, 3):
+        hist = load_checkpoint(checkpoint_path(full, s))["history"]
+        assert hist[-1]["train_loss"] < hist[0]["train_loss"], (s, hist)
+
+    # a run killed after 2 epochs of stage 1 and after 1 epoch of stage 3, then restarted, ends identical
+    part = tmp_path / "part"
+    _train(part, toy, stop=2)
+    assert not load_checkpoint(checkpoint_path(part, 1))["done"]
+    _train(part, toy, want=(1,), stop=None)
+    _train(part, toy, want=(2,))
+    _train(part, toy, want=(3,), stop=1)
+    assert load_checkpoint(checkpoint_path(part, 3))["epoch"] == 0
+    _train(part, toy)
+    resumed = _states(part)
+    for s in (1, 2, 3):
+        for name, t in states[s].items():
+            torch.testing.assert_close(resumed[s][name], t, rtol=0, atol=0, msg=f"stage {s} {name}")
+    h_full = load_checkpoint(checkpoint_path(full, 3))["history"]
+    h_part = load_checkpoint(checkpoint_path(part, 3))["history"]
+    assert [r["train_loss"] for r in h_full] == [r["train_loss"] for r in h_part]
+    commands = json.loads((part / "run.json").read_text())
+    assert commands["losses"]["stage3"]["done"]
+
+
+def test_cli_refuses_inconsistent_runs(toy, tmp_path, capsys):
+    data, fits, lut = toy
+    base = ["--dataset", str(data), "--lut", str(lut), "--out", str(tmp_path / "r"), "--size", "tiny",
+            "--batch", "8", "--synthetic", "16", "--no-progress", "--threads", "1", "--epochs"]
+    assert train_main(base + ["1", "--stage", "3"]) == 2  # no --fits
+    assert "needs --fits" in capsys.readouterr().err
+    assert train_main(base + ["1", "--fits", str(fits), "--stage", "2"]) == 2  # stage 1 not trained
+    assert "stage 1 is not finished" in capsys.readouterr().err
+    assert train_main(base + ["1", "--stage", "1"]) == 0
+    assert train_main(base + ["2", "--stage", "1"]) == 2  # another configuration in the same folder
+    assert "another train" in capsys.readouterr().err
+    rec = json.loads((tmp_path / "r" / "run.json").read_text())
+    assert rec["commands"][0].startswith("python -m training train --dataset")

@@ -1,0 +1,101 @@
+"""``python -m training train``: the frozen staged training of Enc, Dec_R and Dec_T (paper §5.2).
+
+    python -m training train --dataset DIR --fits DIR --lut LUT.npz --out RUNDIR
+        [--stage 1|2|3|all] [--epochs E1,E2,E3] [--batch B1,B2,B3] [--lr L1,L2,L3] [--k 3]
+        [--size paper|small|tiny] [--synthetic N] [--seed S] [--device cpu|cuda]
+        [--checkpoint-interval SECONDS] [--no-progress]
+
+--dataset: folder with train.h5 and validation.h5 (``python -m training dataset``).
+--fits: folder with fits_train.h5 (and optionally fits_validation.h5), groups K1..K3 (needed by stage 3).
+--lut: the lookup tables of ``python -m training lut`` (stage 3's reflectance loss; its g axis bounds g).
+Killing the job and running the same command again resumes from the last checkpoint.
+--size: paper = the paper's networks (Dec_R 512, Dec_T 4 x 768); small / tiny = narrower networks for
+quick experiments and tests.
+"""
+
+from __future__ import annotations
+
+import argparse
+import shlex
+import sys
+from pathlib import Path
+
+from training.model.config import ModelConfig
+from training.train.run import TrainConfig, train
+
+SIZES: dict[str, dict[str, int]] = {
+    "paper": {"enc_hidden": 70, "decr_hidden": 512, "dect_hidden": 768, "dect_layers": 4},
+    "small": {"enc_hidden": 70, "decr_hidden": 256, "dect_hidden": 256, "dect_layers": 4},
+    "tiny": {"enc_hidden": 16, "decr_hidden": 32, "dect_hidden": 32, "dect_layers": 3},
+}
+
+
+def _triple(text: str, kind: type) -> list:
+    vals = [kind(v) for v in text.split(",")]
+    if len(vals) == 1:
+        vals = vals * 3
+    if len(vals) != 3:
+        raise argparse.ArgumentTypeError(f"give one value or three comma-separated values, got {text!r}")
+    return vals
+
+
+def parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="python -m training train", description=__doc__.splitlines()[0],
+                                formatter_class=argparse.RawDescriptionHelpFormatter, epilog=__doc__)
+    p.add_argument("--dataset", type=Path, required=True)
+    p.add_argument("--fits", type=Path, default=None)
+    p.add_argument("--lut", type=Path, required=True)
+    p.add_argument("--out", type=Path, required=True, help="run folder (created; resumed if it exists)")
+    p.add_argument("--stage", choices=("1", "2", "3", "all"), default="all")
+    d = TrainConfig()
+    p.add_argument("--epochs", type=lambda s: _triple(s, int), default=d.epochs, help="E or E1,E2,E3")
+    p.add_argument("--batch", type=lambda s: _triple(s, int), default=d.batch, help="B or B1,B2,B3")
+    p.add_argument("--lr", type=lambda s: _triple(s, float), default=d.lr, help="L or L1,L2,L3")
+    p.add_argument("--synthetic", type=int, default=d.synthetic, help="stage 2: albedos rendered by Dec_R")
+    p.add_argument("--exposure-jitter", type=float, default=d.exposure_jitter)
+    p.add_argument("--k", type=int, default=3, help="mixture components (fits group K{k})")
+    p.add_argument("--size", choices=sorted(SIZES), default="paper")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--device", choices=("cpu", "cuda"), default="cpu")
+    p.add_argument("--checkpoint-interval", type=float, default=0.0,
+                   help="seconds between checkpoints (0: after every epoch; the last epoch is always saved)")
+    p.add_argument("--threads", type=int, default=0, help="torch CPU threads (0: torch's default)")
+    p.add_argument("--no-progress", action="store_true")
+    return p
+
+
+def main(argv: list[str]) -> int:
+    args = parser().parse_args(argv)
+    import torch
+
+    if args.threads > 0:
+        torch.set_num_threads(args.threads)
+    want = (1, 2, 3) if args.stage == "all" else (int(args.stage),)
+    mcfg = ModelConfig(k=args.k, **SIZES[args.size])
+    tcfg = TrainConfig(seed=args.seed, epochs=args.epochs, batch=args.batch, lr=args.lr,
+                       synthetic=args.synthetic, exposure_jitter=args.exposure_jitter)
+    command = "python -m training train " + shlex.join(argv)
+    try:
+        if 3 in want and args.fits is None:
+            raise ValueError("stage 3 needs --fits DIR (fits_train.h5)")
+        for path in (args.dataset, args.lut) + ((args.fits,) if args.fits else ()):
+            if not path.exists():
+                raise ValueError(f"no such file or folder: {path}")
+        record = train(args.out, args.dataset, args.fits, args.lut, want=want, mcfg=mcfg, tcfg=tcfg,
+                       device=args.device, progress=not args.no_progress,
+                       checkpoint_interval_s=args.checkpoint_interval, command=command)
+    except ValueError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    for stage, row in record.get("losses", {}).items():
+        parts = ", ".join(f"{k} {v:.4g}" for k, v in row.items() if k.startswith(("train_", "val_")))
+        print(f"{stage}: {parts}")
+    if "metrics" in record:
+        v = record["metrics"]["validation"]
+        print(f"validation colour dE76 (encoder round trip): mean {v['enc_delta_e76']['mean']:.3f}")
+        print(f"wrote {args.out / 'model.pt'}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main(sys.argv[1:]))

@@ -1,0 +1,149 @@
+"""Orchestration of the staged training in a run folder, resumable at every level.
+
+RUNDIR holds:
+  run.json       the model and training configuration, the inputs (paths, LUT SHA-256, dataset sizes
+                 and photons), every command that trained into it, the last losses of each stage and
+                 the validation metrics;
+  stage{1,2,3}.pt  each stage's checkpoint (whole model + optimizer + history); a finished stage is
+                 marked done and is never trained again;
+  model.pt       the final model (config + state dict), written when stage 3 finishes.
+
+Running the same command again continues where it stopped.  Asking for a later stage loads the
+earlier stages' finished checkpoints (they must exist).  A different configuration in an existing
+RUNDIR is refused (use another folder).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import torch
+
+from training.model.chain import SkinModel
+from training.model.config import ModelConfig, g_range_for_lut
+from training.sim.lut_interp import LookupTables
+from training.train import stages
+from training.train.data import SplitData, load_split
+from training.train.evaluate import evaluate_split
+from training.train.loop import checkpoint_path, load_checkpoint, run_stage, save_atomic
+
+
+@dataclass
+class TrainConfig:
+    """Hyper-parameters per stage (index 0, 1, 2 = stage 1, 2, 3) and of stage 2's synthetic albedos."""
+
+    seed: int = 0
+    epochs: list[int] = field(default_factory=lambda: [300, 100, 300])
+    batch: list[int] = field(default_factory=lambda: [256, 256, 64])
+    lr: list[float] = field(default_factory=lambda: [1e-3, 1e-3, 3e-4])
+    synthetic: int = 20_000
+    exposure_jitter: float = 0.25
+
+
+def sha256_file(path: Path) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def _write_json(path: Path, obj: dict) -> None:
+    tmp = path.with_suffix(".json.tmp")
+    tmp.write_text(json.dumps(obj, indent=2))
+    os.replace(tmp, path)
+
+
+def _check_or_create_record(rundir: Path, record: dict) -> dict:
+    path = rundir / "run.json"
+    if not path.exists():
+        _write_json(path, record)
+        return record
+    old = json.loads(path.read_text())
+    for key in ("model", "train", "lut_sha256"):
+        if old.get(key) != record.get(key):
+            raise ValueError(f"{rundir} was trained with another {key} ({old.get(key)} != {record.get(key)}): "
+                             "use another --out folder")
+    old["commands"] = old.get("commands", []) + record["commands"]
+    return old
+
+
+def load_model(path: Path, device: str | torch.device = "cpu") -> SkinModel:
+    """The final model of a run (``RUNDIR/model.pt``) in eval mode with frozen parameters."""
+    state = torch.load(path, map_location="cpu", weights_only=False)
+    model = SkinModel(ModelConfig.from_dict(state["config"]))
+    model.load_state_dict(state["state_dict"])
+    for p in model.parameters():
+        p.requires_grad_(False)
+    return model.to(device).eval()
+
+
+def train(rundir: Path, dataset: Path, fits: Path | None, lut_path: Path, *, want: tuple[int, ...] = (1, 2, 3),
+          mcfg: ModelConfig | None = None, tcfg: TrainConfig | None = None, device: str = "cpu",
+          progress: bool = True, checkpoint_interval_s: float = 0.0, command: str = "",
+          stop_after_epochs: int | None = None) -> dict:
+    """Train the requested stages into ``rundir``; returns the run record (also written to run.json)."""
+    tcfg = tcfg or TrainConfig()
+    dev = torch.device(device)
+    if dev.type == "cuda" and not torch.cuda.is_available():
+        raise ValueError("--device cuda: no CUDA device available")
+    lut = LookupTables.load(lut_path, dtype=torch.float32, device=dev)
+    mcfg = mcfg or ModelConfig()
+    mcfg.g_range = g_range_for_lut(*lut.g_range)
+    mcfg = ModelConfig.from_dict(mcfg.to_dict())  # re-validate
+    rundir = Path(rundir)
+    rundir.mkdir(parents=True, exist_ok=True)
+    need_fits = 3 in want
+    train_data = load_split(dataset, "train", fits if need_fits else None, mcfg.k).to(dev)
+    val_fits = fits if (need_fits and fits is not None and (Path(fits) / "fits_validation.h5").exists()) else None
+    val_data = load_split(dataset, "validation", val_fits, mcfg.k).to(dev)
+    record = {
+        "model": mcfg.to_dict(), "train": asdict(tcfg), "lut": str(lut_path), "lut_sha256": sha256_file(lut_path),
+        "dataset": str(dataset), "fits": None if fits is None else str(fits),
+        "dataset_info": {"n_train": len(train_data), "n_validation": len(val_data), "photons": train_data.photons},
+        "commands": [command] if command else [],
+    }
+    record = _check_or_create_record(rundir, record)
+    torch.manual_seed(tcfg.seed)
+    model = SkinModel(mcfg).to(dev)
+    common = {"seed": tcfg.seed, "device": dev, "progress": progress, "checkpoint_interval_s": checkpoint_interval_s,
+              "stop_after_epochs": stop_after_epochs}
+    finished = True
+    for s in (1, 2, 3):
+        ck = checkpoint_path(rundir, s)
+        if s not in want:
+            if s < max(want):
+                if not ck.exists() or not load_checkpoint(ck)["done"]:
+                    raise ValueError(f"stage {s} is not finished in {rundir}: train it first (--stage {s})")
+                model.load_state_dict(load_checkpoint(ck)["model"])
+            continue
+        spec = _spec(s, model, lut, train_data, val_data, tcfg)
+        history = run_stage(spec, model, rundir, **common)
+        done = bool(load_checkpoint(ck)["done"])
+        record.setdefault("losses", {})[f"stage{s}"] = {**history[-1], "epochs_done": len(history), "done": done}
+        if not done:
+            finished = False
+            break
+    if finished and 3 in want:
+        model.eval()
+        save_atomic({"config": mcfg.to_dict(), "state_dict": model.state_dict()}, rundir / "model.pt")
+        record["slab_depth_cm"] = {"min": float(model.slab.depth().min()), "max": float(model.slab.depth().max())}
+        record["metrics"] = {"validation": evaluate_split(model, val_data, lut),
+                             "train": evaluate_split(model, train_data, lut)}
+    _write_json(rundir / "run.json", record)
+    return record
+
+
+def _spec(stage: int, model: SkinModel, lut: LookupTables, train_data: SplitData, val_data: SplitData,
+          t: TrainConfig):
+    i = stage - 1
+    if stage == 1:
+        return stages.stage1(model, train_data, val_data, t.epochs[i], t.batch[i], t.lr[i])
+    if stage == 2:
+        return stages.stage2(model, train_data, val_data, t.epochs[i], t.batch[i], t.lr[i], t.synthetic,
+                             t.exposure_jitter, t.seed)
+    return stages.stage3(model, lut, train_data, val_data, t.epochs[i], t.batch[i], t.lr[i])

@@ -1,0 +1,79 @@
+"""The three frozen stages of paper §5.2, as ``StageSpec``s for ``training.train.loop.run_stage``.
+
+* Stage 1 trains Dec_R on (tone, R_d) pairs of the dataset with the spectral L1.
+* Stage 2 trains Enc with the colour loss through the frozen Dec_R, without parameter supervision.
+  Its albedos: the dataset's ``albedo_rgb`` plus ``synthetic`` colours rendered by the frozen Dec_R
+  (the "neural spectral renderer" of the paper) from tones drawn uniformly in PARAM_RANGES, each
+  scaled by an exposure exp(U(-j, j)) (``exposure_jitter`` j) and clamped to [0, 1], so that the
+  encoder sees the whole gamut of the model and not only the few simulated tones.
+* Stage 3 trains Dec_T and the slab depth c(lambda) with the frozen Dec_R.  Dec_T is fed the dataset
+  tone p and R_hat = Dec_R(p): the fit targets belong to p, and ``skin_decoder.onnx`` evaluates
+  Dec_T(p, Dec_R(p)) for any p; at inversion time p = Enc(A_RGB).
+"""
+
+from __future__ import annotations
+
+import torch
+
+from training.model.chain import SkinModel
+from training.sim.lut_interp import LookupTables
+from training.train import losses as L
+from training.train.data import SplitData
+from training.train.loop import StageSpec
+
+
+def stage1(model: SkinModel, train: SplitData, val: SplitData, epochs: int, batch: int, lr: float) -> StageSpec:
+    def step(idx: torch.Tensor) -> dict[str, torch.Tensor]:
+        loss = L.spectral_l1(model.dec_r(train.tone[idx]), train.R_d[idx])
+        return {"loss": loss}
+
+    def evaluate() -> dict[str, float]:
+        return {"spectral_l1": float(L.spectral_l1(model.dec_r(val.tone), val.R_d))}
+
+    return StageSpec(1, "Dec_R", [model.dec_r], len(train), batch, epochs, lr, step, evaluate)
+
+
+def synthetic_albedos(model: SkinModel, n: int, exposure_jitter: float, seed: int) -> torch.Tensor:
+    """n albedos (n, 3): colours of the frozen Dec_R at uniform random tones, times exp(U(-j, j)), in [0, 1]."""
+    dev = model.enc.p_lo.device
+    gen = torch.Generator().manual_seed(int(seed) * 7_919 + 2)
+    u = torch.rand(n, model.enc.p_lo.numel(), generator=gen, dtype=torch.float32)
+    scale = torch.exp((2 * torch.rand(n, 1, generator=gen, dtype=torch.float32) - 1) * exposure_jitter)
+    with torch.no_grad():
+        rgb = model.colour.rgb(model.dec_r(model.enc.from_unit(u.to(dev))))
+    return (rgb * scale.to(dev)).clamp(0.0, 1.0)
+
+
+def stage2(model: SkinModel, train: SplitData, val: SplitData, epochs: int, batch: int, lr: float,
+           synthetic: int, exposure_jitter: float, seed: int) -> StageSpec:
+    albedo = train.albedo_rgb.clamp(0.0, 1.0)
+    if synthetic > 0:
+        albedo = torch.cat([albedo, synthetic_albedos(model, synthetic, exposure_jitter, seed)])
+    val_albedo = val.albedo_rgb.clamp(0.0, 1.0)
+
+    def step(idx: torch.Tensor) -> dict[str, torch.Tensor]:
+        return {"loss": L.colour_loss(model, albedo[idx])}
+
+    def evaluate() -> dict[str, float]:
+        return {"colour_l1": float(L.colour_loss(model, val_albedo))}
+
+    return StageSpec(2, "Enc", [model.enc], albedo.shape[0], batch, epochs, lr, step, evaluate)
+
+
+def stage3(model: SkinModel, lut: LookupTables, train: SplitData, val: SplitData, epochs: int, batch: int,
+           lr: float) -> StageSpec:
+    if train.targets is None:
+        raise ValueError("stage 3 needs the mixture fits of the training split (--fits)")
+
+    def step(idx: torch.Tensor) -> dict[str, torch.Tensor]:
+        targets = {k: v[idx] for k, v in train.targets.items()}
+        return L.stage3_losses(model, lut, train.tone[idx], train.R_d[idx], targets)
+
+    def evaluate() -> dict[str, float]:
+        if val.targets is not None:
+            out = L.stage3_losses(model, lut, val.tone, val.R_d, val.targets)
+            return {k: float(v) for k, v in out.items()}
+        out = model.dec_t(val.tone, model.dec_r(val.tone))
+        return {"refl": float(L.spectral_l1(L.lut_reflectance(model, lut, out), val.R_d))}
+
+    return StageSpec(3, "Dec_T", [model.dec_t, model.slab], len(train), batch, epochs, lr, step, evaluate)

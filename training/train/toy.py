@@ -1,0 +1,73 @@
+"""A tiny synthetic dataset + fits + LUT in the real file formats, for tests and benchmarks ONLY.
+
+NOT PHYSICS.  The spectra and mixture targets are smooth made-up functions of the tone, so that the
+training machinery (stages, checkpoints, resume, export) can be exercised in seconds without the
+Monte Carlo simulator.  The LUT is the analytic diffusion-dipole table of ``training.fit.dipole``.
+Files are written with the dataset's own store (``training.data.store``) and the fits layout read by
+``training.train.data``.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import h5py
+import numpy as np
+
+from exporters.colorimetry import spectrum_to_linear_srgb
+from exporters.constants import WAVELENGTHS_NM
+from training.data import store
+from training.data.sampling import training_tones, validation_tones
+from training.fit.dipole import dipole_lut
+
+
+def toy_spectra(tones: np.ndarray) -> np.ndarray:
+    """Made-up smooth reflectance (N, 376) in (0, 0.7): darker with melanin, a dip near 560 nm with blood."""
+    x = (WAVELENGTHS_NM[None, :] - 600.0) / 80.0
+    base = 0.6 / (1.0 + np.exp(-x))
+    mel = np.exp(-4.0 * tones[:, :1] * (700.0 / WAVELENGTHS_NM[None, :]) ** 3)
+    blood = 1.0 - 2.0 * tones[:, 1:2] * np.exp(-(((WAVELENGTHS_NM[None, :] - 560.0) / 30.0) ** 2))
+    return np.clip(0.02 + base * mel * blood, 1e-3, 0.9)
+
+
+def toy_targets(tones: np.ndarray, k: int) -> dict[str, np.ndarray]:
+    """Made-up mixture targets (N, K, 376): alpha near 0.9-0.99, g 0.8, sigma_t 10^(1.5..3.5), w by k."""
+    n, w = len(tones), WAVELENGTHS_NM.size
+    lam = (WAVELENGTHS_NM - 250.0) / 750.0
+    ks = np.arange(k)[None, :, None]
+    alpha = 0.9 + 0.09 * lam[None, None, :] * (1 - tones[:, None, :1]) * np.ones((n, k, w))
+    g = np.full((n, k, w), 0.8)
+    sigma_t = 10.0 ** (1.5 + ks + 0.5 * tones[:, None, 1:2]) * np.ones((n, k, w))
+    logits = -ks + tones[:, None, 3:4]
+    weight = np.exp(logits) / np.exp(logits).sum(1, keepdims=True) * np.ones((n, k, w))
+    return {"alpha": alpha, "g": g, "sigma_t": sigma_t, "weight": weight}
+
+
+def write_toy(root: Path, n_train: int = 32, n_validation: int = 8) -> tuple[Path, Path, Path]:
+    """Write ``root/dataset/{train,validation}.h5``, ``root/fits/fits_{split}.h5`` and ``root/lut.npz``.
+
+    Returns (dataset_dir, fits_dir, lut_path).
+    """
+    data_dir, fits_dir = root / "dataset", root / "fits"
+    data_dir.mkdir(parents=True, exist_ok=True)
+    fits_dir.mkdir(parents=True, exist_ok=True)
+    for split, tones in (("train", training_tones(n_train, 1)), ("validation", validation_tones(n_validation, 2))):
+        path = data_dir / f"{split}.h5"
+        store.create(path, tones, np.arange(len(tones)), {"preset": "toy", "split": split, "photons": 0,
+                                                          "seed": 0, "shard": "0/1", "method": "toy",
+                                                          "n_total": len(tones), "created_by": "training.train.toy"})
+        R = toy_spectra(tones)
+        rows = np.arange(len(tones))
+        store.write_rows(path, rows, {"R_d": R, "R_d_stderr": np.zeros_like(R),
+                                      "profile": np.zeros((len(tones), R.shape[1], 512)),
+                                      "albedo_rgb": spectrum_to_linear_srgb(R, "D65")})
+        with h5py.File(fits_dir / f"fits_{split}.h5", "w") as f:
+            f.create_dataset("tone", data=tones)
+            f.create_dataset("done", data=np.ones(len(tones), bool))
+            for k in (1, 2, 3):
+                grp = f.create_group(f"K{k}")
+                for name, arr in toy_targets(tones, k).items():
+                    grp.create_dataset(name, data=arr.astype(np.float32))
+    lut_path = root / "lut.npz"
+    np.savez(lut_path, **dipole_lut())
+    return data_dir, fits_dir, lut_path
