@@ -1,0 +1,95 @@
+"""The model card ``skin_inversion.json`` (SPEC §3): what the shipped graphs are and how they were made.
+
+Contents: the files with SHA-256, size and I/O; K and the spectral grid; the input domain; the
+dataset (size, photons, preset, seeds) and fits; the LUT; the exact commands that trained and exported
+the model; the training losses of every stage; the colour errors measured on the validation tones;
+the export checks (torch vs onnxruntime parity, float16 cost); placeholders for the validation tables
+of ``python -m training validate``; and free-text notes (what the model is and is not).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import time
+from pathlib import Path
+
+import h5py
+
+from exporters.constants import WAVELENGTHS_NM
+from training.export.graphs import output_shapes
+from training.model.chain import DECODER_OUTPUTS, INVERSION_OUTPUTS
+from training.model.config import FALLBACK_ALBEDO_RGB
+
+INPUT_DOMAIN = (
+    "albedo_rgb: linear sRGB (D65). A row with any NaN/Inf component is replaced by the fallback colour "
+    f"{list(FALLBACK_ALBEDO_RGB)}; then each component is clamped to [0, 1]. The exposure is computed from "
+    "the sanitised colour, so Y(exposure * rgb(reflectance)) = Y(albedo_rgb) for inputs in [0, 1]^3. "
+    "biophysical: a row with NaN/Inf is replaced by the centre of the sampling ranges, then each component is "
+    "clamped to its range. Callers (exporters) should reject non-finite pixels with an error first."
+)
+VALIDATION_PLACEHOLDER = {
+    "status": "not run: filled by `python -m training validate` (SPEC §6)",
+    "rendering_delta_e76": None,
+    "banded_shape_error": None,
+    "spectral_angle": None,
+    "profile_error": None,
+}
+
+
+def sha256_bytes(data: bytes) -> str:
+    return hashlib.sha256(data).hexdigest()
+
+
+def _io(names: tuple[str, ...], k: int) -> dict[str, list]:
+    shapes = output_shapes(k) | {"albedo_rgb": ("N", 3)}
+    return {n: list(shapes[n]) for n in names}
+
+
+def _h5_attrs(path: Path) -> dict:
+    if not path.is_file():
+        return {}
+    with h5py.File(path, "r") as f:
+        return {k: (v.item() if hasattr(v, "item") else str(v)) for k, v in f.attrs.items()}
+
+
+def build_card(run: dict, graphs: dict[str, bytes], weights: str, parity: dict, f16_cost: dict | None,
+               export_command: str, notes: list[str]) -> dict:
+    """The card as a dict (``run``: the run folder's run.json record)."""
+    k = run["model"]["k"]
+    files = {}
+    for name, data in graphs.items():
+        ins = ("albedo_rgb",) if name == "skin_inversion.onnx" else ("biophysical",)
+        outs = INVERSION_OUTPUTS if name == "skin_inversion.onnx" else DECODER_OUTPUTS
+        files[name] = {"sha256": sha256_bytes(data), "bytes": len(data), "inputs": _io(ins, k),
+                       "outputs": _io(outs, k)}
+    dataset = Path(run["dataset"])
+    return {
+        "name": "Spectral Skin SSS inversion",
+        "created": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
+        "files": files,
+        "K": k,
+        "wavelength_nm": {"first": float(WAVELENGTHS_NM[0]), "last": float(WAVELENGTHS_NM[-1]),
+                          "step": float(WAVELENGTHS_NM[1] - WAVELENGTHS_NM[0]), "count": int(WAVELENGTHS_NM.size)},
+        "units": {"sigma_t": "cm^-1", "biophysical": "f_mel, f_blood, t_epi [cm], so2, b_mel",
+                  "albedo_rgb": "linear sRGB (D65)"},
+        "input_domain": INPUT_DOMAIN,
+        "architecture": run["model"],
+        "dataset": {"path": str(dataset), **run.get("dataset_info", {}),
+                    "train_attrs": _h5_attrs(dataset / "train.h5"),
+                    "validation_attrs": _h5_attrs(dataset / "validation.h5")},
+        "fits": {"path": run.get("fits"),
+                 "train_attrs": _h5_attrs(Path(run["fits"]) / "fits_train.h5") if run.get("fits") else {}},
+        "lut": {"path": run["lut"], "sha256": run["lut_sha256"]},
+        "training": {"commands": run.get("commands", []), "config": run["train"], "losses": run.get("losses", {}),
+                     "slab_depth_cm": run.get("slab_depth_cm")},
+        "metrics": run.get("metrics", {}),
+        "export": {"command": export_command, "weights_dtype": weights, "parity_torch_vs_onnxruntime": parity,
+                   "float16_rounding_cost": f16_cost},
+        "validation_tables": VALIDATION_PLACEHOLDER,
+        "notes": notes,
+    }
+
+
+def write_card(path: Path, card: dict) -> None:
+    path.write_text(json.dumps(card, indent=2) + "\n")
