@@ -31,6 +31,13 @@ def radial_edges(r_min: float = R_MIN_CM, r_max: float = R_MAX_CM, n_bins: int =
 R_EDGES_CM: np.ndarray = radial_edges()
 R_EDGES_CM.setflags(write=False)
 
+#: Radial edges of the homogeneous lookup tables at sigma_t = 1, in mean free paths: 0, then 512 bins
+#: log-spaced from 1e-3 to 1e4 mfp.  Profiles at sigma_t = 1 reach tens of mfp at high albedo (the
+#: diffusion length is ~40 mfp at albedo 0.999, g = 0.8), and scaling by sigma_t = 10..1e4 cm^-1 must
+#: cover r = 1e-4..5 cm: the cm edges (1e-4..5) would hold only 18 % of R at albedo 0.999.
+R_EDGES_MFP: np.ndarray = radial_edges(1e-3, 1e4)
+R_EDGES_MFP.setflags(write=False)
+
 #: One refractive index for epidermis and dermis, air above (Donner & Jensen 2006; SPEC §1).
 N_TISSUE: float = 1.4
 

@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 import torch
 
+from exporters.constants import R_EDGES_MFP
 from training.sim.cli_lut import main as lut_main
 from training.sim.lut import CountBins, albedo_grid, simulate_columns
 from training.sim.medium import LayeredMedium
@@ -63,7 +64,7 @@ def test_lut_reweighting_matches_direct_absorbing_run(columns) -> None:
     col = cols[1]  # g = 0.8
     a = albedo[sel_a]
     m = LayeredMedium.homogeneous(1.0 - a, a, gs[1], n_medium=1.4)  # sigma_t = 1 cm^-1: cm == mfp
-    direct = simulate(m, 15_000, seed=3, illumination="diffuse")
+    direct = simulate(m, 15_000, seed=3, illumination="diffuse", r_edges_cm=R_EDGES_MFP)
     r_lut, se_lut = col["R"][sel_a], col["R_stderr"][sel_a]
     bad = np.abs(r_lut - direct.R_d) > 4 * np.hypot(se_lut, direct.R_d_stderr) + TOL_ABS
     assert not bad.any(), (r_lut, direct.R_d)

@@ -21,8 +21,8 @@ so that it starts in the diffusive regime): it bounds the heavy-tailed cost of a
 the variance grows only logarithmically with the largest albedo.
 
 Grids (the table stores both): albedo with 1 - albedo log-spaced from 1 - albedo_min to
-1 - albedo_max (dense near 1, where profiles change fastest); g linear.  Radial edges: the numbers of
-R_EDGES_CM (SPEC §2) in mean free paths; the light beyond the last edge is in R but not in P
+1 - albedo_max (dense near 1, where profiles change fastest); g linear.  Radial edges: R_EDGES_MFP
+(exporters.constants: 1e-3 to 1e4 mean free paths); the light beyond the last edge is in R but not in P
 (``frac_inside`` = the fraction of R inside).
 """
 
@@ -37,7 +37,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from exporters.constants import N_TISSUE, R_EDGES_CM
+from exporters.constants import N_TISSUE, R_EDGES_MFP
 from training.sim.kernel import KIND_REFLECTED, KIND_TRUNCATED, fmix32_int
 from training.sim.medium import LayeredMedium
 from training.sim.walker import Source, WalkConfig, Walker
@@ -138,6 +138,8 @@ def reweight(hist: dict[str, np.ndarray], albedo: np.ndarray, photons: int, r_ed
     e = np.exp(np.outer(nbar, log_a))  # (NB, NA): albedo^nbar
     dev = hwn - hw * nbar[None, :]  # first-order term: sum w (n - nbar)
     praw = (hw @ e + (dev @ e) * log_a[None, :]) / photons  # (NR + 1, NA), overflow bin last
+    # the first-order term can dip below 0 in far bins holding a handful of photons; the exact sum is >= 0
+    praw = np.clip(praw, 0.0, None)
     r_tot = praw.sum(0)
     ev2 = (hw2 @ np.exp(np.outer(nbar, 2.0 * log_a))) / photons
     r_se = np.sqrt(np.clip(ev2 - r_tot**2, 0.0, None) / max(photons - 1, 1))
@@ -161,7 +163,7 @@ def simulate_columns(
     max_steps: int = MAX_STEPS,
     path_c: float | None = PATH_C,
     n_medium: float = N_TISSUE,
-    r_edges_mfp: np.ndarray = R_EDGES_CM,
+    r_edges_mfp: np.ndarray = R_EDGES_MFP,
     compile: bool = False,
     pool_packets: int | None = None,
     progress=None,
@@ -218,7 +220,7 @@ def build_lut(
     parts = out.with_name(out.name + ".parts")
     parts.mkdir(parents=True, exist_ok=True)
     manifest = {"albedo": albedo.tolist(), "g": gs.tolist(), "photons": int(photons), "seed": int(seed),
-                "max_steps": int(max_steps), "r_edges_mfp": R_EDGES_CM.tolist(), "n": N_TISSUE,
+                "max_steps": int(max_steps), "r_edges_mfp": R_EDGES_MFP.tolist(), "n": N_TISSUE,
                 "path_c": PATH_C, "delta_n": DELTA_N, "n_exact": N_EXACT}
     mpath = parts / "manifest.json"
     if mpath.exists() and json.loads(mpath.read_text()) != manifest:
@@ -247,7 +249,7 @@ def build_lut(
     stack = lambda k: np.stack([c[k] for c in cols], axis=1)  # noqa: E731  (NA, NG, ...)
     tmp = out.with_name(out.name + ".tmp.npz")
     np.savez(
-        tmp, albedo=albedo, g=gs, r_edges_mfp=np.array(R_EDGES_CM), R=stack("R"), P=stack("P"),
+        tmp, albedo=albedo, g=gs, r_edges_mfp=np.array(R_EDGES_MFP), R=stack("R"), P=stack("P"),
         R_stderr=stack("R_stderr"), R_trunc_bound=stack("R_trunc_bound"), frac_inside=stack("frac_inside"),
         photons=np.int64(photons), n_medium=np.float64(N_TISSUE),
     )
