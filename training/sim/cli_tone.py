@@ -17,26 +17,13 @@ import sys
 from pathlib import Path
 
 import numpy as np
-import torch
 
-from exporters.constants import N_TISSUE, R_EDGES_CM, WAVELENGTHS_NM
-from training.sim.medium import LayeredMedium
+from exporters.constants import R_EDGES_CM, WAVELENGTHS_NM
 from training.sim.transport import simulate, simulate_records
+from training.skin.tissue import skin_medium
 
 #: Collision-count roulette of the absorption-free walks (see WalkConfig), in collisions / (1 - g).
 REWEIGHT_PATH_C = 32.0
-
-
-def skin_medium(tone: np.ndarray, absorbing: bool = True) -> LayeredMedium:
-    """The two-layer medium of one tone (5,), channels = the 376 wavelengths."""
-    from training.skin.model import layer_optics
-
-    o = layer_optics(torch.as_tensor(np.asarray(tone, dtype=np.float64))[None], dtype=torch.float64)
-    mua = torch.cat([o.mua_epi, o.mua_derm]) if absorbing else torch.zeros(2, o.mua_epi.shape[1], dtype=torch.float64)
-    return LayeredMedium(
-        mua=mua, mus=torch.cat([o.mus_epi, o.mus_derm]), g=torch.cat([o.g_epi, o.g_derm]),
-        thickness=torch.tensor([float(o.t_epi[0]), math.inf]), n_medium=N_TISSUE,
-    )
 
 
 def reweighted(tone: np.ndarray, photons: int, seed: int, device: str, compile_) -> dict[str, np.ndarray]:
