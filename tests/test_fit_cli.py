@@ -78,7 +78,6 @@ def test_params_out_and_no_overwrite(files, capsys):
 @pytest.mark.parametrize(
     "argv, message",
     [
-        (["--dataset", "DIR", "--lut", "LUT", "--out", "O"], "not implemented yet"),
         (["--tone-file", "TONE", "--lut", "LUT", "--k", "4"], "among 1, 2, 3"),
         (["--tone-file", "TONE", "--lut", "missing.npz"], "no such file"),
     ],

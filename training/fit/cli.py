@@ -3,8 +3,9 @@
     python -m training fit --tone-file TONE.npz --lut LUT.npz --k 1,2,3 --json
         prints {"fits": [{"K": 1, "shape_rmse": ..., "refl_rel_err": ...}, ...]}: means over the
         wavelengths of the tone file (376 for ``python -m training simulate``).
-    python -m training fit --dataset DIR --lut LUT.npz --k 1,2,3 --out DIR
-        (not implemented yet: exits 2).
+    python -m training fit --dataset DIR --lut LUT.npz --k 1,2,3 --out DIR [--split train,validation]
+        [--shard I/N]: every tone x wavelength of the dataset's complete split files into
+        OUT/<split>_fits.h5 (training/fit/dataset.py); resumable, shardable.
 
 The LUT is ``--lut`` or, if not given, the file named by the environment variable SKIN_SSS_LUT.
 """
@@ -35,7 +36,7 @@ def _parser() -> argparse.ArgumentParser:
     )
     src = p.add_mutually_exclusive_group(required=True)
     src.add_argument("--tone-file", type=Path, help="output of `python -m training simulate` (.npz)")
-    src.add_argument("--dataset", type=Path, help="dataset folder (not implemented yet)")
+    src.add_argument("--dataset", type=Path, help="dataset folder of `python -m training dataset`")
     p.add_argument("--lut", type=Path, default=None, help="LUT .npz of `python -m training lut` (or $SKIN_SSS_LUT)")
     p.add_argument("--k", default="1,2,3", help="comma-separated K values among 1, 2, 3 (default 1,2,3)")
     p.add_argument(
@@ -45,7 +46,16 @@ def _parser() -> argparse.ArgumentParser:
         help="lm: Levenberg-Marquardt (default, fast); paper: the paper's Adam schedule",
     )
     p.add_argument("--json", action="store_true", help="print the summary as one JSON object")
-    p.add_argument("--out", type=Path, default=None, help="write the fitted parameters (.npz for --tone-file)")
+    p.add_argument(
+        "--out",
+        type=Path,
+        default=None,
+        help="--tone-file: write the fitted parameters to this .npz; --dataset: output folder",
+    )
+    p.add_argument("--split", default="train,validation", help="--dataset: splits to fit (default both)")
+    p.add_argument("--shard", default="0/1", help="--dataset: fit tones i, i+n, i+2n, ... (I/N)")
+    p.add_argument("--chunk-tones", type=int, default=4, help="--dataset: tones fitted per batch")
+    p.add_argument("--no-progress", action="store_true")
     p.add_argument("--device", choices=("cpu", "cuda"), default="cpu")
     p.add_argument("--seed", type=int, default=0, help="torch seed (the fit itself is deterministic)")
     p.add_argument(
@@ -116,6 +126,46 @@ def fit_tone_file(
     return rows, arrays
 
 
+def _parse_shard(text: str) -> tuple[int, int]:
+    try:
+        i, n = (int(x) for x in text.split("/"))
+    except ValueError:
+        raise ValueError(f"--shard must be I/N, got {text!r}") from None
+    if not 0 <= i < n:
+        raise ValueError(f"--shard I/N needs 0 <= I < N, got {text!r}")
+    return i, n
+
+
+def _fit_dataset(args: argparse.Namespace, ks: tuple[int, ...], lut_path: Path) -> int:
+    from training.fit.dataset import SPLITS, fit_split
+
+    if args.out is None:
+        raise ValueError("--dataset needs --out DIR")
+    splits = [s for s in args.split.split(",") if s]
+    bad = [s for s in splits if s not in SPLITS]
+    if bad or not splits:
+        raise ValueError(f"--split must name some of {SPLITS}, got {args.split!r}")
+    if args.chunk_tones < 1:
+        raise ValueError("--chunk-tones must be >= 1")
+    shard = _parse_shard(args.shard)
+    lut = LookupTables.load(lut_path, dtype=torch.float64, device=args.device)
+    for split in splits:
+        path = fit_split(
+            args.dataset,
+            split,
+            lut,
+            lut_path,
+            ks,
+            args.out,
+            method=args.method,
+            shard=shard,
+            chunk_tones=args.chunk_tones,
+            progress=not args.no_progress,
+        )
+        print(f"{split}: {path}")
+    return 0
+
+
 def main(argv: list[str]) -> int:
     args = _parser().parse_args(argv)
     torch.manual_seed(args.seed)
@@ -123,23 +173,21 @@ def main(argv: list[str]) -> int:
         torch.set_num_threads(max(1, args.threads))
     try:
         ks = _parse_k(args.k)
-        if args.dataset is not None:
-            raise NotImplementedError("`fit --dataset` is not implemented yet (the dataset format is not fixed)")
         if args.device == "cuda" and not torch.cuda.is_available():
             raise ValueError("--device cuda: no CUDA device available")
         lut_path = args.lut or (Path(os.environ["SKIN_SSS_LUT"]) if os.environ.get("SKIN_SSS_LUT") else None)
         if lut_path is None:
             raise ValueError("give --lut LUT.npz (from `python -m training lut`) or set SKIN_SSS_LUT")
-        for p in (args.tone_file, lut_path):
-            if not p.is_file():
-                raise ValueError(f"no such file: {p}")
+        if not lut_path.is_file():
+            raise ValueError(f"no such file: {lut_path}")
+        if args.dataset is not None:
+            return _fit_dataset(args, ks, lut_path)
+        if not args.tone_file.is_file():
+            raise ValueError(f"no such file: {args.tone_file}")
         lut = LookupTables.load(lut_path, dtype=torch.float64, device=args.device)
         t0 = time.perf_counter()
         rows, arrays = fit_tone_file(args.tone_file, lut, ks, args.method)
         seconds = time.perf_counter() - t0
-    except NotImplementedError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
     except ValueError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

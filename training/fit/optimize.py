@@ -25,8 +25,11 @@ L_joint at the current point, so its stationary points are those of L_joint (an 
 reweighting; hand-written because no well-kept torch library offers batched LM).  The Jacobian of
 the per-component profiles comes from ``LookupTables.profile_grad`` (explicit derivatives of the
 interpolant w.r.t. alpha, g, log sigma_t, all K components at once); the mixture and the log are
-differentiated by hand.  ``bin_stride`` > 1 uses every n-th radial bin in the loss during the fit
-(the final metrics always use all bins).
+differentiated by hand.
+
+Both methods evaluate the model only on the radial bins that some problem of the batch uses (the
+others are masked out of the loss, so this changes nothing); ``bin_stride`` > 1 keeps every n-th of
+those during the fit (an approximation; the final metrics always use all bins).
 
 Everything is batched over the leading problem axis (tones x wavelengths) and runs on CPU or CUDA.
 """
@@ -350,7 +353,11 @@ def fit_schedule(
     r_edges_cm = r_edges_cm.to(dev, dt)
     target = L.make_target(profile, R_mc, r_edges_cm, photons)
     prob = Problem(lut, target)
-    t_fit = target.subset(torch.arange(0, target.r_cm.shape[0], bin_stride, device=dev))
+    # the loss only sees used bins: evaluate the model on the bins some problem of the batch uses
+    used = torch.nonzero(target.mask.any(0)).squeeze(1)
+    if used.numel() == 0:
+        used = torch.arange(target.r_cm.shape[0], device=dev)
+    t_fit = target.subset(used[::bin_stride])
     B = R_mc.shape[0]
     g0 = torch.zeros_like(R_mc) if g_init is None else g_init.to(dev, dt)
     n = dict(PAPER_STEPS if method == "paper" else LM_ITERS)

@@ -108,6 +108,11 @@ class LookupTables:
             raise ValueError("LUT contains NaN or Inf")
         self.log_centres = torch.log(bin_centres(self.r_edges_mfp))
         self.log_r_max = float(torch.log(self.r_edges_mfp[-1]))
+        # Fast path: log-spaced edges put the centres from index 1 on a uniform grid in log r, where the
+        # interval index is a floor instead of a binary search (the hot spot of the fitter).
+        d = torch.diff(self.log_centres[1:])
+        self._uniform_log = bool(d.numel() > 0 and torch.allclose(d, d.mean(), rtol=1e-9, atol=0))
+        self._dlog = float(d.mean()) if d.numel() else 1.0
 
     # ------------------------------------------------------------------ construction
     @classmethod
@@ -122,7 +127,7 @@ class LookupTables:
         device: str | torch.device = "cpu",
     ) -> LookupTables:
         """Build from numpy arrays (see the class docstring for shapes)."""
-        arrs = [np.ascontiguousarray(a, dtype=np.float64) for a in (albedo, g, r_edges_mfp, R, P)]
+        arrs = [np.array(a, dtype=np.float64, order="C") for a in (albedo, g, r_edges_mfp, R, P)]
         return cls(*(torch.as_tensor(a, dtype=dtype, device=device) for a in arrs))
 
     @classmethod
@@ -147,6 +152,21 @@ class LookupTables:
         return float(self.g[0]), float(self.g[-1])
 
     # ------------------------------------------------------------------ lookups
+    def _radial_weights(self, x: torch.Tensor):
+        """``_axis_weights`` on the log bin centres, by arithmetic where they are uniform past index 0."""
+        lc = self.log_centres
+        if not self._uniform_log:
+            return _axis_weights(lc, x)
+        n = lc.shape[0]
+        xd = x.detach()
+        j = torch.floor((xd - lc[1]) / self._dlog).to(torch.int64) + 1
+        idx = torch.where(xd < lc[1], torch.zeros_like(j), j).clamp_(0, n - 2)
+        g0 = lc[idx]
+        inv_h = 1.0 / (lc[idx + 1] - g0)
+        t = ((x - g0) * inv_h).clamp(0.0, 1.0)
+        inside = ((xd >= lc[0]) & (xd <= lc[-1])).to(lc.dtype)
+        return idx, t, inside, inv_h
+
     def _corners(self, alpha: torch.Tensor, g: torch.Tensor):
         ia, ta, _, _ = _axis_weights(self.albedo, alpha)
         ig, tg, _, _ = _axis_weights(self.g, g)
@@ -188,7 +208,7 @@ class LookupTables:
         # log radius in mfp; r = 0 maps to a huge negative number (holds the first bin).
         log_r = torch.log(r_cm.clamp_min(1e-300)).expand(*lead, r_cm.shape[-1])
         x = log_r + torch.log(sig)[..., None]
-        ir, tr, _, _ = _axis_weights(self.log_centres, x)
+        ir, tr, _, _ = self._radial_weights(x)
         v0 = torch.gather(rows, -1, ir)
         v1 = torch.gather(rows, -1, ir + 1)
         val = v0 * (1 - tr) + v1 * tr
@@ -257,7 +277,7 @@ class LookupTables:
         rows_g = ((p01 - p00) * (1 - ta_) + (p11 - p10) * ta_) * (hg * qg)[..., None]
         log_s = torch.log(sigma_t)
         x = torch.log(r_cm.clamp_min(1e-300)) + log_s[..., None]
-        ir, tr, qr, hr = _axis_weights(self.log_centres, x)
+        ir, tr, qr, hr = self._radial_weights(x)
         support = (x <= self.log_r_max).to(x.dtype)
         s2 = (sigma_t * sigma_t)[..., None] * support
 

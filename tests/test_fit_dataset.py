@@ -1,0 +1,128 @@
+"""`fit --dataset` (training/fit/dataset.py): output layout, resume, shards, refusal to mix runs.
+
+The split file is written with the dataset's own store (training/data/store.py); its profiles are
+closed-form dipole media (test tables only, training/fit/dipole.py), and the fits are cut short
+(a few iterations): these tests check the plumbing, test_fit_mixture.py the fitting.
+"""
+
+from __future__ import annotations
+
+import h5py
+import numpy as np
+import pytest
+import torch
+
+from exporters.constants import N_WAVELENGTHS, R_EDGES_CM
+from training.data import store
+from training.fit import optimize
+from training.fit.cli import main
+from training.fit.dataset import fit_split, out_path
+from training.fit.dipole import dipole_lut, dipole_mixture_profile
+from training.sim.lut_interp import LookupTables
+
+WIDE_EDGES_MFP = np.concatenate([[0.0], np.geomspace(1e-3, 1e4, 512)])
+STEPS = {"k1_shape": 2, "k1_joint": 2, "k2": 2}
+
+
+@pytest.fixture(scope="module", autouse=True)
+def _one_thread():
+    n = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(n)
+
+
+@pytest.fixture(scope="module")
+def setup(tmp_path_factory):
+    d = tmp_path_factory.mktemp("fitds")
+    lut_path = d / "lut.npz"
+    albedo = np.concatenate([[0.0], 1.0 - np.geomspace(0.95, 1e-5, 30), [1.0]])
+    np.savez(lut_path, **dipole_lut(albedo=albedo, g=np.linspace(0.0, 0.95, 5), r_edges_mfp=WIDE_EDGES_MFP))
+    ds = d / "dataset"
+    ds.mkdir()
+    n = 3
+    tones = np.array([[0.01, 0.02, 0.01, 0.75, 0.8], [0.1, 0.03, 0.012, 0.8, 0.9], [0.3, 0.05, 0.02, 0.6, 0.5]])
+    attrs = {
+        "preset": "test",
+        "split": "train",
+        "photons": 10**9,
+        "seed": 1,
+        "shard": "0/1",
+        "method": "direct",
+        "n_total": n,
+        "created_by": "test",
+    }
+    store.create(ds / "train.h5", tones, np.arange(n), attrs)
+    W = N_WAVELENGTHS
+    rng = np.random.default_rng(0)
+    alpha = rng.uniform(0.9, 0.999, (n * W, 1))
+    profile, R = dipole_mixture_profile(
+        R_EDGES_CM,
+        WIDE_EDGES_MFP,
+        alpha,
+        np.full((n * W, 1), 0.8),
+        rng.uniform(50, 500, (n * W, 1)),
+        np.ones((n * W, 1)),
+    )
+    store.write_rows(
+        ds / "train.h5",
+        np.arange(n),
+        {
+            "R_d": R.reshape(n, W),
+            "R_d_stderr": 1e-4 * R.reshape(n, W),
+            "profile": profile.reshape(n, W, -1),
+            "albedo_rgb": np.full((n, 3), 0.5),
+        },
+    )
+    return d, ds, lut_path
+
+
+def test_fit_split_layout_and_resume(setup, monkeypatch):
+    d, ds, lut_path = setup
+    # plumbing test: one K = 2 start instead of the multi-start (1,128 problems here)
+    monkeypatch.setattr(optimize, "K2_SPLITS", optimize.K2_SPLITS[:1])
+    lut = LookupTables.load(lut_path)
+    out = d / "fits"
+    path = fit_split(ds, "train", lut, lut_path, (1, 2), out, chunk_tones=3, steps=STEPS, progress=False)
+    assert path == out_path(out, "train", (0, 1))
+    with h5py.File(path, "r") as f:
+        assert f["done"][:].all()
+        assert f["k2_alpha"].shape == (3, 2, N_WAVELENGTHS)
+        assert f["k1_sigma_t"].shape == (3, 1, N_WAVELENGTHS)
+        np.testing.assert_allclose(f["k2_weight"][:].sum(1), 1.0, rtol=1e-5)
+        for key in ("k1_shape_rmse", "k2_refl_rel_err", "k2_sigma_t", "k2_g"):
+            assert np.isfinite(f[key][:]).all()
+        first = f["k2_sigma_t"][:]
+        f.attrs["ks"]  # noqa: B018 - present
+    mtime = path.stat().st_mtime_ns
+    # rerun: nothing left to do, the file is unchanged
+    fit_split(ds, "train", lut, lut_path, (1, 2), out, chunk_tones=3, steps=STEPS, progress=False)
+    assert path.stat().st_mtime_ns == mtime
+    with h5py.File(path, "r") as f:
+        np.testing.assert_array_equal(f["k2_sigma_t"][:], first)
+    # other settings into the same folder are refused
+    with pytest.raises(ValueError, match="was made with"):
+        fit_split(ds, "train", lut, lut_path, (1,), out, steps=STEPS, progress=False)
+
+
+def test_shards_cover_the_split(setup):
+    d, ds, lut_path = setup
+    lut = LookupTables.load(lut_path)
+    out = d / "fits_sharded"
+    idx = []
+    for i in range(2):
+        p = fit_split(ds, "train", lut, lut_path, (1,), out, shard=(i, 2), steps=STEPS, progress=False)
+        with h5py.File(p, "r") as f:
+            assert f["done"][:].all()
+            idx.extend(f["index"][:].tolist())
+    assert sorted(idx) == [0, 1, 2]
+
+
+def test_cli_dataset_errors(setup, capsys):
+    d, ds, lut_path = setup
+    assert main(["--dataset", str(d / "nowhere"), "--lut", str(lut_path), "--out", str(d / "o")]) == 2
+    assert "not found" in capsys.readouterr().err
+    assert main(["--dataset", str(ds), "--lut", str(lut_path)]) == 2
+    assert "--out" in capsys.readouterr().err
+    assert main(["--dataset", str(ds), "--lut", str(lut_path), "--out", str(d / "o"), "--shard", "2/2"]) == 2
+    assert "--shard" in capsys.readouterr().err
