@@ -3,6 +3,8 @@ a killed run resumes to the uninterrupted result, and the CLI refuses inconsiste
 
 import json
 
+import h5py
+import numpy as np
 import pytest
 import torch
 
@@ -43,6 +45,21 @@ def test_fits_are_read_sorted_by_sigma_t(toy):
     assert split.targets["sigma_t"].shape == (24, 3, 376)
     assert (torch.diff(split.targets["sigma_t"], dim=1) >= 0).all()
     torch.testing.assert_close(split.targets["weight"].sum(1), torch.ones(24, 376), atol=1e-5, rtol=0)
+
+
+def test_fits_of_the_fitters_flat_layout_are_aligned_by_index(toy, tmp_path):
+    data, fits, _ = toy
+    ref = load_split(data, "train", fits, k=2)
+    index = np.array([5, 2, 9])  # a shard holding three tones, in another order
+    with h5py.File(fits / "fits_train.h5", "r") as src, h5py.File(tmp_path / "train_fits.h5", "w") as dst:
+        dst["index"], dst["tone"], dst["done"] = index, src["tone"][:][index], np.array([True, True, False])
+        for name in ("alpha", "g", "sigma_t", "weight"):
+            dst[f"k2_{name}"] = src["K2"][name][:][index]
+    got = load_split(data, "train", tmp_path, k=2)
+    assert len(got) == 2  # rows 2 and 5 (row 9 not done), in dataset order
+    torch.testing.assert_close(got.tone, ref.tone[[2, 5]])
+    for name in ("alpha", "sigma_t"):
+        torch.testing.assert_close(got.targets[name], ref.targets[name][[2, 5]])
 
 
 def test_staged_training_learns_freezes_and_resumes_exactly(toy, tmp_path):

@@ -3,10 +3,16 @@
 Dataset (``training.data.store``): ``DIR/{split}.h5`` with ``tone`` (N, 5), ``R_d`` (N, 376),
 ``albedo_rgb`` (N, 3) linear sRGB (D65), ``done`` (N,).  Only rows marked done are used.
 
-Fits (written by ``python -m training fit --dataset``, or by ``training.train.fits`` meanwhile):
-``DIR/fits_{split}.h5`` with groups ``K1``, ``K2``, ``K3``, each holding ``alpha``, ``sigma_t`` (cm^-1),
-``g``, ``weight`` of shape (N, K, 376), and root datasets ``tone`` (N, 5), ``done`` (N,).  Rows match
-the dataset's rows (checked through ``tone``).
+Fits, in either of two layouts (both read; the first one found wins):
+
+* ``DIR/fits_{split}.h5`` (``training.train.fits``): groups ``K1``, ``K2``, ``K3``, each holding
+  ``alpha``, ``sigma_t`` (cm^-1), ``g``, ``weight`` of shape (N, K, 376), and root datasets ``tone``
+  (N, 5), ``done`` (N,); row i is dataset row i.
+* ``DIR/{split}_fits.h5`` (``python -m training fit --dataset``, ``training.fit.dataset``): flat
+  datasets ``k{K}_alpha``, ``k{K}_g``, ``k{K}_sigma_t``, ``k{K}_weight`` (N, K, 376), ``index`` (N,)
+  (row in the dataset split), ``tone``, ``done``.
+
+The tones are checked against the dataset's.
 
 Component order: the fitter's component order is arbitrary (it depends on which start won), so the
 targets are sorted per (tone, wavelength) by increasing sigma_t before training.  The network's
@@ -49,6 +55,10 @@ def dataset_file(dataset_dir: Path, split: str) -> Path:
 
 
 def fits_file(fits_dir: Path, split: str) -> Path:
+    """The fits file of ``split`` in ``fits_dir`` (either layout; the grouped one if neither exists)."""
+    for name in (f"fits_{split}.h5", f"{split}_fits.h5"):
+        if (Path(fits_dir) / name).is_file():
+            return Path(fits_dir) / name
     return Path(fits_dir) / f"fits_{split}.h5"
 
 
@@ -62,18 +72,23 @@ def sort_by_sigma_t(targets: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
     return {k: np.take_along_axis(v, order, axis=1) for k, v in targets.items()}
 
 
-def load_fits(path: Path, k: int) -> tuple[np.ndarray, np.ndarray, dict[str, np.ndarray]]:
-    """(tone (N, 5), done (N,), {alpha, g, sigma_t, weight: (N, K, W)}) of group ``K{k}`` of a fits file."""
+def load_fits(path: Path, k: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict[str, np.ndarray]]:
+    """(index (N,), tone (N, 5), done (N,), {alpha, g, sigma_t, weight: (N, K, W)}) of the K-component
+    fits in a fits file of either layout (module docstring)."""
     with h5py.File(path, "r") as f:
-        group = f"K{k}"
-        if group not in f:
-            raise ValueError(f"{path} has no group {group!r} (groups: {sorted(f.keys())})")
-        g = f[group]
-        missing = [n for n in FIT_FIELDS if n not in g]
+        if f"K{k}" in f:
+            g = f[f"K{k}"]
+            keys = {n: n for n in FIT_FIELDS}
+        else:
+            g = f
+            keys = {n: f"k{k}_{n}" for n in FIT_FIELDS}
+        missing = [key for key in keys.values() if key not in g]
         if missing:
-            raise ValueError(f"{path}:{group} lacks {missing}")
-        arrays = {n: np.asarray(g[n][:], dtype=np.float64) for n in FIT_FIELDS}
-        return np.asarray(f["tone"][:], np.float64), np.asarray(f["done"][:], bool), arrays
+            raise ValueError(f"{path}: no K={k} fits ({missing} missing)")
+        arrays = {n: np.asarray(g[key][:], dtype=np.float64) for n, key in keys.items()}
+        tone = np.asarray(f["tone"][:], np.float64)
+        index = np.asarray(f["index"][:], np.int64) if "index" in f else np.arange(len(tone))
+        return index, tone, np.asarray(f["done"][:], bool), arrays
 
 
 def load_split(dataset_dir: Path, split: str, fits_dir: Path | None = None, k: int = 3) -> SplitData:
@@ -93,11 +108,19 @@ def load_split(dataset_dir: Path, split: str, fits_dir: Path | None = None, k: i
         fpath = fits_file(fits_dir, split)
         if not fpath.is_file():
             raise ValueError(f"no fits {fpath}: run `python -m training fit --dataset` (or training.train.fits)")
-        ftone, fdone, arrays = load_fits(fpath, k)
-        if ftone.shape != tone.shape or not np.allclose(ftone, tone, rtol=0, atol=1e-12):
+        index, ftone, fdone, arrays = load_fits(fpath, k)
+        if index.min(initial=0) < 0 or index.max(initial=-1) >= len(tone):
+            raise ValueError(f"{fpath}: row index outside {path}")
+        if not np.allclose(ftone, tone[index], rtol=0, atol=1e-12):
             raise ValueError(f"{fpath} was fitted on other tones than {path}")
-        keep &= fdone
-        targets = arrays
+        fitted = np.zeros(len(tone), bool)
+        fitted[index] = fdone
+        keep &= fitted
+        targets = {}
+        for n, v in arrays.items():
+            full = np.ones((len(tone), *v.shape[1:]))  # placeholder for unfitted rows (never used)
+            full[index] = v
+            targets[n] = full
     if not keep.any():
         raise ValueError(f"{path}: no usable rows (simulated{' and fitted' if fits_dir else ''})")
     for name, arr in (("R_d", R_d[keep]), ("albedo_rgb", rgb[keep])):
