@@ -1,0 +1,115 @@
+"""Benchmarks of the shipped model and of training (collected by ``python -m training bench``).
+
+* ONNX inference throughput of ``blender_addon/models/skin_inversion.onnx`` with onnxruntime on 2 CPU
+  threads (texels/s, batches of 4,096 skin-like colours); anchor: the same model in torch eager mode
+  on 2 threads (the export's point is to be at least as fast without torch).
+* Training step time of stage 3 (paper-sized Dec_T, batch 64, the full loss with LUT reflectance and
+  slab factor) on the CPU; anchor: a step of the same network with a plain MSE loss on the same
+  targets, i.e. what the LUT and smoothness terms add.
+Timings on the shared 2-core machine are taken under contention from other jobs.
+"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import numpy as np
+import torch
+
+MODEL_DIR = Path(__file__).resolve().parents[2] / "blender_addon" / "models"
+BATCH = 4096
+
+
+def _timeit(fn, repeats: int) -> float:
+    fn()  # warm-up
+    t0 = time.perf_counter()
+    for _ in range(repeats):
+        fn()
+    return (time.perf_counter() - t0) / repeats
+
+
+def _skin_like(n: int, seed: int = 0) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    base = np.array([0.45, 0.30, 0.24], np.float32)
+    return (base * rng.uniform(0.2, 1.4, (n, 1)) * rng.uniform(0.85, 1.15, (n, 3))).clip(0, 1).astype(np.float32)
+
+
+def bench_inference(quick: bool) -> dict:
+    path = MODEL_DIR / "skin_inversion.onnx"
+    row = {"workload": f"skin_inversion.onnx inference, batches of {BATCH} texels, 2 CPU threads",
+           "ours": "", "anchor": "", "ratio": "", "error": "", "notes": ""}
+    if not path.is_file():
+        row["error"] = f"{path} missing (run `python -m training export`)"
+        return row
+    from training.export.graphs import session
+
+    x = _skin_like(BATCH)
+    sess = session(path.read_bytes(), threads=2)
+    repeats = 2 if quick else 10
+    t_ort = _timeit(lambda: sess.run(None, {"albedo_rgb": x}), repeats)
+    row["ours"] = f"{BATCH / t_ort:,.0f} texels/s (onnxruntime)"
+    import json
+
+    from training.model import ModelConfig, SkinModel
+
+    arch = json.loads((MODEL_DIR / "skin_inversion.json").read_text())["architecture"]
+    torch.manual_seed(0)
+    model = SkinModel(ModelConfig.from_dict(arch)).eval()  # same architecture; speed does not depend on weights
+    threads = torch.get_num_threads()
+    torch.set_num_threads(2)
+    xt = torch.from_numpy(x)
+    with torch.no_grad():
+        t_torch = _timeit(lambda: model.invert(xt), repeats)
+    torch.set_num_threads(threads)
+    row["anchor"] = f"{BATCH / t_torch:,.0f} texels/s (same architecture in torch eager)"
+    row["ratio"] = f"{t_torch / t_ort:.2f}x"
+    row["notes"] = f"1 texel = 5 + 1 + 376 + 4 K 376 float32 outputs (K = {arch['k']})"
+    return row
+
+
+def bench_training_step(quick: bool) -> dict:
+    from training.fit.dipole import dipole_lut
+    from training.model import ModelConfig, SkinModel
+    from training.sim.lut_interp import LookupTables
+    from training.train import losses as L
+
+    torch.manual_seed(0)
+    model = SkinModel(ModelConfig())
+    lut = LookupTables.from_arrays(**dipole_lut(), dtype=torch.float32)
+    n = 64
+    p = model.enc.from_unit(torch.rand(n, 5))
+    R = torch.rand(n, 376) * 0.5
+    with torch.no_grad():
+        tgt = model.dec_t(p, model.dec_r(p))
+    targets = {k: tgt[k].clone() * (1.0 if k == "weight" else 0.9) for k in ("alpha", "g", "sigma_t", "weight")}
+    params = list(model.dec_t.parameters()) + list(model.slab.parameters())
+    opt = torch.optim.Adam(params, lr=1e-4)
+
+    def full_step():
+        opt.zero_grad()
+        L.stage3_losses(model, lut, p, R, targets)["loss"].backward()
+        opt.step()
+
+    def mse_step():
+        opt.zero_grad()
+        out = model.dec_t(p, model.dec_r(p).detach())
+        torch.nn.functional.mse_loss(out["alpha"], targets["alpha"]).backward()
+        opt.step()
+
+    repeats = 3 if quick else 20
+    t_full, t_mse = _timeit(full_step, repeats), _timeit(mse_step, repeats)
+    return {"workload": f"stage-3 training step, paper-sized Dec_T (4 x 768, K=3), batch {n}, CPU "
+                        f"({torch.get_num_threads()} threads)",
+            "ours": f"{t_full * 1e3:.0f} ms/step", "anchor": f"{t_mse * 1e3:.0f} ms/step (same net, plain MSE)",
+            "ratio": f"{t_full / t_mse:.2f}x", "error": "",
+            "notes": "full loss = L_param + 15 L_refl (LUT, slab factor) + 0.5 L_smooth; dipole LUT for timing"}
+
+
+def benchmarks(quick: bool) -> list[dict]:
+    return [bench_inference(quick), bench_training_step(quick)]
+
+
+if __name__ == "__main__":
+    for r in benchmarks(quick=True):
+        print(r)
