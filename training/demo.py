@@ -24,7 +24,12 @@ def main(argv: list[str]) -> int:
     parser.add_argument("--out", type=Path, default=Path("demo/out"))
     parser.add_argument("--photons", type=int, default=300, help="photons per wavelength (swatches: a fifth)")
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--threads", type=int, default=1,
+                        help="torch CPU threads (1 is fastest for the walker on a busy 2-core machine)")
     args = parser.parse_args(argv)
+    import torch
+
+    torch.set_num_threads(max(1, args.threads))
     tones = load_tones()
     name = "R05"
     tone = tones.values[tones.names.index(name)]

@@ -49,8 +49,13 @@ def main(argv: list[str]) -> int:
     parser.add_argument("--out", type=Path, required=True, help="PNG file to write")
     parser.add_argument("--photons", type=int, default=2000, help="photons per wavelength per tone")
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--threads", type=int, default=1,
+                        help="torch CPU threads (1 is fastest for the walker on a busy 2-core machine)")
     parser.add_argument("--device", default="cpu")
     args = parser.parse_args(argv)
+    import torch
+
+    torch.set_num_threads(max(1, args.threads))
     tone_set = load_tones()
     spectra = simulate_spectra(tone_set.values, args.photons, args.seed, args.device)
     srgb = spectrum_to_srgb(spectra, "D65")
