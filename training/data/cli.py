@@ -39,8 +39,12 @@ def main(argv: list[str]) -> int:
     parser.add_argument("--merge", action="store_true", help="join finished shards in --out")
     parser.add_argument("--seed", type=int, default=None, help="override the preset's sampling seeds")
     parser.add_argument("--device", default="cpu", help="cpu or cuda")
+    parser.add_argument("--threads", type=int, default=1, help="torch CPU threads (the walker is fastest on 1)")
     parser.add_argument("--no-progress", action="store_true")
     args = parser.parse_args(argv)
+    import torch
+
+    torch.set_num_threads(max(1, args.threads))
     splits = SPLITS if args.split == "both" else (args.split,)
     try:
         if args.merge:
