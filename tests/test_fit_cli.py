@@ -10,20 +10,12 @@ import json
 
 import numpy as np
 import pytest
-import torch
 
 from exporters.constants import R_EDGES_CM, WAVELENGTHS_NM
 from training.fit.cli import main
 from training.fit.dipole import dipole_lut, dipole_mixture_profile
 
 WIDE_EDGES_MFP = np.concatenate([[0.0], np.geomspace(1e-3, 1e4, 512)])
-
-
-@pytest.fixture(scope="module", autouse=True)
-def _one_thread():
-    n = torch.get_num_threads()
-    yield
-    torch.set_num_threads(n)  # the command sets 1 thread (its --threads default)
 
 
 @pytest.fixture(scope="module")

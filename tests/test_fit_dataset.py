@@ -10,7 +10,6 @@ from __future__ import annotations
 import h5py
 import numpy as np
 import pytest
-import torch
 
 from exporters.constants import N_WAVELENGTHS, R_EDGES_CM
 from training.data import store
@@ -22,14 +21,6 @@ from training.sim.lut_interp import LookupTables
 
 WIDE_EDGES_MFP = np.concatenate([[0.0], np.geomspace(1e-3, 1e4, 512)])
 STEPS = {"k1_shape": 2, "k1_joint": 2, "k2": 2}
-
-
-@pytest.fixture(scope="module", autouse=True)
-def _one_thread():
-    n = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(n)
 
 
 @pytest.fixture(scope="module")

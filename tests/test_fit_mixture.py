@@ -24,15 +24,6 @@ CENTRES_CM = bin_centres(R_EDGES_CM)
 AREA_CM = np.pi * np.diff(R_EDGES_CM**2)
 
 
-@pytest.fixture(scope="module", autouse=True)
-def _one_thread():
-    # Small batched ops: oversubscribed OpenMP threads on a shared 2-core machine cost 10-100x.
-    n = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(n)
-
-
 @pytest.fixture(scope="module")
 def lut() -> LookupTables:
     albedo = np.concatenate([[0.0], 1.0 - np.geomspace(0.95, 1e-5, 60), [1.0]])

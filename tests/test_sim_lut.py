@@ -24,14 +24,6 @@ from training.sim.transport import simulate, simulate_records
 TOL_ABS = 0.002
 
 
-@pytest.fixture(autouse=True)
-def _one_thread():
-    before = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(before)
-
-
 def _uru_minus_specular(a: float, g: float, n: float = 1.4) -> float:
     quad = 32 if g > 0.8 else 16
     uru = iad.Sample(a=a, b=math.inf, g=g, n=n, n_above=1.0, n_below=1.0, quad_pts=quad).rt()[2]

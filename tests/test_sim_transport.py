@@ -22,16 +22,6 @@ from training.sim.transport import simulate, simulate_records
 TOL_ABS = 0.002
 
 
-@pytest.fixture(autouse=True)
-def _one_thread():
-    """One intra-op thread: the walker's small tensors gain nothing from two threads, and on a shared
-    2-core machine OpenMP threads waiting for each other slow it down many times."""
-    before = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(before)
-
-
 def _close(mc: np.ndarray, se: np.ndarray, ref: np.ndarray) -> None:
     mc, se, ref = (np.asarray(v, dtype=np.float64) for v in (mc, se, ref))
     bad = np.abs(mc - ref) > 4.0 * se + TOL_ABS
