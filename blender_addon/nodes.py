@@ -89,18 +89,27 @@ def _single_channel(group, separate, channel: int, x: float, y: float) -> bpy.ty
     return comb
 
 
-def build_svm_group(k_count: int = 3, name: str = GROUP_NAME) -> bpy.types.NodeTree:
-    """Build (or rebuild) the SVM node group with ``k_count`` components; returns the node tree."""
-    if not 1 <= k_count <= 7:  # 3K closures + margin must stay below Cycles' MAX_CLOSURE = 64
-        raise ValueError("k_count must be in 1..7")
+def _fresh_group(name: str, k_count: int, backend: str):
+    """A new, empty shader node group ``name`` (replacing an old one) with the mixture's interface.
+
+    Returns (group, group input node, group output node).
+    """
     old = bpy.data.node_groups.get(name)
     if old is not None:
         bpy.data.node_groups.remove(old)
     group = bpy.data.node_groups.new(name, "ShaderNodeTree")
     group["spectral_skin_sss_k"] = k_count
-    group["spectral_skin_sss_backend"] = "SVM"
+    group["spectral_skin_sss_backend"] = backend
     _new_interface(group, k_count)
     gin, gout = _group_io(group)
+    return group, gin, gout
+
+
+def build_svm_group(k_count: int = 3, name: str = GROUP_NAME) -> bpy.types.NodeTree:
+    """Build (or rebuild) the SVM node group with ``k_count`` components; returns the node tree."""
+    if not 1 <= k_count <= 7:  # 3K closures + margin must stay below Cycles' MAX_CLOSURE = 64
+        raise ValueError("k_count must be in 1..7")
+    group, gin, gout = _fresh_group(name, k_count, "SVM")
     total = None
     for k in range(1, k_count + 1):
         y0 = -(k - 1) * 1500.0
@@ -148,14 +157,7 @@ def build_osl_group(k_count: int = 3, name: str = GROUP_NAME_OSL) -> bpy.types.N
     """
     if not 1 <= k_count <= 16:
         raise ValueError("k_count must be in 1..16")
-    old = bpy.data.node_groups.get(name)
-    if old is not None:
-        bpy.data.node_groups.remove(old)
-    group = bpy.data.node_groups.new(name, "ShaderNodeTree")
-    group["spectral_skin_sss_k"] = k_count
-    group["spectral_skin_sss_backend"] = "OSL"
-    _new_interface(group, k_count)
-    gin, gout = _group_io(group)
+    group, gin, gout = _fresh_group(name, k_count, "OSL")
     script = osl.script_node(group.nodes, osl.mixture_source(k_count), f"spectral_skin_sss_k{k_count}.osl")
     for k in range(1, k_count + 1):
         for kind in KINDS:
