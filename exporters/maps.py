@@ -224,7 +224,7 @@ def read_albedo(path: str | os.PathLike, colorspace: ColorSpace = "auto",
 
 
 def sha256_file(path: str | os.PathLike) -> str:
-    """Hex SHA-256 of a file (used for the model files in S_maps.json)."""
+    """Hex SHA-256 of a file, read in 1 MiB blocks (model files in S_maps.json; LUTs in training records)."""
     digest = hashlib.sha256()
     with open(path, "rb") as fh:
         for block in iter(lambda: fh.read(1 << 20), b""):

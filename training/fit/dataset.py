@@ -15,7 +15,6 @@ and a file made with other settings is never overwritten (ValueError).  Shards t
 
 from __future__ import annotations
 
-import hashlib
 from pathlib import Path
 
 import h5py
@@ -24,18 +23,12 @@ import torch
 from tqdm import tqdm
 
 from exporters.constants import anisotropy
+from exporters.maps import sha256_file
 from training.fit.optimize import fit_schedule
 from training.sim.lut_interp import LookupTables
 
 SPLITS = ("train", "validation")
 
-
-def file_sha256(path: Path) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        for block in iter(lambda: f.read(1 << 20), b""):
-            h.update(block)
-    return h.hexdigest()
 
 
 def out_path(out: Path, split: str, shard: tuple[int, int]) -> Path:
@@ -100,7 +93,7 @@ def fit_split(
     attrs = {
         "ks": ",".join(map(str, ks)),
         "method": method,
-        "lut_sha256": file_sha256(lut_path),
+        "lut_sha256": sha256_file(lut_path),
         "shard": f"{i}/{n}",
         **src_attrs,
     }

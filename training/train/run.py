@@ -15,7 +15,6 @@ RUNDIR is refused (use another folder).
 
 from __future__ import annotations
 
-import hashlib
 import json
 import os
 from dataclasses import asdict, dataclass, field
@@ -23,6 +22,7 @@ from pathlib import Path
 
 import torch
 
+from exporters.maps import sha256_file
 from training.model.chain import SkinModel
 from training.model.config import ModelConfig, g_range_for_lut
 from training.sim.lut_interp import LookupTables
@@ -43,13 +43,6 @@ class TrainConfig:
     synthetic: int = 20_000
     exposure_jitter: float = 0.25
 
-
-def sha256_file(path: Path) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        for block in iter(lambda: f.read(1 << 20), b""):
-            h.update(block)
-    return h.hexdigest()
 
 
 def _write_json(path: Path, obj: dict) -> None:
