@@ -11,6 +11,7 @@ from training.data import store
 from training.data.build import build_split, merge
 from training.data.cli import main as dataset_main
 from training.data.presets import PRESETS
+from training.data.reweight import TrajectoryStore
 from training.data.sampling import T_EPI_LEVELS_CM, training_tones, validation_tones
 from training.data.simulate import simulate_direct
 
@@ -85,5 +86,25 @@ def test_refuses_to_mix_runs_in_one_folder(tmp_path, capsys):
         build_split(other, "validation", tmp_path, simulate_direct, method="direct", progress=False)
     with pytest.raises(SystemExit):  # argparse rejects the shard with a message and exit status 2
         dataset_main(["--out", str(tmp_path), "--shard", "3/2"])
-    assert dataset_main(["--out", str(tmp_path), "--method", "reweighted"]) == 2
-    assert "not implemented yet" in capsys.readouterr().err
+    assert dataset_main(["--out", str(tmp_path), "--split", "validation", "--method", "direct", "--preset", "ci"]) == 2
+    assert "photons" in capsys.readouterr().err  # the folder holds TINY's run, not ci's: refused, nothing lost
+    assert store.pending(tmp_path / "validation.h5").size == 0
+
+
+def test_reweighted_build_shards_and_merge(tmp_path):
+    """The default estimator: shards share the split's walk and merge into the unsharded result."""
+    def make(folder, shard):
+        walk = TrajectoryStore(folder / "trajectories_validation", TINY.photons, TINY.validation_seed, shard=shard)
+        return build_split(TINY, "validation", folder, walk, method="reweighted", shard=shard, progress=False)
+
+    whole = make(tmp_path / "whole", (0, 1))
+    for i in range(2):
+        make(tmp_path / "sharded", (i, 2))
+    merged = merge(tmp_path / "sharded", "validation")
+    a = store.read_split(whole, ("tone", "R_d", "R_d_stderr", "profile", "profile_stderr", "albedo_rgb"))
+    b = store.read_split(merged, tuple(a))
+    for key in a:
+        np.testing.assert_array_equal(a[key], b[key])
+    assert np.all(a["R_d"].mean(axis=1) > 0.01) and np.all(np.isfinite(a["profile_stderr"]))
+    with h5py.File(merged) as f:
+        assert f.attrs["method"] == "reweighted"

@@ -15,7 +15,8 @@ from training.data import store
 from training.data.presets import Preset
 from training.data.sampling import training_tones, validation_tones
 
-#: simulate(tones (B, 5), photons, seed, device) -> {"R_d": (B, W), "R_d_stderr": (B, W), "profile": (B, W, 512)}
+#: simulate(tones (B, 5), photons, seed, device) -> {"R_d", "R_d_stderr": (B, W),
+#:                                                    "profile", "profile_stderr": (B, W, 512)}
 SimulateFn = Callable[[np.ndarray, int, int, str], dict[str, np.ndarray]]
 SPLITS = ("train", "validation")
 
@@ -36,7 +37,7 @@ def shard_path(out: Path, split: str, shard: tuple[int, int]) -> Path:
 
 def build_split(
     preset: Preset, split: str, out: Path, simulate: SimulateFn, *, method: str,
-    shard: tuple[int, int] = (0, 1), device: str = "cpu", progress: bool = True,
+    shard: tuple[int, int] = (0, 1), device: str = "cpu", progress: bool = True, chunk_tones: int | None = None,
 ) -> Path:
     """Simulate this shard's tones of ``split`` into ``out``; resumes a partial file of the same run."""
     tones, seed = split_tones(preset, split)
@@ -52,8 +53,9 @@ def build_split(
         store.create(path, tones[index], index, attrs)
     todo = store.pending(path)
     bar = tqdm(total=len(index), initial=len(index) - len(todo), desc=f"{split} {i}/{n}", disable=not progress)
-    for start in range(0, len(todo), preset.chunk_tones):
-        rows = todo[start : start + preset.chunk_tones]
+    chunk = chunk_tones or preset.chunk_tones
+    for start in range(0, len(todo), chunk):
+        rows = todo[start : start + chunk]
         t0 = time.perf_counter()
         # per-tone seeds derive from the global index: results do not depend on sharding or resuming
         values = simulate(tones[index[rows]], preset.photons, seed * 1_000_003 + int(index[rows[0]]), device)

@@ -5,6 +5,10 @@
 
 Killing the job loses at most the chunk in flight: run the same command again to resume.  N machines
 (or N processes) each run one ``--shard I/N``; ``--merge`` checks the shards and joins them.
+
+--method reweighted (default): one baseline walk per split (saved in DIR/trajectories_<split>/, in
+photon chunks, shared by the shards of a split) reweighted for every tone; --method direct: one full
+Monte Carlo run per tone (slow; for checks).
 """
 
 from __future__ import annotations
@@ -27,6 +31,21 @@ def parse_shard(text: str) -> tuple[int, int]:
     return i, n
 
 
+def _estimator(args: argparse.Namespace, preset, split: str):
+    """The SimulateFn of ``args.method`` for ``split`` and its chunk size (tones written at once)."""
+    if args.method == "direct":
+        from training.data.simulate import simulate_direct
+
+        return simulate_direct, preset.chunk_tones
+    from training.data.build import split_tones
+    from training.data.reweight import TrajectoryStore
+
+    seed = split_tones(preset, split)[1]
+    store = TrajectoryStore(args.out / f"trajectories_{split}", preset.photons, seed, device=args.device,
+                            shard=args.shard, progress=not args.no_progress)
+    return store, preset.reweighted_chunk_tones
+
+
 def main(argv: list[str]) -> int:
     parser = argparse.ArgumentParser(prog="python -m training dataset", description=__doc__.splitlines()[0],
                                      formatter_class=argparse.RawDescriptionHelpFormatter, epilog=__doc__)
@@ -34,8 +53,8 @@ def main(argv: list[str]) -> int:
     parser.add_argument("--out", type=Path, required=True, help="dataset folder")
     parser.add_argument("--shard", type=parse_shard, default=(0, 1), help="I/N: this process's share")
     parser.add_argument("--split", choices=[*SPLITS, "both"], default="both")
-    parser.add_argument("--method", choices=["direct", "reweighted"], default="direct",
-                        help="estimator (reweighted: not built yet)")
+    parser.add_argument("--method", choices=["direct", "reweighted"], default="reweighted",
+                        help="estimator (default reweighted; direct is a full run per tone)")
     parser.add_argument("--merge", action="store_true", help="join finished shards in --out")
     parser.add_argument("--seed", type=int, default=None, help="override the preset's sampling seeds")
     parser.add_argument("--device", default="cpu", help="cpu or cuda")
@@ -51,19 +70,15 @@ def main(argv: list[str]) -> int:
             for split in splits:
                 print(merge(args.out, split))
             return 0
-        if args.method == "reweighted":
-            print("error: --method reweighted is not implemented yet; use --method direct.", file=sys.stderr)
-            return 2
-        from training.data.simulate import simulate_direct
-
         preset = PRESETS[args.preset]
         if args.seed is not None:
             from dataclasses import replace
 
             preset = replace(preset, train_seed=args.seed, validation_seed=args.seed + 1)
         for split in splits:
-            path = build_split(preset, split, args.out, simulate_direct, method=args.method, shard=args.shard,
-                               device=args.device, progress=not args.no_progress)
+            simulate, chunk = _estimator(args, preset, split)
+            path = build_split(preset, split, args.out, simulate, method=args.method, shard=args.shard,
+                               device=args.device, progress=not args.no_progress, chunk_tones=chunk)
             print(path)
     except ValueError as exc:
         print(f"error: {exc}", file=sys.stderr)

@@ -9,7 +9,10 @@ from training.skin.tissue import skin_medium
 
 
 def simulate_direct(tones: np.ndarray, photons: int, seed: int, device: str) -> dict[str, np.ndarray]:
-    """Simulate each tone (B, 5) at all wavelengths; returns R_d, R_d_stderr (B, 376), profile (B, 376, 512)."""
+    """Simulate each tone (B, 5) at all wavelengths.
+
+    Returns R_d, R_d_stderr (B, 376), profile, profile_stderr (B, 376, 512).
+    """
     results = [
         simulate(skin_medium(tone), photons, illumination="diffuse", seed=seed + i, device=device)
         for i, tone in enumerate(tones)
@@ -18,4 +21,5 @@ def simulate_direct(tones: np.ndarray, photons: int, seed: int, device: str) -> 
         "R_d": np.stack([r.R_d for r in results]),
         "R_d_stderr": np.stack([r.R_d_stderr for r in results]),
         "profile": np.stack([r.profile for r in results]),
+        "profile_stderr": np.stack([r.profile_stderr for r in results]),
     }

@@ -5,7 +5,8 @@ time, plus a ``done`` mask: a killed job restarts where it stopped and loses at 
 A training loop reads tone slices without loading the file (profiles are chunked one tone per chunk).
 
 Datasets (N tones, W = 376 wavelengths, B = 512 radial bins):
-  tone (N, 5), R_d (N, W), R_d_stderr (N, W), profile (N, W, B) cm^-2 float32,
+  tone (N, 5), R_d (N, W), R_d_stderr (N, W), profile (N, W, B) and profile_stderr (N, W, B) cm^-2 float32
+  (LZF-compressed: far bins of absorbing wavelengths are empty),
   albedo_rgb (N, 3) linear sRGB under D65, done (N,) bool, index (N,) position in the full split.
 File attributes: preset, split, photons, seed, shard ("I/N"), method, n_total, created_by.
 """
@@ -24,6 +25,7 @@ FIELDS = {
     "R_d": ((N_WAVELENGTHS,), "f4"),
     "R_d_stderr": ((N_WAVELENGTHS,), "f4"),
     "profile": ((N_WAVELENGTHS, N_RADIAL_BINS), "f4"),
+    "profile_stderr": ((N_WAVELENGTHS, N_RADIAL_BINS), "f4"),
     "albedo_rgb": ((3,), "f8"),
 }
 
@@ -34,7 +36,9 @@ def create(path: Path, tones: np.ndarray, index: np.ndarray, attrs: dict) -> Non
     with h5py.File(tmp, "w") as f:
         n = len(tones)
         for name, (shape, dtype) in FIELDS.items():
-            f.create_dataset(name, shape=(n, *shape), dtype=dtype, chunks=(1, *shape) if len(shape) > 1 else None)
+            big = len(shape) > 1
+            f.create_dataset(name, shape=(n, *shape), dtype=dtype, chunks=(1, *shape) if big else None,
+                             compression="lzf" if big else None, shuffle=big)
         f["tone"][:] = tones
         f.create_dataset("done", data=np.zeros(n, bool))
         f.create_dataset("index", data=index)
@@ -66,7 +70,7 @@ def pending(path: Path) -> np.ndarray:
 def write_rows(path: Path, rows: np.ndarray, values: dict[str, np.ndarray]) -> None:
     """Write simulated ``values`` (each (len(rows), ...)) at local ``rows`` and mark them done."""
     with h5py.File(path, "r+") as f:
-        for name in ("R_d", "R_d_stderr", "profile", "albedo_rgb"):
+        for name in (n for n in FIELDS if n != "tone"):
             data = np.asarray(values[name])
             if not np.all(np.isfinite(data)):
                 raise ValueError(f"refusing to store non-finite {name} for rows {rows.tolist()}")

@@ -1,8 +1,10 @@
 """``python -m training simulate``: the two-layer skin model of one tone at all 376 wavelengths (SPEC §2).
 
 Epidermis of thickness t_epi over a semi-infinite dermis, n = 1.4, air above, diffuse illumination.
-``--method direct`` walks the absorbing medium; ``--method reweighted`` walks it without absorption
-once and weights each reflected photon by exp(-mua_epi L_epi - mua_derm L_derm) (same estimand).
+``--method direct`` walks the absorbing medium; ``--method reweighted`` is the dataset's estimator
+(``training.data.reweight``): a walk at the baseline absorption, each reflected photon weighted by
+exp(-(mua_epi - mua0) L_epi - (mua_derm - mua0) L_derm) (same estimand).  Both write the SPEC keys plus
+``profile_stderr``.
 
 Example::
 
@@ -12,41 +14,23 @@ Example::
 from __future__ import annotations
 
 import argparse
-import math
 import sys
 from pathlib import Path
 
 import numpy as np
 
 from exporters.constants import R_EDGES_CM, WAVELENGTHS_NM
-from training.sim.transport import simulate, simulate_records
+from training.sim.transport import simulate
 from training.skin.tissue import skin_medium
-
-#: Collision-count roulette of the absorption-free walks (see WalkConfig), in collisions / (1 - g).
-REWEIGHT_PATH_C = 32.0
 
 
 def reweighted(tone: np.ndarray, photons: int, seed: int, device: str, compile_) -> dict[str, np.ndarray]:
-    """R_d, its standard error and the profile by absorption reweighting of one absorption-free run."""
-    free = skin_medium(tone, absorbing=False)
-    absorbing = skin_medium(tone, absorbing=True)
-    g_mean = float(free.g.mean())
-    rec = simulate_records(free, photons, seed=seed, device=device, path_roulette_n0=REWEIGHT_PATH_C / (1 - g_mean),
-                           compile=compile_)
-    refl = rec.kind == 1
-    mua = absorbing.mua.numpy()  # (2, W)
-    ch = rec.ch[refl]
-    w = rec.w[refl] * np.exp(-mua[0, ch] * rec.path_cm[refl, 0] - mua[1, ch] * rec.path_cm[refl, 1])
-    n_ch = free.n_channels
-    nb = R_EDGES_CM.size  # 512 bins + overflow
-    b = np.clip(np.searchsorted(R_EDGES_CM, rec.r_cm[refl], side="right") - 1, 0, nb - 1)
-    s1 = np.bincount(ch, weights=w, minlength=n_ch)
-    s2 = np.bincount(ch, weights=w * w, minlength=n_ch)
-    p1 = np.bincount(ch * nb + b, weights=w, minlength=n_ch * nb).reshape(n_ch, nb)
-    mean = s1 / photons
-    se = np.sqrt(np.clip(s2 / photons - mean**2, 0, None) / max(photons - 1, 1))
-    area = math.pi * np.diff(R_EDGES_CM**2)
-    return {"R_d": mean, "R_d_stderr": se, "profile": p1[:, :-1] / photons / area}
+    """The dataset's estimator for one tone: a baseline walk cut at the tone's t_epi, reweighted."""
+    from training.data.reweight import baseline_absorption, reweight, walk
+
+    mua0 = baseline_absorption(tone[None])
+    traj = walk(photons, seed=seed, mua0=mua0, levels_cm=tone[2:3], device=device, compile=compile_)
+    return reweight(traj, tone[None], device)
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -75,9 +59,10 @@ def main(argv: list[str]) -> int:
         if args.method == "direct":
             r = simulate(skin_medium(tone), args.photons, seed=args.seed, device=args.device,
                          progress=not args.no_progress, compile=compile_)
-            res = {"R_d": r.R_d, "R_d_stderr": r.R_d_stderr, "profile": r.profile}
+            res = {"R_d": r.R_d, "R_d_stderr": r.R_d_stderr, "profile": r.profile,
+                   "profile_stderr": r.profile_stderr}
         else:
-            res = reweighted(tone, args.photons, args.seed, args.device, compile_)
+            res = {k: v[0] for k, v in reweighted(tone, args.photons, args.seed, args.device, compile_).items()}
     except ValueError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

@@ -60,6 +60,7 @@ def write_toy(root: Path, n_train: int = 32, n_validation: int = 8) -> tuple[Pat
         rows = np.arange(len(tones))
         store.write_rows(path, rows, {"R_d": R, "R_d_stderr": np.zeros_like(R),
                                       "profile": np.zeros((len(tones), R.shape[1], 512)),
+                                      "profile_stderr": np.zeros((len(tones), R.shape[1], 512)),
                                       "albedo_rgb": spectrum_to_linear_srgb(R, "D65")})
         with h5py.File(fits_dir / f"fits_{split}.h5", "w") as f:
             f.create_dataset("tone", data=tones)

@@ -1,0 +1,104 @@
+"""The dataset's reweighted estimator against direct absorbing runs of the same tones (real simulator).
+
+One baseline walk (all 16 epidermis levels) serves every tone; each tone is also simulated directly.
+The wavelengths are a subset (every 4th) to keep the test short; the estimator is the same at all 376.
+"""
+
+import numpy as np
+import pytest
+
+from exporters.colorimetry import xyz_weights
+from training.data.reweight import Trajectories, TrajectoryStore, baseline_absorption, reweight, walk
+from training.data.sampling import T_EPI_LEVELS_CM
+from training.sim.medium import LayeredMedium
+from training.sim.transport import simulate
+from training.skin.tissue import skin_medium
+
+CHANNELS = np.arange(0, 376, 4)
+PHOTONS = 400
+L = T_EPI_LEVELS_CM
+TONES = np.array([
+    [0.02, 0.03, L[4], 0.8, 0.7],  # light, typical
+    [0.20, 0.08, L[9], 0.7, 0.5],  # medium
+    [0.65, 0.25, L[15], 0.5, 1.0],  # extreme: darkest, thickest, most blood (largest reweighting)
+    [0.001, 0.001, L[0], 1.0, 0.0],  # extreme: lightest, thinnest (the baseline itself, long paths)
+    [0.65, 0.001, L[0], 1.0, 0.0],  # extreme: thin pheomelanin-dark epidermis over bloodless dermis
+])
+
+
+def _subset(medium: LayeredMedium) -> LayeredMedium:
+    return LayeredMedium(mua=medium.mua[:, CHANNELS], mus=medium.mus[:, CHANNELS], g=medium.g[:, CHANNELS],
+                         thickness=medium.thickness, n_medium=medium.n_medium)
+
+
+@pytest.fixture(scope="module")
+def both():
+    traj = walk(PHOTONS, seed=11, mua0=baseline_absorption(), channels=CHANNELS)
+    rw = reweight(traj, TONES)
+    direct = [simulate(_subset(skin_medium(t)), PHOTONS, seed=100 + i) for i, t in enumerate(TONES)]
+    return traj, rw, direct
+
+
+def test_reweighted_equals_direct_within_standard_errors(both):
+    _, rw, direct = both
+    for i, d in enumerate(direct):
+        sigma = np.hypot(rw["R_d_stderr"][i], d.R_d_stderr)
+        diff = rw["R_d"][i] - d.R_d
+        assert np.all(np.abs(diff) <= 4 * sigma + 1e-4), (TONES[i], np.abs(diff / sigma).max())
+        z = diff[sigma > 0] / sigma[sigma > 0]
+        assert abs(z.mean()) < 0.45 and 0.7 < z.std() < 1.35, (TONES[i], z.mean(), z.std())
+        # the shared walk is not much noisier than a walk of the tone itself, even at the extremes
+        assert np.median(rw["R_d_stderr"][i] / np.maximum(d.R_d_stderr, 1e-12)) < 1.6
+        # the radial profile agrees too (first 3 mm, where both have photons), bin sums of 32 bins
+        sig_p = np.hypot(_coarse(rw["profile_stderr"][i], True), _coarse(d.profile_stderr, True))
+        assert np.all(np.abs(_coarse(rw["profile"][i]) - _coarse(d.profile)) <= 5 * sig_p + 2e-4)
+
+
+def _coarse(profile: np.ndarray, stderr: bool = False) -> np.ndarray:
+    """Power in 13 groups of 32 radial bins (to 3 mm), (C, 13); stderr: combine bin errors in quadrature."""
+    from exporters.constants import R_EDGES_CM
+
+    power = (profile * np.pi * np.diff(R_EDGES_CM**2))[:, :416].reshape(len(CHANNELS), 13, 32)
+    return np.sqrt((power**2).sum(-1)) if stderr else power.sum(-1)
+
+
+def test_colour_agrees_within_its_standard_error(both):
+    """XYZ under D65 (on the test's wavelength subset, weights rescaled) agrees within 4 sigma."""
+    _, rw, direct = both
+    w = xyz_weights("D65")[:, CHANNELS] * 4  # 8 nm steps instead of 2 nm
+    for i, d in enumerate(direct):
+        diff = w @ (rw["R_d"][i] - d.R_d)
+        sigma = np.sqrt((w**2) @ (rw["R_d_stderr"][i] ** 2 + d.R_d_stderr**2))
+        assert np.all(np.abs(diff) < 4 * sigma), (TONES[i], diff / sigma)
+
+
+def test_outputs_are_finite_and_energy_is_bounded(both):
+    traj, rw, _ = both
+    for key, v in rw.items():
+        assert np.all(np.isfinite(v)) and np.all(v >= 0), key
+    assert np.all(rw["R_d"] < 1)
+    assert np.all(traj.truncated == 0)
+    assert np.all(traj.w <= 1) and np.all(traj.path_cm >= 0)  # baseline weights only ever shrink
+
+
+def test_tones_must_be_on_a_level_and_above_the_baseline(both):
+    traj, _, _ = both
+    with pytest.raises(ValueError, match="not one of the walked levels"):
+        reweight(traj, np.array([[0.1, 0.05, 0.0123, 0.8, 0.5]]))
+    below = Trajectories(**{**traj.__dict__, "mua0": traj.mua0 * 1e3})
+    with pytest.raises(ValueError, match="absorbs less than the walk's baseline"):
+        reweight(below, TONES[:1])
+
+
+def test_store_resumes_chunks_and_refuses_other_walks(tmp_path):
+    """The dataset's on-disk walk: chunks survive a restart, another photon count is refused."""
+    st = TrajectoryStore(tmp_path / "t", photons=6, seed=3, chunk_photons=4)
+    traj = st.trajectories()
+    assert traj.photons == 6 and sorted(p.name for p in (tmp_path / "t").glob("chunk*.npz")) == [
+        "chunk0000.npz", "chunk0001.npz"]
+    (tmp_path / "t" / "chunk0001.npz").unlink()  # as if killed while walking the second chunk
+    again = TrajectoryStore(tmp_path / "t", photons=6, seed=3, chunk_photons=4).trajectories()
+    for key in ("offsets", "w", "bin", "path_cm"):
+        np.testing.assert_array_equal(getattr(traj, key), getattr(again, key))
+    with pytest.raises(ValueError, match="other photons"):
+        TrajectoryStore(tmp_path / "t", photons=7, seed=3, chunk_photons=4).trajectories()

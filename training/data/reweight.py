@@ -1,0 +1,276 @@
+"""The dataset's fast estimator: absorption reweighting of shared scattering trajectories.
+
+In the skin model (``training.skin.model``) scattering and anisotropy depend on the wavelength only and
+both layers have the same refractive index; a tone changes the absorption of each layer and the depth
+of the epidermis/dermis boundary.  So, per wavelength, one walk through a medium cut into slabs at the
+quantised epidermis thicknesses ``T_EPI_LEVELS_CM`` (every slab with the same scattering and the same
+*baseline* absorption mu_a0, no larger than any tone's in either layer) serves every tone: a photon that
+left the top after a path L_epi above the tone's epidermis depth and L_derm below it carries, for
+that tone, the weight
+
+    w_tone = w_baseline * exp(-(mu_a,epi - mu_a0) L_epi - (mu_a,derm - mu_a0) L_derm),
+
+which is exact (same estimand as a direct walk of the tone; weight roulette decisions taken on the
+baseline weight stay unbiased because the extra factor multiplies every later weight).  With
+mu_a0 <= mu_a the factor is <= 1, so no weight grows and the variance stays bounded.
+
+Cost: one walk per split for all of its tones (the walk is chunked by photons and saved, so it resumes),
+then per tone a few multiply-adds and one exp per reflected photon and wavelength.
+"""
+
+from __future__ import annotations
+
+import itertools
+import json
+import math
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from exporters.constants import N_TISSUE, PARAM_NAMES, PARAM_RANGES, R_EDGES_CM
+from training.data.sampling import T_EPI_LEVELS_CM
+from training.sim.kernel import KIND_REFLECTED, KIND_TRUNCATED
+from training.sim.medium import LayeredMedium
+from training.sim.transport import simulate_records
+from training.skin.model import absorption, scattering
+
+#: Photons per wavelength walked (and saved) at once: ~1.9e6 packets, a few hundred MB of records.
+WALK_CHUNK_PHOTONS = 5_000
+#: Records are stored in bins of ``R_EDGES_CM`` (512 bins, index 512 = beyond 5 cm).
+N_BINS = R_EDGES_CM.size - 1
+
+
+def baseline_absorption(extra_tones: np.ndarray | None = None) -> np.ndarray:
+    """mu_a0 (W,), cm^-1: the smallest absorption of either layer over the SPEC parameter box.
+
+    mu_a of each layer is multilinear in (f_mel, f_blood, so2, b_mel) (``training.skin.model``), so its
+    minimum over the box is at one of the 2^5 corners; ``extra_tones`` (B, 5) outside the box lower it
+    further so that they can be reweighted too.
+    """
+    corners = np.array(list(itertools.product(*[PARAM_RANGES[n] for n in PARAM_NAMES])), dtype=np.float64)
+    tones = corners if extra_tones is None else np.concatenate([corners, np.atleast_2d(extra_tones)])
+    mua_epi, mua_derm = absorption(tones)
+    return torch.minimum(mua_epi.min(0).values, mua_derm.min(0).values).numpy()
+
+
+def slab_medium(mua0: np.ndarray, levels_cm: np.ndarray, channels: np.ndarray | None = None) -> LayeredMedium:
+    """The baseline medium: slabs with boundaries at ``levels_cm`` over a semi-infinite rest, (W,) channels."""
+    mus, g = scattering()
+    mua0_t = torch.as_tensor(mua0, dtype=torch.float64)
+    if channels is not None:
+        mus, g = mus[channels], g[channels]
+    levels = np.asarray(levels_cm, dtype=np.float64)
+    if levels.ndim != 1 or levels.size < 1 or np.any(np.diff(levels) <= 0) or levels[0] <= 0:
+        raise ValueError(f"levels_cm must be positive and strictly increasing, got {levels.tolist()}")
+    n_slabs = levels.size + 1
+    thickness = torch.tensor([*np.diff(np.r_[0.0, levels]).tolist(), math.inf], dtype=torch.float64)
+    full = lambda v: v.reshape(1, -1).expand(n_slabs, -1).clone()  # noqa: E731
+    return LayeredMedium(mua=full(mua0_t), mus=full(mus), g=full(g), thickness=thickness, n_medium=N_TISSUE)
+
+
+@dataclass
+class Trajectories:
+    """Reflected photons of one baseline walk, grouped by channel (numpy).
+
+    Channel c's photons are rows offsets[c]:offsets[c + 1] of: w (n,) float32 exit weight at the
+    baseline absorption, bin (n,) int16 radial bin of the exit point (``N_BINS`` = beyond 5 cm),
+    path_cm (n, S) float32 path length in each of the S = len(levels_cm) + 1 slabs.
+    photons: photons launched per channel; truncated (W,): weight still alive at the walk cap (per photon).
+    """
+
+    mua0: np.ndarray
+    levels_cm: np.ndarray
+    channels: np.ndarray
+    photons: int
+    offsets: np.ndarray
+    w: np.ndarray
+    bin: np.ndarray
+    path_cm: np.ndarray
+    truncated: np.ndarray
+    seconds: float
+
+    def save(self, path: Path) -> None:
+        tmp = path.with_name(path.name + ".tmp.npz")
+        np.savez(tmp, **{k: np.asarray(v) for k, v in self.__dict__.items()})
+        tmp.rename(path)  # a killed job leaves no half-written chunk under the real name
+
+    @classmethod
+    def load(cls, path: Path) -> Trajectories:
+        with np.load(path) as f:
+            d = {k: f[k] for k in f.files}
+        return cls(**{**d, "photons": int(d["photons"]), "seconds": float(d["seconds"])})
+
+    @classmethod
+    def concat(cls, parts: list[Trajectories]) -> Trajectories:
+        """Join walks of the same medium (independent photons) into one."""
+        first = parts[0]
+        for p in parts[1:]:
+            if not (np.array_equal(p.mua0, first.mua0) and np.array_equal(p.levels_cm, first.levels_cm)
+                    and np.array_equal(p.channels, first.channels)):
+                raise ValueError("trajectory chunks of different media cannot be joined")
+        n_ch = first.channels.size
+        pieces = [(p, int(p.offsets[c]), int(p.offsets[c + 1])) for c in range(n_ch) for p in parts]
+        cat = lambda k: np.concatenate([getattr(p, k)[lo:hi] for p, lo, hi in pieces])  # noqa: E731
+        sizes = np.array([hi - lo for _, lo, hi in pieces]).reshape(n_ch, len(parts)).sum(1)
+        photons = sum(p.photons for p in parts)
+        return cls(
+            mua0=first.mua0, levels_cm=first.levels_cm, channels=first.channels, photons=photons,
+            offsets=np.r_[0, np.cumsum(sizes)], w=cat("w"), bin=cat("bin"), path_cm=cat("path_cm"),
+            truncated=sum(p.truncated * p.photons for p in parts) / photons,
+            seconds=sum(p.seconds for p in parts),
+        )
+
+
+def walk(
+    photons: int, *, seed: int, mua0: np.ndarray, levels_cm: np.ndarray = T_EPI_LEVELS_CM,
+    channels: np.ndarray | None = None, device: str = "cpu", compile: bool | str = "auto",
+) -> Trajectories:
+    """One baseline walk: ``photons`` per channel (diffuse illumination, like the dataset)."""
+    ch_idx = np.arange(np.asarray(mua0).size) if channels is None else np.asarray(channels, dtype=np.int64)
+    medium = slab_medium(np.asarray(mua0)[ch_idx], levels_cm, ch_idx)
+    t0 = time.perf_counter()
+    rec = simulate_records(medium, photons, illumination="diffuse", seed=seed, device=device, compile=compile)
+    refl = rec.kind == KIND_REFLECTED
+    order = np.argsort(rec.ch[refl], kind="stable")
+    ch = rec.ch[refl][order]
+    r_bin = np.clip(np.searchsorted(R_EDGES_CM, rec.r_cm[refl][order], side="right") - 1, 0, N_BINS)
+    trunc = np.bincount(rec.ch[rec.kind == KIND_TRUNCATED], weights=rec.w[rec.kind == KIND_TRUNCATED],
+                        minlength=ch_idx.size) / photons
+    return Trajectories(
+        mua0=np.asarray(mua0, dtype=np.float64)[ch_idx], levels_cm=np.asarray(levels_cm, dtype=np.float64),
+        channels=ch_idx, photons=int(photons),
+        offsets=np.r_[0, np.cumsum(np.bincount(ch, minlength=ch_idx.size))].astype(np.int64),
+        w=rec.w[refl][order].astype(np.float32), bin=r_bin.astype(np.int16),
+        path_cm=rec.path_cm[refl][order].astype(np.float32), truncated=trunc,
+        seconds=time.perf_counter() - t0,
+    )
+
+
+def level_index(tones: np.ndarray, levels_cm: np.ndarray) -> np.ndarray:
+    """Index into ``levels_cm`` of each tone's t_epi (B,); ValueError if one is not a level."""
+    t_epi = np.atleast_2d(tones)[:, PARAM_NAMES.index("t_epi")]
+    idx = np.abs(t_epi[:, None] - levels_cm[None]).argmin(1)
+    bad = ~np.isclose(t_epi, levels_cm[idx], rtol=0, atol=1e-9)
+    if bad.any():
+        raise ValueError(
+            f"t_epi {t_epi[bad].tolist()} is not one of the walked levels {levels_cm.tolist()} cm: "
+            "quantise the tones (training.data.sampling.quantise_thickness) or walk their levels."
+        )
+    return idx
+
+
+def reweight(traj: Trajectories, tones: np.ndarray, device: str = "cpu") -> dict[str, np.ndarray]:
+    """R_d, R_d_stderr (B, C), profile, profile_stderr (B, C, 512) cm^-2 of tones (B, 5) from ``traj``.
+
+    C is the walked channels (all 376 wavelengths for the dataset).  Standard errors are per-photon
+    standard deviations / sqrt(photons), as for the direct estimator.
+    """
+    tones = np.atleast_2d(np.asarray(tones, dtype=np.float64))
+    lev = level_index(tones, traj.levels_cm)
+    mua_epi, mua_derm = (m.numpy()[:, traj.channels] for m in absorption(tones))
+    d_epi, d_derm = mua_epi - traj.mua0, mua_derm - traj.mua0
+    if min(d_epi.min(), d_derm.min()) < -1e-9 * max(1.0, float(traj.mua0.max())):
+        raise ValueError("a tone absorbs less than the walk's baseline: walk with baseline_absorption(tones).")
+    dev = torch.device(device)
+    n_t, n_ch, n = len(tones), traj.channels.size, traj.photons
+    s1, s2 = np.zeros((n_t, n_ch)), np.zeros((n_t, n_ch))
+    p1, p2 = np.zeros((n_t, n_ch, N_BINS + 1)), np.zeros((n_t, n_ch, N_BINS + 1))
+    lev_t = torch.as_tensor(lev, device=dev)
+    for c in range(n_ch):
+        lo, hi = int(traj.offsets[c]), int(traj.offsets[c + 1])
+        if hi == lo:
+            continue
+        w = torch.as_tensor(traj.w[lo:hi], device=dev)
+        b = torch.as_tensor(traj.bin[lo:hi].astype(np.int64), device=dev)
+        cum = torch.as_tensor(traj.path_cm[lo:hi], device=dev).cumsum(1)  # (n, S): path above each level
+        l_epi = cum.T[lev_t]  # (B, n): each tone's path in its epidermis
+        l_derm = cum[:, -1][None] - l_epi
+        de = torch.as_tensor(d_epi[:, c], dtype=torch.float32, device=dev)[:, None]
+        dd = torch.as_tensor(d_derm[:, c], dtype=torch.float32, device=dev)[:, None]
+        wt = w[None] * torch.exp(-(de * l_epi + dd * l_derm))
+        sq = wt * wt
+        s1[:, c] = wt.sum(1, dtype=torch.float64).cpu().numpy()
+        s2[:, c] = sq.sum(1, dtype=torch.float64).cpu().numpy()
+        zeros = torch.zeros(n_t, N_BINS + 1, dtype=torch.float32, device=dev)
+        p1[:, c] = zeros.index_add(1, b, wt).cpu().numpy()
+        p2[:, c] = zeros.index_add(1, b, sq).cpu().numpy()
+    mean, se = _mean_stderr(s1, s2, n)
+    pm, pse = _mean_stderr(p1, p2, n)
+    area = math.pi * np.diff(R_EDGES_CM**2)
+    return {"R_d": mean, "R_d_stderr": se, "profile": pm[..., :N_BINS] / area,
+            "profile_stderr": pse[..., :N_BINS] / area}
+
+
+def _mean_stderr(s1: np.ndarray, s2: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Mean and its standard error from per-photon sums of values and of squares over n photons."""
+    mean = s1 / n
+    var = np.clip(s2 / n - mean * mean, 0.0, None) * (n / max(n - 1, 1))
+    return mean, np.sqrt(var / n)
+
+
+class TrajectoryStore:
+    """The baseline walk of one dataset split on disk, in photon chunks (resumable), and its reweighting.
+
+    ``folder`` holds chunk{j}.npz for j = 0 .. ceil(photons / chunk) - 1, each walked with seed
+    ``seed * 1_000_003 + j``; a killed walk loses at most the chunk in flight.  Shards of a split
+    share the folder: shard I/N walks chunks j = I (mod N) first, then whatever is still missing (a
+    chunk may then be walked twice, never corrupted: chunks are deterministic and renamed into place).
+    """
+
+    def __init__(self, folder: Path, photons: int, seed: int, *, device: str = "cpu",
+                 shard: tuple[int, int] = (0, 1), chunk_photons: int = WALK_CHUNK_PHOTONS,
+                 progress: bool = False) -> None:
+        self.folder, self.photons, self.seed, self.device = Path(folder), int(photons), int(seed), device
+        self.shard, self.chunk, self.progress = shard, int(chunk_photons), progress
+        self.mua0 = baseline_absorption()
+        self._traj: Trajectories | None = None
+
+    def _chunks(self) -> list[tuple[int, int]]:
+        n = math.ceil(self.photons / self.chunk)
+        return [(j, min(self.chunk, self.photons - j * self.chunk)) for j in range(n)]
+
+    def trajectories(self) -> Trajectories:
+        """Walk the missing chunks (resumably) and return the whole walk (cached in memory)."""
+        if self._traj is not None:
+            return self._traj
+        self.folder.mkdir(parents=True, exist_ok=True)
+        self._check_manifest()
+        chunks = self._chunks()
+        i, n = self.shard
+        todo = [c for c in chunks if c[0] % n == i] + [c for c in chunks if c[0] % n != i]
+        compile_ = self.photons * self.mua0.size > (1 << 23)
+        for j, count in todo:
+            path = self.folder / f"chunk{j:04d}.npz"
+            if path.exists():
+                continue
+            if self.progress:
+                print(f"walking trajectory chunk {j + 1}/{len(chunks)} ({count} photons x {self.mua0.size} "
+                      f"wavelengths) into {self.folder}", flush=True)
+            walk(count, seed=self.seed * 1_000_003 + j, mua0=self.mua0, device=self.device,
+                 compile=compile_).save(path)
+        parts = [Trajectories.load(self.folder / f"chunk{j:04d}.npz") for j, _ in chunks]
+        self._traj = Trajectories.concat(parts) if len(parts) > 1 else parts[0]
+        return self._traj
+
+    def _check_manifest(self) -> None:
+        """Write the walk's settings once; refuse a folder walked with other settings."""
+        manifest = {"photons": self.photons, "seed": self.seed, "chunk_photons": self.chunk,
+                    "levels_cm": T_EPI_LEVELS_CM.tolist(), "mua0_sum": float(np.sum(self.mua0))}
+        path = self.folder / "manifest.json"
+        if path.exists():
+            old = json.loads(path.read_text())
+            diff = [k for k in manifest if not np.allclose(old.get(k, np.nan), manifest[k], rtol=1e-12, atol=0)]
+            if diff:
+                raise ValueError(f"{self.folder} holds a walk with other {', '.join(diff)}: "
+                                 "use another --out folder or delete it to walk again.")
+        else:
+            path.write_text(json.dumps(manifest, indent=1))
+
+    def __call__(self, tones: np.ndarray, photons: int, seed: int, device: str) -> dict[str, np.ndarray]:
+        """The dataset's SimulateFn: reweight ``tones`` (per-chunk seed unused: the walk is shared)."""
+        if photons != self.photons:
+            raise ValueError(f"the trajectories hold {self.photons} photons, not {photons}")
+        return reweight(self.trajectories(), tones, device)
