@@ -1,0 +1,79 @@
+"""Benchmarks of the dataset estimators (collected by ``python -m training bench``).
+
+Direct: one absorbing Monte Carlo run per tone.  Reweighted: one baseline walk per split, shared by every
+tone of the split, then a reweighting per tone.  Both at the same photons per wavelength on the same
+tones; "equal noise" scales the reweighted cost by the measured variance ratio (reweighted / direct
+squared standard errors, mean over wavelengths and tones), so the ratio compares the cost of the same
+noise.  One torch thread (= one core), uncompiled walks, all 376 wavelengths.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import torch
+
+from exporters.colorimetry import delta_e76, spectrum_to_lab
+from training.data.presets import PRESETS
+from training.data.reweight import baseline_absorption, reweight, walk
+from training.data.sampling import training_tones
+from training.sim.transport import simulate
+from training.skin.tissue import skin_medium
+
+
+def _rows(photons: int, n_reweight: int) -> list[dict]:
+    tones = training_tones(64, seed=7)[[0, 5, 21, 40]]  # four Halton tones: a spread of melanin and blood
+    t0 = time.perf_counter()
+    direct = [simulate(skin_medium(t), photons, seed=50 + i) for i, t in enumerate(tones)]
+    t_direct = (time.perf_counter() - t0) / len(tones)  # s per tone
+    t0 = time.perf_counter()
+    traj = walk(photons, seed=3, mua0=baseline_absorption())
+    t_walk = time.perf_counter() - t0
+    many = training_tones(n_reweight, seed=9)
+    t0 = time.perf_counter()
+    reweight(traj, many)
+    t_rw = (time.perf_counter() - t0) / n_reweight  # s per tone
+    rw = reweight(traj, tones)
+    d_se = np.stack([d.R_d_stderr for d in direct])
+    ok = d_se > 0
+    var_ratio = float(np.mean((rw["R_d_stderr"][ok] / d_se[ok]) ** 2))
+    de = delta_e76(spectrum_to_lab(rw["R_d"]), spectrum_to_lab(np.stack([d.R_d for d in direct])))
+    n_w = 376
+    rows = []
+    for preset in ("laptop", "paper"):
+        p = PRESETS[preset]
+        n_tones = p.n_train + p.n_validation
+        scale = p.photons / photons
+        t_rw_total = 2 * t_walk * scale + n_tones * t_rw * scale  # two walks (train, validation)
+        t_direct_total = n_tones * t_direct * scale
+        rate_rw = n_tones * n_w / t_rw_total
+        rate_direct = n_tones * n_w / t_direct_total
+        rows.append({
+            "workload": f"dataset `{preset}` ({p.n_train:,} + {p.n_validation:,} tones x 376 wavelengths, "
+            f"{p.photons:,} photons), 1 core, projected",
+            "ours": f"reweighted {rate_rw:,.0f} tone-wavelengths/s: {t_rw_total / 3600:.2f} h",
+            "anchor": f"direct {rate_direct:,.2f} tone-wavelengths/s: {t_direct_total / 3600:,.0f} h",
+            "ratio": f"{t_direct_total / t_rw_total:,.0f}x at equal photons, "
+            f"{t_direct_total / (t_rw_total * var_ratio):,.0f}x at equal noise",
+            "error": f"variance ratio {var_ratio:.2f} (mean over 4 tones x 376 wavelengths); "
+            f"dE76 reweighted vs direct at {photons} photons: {', '.join(f'{v:.2f}' for v in de)} (noise)",
+            "notes": f"measured at {photons} photons: direct {t_direct:.1f} s per tone, walk {t_walk:.0f} s per "
+            f"split, reweighting {t_rw * 1e3:.1f} ms per tone ({n_reweight} tones); linear in photons",
+        })
+    return rows
+
+
+def benchmarks(quick: bool) -> list[dict]:
+    """Rows for bench/results.md (see the module docstring)."""
+    before = torch.get_num_threads()
+    torch.set_num_threads(1)
+    try:
+        return _rows(300 if quick else 3000, 128 if quick else 512)
+    finally:
+        torch.set_num_threads(before)
+
+
+if __name__ == "__main__":
+    for row in benchmarks(quick=True):
+        print(row)
