@@ -60,7 +60,7 @@ def build_split(
         # per-tone seeds derive from the global index: results do not depend on sharding or resuming
         values = simulate(tones[index[rows]], preset.photons, seed * 1_000_003 + int(index[rows[0]]), device)
         values["albedo_rgb"] = spectrum_to_linear_srgb(values["R_d"], "D65")
-        store.write_rows(path, rows, values)
+        store.write_rows(path, rows, values, seconds=time.perf_counter() - t0)
         bar.set_postfix(s_per_tone=f"{(time.perf_counter() - t0) / len(rows):.2f}")
         bar.update(len(rows))
     bar.close()

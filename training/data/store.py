@@ -8,7 +8,8 @@ Datasets (N tones, W = 376 wavelengths, B = 512 radial bins):
   tone (N, 5), R_d (N, W), R_d_stderr (N, W), profile (N, W, B) and profile_stderr (N, W, B) cm^-2 float32
   (LZF-compressed: far bins of absorbing wavelengths are empty),
   albedo_rgb (N, 3) linear sRGB under D65, done (N,) bool, index (N,) position in the full split.
-File attributes: preset, split, photons, seed, shard ("I/N"), method, n_total, created_by.
+File attributes: preset, split, photons, seed, shard ("I/N"), method, n_total, created_by, seconds
+(simulation time so far; the reweighted walk's time is in each trajectory chunk).
 """
 
 from __future__ import annotations
@@ -67,8 +68,11 @@ def pending(path: Path) -> np.ndarray:
         return np.flatnonzero(~f["done"][:])
 
 
-def write_rows(path: Path, rows: np.ndarray, values: dict[str, np.ndarray]) -> None:
-    """Write simulated ``values`` (each (len(rows), ...)) at local ``rows`` and mark them done."""
+def write_rows(path: Path, rows: np.ndarray, values: dict[str, np.ndarray], seconds: float = 0.0) -> None:
+    """Write simulated ``values`` (each (len(rows), ...)) at local ``rows`` and mark them done.
+
+    ``seconds`` (the time it took to simulate them) adds to the file attribute ``seconds``.
+    """
     with h5py.File(path, "r+") as f:
         for name in (n for n in FIELDS if n != "tone"):
             data = np.asarray(values[name])
@@ -79,6 +83,7 @@ def write_rows(path: Path, rows: np.ndarray, values: dict[str, np.ndarray]) -> N
         done = f["done"][:]
         done[rows] = True
         f["done"][:] = done
+        f.attrs["seconds"] = float(f.attrs.get("seconds", 0.0)) + float(seconds)
         f.flush()
 
 
