@@ -73,6 +73,22 @@ def _refuse_existing(path: Path, overwrite: bool) -> None:
         raise FileExistsError(f"{path} exists; pass overwrite=True (--overwrite) to replace it")
 
 
+def _exr_spec(width: int, height: int, channels, units: str) -> oiio.ImageSpec:
+    spec = oiio.ImageSpec(width, height, len(channels), "float")
+    spec.channelnames = tuple(channels)
+    spec.attribute("oiio:ColorSpace", "Non-Color")
+    spec.attribute("spectral_skin_sss:colorspace", "Non-Color")
+    spec.attribute("compression", "zip")
+    spec.attribute("spectral_skin_sss:units", units)
+    return spec
+
+
+def _temp_name(path: Path) -> Path:
+    fd, tmp_name = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=".exr", dir=path.parent)
+    os.close(fd)
+    return Path(tmp_name)
+
+
 def write_exr(path: str | os.PathLike, data: np.ndarray, channels: tuple[str, ...] | list[str],
               units: str, overwrite: bool = False) -> Path:
     """Write ``data`` (H, W) or (H, W, C) as a float32 EXR with the given channel names; returns the path.
@@ -95,15 +111,8 @@ def write_exr(path: str | os.PathLike, data: np.ndarray, channels: tuple[str, ..
     _ensure_writable_dir(path.parent)
     _refuse_existing(path, overwrite)
     h, w, c = arr.shape
-    spec = oiio.ImageSpec(w, h, c, "float")
-    spec.channelnames = tuple(channels)
-    spec.attribute("oiio:ColorSpace", "Non-Color")
-    spec.attribute("spectral_skin_sss:colorspace", "Non-Color")
-    spec.attribute("compression", "zip")
-    spec.attribute("spectral_skin_sss:units", units)
-    fd, tmp_name = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=".exr", dir=path.parent)
-    os.close(fd)
-    tmp = Path(tmp_name)
+    spec = _exr_spec(w, h, channels, units)
+    tmp = _temp_name(path)
     try:
         out = oiio.ImageOutput.create(str(tmp))
         if out is None or not out.open(str(tmp), spec):
@@ -127,7 +136,8 @@ class AlbedoImage:
     ``rgb``: (H, W, 3) float64 linear sRGB (grayscale replicated); ``alpha``: (H, W) in [0, 1] or None,
     unassociated (colour is never divided or multiplied by it); ``colorspace``: "srgb" or "linear" as
     used; ``source_format``: OpenImageIO pixel type of the file ("uint8", "uint16", "half", "float", ...);
-    ``n_clamped``: texels whose negative values were clamped to 0 (only with ``clamp_negative``).
+    ``n_clamped``: texels whose negative values were clamped to 0 (only with ``clamp_negative``);
+    ``n_channels``: channels in the file (1 or 2: grayscale, replicated to RGB).
     """
 
     rgb: np.ndarray
@@ -135,6 +145,7 @@ class AlbedoImage:
     colorspace: Literal["srgb", "linear"]
     source_format: str
     n_clamped: int
+    n_channels: int = 3
 
 
 def _detect_colorspace(spec: oiio.ImageSpec) -> Literal["srgb", "linear"]:
@@ -220,7 +231,7 @@ def read_albedo(path: str | os.PathLike, colorspace: ColorSpace = "auto",
         rgb = np.asarray(srgb_decode(rgb), dtype=np.float64)
     alpha = None if alpha is None else np.clip(alpha, 0.0, 1.0)
     return AlbedoImage(rgb=rgb, alpha=alpha, colorspace=used, source_format=str(spec.format),
-                       n_clamped=n_clamped if clamp_negative else 0)
+                       n_clamped=n_clamped if clamp_negative else 0, n_channels=int(spec.nchannels))
 
 
 def sha256_file(path: str | os.PathLike) -> str:
@@ -234,12 +245,13 @@ def sha256_file(path: str | os.PathLike) -> str:
 
 def write_maps_json(path: str | os.PathLike, files: dict[str, dict], k: int, model_sha256: dict[str, str],
                     input_image: str, input_colorspace: str, timings_s: dict[str, float],
-                    unit_scale_m: float | None = None, overwrite: bool = False) -> Path:
+                    unit_scale_m: float | None = None, overwrite: bool = False, extra: dict | None = None) -> Path:
     """Write ``S_maps.json`` (SPEC §4): every file written with its units/channels, K, model SHA-256s,
     the input image and colour space used, and timings in seconds.
 
     ``files`` maps file name -> {"units": str, "channels": [...], ...}; every listed file must exist next to
-    the JSON.  Non-finite timings raise ValueError.
+    the JSON.  Non-finite timings raise ValueError.  ``extra``: further JSON-serialisable keys (options,
+    notes, statistics), added after the standard ones.
     """
     path = Path(path)
     if k < 1:
@@ -260,6 +272,7 @@ def write_maps_json(path: str | os.PathLike, files: dict[str, dict], k: int, mod
         "model_sha256": dict(model_sha256),
         "files": files,
         "timings_s": {key: float(v) for key, v in timings_s.items()},
+        **(extra or {}),
     }
     fd, tmp_name = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=".json", dir=path.parent)
     with os.fdopen(fd, "w", encoding="utf-8") as fh:
@@ -295,3 +308,82 @@ def read_exr(path: str | os.PathLike, channels: tuple[str, ...] | list[str] | No
         arr = arr[..., [names.index(c) for c in channels]]
         names = tuple(channels)
     return arr, names, attrs
+
+
+class MapStream:
+    """A float32 EXR map written band by band (memory bounded) to a temporary file beside ``path``.
+
+    Nothing appears under ``path`` until :func:`publish_maps`; :meth:`discard` removes the temporary file.
+    Checks at creation: the folder exists and is writable, and ``path`` does not exist (unless
+    ``overwrite``), so that a bake fails before any work if it could not finish.
+    """
+
+    def __init__(self, path: str | os.PathLike, width: int, height: int, channels: tuple[str, ...] | list[str],
+                 units: str, overwrite: bool = False) -> None:
+        self.path = Path(path)
+        self.channels = tuple(channels)
+        self.units = units
+        self.width, self.height = int(width), int(height)
+        if self.width < 1 or self.height < 1:
+            raise ValueError(f"map size must be at least 1 x 1, got {width} x {height}")
+        _ensure_writable_dir(self.path.parent)
+        _refuse_existing(self.path, overwrite)
+        self.overwrite = overwrite
+        self.tmp = _temp_name(self.path)
+        self._rows = 0
+        self._out = oiio.ImageOutput.create(str(self.tmp))
+        if self._out is None or not self._out.open(str(self.tmp), _exr_spec(self.width, self.height, self.channels,
+                                                                             units)):
+            err = oiio.geterror() or (self._out.geterror() if self._out else "")
+            self.discard()
+            raise OSError(f"cannot write {self.path}: {err}")
+
+    def write_rows(self, data: np.ndarray) -> None:
+        """Append the next rows, ``data`` (h, W) or (h, W, C), top to bottom; finite values only."""
+        arr = np.asarray(data, dtype=np.float32)
+        if arr.ndim == 2:
+            arr = arr[..., None]
+        h = arr.shape[0]
+        if arr.shape[1:] != (self.width, len(self.channels)) or self._rows + h > self.height:
+            raise ValueError(f"{self.path.name}: rows of shape {arr.shape} do not fit a "
+                             f"{self.width} x {self.height} x {len(self.channels)} map at row {self._rows}")
+        if not np.all(np.isfinite(arr)):
+            raise ValueError(f"map {self.path.name}: NaN/Inf values")
+        if not self._out.write_scanlines(self._rows, self._rows + h, 0, np.ascontiguousarray(arr)):
+            raise OSError(f"cannot write {self.path}: {self._out.geterror()}")
+        self._rows += h
+
+    def close(self) -> None:
+        """Finish the temporary file (all rows must have been written)."""
+        if self._rows != self.height:
+            raise ValueError(f"{self.path.name}: {self._rows} of {self.height} rows written")
+        if self._out is not None:
+            self._out.close()
+            self._out = None
+
+    def discard(self) -> None:
+        if self._out is not None:
+            self._out.close()
+            self._out = None
+        self.tmp.unlink(missing_ok=True)
+
+
+def publish_maps(streams: list[MapStream]) -> list[Path]:
+    """Close every stream and move all of them into place, or none: if one cannot be published (e.g. the
+    name was taken meanwhile), the ones already published are removed again and every temporary file is
+    deleted before the error propagates."""
+    published: list[Path] = []
+    try:
+        for s in streams:
+            s.close()
+        for s in streams:
+            _publish(s.tmp, s.path, s.overwrite)
+            published.append(s.path)
+    except BaseException:
+        for p in published:
+            if not any(s.overwrite and s.path == p for s in streams):
+                p.unlink(missing_ok=True)
+        for s in streams:
+            s.discard()
+        raise
+    return published

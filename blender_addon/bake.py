@@ -1,0 +1,157 @@
+"""Bake an RGB skin albedo texture into spectral-skin subsurface maps (SPEC §4), headless.
+
+    python blender_addon/bake.py --albedo IMAGE --out DIR [--target cycles,physical,spectral]
+        [--colorspace auto|srgb|linear] [--unit-scale M_PER_UNIT] [--overwrite] [--model PATH] [--threads N]
+    blender -b --factory-startup --python blender_addon/bake.py -- --albedo IMAGE --out DIR ...
+
+Writes float EXR maps (Non-Color) and IMAGE-stem_maps.json into DIR (created if missing).  Exit status 0 on
+success, 2 with a one-line error on stderr for bad input (missing/unreadable image, NaN or negative
+texels, missing or wrong model, existing files without --overwrite, read-only folder, bad arguments).
+Nothing in DIR is overwritten without --overwrite, and a failed bake leaves DIR as it was.
+
+This file is a script: it imports ``exporters`` (numpy, onnxruntime, OpenImageIO) and never bpy, so it
+runs with the plain Python of the project venv (where the bpy module is also installed) as well as
+inside Blender, whose own Python finds onnxruntime in the installed extension's wheel folder.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+ROOT = HERE.parent
+DEFAULT_MODEL = HERE / "models" / "skin_inversion.onnx"
+EXIT_BAD_INPUT = 2
+
+
+def _script_argv(argv: list[str] | None) -> list[str]:
+    """Arguments meant for this script: everything after ``--`` when run by Blender, else argv[1:]."""
+    if argv is not None:
+        return argv
+    if "--" in sys.argv:
+        return sys.argv[sys.argv.index("--") + 1:]
+    return sys.argv[1:]
+
+
+def _make_importable() -> None:
+    """Put the folder holding ``exporters`` (the repository or the installed extension) on sys.path, and,
+    inside Blender, the extension's bundled-wheel folder (onnxruntime, OpenImageIO)."""
+    if str(ROOT) not in sys.path:
+        sys.path.insert(0, str(ROOT))
+    try:
+        import onnxruntime  # noqa: F401
+        return
+    except ImportError:
+        pass
+    try:
+        import bpy  # only inside Blender
+    except ImportError:
+        return
+    for base in (bpy.utils.user_resource("EXTENSIONS"), str(ROOT.parent)):
+        for site in Path(base).glob(".local/lib/python3*/site-packages"):
+            if str(site) not in sys.path:
+                sys.path.append(str(site))
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="bake.py", description=__doc__.splitlines()[0])
+    p.add_argument("--albedo", required=True, help="albedo image (PNG/TIFF 8 or 16 bit, EXR, ...)")
+    p.add_argument("--out", required=True, help="output folder (created if missing)")
+    p.add_argument("--target", default="cycles", help="comma-separated subset of cycles,physical,spectral "
+                                                      "(default cycles)")
+    p.add_argument("--colorspace", default="auto", choices=("auto", "srgb", "linear"),
+                   help="how the image is encoded; auto: sRGB unless the file says linear or stores floats")
+    p.add_argument("--unit-scale", type=float, default=1.0, metavar="M_PER_UNIT",
+                   help="metres per Blender unit for the radius maps (the scene's Unit Scale; default 1)")
+    p.add_argument("--overwrite", action="store_true", help="replace existing maps in the output folder")
+    p.add_argument("--model", default=str(DEFAULT_MODEL), help="skin_inversion.onnx (default: the bundled one)")
+    p.add_argument("--threads", type=int, default=0, help="onnxruntime CPU threads (0 = all cores)")
+    p.add_argument("--memory-mb", type=float, default=512.0, help="memory budget of one inference chunk (MiB)")
+    p.add_argument("--match-exposure", action="store_true",
+                   help="reproduce the painted brightness (model reflectance x exposure) instead of the model's "
+                        "unit-exposure reflectance")
+    p.add_argument("--quiet", action="store_true")
+    return p
+
+
+class _Usage(Exception):
+    pass
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message):  # one line, exit 2 (argparse's own status), no usage dump
+        raise _Usage(message)
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    parser.__class__ = _Parser
+    try:
+        args = parser.parse_args(_script_argv(argv))
+    except _Usage as exc:
+        print(f"bake.py: error: {exc}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    _make_importable()
+    from exporters import baking, inference, maps
+
+    bad_input = (FileNotFoundError, FileExistsError, PermissionError, NotADirectoryError, maps.ImageError,
+                 inference.ModelError, baking.BakeError, ValueError)
+    out = Path(args.out)
+    created = False
+    try:
+        if not out.exists():
+            if not out.parent.is_dir():
+                raise baking.BakeError(f"output folder's parent does not exist: {out.parent}")
+            out.mkdir()
+            created = True
+        options = baking.BakeOptions(targets=baking.parse_targets(args.target), unit_scale_m=args.unit_scale,
+                                     threads=args.threads, memory_mb=args.memory_mb,
+                                     match_exposure=args.match_exposure, overwrite=args.overwrite)
+        last = [0.0]
+
+        def progress(fraction: float) -> None:
+            if not args.quiet and (fraction - last[0] >= 0.1 or fraction >= 1.0):
+                last[0] = fraction
+                print(f"bake.py: {100 * fraction:.0f} %", flush=True)
+
+        t0 = time.perf_counter()
+        result = baking.bake(args.albedo, out, args.model, options, colorspace=args.colorspace, progress=progress)
+    except bad_input as exc:
+        if created:
+            _remove_if_empty(out)
+        print(f"bake.py: error: {_one_line(exc)}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    except BaseException:
+        if created:
+            _remove_if_empty(out)
+        raise
+    if not args.quiet:
+        for note in result.notes:
+            print(f"bake.py: note: {note}")
+        print(f"bake.py: wrote {len(result.files)} maps (K={result.k}) and {result.json_path.name} to {out} "
+              f"in {time.perf_counter() - t0:.1f} s")
+    return 0
+
+
+def _one_line(exc: BaseException) -> str:
+    text = str(exc) or type(exc).__name__
+    if isinstance(exc, OSError) and exc.filename and str(exc.filename) not in text:
+        text = f"{text}: {exc.filename}"
+    return " ".join(text.split())
+
+
+def _remove_if_empty(folder: Path) -> None:
+    try:
+        os.rmdir(folder)
+    except OSError:
+        pass
+
+
+if __name__ == "__main__":
+    code = main()
+    if code:
+        sys.exit(code)

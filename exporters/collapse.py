@@ -1,0 +1,221 @@
+"""Collapse the spectral K-media mixture (376 wavelengths) to the three channels Cycles renders.
+
+Input, per texel: the model's reflectance R(lambda) and its K components (alpha_k, sigma_t,k, g_k, w_k)
+(lambda) (SPEC §3).  Output, per texel, component k and linear-sRGB channel c: a medium
+(alpha_kc, sigma_t,kc, g_k) and a weight w_kc such that Cycles' RANDOM_WALK mixture (each path picks
+component k, then walks in its medium; blender_addon/nodes.py) shows what the spectral model shows.
+
+What "shows" means, and the method
+----------------------------------
+1. **Target colour.**  T_c = sum_lambda M_c(lambda) R(lambda), the linear-sRGB colour of the model's
+   reflectance under D65 (``exporters.colorimetry.spectrum_to_linear_srgb``; M_c has negative lobes,
+   T is what a viewer sees).  Optionally times the model's exposure (``target_scale``).
+2. **Channel sensitivity.**  omega_c(lambda) = max(M_c(lambda), 0), normalised to sum 1: where channel
+   c looks.  Used for every per-channel average below.
+3. **Light carried by each component.**  E_k(lambda) = w_k R_model(alpha_k, g_k), with R_model the
+   semi-infinite diffuse reflectance at the model's own boundary (n = 1.4 below air, specular excluded:
+   ``exporters.reflectance_tables``).  Component k's share of channel c is
+   s_kc = <omega_c, E_k> / sum_j <omega_c, E_j>  (sums to 1 over k).
+4. **Reflectance.**  Cycles' walk has no Fresnel boundary, so the same alpha would render brighter than
+   the model's medium.  Each component gets the Cycles albedo whose Cycles reflectance carries its share:
+   w_kc R_cycles(alpha_kc, g_k) = s_kc T_c, with w_kc = <omega_c, w_k> (the channel's mean weight) and
+   R_cycles the index-matched diffuse reflectance (``reflectance_tables``, "cycles").  Summed over k this
+   is exactly T_c.  Cycles' walk is exact only for alpha >= 0.2 and loses energy near alpha -> 1 (256
+   bounces), so alpha_kc is kept in [0.2, 0.999]: a darker share keeps alpha = 0.2 and lowers w_kc, a
+   brighter one keeps 0.999 and raises w_kc (up to 1, Cycles' Mix Shader limit; beyond that alpha may
+   rise to 1 - 1e-6 and texels that still miss T are counted in ``unreachable``).  Weights then sum to
+   at most 1 per channel (the rest is absorbed), or above 1 when a bright share needs it.
+5. **Anisotropy.**  One g per component (Cycles takes one per closure; SPEC §4 stores one channel):
+   the light-weighted mean of g_k over the visible channels, capped at 0.7 (above it Cycles 5.0's walk
+   is biased high: exporters.cycles.RECOMMENDED_G_MAX).  The reflectance of step 4 is solved at this g,
+   so no further similarity transform is needed.
+6. **Profile width.**  The spatial spread of component k's light is set by its diffusion length
+   D = 1 / sigma_tr, sigma_tr = sigma_t sqrt(3 (1 - alpha)(1 - alpha g)) (the decay rate of the
+   diffusion profile, in cm).  Its light-weighted channel mean D_kc = <omega_c, E_k D_k> / <omega_c, E_k>
+   is kept: sigma_t,kc = 1 / (D_kc sqrt(3 (1 - alpha_kc)(1 - alpha_kc g_k))).  So changing alpha to
+   match the boundary does not change how far light bleeds.
+
+All arrays are float64; every output is finite for finite input (non-finite input raises ValueError).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import cache
+
+import numpy as np
+
+from exporters import cycles, reflectance_tables
+from exporters.colorimetry import xyz_to_linear_srgb_matrix, xyz_weights
+from exporters.constants import N_WAVELENGTHS
+
+#: Cycles' walk substitutes alpha < 0.2 (integrator/subsurface_random_walk.h), so we never ask for less.
+ALPHA_MIN: float = cycles.ALPHA_EXACT_MIN
+#: Highest alpha used while the weight can still grow: Cycles matches adding-doubling within 1 % here
+#: (tests/test_cycles_render.py, g = 0.7); closer to 1 the 256-bounce cap loses energy.
+ALPHA_SOFT_MAX: float = 0.999
+#: Absolute ceiling (a component that is brighter than this even at weight 1 is unreachable).
+ALPHA_HARD_MAX: float = reflectance_tables.ALPHA_TABLE_MAX
+#: Anisotropy cap (see exporters.cycles.RECOMMENDED_G_MAX).
+G_MAX: float = cycles.RECOMMENDED_G_MAX
+#: Largest weight a Cycles Mix Shader passes (its Fac is clamped to [0, 1]).
+WEIGHT_MAX: float = 1.0
+_TINY = 1e-30
+
+
+@cache
+def channel_matrix() -> np.ndarray:
+    """M (3, 376): linear sRGB (D65) = M @ R for a reflectance spectrum R on the project grid."""
+    m = xyz_to_linear_srgb_matrix("D65") @ xyz_weights("D65")
+    m.setflags(write=False)
+    return m
+
+
+@cache
+def channel_weights() -> np.ndarray:
+    """omega (3, 376): max(M_c, 0) normalised to sum 1 per channel (where each channel looks)."""
+    w = np.maximum(channel_matrix(), 0.0)
+    w = w / w.sum(axis=1, keepdims=True)
+    w.setflags(write=False)
+    return w
+
+
+@cache
+def _support() -> np.ndarray:
+    """Wavelength indices where any channel weight is non-zero (the rest never matters)."""
+    return np.flatnonzero(channel_weights().sum(axis=0) > 0.0)
+
+
+@dataclass(frozen=True)
+class ChannelMedia:
+    """Per texel (N), component (K) and channel (3): the media Cycles walks and their weights.
+
+    ``alpha`` (N, K, 3) single-scattering albedo; ``sigma_t_cm`` (N, K, 3) extinction in cm^-1; ``g``
+    (N, K) anisotropy; ``weight`` (N, K, 3); ``target`` (N, 3) the linear-sRGB channel reflectance the
+    mixture reproduces (sum_k weight R_cycles(alpha, g) = target where reachable); ``low``/``high`` (N, K, 3)
+    shares clamped at alpha = 0.2 / raised weight; ``unreachable`` (N, 3) channels brighter than Cycles
+    can show with weights <= 1.
+    """
+
+    alpha: np.ndarray
+    sigma_t_cm: np.ndarray
+    g: np.ndarray
+    weight: np.ndarray
+    target: np.ndarray
+    low: np.ndarray
+    high: np.ndarray
+    unreachable: np.ndarray
+
+    def cycles_reflectance(self) -> np.ndarray:
+        """(N, 3): sum_k weight R_cycles(alpha, g), the diffuse reflectance these media render in Cycles."""
+        r = reflectance_tables.reflectance("cycles", self.alpha, self.g[..., None])
+        return np.sum(self.weight * r, axis=1)
+
+
+def _finite(name: str, x) -> np.ndarray:
+    arr = np.asarray(x, dtype=np.float64)
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(f"{name}: NaN or infinite value(s); the model output must be finite")
+    return arr
+
+
+def _check_shapes(reflectance, alpha, sigma_t, g, weight) -> None:
+    n, k, nl = alpha.shape
+    if nl != N_WAVELENGTHS or reflectance.shape != (n, nl):
+        raise ValueError(f"expected reflectance (N, {N_WAVELENGTHS}) and components (N, K, {N_WAVELENGTHS}), got "
+                         f"{reflectance.shape} and {alpha.shape}")
+    for name, arr in (("sigma_t", sigma_t), ("g", g), ("weight", weight)):
+        if arr.shape != alpha.shape:
+            raise ValueError(f"{name} has shape {arr.shape}, alpha {alpha.shape}")
+    if np.any((alpha < 0) | (alpha > 1)) or np.any(sigma_t <= 0) or np.any(np.abs(g) >= 1) or np.any(weight < 0):
+        raise ValueError("need alpha in [0, 1], sigma_t > 0, |g| < 1 and weight >= 0")
+
+
+def collapse(reflectance, alpha, sigma_t_cm, g, weight, target_scale=None, g_max: float = G_MAX) -> ChannelMedia:
+    """Collapse spectral mixtures to per-channel Cycles media (method: module docstring).
+
+    ``reflectance`` (N, 376); ``alpha``, ``sigma_t_cm`` (cm^-1), ``g``, ``weight`` (N, K, 376) as the model
+    outputs them; ``target_scale`` (N,) optional factor on the target colour (the model's exposure, to
+    match the painted brightness instead of the model's unit-exposure reflectance).
+    """
+    refl = _finite("reflectance", reflectance)
+    al, st, gg, w = (_finite(n, x) for n, x in (("alpha", alpha), ("sigma_t", sigma_t_cm), ("g", g),
+                                                  ("weight", weight)))
+    if al.ndim != 3:
+        raise ValueError(f"alpha must have shape (N, K, {N_WAVELENGTHS}), got {al.shape}")
+    _check_shapes(refl, al, st, gg, w)
+    target = np.maximum(refl @ channel_matrix().T, 0.0)  # (N, 3)
+    if target_scale is not None:
+        scale = _finite("target_scale", target_scale).reshape(-1)
+        if scale.shape != (len(refl),) or np.any(scale < 0):
+            raise ValueError("target_scale must be (N,) and >= 0")
+        target = target * scale[:, None]
+    sup = _support()
+    omega = channel_weights()[:, sup]  # (3, L')
+    al, st, gg, w = al[..., sup], st[..., sup], gg[..., sup], w[..., sup]
+    al_c = np.minimum(al, reflectance_tables.ALPHA_TABLE_MAX)
+    light = w * reflectance_tables.reflectance("model", al_c, np.clip(gg, 0.0, 0.95))  # E_k (N, K, L')
+    diff_len = 1.0 / (st * np.sqrt(3.0 * (1.0 - al_c) * (1.0 - al_c * gg)))  # D_k in cm
+    share_raw = light @ omega.T  # (N, K, 3)
+    w_mean = w @ omega.T  # (N, K, 3)
+    # Channels where a component carries no light (E = 0): fall back to weight-weighted means.
+    dark = share_raw <= _TINY
+    d_mean = np.where(dark, ((w * diff_len) @ omega.T) / np.maximum(w_mean, _TINY),
+                      ((light * diff_len) @ omega.T) / np.maximum(share_raw, _TINY))
+    fallback = np.repeat(diff_len.mean(axis=2)[..., None], 3, axis=2)  # a component of weight 0 everywhere
+    d_mean = np.where(np.isfinite(d_mean) & (d_mean > 0), d_mean, fallback)
+    total = share_raw.sum(axis=1, keepdims=True)
+    share = np.where(total > _TINY, share_raw / np.maximum(total, _TINY), w_mean)
+    light_all = share_raw.sum(axis=2)  # (N, K)
+    g_light = ((light * gg) @ omega.T).sum(axis=2) / np.maximum(light_all, _TINY)
+    g_weight = ((w * gg) @ omega.T).sum(axis=2) / np.maximum(w_mean.sum(axis=2), _TINY)
+    g_eff = np.clip(np.where(light_all > _TINY, g_light, g_weight), cycles.G_MIN, g_max)
+    return _solve_channels(share * target[:, None, :], w_mean, g_eff, d_mean, target)
+
+
+def _solve_channels(contribution, w_mean, g_eff, d_mean, target) -> ChannelMedia:
+    """Per (N, K, 3): alpha and weight with w R_cycles(alpha, g) = contribution; sigma_t from D."""
+    g3 = np.broadcast_to(g_eff[..., None], contribution.shape)
+    r_lo = reflectance_tables.reflectance("cycles", ALPHA_MIN, g3)
+    r_soft = reflectance_tables.reflectance("cycles", ALPHA_SOFT_MAX, g3)
+    r_hard = reflectance_tables.reflectance("cycles", ALPHA_HARD_MAX, g3)
+    used = w_mean > 1e-12
+    rho = np.where(used, contribution / np.maximum(w_mean, 1e-12), 0.0)
+    rho_c = np.clip(rho, r_lo, r_soft)
+    weight = np.where(used | (contribution > 0), contribution / rho_c, 0.0)
+    over = weight > WEIGHT_MAX
+    rho_over = np.clip(contribution, r_lo, r_hard)  # weight 1: reflectance must carry all of it
+    rho_c = np.where(over, rho_over, rho_c)
+    weight = np.where(over, np.minimum(contribution / rho_c, WEIGHT_MAX), weight)
+    alpha = reflectance_tables.albedo_for_reflectance("cycles", rho_c, g3)
+    alpha = np.clip(alpha, ALPHA_MIN, ALPHA_HARD_MAX)
+    sigma_t = 1.0 / (d_mean * np.sqrt(3.0 * (1.0 - alpha) * (1.0 - alpha * g3)))
+    low = used & (rho < r_lo)
+    high = weight > w_mean * (1.0 + 1e-9)
+    reached = np.sum(weight * reflectance_tables.reflectance("cycles", alpha, g3), axis=1)
+    unreachable = reached < target * (1.0 - 1e-3)
+    out = ChannelMedia(alpha=alpha, sigma_t_cm=sigma_t, g=np.array(g_eff), weight=weight, target=target, low=low,
+                       high=high, unreachable=unreachable)
+    for name in ("alpha", "sigma_t_cm", "g", "weight"):
+        if not np.all(np.isfinite(getattr(out, name))):
+            raise RuntimeError(f"collapse produced non-finite {name}")  # guarded above; never expected
+    return out
+
+
+@dataclass(frozen=True)
+class CyclesMaps:
+    """Node inputs per texel and component (``--target cycles``): color, radius (Blender units), weight
+    (N, K, 3) and anisotropy (N, K)."""
+
+    color: np.ndarray
+    radius: np.ndarray
+    weight: np.ndarray
+    anisotropy: np.ndarray
+
+
+def to_cycles(media: ChannelMedia, unit_scale_m: float = 1.0) -> CyclesMaps:
+    """RANDOM_WALK inputs (Scale = 1) for ``media``: Color = f^-1(alpha; g), radius = 4 pi / (sigma_t (1 - g))
+    in Blender units of ``unit_scale_m`` metres (exporters.cycles.medium_to_cycles)."""
+    g3 = np.broadcast_to(media.g[..., None], media.alpha.shape)
+    cin = cycles.medium_to_cycles(media.alpha, media.sigma_t_cm, g3, unit_scale_m=unit_scale_m, g_max=cycles.G_MAX)
+    return CyclesMaps(color=cin.color, radius=cin.radius, weight=media.weight, anisotropy=np.array(media.g))

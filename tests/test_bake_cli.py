@@ -1,0 +1,143 @@
+"""blender_addon/bake.py (SPEC §4) in subprocesses: plain python, and the Blender-style ``-- args`` form with bpy
+imported; real images, the real shipped model, real EXR files."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import OpenImageIO as oiio
+import pytest
+
+from exporters import cycles, maps
+
+ROOT = Path(__file__).resolve().parents[1]
+BAKE = ROOT / "blender_addon" / "bake.py"
+CARD = json.loads((ROOT / "blender_addon" / "models" / "skin_inversion.json").read_text())
+K = CARD["K"]
+
+
+def bake(*args: str, timeout: int = 120) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, str(BAKE), *args], capture_output=True, text=True, timeout=timeout,
+                          cwd=str(ROOT))
+
+
+def write_png(path: Path, codes: np.ndarray) -> Path:
+    h, w, c = codes.shape
+    out = oiio.ImageOutput.create(str(path))
+    assert out.open(str(path), oiio.ImageSpec(w, h, c, "uint8"))
+    assert out.write_image(np.ascontiguousarray(codes))
+    out.close()
+    return path
+
+
+@pytest.fixture(scope="module")
+def skin_png(tmp_path_factory) -> Path:
+    codes = np.empty((3, 5, 3), np.uint8)  # non-square; two colours, the second one repeated
+    codes[...] = (224, 172, 150)
+    codes[1, 1:4] = (150, 100, 80)
+    return write_png(tmp_path_factory.mktemp("img") / "face.png", codes)
+
+
+def files_for(stem: str, targets: tuple[str, ...]) -> set[str]:
+    names = {f"{stem}_maps.json"}
+    kinds = {"cycles": ("color", "radius", "weight", "anisotropy"), "physical": ("alpha", "sigma_t", "g", "weight")}
+    for t in targets:
+        if t == "spectral":
+            names.add(f"{stem}_biophysical.exr")
+        else:
+            names |= {f"{stem}_k{k}_{kind}.exr" for k in range(1, K + 1) for kind in kinds[t]}
+    return names
+
+
+def test_cycles_target_maps_and_record(skin_png, tmp_path):
+    out = tmp_path / "maps"
+    proc = bake("--albedo", str(skin_png), "--out", str(out), "--unit-scale", "0.1", "--threads", "1")
+    assert proc.returncode == 0, proc.stderr
+    assert {p.name for p in out.iterdir()} == files_for("face", ("cycles",))  # no temporaries left
+    record = json.loads((out / "face_maps.json").read_text())
+    assert record["K"] == K and record["input"]["colorspace"] == "srgb"
+    assert record["model_sha256"] == {"skin_inversion.onnx": CARD["files"]["skin_inversion.onnx"]["sha256"]}
+    assert record["unit_scale_m_per_blender_unit"] == 0.1
+    assert set(record["files"]) == files_for("face", ("cycles",)) - {"face_maps.json"}
+    assert record["stats"]["texels"] == 15 and record["stats"]["distinct_texels"] == 2
+    assert "inference" in record["timings_s"]
+    color, names, attrs = maps.read_exr(out / "face_k1_color.exr")
+    assert color.shape == (3, 5, 3) and names == ("R", "G", "B")
+    assert attrs["spectral_skin_sss:colorspace"] == "Non-Color"
+    aniso = maps.read_exr(out / "face_k1_anisotropy.exr")[0]
+    assert aniso.shape == (3, 5, 1) and np.all((aniso >= 0) & (aniso <= cycles.RECOMMENDED_G_MAX + 1e-6))
+    total_w = sum(maps.read_exr(out / f"face_k{k}_weight.exr")[0] for k in range(1, K + 1))
+    assert np.all(total_w > 0) and np.all(total_w <= K)
+    for k in range(1, K + 1):
+        c = maps.read_exr(out / f"face_k{k}_color.exr")[0]
+        r = maps.read_exr(out / f"face_k{k}_radius.exr")[0]
+        assert np.all((c >= 0) & (c <= 1)) and np.all(r > cycles.MIN_RADIUS)
+        np.testing.assert_array_equal(c[1, 1], c[1, 3])  # same colour in, same maps out
+        np.testing.assert_array_equal(c[0, 0], c[2, 4])
+        assert not np.array_equal(c[0, 0], c[1, 1])
+
+
+def test_all_targets_are_consistent(skin_png, tmp_path):
+    out = tmp_path / "all"
+    proc = bake("--albedo", str(skin_png), "--out", str(out), "--target", "cycles,physical,spectral",
+                "--unit-scale", "0.01")
+    assert proc.returncode == 0, proc.stderr
+    assert {p.name for p in out.iterdir()} == files_for("face", ("cycles", "physical", "spectral"))
+    bio, names, attrs = maps.read_exr(out / "face_biophysical.exr", channels=maps.BIOPHYSICAL_CHANNELS)
+    assert names == maps.BIOPHYSICAL_CHANNELS and bio.shape == (3, 5, 6)
+    assert "t_epi cm" in attrs["spectral_skin_sss:units"]
+    lo, hi = zip(*CARD["architecture"]["param_ranges"].values(), strict=True)
+    assert np.all(bio[..., :5] >= np.array(lo) - 1e-6) and np.all(bio[..., :5] <= np.array(hi) + 1e-6)
+    for k in range(1, K + 1):
+        alpha = maps.read_exr(out / f"face_k{k}_alpha.exr")[0].astype(np.float64)
+        sigma_t = maps.read_exr(out / f"face_k{k}_sigma_t.exr")[0].astype(np.float64)
+        g = maps.read_exr(out / f"face_k{k}_g.exr")[0].astype(np.float64)
+        color = maps.read_exr(out / f"face_k{k}_color.exr")[0].astype(np.float64)
+        radius = maps.read_exr(out / f"face_k{k}_radius.exr")[0].astype(np.float64)
+        aniso = maps.read_exr(out / f"face_k{k}_anisotropy.exr")[0].astype(np.float64)
+        np.testing.assert_allclose(g, np.repeat(aniso, 3, axis=2), atol=1e-7)
+        # Cycles' own forward maps (exporters.cycles, kernel formulas) turn the node inputs back into the medium
+        np.testing.assert_allclose(cycles.rw_albedo_forward(color, g), alpha, atol=2e-5)
+        np.testing.assert_allclose(4 * np.pi / (sigma_t * 100 * 0.01 * (1 - g)), radius, rtol=1e-5)
+        assert np.all((alpha >= 0.2 - 1e-6) & (alpha < 1))
+
+
+def test_no_overwrite_then_overwrite(skin_png, tmp_path):
+    out = tmp_path / "again"
+    assert bake("--albedo", str(skin_png), "--out", str(out)).returncode == 0
+    before = {p.name: p.read_bytes() for p in out.iterdir()}
+    proc = bake("--albedo", str(skin_png), "--out", str(out), "--unit-scale", "2")
+    assert proc.returncode == 2
+    assert proc.stderr.count("\n") == 1 and "exist" in proc.stderr and "--overwrite" in proc.stderr
+    assert {p.name: p.read_bytes() for p in out.iterdir()} == before
+    proc = bake("--albedo", str(skin_png), "--out", str(out), "--unit-scale", "2", "--overwrite", "--quiet")
+    assert proc.returncode == 0 and proc.stdout == ""
+    assert {p.name for p in out.iterdir()} == set(before)
+    r1 = maps.read_exr(out / "face_k1_radius.exr")[0]
+    assert json.loads((out / "face_maps.json").read_text())["unit_scale_m_per_blender_unit"] == 2.0
+    assert r1.tobytes() != before["face_k1_radius.exr"]
+
+
+def test_blender_style_arguments_with_bpy_loaded(skin_png, tmp_path):
+    out = tmp_path / "bl"
+    script = ("import sys, runpy, bpy\n"
+              f"sys.argv = ['blender', '-b', '--python', {str(BAKE)!r}, '--', '--albedo', {str(skin_png)!r}, "
+              f"'--out', {str(out)!r}, '--target', 'spectral']\n"
+              f"runpy.run_path({str(BAKE)!r}, run_name='__main__')\n")
+    proc = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert {p.name for p in out.iterdir()} == {"face_biophysical.exr", "face_maps.json"}
+
+
+def test_usage_errors_exit_2(skin_png, tmp_path):
+    proc = bake("--albedo", str(skin_png), "--out", str(tmp_path / "x"), "--target", "mitsuba")
+    assert proc.returncode == 2 and "unknown target" in proc.stderr and proc.stderr.count("\n") == 1
+    assert not (tmp_path / "x").exists()  # the folder it would have created is gone again
+    proc = bake("--out", str(tmp_path))
+    assert proc.returncode == 2 and "--albedo" in proc.stderr
+    proc = bake("--albedo", str(skin_png), "--out", str(tmp_path / "y"), "--unit-scale", "-1")
+    assert proc.returncode == 2 and "unit scale" in proc.stderr
