@@ -62,6 +62,7 @@ def setup(tmp_path_factory):
             "R_d": R.reshape(n, W),
             "R_d_stderr": 1e-4 * R.reshape(n, W),
             "profile": profile.reshape(n, W, -1),
+            "profile_stderr": 1e-3 * profile.reshape(n, W, -1),
             "albedo_rgb": np.full((n, 3), 0.5),
         },
     )
@@ -115,5 +116,6 @@ def test_cli_dataset_errors(setup, capsys):
     assert "not found" in capsys.readouterr().err
     assert main(["--dataset", str(ds), "--lut", str(lut_path)]) == 2
     assert "--out" in capsys.readouterr().err
-    assert main(["--dataset", str(ds), "--lut", str(lut_path), "--out", str(d / "o"), "--shard", "2/2"]) == 2
-    assert "--shard" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as exc:  # argparse: usage message and exit status 2
+        main(["--dataset", str(ds), "--lut", str(lut_path), "--out", str(d / "o"), "--shard", "2/2"])
+    assert exc.value.code == 2 and "--shard" in capsys.readouterr().err

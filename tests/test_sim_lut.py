@@ -102,10 +102,32 @@ def test_cli_builds_resumes_and_normalises(tmp_path) -> None:
     assert np.all(np.diff(d["R"], axis=0) > 0)  # R increases with albedo (same photons: exact)
     assert np.all(np.isfinite(d["P"])) and np.all(d["P"] >= 0)
     # resume: drop one column and rebuild: identical result, the other column is not recomputed
-    (tmp_path / "lut.npz.parts" / "g_0001.npz").unlink()
+    (tmp_path / "lut.npz.parts" / "g_0001.npz").unlink()  # the batch holding it is walked again
     assert lut_main(args) == 0
     d2 = dict(np.load(out))
     np.testing.assert_array_equal(d["R"], d2["R"])
     # a different build into the same parts folder is refused
     assert lut_main(args[:-3] + ["--photons", "1000", "--no-progress"]) == 2
     assert lut_main(["--albedo-n", "1", "--g-n", "2", "--photons", "10", "--out", str(tmp_path / "x.npz")]) == 2
+
+
+def test_interpolated_g_columns_between_simulated_nodes(tmp_path) -> None:
+    """g columns between simulated nodes (PCHIP along g) against adding-doubling at their own g."""
+    from training.sim.lut import build_lut
+
+    out = build_lut(tmp_path / "lut.npz", 5, 5, 6000, g_range=(0.3, 0.7), g_nodes=3, seed=4,
+                    albedo_range=(0.3, 0.99), max_steps=6000, log=lambda s: None)
+    d = dict(np.load(out))
+    np.testing.assert_allclose(d["g_nodes"], [0.3, 0.5, 0.7])
+    np.testing.assert_allclose(d["g"], [0.3, 0.4, 0.5, 0.6, 0.7])
+    nodes = [dict(np.load(tmp_path / "lut.npz.parts" / f"g_{j:04d}.npz")) for j in range(3)]
+    for j, col in zip((0, 2, 4), nodes, strict=True):  # columns at a node are that node's simulation
+        np.testing.assert_array_equal(d["R"][:, j], col["R"])
+        np.testing.assert_array_equal(d["P"][:, j], col["P"])
+    area = math.pi * np.diff(d["r_edges_mfp"] ** 2)
+    np.testing.assert_allclose((d["P"] * area).sum(-1), 1.0, rtol=1e-9)
+    assert np.all(d["P"] >= 0) and np.all(np.isfinite(d["P"]))
+    for j in (1, 3):  # interpolated: within the nodes' noise plus a small interpolation error
+        ref = np.array([_uru_minus_specular(a, d["g"][j]) for a in d["albedo"]])
+        bad = np.abs(d["R"][:, j] - ref) > 4 * d["R_stderr"][:, j] + 0.004
+        assert not bad.any(), (d["g"][j], d["R"][:, j], ref)

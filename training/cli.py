@@ -19,13 +19,26 @@ COMMANDS: dict[str, tuple[str | None, str]] = {
     "fit": ("training.fit.cli", "Fit mixtures of K homogeneous media through the LUTs."),
     "train": ("training.train.cli", "Staged training of Enc, Dec_R, Dec_T."),
     "export": ("training.export.cli", "Export the ONNX graphs and the model card."),
-    "validate": (None, "Reproduce the paper's tables and figures."),
+    "validate": ("training.validate.cli", "Reproduce the paper's tables and figures."),
     "report": (None, "Summary report of dataset, fits and model."),
     "bench": ("training.bench", "Run the benchmark suite and write bench/results.md."),
     "swatches": ("training.skin.swatches", "Plot the colours of the representative and outlier tones."),
-    "mitsuba": (None, "Mitsuba 3 reflectance of the network's mixture vs ours vs ground truth."),
+    "mitsuba": ("training.validate.compare", "Mitsuba 3 reflectance of the network's mixture vs ours vs ground truth."),
     "demo": ("training.demo", "What `make demo` runs: the best end-to-end path available today."),
 }
+
+
+def parse_shard(text: str) -> tuple[int, int]:
+    """argparse type of ``--shard I/N`` (0 <= I < N): this process's share of a shardable command."""
+    import argparse
+
+    try:
+        i, n = (int(v) for v in text.split("/"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"--shard must look like I/N (e.g. 0/4), got {text!r}") from None
+    if not (n >= 1 and 0 <= i < n):
+        raise argparse.ArgumentTypeError(f"--shard I/N needs 0 <= I < N, got {text!r}")
+    return i, n
 
 
 def _usage() -> str:

@@ -17,18 +17,9 @@ import argparse
 import sys
 from pathlib import Path
 
+from training.cli import parse_shard
 from training.data.build import SPLITS, build_split, merge
 from training.data.presets import PRESETS
-
-
-def parse_shard(text: str) -> tuple[int, int]:
-    try:
-        i, n = (int(v) for v in text.split("/"))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"--shard must look like I/N (e.g. 0/4), got {text!r}") from None
-    if not (n >= 1 and 0 <= i < n):
-        raise argparse.ArgumentTypeError(f"--shard I/N needs 0 <= I < N, got {text!r}")
-    return i, n
 
 
 def _estimator(args: argparse.Namespace, preset, split: str):

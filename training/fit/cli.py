@@ -23,6 +23,7 @@ import numpy as np
 import torch
 
 from exporters.constants import anisotropy
+from training.cli import parse_shard
 from training.fit.optimize import fit_schedule
 from training.sim.lut_interp import LookupTables
 
@@ -53,7 +54,7 @@ def _parser() -> argparse.ArgumentParser:
         help="--tone-file: write the fitted parameters to this .npz; --dataset: output folder",
     )
     p.add_argument("--split", default="train,validation", help="--dataset: splits to fit (default both)")
-    p.add_argument("--shard", default="0/1", help="--dataset: fit tones i, i+n, i+2n, ... (I/N)")
+    p.add_argument("--shard", type=parse_shard, default=(0, 1), help="--dataset: fit tones i, i+n, i+2n, ... (I/N)")
     p.add_argument("--chunk-tones", type=int, default=4, help="--dataset: tones fitted per batch")
     p.add_argument("--no-progress", action="store_true")
     p.add_argument("--device", choices=("cpu", "cuda"), default="cpu")
@@ -126,16 +127,6 @@ def fit_tone_file(
     return rows, arrays
 
 
-def _parse_shard(text: str) -> tuple[int, int]:
-    try:
-        i, n = (int(x) for x in text.split("/"))
-    except ValueError:
-        raise ValueError(f"--shard must be I/N, got {text!r}") from None
-    if not 0 <= i < n:
-        raise ValueError(f"--shard I/N needs 0 <= I < N, got {text!r}")
-    return i, n
-
-
 def _fit_dataset(args: argparse.Namespace, ks: tuple[int, ...], lut_path: Path) -> int:
     from training.fit.dataset import SPLITS, fit_split
 
@@ -147,7 +138,7 @@ def _fit_dataset(args: argparse.Namespace, ks: tuple[int, ...], lut_path: Path) 
         raise ValueError(f"--split must name some of {SPLITS}, got {args.split!r}")
     if args.chunk_tones < 1:
         raise ValueError("--chunk-tones must be >= 1")
-    shard = _parse_shard(args.shard)
+    shard = args.shard
     lut = LookupTables.load(lut_path, dtype=torch.float64, device=args.device)
     for split in splits:
         path = fit_split(

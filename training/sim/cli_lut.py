@@ -4,7 +4,12 @@ Example (small)::
 
     python -m training lut --albedo-n 64 --g-n 8 --photons 20000 --out runs/lut_small.npz
 
-Resumable: columns are kept in ``<out>.parts/``; rerun the same command after a kill.
+Resumable: simulated g nodes are kept in ``<out>.parts/``; rerun the same command after a kill.  By
+default min(g-n, 48) g nodes are simulated and the other columns interpolated along g (monotone cubic);
+``--g-nodes`` sets the number.  ``--shard I/N`` splits the nodes between N processes (2 on 2 cores)::
+
+    python -m training lut --albedo-n 800 --g-n 800 --photons 1000000 --out lut.npz --shard 0/2 &
+    python -m training lut --albedo-n 800 --g-n 800 --photons 1000000 --out lut.npz --shard 1/2
 """
 
 from __future__ import annotations
@@ -12,18 +17,22 @@ from __future__ import annotations
 import argparse
 import sys
 
-from training.sim.lut import ALBEDO_MAX, ALBEDO_MIN, G_MAX, G_MIN, MAX_STEPS, build_lut
+from training.cli import parse_shard
+from training.sim.lut import ALBEDO_MAX, ALBEDO_MIN, G_MAX, G_MIN, G_NODES, MAX_STEPS, build_lut
 
 
 def _parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog="python -m training lut",
         description="R(albedo, g) and P(r | albedo, g) of a semi-infinite medium at sigma_t = 1, n = 1.4, "
-        "diffuse illumination, by absorption reweighting of one non-absorbing run per g.",
+        "diffuse illumination, by absorption reweighting of one non-absorbing run per simulated g.",
     )
     p.add_argument("--albedo-n", type=int, required=True, help="albedo samples (1 - albedo log-spaced)")
     p.add_argument("--g-n", type=int, required=True, help="anisotropy samples (linear)")
-    p.add_argument("--photons", type=int, required=True, help="photons per g column")
+    p.add_argument("--photons", type=int, required=True, help="photons per simulated g node")
+    p.add_argument("--g-nodes", type=int, default=None,
+                   help=f"simulated g values (default min(g-n, {G_NODES})); the rest is interpolated along g")
+    p.add_argument("--shard", type=parse_shard, default=(0, 1), help="I/N: this process's share of the g nodes")
     p.add_argument("--out", required=True, help="output .npz")
     p.add_argument("--albedo-min", type=float, default=ALBEDO_MIN)
     p.add_argument("--albedo-max", type=float, default=ALBEDO_MAX)
@@ -53,7 +62,8 @@ def main(argv: list[str]) -> int:
         build_lut(
             args.out, args.albedo_n, args.g_n, args.photons, seed=args.seed, device=args.device,
             albedo_range=(args.albedo_min, args.albedo_max), g_range=(args.g_min, args.g_max),
-            max_steps=args.max_steps, compile=compile_, progress=not args.no_progress,
+            g_nodes=args.g_nodes, max_steps=args.max_steps, compile=compile_, shard=args.shard,
+            progress=not args.no_progress,
             log=lambda s: print(s, file=sys.stderr),
         )
     except ValueError as exc:

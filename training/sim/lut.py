@@ -192,6 +192,12 @@ def column_seed(seed: int, j: int) -> int:
     return fmix32_int(seed * 1_000_003 + j) & 0x7FFFFFFF
 
 
+#: Default number of simulated g nodes; more requested columns are interpolated between them.
+G_NODES = 48
+#: g columns walked together in one run (they share the walk's tail of long-lived packets).
+COLUMN_BATCH = 8
+
+
 def build_lut(
     out: str | Path,
     albedo_n: int,
@@ -202,57 +208,107 @@ def build_lut(
     device: str = "cpu",
     albedo_range: tuple[float, float] = (ALBEDO_MIN, ALBEDO_MAX),
     g_range: tuple[float, float] = (G_MIN, G_MAX),
+    g_nodes: int | None = None,
     max_steps: int = MAX_STEPS,
     compile: bool = False,
+    shard: tuple[int, int] = (0, 1),
     progress: bool = False,
     log=print,
-) -> Path:
-    """Build the LUT file ``out`` (.npz, SPEC §2 keys plus R_stderr, R_trunc_bound, frac_inside, photons).
+) -> Path | None:
+    """Build the LUT file ``out`` (.npz, SPEC §2 keys plus R_stderr, R_trunc_bound, frac_inside, photons,
+    g_nodes).
 
-    Resumable: each g column is written to ``<out>.parts/g_XXXX.npz`` as soon as it is done; a rerun
-    with the same arguments skips finished columns (a kill loses at most the column in progress).
+    ``g_nodes`` (default min(g_n, G_NODES)) g values spanning ``g_range`` are simulated with ``photons``
+    each; the g_n table columns are interpolated between them along g (monotone cubic, PCHIP: no
+    overshoot, so P stays >= 0; P is renormalised).  Columns at a node are the node's simulation.  The
+    interpolated columns carry at most the nodes' noise; ``training.sim.bench`` measures the
+    interpolation error against direct columns.
+
+    Resumable: g nodes are walked COLUMN_BATCH at a time and each is written to
+    ``<out>.parts/g_XXXX.npz``; a rerun with the same arguments skips finished batches (a kill loses at
+    most the batch in progress).  ``shard`` (I, N): this process walks batches b = I (mod N); the table
+    is written by whichever process finds every batch done (returns None otherwise).
     """
     out = Path(out)
     if photons < 2:
         raise ValueError("photons must be >= 2")
     albedo = albedo_grid(albedo_n, *albedo_range)
     gs = g_grid(g_n, *g_range)
+    n_nodes = min(g_n, G_NODES) if g_nodes is None else int(g_nodes)
+    if not 2 <= n_nodes <= g_n:
+        raise ValueError(f"g_nodes must be in [2, g_n = {g_n}], got {n_nodes}")
+    nodes = g_grid(n_nodes, *g_range)
     parts = out.with_name(out.name + ".parts")
     parts.mkdir(parents=True, exist_ok=True)
-    manifest = {"albedo": albedo.tolist(), "g": gs.tolist(), "photons": int(photons), "seed": int(seed),
+    manifest = {"albedo": albedo.tolist(), "g": nodes.tolist(), "photons": int(photons), "seed": int(seed),
                 "max_steps": int(max_steps), "r_edges_mfp": R_EDGES_MFP.tolist(), "n": N_TISSUE,
-                "path_c": PATH_C, "delta_n": DELTA_N, "n_exact": N_EXACT}
+                "path_c": PATH_C, "delta_n": DELTA_N, "n_exact": N_EXACT, "column_batch": COLUMN_BATCH}
     mpath = parts / "manifest.json"
     if mpath.exists() and json.loads(mpath.read_text()) != manifest:
         raise ValueError(f"{parts} holds columns of a different LUT build; remove it or change --out")
     mpath.write_text(json.dumps(manifest))
+    t0 = time.perf_counter()
+    _walk_nodes(parts, nodes, albedo, photons, seed, device, max_steps, compile, shard, progress)
+    missing = [j for j in range(n_nodes) if not (parts / f"g_{j:04d}.npz").exists()]
+    if missing:
+        log(f"shard {shard[0]}/{shard[1]} done; {len(missing)} g nodes left to other shards: run any shard "
+            "again when they have finished to write the table")
+        return None
+    node_cols = [dict(np.load(parts / f"g_{j:04d}.npz")) for j in range(n_nodes)]
+    table = _columns_at(node_cols, nodes, gs, R_EDGES_MFP)
+    tmp = out.with_name(out.name + ".tmp.npz")
+    np.savez(tmp, albedo=albedo, g=gs, r_edges_mfp=np.array(R_EDGES_MFP), **table,
+             photons=np.int64(photons), n_medium=np.float64(N_TISSUE), g_nodes=nodes)
+    tmp.replace(out)
+    log(f"LUT {albedo_n}x{g_n} ({n_nodes} simulated g nodes), {photons} photons per node -> {out} "
+        f"({time.perf_counter() - t0:.1f} s)")
+    return out
+
+
+def _walk_nodes(parts: Path, nodes: np.ndarray, albedo: np.ndarray, photons: int, seed: int, device: str,
+                max_steps: int, compile: bool, shard: tuple[int, int], progress: bool) -> None:
+    """Walk this shard's unfinished batches of g nodes; each node's table goes to parts/g_XXXX.npz."""
+    batches = [list(range(b, min(b + COLUMN_BATCH, nodes.size))) for b in range(0, nodes.size, COLUMN_BATCH)]
+    mine = [b for i, b in enumerate(batches) if i % shard[1] == shard[0]]
+    todo = [b for b in mine if not all((parts / f"g_{j:04d}.npz").exists() for j in b)]
     bar = None
     if progress:
         from tqdm import tqdm
 
-        bar = tqdm(total=g_n * photons, unit="photon", unit_scale=True, smoothing=0.05)
-    t0 = time.perf_counter()
-    for j, g in enumerate(gs):
-        path = parts / f"g_{j:04d}.npz"
-        if path.exists():
-            if bar:
-                bar.update(photons)
-            continue
-        (col,) = simulate_columns(np.array([g]), albedo, photons, seed=column_seed(seed, j), device=device,
-                                  max_steps=max_steps, compile=compile, progress=bar.update if bar else None)
-        tmp = path.with_suffix(".tmp.npz")
-        np.savez(tmp, **col)
-        tmp.replace(path)
+        bar = tqdm(total=sum(len(b) for b in mine) * photons, unit="photon", unit_scale=True, smoothing=0.05)
+        bar.update(sum(len(b) for b in mine if b not in todo) * photons)
+    for batch in todo:
+        cols = simulate_columns(nodes[batch], albedo, photons, seed=column_seed(seed, batch[0]), device=device,
+                                max_steps=max_steps, compile=compile, progress=bar.update if bar else None)
+        for j, col in zip(batch, cols, strict=True):
+            tmp = parts / f"g_{j:04d}.tmp.npz"
+            np.savez(tmp, **col)
+            tmp.replace(parts / f"g_{j:04d}.npz")
     if bar:
         bar.close()
-    cols = [np.load(parts / f"g_{j:04d}.npz") for j in range(g_n)]
-    stack = lambda k: np.stack([c[k] for c in cols], axis=1)  # noqa: E731  (NA, NG, ...)
-    tmp = out.with_name(out.name + ".tmp.npz")
-    np.savez(
-        tmp, albedo=albedo, g=gs, r_edges_mfp=np.array(R_EDGES_MFP), R=stack("R"), P=stack("P"),
-        R_stderr=stack("R_stderr"), R_trunc_bound=stack("R_trunc_bound"), frac_inside=stack("frac_inside"),
-        photons=np.int64(photons), n_medium=np.float64(N_TISSUE),
-    )
-    tmp.replace(out)
-    log(f"LUT {albedo_n}x{g_n}, {photons} photons per g column -> {out} ({time.perf_counter() - t0:.1f} s)")
-    return out
+
+
+def _columns_at(node_cols: list[dict], nodes: np.ndarray, gs: np.ndarray, r_edges: np.ndarray) -> dict:
+    """Tables at the g values ``gs`` from the simulated node columns: (NA, NG, ...) arrays.
+
+    Monotone cubic (PCHIP) interpolation along g of R, P, frac_inside; linear for the error bounds
+    (R_stderr, R_trunc_bound).  P is clipped at 0 and renormalised to sum P area = 1.
+    """
+    from scipy.interpolate import PchipInterpolator
+
+    stack = lambda k: np.stack([c[k] for c in node_cols], axis=1)  # noqa: E731  (NA, n_nodes, ...)
+    if nodes.size == gs.size and np.allclose(nodes, gs, rtol=0, atol=1e-12):
+        return {k: stack(k) for k in ("R", "P", "R_stderr", "R_trunc_bound", "frac_inside")}
+    pchip = lambda k: PchipInterpolator(nodes, stack(k), axis=1)(gs)  # noqa: E731
+    lin = lambda k: np.stack([np.interp(gs, nodes, row) for row in stack(k)])  # noqa: E731
+    p = np.clip(pchip("P"), 0.0, None)
+    norm = (p * (math.pi * np.diff(r_edges**2))).sum(-1, keepdims=True)
+    p = np.where(norm > 0, p / np.where(norm > 0, norm, 1.0), 0.0)
+    table = {"R": np.clip(pchip("R"), 0.0, 1.0), "P": p, "R_stderr": lin("R_stderr"),
+             "R_trunc_bound": lin("R_trunc_bound"), "frac_inside": np.clip(pchip("frac_inside"), 0.0, 1.0)}
+    for j, g in enumerate(gs):  # columns at a node: the node's own tables, bit for bit
+        hit = np.flatnonzero(np.isclose(nodes, g, rtol=0, atol=1e-12))
+        if hit.size:
+            for k in table:
+                table[k][:, j] = node_cols[hit[0]][k]
+    return table
