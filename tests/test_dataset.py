@@ -14,6 +14,7 @@ from training.data.presets import PRESETS
 from training.data.reweight import TrajectoryStore
 from training.data.sampling import T_EPI_LEVELS_CM, training_tones, validation_tones
 from training.data.simulate import simulate_direct
+from training.data.summary import write_summary
 
 TINY = replace(PRESETS["ci"], name="ci", n_train=3, n_validation=2, photons=20, chunk_tones=1)
 
@@ -108,3 +109,6 @@ def test_reweighted_build_shards_and_merge(tmp_path):
     assert np.all(a["R_d"].mean(axis=1) > 0.01) and np.all(np.isfinite(a["profile_stderr"]))
     with h5py.File(merged) as f:
         assert f.attrs["method"] == "reweighted"
+    summary = write_summary(tmp_path / "whole")
+    assert summary["validation"]["tones"] == TINY.n_validation and summary["validation"]["walk_s"] > 0
+    assert (tmp_path / "whole" / "summary.png").stat().st_size > 10_000

@@ -2,6 +2,7 @@
 
   python -m training dataset --preset ci|laptop|paper --out DIR [--shard I/N] [--split train|validation|both]
   python -m training dataset --merge --out DIR        # after every shard I/N has finished
+  python -m training dataset --summary --out DIR      # counts, times, sizes -> summary.json, summary.png
 
 Killing the job loses at most the chunk in flight: run the same command again to resume.  N machines
 (or N processes) each run one ``--shard I/N``; ``--merge`` checks the shards and joins them.
@@ -14,6 +15,7 @@ Monte Carlo run per tone (slow; for checks).
 from __future__ import annotations
 
 import argparse
+import json
 import sys
 from pathlib import Path
 
@@ -47,6 +49,8 @@ def main(argv: list[str]) -> int:
     parser.add_argument("--method", choices=["direct", "reweighted"], default="reweighted",
                         help="estimator (default reweighted; direct is a full run per tone)")
     parser.add_argument("--merge", action="store_true", help="join finished shards in --out")
+    parser.add_argument("--summary", action="store_true",
+                        help="write --out/summary.json and summary.png for a built dataset")
     parser.add_argument("--seed", type=int, default=None, help="override the preset's sampling seeds")
     parser.add_argument("--device", default="cpu", help="cpu or cuda")
     parser.add_argument("--threads", type=int, default=1, help="torch CPU threads (the walker is fastest on 1)")
@@ -57,6 +61,11 @@ def main(argv: list[str]) -> int:
     torch.set_num_threads(max(1, args.threads))
     splits = SPLITS if args.split == "both" else (args.split,)
     try:
+        if args.summary:
+            from training.data.summary import write_summary
+
+            print(json.dumps(write_summary(args.out), indent=1))
+            return 0
         if args.merge:
             for split in splits:
                 print(merge(args.out, split))
