@@ -115,7 +115,7 @@ def benchmarks(quick: bool) -> list[dict]:
         "error": "R_d differs from MCML's 0.5630 by design (one refractive index instead of 1.34-1.53)",
         "notes": "torch.compile'd step (compile time excluded), float32 walk, float64 tallies; shared machine",
     })
-    lut_photons = 5_000 if quick else 40_000
+    lut_photons = 25_000 if quick else 100_000  # the pool must fill (2^18 packets) for a clean slope
     fixed, per_1e6, dt = _lut_build(lut_photons)
     batches = math.ceil(G_NODES / COLUMN_BATCH)
     total_1core = per_1e6 * G_NODES + fixed * batches
