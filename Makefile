@@ -5,7 +5,9 @@ VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: install demo test lint bench clean
+MITSUBA_STAMP := $(VENV)/.mitsuba-installed
+
+.PHONY: install mitsuba demo test lint bench clean
 
 install: $(STAMP)
 
@@ -17,7 +19,23 @@ $(STAMP): pyproject.toml
 	$(PY) -m pip install -q -e ".[training,blender,test]"
 	touch $(STAMP)
 
-test: $(STAMP)
+# Mitsuba 3 (the validation renderer): the pinned `mitsuba` extra, and libLLVM 19 for its llvm_ad_* variants
+# (Dr.Jit refuses LLVM 14, and volpath renders abort with LLVM 15: notes on Mitsuba).  Debian's libllvm19
+# needs root; without it only the scalar variants run (the tests skip the LLVM ones and say why).
+mitsuba: $(MITSUBA_STAMP)
+
+$(MITSUBA_STAMP): $(STAMP)
+	$(PY) -m pip install -q -e ".[mitsuba]"
+	@if ls /usr/lib/*/libLLVM.so.19* /usr/lib/*/libLLVM-19.so* >/dev/null 2>&1; then echo "libLLVM 19: present"; \
+	elif command -v apt-get >/dev/null 2>&1 && [ "$$(id -u)" = 0 ]; then \
+	  export DEBIAN_FRONTEND=noninteractive; \
+	  (apt-get install -y -q libllvm19 >/dev/null || (apt-get update -q >/dev/null && apt-get install -y -q libllvm19 >/dev/null)) \
+	    && echo "libLLVM 19: installed (libllvm19)" \
+	    || echo "warning: could not install libllvm19; Mitsuba's scalar variants still work"; \
+	else echo "warning: libllvm19 needs root and apt-get; Mitsuba's scalar variants still work"; fi
+	touch $@
+
+test: $(STAMP) $(MITSUBA_STAMP)
 	$(PY) -m pytest -q tests
 
 lint: $(STAMP)

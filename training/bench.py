@@ -27,9 +27,10 @@ BENCH_MODULES = [
     "training.train.bench",
     "blender_addon.bench",
     "exporters.bench",
+    "training.validate.bench",
 ]
 COLUMNS = ["workload", "ours", "anchor", "ratio", "error", "notes"]
-PACKAGES = ["torch", "numpy", "onnxruntime", "OpenImageIO", "colour-science", "bpy", "iadpython"]
+PACKAGES = ["torch", "numpy", "onnxruntime", "OpenImageIO", "colour-science", "bpy", "iadpython", "mitsuba"]
 
 
 def machine_lines() -> list[str]:
