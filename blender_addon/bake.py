@@ -74,6 +74,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--match-exposure", action="store_true",
                    help="reproduce the painted brightness (model reflectance x exposure) instead of the model's "
                         "unit-exposure reflectance")
+    p.add_argument("--ior", type=float, default=1.4,
+                   help="IOR of the Cycles closures (the node group's IOR input; default 1.4, tissue)")
     p.add_argument("--quiet", action="store_true")
     return p
 
@@ -110,7 +112,8 @@ def main(argv: list[str] | None = None) -> int:
             created = True
         options = baking.BakeOptions(targets=baking.parse_targets(args.target), unit_scale_m=args.unit_scale,
                                      threads=args.threads, memory_mb=args.memory_mb,
-                                     match_exposure=args.match_exposure, overwrite=args.overwrite)
+                                     match_exposure=args.match_exposure, ior=args.ior,
+                                     overwrite=args.overwrite)
         last = [0.0]
 
         def progress(fraction: float) -> None:

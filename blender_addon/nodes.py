@@ -95,9 +95,9 @@ def _fresh_group(name: str, k_count: int, backend: str):
     Returns (group, group input node, group output node).
     """
     old = bpy.data.node_groups.get(name)
-    if old is not None:
+    if old is not None and old.users == 0:  # never pull a group out from under a material using it
         bpy.data.node_groups.remove(old)
-    group = bpy.data.node_groups.new(name, "ShaderNodeTree")
+    group = bpy.data.node_groups.new(name, "ShaderNodeTree")  # Blender suffixes the name if still taken
     group["spectral_skin_sss_k"] = k_count
     group["spectral_skin_sss_backend"] = backend
     _new_interface(group, k_count)
@@ -165,6 +165,27 @@ def build_osl_group(k_count: int = 3, name: str = GROUP_NAME_OSL) -> bpy.types.N
     group.links.new(gin.outputs["IOR"], script.inputs["ior"])
     group.links.new(gin.outputs["Roughness"], script.inputs["roughness"])
     group.links.new(script.outputs["BSSRDF"], gout.inputs["BSSRDF"])
+    return group
+
+
+#: Custom property marking the group layout version (bump when the generated nodes change).
+GROUP_VERSION = 1
+
+
+def ensure_group(k_count: int, backend: str) -> bpy.types.NodeTree:
+    """The mixture group for ``k_count`` components and ``backend`` ("SVM" or "OSL"): an existing group of
+    this add-on with the same K, backend and version is reused (several materials share it), else a new
+    one is built (existing groups are never replaced while used)."""
+    if backend not in ("SVM", "OSL"):
+        raise ValueError(f"backend must be SVM or OSL, not {backend!r}")
+    base = GROUP_NAME if backend == "SVM" else GROUP_NAME_OSL
+    for group in bpy.data.node_groups:
+        if (group.name.startswith(base) and group.get("spectral_skin_sss_k") == k_count
+                and group.get("spectral_skin_sss_backend") == backend
+                and group.get("spectral_skin_sss_version") == GROUP_VERSION):
+            return group
+    group = build_osl_group(k_count) if backend == "OSL" else build_svm_group(k_count)
+    group["spectral_skin_sss_version"] = GROUP_VERSION
     return group
 
 

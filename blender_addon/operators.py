@@ -1,60 +1,149 @@
-"""Operators: Invert Skin Albedo (bake) and Add Skin SSS Mixture (node group into the active material)."""
+"""Operators: Invert Skin Albedo (bake maps, build and wire the node group) and Add Skin SSS Mixture.
+
+Invert Skin Albedo runs synchronously when called from a script or in background mode (``execute``), and
+from the UI as a modal operator driven by a timer: one inference chunk per timer event, a progress bar
+in the panel and the cursor, the rest of the UI usable meanwhile, Esc cancels (nothing is changed).
+Both paths use blender_addon.baker.AddonBake; the whole operation is one undo step.
+"""
 
 from __future__ import annotations
 
-import os
-
 import bpy
 
-from exporters import maps
+from . import baker, nodes, preferences
 
-from . import nodes, preferences
+_COLORSPACES = [
+    ("FROM_IMAGE", "From Image", "The image's colour space setting in Blender (sRGB, Non-Color, Linear ...)"),
+    ("auto", "Auto", "sRGB unless the file says linear/Non-Color or stores floats"),
+    ("srgb", "sRGB", "sRGB-encoded"),
+    ("linear", "Linear", "Linear sRGB / Rec.709"),
+]
+_STORAGE = [
+    ("PACK", "Pack into .blend", "The maps become images packed into the .blend file"),
+    ("FILES", "Save as files", "EXR maps in the output folder (default: a folder beside the saved .blend)"),
+]
+_BACKENDS = [
+    ("AUTO", "Auto", "OSL where the scene's device runs it (CPU, OptiX), SVM nodes elsewhere"),
+    ("SVM", "SVM nodes", "3K single-channel Subsurface Scattering nodes: every Cycles device"),
+    ("OSL", "OSL", "One OSL Script node with K bssrdf closures: CPU and OptiX only"),
+]
+#: Exceptions that mean bad input or a failed bake (reported, nothing changed).
+_EXPECTED = (OSError, ValueError, RuntimeError)
 
 
-def _missing_model_message(path: str) -> str:
-    return f"model not found at {path}: train/export it or set the path in preferences"
+def _one_line(exc: BaseException) -> str:
+    return " ".join((str(exc) or type(exc).__name__).split())
 
 
 class SPECTRAL_SKIN_OT_invert_albedo(bpy.types.Operator):
-    """Invert an RGB skin albedo texture into per-component subsurface maps (needs the trained model)"""
+    """Invert an RGB skin albedo texture into spectral subsurface maps and wire the Spectral Skin SSS Mixture
+    into the material (the active Image Texture node's image, or a chosen image or file)"""
 
     bl_idname = "spectral_skin.invert_albedo"
     bl_label = "Invert Skin Albedo"
-    bl_options = {"REGISTER"}
+    bl_options = {"REGISTER", "UNDO"}
 
-    filepath: bpy.props.StringProperty(name="Albedo image", subtype="FILE_PATH", default="")
+    filepath: bpy.props.StringProperty(name="Albedo file", subtype="FILE_PATH", default="",
+                                       description="Read this file instead of an image datablock")
+    image_name: bpy.props.StringProperty(name="Image", default="",
+                                         description="Image datablock to invert (empty: the active Image "
+                                                     "Texture node of the active material)")
+    storage: bpy.props.EnumProperty(name="Maps", items=_STORAGE, default="PACK")
     output_dir: bpy.props.StringProperty(name="Output folder", subtype="DIR_PATH", default="")
-    colorspace: bpy.props.EnumProperty(
-        name="Colour space",
-        items=[("auto", "Auto", "sRGB unless the file says linear/Non-Color or stores floats"),
-               ("srgb", "sRGB", "sRGB-encoded"), ("linear", "Linear", "Linear sRGB / Rec.709")],
-        default="auto",
-    )
-    overwrite: bpy.props.BoolProperty(name="Overwrite", default=False)
+    colorspace: bpy.props.EnumProperty(name="Colour space", items=_COLORSPACES, default="FROM_IMAGE")
+    backend: bpy.props.EnumProperty(name="Shading", items=_BACKENDS, default="AUTO")
+    overwrite: bpy.props.BoolProperty(name="Overwrite files", default=False)
+    match_exposure: bpy.props.BoolProperty(
+        name="Match painted brightness", default=False,
+        description="Scale the target colour by the model's exposure (shows the texture's brightness instead of "
+                    "the model's physically consistent reflectance)")
+
+    _bake = None
+    _timer = None
+
+    def _settings(self, context) -> baker.BakeSettings:
+        return baker.BakeSettings(model_path=preferences.model_path(context), filepath=self.filepath,
+                                  image_name=self.image_name, storage=self.storage, output_dir=self.output_dir,
+                                  colorspace=self.colorspace, backend=self.backend, overwrite=self.overwrite,
+                                  match_exposure=self.match_exposure, threads=preferences.threads(context))
 
     def execute(self, context):
-        model = preferences.model_path(context)
-        if not os.path.isfile(model):
-            self.report({"ERROR"}, _missing_model_message(model))
-            return {"CANCELLED"}
-        if not self.filepath:
-            self.report({"ERROR"}, "no albedo image given")
+        try:
+            bake = baker.AddonBake(context, self._settings(context))
+        except _EXPECTED as exc:
+            self.report({"ERROR"}, _one_line(exc))
             return {"CANCELLED"}
         try:
-            albedo = maps.read_albedo(bpy.path.abspath(self.filepath), colorspace=self.colorspace)
-        except (OSError, ValueError) as exc:
-            self.report({"ERROR"}, str(exc))
+            bake.run()
+            message = bake.apply(context)
+        except _EXPECTED as exc:
+            bake.cancel()
+            self.report({"ERROR"}, _one_line(exc))
             return {"CANCELLED"}
-        try:
-            from exporters import inference  # written once a model exists (SPEC §3)
-        except ImportError:
-            self.report({"ERROR"}, "exporters.inference is not available in this build: cannot run the model")
-            return {"CANCELLED"}
-        result = inference.bake_cycles_maps(  # pragma: no cover - needs the trained model
-            model, albedo, bpy.path.abspath(self.output_dir), unit_scale_m=context.scene.unit_settings.scale_length,
-            threads=preferences.threads(context), overwrite=self.overwrite)
-        self.report({"INFO"}, f"wrote {len(result)} maps")
+        self.report({"INFO"}, message)
         return {"FINISHED"}
+
+    def invoke(self, context, event):
+        if bpy.app.background or context.window is None:
+            return self.execute(context)
+        try:
+            self._bake = baker.AddonBake(context, self._settings(context))
+        except _EXPECTED as exc:
+            self.report({"ERROR"}, _one_line(exc))
+            return {"CANCELLED"}
+        wm = context.window_manager
+        wm.progress_begin(0, 100)
+        _set_progress(context, 0.0, running=True)
+        self._timer = wm.event_timer_add(0.02, window=context.window)
+        wm.modal_handler_add(self)
+        return {"RUNNING_MODAL"}
+
+    def modal(self, context, event):
+        if event.type == "ESC" and event.value == "PRESS":
+            self._bake.cancel()
+            self._stop(context)
+            self.report({"WARNING"}, "Invert Skin Albedo cancelled: nothing was changed")
+            return {"CANCELLED"}
+        if event.type != "TIMER" or event.timer is not self._timer:
+            return {"PASS_THROUGH"}
+        try:
+            more = self._bake.step()
+            if more:
+                _set_progress(context, self._bake.fraction, running=True)
+                context.window_manager.progress_update(int(100 * self._bake.fraction))
+                return {"RUNNING_MODAL"}
+            message = self._bake.apply(context)
+        except _EXPECTED as exc:
+            self._bake.cancel()
+            self._stop(context)
+            self.report({"ERROR"}, _one_line(exc))
+            return {"CANCELLED"}
+        self._stop(context)
+        self.report({"INFO"}, message)
+        return {"FINISHED"}
+
+    def _stop(self, context) -> None:
+        wm = context.window_manager
+        if self._timer is not None:
+            wm.event_timer_remove(self._timer)
+            self._timer = None
+        wm.progress_end()
+        _set_progress(context, 0.0, running=False)
+
+
+def _set_progress(context, fraction: float, running: bool) -> None:
+    """Progress shown by the panels (WindowManager properties), and the status bar text."""
+    wm = context.window_manager
+    if hasattr(wm, "spectral_skin_progress"):
+        wm.spectral_skin_progress = fraction
+        wm.spectral_skin_running = running
+    if context.workspace is not None:
+        context.workspace.status_text_set(f"Invert Skin Albedo: {100 * fraction:.0f} % (Esc to cancel)"
+                                          if running else None)
+    if context.screen is not None:
+        for area in context.screen.areas:
+            if area.type in ("NODE_EDITOR", "PROPERTIES"):
+                area.tag_redraw()
 
 
 class SPECTRAL_SKIN_OT_add_mixture(bpy.types.Operator):

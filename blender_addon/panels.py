@@ -1,4 +1,5 @@
-"""Panels: Shader Editor sidebar tab "Skin SSS" and Material properties."""
+"""Panels: Shader Editor sidebar tab "Skin SSS" and Material properties, with the bake settings (stored per
+scene in ``scene.spectral_skin``) and the progress of a running bake."""
 
 from __future__ import annotations
 
@@ -6,7 +7,21 @@ import os
 
 import bpy
 
-from . import preferences
+from . import baker, operators, preferences
+
+
+class SpectralSkinSettings(bpy.types.PropertyGroup):
+    """Bake settings shown in the panels and passed to Invert Skin Albedo."""
+
+    image: bpy.props.PointerProperty(name="Image", type=bpy.types.Image,
+                                     description="Albedo to invert (empty: the active Image Texture node)")
+    storage: bpy.props.EnumProperty(name="Maps", items=operators._STORAGE, default="PACK")
+    output_dir: bpy.props.StringProperty(name="Folder", subtype="DIR_PATH", default="",
+                                         description="Output folder for saved maps (empty: beside the .blend)")
+    colorspace: bpy.props.EnumProperty(name="Colour space", items=operators._COLORSPACES, default="FROM_IMAGE")
+    backend: bpy.props.EnumProperty(name="Shading", items=operators._BACKENDS, default="AUTO")
+    overwrite: bpy.props.BoolProperty(name="Overwrite files", default=False)
+    match_exposure: bpy.props.BoolProperty(name="Match painted brightness", default=False)
 
 
 def _draw(layout, context) -> None:
@@ -17,7 +32,32 @@ def _draw(layout, context) -> None:
     else:
         box.label(text="Model not found: train/export it", icon="ERROR")
         box.label(text=model)
-    layout.operator("spectral_skin.invert_albedo", icon="IMAGE_DATA")
+    settings = getattr(context.scene, "spectral_skin", None)
+    wm = context.window_manager
+    if getattr(wm, "spectral_skin_running", False):
+        layout.progress(factor=wm.spectral_skin_progress, type="BAR",
+                        text=f"Inverting {100 * wm.spectral_skin_progress:.0f} % (Esc to cancel)")
+        return
+    if settings is not None:
+        col = layout.column()
+        col.prop(settings, "image")
+        if settings.image is None:
+            node = baker.active_image_node(getattr(context, "material", None))
+            col.label(text=f"Active node: {node.image.name}" if node else "No active Image Texture node",
+                      icon="IMAGE_DATA" if node else "INFO")
+        col.prop(settings, "colorspace")
+        col.prop(settings, "storage")
+        if settings.storage == "FILES":
+            col.prop(settings, "output_dir")
+            col.prop(settings, "overwrite")
+        col.prop(settings, "backend")
+        col.prop(settings, "match_exposure")
+    op = layout.operator("spectral_skin.invert_albedo", icon="IMAGE_DATA")
+    if settings is not None:
+        op.image_name = settings.image.name if settings.image is not None else ""
+        op.storage, op.output_dir = settings.storage, settings.output_dir
+        op.colorspace, op.backend = settings.colorspace, settings.backend
+        op.overwrite, op.match_exposure = settings.overwrite, settings.match_exposure
     layout.operator("spectral_skin.add_mixture", icon="NODETREE")
 
 
@@ -49,4 +89,17 @@ class SPECTRAL_SKIN_PT_material(bpy.types.Panel):
         _draw(self.layout, context)
 
 
-classes = (SPECTRAL_SKIN_PT_shader_editor, SPECTRAL_SKIN_PT_material)
+classes = (SpectralSkinSettings, SPECTRAL_SKIN_PT_shader_editor, SPECTRAL_SKIN_PT_material)
+
+
+def register_properties() -> None:
+    bpy.types.Scene.spectral_skin = bpy.props.PointerProperty(type=SpectralSkinSettings)
+    bpy.types.WindowManager.spectral_skin_progress = bpy.props.FloatProperty(min=0.0, max=1.0, default=0.0)
+    bpy.types.WindowManager.spectral_skin_running = bpy.props.BoolProperty(default=False)
+
+
+def unregister_properties() -> None:
+    for owner, name in ((bpy.types.Scene, "spectral_skin"), (bpy.types.WindowManager, "spectral_skin_progress"),
+                        (bpy.types.WindowManager, "spectral_skin_running")):
+        if hasattr(owner, name):
+            delattr(owner, name)

@@ -150,3 +150,43 @@ def render_mean(scene: bpy.types.Scene | None = None) -> tuple[np.ndarray, np.nd
     if not np.all(np.isfinite(rgb)):
         raise RuntimeError("Cycles produced non-finite pixels")
     return rgb.mean(axis=0), rgb.std(axis=0, ddof=1) / np.sqrt(n), seconds
+
+
+def view_from(scene: bpy.types.Scene, mu: float) -> None:
+    """Point the probe camera at the slab centre from polar angle arccos(mu) (mu = 1: straight down)."""
+    if not 0.0 < mu <= 1.0:
+        raise ValueError("mu = cos(view angle) must lie in (0, 1]")
+    theta = float(np.arccos(mu))
+    cam = scene.camera
+    cam.location = (0.0, -10.0 * np.sin(theta), 10.0 * mu)
+    cam.rotation_euler = (theta, 0.0, 0.0)
+
+
+def hemispherical_nodes(n: int = 4) -> tuple[np.ndarray, np.ndarray]:
+    """Gauss-Jacobi nodes mu_i and weights w_i (sum 1) with sum_i w_i R(mu_i) ~ 2 int_0^1 R(mu) mu dmu.
+
+    That integral is the cosine-weighted mean of the directional reflectance R(mu) over viewing directions:
+    by reciprocity, the diffuse-incidence reflectance (what the model's reflectance is).  With 4 nodes the
+    rule is exact to 0.01 % for the isotropic half-space (checked against the H-function).
+    """
+    from scipy.special import roots_jacobi  # scipy: a test dependency; the probe is a test tool
+
+    x, w = roots_jacobi(n, 0.0, 1.0)
+    return (1.0 + x) / 2.0, w / w.sum()
+
+
+def render_hemispherical(scene: bpy.types.Scene | None = None, n: int = 4
+                         ) -> tuple[np.ndarray, np.ndarray, float]:
+    """Diffuse-incidence reflectance of the probe material: renders from ``n`` view angles combined by
+    :func:`hemispherical_nodes`.  Returns (mean RGB (3,), standard error (3,), seconds)."""
+    scene = scene or bpy.context.scene
+    mus, weights = hemispherical_nodes(n)
+    total, var, seconds = np.zeros(3), np.zeros(3), 0.0
+    for mu, w in zip(mus, weights, strict=True):
+        view_from(scene, float(mu))
+        mean, err, sec = render_mean(scene)
+        total += w * mean
+        var += (w * err) ** 2
+        seconds += sec
+    view_from(scene, 1.0)
+    return total, np.sqrt(var), seconds

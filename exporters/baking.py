@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from exporters import collapse, inference, maps
+from exporters import collapse, inference, maps, reflectance_tables
 
 TARGETS: tuple[str, ...] = ("cycles", "physical", "spectral")
 #: Units strings stored in each EXR header and in S_maps.json.
@@ -87,7 +87,10 @@ class BakeOptions:
     """``targets`` of SPEC §4; ``unit_scale_m`` metres per Blender unit; ``threads`` for onnxruntime (0 =
     all cores); ``memory_mb`` budget of one inference chunk; ``chunk`` caps distinct texels per step
     (None: from the budget); ``match_exposure`` scales the target colour by the model's exposure (shows
-    the painted brightness instead of the model's reflectance); ``overwrite`` replaces existing files."""
+    the painted brightness instead of the model's reflectance); ``ior``: the IOR the node group's closures
+    use (its IOR input; it sets how view rays enter the medium, see exporters.reflectance_tables);
+    ``min_mfp_m``: smallest mean free path given to Cycles, metres (exporters.collapse step 7);
+    ``overwrite`` replaces existing files."""
 
     targets: tuple[str, ...] = ("cycles",)
     unit_scale_m: float = 1.0
@@ -96,6 +99,8 @@ class BakeOptions:
     chunk: int | None = None
     band_texels: int = DEFAULT_BAND_TEXELS
     match_exposure: bool = False
+    ior: float = reflectance_tables.CYCLES_IOR
+    min_mfp_m: float = collapse.MIN_MFP_CM / 100.0
     overwrite: bool = False
 
 
@@ -144,6 +149,9 @@ class BakeJob:
         self.targets = parse_targets(opts.targets)
         if not (np.isfinite(opts.unit_scale_m) and opts.unit_scale_m > 0):
             raise BakeError(f"unit scale must be a positive number of metres per Blender unit, got {opts.unit_scale_m}")
+        if not reflectance_tables.IOR_MIN <= opts.ior <= reflectance_tables.IOR_MAX:
+            raise BakeError(f"IOR must lie in [{reflectance_tables.IOR_MIN}, {reflectance_tables.IOR_MAX}] "
+                            f"(Cycles' range), got {opts.ior}")
         if not stem or os.sep in stem or (os.altsep and os.altsep in stem):
             raise BakeError(f"invalid map name stem {stem!r}")
         rgb = np.asarray(albedo.rgb)
@@ -163,7 +171,7 @@ class BakeJob:
         self.band_rows = max(1, min(self.height, max(opts.band_texels, self.chunk) // self.width))
         self.notes = input_notes(albedo)
         self.stats = {"texels": self.height * self.width, "distinct_texels": 0, "alpha_raised_to_0.2": 0,
-                      "weight_raised": 0, "unreachable_channels": 0}
+                      "weight_raised": 0, "unreachable_channels": 0, "sigma_t_capped": 0}
         self.timings = {"inference": 0.0, "collapse": 0.0, "write": 0.0}
         self._streams: list[maps.MapStream] | None = None
         self._done = False
@@ -236,11 +244,13 @@ class BakeJob:
         t1 = time.perf_counter()
         scale = out["exposure"][:, 0] if self.options.match_exposure else None
         media = collapse.collapse(out["reflectance"], out["alpha"], out["sigma_t"], out["g"], out["weight"],
-                                  target_scale=scale)
+                                  target_scale=scale, ior=self.options.ior,
+                                  min_mfp_cm=self.options.min_mfp_m * 100.0)
         cyc = collapse.to_cycles(media, self.options.unit_scale_m) if "cycles" in self.targets else None
         self.stats["alpha_raised_to_0.2"] += int((media.low.sum(axis=(1, 2)) * counts).sum())
         self.stats["weight_raised"] += int((media.high.sum(axis=(1, 2)) * counts).sum())
         self.stats["unreachable_channels"] += int((media.unreachable.sum(axis=1) * counts).sum())
+        self.stats["sigma_t_capped"] += int((media.mfp_capped.sum(axis=(1, 2)) * counts).sum())
         for spec in self.specs:
             values[spec.name][sl] = self._values(spec, media, cyc, out)
         self.timings["inference"] += t1 - t0
@@ -299,8 +309,11 @@ class BakeJob:
             "image_size": [self.width, self.height],
             "targets": list(self.targets),
             "collapse": {"method": "exporters.collapse (per channel: Cycles reflectance share, diffusion length)",
-                         "g_max": collapse.G_MAX, "alpha_range": [collapse.ALPHA_MIN, collapse.ALPHA_SOFT_MAX],
+                         "g_max": collapse.G_MAX, "alpha_min": collapse.ALPHA_MIN,
+                         "alpha_star_soft_max": collapse.ALPHA_STAR_SOFT_MAX,
                          "match_exposure": bool(self.options.match_exposure),
+                         "ior": float(self.options.ior),
+                         "min_mean_free_path_m": float(self.options.min_mfp_m),
                          "target": "exposure x linear sRGB (D65) of the model reflectance" if
                          self.options.match_exposure else "linear sRGB (D65) of the model reflectance"},
             "model": {"path": str(self.model.path), "K": self.model.k},

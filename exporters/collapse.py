@@ -19,11 +19,15 @@ What "shows" means, and the method
 4. **Reflectance.**  Cycles' walk has no Fresnel boundary, so the same alpha would render brighter than
    the model's medium.  Each component gets the Cycles albedo whose Cycles reflectance carries its share:
    w_kc R_cycles(alpha_kc, g_k) = s_kc T_c, with w_kc = <omega_c, w_k> (the channel's mean weight) and
-   R_cycles the index-matched diffuse reflectance (``reflectance_tables``, "cycles").  Summed over k this
-   is exactly T_c.  Cycles' walk is exact only for alpha >= 0.2 and loses energy near alpha -> 1 (256
-   bounces), so alpha_kc is kept in [0.2, 0.999]: a darker share keeps alpha = 0.2 and lowers w_kc, a
-   brighter one keeps 0.999 and raises w_kc (up to 1, Cycles' Mix Shader limit; beyond that alpha may
-   rise to 1 - 1e-6 and texels that still miss T are counted in ``unreachable``).  Weights then sum to
+   R_cycles the diffuse reflectance Cycles renders for the closure IOR ``ior`` (Snell refraction of the
+   view ray, no Fresnel weight, Lambertian exit: ``reflectance_tables``, "cycles").  Summed over k this
+   is exactly T_c.  Cycles' walk is exact only for alpha >= 0.2 and loses energy near alpha -> 1 (it
+   kills walks after 256 bounces; from bounce 10 on it walks the similar isotropic medium of albedo
+   alpha* = alpha (1 - g) / (1 - alpha g)), so alpha_kc is kept in [0.2, alpha_soft(g)], alpha_soft the
+   albedo with alpha* = 0.99 (measured loss 0.1 %; at alpha* = 0.997 it is 1.4 %, at 0.9999 7 %): a
+   darker share keeps alpha = 0.2 and lowers w_kc, a brighter one keeps alpha_soft and raises w_kc (up to
+   1, Cycles' Mix Shader limit; beyond that alpha may rise to 1 - 1e-6 and texels that still miss T are
+   counted in ``unreachable``).  The profile width does not depend on this split (step 6).  Weights then sum to
    at most 1 per channel (the rest is absorbed), or above 1 when a bright share needs it.
 5. **Anisotropy.**  One g per component (Cycles takes one per closure; SPEC §4 stores one channel):
    the light-weighted mean of g_k over the visible channels, capped at 0.7 (above it Cycles 5.0's walk
@@ -34,14 +38,21 @@ What "shows" means, and the method
    diffusion profile, in cm).  Its light-weighted channel mean D_kc = <omega_c, E_k D_k> / <omega_c, E_k>
    is kept: sigma_t,kc = 1 / (D_kc sqrt(3 (1 - alpha_kc)(1 - alpha_kc g_k))).  So changing alpha to
    match the boundary does not change how far light bleeds.
+7. **Resolvable mean free path.**  Cycles walks in float32 from an entry point whose position error
+   grows with the camera distance (~1e-7 of it): with a mean free path of 1 um (sigma_t = 1e4 cm^-1,
+   the model's densest components) a probe 10 units away rendered +84 % too bright, at 1000 units +400 %.
+   sigma_t is therefore capped at 1 / ``min_mfp_cm`` (default 10 um): the reflectance (alpha) is
+   unchanged, the profile of such a component widens to ~10-30 um, far below any pixel.
 
 All arrays are float64; every output is finite for finite input (non-finite input raises ValueError).
 """
 
 from __future__ import annotations
 
+import sys
 from dataclasses import dataclass
 from functools import cache
+from pathlib import Path
 
 import numpy as np
 
@@ -51,22 +62,39 @@ from exporters.constants import N_WAVELENGTHS
 
 #: Cycles' walk substitutes alpha < 0.2 (integrator/subsurface_random_walk.h), so we never ask for less.
 ALPHA_MIN: float = cycles.ALPHA_EXACT_MIN
-#: Highest alpha used while the weight can still grow: Cycles matches adding-doubling within 1 % here
-#: (tests/test_cycles_render.py, g = 0.7); closer to 1 the 256-bounce cap loses energy.
-ALPHA_SOFT_MAX: float = 0.999
+#: Highest isotropic-equivalent albedo alpha* = alpha (1 - g) / (1 - alpha g) used while the weight can still
+#: grow.  Measured (Cycles 5.0.1, IOR 1.4, diffuse average, 512 spp) against the adding-doubling table:
+#: g = 0: alpha 0.99 -0.1 %, 0.997 -1.4 %, 0.999 -3.5 %, 0.9999 -6.8 %; g = 0.7: alpha 0.997 (alpha* 0.990)
+#: +0.9 %, 0.9995 (alpha* 0.998) -1.7 %: the loss follows alpha*, i.e. the walk after the similarity switch.
+ALPHA_STAR_SOFT_MAX: float = 0.99
 #: Absolute ceiling (a component that is brighter than this even at weight 1 is unreachable).
 ALPHA_HARD_MAX: float = reflectance_tables.ALPHA_TABLE_MAX
 #: Anisotropy cap (see exporters.cycles.RECOMMENDED_G_MAX).
 G_MAX: float = cycles.RECOMMENDED_G_MAX
+#: Smallest mean free path given to Cycles (cm): 10 um (step 7 of the module docstring).
+MIN_MFP_CM: float = 1e-3
 #: Largest weight a Cycles Mix Shader passes (its Fac is clamped to [0, 1]).
 WEIGHT_MAX: float = 1.0
 _TINY = 1e-30
 
 
+#: M of :func:`channel_matrix`, stored so that the add-on needs no colour-science inside Blender (whose
+#: Python lacks it and scipy); tests/test_collapse.py checks it against exporters.colorimetry.
+CHANNEL_MATRIX_PATH = Path(__file__).resolve().parent / "data" / "linear_srgb_d65_weights.npy"
+
+
+def compute_channel_matrix() -> np.ndarray:
+    """M (3, 376) from exporters.colorimetry (colour-science): XYZ-to-linear-sRGB matrix times the D65 CMF
+    weights.  ``python -m exporters.collapse`` writes it to CHANNEL_MATRIX_PATH."""
+    return xyz_to_linear_srgb_matrix("D65") @ xyz_weights("D65")
+
+
 @cache
 def channel_matrix() -> np.ndarray:
     """M (3, 376): linear sRGB (D65) = M @ R for a reflectance spectrum R on the project grid."""
-    m = xyz_to_linear_srgb_matrix("D65") @ xyz_weights("D65")
+    m = np.load(CHANNEL_MATRIX_PATH) if CHANNEL_MATRIX_PATH.is_file() else compute_channel_matrix()
+    if m.shape != (3, N_WAVELENGTHS):
+        raise RuntimeError(f"{CHANNEL_MATRIX_PATH} holds shape {m.shape}, expected (3, {N_WAVELENGTHS})")
     m.setflags(write=False)
     return m
 
@@ -94,7 +122,7 @@ class ChannelMedia:
     (N, K) anisotropy; ``weight`` (N, K, 3); ``target`` (N, 3) the linear-sRGB channel reflectance the
     mixture reproduces (sum_k weight R_cycles(alpha, g) = target where reachable); ``low``/``high`` (N, K, 3)
     shares clamped at alpha = 0.2 / raised weight; ``unreachable`` (N, 3) channels brighter than Cycles
-    can show with weights <= 1.
+    can show with weights <= 1; ``mfp_capped`` (N, K, 3) extinction capped at 1 / min_mfp_cm.
     """
 
     alpha: np.ndarray
@@ -105,10 +133,12 @@ class ChannelMedia:
     low: np.ndarray
     high: np.ndarray
     unreachable: np.ndarray
+    mfp_capped: np.ndarray | None = None
+    ior: float = reflectance_tables.CYCLES_IOR
 
     def cycles_reflectance(self) -> np.ndarray:
         """(N, 3): sum_k weight R_cycles(alpha, g), the diffuse reflectance these media render in Cycles."""
-        r = reflectance_tables.reflectance("cycles", self.alpha, self.g[..., None])
+        r = reflectance_tables.reflectance("cycles", self.alpha, self.g[..., None], self.ior)
         return np.sum(self.weight * r, axis=1)
 
 
@@ -131,12 +161,15 @@ def _check_shapes(reflectance, alpha, sigma_t, g, weight) -> None:
         raise ValueError("need alpha in [0, 1], sigma_t > 0, |g| < 1 and weight >= 0")
 
 
-def collapse(reflectance, alpha, sigma_t_cm, g, weight, target_scale=None, g_max: float = G_MAX) -> ChannelMedia:
+def collapse(reflectance, alpha, sigma_t_cm, g, weight, target_scale=None, g_max: float = G_MAX,
+             ior: float = reflectance_tables.CYCLES_IOR, min_mfp_cm: float = MIN_MFP_CM) -> ChannelMedia:
     """Collapse spectral mixtures to per-channel Cycles media (method: module docstring).
 
     ``reflectance`` (N, 376); ``alpha``, ``sigma_t_cm`` (cm^-1), ``g``, ``weight`` (N, K, 376) as the model
     outputs them; ``target_scale`` (N,) optional factor on the target colour (the model's exposure, to
-    match the painted brightness instead of the model's unit-exposure reflectance).
+    match the painted brightness instead of the model's unit-exposure reflectance); ``ior``: the IOR of
+    the Cycles closures (the node group's IOR input), which sets how the view ray enters the medium;
+    ``min_mfp_cm``: the smallest mean free path handed to Cycles (step 7; 0 disables the cap).
     """
     refl = _finite("reflectance", reflectance)
     al, st, gg, w = (_finite(n, x) for n, x in (("alpha", alpha), ("sigma_t", sigma_t_cm), ("g", g),
@@ -170,15 +203,23 @@ def collapse(reflectance, alpha, sigma_t_cm, g, weight, target_scale=None, g_max
     g_light = ((light * gg) @ omega.T).sum(axis=2) / np.maximum(light_all, _TINY)
     g_weight = ((w * gg) @ omega.T).sum(axis=2) / np.maximum(w_mean.sum(axis=2), _TINY)
     g_eff = np.clip(np.where(light_all > _TINY, g_light, g_weight), cycles.G_MIN, g_max)
-    return _solve_channels(share * target[:, None, :], w_mean, g_eff, d_mean, target)
+    if min_mfp_cm < 0:
+        raise ValueError("min_mfp_cm must be >= 0")
+    return _solve_channels(share * target[:, None, :], w_mean, g_eff, d_mean, target, ior, min_mfp_cm)
 
 
-def _solve_channels(contribution, w_mean, g_eff, d_mean, target) -> ChannelMedia:
+def alpha_soft_max(g) -> np.ndarray:
+    """The albedo whose similar isotropic medium has albedo ALPHA_STAR_SOFT_MAX, for anisotropy g."""
+    gg = np.asarray(g, dtype=np.float64)
+    return ALPHA_STAR_SOFT_MAX / (1.0 - gg + ALPHA_STAR_SOFT_MAX * gg)
+
+
+def _solve_channels(contribution, w_mean, g_eff, d_mean, target, ior: float, min_mfp_cm: float) -> ChannelMedia:
     """Per (N, K, 3): alpha and weight with w R_cycles(alpha, g) = contribution; sigma_t from D."""
     g3 = np.broadcast_to(g_eff[..., None], contribution.shape)
-    r_lo = reflectance_tables.reflectance("cycles", ALPHA_MIN, g3)
-    r_soft = reflectance_tables.reflectance("cycles", ALPHA_SOFT_MAX, g3)
-    r_hard = reflectance_tables.reflectance("cycles", ALPHA_HARD_MAX, g3)
+    r_lo = reflectance_tables.reflectance("cycles", ALPHA_MIN, g3, ior)
+    r_soft = reflectance_tables.reflectance("cycles", alpha_soft_max(g3), g3, ior)
+    r_hard = reflectance_tables.reflectance("cycles", ALPHA_HARD_MAX, g3, ior)
     used = w_mean > 1e-12
     rho = np.where(used, contribution / np.maximum(w_mean, 1e-12), 0.0)
     rho_c = np.clip(rho, r_lo, r_soft)
@@ -187,15 +228,17 @@ def _solve_channels(contribution, w_mean, g_eff, d_mean, target) -> ChannelMedia
     rho_over = np.clip(contribution, r_lo, r_hard)  # weight 1: reflectance must carry all of it
     rho_c = np.where(over, rho_over, rho_c)
     weight = np.where(over, np.minimum(contribution / rho_c, WEIGHT_MAX), weight)
-    alpha = reflectance_tables.albedo_for_reflectance("cycles", rho_c, g3)
+    alpha = reflectance_tables.albedo_for_reflectance("cycles", rho_c, g3, ior)
     alpha = np.clip(alpha, ALPHA_MIN, ALPHA_HARD_MAX)
     sigma_t = 1.0 / (d_mean * np.sqrt(3.0 * (1.0 - alpha) * (1.0 - alpha * g3)))
+    capped = sigma_t * min_mfp_cm > 1.0
+    sigma_t = np.where(capped, 1.0 / max(min_mfp_cm, 1e-300), sigma_t)
     low = used & (rho < r_lo)
     high = weight > w_mean * (1.0 + 1e-9)
-    reached = np.sum(weight * reflectance_tables.reflectance("cycles", alpha, g3), axis=1)
+    reached = np.sum(weight * reflectance_tables.reflectance("cycles", alpha, g3, ior), axis=1)
     unreachable = reached < target * (1.0 - 1e-3)
     out = ChannelMedia(alpha=alpha, sigma_t_cm=sigma_t, g=np.array(g_eff), weight=weight, target=target, low=low,
-                       high=high, unreachable=unreachable)
+                       high=high, unreachable=unreachable, mfp_capped=capped, ior=float(ior))
     for name in ("alpha", "sigma_t_cm", "g", "weight"):
         if not np.all(np.isfinite(getattr(out, name))):
             raise RuntimeError(f"collapse produced non-finite {name}")  # guarded above; never expected
@@ -219,3 +262,9 @@ def to_cycles(media: ChannelMedia, unit_scale_m: float = 1.0) -> CyclesMaps:
     g3 = np.broadcast_to(media.g[..., None], media.alpha.shape)
     cin = cycles.medium_to_cycles(media.alpha, media.sigma_t_cm, g3, unit_scale_m=unit_scale_m, g_max=cycles.G_MAX)
     return CyclesMaps(color=cin.color, radius=cin.radius, weight=media.weight, anisotropy=np.array(media.g))
+
+
+if __name__ == "__main__":
+    np.save(CHANNEL_MATRIX_PATH, compute_channel_matrix())
+    print(f"wrote {CHANNEL_MATRIX_PATH}")
+    sys.exit(0)

@@ -128,18 +128,23 @@ def linear_srgb_to_xyz(rgb: np.ndarray) -> np.ndarray:
     return _finite(rgb, "rgb") @ np.linalg.inv(xyz_to_linear_srgb_matrix("D65")).T
 
 
+# The two sRGB curves are written out (IEC 61966-2-1, the same formulas as colour-science's eotf_sRGB /
+# eotf_inverse_sRGB, compared in tests/test_colorimetry.py) because the add-on decodes albedo textures
+# inside Blender, whose Python has numpy but not colour-science.
+
+
 def srgb_encode(linear: np.ndarray) -> np.ndarray:
     """sRGB transfer function (IEC 61966-2-1) of linear values (negatives stay on the linear segment)."""
-    import colour
-
-    return colour.models.eotf_inverse_sRGB(_finite(linear, "linear sRGB"))
+    x = _finite(linear, "linear sRGB")
+    with np.errstate(invalid="ignore"):
+        return np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.abs(x) ** (1.0 / 2.4) - 0.055)
 
 
 def srgb_decode(encoded: np.ndarray) -> np.ndarray:
     """Inverse of :func:`srgb_encode`: sRGB-encoded values -> linear values."""
-    import colour
-
-    return colour.models.eotf_sRGB(_finite(encoded, "sRGB"))
+    v = _finite(encoded, "sRGB")
+    with np.errstate(invalid="ignore"):
+        return np.where(v <= 0.04045, v / 12.92, ((np.abs(v) + 0.055) / 1.055) ** 2.4)
 
 
 def xyz_to_lab(xyz: np.ndarray, illuminant: Illuminant = "D65") -> np.ndarray:

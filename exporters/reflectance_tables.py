@@ -1,27 +1,30 @@
-"""Total diffuse reflectance of a semi-infinite Henyey-Greenstein medium, R(alpha, g), for two boundaries.
+"""Reflectance of a semi-infinite Henyey-Greenstein medium: Cycles' random-walk boundary and the model's.
 
-Both tables are the reflectance for *diffuse* (cosine-weighted) illumination of a semi-infinite,
-homogeneous medium with single-scattering albedo ``alpha`` and HG anisotropy ``g``, computed once by
-adding-doubling (iadpython 0.5.3, ``Sample(a, b=inf, g, n, quad_pts=16).rt()`` -> URU; Prahl's method,
-checked against van de Hulst's tables) and stored in ``exporters/data/reflectance_tables.npz``:
+Computed once by adding-doubling (iadpython 0.5.3, Prahl's method, checked against van de Hulst's tables)
+and stored in ``exporters/data/reflectance_tables.npz``; reading needs numpy only.
 
-* ``"cycles"``: n = 1 (index-matched).  What Cycles 5.0's RANDOM_WALK closure renders: the entry bounce
-  has no Fresnel weight (ior 1.01 changes no direction), the exit is a Lambertian of weight 1, so under
-  uniform white light a pixel seen from direction v is the directional-hemispherical reflectance R(v) of
-  the index-matched medium, and the cosine-weighted mean over v (what a flat patch averaged over viewing
-  directions, or a large sphere seen whole, shows) is URU.  Checked against Cycles renders in
+* ``"cycles"``: what Cycles 5.0's RANDOM_WALK closure renders under uniform white light, averaged over
+  viewing directions with the cosine weight (what a flat patch seen from everywhere, or a large sphere
+  seen whole, shows; by reciprocity the reflectance for diffuse illumination).  The kernel
+  (integrator/subsurface.h) refracts the camera ray into the medium by Snell's law with the closure's IOR
+  (roughness 0), applies **no** Fresnel weight, and ends the walk at the first surface crossing with a
+  Lambertian of weight 1, so a pixel seen from mu = cos(view angle) is the directional reflectance
+  R1(mu_t) of the *index-matched* medium at the refracted cosine mu_t = sqrt(1 - (1 - mu^2) / eta^2).
+  Averaged: H(alpha, g; eta) = 2 int_0^1 mu R1(mu_t(mu)) dmu = eta^2 2 int_{mu_0}^1 mu_t R1(mu_t) dmu_t,
+  mu_0 = sqrt(1 - 1/eta^2).  eta = 1 gives iadpython's URU.  Stored: R1 at 16 quadrature cosines
+  (``Sample(n=1, quad_pts=16).rt_matrices()``); H is integrated on load for the IOR asked for
+  (natural cubic spline of R1 in mu, 2049-point trapezoid).  Checked against Cycles renders in
   tests/test_bake_fidelity.py.
-* ``"model"``: n = 1.4 below air, the specular surface reflection excluded (URU(alpha) - URU(0)): the
-  boundary of the training simulator and lookup tables (training/sim/lut.py: "diffuse (cosine-weighted)
-  illumination through the Fresnel boundary, specular reflection excluded"), i.e. the reflectance each
-  mixture component k of the model carries, R(alpha_k, g_k).
+* ``"model"``: n = 1.4 below air, diffuse illumination, the specular surface reflection excluded
+  (URU(alpha) - URU(0)): the boundary of the training simulator and lookup tables (training/sim/lut.py),
+  i.e. the reflectance each mixture component k of the model carries, R(alpha_k, g_k).
 
 Grid: u = sqrt(1 - alpha) uniform on [1e-3, 1] (129 nodes; near alpha -> 1, R ~ 1 - c u is nearly linear
-in u, so bilinear interpolation in (u, g) is accurate to ~1e-4, see tests/test_collapse.py), and g from 0
+in u, so bilinear interpolation in (u, g) is accurate to ~1e-3, see tests/test_collapse.py), and g from 0
 to 0.95 in steps of 0.05.  alpha above 1 - 1e-6 is treated as 1 - 1e-6.
 
 Regenerate with ``python -m exporters.reflectance_tables --build`` (needs iadpython, a test dependency;
-about 10 minutes on one core).  Reading the tables needs numpy only.
+about 10 minutes on one core).
 """
 
 from __future__ import annotations
@@ -37,13 +40,18 @@ import numpy as np
 
 Boundary = Literal["cycles", "model"]
 BOUNDARIES: tuple[str, ...] = ("cycles", "model")
-#: Refractive index below air for each table.
-BOUNDARY_N: dict[str, float] = {"cycles": 1.0, "model": 1.4}
 TABLE_PATH = Path(__file__).resolve().parent / "data" / "reflectance_tables.npz"
 U_MIN: float = 1e-3
 N_U: int = 129
 G_STEP: float = 0.05
 N_G: int = 20
+#: Refractive index of the model's boundary (SPEC §1 n = 1.4).
+MODEL_N: float = 1.4
+#: Quadrature cosines of the stored directional reflectance R1(mu) (16: iadpython is less accurate at 32 as
+#: alpha -> 1, e.g. URU(0.999) 0.92847 vs van de Hulst 0.92971; at 16 it is 0.9297).
+N_MU: int = 16
+#: Cycles clamps the closure IOR to this range (closure/bssrdf.h bssrdf_setup).
+IOR_MIN, IOR_MAX = 1.01, 3.8
 #: Largest albedo the tables resolve (u = U_MIN).
 ALPHA_TABLE_MAX: float = 1.0 - U_MIN**2
 
@@ -58,35 +66,37 @@ def g_grid() -> np.ndarray:
     return np.arange(N_G) * G_STEP
 
 
-def build_tables(path: str | Path = TABLE_PATH, quad_pts: int = 16) -> Path:
-    """Compute both tables with iadpython (adding-doubling) and write them to ``path`` (.npz)."""
+def build_tables(path: str | Path = TABLE_PATH) -> Path:
+    """Compute the tables with iadpython (adding-doubling) and write them to ``path`` (.npz)."""
     import iadpython  # test/build dependency only; lazily imported
 
     u, g = u_grid(), g_grid()
     alpha = 1.0 - u**2
-    out: dict[str, np.ndarray] = {"u": u, "g": g}
-    for name in BOUNDARIES:
-        n = BOUNDARY_N[name]
-        table = np.empty((g.size, u.size))
-        for i, gi in enumerate(g):
-            t0 = time.perf_counter()
-            sample = iadpython.Sample(a=alpha, b=np.full_like(alpha, np.inf), g=np.full_like(alpha, gi), n=n,
-                                      quad_pts=quad_pts)
-            uru = np.asarray(sample.rt()[2], dtype=np.float64)
-            if n != 1.0:  # exclude the specular reflection of the smooth surface (the albedo-0 value)
-                spec = iadpython.Sample(a=0.0, b=np.inf, g=gi, n=n, quad_pts=quad_pts).rt()[2]
-                uru = uru - float(spec)
-            table[i] = uru
-            print(f"[tables] {name} g={gi:.2f}: R in [{uru.min():.4f}, {uru.max():.4f}] "
-                  f"({time.perf_counter() - t0:.1f} s)", flush=True)
+    directional = np.empty((g.size, u.size, N_MU))
+    model = np.empty((g.size, u.size))
+    mu = None
+    for i, gi in enumerate(g):
+        t0 = time.perf_counter()
+        for j, aj in enumerate(alpha):
+            s = iadpython.Sample(a=aj, b=np.inf, g=gi, n=1.0, quad_pts=N_MU)
+            s.update_quadrature()
+            r_mat = s.rt_matrices()[0]
+            directional[i, j] = (r_mat * s.twonuw[None, :]).sum(axis=1)  # R1(mu_i), diffuse-integrated
+            mu = np.array(s.nu, dtype=np.float64) if mu is None else mu
+        sample = iadpython.Sample(a=alpha, b=np.full_like(alpha, np.inf), g=np.full_like(alpha, gi), n=MODEL_N,
+                                  quad_pts=16)
+        spec = iadpython.Sample(a=0.0, b=np.inf, g=gi, n=MODEL_N, quad_pts=16).rt()[2]
+        model[i] = np.asarray(sample.rt()[2], dtype=np.float64) - float(spec)
+        print(f"[tables] g={gi:.2f}: R1 in [{directional[i].min():.4f}, {directional[i].max():.4f}], model R in "
+              f"[{model[i].min():.4f}, {model[i].max():.4f}] ({time.perf_counter() - t0:.1f} s)", flush=True)
+    for name, table in (("directional", directional), ("model", model)):
         if not np.all(np.isfinite(table)) or np.any(np.diff(table, axis=1) > 0):
             raise RuntimeError(f"{name} table is not finite or not decreasing in u")
-        out[name] = table
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    np.savez_compressed(path, **out, source=np.array(
-        f"iadpython {iadpython.__version__} Sample(a, b=inf, g, n, quad_pts={quad_pts}).rt() URU; "
-        "model: n=1.4 minus the a=0 (specular) value"))
+    np.savez_compressed(path, u=u, g=g, mu=mu, directional=directional, model=model, source=np.array(
+        f"iadpython {iadpython.__version__}: directional = Sample(a, b=inf, g, n=1, quad_pts={N_MU}).rt_matrices() "
+        "R summed against 2 nu w; model = Sample(a, b=inf, g, n=1.4, quad_pts=16).rt() URU minus its a=0 value"))
     return path
 
 
@@ -96,15 +106,64 @@ def _load() -> dict[str, np.ndarray]:
         raise FileNotFoundError(f"reflectance tables missing: {TABLE_PATH} (python -m exporters.reflectance_tables "
                                 "--build)")
     with np.load(TABLE_PATH) as data:
-        tables = {key: np.array(data[key]) for key in ("u", "g", *BOUNDARIES)}
+        tables = {key: np.array(data[key]) for key in ("u", "g", "mu", "directional", "model")}
     for arr in tables.values():
         arr.setflags(write=False)
     return tables
 
 
-def _check(boundary: str) -> None:
-    if boundary not in BOUNDARIES:
+def _natural_spline(nodes: np.ndarray, values: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """Natural cubic spline through (nodes, values[..., i]) evaluated at x (constant outside the nodes).
+
+    Hand-written (a 16-node tridiagonal system, solved densely) because the add-on runs inside Blender,
+    whose Python has numpy but not scipy.
+    """
+    n = nodes.size
+    h = np.diff(nodes)
+    a = np.zeros((n, n))
+    rhs = np.zeros(values.shape[:-1] + (n,))
+    a[0, 0] = a[-1, -1] = 1.0
+    for i in range(1, n - 1):
+        a[i, i - 1], a[i, i], a[i, i + 1] = h[i - 1], 2.0 * (h[i - 1] + h[i]), h[i]
+    slopes = np.diff(values, axis=-1) / h
+    rhs[..., 1:-1] = 6.0 * np.diff(slopes, axis=-1)
+    m = np.linalg.solve(a, rhs.reshape(-1, n).T).T.reshape(rhs.shape)  # second derivatives
+    xc = np.clip(x, nodes[0], nodes[-1])
+    i = np.clip(np.searchsorted(nodes, xc) - 1, 0, n - 2)
+    t0, t1 = nodes[i + 1] - xc, xc - nodes[i]
+    hi = h[i]
+    return (m[..., i] * t0**3 / (6 * hi) + m[..., i + 1] * t1**3 / (6 * hi)
+            + (values[..., i] / hi - m[..., i] * hi / 6) * t0 + (values[..., i + 1] / hi - m[..., i + 1] * hi / 6) * t1)
+
+
+@cache
+def _cycles_table(ior: float) -> np.ndarray:
+    """H[g, u] for entry IOR ``ior``: eta^2 int_{mu_0}^1 2 mu R1(mu) dmu (module docstring), with R1 a
+    natural cubic spline through the 16 stored cosines and a 2049-point trapezoid."""
+    t = _load()
+    mu0 = np.sqrt(1.0 - 1.0 / ior**2)
+    x = np.linspace(mu0, 1.0, 2049)
+    r1 = _natural_spline(t["mu"], t["directional"], x)  # (G, U, X)
+    y = 2.0 * x * r1
+    table = ior**2 * np.sum(0.5 * (y[..., 1:] + y[..., :-1]) * np.diff(x), axis=-1)  # trapezoid rule
+    table.setflags(write=False)
+    return table
+
+
+def _table(boundary: str, ior: float | None) -> np.ndarray:
+    if boundary == "model":
+        return _load()["model"]
+    if boundary != "cycles":
         raise ValueError(f"boundary must be one of {BOUNDARIES}, not {boundary!r}")
+    eta = CYCLES_IOR if ior is None else float(ior)
+    if not (1.0 <= eta <= IOR_MAX):  # 1.0: the index-matched limit (URU), useful as a reference
+        raise ValueError(f"Cycles' subsurface IOR must lie in [{IOR_MIN}, {IOR_MAX}] (the kernel clamps it), "
+                         f"got {eta}")
+    return _cycles_table(round(eta, 6))
+
+
+#: Default entry IOR of the Cycles closures (the tissue index of SPEC §1; blender_addon.nodes.DEFAULT_IOR).
+CYCLES_IOR: float = 1.4
 
 
 def _g_index(g: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -125,15 +184,15 @@ def _finite(name: str, x) -> np.ndarray:
     return arr
 
 
-def reflectance(boundary: Boundary, alpha, g) -> np.ndarray:
-    """R(alpha, g) of a semi-infinite medium under diffuse light for ``boundary`` ("cycles" or "model").
+def reflectance(boundary: Boundary, alpha, g, ior: float | None = None) -> np.ndarray:
+    """Diffuse reflectance R(alpha, g) of a semi-infinite medium for ``boundary`` ("cycles" or "model").
 
     ``alpha`` in [0, 1], ``g`` in [0, 0.95] (broadcastable; values outside are clipped to the table, alpha
-    above 1 - 1e-6 counts as 1 - 1e-6).  Bilinear interpolation in (sqrt(1 - alpha), g); float64.
+    above 1 - 1e-6 counts as 1 - 1e-6); ``ior``: the Cycles closure's IOR (default :data:`CYCLES_IOR`;
+    ignored for "model").  Bilinear interpolation in (sqrt(1 - alpha), g); float64.
     """
-    _check(boundary)
+    t = _table(boundary, ior)
     al, gg = np.broadcast_arrays(_finite("alpha", alpha), _finite("g", g))
-    t = _load()[boundary]
     u = _u_of_alpha(al)
     xu = (u - U_MIN) / (1.0 - U_MIN) * (N_U - 1)
     j = np.minimum(np.floor(xu).astype(np.intp), N_U - 2)
@@ -144,20 +203,21 @@ def reflectance(boundary: Boundary, alpha, g) -> np.ndarray:
     return lo * (1.0 - fg) + hi * fg
 
 
-def albedo_for_reflectance(boundary: Boundary, reflectance_target, g, iterations: int = 60) -> np.ndarray:
+def albedo_for_reflectance(boundary: Boundary, reflectance_target, g, ior: float | None = None,
+                           iterations: int = 60) -> np.ndarray:
     """Inverse of :func:`reflectance` in alpha: the albedo whose table reflectance is ``reflectance_target``.
 
     R is strictly increasing in alpha on the table (checked when it is built), so the answer is unique;
     found by bisection in u = sqrt(1 - alpha) (60 halvings: below 1e-15 in u).  Targets outside
     [R(0, g), R(1 - 1e-6, g)] give the end albedo (0 or 1 - 1e-6): callers clamp targets first.
     """
-    _check(boundary)
+    _table(boundary, ior)
     target, gg = np.broadcast_arrays(_finite("reflectance", reflectance_target), _finite("g", g))
     lo = np.full(target.shape, U_MIN)  # u = U_MIN: highest reflectance
     hi = np.ones(target.shape)
     for _ in range(iterations):
         mid = 0.5 * (lo + hi)
-        too_bright = reflectance(boundary, 1.0 - mid**2, gg) > target  # R decreases with u
+        too_bright = reflectance(boundary, 1.0 - mid**2, gg, ior) > target  # R decreases with u
         lo = np.where(too_bright, mid, lo)
         hi = np.where(too_bright, hi, mid)
     return 1.0 - (0.5 * (lo + hi)) ** 2

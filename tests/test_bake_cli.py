@@ -141,3 +141,17 @@ def test_usage_errors_exit_2(skin_png, tmp_path):
     assert proc.returncode == 2 and "--albedo" in proc.stderr
     proc = bake("--albedo", str(skin_png), "--out", str(tmp_path / "y"), "--unit-scale", "-1")
     assert proc.returncode == 2 and "unit scale" in proc.stderr
+
+
+def test_runs_without_colour_science_or_scipy(skin_png, tmp_path):
+    # Blender's Python has numpy and OpenImageIO but neither colour-science nor scipy: the bake must not need
+    # them (sRGB decoding and the channel weights are stored / written out in exporters).
+    out = tmp_path / "plain"
+    script = ("import sys, runpy\n"
+              "for name in ('colour', 'scipy'):\n"
+              "    sys.modules[name] = None  # any import of them now fails\n"
+              f"sys.argv = ['bake.py', '--albedo', {str(skin_png)!r}, '--out', {str(out)!r}]\n"
+              f"runpy.run_path({str(BAKE)!r}, run_name='__main__')\n")
+    proc = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert (out / "face_maps.json").is_file()

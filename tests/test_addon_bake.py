@@ -1,0 +1,180 @@
+"""Invert Skin Albedo with the real pip bpy, the real shipped model and real files: register, bake from the
+active Image Texture node, check the images and the node group, render 32 x 32 in Cycles (SVM and OSL), step
+and cancel like the modal operator, unregister cleanly."""
+
+from __future__ import annotations
+
+import importlib
+import sys
+from pathlib import Path
+
+import bpy
+import numpy as np
+import pytest
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from blender_addon import baker, nodes, preferences  # noqa: E402
+from exporters import baking, maps  # noqa: E402
+from tests.addon_scene import (  # noqa: E402
+    image_pixels,
+    render_small,
+    run_invert,
+    skin_codes,
+    skin_object,
+    snapshot,
+    write_image,
+)
+
+addon_utils = importlib.import_module("addon_utils")
+ADDON = "blender_addon"
+K = baking.inference.load_model(preferences.DEFAULT_MODEL, threads=1).k
+
+
+@pytest.fixture()
+def addon():
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    mod = addon_utils.enable(ADDON, default_set=True, handle_error=None)
+    assert mod is not None
+    prefs = bpy.context.preferences.addons[ADDON].preferences
+    prefs.threads = 1
+    yield prefs
+    addon_utils.disable(ADDON, default_set=True)
+
+
+@pytest.fixture(scope="module")
+def albedo_png(tmp_path_factory) -> Path:
+    return write_image(tmp_path_factory.mktemp("alb") / "albedo.png", skin_codes(), "uint8")
+
+
+@pytest.fixture(scope="module")
+def reference_maps(albedo_png, tmp_path_factory) -> Path:
+    """The same PNG baked by exporters.baking (no Blender involved): what the images must hold."""
+    out = tmp_path_factory.mktemp("ref")
+    baking.bake(albedo_png, out, preferences.DEFAULT_MODEL, baking.BakeOptions(threads=1))
+    return out
+
+
+def group_node(mat):
+    found = [n for n in mat.node_tree.nodes if n.bl_idname == "ShaderNodeGroup"]
+    assert len(found) == 1
+    return found[0]
+
+
+def test_bake_svm_packed_wired_and_renders(addon, albedo_png, reference_maps):
+    obj, mat, tex = skin_object(albedo_png)
+    user_nodes = {n.name for n in mat.node_tree.nodes}
+    assert run_invert(obj, backend="SVM") == {"FINISHED"}
+    tree = mat.node_tree
+    assert user_nodes < {n.name for n in tree.nodes}  # the user's nodes are all kept
+    assert tree.nodes["Principled BSDF"].inputs["Base Color"].links[0].from_node == tex
+    gnode = group_node(mat)
+    assert gnode.node_tree.name.startswith(nodes.GROUP_NAME) and gnode.node_tree["spectral_skin_sss_k"] == K
+    assert gnode.node_tree["spectral_skin_sss_backend"] == "SVM"
+    out = next(n for n in tree.nodes if n.bl_idname == "ShaderNodeOutputMaterial")
+    assert out.inputs["Surface"].links[0].from_node == gnode
+    assert mat[nodes.PREVIOUS_SURFACE_PROP] == "Principled BSDF"
+    assert gnode.inputs["IOR"].default_value == pytest.approx(1.4)
+    uv = next(n for n in tree.nodes if n.bl_idname == "ShaderNodeUVMap")
+    for k in range(1, K + 1):
+        for kind in nodes.KINDS:
+            src = gnode.inputs[nodes.socket_name(k, kind)].links[0].from_node
+            assert src.bl_idname == "ShaderNodeTexImage" and src.interpolation == "Closest"
+            assert src.inputs["Vector"].links[0].from_node == uv  # same UVs as the albedo
+            image = src.image
+            name = f"albedo_k{k}_{kind.lower()}.exr"
+            assert image.name == name and image.packed_file is not None and image.is_float
+            assert image.colorspace_settings.name == "Non-Color"
+            assert tuple(image.size) == (4, 3)
+            ref, _, _ = maps.read_exr(reference_maps / name)
+            got = image_pixels(image)[..., : ref.shape[2]]
+            np.testing.assert_allclose(got, ref, rtol=1e-6, atol=1e-7)
+    assert not any(p.name.startswith("spectral_skin_sss_") for p in Path(baker.tempfile.gettempdir()).iterdir())
+    px = render_small()
+    assert np.all(np.isfinite(px)) and px[16, 16, :3].max() > 0.0
+
+
+def test_bake_osl_and_files_beside_blend(addon, albedo_png, tmp_path):
+    bpy.ops.wm.save_as_mainfile(filepath=str(tmp_path / "scene.blend"))
+    obj, mat, _ = skin_object(albedo_png)
+    assert run_invert(obj, backend="OSL", storage="FILES") == {"FINISHED"}
+    folder = tmp_path / "albedo_skin_maps"
+    expected = {f"albedo_k{k}_{kind}.exr" for k in range(1, K + 1) for kind in ("color", "radius", "weight",
+                                                                                 "anisotropy")}
+    assert {p.name for p in folder.iterdir()} == expected | {"albedo_maps.json"}
+    gnode = group_node(mat)
+    assert gnode.node_tree["spectral_skin_sss_backend"] == "OSL" and bpy.context.scene.cycles.shading_system
+    image = gnode.inputs["k1 Radius"].links[0].from_node.image
+    assert image.packed_file is None and Path(bpy.path.abspath(image.filepath)) == folder / "albedo_k1_radius.exr"
+    px = render_small()
+    assert np.all(np.isfinite(px)) and px[16, 16, :3].max() > 0.0
+
+
+def test_auto_backend_follows_the_device(addon, albedo_png):
+    scene = bpy.context.scene
+    scene.cycles.device = "CPU"
+    assert baker.pick_backend(scene, "AUTO") == "OSL"
+    scene.cycles.device = "GPU"  # no OptiX on this machine: compute device type NONE
+    assert baker.pick_backend(scene, "AUTO") == "SVM"
+    with pytest.raises(baker.BakeInputError, match="OSL does not run"):
+        baker.pick_backend(scene, "OSL")
+    assert baker.pick_backend(scene, "SVM") == "SVM"
+
+
+def test_generated_image_and_shared_group(addon, tmp_path):
+    # An image with no file (painted in Blender): float pixels, non-square 3 x 2, linear.
+    lin = np.array([[0.55, 0.32, 0.25], [0.30, 0.17, 0.12], [0.62, 0.40, 0.33]])
+    img = bpy.data.images.new("painted", 3, 2, float_buffer=True)
+    img.colorspace_settings.name = "Linear Rec.709"
+    rows = np.stack([lin, lin[::-1]])  # top row, bottom row
+    img.pixels.foreach_set(np.concatenate([rows[::-1], np.ones((2, 3, 1))], axis=2).astype(np.float32).ravel())
+    obj1, mat1, _ = skin_object(None, name="A")
+    obj2, mat2, _ = skin_object(None, name="B")
+    assert run_invert(obj1, image_name="painted", backend="SVM") == {"FINISHED"}
+    assert run_invert(obj2, image_name="painted", backend="SVM") == {"FINISHED"}
+    g1, g2 = group_node(mat1), group_node(mat2)
+    assert g1.node_tree == g2.node_tree  # one shared group, the first material still has it
+    model = baking.inference.load_model(preferences.DEFAULT_MODEL, threads=1)
+    albedo = maps.AlbedoImage(rgb=rows, alpha=None, colorspace="linear", source_format="float", n_clamped=0)
+    job = baking.BakeJob(albedo, tmp_path, "ref", model, baking.BakeOptions(threads=1))
+    for _ in job.steps():
+        pass
+    job.finish()
+    ref = maps.read_exr(tmp_path / f"ref_k{K}_color.exr")[0]
+    got = image_pixels(g2.inputs[f"k{K} Color"].links[0].from_node.image)[..., :3]
+    np.testing.assert_allclose(got, ref, rtol=1e-6, atol=1e-7)
+
+
+def test_stepping_then_cancel_changes_nothing(addon, tmp_path):
+    codes = np.random.default_rng(3).integers(60, 230, (6, 5, 3)).astype(np.uint8)  # 30 distinct texels
+    png = write_image(tmp_path / "many.png", codes, "uint8")
+    obj, mat, _ = skin_object(png)
+    out = tmp_path / "maps_out"
+    before = snapshot(out)
+    for storage in ("FILES", "PACK"):
+        settings = baker.BakeSettings(model_path=preferences.DEFAULT_MODEL, storage=storage, output_dir=str(out),
+                                      threads=1, chunk=7)
+        with bpy.context.temp_override(object=obj, active_object=obj):
+            run = baker.AddonBake(bpy.context, settings)
+        assert run.step() and 0.0 < run.fraction < 1.0  # one chunk of 7 of the 30 colours
+        run.cancel()
+        assert snapshot(out) == before
+    with bpy.context.temp_override(object=obj, active_object=obj):
+        run = baker.AddonBake(bpy.context, baker.BakeSettings(model_path=preferences.DEFAULT_MODEL, threads=1,
+                                                              chunk=7, backend="SVM"))
+    fractions = []
+    while run.step():
+        fractions.append(run.fraction)
+    assert fractions == sorted(fractions) and len(fractions) == 5 and fractions[-1] == pytest.approx(1.0)
+    assert "baked" in run.apply(bpy.context)
+
+
+def test_unregister_cleanly():
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    assert addon_utils.enable(ADDON, default_set=True, handle_error=None) is not None
+    assert hasattr(bpy.types.Scene, "spectral_skin") and hasattr(bpy.types.WindowManager, "spectral_skin_running")
+    assert bpy.types.SPECTRAL_SKIN_OT_invert_albedo.bl_options == {"REGISTER", "UNDO"}  # one undo step
+    addon_utils.disable(ADDON, default_set=True)
+    assert not hasattr(bpy.types.Scene, "spectral_skin")
+    assert not hasattr(bpy.types.WindowManager, "spectral_skin_progress")
+    assert not hasattr(bpy.types, "SPECTRAL_SKIN_OT_invert_albedo")

@@ -1,0 +1,76 @@
+"""Render fidelity: baked maps rendered by Cycles reproduce the spectral model's colour.
+
+For three skin tones a uniform albedo image is baked by the operator (the real model, maps packed as
+images, the node group wired into the probe slab's material), and the slab (blender_addon/probe.py: a
+100-unit block, uniform white world, orthographic camera) is rendered from 4 view angles combined with
+the cosine weight (Gauss-Jacobi): the slab's diffuse reflectance.  The reference is computed here from the
+ONNX model alone: its ``reflectance`` spectrum (376 samples) in linear sRGB under D65
+(exporters.colorimetry.spectrum_to_linear_srgb), i.e. what a viewer of the spectral skin sees.
+Tolerance 3 % per channel, for the SVM and the OSL node groups.  1 Blender unit = 5 mm, so the slab is
+semi-infinite for every component and Cycles' float32 walk resolves the shortest mean free path.
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import bpy
+import numpy as np
+import onnxruntime as ort
+import pytest
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+import blender_addon  # noqa: E402
+from blender_addon import preferences, probe  # noqa: E402
+from exporters.colorimetry import spectrum_to_linear_srgb  # noqa: E402
+from tests.addon_scene import run_invert, write_image  # noqa: E402
+
+TONES = {  # linear sRGB albedo (light, medium, dark skin)
+    "light": np.array([0.70, 0.45, 0.33]),
+    "medium": np.array([0.40, 0.20, 0.12]),
+    "dark": np.array([0.12, 0.055, 0.033]),
+}
+SAMPLES = 1024
+TOLERANCE = 0.03
+
+
+def model_colour(albedo_rgb: np.ndarray, exposure: bool = False) -> np.ndarray:
+    """The spectral model's colour for one texel: linear sRGB (D65) of its reflectance spectrum."""
+    session = ort.InferenceSession(preferences.DEFAULT_MODEL, providers=["CPUExecutionProvider"])
+    refl, gamma = session.run(["reflectance", "exposure"], {"albedo_rgb": albedo_rgb[None].astype(np.float32)})
+    colour = spectrum_to_linear_srgb(refl.astype(np.float64))[0]
+    return colour * float(gamma[0, 0]) if exposure else colour
+
+
+def render_tone(tmp_path: Path, tone: str, backend: str, exposure: bool = False):
+    scene = probe.new_scene(samples=SAMPLES, resolution=16, seed=7)
+    scene.unit_settings.system = "METRIC"
+    scene.unit_settings.scale_length = 0.005
+    blender_addon.register()
+    try:
+        albedo = write_image(tmp_path / f"{tone}.exr", np.broadcast_to(TONES[tone], (2, 2, 3)).astype(np.float32),
+                             "float")
+        probe.slab_material()
+        slab = bpy.data.objects["ProbeSlab"]
+        assert run_invert(slab, filepath=str(albedo), backend=backend, match_exposure=exposure) == {"FINISHED"}
+        return probe.render_hemispherical(scene, 4)
+    finally:
+        blender_addon.unregister()
+
+
+CASES = [(tone, backend, False) for backend in ("SVM", "OSL") for tone in TONES] + [("light", "OSL", True)]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("tone, backend, exposure", CASES)
+def test_cycles_reproduces_the_spectral_colour(tmp_path, tone, backend, exposure):
+    target = model_colour(TONES[tone], exposure)
+    mean, err, seconds = render_tone(tmp_path, tone, backend, exposure)
+    rel = mean / target - 1.0
+    print(f"\n{backend} {tone}{' (exposure)' if exposure else ''}: cycles {np.round(mean, 5)} model "
+          f"{np.round(target, 5)} rel {np.round(rel * 100, 2)} % (stderr {np.round(err / target * 100, 2)} %, "
+          f"{seconds:.1f} s)")
+    assert np.all(err / target < 0.01), "too noisy to test 3 %"
+    assert np.all(np.abs(rel) <= TOLERANCE), rel
