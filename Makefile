@@ -7,7 +7,7 @@ STAMP := $(VENV)/.installed
 
 MITSUBA_STAMP := $(VENV)/.mitsuba-installed
 
-.PHONY: install mitsuba demo test lint bench clean
+.PHONY: install mitsuba demo extension test lint bench clean
 
 install: $(STAMP)
 
@@ -43,6 +43,12 @@ lint: $(STAMP)
 
 demo: $(STAMP)
 	$(PY) -m training demo
+
+# Blender extension zip (dist/) with the onnxruntime wheel for linux-x64, built and validated by Blender's own
+# extension tool from the bpy wheel; PLATFORMS=linux-x64,windows-x64,macos-arm64 for more (one zip each).
+PLATFORMS ?= linux-x64
+extension: $(STAMP)
+	$(PY) blender_addon/package.py --out dist --platforms $(PLATFORMS)
 
 bench: $(STAMP)
 	$(PY) -m training bench --out bench/results.md

@@ -1,0 +1,137 @@
+"""``make extension``: build and validate the Blender extension zip, with the onnxruntime wheel bundled.
+
+    python blender_addon/package.py [--out dist] [--platforms linux-x64[,windows-x64,macos-arm64]]
+                                    [--wheel-dir .whl] [--no-download]
+
+Steps: fetch the onnxruntime wheel of the pinned version for each platform with pip (``pip download
+--only-binary=:all: --no-deps``, cached in ``--wheel-dir``); stage the extension in ``build/extension``
+(``__init__.py``, ``blender_addon/``, ``exporters/`` and the repository manifest with ``platforms`` and
+``wheels`` added); build it with Blender's own extension tool (``blender_ext.py build``, the back-end of
+``blender --command extension build``, shipped in the bpy wheel) and validate the zip with it.
+
+Only onnxruntime is bundled: Blender's Python already has numpy and OpenImageIO, and onnxruntime's
+InferenceSession runs with nothing else (notes/blender_cycles.md §4).  This file is a script (it is not
+shipped in the zip: blender_manifest.toml excludes it) and needs neither bpy imported nor a Blender binary.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib.metadata
+import importlib.util
+import re
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+#: Blender platform -> the pip platform tag of onnxruntime's wheel for CPython 3.11 (Blender 4.2-5.x).
+PLATFORM_TAGS = {
+    "linux-x64": "manylinux_2_28_x86_64",
+    "windows-x64": "win_amd64",
+    "macos-arm64": "macosx_13_0_arm64",
+}
+PYTHON_VERSION = "3.11"
+SHIPPED = ("__init__.py", "blender_addon", "exporters")
+
+
+def blender_ext_tool() -> Path:
+    """blender_ext.py inside the installed bpy package (found without importing bpy)."""
+    spec = importlib.util.find_spec("bpy")
+    if spec is None or not spec.submodule_search_locations:
+        raise SystemExit("package.py: the bpy module is not installed (pip install bpy==5.0.1)")
+    base = Path(list(spec.submodule_search_locations)[0])
+    found = sorted(base.glob("*/scripts/addons_core/bl_pkg/cli/blender_ext.py"))
+    if not found:
+        raise SystemExit(f"package.py: blender_ext.py not found under {base}")
+    return found[-1]
+
+
+def fetch_wheel(platform: str, version: str, wheel_dir: Path, download: bool) -> Path:
+    """The onnxruntime wheel for ``platform`` in ``wheel_dir`` (downloaded with pip if missing)."""
+    tag = PLATFORM_TAGS[platform]
+    arch = tag.rsplit("_", 1)[-1] if platform != "windows-x64" else "amd64"
+    pattern = f"onnxruntime-{version}-cp311-cp311-*{arch}.whl"
+    existing = sorted(wheel_dir.glob(pattern))
+    if existing:
+        return existing[-1]
+    if not download:
+        raise SystemExit(f"package.py: no {pattern} in {wheel_dir} (run without --no-download)")
+    wheel_dir.mkdir(parents=True, exist_ok=True)
+    cmd = [sys.executable, "-m", "pip", "download", f"onnxruntime=={version}", "--only-binary=:all:", "--no-deps",
+           "--python-version", PYTHON_VERSION, "--implementation", "cp", "--platform", tag, "-d", str(wheel_dir),
+           "--quiet"]
+    subprocess.run(cmd, check=True)
+    existing = sorted(wheel_dir.glob(pattern))
+    if not existing:
+        raise SystemExit(f"package.py: pip did not produce {pattern}")
+    return existing[-1]
+
+
+def stage(stage_dir: Path, wheels: list[Path], platforms: list[str]) -> Path:
+    """Copy what the extension ships into ``stage_dir`` and write its manifest (platforms, wheels)."""
+    if stage_dir.exists():
+        shutil.rmtree(stage_dir)
+    stage_dir.mkdir(parents=True)
+    ignore = shutil.ignore_patterns("__pycache__", "*.pyc")
+    for name in SHIPPED:
+        src = ROOT / name
+        if src.is_dir():
+            shutil.copytree(src, stage_dir / name, ignore=ignore)
+        else:
+            shutil.copy2(src, stage_dir / name)
+    (stage_dir / "wheels").mkdir()
+    for w in wheels:
+        shutil.copy2(w, stage_dir / "wheels" / w.name)
+    manifest = (ROOT / "blender_manifest.toml").read_text()
+    if re.search(r"^(platforms|wheels)\s*=", manifest, flags=re.M):
+        raise SystemExit("package.py: the repository manifest already sets platforms/wheels")
+    platform_list = ", ".join(f'"{p}"' for p in platforms)
+    wheel_list = ", ".join(f'"./wheels/{w.name}"' for w in wheels)
+    extra = f"platforms = [{platform_list}]\nwheels = [{wheel_list}]\n"
+    manifest, n = re.subn(r"^(license\s*=.*\n)", lambda m: m.group(1) + extra, manifest, count=1, flags=re.M)
+    if n != 1:
+        raise SystemExit("package.py: no 'license = ...' line in blender_manifest.toml to put the wheels after")
+    (stage_dir / "blender_manifest.toml").write_text(manifest)
+    return stage_dir
+
+
+def build(out: Path, platforms: list[str], wheel_dir: Path, download: bool = True) -> list[Path]:
+    """Build and validate; returns the zip file(s) written to ``out``."""
+    for p in platforms:
+        if p not in PLATFORM_TAGS:
+            raise SystemExit(f"package.py: unknown platform {p!r}; use {', '.join(PLATFORM_TAGS)}")
+    version = importlib.metadata.version("onnxruntime")
+    wheels = [fetch_wheel(p, version, wheel_dir, download) for p in platforms]
+    src = stage(ROOT / "build" / "extension", wheels, platforms)
+    out.mkdir(parents=True, exist_ok=True)
+    tool = blender_ext_tool()
+    before = set(out.glob("*.zip"))
+    cmd = [sys.executable, str(tool), "build", "--source-dir", str(src), "--output-dir", str(out)]
+    if len(platforms) > 1:
+        cmd.append("--split-platforms")
+    subprocess.run(cmd, check=True)
+    zips = sorted(set(out.glob("*.zip")) - before) or sorted(out.glob("spectral_skin_sss-*.zip"))
+    for z in zips:
+        proc = subprocess.run([sys.executable, str(tool), "validate", str(z)], capture_output=True, text=True)
+        if proc.returncode != 0 or "Success" not in proc.stdout:
+            raise SystemExit(f"package.py: {z.name} does not validate:\n{proc.stdout}{proc.stderr}")
+        print(f"package.py: {z} ({z.stat().st_size / 2**20:.1f} MiB) built and validated")
+    return zips
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="package.py", description=__doc__.splitlines()[0])
+    parser.add_argument("--out", type=Path, default=ROOT / "dist")
+    parser.add_argument("--platforms", default="linux-x64", help="comma-separated Blender platforms")
+    parser.add_argument("--wheel-dir", type=Path, default=ROOT / ".whl", help="wheel cache (default .whl/)")
+    parser.add_argument("--no-download", action="store_true", help="use only wheels already in --wheel-dir")
+    args = parser.parse_args(argv)
+    build(args.out, [p.strip() for p in args.platforms.split(",") if p.strip()], args.wheel_dir,
+          download=not args.no_download)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
