@@ -30,7 +30,7 @@ def agreement_row(name: str, tone: np.ndarray, spp: int, photons: int, variant: 
     se = np.hypot(mit.R_d_stderr, ours.R_d_stderr)
     z = (ours.R_d - mit.R_d) / se
     ok = (np.abs(rel) <= 0.02) | (np.abs(z) <= 4.0)
-    fmt = lambda v, s: ", ".join(f"{a:.4f}±{b:.4f}" for a, b in zip(v, s, strict=True))  # noqa: E731
+    fmt = lambda v, s: ", ".join(f"{a:.4g}±{b:.2g}" for a, b in zip(v, s, strict=True))  # noqa: E731
     return {
         "workload": f"mixture R_d, tone {name}, {'/'.join(f'{w:g}' for w in WAVELENGTHS)} nm",
         "ours": fmt(ours.R_d, ours.R_d_stderr),
