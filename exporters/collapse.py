@@ -142,8 +142,8 @@ class ChannelMedia:
         return np.sum(self.weight * r, axis=1)
 
 
-def _finite(name: str, x) -> np.ndarray:
-    arr = np.asarray(x, dtype=np.float64)
+def _finite(name: str, x, dtype=np.float64) -> np.ndarray:
+    arr = np.asarray(x, dtype=dtype)
     if not np.all(np.isfinite(arr)):
         raise ValueError(f"{name}: NaN or infinite value(s); the model output must be finite")
     return arr
@@ -172,8 +172,9 @@ def collapse(reflectance, alpha, sigma_t_cm, g, weight, target_scale=None, g_max
     ``min_mfp_cm``: the smallest mean free path handed to Cycles (step 7; 0 disables the cap).
     """
     refl = _finite("reflectance", reflectance)
-    al, st, gg, w = (_finite(n, x) for n, x in (("alpha", alpha), ("sigma_t", sigma_t_cm), ("g", g),
-                                                  ("weight", weight)))
+    # The per-wavelength work runs in float32 (the model's own precision; sums of 236 terms keep ~1e-6).
+    al, st, gg, w = (_finite(n, x, np.float32) for n, x in (("alpha", alpha), ("sigma_t", sigma_t_cm), ("g", g),
+                                                              ("weight", weight)))
     if al.ndim != 3:
         raise ValueError(f"alpha must have shape (N, K, {N_WAVELENGTHS}), got {al.shape}")
     _check_shapes(refl, al, st, gg, w)
@@ -184,24 +185,24 @@ def collapse(reflectance, alpha, sigma_t_cm, g, weight, target_scale=None, g_max
             raise ValueError("target_scale must be (N,) and >= 0")
         target = target * scale[:, None]
     sup = _support()
-    omega = channel_weights()[:, sup]  # (3, L')
+    omega = channel_weights()[:, sup].astype(np.float32).T  # (L', 3)
     al, st, gg, w = al[..., sup], st[..., sup], gg[..., sup], w[..., sup]
-    al_c = np.minimum(al, reflectance_tables.ALPHA_TABLE_MAX)
-    light = w * reflectance_tables.reflectance("model", al_c, np.clip(gg, 0.0, 0.95))  # E_k (N, K, L')
-    diff_len = 1.0 / (st * np.sqrt(3.0 * (1.0 - al_c) * (1.0 - al_c * gg)))  # D_k in cm
-    share_raw = light @ omega.T  # (N, K, 3)
-    w_mean = w @ omega.T  # (N, K, 3)
+    al_c = np.minimum(al, np.float32(reflectance_tables.ALPHA_TABLE_MAX))
+    light = w * reflectance_tables.reflectance("model", al_c, np.clip(gg, np.float32(0), np.float32(0.95)))  # E_k
+    diff_len = 1.0 / (st * np.sqrt(3.0 * (1.0 - al_c) * (1.0 - al_c * gg)))  # D_k in cm, (N, K, L')
+    # One matrix product for all six channel averages: E, w, E D, w D, E g, w g against omega.
+    sums = (np.stack([light, w, light * diff_len, w * diff_len, light * gg, w * gg]) @ omega).astype(np.float64)
+    share_raw, w_mean, light_d, w_d, light_g, w_g = sums  # each (N, K, 3)
     # Channels where a component carries no light (E = 0): fall back to weight-weighted means.
     dark = share_raw <= _TINY
-    d_mean = np.where(dark, ((w * diff_len) @ omega.T) / np.maximum(w_mean, _TINY),
-                      ((light * diff_len) @ omega.T) / np.maximum(share_raw, _TINY))
-    fallback = np.repeat(diff_len.mean(axis=2)[..., None], 3, axis=2)  # a component of weight 0 everywhere
+    d_mean = np.where(dark, w_d / np.maximum(w_mean, _TINY), light_d / np.maximum(share_raw, _TINY))
+    fallback = np.repeat(diff_len.mean(axis=2, dtype=np.float64)[..., None], 3, axis=2)  # weight 0 everywhere
     d_mean = np.where(np.isfinite(d_mean) & (d_mean > 0), d_mean, fallback)
     total = share_raw.sum(axis=1, keepdims=True)
     share = np.where(total > _TINY, share_raw / np.maximum(total, _TINY), w_mean)
     light_all = share_raw.sum(axis=2)  # (N, K)
-    g_light = ((light * gg) @ omega.T).sum(axis=2) / np.maximum(light_all, _TINY)
-    g_weight = ((w * gg) @ omega.T).sum(axis=2) / np.maximum(w_mean.sum(axis=2), _TINY)
+    g_light = light_g.sum(axis=2) / np.maximum(light_all, _TINY)
+    g_weight = w_g.sum(axis=2) / np.maximum(w_mean.sum(axis=2), _TINY)
     g_eff = np.clip(np.where(light_all > _TINY, g_light, g_weight), cycles.G_MIN, g_max)
     if min_mfp_cm < 0:
         raise ValueError("min_mfp_cm must be >= 0")

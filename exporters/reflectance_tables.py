@@ -168,9 +168,9 @@ CYCLES_IOR: float = 1.4
 
 def _g_index(g: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Lower g node index and fraction for bilinear interpolation (g clipped to the grid)."""
-    x = np.clip(g, 0.0, (N_G - 1) * G_STEP) / G_STEP
-    i = np.minimum(np.floor(x).astype(np.intp), N_G - 2)
-    return i, x - i
+    x = np.clip(g, 0.0, (N_G - 1) * G_STEP) * (1.0 / G_STEP)
+    i = np.minimum(x.astype(np.intp), N_G - 2)  # x >= 0: truncation is floor
+    return i, x - i.astype(x.dtype)
 
 
 def _u_of_alpha(alpha: np.ndarray) -> np.ndarray:
@@ -184,43 +184,60 @@ def _finite(name: str, x) -> np.ndarray:
     return arr
 
 
+@cache
+def _table32(boundary: str, ior: float | None) -> np.ndarray:
+    t = _table(boundary, ior).astype(np.float32)
+    t.setflags(write=False)
+    return t
+
+
 def reflectance(boundary: Boundary, alpha, g, ior: float | None = None) -> np.ndarray:
     """Diffuse reflectance R(alpha, g) of a semi-infinite medium for ``boundary`` ("cycles" or "model").
 
     ``alpha`` in [0, 1], ``g`` in [0, 0.95] (broadcastable; values outside are clipped to the table, alpha
     above 1 - 1e-6 counts as 1 - 1e-6); ``ior``: the Cycles closure's IOR (default :data:`CYCLES_IOR`;
-    ignored for "model").  Bilinear interpolation in (sqrt(1 - alpha), g); float64.
+    ignored for "model").  Bilinear interpolation in (sqrt(1 - alpha), g); float64, or float32 when both
+    inputs are float32 arrays (the collapse's per-wavelength work, where float32 is plenty).
     """
-    t = _table(boundary, ior)
-    al, gg = np.broadcast_arrays(_finite("alpha", alpha), _finite("g", g))
+    single = isinstance(alpha, np.ndarray) and isinstance(g, np.ndarray) and alpha.dtype == g.dtype == np.float32
+    if single:
+        if not (np.all(np.isfinite(alpha)) and np.all(np.isfinite(g))):
+            raise ValueError("alpha, g: NaN or infinite value(s); all inputs must be finite")
+        t = _table32(boundary, ior)
+        al, gg = np.broadcast_arrays(alpha, g)
+    else:
+        t = _table(boundary, ior)
+        al, gg = np.broadcast_arrays(_finite("alpha", alpha), _finite("g", g))
     u = _u_of_alpha(al)
-    xu = (u - U_MIN) / (1.0 - U_MIN) * (N_U - 1)
-    j = np.minimum(np.floor(xu).astype(np.intp), N_U - 2)
-    fu = xu - j
+    xu = (u - U_MIN) * ((N_U - 1) / (1.0 - U_MIN))
+    j = np.minimum(xu.astype(np.intp), N_U - 2)  # xu >= 0: truncation is floor
+    fu = xu - j.astype(xu.dtype)
     i, fg = _g_index(gg)
     lo = t[i, j] * (1.0 - fu) + t[i, j + 1] * fu
     hi = t[i + 1, j] * (1.0 - fu) + t[i + 1, j + 1] * fu
     return lo * (1.0 - fg) + hi * fg
 
 
-def albedo_for_reflectance(boundary: Boundary, reflectance_target, g, ior: float | None = None,
-                           iterations: int = 60) -> np.ndarray:
+def albedo_for_reflectance(boundary: Boundary, reflectance_target, g, ior: float | None = None) -> np.ndarray:
     """Inverse of :func:`reflectance` in alpha: the albedo whose table reflectance is ``reflectance_target``.
 
-    R is strictly increasing in alpha on the table (checked when it is built), so the answer is unique;
-    found by bisection in u = sqrt(1 - alpha) (60 halvings: below 1e-15 in u).  Targets outside
-    [R(0, g), R(1 - 1e-6, g)] give the end albedo (0 or 1 - 1e-6): callers clamp targets first.
+    For a fixed g the interpolant is piecewise linear in u = sqrt(1 - alpha) on the table nodes and
+    strictly decreasing (checked when the table is built), so the inverse is exact and unique: find the
+    segment, solve the linear piece.  Targets outside [R(0, g), R(1 - 1e-6, g)] give the end albedo
+    (0 or 1 - 1e-6): callers clamp targets first.
     """
-    _table(boundary, ior)
+    t = _table(boundary, ior)
     target, gg = np.broadcast_arrays(_finite("reflectance", reflectance_target), _finite("g", g))
-    lo = np.full(target.shape, U_MIN)  # u = U_MIN: highest reflectance
-    hi = np.ones(target.shape)
-    for _ in range(iterations):
-        mid = 0.5 * (lo + hi)
-        too_bright = reflectance(boundary, 1.0 - mid**2, gg, ior) > target  # R decreases with u
-        lo = np.where(too_bright, mid, lo)
-        hi = np.where(too_bright, hi, mid)
-    return 1.0 - (0.5 * (lo + hi)) ** 2
+    shape = target.shape
+    target, gg = target.ravel(), gg.ravel()
+    i, fg = _g_index(gg)
+    rows = t[i] * (1.0 - fg)[:, None] + t[i + 1] * fg[:, None]  # (M, N_U), decreasing along u
+    j = np.clip(np.sum(rows > target[:, None], axis=1) - 1, 0, N_U - 2)  # rows[j] > target >= rows[j + 1]
+    m = np.arange(target.size)
+    r0, r1 = rows[m, j], rows[m, j + 1]
+    frac = np.clip((r0 - target) / np.where(r0 > r1, r0 - r1, 1.0), 0.0, 1.0)
+    u = U_MIN + (j + frac) * (1.0 - U_MIN) / (N_U - 1)
+    return (1.0 - u**2).reshape(shape)
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -106,12 +106,12 @@ def test_single_flat_component_reference():
     for c in range(3):
         alpha_ref = brentq(lambda x, c=c: cycles_hemispherical(x, 0.7, 1.4) - t[c], 0.5, 0.999999, xtol=1e-10)
         assert media.alpha[0, 0, c] == pytest.approx(alpha_ref, abs=2e-4)
-    np.testing.assert_allclose(media.weight[0, 0], 1.0, rtol=1e-9)
+    np.testing.assert_allclose(media.weight[0, 0], 1.0, rtol=1e-6)  # float32 spectral sums
     # diffusion length kept: 1 / (sigma_t sqrt(3 (1 - a)(1 - a g)))
     d_in = 1.0 / (st * np.sqrt(3 * (1 - a) * (1 - a * g)))
     ae, ge = media.alpha[0, 0], media.g[0, 0]
     d_out = 1.0 / (media.sigma_t_cm[0, 0] * np.sqrt(3 * (1 - ae) * (1 - ae * ge)))
-    np.testing.assert_allclose(d_out, d_in, rtol=1e-9)
+    np.testing.assert_allclose(d_out, d_in, rtol=3e-6)  # float32 spectral work
 
 
 def test_mixture_reaches_target_per_adding_doubling_and_keeps_shares():
