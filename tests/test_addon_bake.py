@@ -178,3 +178,13 @@ def test_unregister_cleanly():
     assert not hasattr(bpy.types.Scene, "spectral_skin")
     assert not hasattr(bpy.types.WindowManager, "spectral_skin_progress")
     assert not hasattr(bpy.types, "SPECTRAL_SKIN_OT_invert_albedo")
+
+
+def test_invoke_in_background_runs_synchronously(addon, albedo_png):
+    # From the UI the operator is modal (timer steps, Esc); without a window (background, scripts) invoke
+    # falls back to the synchronous execute.
+    obj, mat, _ = skin_object(albedo_png)
+    with bpy.context.temp_override(object=obj, active_object=obj):
+        assert bpy.ops.spectral_skin.invert_albedo("INVOKE_DEFAULT", backend="SVM") == {"FINISHED"}
+    assert group_node(mat).node_tree["spectral_skin_sss_k"] == K
+    assert not bpy.context.window_manager.spectral_skin_running
