@@ -52,6 +52,8 @@ def build_split(
     else:
         store.create(path, tones[index], index, attrs)
     todo = store.pending(path)
+    if len(todo) and hasattr(simulate, "prepare"):
+        simulate.prepare()  # e.g. the reweighted estimator's shared walk, before per-chunk timing
     bar = tqdm(total=len(index), initial=len(index) - len(todo), desc=f"{split} {i}/{n}", disable=not progress)
     chunk = chunk_tones or preset.chunk_tones
     for start in range(0, len(todo), chunk):

@@ -284,6 +284,10 @@ class TrajectoryStore:
         else:
             path.write_text(json.dumps(manifest, indent=1))
 
+    def prepare(self) -> None:
+        """Walk (or load) the trajectories now, so that chunk timings measure the reweighting alone."""
+        self.trajectories()
+
     def __call__(self, tones: np.ndarray, photons: int, seed: int, device: str) -> dict[str, np.ndarray]:
         """The dataset's SimulateFn: reweight ``tones`` (per-chunk seed unused: the walk is shared)."""
         if photons != self.photons:
