@@ -139,6 +139,8 @@ class AddonBake:
         self.scene = context.scene
         obj = context.object
         self.material = obj.active_material if obj is not None else None
+        if self.material is not None and self.material.node_tree is None:
+            self.material = None  # a material without nodes: the maps and the group are made, nothing is wired
         self.source_node = None
         if not os.path.isfile(settings.model_path):
             raise BakeInputError(missing_model_message(settings.model_path))
