@@ -299,7 +299,10 @@ def _columns_at(node_cols: list[dict], nodes: np.ndarray, gs: np.ndarray, r_edge
     stack = lambda k: np.stack([c[k] for c in node_cols], axis=1)  # noqa: E731  (NA, n_nodes, ...)
     if nodes.size == gs.size and np.allclose(nodes, gs, rtol=0, atol=1e-12):
         return {k: stack(k) for k in ("R", "P", "R_stderr", "R_trunc_bound", "frac_inside")}
-    pchip = lambda k: PchipInterpolator(nodes, stack(k), axis=1)(gs)  # noqa: E731
+    def pchip(k: str) -> np.ndarray:
+        with np.errstate(divide="ignore", over="ignore"):  # flat (zero-slope) stretches: handled by PCHIP
+            return PchipInterpolator(nodes, stack(k), axis=1)(gs)
+
     lin = lambda k: np.stack([np.interp(gs, nodes, row) for row in stack(k)])  # noqa: E731
     p = np.clip(pchip("P"), 0.0, None)
     norm = (p * (math.pi * np.diff(r_edges**2))).sum(-1, keepdims=True)
