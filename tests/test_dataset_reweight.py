@@ -10,7 +10,6 @@ import pytest
 from exporters.colorimetry import xyz_weights
 from training.data.reweight import Trajectories, TrajectoryStore, baseline_absorption, reweight, walk
 from training.data.sampling import T_EPI_LEVELS_CM
-from training.sim.medium import LayeredMedium
 from training.sim.transport import simulate
 from training.skin.tissue import skin_medium
 
@@ -26,16 +25,11 @@ TONES = np.array([
 ])
 
 
-def _subset(medium: LayeredMedium) -> LayeredMedium:
-    return LayeredMedium(mua=medium.mua[:, CHANNELS], mus=medium.mus[:, CHANNELS], g=medium.g[:, CHANNELS],
-                         thickness=medium.thickness, n_medium=medium.n_medium)
-
-
 @pytest.fixture(scope="module")
 def both():
     traj = walk(PHOTONS, seed=11, mua0=baseline_absorption(), channels=CHANNELS)
     rw = reweight(traj, TONES)
-    direct = [simulate(_subset(skin_medium(t)), PHOTONS, seed=100 + i) for i, t in enumerate(TONES)]
+    direct = [simulate(skin_medium(t).select_channels(CHANNELS), PHOTONS, seed=100 + i) for i, t in enumerate(TONES)]
     return traj, rw, direct
 
 

@@ -102,7 +102,7 @@ def merge(out: Path, split: str) -> Path:
     with h5py.File(target, "r+") as dst:
         for p, ix in parts:
             with h5py.File(p, "r") as src:
-                for name in (n for n in store.FIELDS if n != "tone"):  # tones: written by create()
+                for name in store.SIMULATED:  # tones: written by create()
                     for local, global_row in enumerate(ix):
                         dst[name][global_row] = src[name][local]
         dst["done"][:] = True

@@ -34,7 +34,7 @@ from exporters.constants import N_TISSUE, PARAM_NAMES, PARAM_RANGES, R_EDGES_CM
 from training.data.sampling import T_EPI_LEVELS_CM
 from training.sim.kernel import KIND_REFLECTED, KIND_TRUNCATED
 from training.sim.medium import LayeredMedium
-from training.sim.transport import simulate_records
+from training.sim.transport import mean_stderr, simulate_records
 from training.skin.model import absorption, scattering
 
 #: Photons per wavelength walked (and saved) at once: ~1.9e6 packets, a few hundred MB of records.
@@ -105,7 +105,9 @@ class Trajectories:
 
     @classmethod
     def concat(cls, parts: list[Trajectories]) -> Trajectories:
-        """Join walks of the same medium (independent photons) into one."""
+        """Join walks of the same medium (independent photons) into one; one part is returned as it is."""
+        if len(parts) == 1:
+            return parts[0]
         first = parts[0]
         for p in parts[1:]:
             if not (np.array_equal(p.mua0, first.mua0) and np.array_equal(p.levels_cm, first.levels_cm)
@@ -187,8 +189,8 @@ def reweight(traj: Trajectories, tones: np.ndarray, device: str = "cpu") -> dict
     flush = torch.set_flush_denormal(True)  # tiny weights: float32 denormals are ~10x slower on x86 CPUs
     try:
         _reweight_channels(traj, torch.as_tensor(x, device=torch.device(device)), p1, p2)
-        mean, se = _mean_stderr(p1.sum(-1, dtype=np.float64), p2.sum(-1, dtype=np.float64), traj.photons)
-        pm, pse = _mean_stderr(torch.from_numpy(p1[..., :N_BINS]), torch.from_numpy(p2[..., :N_BINS]),
+        mean, se = mean_stderr(p1.sum(-1, dtype=np.float64), p2.sum(-1, dtype=np.float64), traj.photons)
+        pm, pse = mean_stderr(torch.from_numpy(p1[..., :N_BINS]), torch.from_numpy(p2[..., :N_BINS]),
                                traj.photons)
     finally:
         if flush:
@@ -214,16 +216,6 @@ def _reweight_channels(traj: Trajectories, x: torch.Tensor, p1: np.ndarray, p2: 
         zeros = torch.zeros(x.shape[0], N_BINS + 1, dtype=torch.float32, device=dev)
         p1[:, c] = zeros.index_add(1, b, wt).cpu().numpy()
         p2[:, c] = zeros.index_add(1, b, wt.mul_(wt)).cpu().numpy()
-
-
-def _mean_stderr(s1, s2, n: int):
-    """Mean and its standard error from per-photon sums of values and of squares over n photons.
-
-    Works on numpy arrays and torch tensors alike (the profile's are torch, to flush denormals).
-    """
-    mean = s1 / n
-    var = (s2 / n - mean * mean).clip(0.0, None) * (n / max(n - 1, 1))
-    return mean, (var / n) ** 0.5
 
 
 class TrajectoryStore:
@@ -266,8 +258,7 @@ class TrajectoryStore:
                       f"wavelengths) into {self.folder}", flush=True)
             walk(count, seed=self.seed * 1_000_003 + j, mua0=self.mua0, device=self.device,
                  compile=compile_).save(path)
-        parts = [Trajectories.load(self.folder / f"chunk{j:04d}.npz") for j, _ in chunks]
-        self._traj = Trajectories.concat(parts) if len(parts) > 1 else parts[0]
+        self._traj = Trajectories.concat([Trajectories.load(self.folder / f"chunk{j:04d}.npz") for j, _ in chunks])
         return self._traj
 
     def _check_manifest(self) -> None:

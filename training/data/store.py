@@ -29,6 +29,8 @@ FIELDS = {
     "profile_stderr": ((N_WAVELENGTHS, N_RADIAL_BINS), "f4"),
     "albedo_rgb": ((3,), "f8"),
 }
+#: The fields a simulation writes (everything but the tones, which ``create`` writes).
+SIMULATED = tuple(name for name in FIELDS if name != "tone")
 
 
 def create(path: Path, tones: np.ndarray, index: np.ndarray, attrs: dict) -> None:
@@ -74,7 +76,7 @@ def write_rows(path: Path, rows: np.ndarray, values: dict[str, np.ndarray], seco
     ``seconds`` (the time it took to simulate them) adds to the file attribute ``seconds``.
     """
     with h5py.File(path, "r+") as f:
-        for name in (n for n in FIELDS if n != "tone"):
+        for name in SIMULATED:
             data = np.asarray(values[name])
             if not np.all(np.isfinite(data)):
                 raise ValueError(f"refusing to store non-finite {name} for rows {rows.tolist()}")

@@ -51,8 +51,7 @@ def write_summary(out: Path) -> dict:
     spectra = None
     walk_dir = out / "trajectories_train"
     if walk_dir.exists() and any(walk_dir.glob("chunk*.npz")):
-        parts = [Trajectories.load(p) for p in sorted(walk_dir.glob("chunk*.npz"))]
-        traj = Trajectories.concat(parts) if len(parts) > 1 else parts[0]
+        traj = Trajectories.concat([Trajectories.load(p) for p in sorted(walk_dir.glob("chunk*.npz"))])
         reps = load_tones().select("representative")
         spectra = (reps.names, reweight(traj, quantise_thickness(reps.values))["R_d"], traj.photons)
     _plot(out / "summary.png", albedo, spectra, record)

@@ -90,6 +90,12 @@ class LayeredMedium:
         """Depths of the layer boundaries, shape (L + 1,), cm: 0, t0, t0 + t1, ... (last may be inf)."""
         return torch.cat([torch.zeros(1, dtype=torch.float64), torch.cumsum(self.thickness, 0)])
 
+    def select_channels(self, index) -> LayeredMedium:
+        """The same layers at a subset of the channels (``index``: indices or a boolean mask over W)."""
+        idx = torch.as_tensor(index)
+        return LayeredMedium(self.mua[:, idx], self.mus[:, idx], self.g[:, idx], self.thickness,
+                             self.n_medium, self.n_below)
+
     @classmethod
     def homogeneous(
         cls, mua, mus, g, thickness: float = math.inf, n_medium: float = 1.4, n_below: float = 1.0

@@ -102,11 +102,14 @@ class _Tallies:
             self.p2.index_add_(0, flat, wr * wr)
 
 
-def _mean_stderr(s1: np.ndarray, s2: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
-    """Mean and standard error of the mean of n per-photon values from their sum and sum of squares."""
+def mean_stderr(s1, s2, n: int):
+    """Mean and standard error of the mean of n per-photon values from their sum and sum of squares.
+
+    Works on numpy arrays and torch tensors alike (same type out as in).
+    """
     mean = s1 / n
-    var = np.clip(s2 / n - mean * mean, 0.0, None) * (n / max(n - 1, 1))
-    return mean, np.sqrt(var / n)
+    var = (s2 / n - mean * mean).clip(0.0, None) * (n / max(n - 1, 1))
+    return mean, (var / n) ** 0.5
 
 
 def _check_common(photons: int, device: str | torch.device) -> torch.device:
@@ -195,14 +198,14 @@ def _progress_bar(total: int, enabled: bool):
 
 def _result(tal: _Tallies, totals, n: int, edges_t: torch.Tensor | None, seconds: float) -> SimResult:
     np64 = lambda t: t.detach().cpu().numpy().astype(np.float64)  # noqa: E731
-    r_d, r_se = _mean_stderr(np64(tal.r1), np64(tal.r2), n)
-    t_d, t_se = _mean_stderr(np64(tal.t1), np64(tal.t2), n)
+    r_d, r_se = mean_stderr(np64(tal.r1), np64(tal.r2), n)
+    t_d, t_se = mean_stderr(np64(tal.t1), np64(tal.t2), n)
     if edges_t is not None:
         edges = np64(edges_t)
         area = math.pi * np.diff(edges**2)
         p1 = np64(tal.p1).reshape(tal.n_ch, -1)
         p2 = np64(tal.p2).reshape(tal.n_ch, -1)
-        pm, pse = _mean_stderr(p1, p2, n)
+        pm, pse = mean_stderr(p1, p2, n)
         profile, profile_se, beyond = pm[:, :-1] / area, pse[:, :-1] / area, pm[:, -1]
     else:
         edges = np.zeros(0)

@@ -13,7 +13,6 @@ import numpy as np
 import torch
 
 from exporters.constants import WAVELENGTHS_NM
-from training.sim.medium import LayeredMedium
 from training.sim.transport import simulate
 from training.skin.tissue import skin_medium
 
@@ -24,9 +23,8 @@ WAVELENGTH_INDEX = np.arange(0, 376, 25)
 def main(argv: list[str]) -> int:
     name, tone, photons = argv[0], [float(x) for x in argv[1:6]], int(argv[6])
     torch.set_num_threads(1)
-    m = skin_medium(tone)
     idx = WAVELENGTH_INDEX
-    sub = LayeredMedium(m.mua[:, idx], m.mus[:, idx], m.g[:, idx], m.thickness, m.n_medium)
+    sub = skin_medium(tone).select_channels(idx)
     t0 = time.time()
     res = simulate(sub, photons, seed=7)
     print(name, f"{time.time() - t0:.0f} s", res.R_d.round(4))
