@@ -82,14 +82,17 @@ def _g_interpolation_error(n_albedo: int) -> tuple[float, float]:
 
     Adding-doubling (iadpython, an independent solver) gives R(albedo, g) of the LUT's medium (URU minus
     the boundary's specular part); the max is over ``n_albedo`` albedos in [0.3, 0.9999] and every midpoint.
+    One quadrature (16 points) for every g and for the specular part: a change of quadrature along g
+    would show up as a step, not as interpolation error.
     """
     import iadpython as iad
     from scipy.interpolate import PchipInterpolator
 
-    def r(a: float, g: float) -> float:
-        quad = 32 if g > 0.8 else 16
-        s = iad.Sample(a=a, b=math.inf, g=g, n=1.4, n_above=1.0, n_below=1.0, quad_pts=quad)
-        return float(s.rt()[2])
+    def uru(a: float, g: float) -> float:
+        return float(iad.Sample(a=a, b=math.inf, g=g, n=1.4, n_above=1.0, n_below=1.0, quad_pts=16).rt()[2])
+
+    specular = uru(0.0, 0.0)
+    r = lambda a, g: uru(a, g) - specular  # noqa: E731
 
     nodes = g_grid(G_NODES)
     mids = 0.5 * (nodes[1:] + nodes[:-1])
