@@ -97,6 +97,22 @@ def test_fit_split_layout_and_resume(setup, monkeypatch):
         fit_split(ds, "train", lut, lut_path, (1,), out, steps=STEPS, progress=False)
 
 
+def test_wavelength_stride_anchors_and_tone_limit(setup, monkeypatch):
+    d, ds, lut_path = setup
+    monkeypatch.setattr(optimize, "K2_SPLITS", optimize.K2_SPLITS[:1])
+    lut = LookupTables.load(lut_path)
+    path = fit_split(ds, "train", lut, lut_path, (1, 2), d / "fits_stride", steps=STEPS, wavelength_stride=8,
+                     anchor_every=3, max_tones=2, progress=False)
+    with h5py.File(path, "r") as f:
+        assert f["index"][:].tolist() == [0, 1] and f["done"][:].all()
+        assert f["wavelength_index"][:].tolist() == list(range(0, N_WAVELENGTHS, 8))
+        np.testing.assert_array_equal(f["wavelength_nm"][:], 250.0 + 2.0 * f["wavelength_index"][:])
+        assert f["k2_alpha"].shape == (2, 2, 47) and np.isfinite(f["k2_joint"][:]).all()
+        assert f.attrs["anchor_every"] == 3 and f.attrs["refl_loss"] == "relative"
+    with pytest.raises(ValueError, match="wavelength_stride"):
+        fit_split(ds, "train", lut, lut_path, (1,), d / "x", wavelength_stride=0, progress=False)
+
+
 def test_shards_cover_the_split(setup):
     d, ds, lut_path = setup
     lut = LookupTables.load(lut_path)

@@ -42,22 +42,25 @@ def _states(rundir):
 def test_fits_are_read_sorted_by_sigma_t(toy):
     data, fits, _ = toy
     split = load_split(data, "train", fits, k=3)
-    assert split.targets["sigma_t"].shape == (24, 3, 376)
+    assert len(split) == 24 and split.targets["sigma_t"].shape == (18, 3, 188)  # toy: 18 fitted, every 2nd λ
     assert (torch.diff(split.targets["sigma_t"], dim=1) >= 0).all()
-    torch.testing.assert_close(split.targets["weight"].sum(1), torch.ones(24, 376), atol=1e-5, rtol=0)
+    torch.testing.assert_close(split.targets["weight"].sum(1), torch.ones(18, 188), atol=1e-5, rtol=0)
+    assert split.fitted.tolist() == list(range(18)) and split.target_index.tolist() == list(range(0, 376, 2))
 
 
-def test_fits_of_the_fitters_flat_layout_are_aligned_by_index(toy, tmp_path):
+def test_fits_of_a_shard_are_aligned_by_index(toy, tmp_path):
     data, fits, _ = toy
     ref = load_split(data, "train", fits, k=2)
     index = np.array([5, 2, 9])  # a shard holding three tones, in another order
-    with h5py.File(fits / "fits_train.h5", "r") as src, h5py.File(tmp_path / "train_fits.h5", "w") as dst:
+    with h5py.File(fits / "train_fits.h5", "r") as src, h5py.File(tmp_path / "train_fits.h5", "w") as dst:
         dst["index"], dst["tone"], dst["done"] = index, src["tone"][:][index], np.array([True, True, False])
+        dst["wavelength_index"] = src["wavelength_index"][:]
         for name in ("alpha", "g", "sigma_t", "weight"):
-            dst[f"k2_{name}"] = src["K2"][name][:][index]
+            dst[f"k2_{name}"] = src[f"k2_{name}"][:][index]
     got = load_split(data, "train", tmp_path, k=2)
-    assert len(got) == 2  # rows 2 and 5 (row 9 not done), in dataset order
-    torch.testing.assert_close(got.tone, ref.tone[[2, 5]])
+    assert len(got) == 24  # every simulated tone serves stages 1 and 2
+    assert got.fitted.tolist() == [2, 5]  # rows 2 and 5 have targets (row 9 not done), in dataset order
+    torch.testing.assert_close(got.tone[got.fitted], ref.tone[[2, 5]])
     for name in ("alpha", "sigma_t"):
         torch.testing.assert_close(got.targets[name], ref.targets[name][[2, 5]])
 

@@ -4,10 +4,23 @@ Input: the split files of ``python -m training dataset`` (``DIR/train.h5``, ``DI
 training/data/store.py), which must be complete.  Output, per split, ``OUT/<split>_fits.h5`` (or
 ``<split>_fits.shard{i}of{n}.h5`` with ``--shard i/n``), one row per tone of the shard:
 
-    index (N,) position in the split; tone (N, 5);
-    k{K}_alpha, k{K}_g, k{K}_sigma_t [cm^-1], k{K}_weight: (N, K, 376) float32;
-    k{K}_shape_rmse, k{K}_refl_rel_err, k{K}_joint: (N, 376) float32;
-    done (N,) bool; attributes: ks, method, lut (path), lut_sha256, dataset attributes.
+    index (N,) position in the split; tone (N, 5); wavelength_nm, wavelength_index (Wf,): the fitted
+    wavelengths (every ``wavelength_stride``-th of the 376);
+    k{K}_alpha, k{K}_g, k{K}_sigma_t [cm^-1], k{K}_weight: (N, K, Wf) float32;
+    k{K}_shape_rmse, k{K}_refl_rel_err, k{K}_joint: (N, Wf) float32;
+    done (N,) bool; attributes: ks, method, refl_loss, wavelength_stride, anchor_every, max_tones,
+    lut (path), lut_sha256, dataset attributes.
+
+Speed (what makes a laptop run possible; measured in the README):
+
+* ``anchor_every`` = a > 0: per tone, every a-th fitted wavelength (an *anchor*) gets the full schedule
+  (coarse search, K = 1 -> 2 -> 3 with all the starts of ``fit_schedule``); every other wavelength
+  starts from its nearest anchor's K = 1, 2, 3 fits (``fit_schedule(warm=...)``), one short LM run per
+  K.  The parameters vary slowly with wavelength, so the warm start is already in the right basin;
+  ``anchor_every`` = 0 fits every wavelength with the full schedule.
+* ``wavelength_stride`` = s: fit every s-th wavelength only (the trainer's L_param then uses those).
+* ``max_tones`` = m: fit the first m tones of the split only (a Halton prefix of the training split is
+  itself stratified; the validation tones are uniform random in any order).
 
 Resumable: tones are fitted a chunk at a time and marked done; rerunning the same command skips them,
 and a file made with other settings is never overwritten (ValueError).  Shards take every n-th tone.
@@ -24,7 +37,7 @@ from tqdm import tqdm
 
 from exporters.constants import anisotropy
 from exporters.maps import sha256_file
-from training.fit.optimize import fit_schedule
+from training.fit.optimize import WARM_LM_ITERS, fit_schedule
 from training.sim.lut_interp import LookupTables
 
 SPLITS = ("train", "validation")
@@ -36,12 +49,15 @@ def out_path(out: Path, split: str, shard: tuple[int, int]) -> Path:
     return out / (f"{split}_fits.h5" if n == 1 else f"{split}_fits.shard{i}of{n}.h5")
 
 
-def _create(path: Path, tones: np.ndarray, index: np.ndarray, ks: tuple[int, ...], w: int, attrs: dict) -> None:
+def _create(path: Path, tones: np.ndarray, index: np.ndarray, ks: tuple[int, ...], wl: np.ndarray,
+            widx: np.ndarray, attrs: dict) -> None:
     tmp = path.with_suffix(".tmp")
-    n = len(index)
+    n, w = len(index), len(widx)
     with h5py.File(tmp, "w") as f:
         f.create_dataset("index", data=index)
         f.create_dataset("tone", data=tones)
+        f.create_dataset("wavelength_nm", data=wl[widx])
+        f.create_dataset("wavelength_index", data=widx)
         f.create_dataset("done", data=np.zeros(n, bool))
         for k in ks:
             for name in ("alpha", "g", "sigma_t", "weight"):
@@ -61,6 +77,64 @@ def _check(path: Path, index: np.ndarray, attrs: dict) -> None:
             raise ValueError(f"{path} holds other tones than this run: use another --out")
 
 
+def _nearest_anchor(n: int, every: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(anchor positions, other positions, the anchor rank nearest to each other position) in range(n)."""
+    anchors = np.arange(0, n, every) if every > 0 else np.arange(n)
+    rest = np.setdiff1d(np.arange(n), anchors)
+    near = np.abs(rest[:, None] - anchors[None, :]).argmin(1) if len(rest) else np.zeros(0, np.int64)
+    return anchors, rest, near
+
+
+def fit_tones(
+    lut: LookupTables,
+    profile: torch.Tensor,
+    R: torch.Tensor,
+    stderr: torch.Tensor,
+    r_edges_cm: torch.Tensor,
+    photons: float,
+    g_init: torch.Tensor,
+    ks: tuple[int, ...],
+    *,
+    method: str = "lm",
+    anchor_every: int = 0,
+    relative_refl: bool = True,
+    steps: dict[str, int] | None = None,
+) -> dict[int, dict[str, torch.Tensor]]:
+    """Fit T tones at W wavelengths: ``profile``/``stderr`` (T, W, M), ``R`` (T, W), ``g_init`` (W,).
+
+    Anchors and warm starts as in the module docstring.  Returns {K: {alpha, g, sigma_t, weight:
+    (T, K, W); shape_rmse, refl_rel_err, joint: (T, W)}}.
+    """
+    T, W, M = profile.shape
+    anchors, rest, near = _nearest_anchor(W, anchor_every if method == "lm" else 0)
+    kw = {"ks": tuple(range(1, max(ks) + 1)), "method": method, "relative_refl": relative_refl}
+
+    def run(cols: np.ndarray, **extra):
+        return fit_schedule(lut, profile[:, cols].reshape(-1, M), R[:, cols].reshape(-1), r_edges_cm, photons,
+                            stderr=stderr[:, cols].reshape(-1, M), g_init=g_init[cols].repeat(T), **kw, **extra)
+
+    parts = [(anchors, run(anchors, steps=steps))]
+    if len(rest):
+        src = torch.as_tensor((np.arange(T)[:, None] * len(anchors) + near[None, :]).reshape(-1))
+        warm = {k: parts[0][1][k].theta[src] for k in kw["ks"]}
+        parts.append((rest, run(rest, warm=warm, steps=WARM_LM_ITERS)))
+    out: dict[int, dict[str, torch.Tensor]] = {}
+    for k in ks:
+        res = {}
+        for name in ("alpha", "g", "sigma_t", "w", "shape_rmse", "refl_rel_err", "joint"):
+            full = None
+            for cols, fits in parts:
+                f = fits[k]
+                val = getattr(f.mixture, name) if name in ("alpha", "g", "sigma_t", "w") else getattr(f, name)
+                val = val.reshape(T, len(cols), *val.shape[1:])
+                if full is None:
+                    full = torch.empty((T, W, *val.shape[2:]), dtype=val.dtype, device=val.device)
+                full[:, torch.as_tensor(cols)] = val
+            res["weight" if name == "w" else name] = full.transpose(1, 2) if full.dim() == 3 else full
+        out[k] = res
+    return out
+
+
 def fit_split(
     dataset: Path,
     split: str,
@@ -71,17 +145,25 @@ def fit_split(
     *,
     method: str = "lm",
     shard: tuple[int, int] = (0, 1),
-    chunk_tones: int = 4,
+    chunk_tones: int = 16,
     steps: dict[str, int] | None = None,
+    wavelength_stride: int = 1,
+    anchor_every: int = 0,
+    max_tones: int | None = None,
+    relative_refl: bool = True,
     progress: bool = True,
 ) -> Path:
     """Fit one split of ``dataset`` into ``out`` (see the module docstring); returns the output path."""
+    if wavelength_stride < 1 or anchor_every < 0 or (max_tones is not None and max_tones < 1):
+        raise ValueError("wavelength_stride must be >= 1, anchor_every >= 0 and max_tones >= 1")
     src = dataset / f"{split}.h5"
     if not src.is_file():
         raise ValueError(f"{src} not found (run `python -m training dataset` and merge its shards first)")
     with h5py.File(src, "r") as f:
         if not f["done"][:].all():
             raise ValueError(f"{src} is incomplete: finish the dataset first")
+        if "profile_stderr" not in f:
+            raise ValueError(f"{src} has no profile_stderr (made by an older version): rebuild the dataset")
         n_all = f["tone"].shape[0]
         tones_all = f["tone"][:]
         wl = f["wavelength_nm"][:]
@@ -89,10 +171,15 @@ def fit_split(
         photons = float(f.attrs["photons"])
         src_attrs = {f"dataset_{k}": str(v) for k, v in f.attrs.items()}
     i, n = shard
-    index = np.arange(n_all)[i::n]
+    index = np.arange(n_all if max_tones is None else min(max_tones, n_all))[i::n]
+    widx = np.arange(0, len(wl), wavelength_stride)
     attrs = {
         "ks": ",".join(map(str, ks)),
         "method": method,
+        "refl_loss": "relative" if relative_refl else "paper",
+        "wavelength_stride": wavelength_stride,
+        "anchor_every": anchor_every,
+        "max_tones": "all" if max_tones is None else max_tones,
         "lut_sha256": sha256_file(lut_path),
         "shard": f"{i}/{n}",
         **src_attrs,
@@ -102,39 +189,25 @@ def fit_split(
     if path.exists():
         _check(path, index, attrs)
     else:
-        _create(path, tones_all[index], index, ks, len(wl), {**attrs, "lut": str(lut_path)})
+        _create(path, tones_all[index], index, ks, wl, widx, {**attrs, "lut": str(lut_path)})
     with h5py.File(path, "r") as f:
         todo = np.flatnonzero(~f["done"][:])
     dt, dev = lut.P.dtype, lut.P.device
-    g0 = torch.tensor(anisotropy(wl), dtype=dt, device=dev)
+    g0 = torch.tensor(anisotropy(wl[widx]), dtype=dt, device=dev)
     e = torch.tensor(edges, dtype=dt, device=dev)
     bar = tqdm(total=len(index), initial=len(index) - len(todo), desc=f"fit {split} {i}/{n}", disable=not progress)
     for start in range(0, len(todo), chunk_tones):
         rows = todo[start : start + chunk_tones]
         with h5py.File(src, "r") as f:
-            prof = np.stack([f["profile"][index[r]] for r in rows]).astype(np.float64)  # (T, W, 512)
-            R = np.stack([f["R_d"][index[r]] for r in rows]).astype(np.float64)  # (T, W)
-        T, W = R.shape
-        fits = fit_schedule(
-            lut,
-            torch.tensor(prof.reshape(T * W, -1), dtype=dt, device=dev),
-            torch.tensor(R.reshape(-1), dtype=dt, device=dev),
-            e,
-            photons,
-            g_init=g0.repeat(T),
-            ks=ks,
-            method=method,
-            steps=steps,
-        )
+            arrs = [np.stack([f[name][index[r]][widx] for r in rows]).astype(np.float64)
+                    for name in ("profile", "R_d", "profile_stderr")]
+        prof, R, se = (torch.tensor(a, dtype=dt, device=dev) for a in arrs)
+        fits = fit_tones(lut, prof, R, se, e, photons, g0, ks, method=method, anchor_every=anchor_every,
+                         relative_refl=relative_refl, steps=steps)
         with h5py.File(path, "r+") as f:
             for k in ks:
-                fk, m = fits[k], fits[k].mixture
-                for name, val in (("alpha", m.alpha), ("g", m.g), ("sigma_t", m.sigma_t), ("weight", m.w)):
-                    arr = val.reshape(T, W, k).permute(0, 2, 1).cpu().numpy().astype(np.float32)
-                    for j, r in enumerate(rows):
-                        f[f"k{k}_{name}"][r] = arr[j]
-                for name in ("shape_rmse", "refl_rel_err", "joint"):
-                    arr = getattr(fk, name).reshape(T, W).cpu().numpy().astype(np.float32)
+                for name, val in fits[k].items():
+                    arr = val.cpu().numpy().astype(np.float32)
                     for j, r in enumerate(rows):
                         f[f"k{k}_{name}"][r] = arr[j]
             done = f["done"][:]

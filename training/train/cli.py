@@ -6,7 +6,7 @@
         [--checkpoint-interval SECONDS] [--no-progress]
 
 --dataset: folder with train.h5 and validation.h5 (``python -m training dataset``).
---fits: folder with fits_train.h5 (and optionally fits_validation.h5), groups K1..K3 (needed by stage 3).
+--fits: the --out folder of `python -m training fit --dataset` (train_fits.h5, optionally validation_fits.h5; stage 3).
 --lut: the lookup tables of ``python -m training lut`` (stage 3's reflectance loss; its g axis bounds g).
 Killing the job and running the same command again resumes from the last checkpoint.
 --size: paper = the paper's networks (Dec_R 512, Dec_T 4 x 768); small / tiny = narrower networks for
@@ -77,7 +77,7 @@ def main(argv: list[str]) -> int:
     command = "python -m training train " + shlex.join(argv)
     try:
         if 3 in want and args.fits is None:
-            raise ValueError("stage 3 needs --fits DIR (fits_train.h5)")
+            raise ValueError("stage 3 needs --fits DIR (train_fits.h5 of `python -m training fit --dataset`)")
         for path in (args.dataset, args.lut) + ((args.fits,) if args.fits else ()):
             if not path.exists():
                 raise ValueError(f"no such file or folder: {path}")

@@ -3,16 +3,12 @@
 Dataset (``training.data.store``): ``DIR/{split}.h5`` with ``tone`` (N, 5), ``R_d`` (N, 376),
 ``albedo_rgb`` (N, 3) linear sRGB (D65), ``done`` (N,).  Only rows marked done are used.
 
-Fits, in either of two layouts (both read; the first one found wins):
-
-* ``DIR/fits_{split}.h5`` (``training.train.fits``): groups ``K1``, ``K2``, ``K3``, each holding
-  ``alpha``, ``sigma_t`` (cm^-1), ``g``, ``weight`` of shape (N, K, 376), and root datasets ``tone``
-  (N, 5), ``done`` (N,); row i is dataset row i.
-* ``DIR/{split}_fits.h5`` (``python -m training fit --dataset``, ``training.fit.dataset``): flat
-  datasets ``k{K}_alpha``, ``k{K}_g``, ``k{K}_sigma_t``, ``k{K}_weight`` (N, K, 376), ``index`` (N,)
-  (row in the dataset split), ``tone``, ``done``.
-
-The tones are checked against the dataset's.
+Fits: ``DIR/{split}_fits.h5`` of ``python -m training fit --dataset`` (``training.fit.dataset``): flat
+datasets ``k{K}_alpha``, ``k{K}_g``, ``k{K}_sigma_t``, ``k{K}_weight`` (Nf, K, Wf), ``index`` (Nf,)
+(row in the dataset split), ``tone``, ``done``, and ``wavelength_index`` (Wf,) when only every n-th
+wavelength was fitted (absent: all 376).  The tones are checked against the dataset's.  The fits may
+cover a subset of the tones (``fit --max-tones``, or an unfinished run): every simulated tone still
+serves stages 1 and 2, and stage 3 draws its batches from the fitted ones (``SplitData.fitted``).
 
 Component order: the fitter's component order is arbitrary (it depends on which start won), so the
 targets are sorted per (tone, wavelength) by increasing sigma_t before training.  The network's
@@ -33,21 +29,27 @@ FIT_FIELDS: tuple[str, ...] = ("alpha", "g", "sigma_t", "weight")
 
 @dataclass
 class SplitData:
-    """One split in memory (float32 tensors): tone (N, 5), R_d (N, W), albedo_rgb (N, 3), and the
-    sorted fit targets (N, K, W) per name in ``FIT_FIELDS`` when fits were loaded."""
+    """One split in memory (float32 tensors): tone (N, 5), R_d (N, W), albedo_rgb (N, 3) of every simulated
+    tone; with fits, ``fitted`` (Nf,) the rows that have fit targets, ``targets`` {name: (Nf, K, Wf)} per
+    name in ``FIT_FIELDS`` (sorted by sigma_t, row j belongs to tone ``fitted[j]``) and ``target_index``
+    (Wf,) the wavelengths (indices into the 376) they were fitted at."""
 
     tone: torch.Tensor
     R_d: torch.Tensor
     albedo_rgb: torch.Tensor
     targets: dict[str, torch.Tensor] | None = None
     photons: int = 0
+    fitted: torch.Tensor | None = None
+    target_index: torch.Tensor | None = None
 
     def __len__(self) -> int:
         return int(self.tone.shape[0])
 
     def to(self, device: str | torch.device) -> SplitData:
         t = None if self.targets is None else {k: v.to(device) for k, v in self.targets.items()}
-        return SplitData(self.tone.to(device), self.R_d.to(device), self.albedo_rgb.to(device), t, self.photons)
+        opt = [None if x is None else x.to(device) for x in (self.fitted, self.target_index)]
+        return SplitData(self.tone.to(device), self.R_d.to(device), self.albedo_rgb.to(device), t, self.photons,
+                         *opt)
 
 
 def dataset_file(dataset_dir: Path, split: str) -> Path:
@@ -55,11 +57,8 @@ def dataset_file(dataset_dir: Path, split: str) -> Path:
 
 
 def fits_file(fits_dir: Path, split: str) -> Path:
-    """The fits file of ``split`` in ``fits_dir`` (either layout; the grouped one if neither exists)."""
-    for name in (f"fits_{split}.h5", f"{split}_fits.h5"):
-        if (Path(fits_dir) / name).is_file():
-            return Path(fits_dir) / name
-    return Path(fits_dir) / f"fits_{split}.h5"
+    """The fits file of ``split`` in ``fits_dir`` (``python -m training fit --dataset --out fits_dir``)."""
+    return Path(fits_dir) / f"{split}_fits.h5"
 
 
 def _f32(a: np.ndarray) -> torch.Tensor:
@@ -72,27 +71,22 @@ def sort_by_sigma_t(targets: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
     return {k: np.take_along_axis(v, order, axis=1) for k, v in targets.items()}
 
 
-def load_fits(path: Path, k: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict[str, np.ndarray]]:
-    """(index (N,), tone (N, 5), done (N,), {alpha, g, sigma_t, weight: (N, K, W)}) of the K-component
-    fits in a fits file of either layout (module docstring)."""
+def load_fits(path: Path, k: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None, dict]:
+    """(index (Nf,), tone (Nf, 5), done (Nf,), wavelength_index (Wf,) or None for all, {alpha, g, sigma_t,
+    weight: (Nf, K, Wf)}) of the K-component fits in a fits file (module docstring)."""
     with h5py.File(path, "r") as f:
-        if f"K{k}" in f:
-            g = f[f"K{k}"]
-            keys = {n: n for n in FIT_FIELDS}
-        else:
-            g = f
-            keys = {n: f"k{k}_{n}" for n in FIT_FIELDS}
-        missing = [key for key in keys.values() if key not in g]
+        keys = {n: f"k{k}_{n}" for n in FIT_FIELDS}
+        missing = [key for key in keys.values() if key not in f]
         if missing:
-            raise ValueError(f"{path}: no K={k} fits ({missing} missing)")
-        arrays = {n: np.asarray(g[key][:], dtype=np.float64) for n, key in keys.items()}
-        tone = np.asarray(f["tone"][:], np.float64)
-        index = np.asarray(f["index"][:], np.int64) if "index" in f else np.arange(len(tone))
-        return index, tone, np.asarray(f["done"][:], bool), arrays
+            raise ValueError(f"{path}: no K={k} fits ({missing} missing): fit with --k including {k}")
+        arrays = {n: np.asarray(f[key][:], dtype=np.float64) for n, key in keys.items()}
+        widx = np.asarray(f["wavelength_index"][:], np.int64) if "wavelength_index" in f else None
+        return (np.asarray(f["index"][:], np.int64), np.asarray(f["tone"][:], np.float64),
+                np.asarray(f["done"][:], bool), widx, arrays)
 
 
 def load_split(dataset_dir: Path, split: str, fits_dir: Path | None = None, k: int = 3) -> SplitData:
-    """Load the done rows of ``split`` (and, with ``fits_dir``, the rows fitted too, with targets)."""
+    """Load the done rows of ``split`` and, with ``fits_dir``, the fit targets of those that have them."""
     path = dataset_file(dataset_dir, split)
     if not path.is_file():
         raise ValueError(f"no dataset split {path}: run `python -m training dataset` first")
@@ -102,35 +96,36 @@ def load_split(dataset_dir: Path, split: str, fits_dir: Path | None = None, k: i
         R_d = np.asarray(f["R_d"][:], np.float64)
         rgb = np.asarray(f["albedo_rgb"][:], np.float64)
         photons = int(f.attrs.get("photons", 0))
-    keep = done.copy()
-    targets = None
-    if fits_dir is not None:
-        fpath = fits_file(fits_dir, split)
-        if not fpath.is_file():
-            raise ValueError(f"no fits {fpath}: run `python -m training fit --dataset` (or training.train.fits)")
-        index, ftone, fdone, arrays = load_fits(fpath, k)
-        if index.min(initial=0) < 0 or index.max(initial=-1) >= len(tone):
-            raise ValueError(f"{fpath}: row index outside {path}")
-        if not np.allclose(ftone, tone[index], rtol=0, atol=1e-12):
-            raise ValueError(f"{fpath} was fitted on other tones than {path}")
-        fitted = np.zeros(len(tone), bool)
-        fitted[index] = fdone
-        keep &= fitted
-        targets = {}
-        for n, v in arrays.items():
-            full = np.ones((len(tone), *v.shape[1:]))  # placeholder for unfitted rows (never used)
-            full[index] = v
-            targets[n] = full
-    if not keep.any():
-        raise ValueError(f"{path}: no usable rows (simulated{' and fitted' if fits_dir else ''})")
-    for name, arr in (("R_d", R_d[keep]), ("albedo_rgb", rgb[keep])):
+    if not done.any():
+        raise ValueError(f"{path}: no simulated rows")
+    for name, arr in (("R_d", R_d[done]), ("albedo_rgb", rgb[done])):
         if not np.all(np.isfinite(arr)):
             raise ValueError(f"{path}: non-finite {name}")
-    t = None
-    if targets is not None:
-        kept = sort_by_sigma_t({n: v[keep] for n, v in targets.items()})
-        for n, v in kept.items():
-            if not np.all(np.isfinite(v)):
-                raise ValueError(f"{fits_file(fits_dir, split)}: non-finite {n} in group K{k}")
-        t = {n: _f32(v) for n, v in kept.items()}
-    return SplitData(_f32(tone[keep]), _f32(R_d[keep]), _f32(rgb[keep]), t, photons)
+    data = SplitData(_f32(tone[done]), _f32(R_d[done]), _f32(rgb[done]), None, photons)
+    if fits_dir is None:
+        return data
+    fpath = fits_file(fits_dir, split)
+    if not fpath.is_file():
+        raise ValueError(f"no fits {fpath}: run `python -m training fit --dataset ... --out {fits_dir}`")
+    index, ftone, fdone, widx, arrays = load_fits(fpath, k)
+    if index.min(initial=0) < 0 or index.max(initial=-1) >= len(tone):
+        raise ValueError(f"{fpath}: row index outside {path}")
+    if not np.allclose(ftone, tone[index], rtol=0, atol=1e-12):
+        raise ValueError(f"{fpath} was fitted on other tones than {path}")
+    use = fdone & done[index]
+    if not use.any():
+        raise ValueError(f"{fpath}: no fitted rows yet (finish `python -m training fit --dataset`)")
+    order = np.argsort(index[use], kind="stable")  # dataset order
+    rows_in_data = np.cumsum(done) - 1  # position of each dataset row among the done rows
+    kept = sort_by_sigma_t({n: v[use][order] for n, v in arrays.items()})
+    for n, v in kept.items():
+        if not np.all(np.isfinite(v)):
+            raise ValueError(f"{fpath}: non-finite k{k}_{n}")
+    w = R_d.shape[1]
+    widx = np.arange(w) if widx is None else widx
+    if widx.min(initial=0) < 0 or widx.max(initial=-1) >= w or kept["alpha"].shape[-1] != len(widx):
+        raise ValueError(f"{fpath}: its wavelength_index does not match {w} wavelengths")
+    data.targets = {n: _f32(v) for n, v in kept.items()}
+    data.fitted = torch.as_tensor(rows_in_data[index[use][order]], dtype=torch.int64)
+    data.target_index = torch.as_tensor(widx, dtype=torch.int64)
+    return data

@@ -6,7 +6,8 @@ Shapes: N tones, W wavelengths, K components; ``u`` tensors are Dec_T's normalis
 * Stage 1: spectral L1, mean |R_hat - R_d| over tones and all 376 wavelengths.
 * Stage 2: colour L1, mean |A_RGB - gamma * CMF(Dec_R(Enc(A_RGB)))| with the analytic exposure gamma.
 * Stage 3: L = L_param + LAMBDA_R L_refl + LAMBDA_SMOOTH L_smooth (paper eq. total_loss):
-  - L_param = (1/|C|) sum_c phi_c Huber(u_c, u*_c), each channel averaged over its elements, phi_alpha
+  - L_param = (1/|C|) sum_c phi_c Huber(u_c, u*_c), each channel averaged over its elements (at the
+    fitted wavelengths: ``fit --wavelength-stride`` may fit every n-th only), phi_alpha
     = 2, others 1.  Comparing in ``u`` puts sigma_t on a log scale (a difference of 0.05 is a factor
     exp(0.05 ln 1e6) = 2.0 in sigma_t) and g on its range.  Huber's transition HUBER_DELTA = 0.05 (our
     choice; the paper gives none): L1-like beyond it.
@@ -59,13 +60,17 @@ def smooth_loss(u: torch.Tensor) -> torch.Tensor:
 
 
 def stage3_losses(model: SkinModel, lut: LookupTables, p: torch.Tensor, R_mc: torch.Tensor,
-                  targets: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:
-    """All stage-3 terms for true tones ``p`` (N, 5), MC reflectance (N, W) and fit targets (N, K, W)."""
+                  targets: dict[str, torch.Tensor],
+                  target_index: torch.Tensor | None = None) -> dict[str, torch.Tensor]:
+    """All stage-3 terms for true tones ``p`` (N, 5), MC reflectance (N, W) and fit targets (N, K, Wf) at
+    the wavelengths ``target_index`` (Wf,) (None: all W).  L_param compares at those wavelengths only;
+    L_refl and L_smooth use all W."""
     with torch.no_grad():
         refl = model.dec_r(p)  # frozen Dec_R
     out = model.dec_t(p, refl)
     u_t = model.dec_t.to_unit(targets["alpha"], targets["g"], targets["sigma_t"], targets["weight"])
-    l_param = param_loss(out["u"], u_t)
+    u = out["u"] if target_index is None else out["u"][..., target_index]
+    l_param = param_loss(u, u_t)
     l_refl = spectral_l1(lut_reflectance(model, lut, out), R_mc)
     l_smooth = smooth_loss(out["u"])
     total = l_param + LAMBDA_R * l_refl + LAMBDA_SMOOTH * l_smooth

@@ -97,7 +97,10 @@ def train(rundir: Path, dataset: Path, fits: Path | None, lut_path: Path, *, wan
     record = {
         "model": mcfg.to_dict(), "train": asdict(tcfg), "lut": str(lut_path), "lut_sha256": sha256_file(lut_path),
         "dataset": str(dataset), "fits": None if fits is None else str(fits),
-        "dataset_info": {"n_train": len(train_data), "n_validation": len(val_data), "photons": train_data.photons},
+        "dataset_info": {"n_train": len(train_data), "n_validation": len(val_data), "photons": train_data.photons,
+                         "n_train_fitted": 0 if train_data.fitted is None else len(train_data.fitted),
+                         "n_validation_fitted": 0 if val_data.fitted is None else len(val_data.fitted),
+                         "fitted_wavelengths": 0 if train_data.target_index is None else len(train_data.target_index)},
         "commands": [command] if command else [],
     }
     record = _check_or_create_record(rundir, record)

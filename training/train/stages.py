@@ -65,15 +65,17 @@ def stage3(model: SkinModel, lut: LookupTables, train: SplitData, val: SplitData
     if train.targets is None:
         raise ValueError("stage 3 needs the mixture fits of the training split (--fits)")
 
-    def step(idx: torch.Tensor) -> dict[str, torch.Tensor]:
+    def step(idx: torch.Tensor) -> dict[str, torch.Tensor]:  # idx: positions among the fitted rows
+        rows = train.fitted[idx]
         targets = {k: v[idx] for k, v in train.targets.items()}
-        return L.stage3_losses(model, lut, train.tone[idx], train.R_d[idx], targets)
+        return L.stage3_losses(model, lut, train.tone[rows], train.R_d[rows], targets, train.target_index)
 
     def evaluate() -> dict[str, float]:
         if val.targets is not None:
-            out = L.stage3_losses(model, lut, val.tone, val.R_d, val.targets)
+            rows = val.fitted
+            out = L.stage3_losses(model, lut, val.tone[rows], val.R_d[rows], val.targets, val.target_index)
             return {k: float(v) for k, v in out.items()}
         out = model.dec_t(val.tone, model.dec_r(val.tone))
         return {"refl": float(L.spectral_l1(L.lut_reflectance(model, lut, out), val.R_d))}
 
-    return StageSpec(3, "Dec_T", [model.dec_t, model.slab], len(train), batch, epochs, lr, step, evaluate)
+    return StageSpec(3, "Dec_T", [model.dec_t, model.slab], len(train.fitted), batch, epochs, lr, step, evaluate)

@@ -44,7 +44,7 @@ def toy_targets(tones: np.ndarray, k: int) -> dict[str, np.ndarray]:
 
 
 def write_toy(root: Path, n_train: int = 32, n_validation: int = 8) -> tuple[Path, Path, Path]:
-    """Write ``root/dataset/{train,validation}.h5``, ``root/fits/fits_{split}.h5`` and ``root/lut.npz``.
+    """Write ``root/dataset/{train,validation}.h5``, ``root/fits/{split}_fits.h5`` and ``root/lut.npz``.
 
     Returns (dataset_dir, fits_dir, lut_path).
     """
@@ -62,13 +62,18 @@ def write_toy(root: Path, n_train: int = 32, n_validation: int = 8) -> tuple[Pat
                                       "profile": np.zeros((len(tones), R.shape[1], 512)),
                                       "profile_stderr": np.zeros((len(tones), R.shape[1], 512)),
                                       "albedo_rgb": spectrum_to_linear_srgb(R, "D65")})
-        with h5py.File(fits_dir / f"fits_{split}.h5", "w") as f:
-            f.create_dataset("tone", data=tones)
-            f.create_dataset("done", data=np.ones(len(tones), bool))
+        # the fitter's layout; like a `fit --max-tones --wavelength-stride 2` run: the training split's
+        # last quarter of tones is not fitted and the targets are at every 2nd wavelength
+        n_fit = len(tones) - (len(tones) // 4 if split == "train" else 0)
+        widx = np.arange(0, R.shape[1], 2)
+        with h5py.File(fits_dir / f"{split}_fits.h5", "w") as f:
+            f.create_dataset("index", data=np.arange(n_fit))
+            f.create_dataset("tone", data=tones[:n_fit])
+            f.create_dataset("done", data=np.ones(n_fit, bool))
+            f.create_dataset("wavelength_index", data=widx)
             for k in (1, 2, 3):
-                grp = f.create_group(f"K{k}")
-                for name, arr in toy_targets(tones, k).items():
-                    grp.create_dataset(name, data=arr.astype(np.float32))
+                for name, arr in toy_targets(tones[:n_fit], k).items():
+                    f.create_dataset(f"k{k}_{name}", data=arr[..., widx].astype(np.float32))
     lut_path = root / "lut.npz"
     np.savez(lut_path, **dipole_lut())
     return data_dir, fits_dir, lut_path
