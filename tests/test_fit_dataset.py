@@ -7,6 +7,8 @@ closed-form dipole media (test tables only, training/fit/dipole.py), and the fit
 
 from __future__ import annotations
 
+import json
+
 import h5py
 import numpy as np
 import pytest
@@ -109,6 +111,14 @@ def test_wavelength_stride_anchors_and_tone_limit(setup, monkeypatch):
         np.testing.assert_array_equal(f["wavelength_nm"][:], 250.0 + 2.0 * f["wavelength_index"][:])
         assert f["k2_alpha"].shape == (2, 2, 47) and np.isfinite(f["k2_joint"][:]).all()
         assert f.attrs["anchor_every"] == 3 and f.attrs["refl_loss"] == "relative"
+    # the summary: means over the fitted rows, per K and band, with the noise floor (1e-3 relative stderr)
+    assert main(["--dataset", str(ds), "--out", str(d / "fits_stride"), "--split", "train", "--summary"]) == 0
+    summary = json.loads((d / "fits_stride" / "summary.json").read_text())["train"]
+    assert summary["tones"] == 2 and summary["wavelengths"] == 47
+    assert summary["noise"] == pytest.approx(1e-3, rel=1e-3)
+    for k in ("1", "2"):
+        assert set(summary["K"][k]["bands"]) == {"UV", "Vis", "NIR"}
+        assert 0 <= summary["K"][k]["shape_excess"] <= summary["K"][k]["shape_rmse"]
     with pytest.raises(ValueError, match="wavelength_stride"):
         fit_split(ds, "train", lut, lut_path, (1,), d / "x", wavelength_stride=0, progress=False)
 

@@ -4,8 +4,11 @@
         prints {"fits": [{"K": 1, "shape_rmse": ..., "refl_rel_err": ...}, ...]}: means over the
         wavelengths of the tone file (376 for ``python -m training simulate``).
     python -m training fit --dataset DIR --lut LUT.npz --k 1,2,3 --out DIR [--split train,validation]
-        [--shard I/N]: every tone x wavelength of the dataset's complete split files into
-        OUT/<split>_fits.h5 (training/fit/dataset.py); resumable, shardable.
+        [--shard I/N] [--wavelength-stride S] [--anchor-every A] [--max-tones M]: every tone x wavelength
+        of the dataset's complete split files into OUT/<split>_fits.h5 (training/fit/dataset.py);
+        resumable, shardable.
+    python -m training fit --dataset DIR --out DIR --summary: mean errors per split, K and band of those
+        fits, with the Monte Carlo noise floor of the shape error; writes OUT/summary.json.
 
 The LUT is ``--lut`` or, if not given, the file named by the environment variable SKIN_SSS_LUT.
 """
@@ -64,6 +67,9 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--max-tones", type=int, default=None, help="--dataset: fit the first n tones of each split")
     p.add_argument("--refl-loss", choices=("relative", "paper"), default="relative",
                    help="reflectance term: ((R_hat - R)/R)^2 (default) or the paper's (R_hat - R)^2")
+    p.add_argument("--summary", action="store_true",
+                   help="--dataset: do not fit; print (and write OUT/summary.json) the mean errors per split, K "
+                        "and band of the fits in --out, with the MC noise floor of the shape error")
     p.add_argument("--no-progress", action="store_true")
     p.add_argument("--device", choices=("cpu", "cuda"), default="cpu")
     p.add_argument("--seed", type=int, default=0, help="torch seed (the fit itself is deterministic)")
@@ -150,6 +156,8 @@ def _fit_dataset(args: argparse.Namespace, ks: tuple[int, ...], lut_path: Path) 
         raise ValueError(f"--split must name some of {SPLITS}, got {args.split!r}")
     if args.chunk_tones < 1:
         raise ValueError("--chunk-tones must be >= 1")
+    if args.summary:
+        return _summary(args.dataset, args.out, splits)
     shard = args.shard
     lut = LookupTables.load(lut_path, dtype=torch.float64, device=args.device)
     for split in splits:
@@ -173,6 +181,21 @@ def _fit_dataset(args: argparse.Namespace, ks: tuple[int, ...], lut_path: Path) 
     return 0
 
 
+def _summary(dataset: Path, out: Path, splits: list[str]) -> int:
+    from training.fit.dataset import summarise
+
+    result = {}
+    for split in splits:
+        files = sorted(out.glob(f"{split}_fits*.h5"))
+        if files:
+            result[split] = summarise(dataset, files)
+    if not result:
+        raise ValueError(f"no fits files in {out}: run `python -m training fit --dataset ... --out {out}` first")
+    (out / "summary.json").write_text(json.dumps(result, indent=2))
+    print(json.dumps(result))
+    return 0
+
+
 def main(argv: list[str]) -> int:
     args = _parser().parse_args(argv)
     torch.manual_seed(args.seed)
@@ -182,6 +205,8 @@ def main(argv: list[str]) -> int:
         ks = _parse_k(args.k)
         if args.device == "cuda" and not torch.cuda.is_available():
             raise ValueError("--device cuda: no CUDA device available")
+        if args.dataset is not None and args.summary:  # reads the fits files only
+            return _fit_dataset(args, ks, Path())
         lut_path = args.lut or (Path(os.environ["SKIN_SSS_LUT"]) if os.environ.get("SKIN_SSS_LUT") else None)
         if lut_path is None:
             raise ValueError("give --lut LUT.npz (from `python -m training lut`) or set SKIN_SSS_LUT")

@@ -217,3 +217,58 @@ def fit_split(
         bar.update(len(rows))
     bar.close()
     return path
+
+
+#: Bands of the paper's Table 2 (nm, lower bound inclusive).
+BANDS: dict[str, tuple[float, float]] = {"UV": (250.0, 400.0), "Vis": (400.0, 700.0), "NIR": (700.0, 1000.1)}
+
+
+def summarise(dataset: Path, fits: list[Path], chunk_tones: int = 64) -> dict:
+    """Mean errors of the done rows of one split's fits files (shards allowed), per K and band.
+
+    Per K: ``shape_rmse``, ``refl_rel_err`` (means over tones x fitted wavelengths), and the MC noise
+    floor of L_shape (``loss.Target.noise``, recomputed from the dataset's standard errors) with
+    ``shape_excess`` = sqrt(L_shape^2 - noise^2), the model error proper; the same per band.
+    """
+    from training.fit import loss as L
+
+    rows, per_k = [], {}
+    for path in fits:
+        with h5py.File(path, "r", locking=False) as f:
+            done = f["done"][:]
+            rows.append(f["index"][:][done])
+            widx = f["wavelength_index"][:] if "wavelength_index" in f else np.arange(f["k1_shape_rmse"].shape[1])
+            ks = [int(k) for k in str(f.attrs["ks"]).split(",")]
+            for k in ks:
+                for name in ("shape_rmse", "refl_rel_err"):
+                    per_k.setdefault(k, {}).setdefault(name, []).append(f[f"k{k}_{name}"][:][done])
+    index = np.concatenate(rows)
+    if len(index) == 0:
+        raise ValueError("no fitted rows yet")
+    src = dataset / f"{fits[0].name.split('_fits')[0]}.h5"
+    noise = []
+    with h5py.File(src, "r") as f:
+        edges = torch.tensor(f["r_edges_cm"][:])
+        wl = f["wavelength_nm"][:][widx]
+        photons = float(f.attrs["photons"])
+        for start in range(0, len(index), chunk_tones):
+            idx = np.sort(index[start : start + chunk_tones])
+            order = np.argsort(np.argsort(index[start : start + chunk_tones]))
+            prof = torch.tensor(f["profile"][idx][:, widx], dtype=torch.float64)
+            se = torch.tensor(f["profile_stderr"][idx][:, widx], dtype=torch.float64)
+            R = torch.tensor(f["R_d"][idx][:, widx], dtype=torch.float64)
+            t = L.make_target(prof, R, edges, photons, stderr=se)
+            noise.append(t.noise.numpy()[order])
+    noise = np.concatenate(noise)
+    out = {"tones": int(len(index)), "wavelengths": int(len(widx)), "noise": float(noise.mean()), "K": {}}
+    for k, d in per_k.items():
+        shape, refl = np.concatenate(d["shape_rmse"]), np.concatenate(d["refl_rel_err"])
+        excess = L.shape_excess(torch.tensor(shape, dtype=torch.float64), torch.tensor(noise)).numpy()
+        res = {"shape_rmse": float(shape.mean()), "refl_rel_err": float(refl.mean()),
+               "shape_excess": float(excess.mean()), "bands": {}}
+        for band, (lo, hi) in BANDS.items():
+            sel = (wl >= lo) & (wl < hi)
+            res["bands"][band] = {name: float(arr[:, sel].mean()) for name, arr in (
+                ("shape_rmse", shape), ("shape_excess", excess), ("refl_rel_err", refl), ("noise", noise))}
+        out["K"][k] = res
+    return out

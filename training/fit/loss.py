@@ -64,7 +64,9 @@ class Target:
     ``r_cm`` (M,): the bin centres at which the model is evaluated; ``log_p`` (..., M): log of P_MC
     (0 where masked); ``mask`` (..., M) float 0/1; ``n_used`` (...,): number of used bins;
     ``floor`` (...,): the model floor (cm^-2); ``R`` (...,): R_MC; ``r_scale`` (...,): the unit of the
-    reflectance residual (R_MC floored at 1e-6 for the relative term, 1 for the paper's absolute one).
+    reflectance residual (R_MC floored at 1e-6 for the relative term, 1 for the paper's absolute one);
+    ``noise`` (...,): the L_shape that the Monte Carlo noise of the used bins alone gives, sqrt(mean of
+    (stderr / profile)^2) (or 1/count without standard errors): a fit cannot be expected to go below it.
     """
 
     r_cm: torch.Tensor
@@ -74,6 +76,7 @@ class Target:
     floor: torch.Tensor
     R: torch.Tensor
     r_scale: torch.Tensor
+    noise: torch.Tensor
 
     def repeat(self, n: int) -> Target:
         """The batch repeated ``n`` times along the first axis (for multi-start fits)."""
@@ -86,17 +89,19 @@ class Target:
             self.floor.repeat(n),
             self.R.repeat(n),
             self.r_scale.repeat(n),
+            self.noise.repeat(n),
         )
 
     def rows(self, idx: torch.Tensor) -> Target:
         """The targets of a subset of the problems (indices into the first axis)."""
         return Target(self.r_cm, self.log_p[idx], self.mask[idx], self.n_used[idx], self.floor[idx], self.R[idx],
-                      self.r_scale[idx])
+                      self.r_scale[idx], self.noise[idx])
 
     def subset(self, idx: torch.Tensor) -> Target:
         """The same targets on a subset of the radial bins (indices into the last axis)."""
         mask = self.mask[..., idx]
-        return Target(self.r_cm[idx], self.log_p[..., idx], mask, mask.sum(-1), self.floor, self.R, self.r_scale)
+        return Target(self.r_cm[idx], self.log_p[..., idx], mask, mask.sum(-1), self.floor, self.R, self.r_scale,
+                      self.noise)
 
 
 def make_target(
@@ -126,10 +131,12 @@ def make_target(
     if stderr is None:
         ok = positive
         counted = energy * photons >= min_count
+        rel = torch.rsqrt((energy * photons).clamp_min(1e-300))
     else:
         if stderr.shape != profile.shape or not torch.isfinite(stderr).all() or (stderr < 0).any():
             raise ValueError("profile stderr must be finite, non-negative and shaped like the profile")
         ok = positive & (stderr <= MAX_REL_STDERR * profile)
+        rel = stderr / profile.clamp_min(1e-300)
         counted = ok & (energy * REFERENCE_PHOTONS >= min_count)
     few = counted.sum(-1, keepdim=True) < MIN_BINS
     score = torch.where(ok, energy, torch.zeros_like(energy)) + torch.where(positive, energy, 0.0) * 1e-300
@@ -141,7 +148,9 @@ def make_target(
     p_min = torch.where(mask > 0, p_mc, big).amin(-1)
     floor = torch.where(torch.isfinite(p_min), p_min * FLOOR_REL, torch.ones_like(p_min))
     r_scale = R_mc.clamp_min(1e-6) if relative_refl else torch.ones_like(R_mc)
-    return Target(bin_centres(r_edges_cm), log_p, mask, mask.sum(-1), floor, R_mc, r_scale)
+    n_used = mask.sum(-1)
+    noise = torch.sqrt((mask * torch.where(mask > 0, rel, 0.0) ** 2).sum(-1) / n_used.clamp_min(1.0))
+    return Target(bin_centres(r_edges_cm), log_p, mask, n_used, floor, R_mc, r_scale, noise)
 
 
 def shape_residuals(p_hat: torch.Tensor, t: Target) -> torch.Tensor:
@@ -163,6 +172,12 @@ def refl_loss(r_hat: torch.Tensor, t: Target) -> torch.Tensor:
 def joint_loss(p_hat: torch.Tensor, r_hat: torch.Tensor, t: Target) -> torch.Tensor:
     """L_joint = L_shape + 5 L_R per problem; shape (...,)."""
     return shape_loss(p_hat, t) + LAMBDA_R * refl_loss(r_hat, t)
+
+
+def shape_excess(shape_rmse: torch.Tensor, noise: torch.Tensor) -> torch.Tensor:
+    """The part of L_shape that the MC noise does not explain, sqrt(max(L_shape^2 - noise^2, 0)): the
+    model error, if the noise of each bin is independent of the misfit (same shape as the inputs)."""
+    return torch.sqrt((shape_rmse**2 - noise**2).clamp_min(0.0))
 
 
 def refl_rel_err(r_hat: torch.Tensor, t: Target) -> torch.Tensor:

@@ -92,6 +92,7 @@ class FitResult:
     shape_rmse: torch.Tensor
     refl_rel_err: torch.Tensor
     joint: torch.Tensor
+    noise: torch.Tensor  # L_shape of the MC noise alone (loss.Target.noise)
     work: float  # model evaluations per problem spent up to this K (incl. the stages it starts from)
     seconds: float
     extra: dict = field(default_factory=dict)
@@ -400,7 +401,7 @@ def fit_schedule(
 
     def record(k, theta, evals, seconds):
         s, rr, j = prob.metrics(theta, k)
-        out[k] = FitResult(k, theta, prob.mixture(theta, k), s, rr, j, evals / B, seconds)
+        out[k] = FitResult(k, theta, prob.mixture(theta, k), s, rr, j, target.noise, evals / B, seconds)
 
     if warm is not None:
         if method != "lm" or sorted(warm) != list(range(1, max(ks) + 1)):
