@@ -2,7 +2,13 @@
 
     python blender_addon/bake.py --albedo IMAGE --out DIR [--target cycles,physical,spectral]
         [--colorspace auto|srgb|linear] [--unit-scale M_PER_UNIT] [--overwrite] [--model PATH] [--threads N]
+        [--exact] [--table PATH] [--force] [--uv-mask IMAGE] [--prune-share S] [--exr-compression piz|zip|...]
     blender -b --factory-startup --python blender_addon/bake.py -- --albedo IMAGE --out DIR ...
+
+By default texels are looked up in the fast-path table shipped beside the model
+(``skin_inversion_table.npz``, exporters.texel_table; colours outside it are evaluated exactly); ``--exact``
+evaluates every distinct colour with the model.  Re-running a bake whose maps in DIR are up to date (same
+image content, model and options) does nothing and says so (``--force`` re-bakes).
 
 Writes float EXR maps (Non-Color) and IMAGE-stem_maps.json into DIR (created if missing).  Exit status 0 on
 success, 2 with a one-line error on stderr for bad input (missing/unreadable image, NaN or negative
@@ -76,6 +82,17 @@ def build_parser() -> argparse.ArgumentParser:
                         "unit-exposure reflectance")
     p.add_argument("--ior", type=float, default=1.4,
                    help="IOR of the Cycles closures (the node group's IOR input; default 1.4, tissue)")
+    p.add_argument("--exact", action="store_true",
+                   help="evaluate every distinct colour with the model instead of the fast-path table")
+    p.add_argument("--table", default=None, metavar="PATH",
+                   help="fast-path table (default: <model stem>_table.npz beside the model)")
+    p.add_argument("--force", action="store_true", help="re-bake even if DIR holds an up-to-date bake")
+    p.add_argument("--uv-mask", default=None, metavar="IMAGE",
+                   help="image of the texels the mesh's UVs cover (non-zero = covered, same size as the albedo); "
+                        "others get the maps of the most common covered colour")
+    p.add_argument("--prune-share", type=float, default=None, metavar="S",
+                   help="drop components below this share of the colour at every texel (default 0.002; 0 keeps all)")
+    p.add_argument("--exr-compression", default=None, help="EXR compression of the maps (default piz)")
     p.add_argument("--quiet", action="store_true")
     return p
 
@@ -113,7 +130,11 @@ def main(argv: list[str] | None = None) -> int:
         options = baking.BakeOptions(targets=baking.parse_targets(args.target), unit_scale_m=args.unit_scale,
                                      threads=args.threads, memory_mb=args.memory_mb,
                                      match_exposure=args.match_exposure, ior=args.ior,
-                                     overwrite=args.overwrite)
+                                     overwrite=args.overwrite, exact=args.exact, table_path=args.table,
+                                     force=args.force, texel_mask=_read_mask(args.uv_mask, maps),
+                                     prune_share=(baking.DEFAULT_PRUNE_SHARE if args.prune_share is None
+                                                  else args.prune_share),
+                                     compression=args.exr_compression or maps.DEFAULT_COMPRESSION)
         last = [0.0]
 
         def progress(fraction: float) -> None:
@@ -132,12 +153,24 @@ def main(argv: list[str] | None = None) -> int:
         if created:
             _remove_if_empty(out)
         raise
-    if not args.quiet:
-        for note in result.notes:
+    for note in result.notes:
+        if note.startswith("warning: "):
+            print(f"bake.py: {note}", file=sys.stderr)
+        elif not args.quiet:
             print(f"bake.py: note: {note}")
-        print(f"bake.py: wrote {len(result.files)} maps (K={result.k}) and {result.json_path.name} to {out} "
+    if not args.quiet:
+        verb = "kept" if result.reused else "wrote"
+        print(f"bake.py: {verb} {len(result.files)} maps (K={result.k}) and {result.json_path.name} in {out} "
               f"in {time.perf_counter() - t0:.1f} s")
     return 0
+
+
+def _read_mask(path: str | None, maps):
+    """The --uv-mask image as (H, W) bool (any non-zero colour channel = covered), or None."""
+    if path is None:
+        return None
+    image = maps.read_albedo(path, colorspace="linear")
+    return (image.rgb > 0).any(axis=2)
 
 
 def _one_line(exc: BaseException) -> str:

@@ -20,10 +20,13 @@ from pathlib import Path
 import bpy
 import numpy as np
 
-from exporters import baking, inference, maps
+from exporters import baking, inference, maps, uv_coverage
 
 from . import nodes
 
+#: Custom properties on baked images: the bake key (exporters.baking.bake_key), component, map kind, K of the bake.
+KEY_PROP, K_PROP = "spectral_skin_sss_bake_key", "spectral_skin_sss_k"
+KIND_PROP, KCOUNT_PROP = "spectral_skin_sss_kind", "spectral_skin_sss_k_count"
 #: Colour-space names of Blender's OCIO config that mean "not sRGB-encoded" (data or linear).
 _LINEAR_SPACES = ("non-color", "linear", "raw", "acescg", "aces2065", "filmic log", "agx log", "xyz")
 
@@ -41,7 +44,9 @@ class BakeSettings:
     """What the operator asks for.  ``filepath`` (a file on disk) wins over ``image_name`` (an image
     datablock), which wins over the active Image Texture node of the active material.  ``storage``:
     "PACK" (images packed into the .blend) or "FILES" (EXR files in ``output_dir``, default a folder
-    beside the saved .blend).  ``backend``: "AUTO", "SVM" or "OSL"."""
+    beside the saved .blend).  ``backend``: "AUTO", "SVM" or "OSL".  ``exact``: every distinct colour through
+    the model instead of the fast-path table; ``uv_coverage``: evaluate only the texels the active mesh's UVs
+    cover (the others take the maps of the most common covered colour)."""
 
     model_path: str
     filepath: str = ""
@@ -54,6 +59,8 @@ class BakeSettings:
     match_exposure: bool = False
     threads: int = 0
     chunk: int = 2048
+    exact: bool = False
+    uv_coverage: bool = True
 
 
 def active_image_node(material: bpy.types.Material | None) -> bpy.types.Node | None:
@@ -124,6 +131,51 @@ def _albedo_from_pixels(image: bpy.types.Image, colorspace: str) -> maps.AlbedoI
                             "uint8", n_clamped=0, n_channels=3 if ch >= 3 else ch)
 
 
+def mesh_uv_mask(obj, source_node, width: int, height: int) -> tuple[np.ndarray | None, str]:
+    """Texels of a width x height texture that ``obj``'s UVs cover (exporters.uv_coverage), with the UV map the
+    albedo's Image Texture node reads (a UV Map node, else the mesh's active render UV map); (None, why) when
+    there is no mesh, no UV map, a non-UV texture vector, or UVs outside [0, 1] (tiles: everything is baked)."""
+    if obj is None or obj.type != "MESH" or not obj.data.uv_layers:
+        return None, "no mesh with a UV map"
+    mesh = obj.data
+    name = ""
+    if source_node is not None and source_node.inputs["Vector"].is_linked:
+        src = source_node.inputs["Vector"].links[0].from_node
+        if src.bl_idname != "ShaderNodeUVMap":
+            return None, "the albedo is not mapped by UVs"
+        name = src.uv_map
+    layer = mesh.uv_layers.get(name) if name else next((u for u in mesh.uv_layers if u.active_render),
+                                                        mesh.uv_layers.active)
+    if layer is None:
+        return None, f"UV map '{name}' not found"
+    mesh.calc_loop_triangles()
+    n = len(mesh.loop_triangles)
+    loops = np.empty(3 * n, np.int64)
+    mesh.loop_triangles.foreach_get("loops", loops)
+    uv = np.empty(2 * len(layer.data), np.float64)
+    layer.data.foreach_get("uv", uv)
+    tri = uv.reshape(-1, 2)[loops].reshape(n, 3, 2)
+    if tri.size and (tri.min() < -1e-4 or tri.max() > 1.0 + 1e-4):
+        return None, "UVs outside [0, 1]"
+    return uv_coverage.uv_coverage(tri, width, height), layer.name
+
+
+def _wired_to(material: bpy.types.Material, images: dict[tuple[int, str], bpy.types.Image]) -> bool:
+    """Whether the material's active output is fed by a mixture group node whose inputs read exactly
+    ``images`` (so re-applying them would change nothing)."""
+    tree = material.node_tree
+    outs = [n for n in tree.nodes if n.bl_idname == "ShaderNodeOutputMaterial" and n.is_active_output]
+    links = outs[0].inputs["Surface"].links if outs else []
+    if not links or links[0].from_node.bl_idname != "ShaderNodeGroup":
+        return False
+    gnode = links[0].from_node
+    for (k, kind), image in images.items():
+        sock = gnode.inputs.get(nodes.socket_name(k, kind))
+        if sock is None or not sock.is_linked or getattr(sock.links[0].from_node, "image", None) != image:
+            return False
+    return True
+
+
 def _image_file(image: bpy.types.Image) -> str | None:
     """Absolute path of the image's file if it has one on disk (not packed/generated)."""
     if image.source not in ("FILE", "SEQUENCE", "TILED") or image.packed_file is not None or not image.filepath:
@@ -144,31 +196,43 @@ class AddonBake:
         self.source_node = None
         if not os.path.isfile(settings.model_path):
             raise BakeInputError(missing_model_message(settings.model_path))
+        self.image_id = None
         self.albedo, self.stem, self.input_name = self._read_albedo()
         self.backend = pick_backend(self.scene, settings.backend)
-        self.model = inference.load_model(settings.model_path, threads=settings.threads)
+        self.model = inference.ModelFile(settings.model_path, threads=settings.threads)  # loaded if needed
+        height, width = (self.albedo.shape if isinstance(self.albedo, maps.IndexedAlbedo) else
+                         self.albedo.rgb.shape[:2])
+        mask, self.uv_note = (mesh_uv_mask(obj, self.source_node, width, height) if settings.uv_coverage
+                              else (None, "off"))
         self.out_dir, self._temp_dir = self._output_folder()
         scale = self.scene.unit_settings.scale_length if self.scene.unit_settings.system != "NONE" else 1.0
         self.options = baking.BakeOptions(targets=("cycles",), unit_scale_m=float(scale or 1.0),
                                           threads=settings.threads, chunk=settings.chunk,
-                                          match_exposure=settings.match_exposure, overwrite=settings.overwrite)
+                                          match_exposure=settings.match_exposure, overwrite=settings.overwrite,
+                                          exact=settings.exact, texel_mask=mask)
         try:
             self.job = baking.BakeJob(self.albedo, self.out_dir, self.stem, self.model, self.options,
-                                      input_image=self.input_name)
+                                      input_image=self.input_name, image_id=self.image_id)
         except BaseException:
             self._remove_temp_dir()
             raise
+        self.reused_images = self._packed_up_to_date() if settings.storage == "PACK" else None
         self._steps = None
         self.fraction = 0.0
         self.result: baking.BakeResult | None = None
 
     # -- inputs --------------------------------------------------------------------------------------------
-    def _read_albedo(self) -> tuple[maps.AlbedoImage, str, str]:
+    def _read_file(self, path: str, colorspace: str) -> maps.IndexedAlbedo:
+        if os.path.isfile(path):
+            self.image_id = f"file:{maps.sha256_file(path)}:{colorspace}"
+        return maps.read_albedo_indexed(path, colorspace=colorspace)
+
+    def _read_albedo(self) -> tuple[maps.AlbedoImage | maps.IndexedAlbedo, str, str]:
         s = self.settings
         if s.filepath:
             path = bpy.path.abspath(s.filepath)
             cs = s.colorspace if s.colorspace in ("auto", "srgb", "linear") else "auto"
-            return maps.read_albedo(path, colorspace=cs), Path(path).stem, path
+            return self._read_file(path, cs), Path(path).stem, path
         if s.image_name:
             image = bpy.data.images.get(s.image_name)
             if image is None:
@@ -185,8 +249,21 @@ class AddonBake:
         if path is not None:
             if not os.path.isfile(path):
                 raise BakeInputError(f"the file of image '{image.name}' is missing: {path}")
-            return maps.read_albedo(path, colorspace=cs), stem, path
+            return self._read_file(path, cs), stem, path
         return _albedo_from_pixels(image, cs), stem, f"<image {image.name}>"
+
+    def _packed_up_to_date(self) -> dict[tuple[int, str], bpy.types.Image] | None:
+        """Images this add-on packed from a bake with the same key (same image content, model, options), if a
+        complete set of them is still in the file: then nothing needs to be computed."""
+        found: dict[tuple[int, str], bpy.types.Image] = {}
+        k_count = None
+        for image in bpy.data.images:
+            if image.get(KEY_PROP) == self.job.key and image.packed_file is not None:
+                found[(int(image.get(K_PROP, 0)), str(image.get(KIND_PROP, "")))] = image
+                k_count = int(image.get(KCOUNT_PROP, 0))
+        if not k_count or any((k, kind) not in found for k in range(1, k_count + 1) for kind in nodes.KINDS):
+            return None
+        return {(k, kind): found[(k, kind)] for k in range(1, k_count + 1) for kind in nodes.KINDS}
 
     def _output_folder(self) -> tuple[Path, Path | None]:
         s = self.settings
@@ -211,6 +288,9 @@ class AddonBake:
     # -- running -------------------------------------------------------------------------------------------
     def step(self) -> bool:
         """Do one inference chunk; False when all texels are done."""
+        if self.reused_images is not None:
+            self.fraction = 1.0
+            return False
         if self._steps is None:
             self._steps = self.job.steps()
         try:
@@ -246,7 +326,9 @@ class AddonBake:
     def apply(self, context: bpy.types.Context) -> str:
         """Publish the maps, create the images and the node group, wire it into the material.
 
-        Returns a one-line report; on failure everything created here is removed again."""
+        An up-to-date bake (packed images of the same key, or an up-to-date folder) is reused: no image is
+        made again, and a material already wired to those images is left as it is.  Returns a one-line
+        report; on failure everything created here is removed again."""
         created_images: list[bpy.types.Image] = []
         created_nodes: list[str] = []
         group_existed = set(bpy.data.node_groups.keys())
@@ -254,21 +336,20 @@ class AddonBake:
         previous_surface = None
         previous_prop = self.material.get(nodes.PREVIOUS_SURFACE_PROP) if self.material is not None else None
         try:
-            self.result = self.job.finish()
-            images = {}
-            for spec in baking.map_specs(self.stem, self.model.k, ("cycles",)):
-                image = bpy.data.images.load(str(self.out_dir / spec.name), check_existing=False)
-                created_images.append(image)
-                image.colorspace_settings.name = "Non-Color"
-                if self.settings.storage == "PACK":
-                    image.pack()
-                    image.filepath_raw = f"//{self.stem}_skin_maps/{spec.name}"
-                    image.name = spec.name
-                images[(spec.k, spec.kind.capitalize())] = image
+            if self.reused_images is not None:
+                images, k_count, reused = dict(self.reused_images), max(k for k, _ in self.reused_images), True
+                self.result = None
+            else:
+                self.result = self.job.finish()
+                reused = self.result.reused
+                images, k_count = self._images(created_images), self.result.k
             if self.backend == "OSL":
                 self.scene.cycles.shading_system = True
-            group = nodes.ensure_group(self.model.k, self.backend)
-            report = f"baked {len(images)} maps (K={self.model.k})"
+            if reused and self.material is not None and _wired_to(self.material, images):
+                return (f"up to date: the maps of this image, model and options are already in '{self.material.name}'"
+                        "; nothing was recomputed or changed")
+            group = nodes.ensure_group(k_count, self.backend)
+            report = f"{'reused' if reused else 'baked'} {len(images)} maps (K={k_count})"
             if self.material is not None:
                 before = {n.name for n in self.material.node_tree.nodes}
                 out_links = [ln for ln in self.material.node_tree.links
@@ -293,9 +374,36 @@ class AddonBake:
             report += f"; files in {self.out_dir}"
         if self.backend == "OSL" and not osl_before:
             report += "; Open Shading Language enabled for the scene"
-        notes = self.result.notes + ([f"{self.result.stats['unreachable_channels']} texel channel(s) brighter than "
-                                      "Cycles can show"] if self.result.stats["unreachable_channels"] else [])
+        notes = list(self.result.notes) if self.result is not None else []
+        if self.result is not None and self.result.stats.get("unreachable_channels"):
+            notes.append(f"{self.result.stats['unreachable_channels']} texel channel(s) brighter than Cycles can show")
         return report + ("; note: " + "; ".join(notes) if notes else "")
+
+    def _images(self, created: list[bpy.types.Image]) -> dict[tuple[int, str], bpy.types.Image]:
+        """Blender images of the written maps, tagged with the bake key (packed, or loaded from the files; a
+        file already loaded is reused and reloaded)."""
+        images = {}
+        k_count = self.result.k
+        for spec in self.job.specs or baking.map_specs(self.stem, k_count, ("cycles",)):
+            path = str(self.out_dir / spec.name)
+            if self.settings.storage == "PACK":
+                image = bpy.data.images.load(path, check_existing=False)
+                created.append(image)
+                image.pack()
+                image.filepath_raw = f"//{self.stem}_skin_maps/{spec.name}"
+                image.name = spec.name
+            else:
+                count = len(bpy.data.images)
+                image = bpy.data.images.load(path, check_existing=True)
+                if len(bpy.data.images) > count:
+                    created.append(image)
+                elif not self.result.reused:
+                    image.reload()
+            image.colorspace_settings.name = "Non-Color"
+            image[KEY_PROP], image[K_PROP], image[KIND_PROP], image[KCOUNT_PROP] = (
+                self.job.key, spec.k, spec.kind.capitalize(), k_count)
+            images[(spec.k, spec.kind.capitalize())] = image
+        return images
 
     def _follow_source_uv(self, gnode: bpy.types.Node) -> None:
         """New texture nodes read the same UVs as the albedo's Image Texture node (when it has a link)."""
@@ -332,6 +440,6 @@ class AddonBake:
             bpy.data.node_groups.remove(bpy.data.node_groups[name])
         if hasattr(self.scene, "cycles"):
             self.scene.cycles.shading_system = osl_before
-        if self.result is not None and self.settings.storage == "FILES":
+        if self.result is not None and not self.result.reused and self.settings.storage == "FILES":
             for f in [*self.result.files, self.result.json_path]:
                 Path(f).unlink(missing_ok=True)

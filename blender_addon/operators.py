@@ -58,6 +58,15 @@ class SPECTRAL_SKIN_OT_invert_albedo(bpy.types.Operator):
         description="Scale the target colour by the model's exposure (shows the texture's brightness instead of "
                     "the model's physically consistent reflectance)")
 
+    exact: bpy.props.BoolProperty(
+        name="Exact (slow)", default=False,
+        description="Evaluate every distinct colour with the network instead of the fast-path table shipped with the "
+                    "model (the table is within ~0.1 ΔE of it on skin; colours outside it are always exact)")
+    uv_coverage: bpy.props.BoolProperty(
+        name="Only UV-covered texels", default=True,
+        description="Evaluate only the texels the active mesh's UVs cover; the others get the maps of the most "
+                    "common covered colour")
+
     _bake = None
     _timer = None
 
@@ -65,7 +74,8 @@ class SPECTRAL_SKIN_OT_invert_albedo(bpy.types.Operator):
         return baker.BakeSettings(model_path=preferences.model_path(context), filepath=self.filepath,
                                   image_name=self.image_name, storage=self.storage, output_dir=self.output_dir,
                                   colorspace=self.colorspace, backend=self.backend, overwrite=self.overwrite,
-                                  match_exposure=self.match_exposure, threads=preferences.threads(context))
+                                  match_exposure=self.match_exposure, threads=preferences.threads(context),
+                                  exact=self.exact, uv_coverage=self.uv_coverage)
 
     def execute(self, context):
         try:

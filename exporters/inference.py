@@ -23,6 +23,8 @@ from exporters.constants import N_WAVELENGTHS
 from exporters.maps import sha256_file
 
 INPUT_NAME = "albedo_rgb"
+#: The bundled model (blender_addon/models/, SPEC §3), in the repository and in the installed extension alike.
+DEFAULT_MODEL_PATH = Path(__file__).resolve().parents[1] / "blender_addon" / "models" / "skin_inversion.onnx"
 #: SPEC §3 outputs of skin_inversion.onnx and their shapes after the batch axis ("K" = components).
 OUTPUT_SHAPES: dict[str, tuple] = {
     "biophysical": (5,),
@@ -38,6 +40,16 @@ DEFAULT_MEMORY_MB: int = 512
 #: Bytes per texel of the collapse's float64 work arrays, per component and wavelength (measured upper
 #: bound: about 10 float64 arrays of shape (K, 236 visible wavelengths) live at once, rounded up).
 _COLLAPSE_BYTES_PER_KL = 10 * 8
+
+
+#: onnxruntime session runs and texels evaluated by every SkinModel of this process (read by tests and
+#: benchmarks to prove that a step did no inference; :func:`inference_counts`).
+_COUNTS = {"runs": 0, "texels": 0}
+
+
+def inference_counts() -> dict[str, int]:
+    """How many onnxruntime session runs (``runs``) on how many texels (``texels``) this process has done."""
+    return dict(_COUNTS)
 
 
 class ModelError(ValueError):
@@ -64,8 +76,7 @@ class SkinModel:
 
     def bytes_per_texel(self) -> int:
         """Peak bytes per texel of one inference + collapse step (used to size chunks)."""
-        onnx_out = 4 * (5 + 1 + N_WAVELENGTHS * (1 + 4 * self.k))
-        return onnx_out + _COLLAPSE_BYTES_PER_KL * self.k * N_WAVELENGTHS
+        return bytes_per_texel(self.k)
 
     def run(self, rgb: np.ndarray) -> dict[str, np.ndarray]:
         """Evaluate rows ``rgb`` (N, 3) linear sRGB in one call; returns every output as float32 arrays.
@@ -81,7 +92,12 @@ class SkinModel:
             raise ValueError(f"{int(bad.sum())} albedo texel(s) are NaN/Inf (first row {int(np.argmax(bad))}); "
                              "fix the texture")
         names = list(OUTPUT_SHAPES)
+        if len(x) == 0:  # onnxruntime warns on empty batches; the answer is known
+            return {n: np.zeros((0, *(self.k if d == "K" else d for d in OUTPUT_SHAPES[n])), np.float32)
+                    for n in names}
         values = self.session.run(names, {INPUT_NAME: np.ascontiguousarray(x)})
+        _COUNTS["runs"] += 1
+        _COUNTS["texels"] += len(x)
         out = dict(zip(names, values, strict=True))
         for name, value in out.items():
             if not np.all(np.isfinite(value)):
@@ -98,11 +114,22 @@ class SkinModel:
             yield sl, self.run(rgb[sl])
 
 
+def bytes_per_texel(k: int) -> int:
+    """Peak bytes per texel of one inference + collapse step for K components (ONNX outputs + collapse)."""
+    onnx_out = 4 * (5 + 1 + N_WAVELENGTHS * (1 + 4 * k))
+    return onnx_out + _COLLAPSE_BYTES_PER_KL * k * N_WAVELENGTHS
+
+
 def chunk_rows(model: SkinModel, memory_mb: float = DEFAULT_MEMORY_MB) -> int:
     """Texels per chunk so that one chunk stays within ``memory_mb`` MiB (at least 1)."""
+    return chunk_rows_for_k(model.k, memory_mb)
+
+
+def chunk_rows_for_k(k: int, memory_mb: float = DEFAULT_MEMORY_MB) -> int:
+    """:func:`chunk_rows` for a model of K components (without loading it)."""
     if not memory_mb > 0:
         raise ValueError("memory budget must be > 0 MiB")
-    return max(1, int(memory_mb * 2**20 // model.bytes_per_texel()))
+    return max(1, int(memory_mb * 2**20 // bytes_per_texel(k)))
 
 
 def load_model(path: str | os.PathLike, threads: int = 0) -> SkinModel:
@@ -179,3 +206,42 @@ def unique_rows(rgb: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     keys = x.view(np.dtype((np.void, 12))).ravel()
     _, first, inverse = np.unique(keys, return_index=True, return_inverse=True)
     return x[first], inverse.ravel()
+
+
+class ModelFile:
+    """``skin_inversion.onnx`` on disk, opened with onnxruntime only when first needed (:meth:`load`): a bake
+    served entirely by the fast-path table, or found up to date, never loads the model.  ``sha256`` hashes
+    the file (cheap); a missing file raises :class:`ModelError` there and in :meth:`load`."""
+
+    def __init__(self, path: str | os.PathLike, threads: int = 0) -> None:
+        self.path = Path(path)
+        self.threads = int(threads)
+        self._model: SkinModel | None = None
+        self._sha256: str | None = None
+        if not self.path.is_file():
+            raise ModelError(f"model not found at {self.path}: train/export it (python -m training export) or set "
+                             "the model path")
+        if self.threads < 0:
+            raise ValueError("threads must be >= 0 (0 = all cores)")
+
+    @property
+    def sha256(self) -> str:
+        if self._sha256 is None:
+            self._sha256 = self._model.sha256 if self._model is not None else sha256_file(self.path)
+        return self._sha256
+
+    @property
+    def loaded(self) -> bool:
+        return self._model is not None
+
+    def load(self) -> SkinModel:
+        if self._model is None:
+            self._model = load_model(self.path, threads=self.threads)
+        return self._model
+
+    @classmethod
+    def of(cls, model: SkinModel) -> ModelFile:
+        """Wrap an already loaded model."""
+        ref = cls(model.path, model.threads)
+        ref._model = model
+        return ref

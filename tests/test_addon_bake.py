@@ -161,11 +161,12 @@ def test_stepping_then_cancel_changes_nothing(addon, tmp_path):
         assert snapshot(out) == before
     with bpy.context.temp_override(object=obj, active_object=obj):
         run = baker.AddonBake(bpy.context, baker.BakeSettings(model_path=preferences.DEFAULT_MODEL, threads=1,
-                                                              chunk=7, backend="SVM"))
+                                                              chunk=7, backend="SVM", exact=True))
     fractions = []
     while run.step():
         fractions.append(run.fraction)
-    assert fractions == sorted(fractions) and len(fractions) == 5 and fractions[-1] == pytest.approx(1.0)
+    # exact: 5 chunks of at most 7 of the 30 colours, then one band of rows written
+    assert fractions == sorted(fractions) and len(fractions) == 6 and fractions[-1] == pytest.approx(1.0)
     assert "baked" in run.apply(bpy.context)
 
 

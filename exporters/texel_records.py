@@ -1,0 +1,161 @@
+"""What a bake computes per texel (a *record*), by exact evaluation, and the map values made from it.
+
+Everything a bake writes depends on the texel's colour only.  A record holds, for N texels and the
+model's K components (arrays in a dict, float64 unless said otherwise):
+
+* ``color`` (N, K, 3) Cycles Subsurface Color, ``radius_m`` (N, K, 3) RANDOM_WALK radius in metres (Blender
+  units at unit scale 1; the map is radius_m / unit_scale), ``weight`` (N, K, 3), ``anisotropy`` (N, K)
+  — the ``cycles`` target;
+* ``alpha`` (N, K, 3) single-scattering albedo, ``sigma_t_cm`` (N, K, 3) in cm^-1 — with ``weight`` and
+  ``anisotropy`` the ``physical`` target;
+* ``biophysical`` (N, 5) and ``exposure`` (N,) — the ``spectral`` target;
+* ``max_share`` (N, K): each component's largest share of the rendered colour over the three channels,
+  w_kc R_cycles(alpha_kc, g_k) / sum_j w_jc R_cycles(alpha_jc, g_j) (components below a small share
+  everywhere are dropped from a bake);
+* clamp counts per texel (N,) int: ``n_low`` (channels whose albedo was raised to 0.2), ``n_high`` (weights
+  raised above the channel mean), ``n_unreachable`` (colour channels Cycles cannot reach), ``n_capped``
+  (extinctions capped at the smallest mean free path): exporters.collapse.
+
+:func:`exact_records` evaluates the model (exporters.inference) and the collapse (exporters.collapse) and
+fills only the fields the targets need (``spectral`` alone needs no collapse).  The fast path
+(exporters.texel_table) interpolates records instead.  :func:`map_values` turns records into the rows of
+one SPEC §4 map.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from exporters import collapse, cycles, reflectance_tables
+from exporters.colorimetry import SRGB_LUMINANCE
+
+MEDIA_TARGETS = ("cycles", "physical")
+COUNT_FIELDS = ("n_low", "n_high", "n_unreachable", "n_capped")
+#: Stats keys of S_maps.json for each count field (texel x component x channel events, summed over texels).
+STAT_NAMES = {"n_low": "alpha_raised_to_0.2", "n_high": "weight_raised", "n_unreachable": "unreachable_channels",
+              "n_capped": "sigma_t_capped"}
+
+
+@dataclass(frozen=True)
+class CollapseOptions:
+    """The bake options that change per-texel values (besides the model): ``match_exposure`` (target colour
+    times the model's exposure), ``ior`` of the Cycles closures, ``min_mfp_cm`` (exporters.collapse step 7).
+    The unit scale is not here: it only divides the radius."""
+
+    match_exposure: bool = False
+    ior: float = reflectance_tables.CYCLES_IOR
+    min_mfp_cm: float = collapse.MIN_MFP_CM
+
+    def as_dict(self) -> dict:
+        return {"match_exposure": bool(self.match_exposure), "ior": round(float(self.ior), 6),
+                "min_mfp_cm": float(self.min_mfp_cm)}
+
+
+def needs_media(targets: tuple[str, ...]) -> bool:
+    """Whether ``targets`` need the collapse (cycles or physical maps)."""
+    return any(t in MEDIA_TARGETS for t in targets)
+
+
+def model_luminance(reflectance: np.ndarray) -> np.ndarray:
+    """Relative luminance (N,) of the model's reflectance (N, 376) under D65 (linear sRGB, Rec. 709 weights):
+    the divisor of the model's exposure, exposure = Y(albedo) / Y(model colour)."""
+    return (np.asarray(reflectance, np.float64) @ collapse.channel_matrix().T) @ SRGB_LUMINANCE
+
+
+def albedo_luminance(rgb: np.ndarray) -> np.ndarray:
+    """Y (N,) of albedo rows (N, 3) as the model sees them (clamped to [0, 1])."""
+    return np.clip(np.asarray(rgb, np.float64), 0.0, 1.0) @ SRGB_LUMINANCE
+
+
+def exact_records(model, rgb: np.ndarray, targets: tuple[str, ...], options: CollapseOptions,
+                  with_luminance: bool = False) -> dict[str, np.ndarray]:
+    """Records (module docstring) of albedo rows ``rgb`` (N, 3), linear sRGB, by the model and the collapse.
+
+    ``model``: an exporters.inference.SkinModel; ``targets``: which fields to fill (spectral alone skips the
+    collapse); ``with_luminance`` adds ``y_model`` (N,), the luminance of the model's reflectance.
+    """
+    out = model.run(rgb)
+    rec: dict[str, np.ndarray] = {"biophysical": out["biophysical"].astype(np.float64),
+                                  "exposure": out["exposure"][:, 0].astype(np.float64)}
+    if with_luminance:
+        rec["y_model"] = model_luminance(out["reflectance"])
+    if not needs_media(targets):
+        return rec
+    scale = rec["exposure"] if options.match_exposure else None
+    media = collapse.collapse(out["reflectance"], out["alpha"], out["sigma_t"], out["g"], out["weight"],
+                              target_scale=scale, ior=options.ior, min_mfp_cm=options.min_mfp_cm)
+    cyc = collapse.to_cycles(media, 1.0)
+    rec.update(color=cyc.color, radius_m=cyc.radius, weight=media.weight, anisotropy=media.g, alpha=media.alpha,
+               sigma_t_cm=media.sigma_t_cm, unreachable=media.unreachable.astype(np.float64),
+               n_low=media.low.sum(axis=(1, 2)), n_high=media.high.sum(axis=(1, 2)),
+               n_unreachable=media.unreachable.sum(axis=1), n_capped=media.mfp_capped.sum(axis=(1, 2)))
+    rec["max_share"] = max_share(cycles_contributions(rec, options.ior))
+    return rec
+
+
+def max_share(contributions: np.ndarray) -> np.ndarray:
+    """(N, K): max over channels of each component's share of the channel's colour, from (N, K, 3)
+    contributions (:func:`cycles_contributions`); a channel with no light gives every component share 0."""
+    total = contributions.sum(axis=1, keepdims=True)
+    share = np.where(total > 0.0, contributions / np.where(total > 0.0, total, 1.0), 0.0)
+    return share.max(axis=2)
+
+
+def empty_records(k: int, targets: tuple[str, ...]) -> dict[str, np.ndarray]:
+    """Records of zero texels (the shapes of :func:`exact_records`)."""
+    rec = {"biophysical": np.zeros((0, 5)), "exposure": np.zeros(0)}
+    if needs_media(targets):
+        for name in ("color", "radius_m", "weight", "alpha", "sigma_t_cm"):
+            rec[name] = np.zeros((0, k, 3))
+        rec["anisotropy"] = np.zeros((0, k))
+        rec["max_share"] = np.zeros((0, k))
+        rec["unreachable"] = np.zeros((0, 3))
+        for name in COUNT_FIELDS:
+            rec[name] = np.zeros(0, np.int64)
+    return rec
+
+
+def concat_records(parts: list[dict[str, np.ndarray]]) -> dict[str, np.ndarray]:
+    """Records of several row blocks, in order (every part must have the same fields)."""
+    return {key: np.concatenate([p[key] for p in parts]) for key in parts[0]}
+
+
+def take_records(rec: dict[str, np.ndarray], rows) -> dict[str, np.ndarray]:
+    """Rows ``rows`` (index array, slice or mask) of every field."""
+    return {key: value[rows] for key, value in rec.items()}
+
+
+def map_values(kind: str, k: int, rec: dict[str, np.ndarray], unit_scale_m: float) -> np.ndarray:
+    """Rows (N, channels) float32 of one SPEC §4 map: ``kind`` as in exporters.baking.UNITS, component ``k``
+    (1-based; ignored for "biophysical").  Radii below Cycles' minimum (1e-8 Blender units, which would turn
+    the channel into a diffuse BSDF) raise ValueError: use a larger unit scale."""
+    i = k - 1
+    if kind == "biophysical":
+        return np.concatenate([rec["biophysical"], rec["exposure"][:, None]], axis=1).astype(np.float32)
+    if kind == "radius":
+        radius = rec["radius_m"][:, i] / unit_scale_m
+        if radius.size and not radius.min() >= cycles.MIN_RADIUS:
+            raise ValueError(f"radius below Cycles' minimum {cycles.MIN_RADIUS} BU at unit scale {unit_scale_m:g} "
+                             "m per unit: the channel would become diffuse (use a larger unit scale)")
+        return radius.astype(np.float32)
+    if kind in ("g", "anisotropy"):
+        g = rec["anisotropy"][:, i, None]
+        return (np.repeat(g, 3, axis=1) if kind == "g" else g).astype(np.float32)
+    field = {"color": "color", "weight": "weight", "alpha": "alpha", "sigma_t": "sigma_t_cm"}[kind]
+    return rec[field][:, i].astype(np.float32)
+
+
+def count_stats(rec: dict[str, np.ndarray], counts: np.ndarray) -> dict[str, int]:
+    """Clamp statistics of S_maps.json: per-texel counts of ``rec`` weighted by how many texels share the
+    colour (``counts`` (N,))."""
+    return {STAT_NAMES[name]: int(np.dot(np.rint(rec[name]).astype(np.int64), counts))
+            for name in COUNT_FIELDS if name in rec}
+
+
+def cycles_contributions(rec: dict[str, np.ndarray], ior: float) -> np.ndarray:
+    """(N, K, 3): w_kc R_cycles(alpha_kc, g_k), what each component adds to the colour Cycles renders (their sum
+    over K is the baked appearance, linear sRGB)."""
+    g = rec["anisotropy"][..., None]
+    return rec["weight"] * reflectance_tables.reflectance("cycles", rec["alpha"], g, ior)
