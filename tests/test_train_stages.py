@@ -48,15 +48,19 @@ def test_fits_are_read_sorted_by_sigma_t(toy):
     assert split.fitted.tolist() == list(range(18)) and split.target_index.tolist() == list(range(0, 376, 2))
 
 
-def test_fits_of_a_shard_are_aligned_by_index(toy, tmp_path):
+def test_fits_of_shards_are_aligned_by_index(toy, tmp_path):
     data, fits, _ = toy
     ref = load_split(data, "train", fits, k=2)
-    index = np.array([5, 2, 9])  # a shard holding three tones, in another order
-    with h5py.File(fits / "train_fits.h5", "r") as src, h5py.File(tmp_path / "train_fits.h5", "w") as dst:
-        dst["index"], dst["tone"], dst["done"] = index, src["tone"][:][index], np.array([True, True, False])
-        dst["wavelength_index"] = src["wavelength_index"][:]
-        for name in ("alpha", "g", "sigma_t", "weight"):
-            dst[f"k2_{name}"] = src[f"k2_{name}"][:][index]
+    # two shard files (`fit --shard i/2`) holding tones 5, 2 and 9, in another order; 9 not done yet
+    shards = {"train_fits.shard0of2.h5": (np.array([5, 2]), [True, True]),
+              "train_fits.shard1of2.h5": (np.array([9]), [False])}
+    with h5py.File(fits / "train_fits.h5", "r") as src:
+        for name, (index, done) in shards.items():
+            with h5py.File(tmp_path / name, "w") as dst:
+                dst["index"], dst["tone"], dst["done"] = index, src["tone"][:][index], np.array(done)
+                dst["wavelength_index"] = src["wavelength_index"][:]
+                for field in ("alpha", "g", "sigma_t", "weight"):
+                    dst[f"k2_{field}"] = src[f"k2_{field}"][:][index]
     got = load_split(data, "train", tmp_path, k=2)
     assert len(got) == 24  # every simulated tone serves stages 1 and 2
     assert got.fitted.tolist() == [2, 5]  # rows 2 and 5 have targets (row 9 not done), in dataset order

@@ -53,6 +53,14 @@ def _h5_attrs(path: Path) -> dict:
         return {k: (v.item() if hasattr(v, "item") else str(v)) for k, v in f.attrs.items()}
 
 
+def _fits_attrs(fits_dir: Path) -> dict:
+    """Attributes of the training split's fits (the first shard's when sharded; ``shard`` then says which)."""
+    from training.train.data import fits_files
+
+    files = fits_files(fits_dir, "train")
+    return _h5_attrs(files[0]) if files else {}
+
+
 def build_card(run: dict, graphs: dict[str, bytes], weights: str, parity: dict, f16_cost: dict | None,
                export_command: str, notes: list[str]) -> dict:
     """The card as a dict (``run``: the run folder's run.json record)."""
@@ -79,7 +87,7 @@ def build_card(run: dict, graphs: dict[str, bytes], weights: str, parity: dict, 
                     "train_attrs": _h5_attrs(dataset / "train.h5"),
                     "validation_attrs": _h5_attrs(dataset / "validation.h5")},
         "fits": {"path": run.get("fits"),
-                 "train_attrs": _h5_attrs(Path(run["fits"]) / "train_fits.h5") if run.get("fits") else {}},
+                 "train_attrs": _fits_attrs(Path(run["fits"])) if run.get("fits") else {}},
         "lut": {"path": run["lut"], "sha256": run["lut_sha256"]},
         "training": {"commands": run.get("commands", []), "config": run["train"], "losses": run.get("losses", {}),
                      "slab_depth_cm": run.get("slab_depth_cm")},
@@ -93,3 +101,25 @@ def build_card(run: dict, graphs: dict[str, bytes], weights: str, parity: dict, 
 
 def write_card(path: Path, card: dict) -> None:
     path.write_text(json.dumps(card, indent=2) + "\n")
+
+
+def update_validation(path: Path, validation: dict) -> None:
+    """Set the card's ``validation`` entry (the headline numbers of ``python -m training validate``).
+
+    Every other key is kept as it is, except the export's placeholder ``validation_tables`` (when it still
+    is the placeholder), whose status then points to ``validation``.  Written atomically (temporary file
+    renamed into place); ValueError if ``path`` is not a JSON object.
+    """
+    path = Path(path)
+    try:
+        card = json.loads(path.read_text())
+    except (OSError, json.JSONDecodeError) as exc:
+        raise ValueError(f"cannot read the model card {path}: {exc}") from None
+    if not isinstance(card, dict):
+        raise ValueError(f"{path} is not a model card (a JSON object).")
+    card["validation"] = validation
+    if card.get("validation_tables") == VALIDATION_PLACEHOLDER:
+        card["validation_tables"] = {"status": "filled: see `validation` (python -m training validate)"}
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_text(json.dumps(card, indent=2) + "\n")
+    tmp.replace(path)

@@ -6,7 +6,8 @@ Dataset (``training.data.store``): ``DIR/{split}.h5`` with ``tone`` (N, 5), ``R_
 Fits: ``DIR/{split}_fits.h5`` of ``python -m training fit --dataset`` (``training.fit.dataset``): flat
 datasets ``k{K}_alpha``, ``k{K}_g``, ``k{K}_sigma_t``, ``k{K}_weight`` (Nf, K, Wf), ``index`` (Nf,)
 (row in the dataset split), ``tone``, ``done``, and ``wavelength_index`` (Wf,) when only every n-th
-wavelength was fitted (absent: all 376).  The tones are checked against the dataset's.  The fits may
+wavelength was fitted (absent: all 376); or its shards ``{split}_fits.shard{i}of{n}.h5`` (``fit
+--shard``).  The tones are checked against the dataset's.  The fits may
 cover a subset of the tones (``fit --max-tones``, or an unfinished run): every simulated tone still
 serves stages 1 and 2, and stage 3 draws its batches from the fitted ones (``SplitData.fitted``).
 
@@ -61,6 +62,12 @@ def fits_file(fits_dir: Path, split: str) -> Path:
     return Path(fits_dir) / f"{split}_fits.h5"
 
 
+def fits_files(fits_dir: Path, split: str) -> list[Path]:
+    """``fits_file`` if it exists, else the shard files ``{split}_fits.shard{i}of{n}.h5`` (``fit --shard``)."""
+    one = fits_file(fits_dir, split)
+    return [one] if one.is_file() else sorted(Path(fits_dir).glob(f"{split}_fits.shard*of*.h5"))
+
+
 def _f32(a: np.ndarray) -> torch.Tensor:
     return torch.as_tensor(np.ascontiguousarray(a, dtype=np.float32))
 
@@ -71,18 +78,26 @@ def sort_by_sigma_t(targets: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
     return {k: np.take_along_axis(v, order, axis=1) for k, v in targets.items()}
 
 
-def load_fits(path: Path, k: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None, dict]:
+def load_fits(paths: list[Path], k: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None, dict]:
     """(index (Nf,), tone (Nf, 5), done (Nf,), wavelength_index (Wf,) or None for all, {alpha, g, sigma_t,
-    weight: (Nf, K, Wf)}) of the K-component fits in a fits file (module docstring)."""
-    with h5py.File(path, "r") as f:
-        keys = {n: f"k{k}_{n}" for n in FIT_FIELDS}
-        missing = [key for key in keys.values() if key not in f]
-        if missing:
-            raise ValueError(f"{path}: no K={k} fits ({missing} missing): fit with --k including {k}")
-        arrays = {n: np.asarray(f[key][:], dtype=np.float64) for n, key in keys.items()}
-        widx = np.asarray(f["wavelength_index"][:], np.int64) if "wavelength_index" in f else None
-        return (np.asarray(f["index"][:], np.int64), np.asarray(f["tone"][:], np.float64),
-                np.asarray(f["done"][:], bool), widx, arrays)
+    weight: (Nf, K, Wf)}) of the K-component fits in one fits file or its shards (module docstring)."""
+    parts, widx = [], None
+    for path in paths:
+        with h5py.File(path, "r") as f:
+            keys = {n: f"k{k}_{n}" for n in FIT_FIELDS}
+            missing = [key for key in keys.values() if key not in f]
+            if missing:
+                raise ValueError(f"{path}: no K={k} fits ({missing} missing): fit with --k including {k}")
+            w = np.asarray(f["wavelength_index"][:], np.int64) if "wavelength_index" in f else None
+            if parts and not np.array_equal(-1 if w is None else w, -1 if widx is None else widx):
+                raise ValueError(f"{path} was fitted at other wavelengths than {paths[0]}")
+            widx = w
+            parts.append((np.asarray(f["index"][:], np.int64), np.asarray(f["tone"][:], np.float64),
+                          np.asarray(f["done"][:], bool),
+                          {n: np.asarray(f[key][:], dtype=np.float64) for n, key in keys.items()}))
+    arrays = {n: np.concatenate([p[3][n] for p in parts]) for n in FIT_FIELDS}
+    return (np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts]),
+            np.concatenate([p[2] for p in parts]), widx, arrays)
 
 
 def load_split(dataset_dir: Path, split: str, fits_dir: Path | None = None, k: int = 3) -> SplitData:
@@ -104,10 +119,12 @@ def load_split(dataset_dir: Path, split: str, fits_dir: Path | None = None, k: i
     data = SplitData(_f32(tone[done]), _f32(R_d[done]), _f32(rgb[done]), None, photons)
     if fits_dir is None:
         return data
-    fpath = fits_file(fits_dir, split)
-    if not fpath.is_file():
-        raise ValueError(f"no fits {fpath}: run `python -m training fit --dataset ... --out {fits_dir}`")
-    index, ftone, fdone, widx, arrays = load_fits(fpath, k)
+    paths = fits_files(fits_dir, split)
+    if not paths:
+        raise ValueError(f"no fits {fits_file(fits_dir, split)}: run `python -m training fit --dataset ... --out "
+                         f"{fits_dir}`")
+    fpath = paths[0]
+    index, ftone, fdone, widx, arrays = load_fits(paths, k)
     if index.min(initial=0) < 0 or index.max(initial=-1) >= len(tone):
         raise ValueError(f"{fpath}: row index outside {path}")
     if not np.allclose(ftone, tone[index], rtol=0, atol=1e-12):

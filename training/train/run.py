@@ -27,7 +27,7 @@ from training.model.chain import SkinModel
 from training.model.config import ModelConfig, g_range_for_lut
 from training.sim.lut_interp import LookupTables
 from training.train import stages
-from training.train.data import SplitData, fits_file, load_split
+from training.train.data import SplitData, fits_files, load_split
 from training.train.evaluate import evaluate_split
 from training.train.loop import checkpoint_path, load_checkpoint, run_stage, save_atomic
 
@@ -92,7 +92,7 @@ def train(rundir: Path, dataset: Path, fits: Path | None, lut_path: Path, *, wan
     rundir.mkdir(parents=True, exist_ok=True)
     need_fits = 3 in want
     train_data = load_split(dataset, "train", fits if need_fits else None, mcfg.k).to(dev)
-    val_fits = fits if (need_fits and fits is not None and fits_file(fits, "validation").is_file()) else None
+    val_fits = fits if (need_fits and fits is not None and fits_files(fits, "validation")) else None
     val_data = load_split(dataset, "validation", val_fits, mcfg.k).to(dev)
     record = {
         "model": mcfg.to_dict(), "train": asdict(tcfg), "lut": str(lut_path), "lut_sha256": sha256_file(lut_path),
