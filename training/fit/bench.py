@@ -6,6 +6,9 @@ LUT: the file named by $SKIN_SSS_LUT if set (the MC tables of ``python -m traini
 diffusion-dipole table of training/fit/dipole.py on a 1e-3..1e4 mfp radial grid (a stand-in: the
 comparison of optimisers is on identical problems either way, but the absolute losses depend on it).
 
+With $SKIN_SSS_DATASET (a dataset folder) a further row times a chunk of its validation tones fitted as
+``fit --dataset`` does (anchors + warm starts) against the full schedule at every wavelength.
+
 Quick mode: the dark tone only, every third of its wavelengths, K = 1 and 2 (the paper's K = 3 stage
 alone is 10,000 Adam steps).  Both methods run the same schedule from the same start, batched over
 all problems in one call, on one CPU thread.  Reported per (tone, wavelength): wall time up to and
@@ -75,6 +78,43 @@ def _run(lut, pr, method, ks):
     return fits, time.perf_counter() - t0
 
 
+def dataset_chunk_row(lut: LookupTables, lut_note: str, quick: bool) -> dict | None:
+    """Fitting a dataset chunk as ``fit --dataset`` does: anchors every 12th fitted wavelength + warm starts
+    vs the full schedule at every wavelength, same problems.  Needs $SKIN_SSS_DATASET (a dataset folder
+    with validation.h5); None without it."""
+    from training.fit.dataset import fit_tones
+
+    path = os.environ.get("SKIN_SSS_DATASET")
+    if not path or not (Path(path) / "validation.h5").is_file():
+        return None
+    import h5py
+
+    T, stride = (4, 8) if quick else (8, 4)
+    with h5py.File(Path(path) / "validation.h5", "r") as f:
+        widx = np.arange(0, f["R_d"].shape[1], stride)
+        prof, R, se = (torch.tensor(f[name][:T][:, widx], dtype=torch.float64)
+                       for name in ("profile", "R_d", "profile_stderr"))
+        edges, photons, wl = torch.tensor(f["r_edges_cm"][:]), float(f.attrs["photons"]), f["wavelength_nm"][:][widx]
+    g0 = torch.tensor(anisotropy(wl))
+    res = {}
+    for every in (12, 0):
+        t0 = time.perf_counter()
+        fits = fit_tones(lut, prof, R, se, edges, photons, g0, (1, 2, 3), anchor_every=every)
+        res[every] = (time.perf_counter() - t0, fits)
+    n = T * len(widx)
+    (t_w, w), (t_f, full) = res[12], res[0]
+    return {
+        "workload": f"fit a dataset chunk, K=1,2,3, per (tone, wavelength): {T} validation tones x {len(widx)} "
+                    "wavelengths, 1 thread",
+        "ours": f"{1e3 * t_w / n:.0f} ms (anchors every 12th wavelength, warm starts between)",
+        "anchor": f"{1e3 * t_f / n:.0f} ms (full schedule at every wavelength)",
+        "ratio": f"{t_f / t_w:.1f}x",
+        "error": "mean shape RMSE K=1/2/3 " + "/".join(f"{float(w[k]['shape_rmse'].mean()):.4f}" for k in (1, 2, 3))
+                 + " vs " + "/".join(f"{float(full[k]['shape_rmse'].mean()):.4f}" for k in (1, 2, 3)),
+        "notes": f"{path}; {lut_note}",
+    }
+
+
 def benchmarks(quick: bool) -> list[dict]:
     """Rows for bench/results.md (see module docstring)."""
     n_threads = torch.get_num_threads()
@@ -86,6 +126,7 @@ def benchmarks(quick: bool) -> list[dict]:
         ks = (1, 2) if quick else (1, 2, 3)  # quick: skip the 10,000-step K = 3 Adam stage
         ours, t_ours = _run(lut, pr, "lm", ks)
         paper, t_paper = _run(lut, pr, "paper", ks)
+        chunk = dataset_chunk_row(lut, lut_note, quick)
     finally:
         torch.set_num_threads(n_threads)
     rows = []
@@ -116,6 +157,8 @@ def benchmarks(quick: bool) -> list[dict]:
             "notes": "includes the shared K=1 initial search",
         }
     )
+    if chunk is not None:
+        rows.append(chunk)
     return rows
 
 
