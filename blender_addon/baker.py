@@ -211,12 +211,17 @@ class AddonBake:
                                           match_exposure=settings.match_exposure, overwrite=settings.overwrite,
                                           exact=settings.exact, texel_mask=mask)
         try:
-            self.job = baking.BakeJob(self.albedo, self.out_dir, self.stem, self.model, self.options,
-                                      input_image=self.input_name, image_id=self.image_id)
+            self.albedo = baking.BakeJob.index(self.albedo)
+            image_id = self.image_id or baking.pixels_id(self.albedo)
+            self.key = baking.bake_key(image_id, self.model.sha256, self.stem, self.options,
+                                       baking.mask_sha256(mask, self.albedo.shape))
+            self.reused_images = self._packed_up_to_date() if settings.storage == "PACK" else None
+            self.job = None if self.reused_images is not None else baking.BakeJob(
+                self.albedo, self.out_dir, self.stem, self.model, self.options, input_image=self.input_name,
+                image_id=image_id)
         except BaseException:
             self._remove_temp_dir()
             raise
-        self.reused_images = self._packed_up_to_date() if settings.storage == "PACK" else None
         self._steps = None
         self.fraction = 0.0
         self.result: baking.BakeResult | None = None
@@ -258,7 +263,7 @@ class AddonBake:
         found: dict[tuple[int, str], bpy.types.Image] = {}
         k_count = None
         for image in bpy.data.images:
-            if image.get(KEY_PROP) == self.job.key and image.packed_file is not None:
+            if image.get(KEY_PROP) == self.key and image.packed_file is not None:
                 found[(int(image.get(K_PROP, 0)), str(image.get(KIND_PROP, "")))] = image
                 k_count = int(image.get(KCOUNT_PROP, 0))
         if not k_count or any((k, kind) not in found for k in range(1, k_count + 1) for kind in nodes.KINDS):
@@ -309,7 +314,8 @@ class AddonBake:
 
     def cancel(self) -> None:
         """Stop: temporary files and folders removed, nothing else was changed."""
-        self.job.cancel()
+        if self.job is not None:
+            self.job.cancel()
         self._remove_temp_dir()
 
     def _remove_temp_dir(self) -> None:
@@ -401,7 +407,7 @@ class AddonBake:
                     image.reload()
             image.colorspace_settings.name = "Non-Color"
             image[KEY_PROP], image[K_PROP], image[KIND_PROP], image[KCOUNT_PROP] = (
-                self.job.key, spec.k, spec.kind.capitalize(), k_count)
+                self.key, spec.k, spec.kind.capitalize(), k_count)
             images[(spec.k, spec.kind.capitalize())] = image
         return images
 

@@ -137,7 +137,8 @@ class BakeOptions:
     take the maps of the most common covered colour); ``force`` re-bakes an up-to-date folder;
     ``compression`` of the EXR maps (exporters.maps.COMPRESSIONS); ``mantissa_bits``: float32 mantissa bits the
     maps keep (None: 16 when the table is used — relative 7.6e-6, far below its interpolation error, and 25 %
-    faster to compress — and all 23 for exact bakes)."""
+    faster to compress — and all 23 for exact bakes); ``cache_min_colours``: distinct colours from which a
+    bake without a usable table builds one (grid step ``cache_step``) into the user cache."""
 
     targets: tuple[str, ...] = ("cycles",)
     unit_scale_m: float = 1.0
@@ -157,6 +158,8 @@ class BakeOptions:
     force: bool = False
     compression: str = maps.DEFAULT_COMPRESSION
     mantissa_bits: int | None = None
+    cache_min_colours: int = 50_000  # building evaluates ~34,000 grid nodes: it pays off from ~1.5x that
+    cache_step: float = texel_table.DEFAULT_STEP
 
     def collapse_options(self) -> CollapseOptions:
         return CollapseOptions(match_exposure=bool(self.match_exposure), ior=float(self.ior),
@@ -269,19 +272,21 @@ def table_cache_dir() -> Path:
     return Path(base) / "spectral_skin_sss"
 
 
-def cached_table_path(model_sha256: str, options: CollapseOptions) -> Path:
+def cached_table_path(model_sha256: str, options: CollapseOptions, step: float = texel_table.DEFAULT_STEP) -> Path:
+    """The user-cache file of the table for a model, collapse options and grid step."""
     opts = hashlib.sha256(json.dumps(options.as_dict(), sort_keys=True).encode()).hexdigest()[:12]
-    return table_cache_dir() / f"table_{model_sha256[:16]}_{opts}_step{texel_table.DEFAULT_STEP:g}.npz"
+    return table_cache_dir() / f"table_{model_sha256[:16]}_{opts}_step{step:g}.npz"
 
 
 def find_table(model: inference.ModelFile, options: CollapseOptions, table_path=None,
-               notes: list[str] | None = None) -> texel_table.TexelTable | None:
+               notes: list[str] | None = None, cache_step: float = texel_table.DEFAULT_STEP
+               ) -> texel_table.TexelTable | None:
     """The fast-path table for ``model`` and ``options``: ``table_path`` (or the one beside the model), else
     the user cache.  A table made from another model (SHA-256 differs) is refused with a warning in
     ``notes`` (and Python's warnings): the bake then evaluates exactly."""
     notes = notes if notes is not None else []
     first = Path(table_path) if table_path else default_table_path(model.path)
-    for path in dict.fromkeys([first, cached_table_path(model.sha256, options)]):
+    for path in dict.fromkeys([first, cached_table_path(model.sha256, options, cache_step)]):
         if not path.is_file():
             continue
         try:
@@ -315,6 +320,13 @@ def mask_sha256(mask: np.ndarray | None, shape: tuple[int, int] | None = None) -
     if m.ndim != 2 or (shape is not None and m.shape != tuple(shape)):
         raise BakeError(f"UV coverage mask has shape {m.shape}, the image {tuple(shape or ())}: they must match")
     return hashlib.sha256(np.packbits(m.astype(bool)).tobytes() + str(m.shape).encode()).hexdigest()
+
+
+def pixels_id(image: maps.IndexedAlbedo) -> str:
+    """What identifies an image without a file in the bake key: a hash of its decoded colours and index."""
+    digest = hashlib.sha256(np.ascontiguousarray(image.palette, np.float64).tobytes())
+    digest.update(np.ascontiguousarray(image.index, np.int32).tobytes())
+    return f"pixels:{digest.hexdigest()}:{image.colorspace}"
 
 
 def _threads(n: int) -> int:
@@ -378,9 +390,7 @@ class BakeJob:
         self.timings = {"load_model": 0.0, "evaluate": 0.0, "inference": 0.0, "table": 0.0, "write": 0.0}
         mask_sha = mask_sha256(opts.texel_mask, image.shape)
         if image_id is None:
-            digest = hashlib.sha256(np.ascontiguousarray(image.palette, np.float64).tobytes())
-            digest.update(np.ascontiguousarray(image.index, np.int32).tobytes())
-            image_id = f"pixels:{digest.hexdigest()}:{image.colorspace}"
+            image_id = pixels_id(image)
         self.key = bake_key(image_id, self.model.sha256, stem, opts, mask_sha)
         self.reused = None if opts.force else find_up_to_date(self.out_dir, stem, self.key)
         self._streams: list[maps.MapStream] | None = None
@@ -400,7 +410,14 @@ class BakeJob:
             self.stats.update({name: 0 for name in texel_records.STAT_NAMES.values()})
         self.copts = opts.collapse_options()
         self.threads = _threads(opts.threads)
-        self.table = None if opts.exact else find_table(self.model, self.copts, opts.table_path, self.notes)
+        self.table = None if opts.exact else find_table(self.model, self.copts, opts.table_path, self.notes,
+                                                        opts.cache_step)
+        self._build_table = (self.table is None and not opts.exact and opts.cache_tables
+                             and len(self.palette) >= opts.cache_min_colours)
+        if self.table is None and not opts.exact and not self._build_table:
+            self.notes.append("no fast-path table for this model and these options: every distinct colour evaluated "
+                              f"exactly (python -m exporters.texel_table --model {self.model.path} builds one; "
+                              f"images with {opts.cache_min_colours:,}+ colours build and cache one themselves)")
         self.model_k = self.table.k if self.table is not None else self._load_model().k
         self.mantissa_bits = opts.mantissa_bits or (FAST_MANTISSA_BITS if self.table is not None else 23)
         self.components = list(range(1, self.model_k + 1))
@@ -415,6 +432,12 @@ class BakeJob:
         self._counted = {"texels_from_table": 0, "texels_evaluated_exactly": 0}
 
     # -- set-up -----------------------------------------------------------------------------------------------
+    @staticmethod
+    def index(albedo) -> maps.IndexedAlbedo:
+        """An albedo image as an :class:`exporters.maps.IndexedAlbedo`, checked (BakeError for NaN, negative
+        texels or a bad shape)."""
+        return BakeJob._index(albedo)
+
     @staticmethod
     def _index(albedo) -> maps.IndexedAlbedo:
         if isinstance(albedo, maps.IndexedAlbedo):
@@ -531,6 +554,19 @@ class BakeJob:
             self.timings["evaluate"] += time.perf_counter() - t0
             yield progress(sl.stop / max(len(ids), 1))
 
+    def _make_table(self) -> Iterator[float]:
+        """Build the table for these options in the user cache (first step of a big bake without one)."""
+        path = cached_table_path(self.model.sha256, self.copts, self.options.cache_step)
+        t0 = time.perf_counter()
+        table = yield from texel_table.build_steps(self._load_model(), self.copts, self.options.cache_step)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        texel_table.save(table, path, overwrite=True)
+        self.table = texel_table.load(path)
+        self.timings["table_build"] = time.perf_counter() - t0
+        self.notes.append(f"built a fast-path table for these options in {self.timings['table_build']:.0f} s, "
+                          f"cached as {path} (reused by later bakes)")
+        self.mantissa_bits = self.options.mantissa_bits or FAST_MANTISSA_BITS
+
     def _prune(self) -> None:
         """Drop components whose share of the colour is below ``prune_share`` for every texel (global mode)."""
         share = self.options.prune_share
@@ -560,6 +596,14 @@ class BakeJob:
             yield 1.0
             return
         maps.set_threads(self.threads)
+        pre = 0.0
+        if self._build_table:
+            pre = 0.3
+            yield from (pre * f for f in self._make_table())
+        for f in self._work():
+            yield pre + (1.0 - pre) * f
+
+    def _work(self) -> Iterator[float]:
         share_eval = 0.15 if self.table is not None else 0.6
         if self.global_values:
             ids = np.arange(len(self.palette))

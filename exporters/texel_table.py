@@ -230,13 +230,23 @@ def _dequantise(q: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
 
 
 def build(model: inference.SkinModel, options: CollapseOptions | None = None, step: float = DEFAULT_STEP,
-          box: tuple[tuple[float, float], ...] = DEFAULT_BOX, chunk: int = 2048,
-          progress=None) -> TexelTable:
+          box: tuple[tuple[float, float], ...] = DEFAULT_BOX, chunk: int = 2048) -> TexelTable:
     """Evaluate ``model`` (and the collapse with ``options``) at every grid node inside the RGB cube.
 
-    ``step``: grid step in skin space; ``box``: ((l_lo, l_hi), (c1_lo, c1_hi), (c2_lo, c2_hi)); ``progress``:
-    optional callable(fraction).  Returns the table in memory (values quantised as they will be stored).
+    ``step``: grid step in skin space; ``box``: ((l_lo, l_hi), (c1_lo, c1_hi), (c2_lo, c2_hi)).  Returns the
+    table in memory (values quantised as they will be stored).
     """
+    steps = build_steps(model, options, step, box, chunk)
+    while True:
+        try:
+            next(steps)
+        except StopIteration as done:
+            return done.value
+
+
+def build_steps(model: inference.SkinModel, options: CollapseOptions | None = None, step: float = DEFAULT_STEP,
+                box: tuple[tuple[float, float], ...] = DEFAULT_BOX, chunk: int = 2048):
+    """:func:`build` as a generator yielding the fraction of nodes done; its return value is the table."""
     options = options or CollapseOptions()
     if not (np.isfinite(step) and 1e-3 <= step <= 0.5):
         raise ValueError(f"step must lie in [0.001, 0.5], got {step}")
@@ -256,8 +266,7 @@ def build(model: inference.SkinModel, options: CollapseOptions | None = None, st
         rec = texel_records.exact_records(model, rgb[idx].astype(np.float32), ("cycles", "spectral"), options,
                                           with_luminance=True)
         values[idx] = _node_channels(rec, model.k)
-        if progress is not None:
-            progress(min(1.0, (start + chunk) / max(len(todo), 1)))
+        yield min(1.0, (start + chunk) / max(len(todo), 1))
     seconds = time.perf_counter() - t0
     q, lo, hi = _quantise(values.reshape(*shape, len(names)))
     meta = {"format": FORMAT, "model_sha256": model.sha256, "model_file": model.path.name, "K": model.k,

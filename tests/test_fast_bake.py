@@ -1,0 +1,200 @@
+"""The fast bake path (exporters.texel_table) with the real shipped model and table: the table belongs to the
+model, real bakes through the table match real exact bakes (appearance ΔE76, biophysical maps), a table of
+another model is refused, tables are built and cached for other options, negligible components are dropped,
+only the targets asked for are computed, and only the texels the UVs cover are evaluated."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import onnx
+import pytest
+
+from exporters import baking, cycles, inference, maps, reflectance_tables, texel_table
+from exporters.bench import skin_texture
+from exporters.colorimetry import delta_e76, linear_srgb_to_lab
+from exporters.constants import PARAM_NAMES, PARAM_RANGES
+from tests.addon_scene import write_image
+
+ROOT = Path(__file__).resolve().parents[1]
+MODELS = ROOT / "blender_addon" / "models"
+MODEL = MODELS / "skin_inversion.onnx"
+CARD = json.loads((MODELS / "skin_inversion.json").read_text())
+
+
+@pytest.fixture(scope="module")
+def skin_png(tmp_path_factory) -> Path:
+    """48 x 48 8-bit skin texture (light to dark, noise: ~1,500 distinct colours)."""
+    return write_image(tmp_path_factory.mktemp("skin") / "skin.png", skin_texture(48, seed=3), "uint8")
+
+
+def bake(png: Path, out: Path, **options) -> baking.BakeResult:
+    out.mkdir(exist_ok=True)
+    return baking.bake(png, out, MODEL, baking.BakeOptions(threads=1, **options))
+
+
+def appearance(folder: Path, stem: str, k: int) -> np.ndarray:
+    """CIE Lab of the colour the Cycles maps render: sum_k w_k R_cycles(f(color_k, g_k), g_k) per texel, with
+    Cycles' own colour -> albedo map (exporters.cycles) and its reflectance table (IOR 1.4)."""
+    total = 0.0
+    for i in range(1, k + 1):
+        color = maps.read_exr(folder / f"{stem}_k{i}_color.exr")[0].astype(np.float64)
+        weight = maps.read_exr(folder / f"{stem}_k{i}_weight.exr")[0].astype(np.float64)
+        g = maps.read_exr(folder / f"{stem}_k{i}_anisotropy.exr")[0].astype(np.float64)
+        alpha = cycles.rw_albedo_forward(np.clip(color, 0, 1), g)
+        total = total + weight * reflectance_tables.reflectance("cycles", alpha, g, reflectance_tables.CYCLES_IOR)
+    return linear_srgb_to_lab(total)
+
+
+def test_shipped_table_was_made_from_the_shipped_model():
+    table = texel_table.load(texel_table.DEFAULT_PATH)
+    assert texel_table.DEFAULT_PATH == baking.default_table_path(MODEL)
+    assert table.model_sha256 == maps.sha256_file(MODEL) == CARD["files"]["skin_inversion.onnx"]["sha256"], \
+        "rebuild the table: python -m exporters.texel_table --overwrite"
+    assert table.k == CARD["K"] and table.options == texel_table.CollapseOptions()
+    assert table.meta["command"].startswith("python -m exporters.texel_table --model ")
+    assert sum(p.stat().st_size for p in MODELS.iterdir()) < 25e6  # the add-on's model folder stays small
+    proc = subprocess.run([sys.executable, "-m", "exporters.texel_table", "--check"], capture_output=True, text=True,
+                          cwd=ROOT, timeout=60)
+    assert proc.returncode == 0 and "matches" in proc.stdout
+
+
+def test_table_bake_matches_exact_bake(skin_png, tmp_path):
+    fast = bake(skin_png, tmp_path / "fast", targets=("cycles", "spectral"))
+    exact = bake(skin_png, tmp_path / "exact", targets=("cycles", "spectral"), exact=True)
+    assert fast.stats["texels_from_table"] == 48 * 48 and exact.stats["texels_evaluated_exactly"] == 48 * 48
+    de = delta_e76(appearance(tmp_path / "fast", "skin", fast.k), appearance(tmp_path / "exact", "skin", exact.k))
+    assert de.mean() <= 0.1 and de.max() <= 0.5, (de.mean(), de.max())
+    span = np.array([PARAM_RANGES[p][1] - PARAM_RANGES[p][0] for p in PARAM_NAMES])
+    bf = maps.read_exr(tmp_path / "fast" / "skin_biophysical.exr", channels=maps.BIOPHYSICAL_CHANNELS)[0]
+    be = maps.read_exr(tmp_path / "exact" / "skin_biophysical.exr", channels=maps.BIOPHYSICAL_CHANNELS)[0]
+    assert np.max(np.abs(bf[..., :5] - be[..., :5]) / span) <= 0.005
+    np.testing.assert_allclose(bf[..., 5], be[..., 5], rtol=0.01)  # exposure
+    record = json.loads((tmp_path / "fast" / "skin_maps.json").read_text())
+    assert record["evaluation"]["mode"] == "table"
+    assert record["evaluation"]["table"]["sha256"] == maps.sha256_file(texel_table.DEFAULT_PATH)
+    assert json.loads((tmp_path / "exact" / "skin_maps.json").read_text())["evaluation"]["mode"] == "exact"
+
+
+def test_colours_outside_the_table_are_evaluated_exactly(tmp_path):
+    codes = np.array([[[224, 172, 150], [30, 60, 220]], [[0, 255, 0], [150, 100, 80]]], np.uint8)  # blue, green
+    png = write_image(tmp_path / "odd.png", codes, "uint8")
+    fast = bake(png, tmp_path / "fast")
+    bake(png, tmp_path / "exact", exact=True)
+    assert fast.stats["texels_evaluated_exactly"] == 2 and fast.stats["texels_from_table"] == 2
+    for name in ("odd_k1_color.exr", "odd_k2_radius.exr"):
+        a, b = maps.read_exr(tmp_path / "fast" / name)[0], maps.read_exr(tmp_path / "exact" / name)[0]
+        np.testing.assert_allclose(a[0, 1], b[0, 1], rtol=2e-5)  # the non-skin texels: exact (16-bit mantissa)
+        np.testing.assert_allclose(a[1, 0], b[1, 0], rtol=2e-5)
+
+
+def test_table_of_another_model_is_refused_with_a_warning(skin_png, tmp_path):
+    other = onnx.load(str(MODEL))
+    other.doc_string = "the same network saved again: another file, another SHA-256"
+    copy = tmp_path / "copy.onnx"
+    onnx.save(other, str(copy))
+    out = tmp_path / "maps"
+    proc = subprocess.run([sys.executable, str(ROOT / "blender_addon" / "bake.py"), "--albedo", str(skin_png), "--out",
+                           str(out), "--model", str(copy), "--table", str(texel_table.DEFAULT_PATH), "--threads", "1"],
+                          capture_output=True, text=True, timeout=300, cwd=ROOT)
+    assert proc.returncode == 0, proc.stderr
+    assert "warning: fast-path table" in proc.stderr and "refused" in proc.stderr
+    assert "python -m exporters.texel_table" in proc.stderr  # says how to rebuild
+    record = json.loads((out / "skin_maps.json").read_text())
+    assert record["evaluation"]["mode"] == "exact" and record["stats"]["texels_evaluated_exactly"] == 48 * 48
+
+
+def test_table_file_round_trip_and_bad_files(tmp_path):
+    model = inference.load_model(MODEL, threads=1)
+    table = texel_table.build(model, step=0.1)
+    path = texel_table.save(table, tmp_path / "t.npz")
+    with pytest.raises(FileExistsError):
+        texel_table.save(table, path)
+    back = texel_table.load(path)
+    assert back.model_sha256 == model.sha256 and back.shape == table.shape and back.sha256 == maps.sha256_file(path)
+    span = np.asarray(back.meta["quantisation"]["hi"]) - np.asarray(back.meta["quantisation"]["lo"])
+    ok = np.isfinite(table.values)
+    assert np.array_equal(ok, np.isfinite(back.values))
+    assert np.all(np.abs(back.values - table.values)[ok] <= (np.broadcast_to(span, table.values.shape)[ok] / 65534
+                                                               + 1e-6))
+    # nodes hold the exact evaluation of their colour (up to 16-bit storage)
+    n = np.array(back.shape)
+    i = np.argwhere(np.all(ok, axis=3))[len(np.argwhere(np.all(ok, axis=3))) // 2]
+    rgb, inside = texel_table.rgb_of_coords((back.origin + back.step * i)[None])
+    assert inside[0] and np.all(i < n)
+    exact = baking.texel_records.exact_records(model, rgb.astype(np.float32), ("cycles", "spectral"), back.options)
+    node = back.values[tuple(i)]
+    k1 = back.channel("color_k1_r")
+    assert node[k1] == pytest.approx(exact["color"][0, 0, 0], abs=span[k1] / 65534 + 1e-6)
+    junk = tmp_path / "junk.npz"
+    junk.write_bytes(b"not a table")
+    with pytest.raises(texel_table.TableError, match="not a texel table"):
+        texel_table.load(junk)
+    with pytest.raises(texel_table.TableError, match="no fast-path table"):
+        texel_table.load(tmp_path / "missing.npz")
+
+
+def test_other_options_build_and_cache_a_table(skin_png, tmp_path, monkeypatch):
+    monkeypatch.setenv("SPECTRAL_SKIN_SSS_CACHE", str(tmp_path / "cache"))
+    opts = {"match_exposure": True, "cache_min_colours": 100, "cache_step": 0.1}
+    first = bake(skin_png, tmp_path / "a", **opts)
+    assert any("built a fast-path table" in n for n in first.notes)
+    cached = list((tmp_path / "cache").glob("table_*.npz"))
+    assert len(cached) == 1 and texel_table.load(cached[0]).options.match_exposure
+    before = inference.inference_counts()
+    second = bake(skin_png, tmp_path / "b", **opts)  # another folder: a new bake, served by the cached table
+    assert not any("built" in n for n in second.notes)
+    inferred = inference.inference_counts()["texels"] - before["texels"]  # distinct colours (+ 1: the load probe)
+    assert inferred <= second.stats["texels_evaluated_exactly"] + 1 < second.stats["distinct_texels"] / 10
+    record = json.loads((tmp_path / "b" / "skin_maps.json").read_text())
+    assert record["evaluation"]["table"]["path"] == str(cached[0])
+    few = bake(skin_png, tmp_path / "c", match_exposure=True, ior=1.3, cache_step=0.1)  # 1,500 colours: no build
+    assert any("no fast-path table" in n for n in few.notes) and few.stats["texels_evaluated_exactly"] == 48 * 48
+
+
+def test_negligible_components_are_dropped(tmp_path):
+    png = write_image(tmp_path / "u.png", np.full((2, 3, 3), (224, 172, 150), np.uint8), "uint8")
+    full = bake(png, tmp_path / "full")
+    shares = json.loads((tmp_path / "full" / "u_maps.json").read_text())["components"]["max_share"]
+    assert full.k == CARD["K"] and min(shares) < 0.5  # no component of the shipped model is negligible
+    threshold = float(np.sort(shares)[0] + 1e-3)  # just above the smallest component's share
+    pruned = bake(png, tmp_path / "pruned", prune_share=threshold)
+    drop = int(np.argmin(shares)) + 1
+    assert pruned.k == CARD["K"] - 1 and pruned.components == [k for k in range(1, CARD["K"] + 1) if k != drop]
+    names = {p.name for p in (tmp_path / "pruned").iterdir()}
+    assert f"u_k{CARD['K']}_color.exr" not in names and "u_k1_color.exr" in names
+    record = json.loads((tmp_path / "pruned" / "u_maps.json").read_text())
+    assert record["K"] == CARD["K"] - 1 and record["components"]["dropped"] == [drop]
+    for new, old in enumerate(pruned.components, start=1):  # renumbered maps hold the kept components' values
+        a = maps.read_exr(tmp_path / "pruned" / f"u_k{new}_color.exr")[0]
+        np.testing.assert_array_equal(a, maps.read_exr(tmp_path / "full" / f"u_k{old}_color.exr")[0])
+
+
+def test_only_the_targets_asked_for(skin_png, tmp_path):
+    spectral = bake(skin_png, tmp_path / "s", targets=("spectral",), exact=True)
+    assert {p.name for p in (tmp_path / "s").iterdir()} == {"skin_biophysical.exr", "skin_maps.json"}
+    assert "alpha_raised_to_0.2" not in spectral.stats  # the collapse never ran
+    cyc = bake(skin_png, tmp_path / "c", targets=("cycles",), exact=True)
+    assert "alpha_raised_to_0.2" in cyc.stats and not any("alpha" in p.name for p in (tmp_path / "c").iterdir())
+
+
+def test_uv_mask_evaluates_only_covered_texels(tmp_path):
+    codes = np.full((4, 6, 3), (224, 172, 150), np.uint8)
+    codes[:, 3:] = (30, 60, 220)  # the right half (not skin: would need exact evaluation) is not covered
+    codes[0, 0] = (150, 100, 80)
+    png = write_image(tmp_path / "half.png", codes, "uint8")
+    mask = np.zeros((4, 6), bool)
+    mask[:, :3] = True
+    result = bake(png, tmp_path / "m", texel_mask=mask)
+    assert result.stats["texels_not_covered_by_uvs"] == 12 and result.stats["distinct_texels"] == 2
+    assert result.stats["texels_evaluated_exactly"] == 0  # the blue half was never evaluated
+    color = maps.read_exr(tmp_path / "m" / "half_k1_color.exr")[0]
+    np.testing.assert_array_equal(color[:, 3:], np.broadcast_to(color[1, 1], (4, 3, 3)))  # most common covered
+    with pytest.raises(baking.BakeError, match="shape"):
+        bake(png, tmp_path / "bad", texel_mask=np.ones((3, 3), bool))
+    with pytest.raises(baking.BakeError, match="cover no texel"):
+        bake(png, tmp_path / "none", texel_mask=np.zeros((4, 6), bool))
