@@ -42,6 +42,13 @@ def _finite(x: np.ndarray | float, name: str) -> np.ndarray:
     return arr
 
 
+def _result(x: np.ndarray, name: str) -> np.ndarray:
+    """``x`` if every value is finite; ValueError if finite inputs overflowed float64 (values near 1e308)."""
+    if not np.all(np.isfinite(x)):
+        raise ValueError(f"{name}: the result overflows float64 (input values too large)")
+    return x
+
+
 def _check_illuminant(illuminant: str) -> None:
     if illuminant not in ILLUMINANTS:
         raise ValueError(f"unknown illuminant {illuminant!r}; use one of {ILLUMINANTS}.")
@@ -114,18 +121,21 @@ def spectrum_to_xyz(reflectance: np.ndarray, illuminant: Illuminant = "D65") -> 
     r = _finite(reflectance, "reflectance")
     if r.shape[-1:] != WAVELENGTHS_NM.shape:
         raise ValueError(f"reflectance must have {WAVELENGTHS_NM.size} samples on its last axis, got {r.shape}.")
-    return r @ xyz_weights(illuminant).T
+    with np.errstate(over="ignore", invalid="ignore"):
+        return _result(r @ xyz_weights(illuminant).T, "spectrum_to_xyz")
 
 
 def xyz_to_linear_srgb(xyz: np.ndarray, illuminant: Illuminant = "D65") -> np.ndarray:
     """Linear sRGB (..., 3) of XYZ (..., 3) seen under ``illuminant`` (CAT02 to D65 for A and E)."""
     _check_illuminant(illuminant)
-    return _finite(xyz, "xyz") @ xyz_to_linear_srgb_matrix(illuminant).T
+    with np.errstate(over="ignore", invalid="ignore"):
+        return _result(_finite(xyz, "xyz") @ xyz_to_linear_srgb_matrix(illuminant).T, "xyz_to_linear_srgb")
 
 
 def linear_srgb_to_xyz(rgb: np.ndarray) -> np.ndarray:
     """XYZ (D65, Y of white = 1) of linear sRGB values (..., 3)."""
-    return _finite(rgb, "rgb") @ np.linalg.inv(xyz_to_linear_srgb_matrix("D65")).T
+    with np.errstate(over="ignore", invalid="ignore"):
+        return _result(_finite(rgb, "rgb") @ np.linalg.inv(xyz_to_linear_srgb_matrix("D65")).T, "linear_srgb_to_xyz")
 
 
 # The two sRGB curves are written out (IEC 61966-2-1, the same formulas as colour-science's eotf_sRGB /
@@ -143,8 +153,8 @@ def srgb_encode(linear: np.ndarray) -> np.ndarray:
 def srgb_decode(encoded: np.ndarray) -> np.ndarray:
     """Inverse of :func:`srgb_encode`: sRGB-encoded values -> linear values."""
     v = _finite(encoded, "sRGB")
-    with np.errstate(invalid="ignore"):
-        return np.where(v <= 0.04045, v / 12.92, ((np.abs(v) + 0.055) / 1.055) ** 2.4)
+    with np.errstate(invalid="ignore", over="ignore"):
+        return _result(np.where(v <= 0.04045, v / 12.92, ((np.abs(v) + 0.055) / 1.055) ** 2.4), "srgb_decode")
 
 
 def xyz_to_lab(xyz: np.ndarray, illuminant: Illuminant = "D65") -> np.ndarray:
@@ -156,9 +166,15 @@ def xyz_to_lab(xyz: np.ndarray, illuminant: Illuminant = "D65") -> np.ndarray:
 
 
 def delta_e76(lab_a: np.ndarray, lab_b: np.ndarray) -> np.ndarray:
-    """CIE 1976 colour difference: Euclidean distance in Lab, shape (...)."""
+    """CIE 1976 colour difference: Euclidean distance in Lab, shape (...) (computed without overflow of the
+    squares; ValueError if the distance itself exceeds float64)."""
     a, b = _finite(lab_a, "lab_a"), _finite(lab_b, "lab_b")
-    return np.sqrt(np.sum((a - b) ** 2, axis=-1))
+    with np.errstate(over="ignore", invalid="ignore"):
+        d = np.abs(a - b)
+        scale = np.max(d, axis=-1, keepdims=True) if d.shape[-1:] != (0,) else np.zeros(d.shape[:-1] + (1,))
+        safe = np.where(scale > 0, scale, 1.0)
+        dist = np.where(scale[..., 0] > 0, safe[..., 0] * np.sqrt(np.sum((d / safe) ** 2, axis=-1)), 0.0)
+    return _result(dist, "delta_e76")
 
 
 def spectrum_to_linear_srgb(reflectance: np.ndarray, illuminant: Illuminant = "D65") -> np.ndarray:

@@ -257,16 +257,17 @@ def rw_radius_from_sigma_t(sigma_t_cm, g, unit_scale_m=1.0) -> np.ndarray:
     in cm^-1; ``g`` in [0, 0.9].  Radii below Cycles' 1e-8 minimum (which would turn the channel into a
     diffuse BSDF) raise ValueError: use a larger unit scale or a smaller extinction.
     """
-    st = sigma_t_to_blender(sigma_t_cm, unit_scale_m)
-    gg = _finite("g", g)
-    _check_g(gg)
-    if np.any(st <= 0.0):
+    if np.any(_finite("sigma_t_cm", sigma_t_cm) <= 0.0):
         raise ValueError("sigma_t must be > 0")
-    r = 4.0 * np.pi / (st * (1.0 - gg))
-    if np.any(r < MIN_RADIUS):
-        raise ValueError(f"radius below Cycles' minimum {MIN_RADIUS} BU: the channel would become diffuse")
+    with np.errstate(over="ignore", under="ignore", divide="ignore"):
+        st = sigma_t_to_blender(sigma_t_cm, unit_scale_m)
+        gg = _finite("g", g)
+        _check_g(gg)
+        r = 4.0 * np.pi / (st * (1.0 - gg))
     if not np.all(np.isfinite(r)):
         raise ValueError("radius overflow: sigma_t too small for float64")
+    if np.any(r < MIN_RADIUS):
+        raise ValueError(f"radius below Cycles' minimum {MIN_RADIUS} BU: the channel would become diffuse")
     return r
 
 
@@ -314,13 +315,18 @@ def similar_medium(alpha, sigma_t_cm, g, g_new=None, g_max: float = G_MAX) -> Si
     target = np.clip(gg, G_MIN, g_max) if g_new is None else _finite("g_new", g_new) + 0.0 * gg
     if np.any(np.abs(target) >= 1.0):
         raise ValueError("g_new must satisfy |g_new| < 1")
-    mu_a = (1.0 - al) * st
-    mu_s_reduced = al * st * (1.0 - gg)
-    mu_s_new = mu_s_reduced / (1.0 - target)
-    st_new = mu_a + mu_s_new
-    al_new = mu_s_new / st_new
+    with np.errstate(over="ignore", under="ignore", divide="ignore", invalid="ignore"):
+        mu_a = (1.0 - al) * st
+        mu_s_reduced = al * st * (1.0 - gg)
+        mu_s_new = mu_s_reduced / (1.0 - target)
+        st_new = mu_a + mu_s_new
+        al_new = mu_s_new / st_new
     al, st, gg, target, al_new, st_new = np.broadcast_arrays(al, st, gg, target, al_new, st_new)
     changed = target != gg
+    if not (np.all(np.isfinite(al_new[changed])) and np.all(np.isfinite(st_new[changed]))
+            and np.all(st_new[changed] > 0)):
+        raise ValueError("similar_medium: sigma_t too small or too large for float64 (the moved medium under- or "
+                         "overflows)")
     return SimilarMedium(alpha=np.where(changed, al_new, al), sigma_t_cm=np.where(changed, st_new, st),
                          g=target.copy(), changed=changed)
 

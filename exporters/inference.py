@@ -84,13 +84,19 @@ class SkinModel:
         Raises ValueError on non-finite input (the graph would silently substitute a fallback colour)
         and RuntimeError if the model produced non-finite values.
         """
-        x = np.asarray(rgb, dtype=np.float32)
+        x = np.asarray(rgb)
         if x.ndim != 2 or x.shape[1] != 3:
             raise ValueError(f"albedo rows must have shape (N, 3), got {x.shape}")
         bad = ~np.isfinite(x).all(axis=1)
         if bad.any():
             raise ValueError(f"{int(bad.sum())} albedo texel(s) are NaN/Inf (first row {int(np.argmax(bad))}); "
                              "fix the texture")
+        with np.errstate(over="ignore"):
+            x = x.astype(np.float32)
+        big = ~np.isfinite(x).all(axis=1)
+        if big.any():
+            raise ValueError(f"{int(big.sum())} albedo texel(s) exceed the float32 range (first row "
+                             f"{int(np.argmax(big))}); an albedo lies in [0, 1]")
         names = list(OUTPUT_SHAPES)
         if len(x) == 0:  # onnxruntime warns on empty batches; the answer is known
             return {n: np.zeros((0, *(self.k if d == "K" else d for d in OUTPUT_SHAPES[n])), np.float32)

@@ -89,8 +89,12 @@ def channel_names(k: int) -> tuple[str, ...]:
 
 
 def skin_coords(rgb: np.ndarray) -> np.ndarray:
-    """Skin-space coordinates (N, 3) (l, c1, c2) of linear-sRGB rows (N, 3), clamped to [0, 1] first."""
-    e = srgb_encode(np.clip(np.asarray(rgb, np.float64), 0.0, 1.0))
+    """Skin-space coordinates (N, 3) (l, c1, c2) of linear-sRGB rows (N, 3), clamped to [0, 1] first (as the
+    model clamps them); ValueError for NaN/Inf."""
+    x = np.asarray(rgb, np.float64)
+    if not np.all(np.isfinite(x)):
+        raise ValueError("albedo rows contain NaN or Inf; fix the texture")
+    e = srgb_encode(np.clip(x, 0.0, 1.0))
     return e @ COORDS.T
 
 
