@@ -404,6 +404,9 @@ class BakeJob:
         else:
             self.palette, self.index = image.palette, image.index
         self.counts = np.bincount(self.index.ravel(), minlength=len(self.palette))
+        if uncovered:
+            self.notes.append(f"{uncovered} texel(s) not covered by the mesh's UVs were not evaluated: they hold the "
+                              "maps of the most common covered colour")
         self.stats: dict[str, int] = {"texels": self.height * self.width, "distinct_texels": len(self.palette),
                                       "texels_not_covered_by_uvs": uncovered}
         if texel_records.needs_media(self.targets):
