@@ -23,7 +23,7 @@ import torch
 from exporters.colorimetry import Illuminant, spectrum_to_lab, spectrum_to_srgb
 from exporters.constants import N_TISSUE, WAVELENGTHS_NM
 from training.sim.medium import LayeredMedium
-from training.sim.transport import simulate
+from training.sim.transport import SimResult, simulate
 
 #: Tolerance on sum_k w_k = 1 (the decoder's softmax in float16/32).
 WEIGHT_SUM_TOL = 1e-3
@@ -32,7 +32,8 @@ WEIGHT_SUM_TOL = 1e-3
 @dataclass(frozen=True)
 class MixtureResult:
     """R_d (W,) of the mixture with its standard error, per-component R_k and R_k_stderr (K, W),
-    photons per component and wavelength, and the wall time (s)."""
+    photons per component and wavelength, and the wall time (s).  With radial tallies (``r_edges_cm``
+    given) also ``profile`` and ``profile_stderr`` (W, NB) in cm^-2 (SPEC §1 definition), else None."""
 
     R_d: np.ndarray
     R_d_stderr: np.ndarray
@@ -40,6 +41,8 @@ class MixtureResult:
     R_k_stderr: np.ndarray
     photons: int
     seconds: float
+    profile: np.ndarray | None = None
+    profile_stderr: np.ndarray | None = None
 
 
 def _as_kw(name: str, x, shape: tuple[int, ...] | None = None) -> np.ndarray:
@@ -70,28 +73,53 @@ def check_mixture(alpha, sigma_t, g, weight) -> tuple[np.ndarray, ...]:
     return a, s, gg, w
 
 
+def render_media(alpha, sigma_t, g, *, photons: int, seed: int = 0, illumination: str = "diffuse",
+                 r_edges_cm: np.ndarray | None = None, device: str = "cpu", compile: bool | str = "auto",
+                 progress: bool = False, max_steps: int = 100_000) -> SimResult:
+    """One batched walk of C independent homogeneous semi-infinite media (the components of any number of
+    mixtures): ``alpha``, ``sigma_t`` (cm^-1), ``g`` of shape (C,).  Returns the simulator's SimResult
+    (R_d, R_d_stderr (C,), profile (C, NB) when ``r_edges_cm`` is given; ``truncated`` (C,): the weight
+    still alive at the walk cap ``max_steps``, an upper bound on the light the cap lost)."""
+    a, s, gg = (np.asarray(x, dtype=np.float64).ravel() for x in (alpha, sigma_t, g))
+    check_mixture(a[None], s[None], gg[None], np.ones((1, a.size)))
+    medium = LayeredMedium.homogeneous((1 - a) * s, a * s, gg, n_medium=N_TISSUE)
+    return simulate(medium, int(photons), illumination=illumination, seed=seed, device=device,
+                    r_edges_cm=r_edges_cm, progress=progress, compile=compile, max_steps=max_steps)
+
+
+def combine(weight: np.ndarray, values: np.ndarray, stderr: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Mixture of independent component estimates: (sum_k w_k v_k, sqrt(sum_k w_k^2 se_k^2)).
+
+    ``weight`` (K, W); ``values``, ``stderr`` (K, W) or (K, W, NB) (radial profiles)."""
+    w = weight if values.ndim == weight.ndim else weight[..., None]
+    return np.sum(w * values, axis=0), np.sqrt(np.sum((w * stderr) ** 2, axis=0))
+
+
 def mixture_reflectance(alpha, sigma_t, g, weight, *, photons: int, seed: int = 0,
-                        illumination: str = "diffuse", device: str = "cpu", progress: bool = False) -> MixtureResult:
+                        illumination: str = "diffuse", device: str = "cpu", progress: bool = False,
+                        r_edges_cm: np.ndarray | None = None, compile: bool | str = "auto") -> MixtureResult:
     """Total diffuse reflectance of the mixture at each of its W wavelengths.
 
     Args:
         alpha, sigma_t (cm^-1), g, weight: (K, W) arrays (or (W,) for K = 1); weights sum to 1 over K.
         photons: photons per component and wavelength.
         illumination: "diffuse" (the dataset's) or "normal".
+        r_edges_cm: radial bin edges (NB + 1,) to tally the mixture's profile too (None: R_d only).
     Returns: MixtureResult; R_d = sum_k w_k R_k (exact by linearity, see the module docstring).
     """
     a, s, gg, w = check_mixture(alpha, sigma_t, g, weight)
     k, n_w = a.shape
-    medium = LayeredMedium.homogeneous(((1 - a) * s).ravel(), (a * s).ravel(), gg.ravel(), n_medium=N_TISSUE)
-    res = simulate(medium, int(photons), illumination=illumination, seed=seed, device=device,
-                   r_edges_cm=None, progress=progress)
+    res = render_media(a, s, gg, photons=photons, seed=seed, illumination=illumination, r_edges_cm=r_edges_cm,
+                       device=device, compile=compile, progress=progress)
     r_k = res.R_d.reshape(k, n_w)
     se_k = res.R_d_stderr.reshape(k, n_w)
-    return MixtureResult(
-        R_d=np.sum(w * r_k, axis=0),
-        R_d_stderr=np.sqrt(np.sum((w * se_k) ** 2, axis=0)),
-        R_k=r_k, R_k_stderr=se_k, photons=int(photons), seconds=res.seconds,
-    )
+    r_d, r_se = combine(w, r_k, se_k)
+    prof = prof_se = None
+    if r_edges_cm is not None:
+        nb = res.profile.shape[-1]
+        prof, prof_se = combine(w, res.profile.reshape(k, n_w, nb), res.profile_stderr.reshape(k, n_w, nb))
+    return MixtureResult(R_d=r_d, R_d_stderr=r_se, R_k=r_k, R_k_stderr=se_k, photons=int(photons),
+                         seconds=res.seconds, profile=prof, profile_stderr=prof_se)
 
 
 def _full_grid(reflectance) -> np.ndarray:

@@ -1,0 +1,119 @@
+"""`python -m training validate --out DIR --quick` end to end, the model card update, and bad input.
+
+The quick run uses the real model (a copy of blender_addon/models, so that --update-card does not touch
+the shipped card), a tiny Monte Carlo LUT that the command builds itself, real renders and fits: what
+it checks is the plumbing (files, finite numbers, resume, refusals), not the numbers' quality.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import shutil
+import time
+from pathlib import Path
+
+import pytest
+
+from training.export.card import VALIDATION_PLACEHOLDER, update_validation
+from training.validate import cli
+from training.validate.gate import ROWS
+from training.validate.run import OUTPUTS
+
+MODELS = Path(__file__).resolve().parents[1] / "blender_addon" / "models"
+
+
+@pytest.fixture(scope="module")
+def quick_run(tmp_path_factory):
+    root = tmp_path_factory.mktemp("validate")
+    models = root / "models"
+    models.mkdir()
+    for name in ("skin_inversion.onnx", "skin_decoder.onnx", "skin_inversion.json"):
+        shutil.copy(MODELS / name, models / name)
+    before = json.loads((models / "skin_inversion.json").read_text())
+    out = root / "out"
+    t0 = time.perf_counter()
+    rc = cli.main(["--out", str(out), "--quick", "--model-dir", str(models), "--update-card", "--no-progress"])
+    return out, models, before, rc, time.perf_counter() - t0
+
+
+def _finite(x) -> bool:
+    return isinstance(x, int | float) and math.isfinite(x)
+
+
+def test_quick_writes_tables_and_figures(quick_run, monkeypatch):
+    out, _, _, rc, _ = quick_run
+    assert rc == 0
+    for name in OUTPUTS:
+        assert (out / name).is_file() and (out / name).stat().st_size > 0, name
+    rec = json.loads((out / "tables.json").read_text())
+    per_tone = rec["gate"]["per_tone"]
+    assert set(per_tone) == set(ROWS)
+    for row in ROWS:
+        for tone, vals in per_tone[row].items():
+            for key in ("delta_e", "delta_e_edge", "sam_vis", "shape_vis_lut", "noise_floor"):
+                assert _finite(vals[key]), (row, tone, key, vals[key])
+    for band in ("UV", "Vis", "NIR"):
+        assert all(_finite(v) for v in rec["banded"]["shape"][band].values())
+    md = (out / "tables.md").read_text()
+    for heading in ("## Table 1", "## Table 2", "## Table 3", "## Notes", "Quick mode"):
+        assert heading in md, heading
+    assert "3.19" in md and "51.40" in md  # the paper's numbers beside ours
+
+
+def test_rerun_refuses_then_resumes_from_the_cache(quick_run):
+    out, models, _, _, first = quick_run
+    base = ["--out", str(out), "--quick", "--model-dir", str(models), "--no-progress"]
+    assert cli.main(base) == 2  # outputs exist
+    t0 = time.perf_counter()
+    assert cli.main([*base, "--overwrite"]) == 0
+    assert time.perf_counter() - t0 < first  # ground truth, fits and renders came from DIR/cache
+    # another configuration in the same folder is refused, not mixed
+    assert cli.main([*base, "--photons", "99"]) == 2
+
+
+def test_update_card_keeps_other_keys(quick_run):
+    _, models, before, _, _ = quick_run
+    after = json.loads((models / "skin_inversion.json").read_text())
+    v = after["validation"]
+    assert set(v["gate"]["joint_opt_delta_e"]) == {"K1", "K2", "K3"}
+    assert _finite(v["gate"]["nn_delta_e"]["representative"])
+    assert "banded" in v and "profile_shape" in v
+    for key, value in before.items():
+        if key == "validation_tables" and value == VALIDATION_PLACEHOLDER:
+            assert after[key]["status"].startswith("filled")
+        else:
+            assert after[key] == value, key
+
+
+def test_update_validation_refuses_a_non_card(tmp_path):
+    bad = tmp_path / "card.json"
+    bad.write_text("[1, 2]")
+    with pytest.raises(ValueError, match="not a model card"):
+        update_validation(bad, {"x": 1})
+    with pytest.raises(ValueError, match="cannot read"):
+        update_validation(tmp_path / "missing.json", {"x": 1})
+    good = tmp_path / "good.json"
+    good.write_text(json.dumps({"K": 3, "validation": {"old": True}}))
+    update_validation(good, {"gate": 1})
+    assert json.loads(good.read_text()) == {"K": 3, "validation": {"gate": 1}}
+
+
+@pytest.mark.parametrize(("argv", "message"), [
+    ([], "--out"),
+    (["--out", "OUT"], "--lut"),
+    (["--out", "OUT", "--quick", "--wavelength-step-nm", "3"], "multiple of 2"),
+    (["--out", "OUT", "--quick", "--tones", "R01,X99"], "unknown tone"),
+    (["--out", "OUT", "--lut", "missing.npz"], "no such file"),
+    (["--out", "OUT", "--quick", "--fits", "missing_dir"], "no such folder"),
+])
+def test_bad_input_exits_2(tmp_path, monkeypatch, capsys, argv, message):
+    monkeypatch.delenv("SKIN_SSS_LUT", raising=False)
+    monkeypatch.chdir(tmp_path)
+    lut = tmp_path / "lut.npz"
+    lut.write_bytes(b"")  # never read: the errors come first
+    argv = [a.replace("OUT", str(tmp_path / "o")) for a in argv]
+    if "--quick" in argv:
+        argv += ["--lut", str(lut)]
+    assert cli.main(argv) == 2
+    assert message in capsys.readouterr().err

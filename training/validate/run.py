@@ -1,0 +1,479 @@
+"""``python -m training validate --out DIR``: run the gate, compute the tables, write them with the figures.
+
+Stages (each cached in ``DIR/cache`` so that a rerun of the same command continues): ground truth,
+joint-optimised fits per tone, baseline calibration, renders per tone; then the metrics (seconds),
+Table 3 from the validation fits (if given) and the figures.  The output files are ``tables.md``,
+``tables.json`` and ``fig_*.png``; existing ones are replaced only with ``overwrite``.
+"""
+
+from __future__ import annotations
+
+import json
+import platform
+import sys
+import time
+import zipfile
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from exporters.constants import R_EDGES_CM, WAVELENGTHS_NM
+from exporters.maps import sha256_file
+from training.validate import baselines as bl
+from training.validate import figures, paper
+from training.validate import gate as G
+from training.validate import metrics as M
+
+#: The paper's full gate: 10 representative and 10 outlier tones of tones.csv.
+FULL_TONES: tuple[str, ...] = tuple(f"R{i:02d}" for i in range(1, 11)) + tuple(f"O{i:02d}" for i in range(1, 11))
+#: --quick: three representative tones and one outlier, every 20 nm, few photons, few fitter iterations.
+QUICK_TONES: tuple[str, ...] = ("R01", "R05", "R10", "O01")
+QUICK_STEPS: tuple[tuple[str, int], ...] = (("k1_shape", 3), ("k1_joint", 3), ("k2", 3), ("k3", 3))
+QUICK = dict(wavelength_step=10, gt_photons=400, photons=150, fit_steps=QUICK_STEPS, max_steps=2_000,
+             calibration_scales_m=tuple(np.geomspace(1e-4, 0.3, 8).tolist()))
+#: Tiny MC LUT built for --quick when none is given (about 10 s): albedos x g nodes, photons per node.
+QUICK_LUT = dict(albedo_n=24, g_n=5, photons=400, max_steps=20_000)
+#: Wavelengths of the cross-section figure (nm; the nearest validation wavelength is shown).
+CROSS_SECTION_NM = (250, 350, 450, 550, 650, 750, 850, 1000)
+#: Tones of the profile heat maps (those present are used).
+HEAT_TONES = ("R01", "R05", "R09", "R10")
+OUTPUTS = ("tables.md", "tables.json", "fig_k_progression.png", "fig_spectral_parameters.png",
+           "fig_cross_sections.png", "fig_reflectance_profiles.png")
+
+
+@dataclass
+class Options:
+    """What the command was asked to do (``config``: the gate's numbers-determining settings)."""
+
+    out: Path
+    config: G.GateConfig
+    lut: Path
+    model_dir: Path
+    dataset: Path | None = None
+    fits: Path | None = None
+    threads: int = 1
+    overwrite: bool = False
+    progress: bool = True
+    quick: bool = False
+    nn_profile_tones: int | None = None
+    command: str = ""
+
+
+def _log(opts: Options, text: str) -> None:
+    if opts.progress:
+        print(text, file=sys.stderr, flush=True)
+
+
+def _bar(opts: Options, total: int, desc: str):
+    from tqdm import tqdm
+
+    return tqdm(total=total, desc=desc, disable=not opts.progress, file=sys.stderr)
+
+
+def _mean(values) -> float | None:
+    v = [x for x in values if x is not None]
+    return float(np.mean(v)) if v else None
+
+
+def check_outputs(out: Path, overwrite: bool) -> None:
+    """Refuse to replace the outputs of an earlier run unless ``overwrite``."""
+    existing = [str(out / n) for n in OUTPUTS if (out / n).exists()]
+    if existing and not overwrite:
+        raise FileExistsError(f"{', '.join(existing)} exist; pass --overwrite to replace them.")
+
+
+def model_files(model_dir: Path) -> dict[str, Path]:
+    """The two ONNX graphs and the card of ``model_dir`` (ValueError naming a missing one)."""
+    files = {n: Path(model_dir) / n for n in ("skin_inversion.onnx", "skin_decoder.onnx")}
+    missing = [str(p) for p in files.values() if not p.is_file()]
+    if missing:
+        raise ValueError(f"model file(s) {missing} not found: pass --model-dir with the exported model "
+                         "(python -m training export).")
+    files["card"] = Path(model_dir) / "skin_inversion.json"
+    return files
+
+
+# ------------------------------------------------------------------------------------------ the run
+def run(opts: Options) -> dict:
+    """Run the whole validation (module docstring); returns the tables' record (also in tables.json)."""
+    t_start = time.perf_counter()
+    cfg = opts.config
+    check_outputs(opts.out, opts.overwrite)
+    files = model_files(opts.model_dir)
+    torch.set_num_threads(opts.threads)
+    from training.sim.lut_interp import LookupTables
+
+    _log(opts, f"loading LUT {opts.lut}")
+    t0 = time.perf_counter()
+    lut_sha = sha256_file(opts.lut)
+    try:
+        lut = LookupTables.load(opts.lut)
+    except (OSError, EOFError, KeyError, zipfile.BadZipFile) as exc:
+        raise ValueError(f"cannot read the LUT {opts.lut}: {exc or type(exc).__name__}") from None
+    timings = {"lut_load": time.perf_counter() - t0}
+    manifest = {"config": G.config_record(cfg), "lut_sha256": lut_sha,
+                "model_sha256": {n: sha256_file(p) for n, p in files.items() if n != "card"}}
+    cache = G.Cache(opts.out / "cache", manifest)
+    cache.open(reset=opts.overwrite)
+    tones = G.gate_tones(cfg.tones)
+    wl_val = G.validation_indices(cfg.wavelength_step)
+    wl_r = G.render_indices(cfg.wavelength_step)
+    col_r = np.searchsorted(wl_val, wl_r)
+
+    t0 = time.perf_counter()
+    gt = G.ground_truth(tones.values, wl_val, cfg.gt_photons, cfg.seed, cache, lambda s: _log(opts, s))
+    timings["ground_truth"] = time.perf_counter() - t0
+    albedo = G.albedo_rgb_of(gt["R_d"], wl_val)
+
+    fits = _fits(opts, lut, tones, gt, wl_val, wl_r, cache, timings)
+    t0 = time.perf_counter()
+    inv, dec, nn_full = _network(opts, files, albedo, tones.values, wl_r)
+    scales, calib = _baseline_scales(opts, lut, tones, gt, albedo, wl_val)
+    timings["network_and_calibration"] = time.perf_counter() - t0
+
+    rows_per_tone, held = [], {}
+    for i, name in enumerate(tones.names):
+        rows = {}
+        for k in (1, 2, 3):
+            rows[f"k{k}"], held[f"{name}_k{k}"] = G.hold_lut_albedo(G.fit_params(fits[name], k, wl_r), lut)
+        rows |= {"nn": inv[i], "nn_decoder": dec[i]}
+        rows |= {m: G.baseline_params(m, albedo[i], scales[m], wl_r) for m in bl.METHODS}
+        rows_per_tone.append(rows)
+    t0 = time.perf_counter()
+    renders = []
+    bar = _bar(opts, len(tones.names), "gate renders")
+    for i, name in enumerate(tones.names):
+        renders.append(G.render_tone(cache, name, rows_per_tone[i], cfg.photons, cfg.seed * 1000 + i, cfg.max_steps))
+        bar.update(1)
+    bar.close()
+    timings["renders"] = time.perf_counter() - t0
+
+    t0 = time.perf_counter()
+    record = _gate_tables(lut, tones, gt, wl_val, wl_r, col_r, rows_per_tone, renders, fits, cfg, albedo)
+    record["banded"] = _banded(tones, fits, wl_val, record)
+    record["profile_fidelity"] = _profile_fidelity(opts, lut, files, record)
+    record["goals"] = _goals(record)
+    timings["metrics"] = time.perf_counter() - t0
+    record["baselines"] = {"scale_m": scales, "calibration": calib, "radius_rgb": list(bl.BLENDER_RADIUS),
+                           "wrenninge_g": bl.WRENNINGE_G,
+                           "published_darkening": {m: [bl.published_darkening(m, a, WAVELENGTHS_NM[wl_r])
+                                                       for a in albedo] for m in bl.METHODS}}
+    record["truncated_max"] = {r: max(record["gate"]["per_tone"][r][n]["truncated_max"] for n in tones.names)
+                               for r in G.ROWS}
+    record["fits_held_at_lut_albedo"] = {"count": int(sum(held.values())),
+                                         "of": int(sum(3 * 2 * wl_r.size for _ in tones.names)),
+                                         "range": list(G.params_lut_range(lut))}
+    record["network"] = {"exposure": {n: inv[i].extra["exposure"] for i, n in enumerate(tones.names)},
+                         "biophysical_estimate": {n: inv[i].extra["biophysical"] for i, n in enumerate(tones.names)},
+                         "biophysical_true": {n: tones.values[i].tolist() for i, n in enumerate(tones.names)}}
+    t0 = time.perf_counter()
+    opts.out.mkdir(parents=True, exist_ok=True)
+    _figures(opts, lut, tones, gt, wl_val, wl_r, col_r, rows_per_tone, renders, fits, nn_full, record)
+    timings["figures"] = time.perf_counter() - t0
+    timings["total"] = time.perf_counter() - t_start
+    record["run"] = _run_record(opts, cfg, files, lut, lut_sha, gt, fits, timings, manifest)
+    from training.validate.tables import notes, write_tables
+
+    record["notes"] = notes(record)
+    write_tables(opts.out, record)
+    return record
+
+
+def _fits(opts, lut, tones, gt, wl_val, wl_r, cache, timings) -> dict[str, dict]:
+    """Joint-optimised fits per tone (cached): all validation wavelengths for the representative tones,
+    the render wavelengths for the others."""
+    cfg = opts.config
+    t0 = time.perf_counter()
+    fits = {}
+    bar = _bar(opts, len(tones.names), "joint-optimised fits K=1,2,3")
+    for i, name in enumerate(tones.names):
+        idx = wl_val if tones.kinds[i] == "representative" else wl_r
+        cols = np.searchsorted(wl_val, idx)
+        path = cache.path(f"fit_{name}.npz")
+        fit = G.Cache.load(path)
+        if fit is None or not np.array_equal(fit["wl_idx"], idx):
+            fit = G.fit_tone(lut, gt["profile"][i][cols], gt["R_d"][i][cols], gt["profile_stderr"][i][cols], idx,
+                             cfg.gt_photons, cfg.fit_method, cfg.steps(), cfg.anchor_every)
+            G.Cache.save(path, **fit)
+        fits[name] = fit
+        bar.update(1)
+    bar.close()
+    timings["fits"] = time.perf_counter() - t0
+    return fits
+
+
+def _network(opts, files, albedo, tones, wl_r):
+    """The network's mixtures at the render wavelengths (inversion on the albedo, decoder on the true p),
+    and the inversion's full outputs (for the figures)."""
+    from exporters import inference
+    from exporters.mitsuba import decode
+
+    model = inference.load_model(files["skin_inversion.onnx"], threads=opts.threads)
+    out = model.run(np.asarray(albedo, dtype=np.float32))
+    inv = [G.Params(out["alpha"][i][:, wl_r], out["sigma_t"][i][:, wl_r], out["g"][i][:, wl_r],
+                    out["weight"][i][:, wl_r],
+                    extra={"exposure": float(out["exposure"][i, 0]), "biophysical": out["biophysical"][i].tolist()})
+           for i in range(len(albedo))]
+    dec = []
+    for tone in tones:
+        m = decode(tone, files["skin_decoder.onnx"])
+        dec.append(G.Params(m.alpha[:, wl_r], m.sigma_t[:, wl_r], m.g[:, wl_r], m.weight[:, wl_r]))
+    return inv, dec, out
+
+
+def _baseline_scales(opts, lut, tones, gt, albedo, wl_val) -> tuple[dict[str, float], dict]:
+    """Each baseline's Subsurface Scale: given, or calibrated on the calibration tone (see baselines)."""
+    cfg = opts.config
+    if cfg.baseline_scale_m is not None:
+        return {m: cfg.baseline_scale_m for m in bl.METHODS}, {"mode": "given"}
+    name = cfg.calibration_tone if cfg.calibration_tone in tones.names else next(
+        n for n, k in zip(tones.names, tones.kinds, strict=True) if k == "representative")
+    i = tones.names.index(name)
+    scales, calib = {}, {"mode": "calibrated", "tone": name, "scales_m": list(cfg.calibration_scales_m), "errors": {}}
+    for m in bl.METHODS:
+        target = _target(lut, gt, i, np.arange(wl_val.size), cfg.gt_photons)
+        best, errs = bl.calibrate_scale(m, lut, albedo[i], WAVELENGTHS_NM[wl_val], target,
+                                        np.asarray(cfg.calibration_scales_m))
+        scales[m] = best
+        calib["errors"][m] = errs
+    return scales, calib
+
+
+# ------------------------------------------------------------------------------------------ metrics
+def _target(lut, gt, i, cols, photons):
+    return G.mc_target(lut, gt["profile"][i][cols], gt["R_d"][i][cols], gt["profile_stderr"][i][cols], photons)
+
+
+def _gate_tables(lut, tones, gt, wl_val, wl_r, col_r, rows_per_tone, renders, fits, cfg, albedo) -> dict:
+    """Table 1 (per tone and summarised): colour Delta E, edge Delta E, SAM, LUT shape error, noise floor."""
+    wl = WAVELENGTHS_NM[wl_r]
+    vis = M.band_mask(wl, "Vis")
+    vis_rows = np.flatnonzero(vis)
+    per_row: dict[str, dict[str, dict]] = {r: {} for r in G.ROWS}
+    nn_vs_k3 = {}
+    gt_rec = {}
+    for i, name in enumerate(tones.names):
+        g_r, g_se = gt["R_d"][i][col_r], gt["R_d_stderr"][i][col_r]
+        g_prof = gt["profile"][i][col_r].astype(np.float64)
+        target = _target(lut, gt, i, col_r, cfg.gt_photons)
+        gt_rec[name] = {"kind": tones.kinds[i], "albedo_rgb": albedo[i].tolist(),
+                        "srgb": np.clip(M.linear_srgb(g_r, wl), 0, None).tolist(),
+                        "lab": M.lab(g_r, wl).tolist()}
+        for r in G.ROWS:
+            rend = renders[i][r]
+            rec = {
+                "delta_e": float(M.delta_e(rend["R_d"], g_r, wl)),
+                "noise_floor": M.noise_floor(g_r, g_se, rend["R_d_stderr"], wl, seed=cfg.seed + i),
+                "delta_e_edge": M.edge_delta_e(rend["profile"].astype(np.float64), rend["R_d"], g_prof, g_r, wl),
+                "sam_vis": M.spectral_angle(rend["R_d"], g_r, vis),
+                "shape_vis_lut": float(np.mean(G.lut_mixture_shape_error(lut, rows_per_tone[i][r], target, vis_rows))),
+                "linear_srgb": M.linear_srgb(rend["R_d"], wl).tolist(),
+                "truncated_max": float(np.max(rend["truncated"])),
+            }
+            per_row[r][name] = rec
+        nn_vs_k3[name] = float(M.delta_e(renders[i]["nn"]["R_d"], renders[i]["k3"]["R_d"], wl))
+    kinds = {"representative": [n for n, k in zip(tones.names, tones.kinds, strict=True) if k == "representative"],
+             "outlier": [n for n, k in zip(tones.names, tones.kinds, strict=True) if k == "outlier"],
+             "all": list(tones.names)}
+    summary = {}
+    for r in G.ROWS:
+        summary[r] = {"label": G.ROW_LABELS[r]}
+        for metric in ("delta_e", "noise_floor", "delta_e_edge", "sam_vis", "shape_vis_lut"):
+            summary[r][metric] = {kind: _mean(per_row[r][n][metric] for n in names) if names else None
+                                  for kind, names in kinds.items()}
+    k1 = summary["k1"]["delta_e"]["representative"]
+    for r in G.ROWS:
+        v = summary[r]["delta_e"]["representative"]
+        summary[r]["vs_k1"] = (k1 / v) if (k1 is not None and v) else None
+    nn_sum = {kind: _mean(nn_vs_k3[n] for n in names) if names else None for kind, names in kinds.items()}
+    diff = {kind: (summary["nn"]["delta_e"][kind] - summary["k3"]["delta_e"][kind])
+            if summary["nn"]["delta_e"][kind] is not None else None for kind in kinds}
+    return {"gate": {"tones": list(tones.names), "kinds": list(tones.kinds), "groups": kinds,
+                     "wavelength_nm": wl.tolist(), "rows": summary, "per_tone": per_row,
+                     "nn_vs_k3": {"delta_e": nn_sum, "per_tone": nn_vs_k3, "difference_of_means": diff},
+                     "ground_truth": gt_rec}}
+
+
+def _banded(tones, fits, wl_val, record) -> dict:
+    """Table 2: per band the fits' mean L_shape (representative tones) for K = 1, 2, 3 and the reductions;
+    the rendered visible SAM of every configuration (representative tones)."""
+    rep = [n for n, k in zip(tones.names, tones.kinds, strict=True) if k == "representative"]
+    out: dict = {"tones": rep, "shape": {}, "reduction": {}}
+    if not rep:
+        return out
+    wl = WAVELENGTHS_NM[wl_val]
+    for band in M.BANDS:
+        mask = M.band_mask(wl, band)
+        vals = {}
+        for k in (1, 2, 3):
+            data = np.stack([fits[n][f"k{k}_shape_rmse"] for n in rep])  # (T, W) on wl_val
+            vals[f"K{k}"] = float(np.mean(data[:, mask])) if mask.any() else None
+        out["shape"][band] = vals
+        ok = all(vals[k] for k in ("K1", "K2", "K3"))
+        out["reduction"][band] = {"K1_to_K2": M.relative_reduction(vals["K1"], vals["K2"]) if ok else None,
+                                  "K2_to_K3": M.relative_reduction(vals["K2"], vals["K3"]) if ok else None}
+    all_w = {f"K{k}": float(np.mean(np.stack([fits[n][f"k{k}_shape_rmse"] for n in rep]))) for k in (1, 2, 3)}
+    out["shape"]["all"] = all_w
+    out["reduction"]["all"] = {"K1_to_K2": M.relative_reduction(all_w["K1"], all_w["K2"]),
+                               "K2_to_K3": M.relative_reduction(all_w["K2"], all_w["K3"])}
+    rows = record["gate"]["rows"]
+    out["sam_vis"] = {r: rows[r]["sam_vis"]["representative"] for r in G.ROWS}
+    sam = [out["sam_vis"][f"k{k}"] for k in (1, 2, 3)]
+    out["sam_reduction"] = {"K1_to_K2": M.relative_reduction(sam[0], sam[1]) if sam[0] else None,
+                            "K2_to_K3": M.relative_reduction(sam[1], sam[2]) if sam[1] else None}
+    out["refl_rel_err"] = {f"K{k}": float(np.mean(np.stack([fits[n][f"k{k}_refl_rel_err"] for n in rep])))
+                           for k in (1, 2, 3)}
+    return out
+
+
+def _profile_fidelity(opts, lut, files, record) -> dict:
+    """Table 3 from the validation fits (and the network on the validation split) when given."""
+    from training.validate import profile_set
+
+    out: dict = {"fits": None, "network": None}
+    if opts.fits is not None:
+        out["fits"] = profile_set.fit_profile_fidelity(opts.fits, opts.dataset)
+    else:
+        out["fits_missing"] = "no --fits given: Table 3 needs `python -m training fit --dataset DIR --out FITS`."
+    if opts.dataset is not None:
+        out["network"] = profile_set.network_profile_fidelity(opts.dataset, lut, files["skin_decoder.onnx"],
+                                                              max_tones=opts.nn_profile_tones, progress=opts.progress)
+    return out
+
+
+def _goals(record) -> dict:
+    """The issue's goals, checked on our numbers."""
+    nn = record["gate"]["rows"]["nn"]["delta_e"]["representative"]
+    goals = {"nn_delta_e_at_most_paper": {"ours": nn, "paper": paper.TABLE1_DELTA_E["nn"],
+                                           "met": None if nn is None else bool(nn <= paper.TABLE1_DELTA_E["nn"])}}
+    prof = record.get("profile_fidelity", {}).get("fits")
+    if prof and "K1_to_K2_reduction" in prof["fits"]:
+        red, source = prof["fits"]["K1_to_K2_reduction"]["mean"], "validation split (Table 3)"
+    else:
+        red, source = record["banded"]["reduction"].get("all", {}).get("K1_to_K2"), \
+            "gate representative tones, all validation wavelengths (Table 3 not available)"
+    met = None if red is None else bool(red >= paper.PROFILE_REDUCTION)
+    goals["k2_profile_reduction_at_least_paper"] = {"ours": red, "paper": paper.PROFILE_REDUCTION, "source": source,
+                                                    "met": met}
+    return goals
+
+
+# ------------------------------------------------------------------------------------------ figures
+def _figures(opts, lut, tones, gt, wl_val, wl_r, col_r, rows_per_tone, renders, fits, nn_full, record) -> None:
+    wl = WAVELENGTHS_NM[wl_r]
+    rep = [i for i, k in enumerate(tones.kinds) if k == "representative"] or list(range(len(tones.names)))
+    x = M.edge_positions_cm()
+    edge = []
+    for i in rep:
+        g_r = gt["R_d"][i][col_r]
+        cells = [M.linear_srgb(M.edge_exitance(gt["profile"][i][col_r].astype(np.float64), g_r, x), wl)]
+        for r in G.ROWS:
+            rend = renders[i][r]
+            cells.append(M.linear_srgb(M.edge_exitance(rend["profile"].astype(np.float64), rend["R_d"], x), wl))
+        edge.append(np.stack(cells))  # (rows, P, 3)
+    edge_rgb = np.stack(edge, axis=1)  # (rows, tones, P, 3)
+    de = np.zeros(edge_rgb.shape[:2])
+    per_tone = record["gate"]["per_tone"]
+    for j, i in enumerate(rep):
+        for r_i, r in enumerate(G.ROWS):
+            de[r_i + 1, j] = per_tone[r][tones.names[i]]["delta_e"]
+    names = [tones.names[i] for i in rep]
+    figures.k_progression(opts.out / "fig_k_progression.png", names, ["MC ground truth"] +
+                          [G.ROW_LABELS[r].replace(" (", "\n(") for r in G.ROWS], edge_rgb, de)
+    figures.spectral_parameters(opts.out / "fig_spectral_parameters.png", WAVELENGTHS_NM, nn_full["alpha"],
+                                nn_full["sigma_t"], nn_full["weight"],
+                                f"skin_inversion.onnx on the {len(tones.names)} gate tones' albedos: median and IQR")
+    cols = [int(np.argmin(np.abs(WAVELENGTHS_NM[wl_val] - w))) for w in CROSS_SECTION_NM]
+    cols = list(dict.fromkeys(cols))
+    figures.cross_sections(opts.out / "fig_cross_sections.png", names, WAVELENGTHS_NM[wl_val][cols],
+                           gt["profile"][rep][:, cols].astype(np.float64))
+    heat = [i for i in rep if tones.names[i] in HEAT_TONES] or rep[:1]
+    fit_prof = {}
+    for k in (1, 3):
+        arr = np.zeros((len(tones.names), wl_val.size, R_EDGES_CM.size - 1))
+        for i in heat:
+            arr[i] = _lut_profile(lut, G.fit_params(fits[tones.names[i]], k, wl_val))
+        fit_prof[f"K={k}"] = arr
+    srgb = np.array([record["gate"]["ground_truth"][n]["srgb"] for n in names])
+    from exporters.colorimetry import srgb_encode
+
+    figures.reflectance_and_profiles(opts.out / "fig_reflectance_profiles.png", WAVELENGTHS_NM[wl_val], names,
+                                     gt["R_d"][rep], srgb_encode(srgb), [rep.index(i) for i in heat],
+                                     gt["profile"][rep].astype(np.float64),
+                                     gt["profile_stderr"][rep].astype(np.float64),
+                                     {k: v[rep] for k, v in fit_prof.items()})
+
+
+def _lut_profile(lut, params: G.Params) -> np.ndarray:
+    """Absolute profile sum_k w_k R_k P_k (W, 512) cm^-2 of a mixture through the LUT (paper eq. mixture)."""
+    from training.sim.lut_interp import bin_centres
+
+    dt = lut.P.dtype
+    r = torch.as_tensor(bin_centres(R_EDGES_CM), dtype=dt)
+    a, s, g, w = (torch.as_tensor(v.T, dtype=dt) for v in (params.alpha, params.sigma_t, params.g, params.weight))
+    p = lut.profile(r, a, g, s)  # (W, K, M)
+    return ((w * lut.reflectance(a, g))[..., None] * p).sum(1).numpy()
+
+
+# ------------------------------------------------------------------------------------------ record
+def _card_info(card: Path) -> dict:
+    if not card.is_file():
+        return {"path": str(card), "missing": True}
+    c = json.loads(card.read_text())
+    ds = c.get("dataset", {})
+    return {"path": str(card), "created": c.get("created"), "K": c.get("K"),
+            "dataset": {k: ds.get(k) for k in ("path", "n_train", "n_validation", "photons")},
+            "preset": ds.get("train_attrs", {}).get("preset"), "lut": c.get("lut", {}).get("path"),
+            "notes": c.get("notes", [])[:1],
+            "sha256": {n: v.get("sha256") for n, v in c.get("files", {}).items()}}
+
+
+def _run_record(opts, cfg, files, lut, lut_sha, gt, fits, timings, manifest) -> dict:
+    rep_fit_seconds = float(sum(float(f["seconds"]) for f in fits.values()))
+    return {
+        "command": opts.command, "quick": opts.quick, "config": G.config_record(cfg),
+        "wavelengths": {"validation_step_nm": 2 * cfg.wavelength_step,
+                        "rendered_nm": [float(WAVELENGTHS_NM[G.render_indices(cfg.wavelength_step)][0]),
+                                        float(WAVELENGTHS_NM[G.render_indices(cfg.wavelength_step)][-1])],
+                        "n_validation": int(G.validation_indices(cfg.wavelength_step).size),
+                        "n_rendered": int(G.render_indices(cfg.wavelength_step).size)},
+        "lut": {"path": str(opts.lut), "sha256": lut_sha, "albedo_n": int(lut.albedo.numel()),
+                "g_n": int(lut.g.numel()), "g_range": list(lut.g_range)},
+        "model": {"dir": str(opts.model_dir), "sha256": manifest["model_sha256"], "card": _card_info(files["card"])},
+        "ground_truth": {"estimator": "reweighted (training.data.reweight)", "photons": int(gt["photons"]),
+                         "walk_seconds": float(gt["walk_seconds"])},
+        "fits": {"method": cfg.fit_method, "steps": cfg.steps(), "seconds": rep_fit_seconds},
+        "timings_s": {k: round(v, 2) for k, v in timings.items()},
+        "threads": opts.threads, "machine": {"python": platform.python_version(), "torch": torch.__version__,
+                                             "cpu": platform.processor() or platform.machine()},
+        "dataset": str(opts.dataset) if opts.dataset else None, "fits_dir": str(opts.fits) if opts.fits else None,
+    }
+
+
+def headline(record: dict) -> dict:
+    """The model card's ``validation`` entry: the headline numbers of the tables."""
+    rows = record["gate"]["rows"]
+    prof = record["profile_fidelity"].get("fits")
+    return {
+        "created": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
+        "command": record["run"]["command"],
+        "gate": {
+            "tones": record["gate"]["tones"],
+            "nn_delta_e": rows["nn"]["delta_e"],
+            "nn_decoder_delta_e": rows["nn_decoder"]["delta_e"],
+            "joint_opt_delta_e": {f"K{k}": rows[f"k{k}"]["delta_e"] for k in (1, 2, 3)},
+            "baseline_delta_e": {m: rows[m]["delta_e"] for m in bl.METHODS},
+            "edge_delta_e": {r: rows[r]["delta_e_edge"] for r in G.ROWS},
+            "nn_vs_joint_opt_k3_delta_e": record["gate"]["nn_vs_k3"]["delta_e"],
+            "photons": {"ground_truth": record["run"]["ground_truth"]["photons"],
+                        "render_per_component": record["run"]["config"]["photons"]},
+        },
+        "banded": {"shape": record["banded"].get("shape"), "sam_vis": record["banded"].get("sam_vis")},
+        "profile_shape": None if not prof else {k: prof["fits"][k]["mean"] for k in ("K1", "K2", "K3")
+                                                if k in prof["fits"]}
+        | {"K1_to_K2_reduction": prof["fits"].get("K1_to_K2_reduction", {}).get("mean"),
+           "n_tones": prof["n_tones"]},
+        "goals": record["goals"],
+    }

@@ -1,0 +1,263 @@
+"""``tables.md`` and ``tables.json`` of ``python -m training validate``: our numbers beside the paper's.
+
+The Markdown holds Table 1 (rendering gate), its per-tone breakdown, Table 2 (banded fidelity), Table 3
+(profile fidelity on the validation split), the goals of the issue and a Notes section whose every line
+is filled from the run's record (photons, wavelengths, LUT, model card, dataset, baselines, gaps).
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+
+from training.validate import gate as G
+from training.validate import paper
+from training.validate.baselines import BLENDER_DEFAULT_SCALE_M, METHODS
+from training.validate.metrics import BANDS, EDGE_HALF_WIDTH_CM, EDGE_STEP_CM
+
+
+def _f(x, digits: int = 2, pct: bool = False) -> str:
+    if x is None or (isinstance(x, float) and not np.isfinite(x)):
+        return "—"
+    return f"{100 * x:.1f} %" if pct else f"{x:.{digits}f}"
+
+
+def _table(header: list[str], rows: list[list[str]]) -> list[str]:
+    return ["| " + " | ".join(header) + " |", "|" + "|".join("---" for _ in header) + "|",
+            *("| " + " | ".join(r) + " |" for r in rows)]
+
+
+def table1(record: dict) -> list[str]:
+    rows = record["gate"]["rows"]
+    groups = record["gate"]["groups"]
+    out = ["## Table 1 — rendering gate", "",
+           "ΔE76 between the D65 colour of the rendered slab and the Monte Carlo ground truth (mean over tones; "
+           f"{len(groups['representative'])} representative, {len(groups['outlier'])} outlier tones). "
+           "*Edge ΔE76*: the same slab lit on one half-plane (±2 mm image, mean over pixels) — sees translucency. "
+           "*Shape Vis*: L_shape (log-profile RMSE) of the configuration's rendered profile through the LUT, "
+           "400–700 nm. *Noise floor*: the ΔE76 that Monte Carlo noise alone gives.", ""]
+    body = []
+    for r in G.ROWS:
+        s = rows[r]
+        pap = paper.TABLE1_DELTA_E.get(r)
+        body.append([s["label"], _f(s["delta_e"]["representative"]), _f(s.get("vs_k1"), 1) + "×" if s.get("vs_k1")
+                     else "—", _f(s["delta_e"]["outlier"]), _f(s["delta_e"]["all"]), _f(pap),
+                     _f(s["noise_floor"]["representative"]), _f(s["delta_e_edge"]["representative"]),
+                     _f(s["sam_vis"]["representative"], 3), _f(s["shape_vis_lut"]["representative"], 3)])
+    out += _table(["Configuration", "ΔE76 rep.", "vs K=1", "ΔE76 outliers", "ΔE76 all", "paper rep.",
+                   "noise floor rep.", "edge ΔE76 rep.", "SAM Vis rep. (rad)", "shape Vis rep."], body)
+    nv = record["gate"]["nn_vs_k3"]
+    out += ["", f"Network vs the joint-optimised K = 3 reference (ΔE76 between the two renders): representative "
+            f"{_f(nv['delta_e']['representative'])}, outliers {_f(nv['delta_e']['outlier'])}, all "
+            f"{_f(nv['delta_e']['all'])}. Difference of the means vs ground truth (NN − K=3): representative "
+            f"{_f(nv['difference_of_means']['representative'])} (paper {paper.NN_MINUS_JOINT_OPT:+.2f}), all "
+            f"{_f(nv['difference_of_means']['all'])}; paper's NN on all 20 tones: {paper.NN_ALL_TONES}.", ""]
+    return out
+
+
+def table1_per_tone(record: dict) -> list[str]:
+    g = record["gate"]
+    out = ["### Table 1 per tone (ΔE76, slab colour)", ""]
+    body = []
+    for n in g["tones"]:
+        srgb = np.clip(np.array(g["ground_truth"][n]["srgb"]), 0, 1)
+        from exporters.colorimetry import srgb_encode
+
+        hexc = "#" + "".join(f"{int(round(255 * v)):02x}" for v in np.clip(srgb_encode(srgb), 0, 1))
+        body.append([n, g["ground_truth"][n]["kind"][:3], hexc] +
+                     [_f(g["per_tone"][r][n]["delta_e"]) for r in G.ROWS] + [_f(g["nn_vs_k3"]["per_tone"][n])])
+    out += _table(["Tone", "kind", "GT sRGB", *[r for r in G.ROWS], "NN vs K=3"], body)
+    return out + [""]
+
+
+def table2(record: dict) -> list[str]:
+    b = record["banded"]
+    out = ["## Table 2 — banded fidelity (joint-optimised fits, representative tones)", "",
+           "Shape: the fits' L_shape (RMSE of log normalised profiles, the fitter's own loss term) averaged over the "
+           "band's validation wavelengths and the representative tones; paper values in brackets. SAM: visible "
+           "spectral angle of the rendered R_d vs the ground truth.", ""]
+    if not b.get("shape"):
+        return out + ["(no representative tone in this run)", ""]
+    body = []
+    for band in (*BANDS, "all"):
+        v = b["shape"][band]
+        red = b["reduction"][band]
+        pap = paper.TABLE2_SHAPE.get(band)
+        label = band if band != "all" else "all wavelengths"
+        body.append([label] + [f"{_f(v[f'K{k}'], 3)}" + (f" ({pap[k - 1]})" if pap else "") for k in (1, 2, 3)]
+                    + [_f(red["K1_to_K2"], pct=True), _f(red["K2_to_K3"], pct=True)])
+    sam = b["sam_vis"]
+    body.append(["SAM Vis (rad)"] + [f"{_f(sam[f'k{k}'], 3)} ({paper.TABLE2_SAM_VIS[k - 1]})" for k in (1, 2, 3)]
+                + [_f(b["sam_reduction"]["K1_to_K2"], pct=True), _f(b["sam_reduction"]["K2_to_K3"], pct=True)])
+    out += _table(["Band", "Shape K=1", "K=2", "K=3", "K=1→2", "K=2→3"], body)
+    out += ["", "Visible SAM of the other configurations (rep.): " + ", ".join(
+        f"{G.ROW_LABELS[r]} {_f(sam[r], 3)}" for r in G.ROWS if not r.startswith("k")) + ".",
+        "Mean relative reflectance error of the fits (LUT, rep.): " + ", ".join(
+            f"K={k} {_f(b['refl_rel_err'][f'K{k}'], pct=True)}" for k in (1, 2, 3)) + ".", ""]
+    return out
+
+
+def table3(record: dict) -> list[str]:
+    pf = record["profile_fidelity"]
+    out = ["## Table 3 — profile fidelity on the validation split", ""]
+    fits = pf.get("fits")
+    if not fits:
+        out += [f"Not computed: {pf.get('fits_missing', 'no fits')} (paper: K = 1 {paper.PROFILE_K1} → K = 2 "
+                f"{paper.PROFILE_K2}, −{100 * paper.PROFILE_REDUCTION:.1f} %).", ""]
+    else:
+        t = fits["fits"]
+        out += [f"Mean L_shape over {fits['n_tones']} validation tones × {fits['n_wavelengths']} wavelengths "
+                f"(files: {', '.join(Path(p).name for p in fits['files'])}).", ""]
+        body = []
+        for key in ("mean", *BANDS):
+            body.append([key if key != "mean" else "all"] + [_f(t.get(f"K{k}", {}).get(key), 4) for k in (1, 2, 3)]
+                        + [_f(t.get("K1_to_K2_reduction", {}).get(key), pct=True),
+                           _f(t.get("K2_to_K3_reduction", {}).get(key), pct=True)]
+                        + ([f"{paper.PROFILE_K1} → {paper.PROFILE_K2} (−{100 * paper.PROFILE_REDUCTION:.1f} %)"]
+                           if key == "mean" else ["—"]))
+        out += _table(["Wavelengths", "K=1", "K=2", "K=3", "K=1→2", "K=2→3", "paper"], body) + [""]
+    net = pf.get("network")
+    if net:
+        n = net["nn_decoder"]
+        out += [f"The network's decoder (true p of {net['n_tones']} validation tones) through the LUT: L_shape "
+                f"{_f(n['fit']['mean'], 4)} with the fits' weighting Σ w_k P_k, {_f(n['rendered']['mean'], 4)} with "
+                "the rendered weighting Σ w_k R_k P_k (per band, fit weighting: " + ", ".join(
+                    f"{b} {_f(n['fit'][b], 4)}" for b in BANDS) + ").", ""]
+    return out
+
+
+def goals_md(record: dict) -> list[str]:
+    g = record["goals"]
+    a, b = g["nn_delta_e_at_most_paper"], g["k2_profile_reduction_at_least_paper"]
+    met = lambda m: "—" if m is None else ("met" if m else "NOT met")  # noqa: E731
+    return ["## Goals of the issue", "",
+            f"- Network rendering ΔE76 on the representative gate tones ≤ the paper's {a['paper']}: ours "
+            f"{_f(a['ours'])} — {met(a['met'])}.",
+            f"- K = 2 reduces the profile error by ≥ {100 * b['paper']:.1f} %: ours {_f(b['ours'], pct=True)} on the "
+            f"{b['source']} — {met(b['met'])}.", ""]
+
+
+def notes(record: dict) -> list[str]:
+    """Facts of the run, and the gaps to the paper with what explains them (one string per note)."""
+    run, g, rows = record["run"], record["gate"], record["gate"]["rows"]
+    cfg, out = run["config"], []
+    if run["quick"]:
+        out.append("QUICK MODE: a smoke test (few tones, wavelengths and photons, a tiny LUT, few fitter "
+                   "iterations); its numbers are not the validation.")
+    out.append(f"Photons: ground truth {run['ground_truth']['photons']:,} per wavelength (the dataset's reweighted "
+               f"estimator, one walk for all gate tones); renders {cfg['photons']:,} per component and wavelength "
+               f"(every component walks all photons; exact by linearity). The paper: {paper.GATE_PHOTONS:,} per "
+               f"wavelength. MC noise floor of the colour ΔE76 (rep.): "
+               + ", ".join(f"{r} {_f(rows[r]['noise_floor']['representative'])}" for r in G.ROWS) + ".")
+    tr = record["truncated_max"]
+    out.append(f"Walk cap {cfg['max_steps']:,} steps per photon: the largest weight still alive at the cap (an upper "
+               "bound on the reflectance it cut, per wavelength) is " + ", ".join(f"{r} {tr[r]:.1e}" for r in G.ROWS)
+               + ".")
+    wl = run["wavelengths"]
+    out.append(f"Wavelengths: ground truth and fits every {wl['validation_step_nm']} nm ({wl['n_validation']} of 376; "
+               f"outlier tones fitted only where rendered); renders at the {wl['n_rendered']} of them in "
+               f"{wl['rendered_nm'][0]:.0f}–{wl['rendered_nm'][1]:.0f} nm, linearly interpolated onto the 2 nm grid "
+               "for colour (CIE 1931 2°, 360–830 nm, D65; Lab of the unclipped colour).")
+    oog = [n for n in g["tones"] if np.any(np.array(g["ground_truth"][n]["srgb"]) > 1.0)]
+    neg = [n for n in g["tones"] if any(v < 0 for v in record["gate"]["per_tone"]["k1"][n]["linear_srgb"])]
+    out.append(f"Edge image: ±{10 * EDGE_HALF_WIDTH_CM:.0f} mm at {1e4 * EDGE_STEP_CM:.0f} µm pixels. Ground-truth "
+               f"colours outside the sRGB gamut: {', '.join(oog) if oog else 'none'}; K = 1 renders with a negative "
+               f"linear-sRGB channel: {', '.join(neg) if neg else 'none'}.")
+    lut = run["lut"]
+    out.append(f"LUT: {lut['path']} ({lut['albedo_n']} albedos × {lut['g_n']} g in [{lut['g_range'][0]:.2f}, "
+               f"{lut['g_range'][1]:.2f}]), SHA-256 {lut['sha256'][:16]}…; fits: method {run['fits']['method']}"
+               f"{', iterations ' + str(run['fits']['steps']) if run['fits']['steps'] else ' (default schedule)'}, "
+               f"{run['fits']['seconds']:.0f} s.")
+    held = record["fits_held_at_lut_albedo"]
+    out.append(f"Fits rendered with alpha held in the LUT's albedo range [{held['range'][0]:g}, {held['range'][1]:g}] "
+               "(the LUT holds its edge value beyond it, so the fitter cannot tell the difference): "
+               f"{held['count']} of {held['of']} fitted albedos moved.")
+    m = run["model"]
+    card = m["card"]
+    same = card.get("sha256", {}).get("skin_inversion.onnx") == m["sha256"]["skin_inversion.onnx"]
+    if card.get("missing"):
+        out.append(f"Model: {m['dir']} (no model card found).")
+    else:
+        ds = card.get("dataset", {})
+        out.append(f"Model: {m['dir']}, skin_inversion.onnx SHA-256 {m['sha256']['skin_inversion.onnx'][:16]}… "
+                   f"({'matches' if same else 'does NOT match'} the card); card created {card.get('created')}, "
+                   f"trained on {ds.get('n_train')} tones at {ds.get('photons')} photons (preset "
+                   f"{card.get('preset')}), K = {card.get('K')}. Card note: "
+                   f"{(card.get('notes') or ['—'])[0][:300]}")
+    pf = record["profile_fidelity"]
+    if pf.get("fits"):
+        at = pf["fits"]["attrs"]
+        out.append(f"Table 3 data: {run['fits_dir']} ({pf['fits']['n_tones']} of {pf['fits']['n_tones_in_files']} "
+                   f"tones fitted; method {at.get('method')}; dataset preset {at.get('dataset_preset')}, "
+                   f"{at.get('dataset_photons')} photons).")
+    else:
+        out.append("Table 3: no validation fits given (--dataset DIR --fits FITS).")
+    bl = record["baselines"]
+    cal = bl["calibration"]
+    how = (f"calibrated on {cal['tone']} (the scale with the smallest visible L_shape against its ground truth, "
+           f"searched over {len(cal['scales_m'])} values {cal['scales_m'][0]:g}–{cal['scales_m'][-1]:g} m)"
+           if cal["mode"] == "calibrated" else "given (--baseline-scale)")
+    dark = {mth: float(np.mean(v)) for mth, v in bl["published_darkening"].items()}
+    out.append(f"Baselines: radius = Blender's default Subsurface Radius {tuple(bl['radius_rgb'])} × Subsurface Scale "
+               + ", ".join(f"{mth} {bl['scale_m'][mth]:.3g} m" for mth in METHODS) + f", {how}; Blender's default "
+               f"scale would be {BLENDER_DEFAULT_SCALE_M} m. Wrenninge g = {bl['wrenninge_g']}. Albedo inverted "
+               "exactly for the gate's boundary (n = 1.4 Fresnel); the published polynomials (fitted for index-matched "
+               "boundaries) would render R/A = " + ", ".join(f"{mth} {dark[mth]:.2f}" for mth in METHODS)
+               + " (mean over tones, visible band) under it. RGB → spectrum: Mallett & Yuksel 2019.")
+    exp = list(record["network"]["exposure"].values())
+    out.append(f"Network exposure (Y of the input over Y of its own reflectance): {min(exp):.3f}–{max(exp):.3f} over "
+               "the gate tones (1 = the encoder found the input's brightness).")
+    k1, k1p = rows["k1"]["delta_e"]["representative"], paper.TABLE1_DELTA_E["k1"]
+    rr = record["banded"].get("refl_rel_err", {})
+    if k1 is not None:
+        out.append(f"Gap, K = 1: ours {_f(k1)} vs the paper's {k1p} (its own figure caption says "
+                   f"{paper.FIGURE_K1_DELTA_E}). Our K = 1 is the joint fit (L_shape + 5 L_R, the fitter's relative "
+                   f"reflectance term) with a mean LUT reflectance error of {_f(rr.get('K1'), pct=True)} on the "
+                   "representative tones. A ΔE76 near 50 on skin needs reflectance errors of tens of percent; the "
+                   "paper's K = 1 row may be its shape-only initialisation (§4), which we do not report.")
+    b = record["banded"]
+    if b.get("shape"):
+        out.append("Gap, Table 2 scale: the paper's band shape errors (2.2–15) are not on the scale of its own "
+                   f"whole-set mean ({paper.PROFILE_K1} → {paper.PROFILE_K2}) nor of its training-set fits "
+                   f"({paper.TRAIN_SHAPE_K2}, {paper.TRAIN_SHAPE_K3}); the paper does not define the band metric "
+                   "further. Ours is the fitter's L_shape; compare the K = 1 → 2 reductions, not the values.")
+    out.append("Rendered vs fitted profile: the paper's loss (and our fitter) weights normalised component profiles by "
+               "w_k (Σ w_k P_k), while a renderer that picks medium k with probability w_k produces Σ w_k R_k P_k; "
+               "'shape Vis' in Table 1 and the edge images measure the latter.")
+    t = run["timings_s"]
+    out.append("Run time (s): " + ", ".join(f"{k} {v:.0f}" for k, v in t.items()) + f"; {run['threads']} thread(s).")
+    return out
+
+
+def markdown(record: dict) -> str:
+    run = record["run"]
+    head = ["# Validation tables", "",
+            f"`{run['command']}` — {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}."
+            + (" **Quick mode: not the validation.**" if run["quick"] else ""), ""]
+    body = table1(record) + table1_per_tone(record) + table2(record) + table3(record) + goals_md(record)
+    body += ["## Notes", "", *(f"- {n}" for n in record["notes"]), ""]
+    return "\n".join(head + body)
+
+
+def _jsonable(x):
+    if isinstance(x, dict):
+        return {str(k): _jsonable(v) for k, v in x.items()}
+    if isinstance(x, list | tuple):
+        return [_jsonable(v) for v in x]
+    if isinstance(x, np.generic):
+        return x.item()
+    if isinstance(x, np.ndarray):
+        return _jsonable(x.tolist())
+    if isinstance(x, float) and not np.isfinite(x):
+        return None
+    return x
+
+
+def write_tables(out: Path, record: dict) -> None:
+    """Write ``tables.json`` and ``tables.md`` into ``out``."""
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "tables.json").write_text(json.dumps(_jsonable(record), indent=1) + "\n")
+    (out / "tables.md").write_text(markdown(record))
