@@ -640,11 +640,10 @@ class BakeJob:
                 ids = self.index[y0:y1].ravel()
                 if self.global_values:
                     values, rows = self.values, ids
-                else:
+                else:  # this band's share of the progress: evaluation first, then writing
                     uniq, rows = np.unique(ids, return_inverse=True)
                     values = {}
-                    base = share_eval * y0 / self.height
-                    span = share_eval * (y1 - y0) / self.height
+                    base, span = y0 / self.height, share_eval * (y1 - y0) / self.height
                     yield from self._evaluate(uniq, np.bincount(rows, minlength=len(uniq)), self.specs, values,
                                               lambda f, b=base, s=span: b + s * f)
                 t0 = time.perf_counter()
@@ -660,7 +659,7 @@ class BakeJob:
                 else:
                     list(pool.map(write, items))
                 self.timings["write"] += time.perf_counter() - t0
-                yield share_eval + (1.0 - share_eval) * y1 / self.height
+                yield (share_eval + (1.0 - share_eval) * y1 / self.height) if self.global_values else y1 / self.height
         finally:
             if pool is not None:
                 pool.shutdown()
