@@ -16,8 +16,9 @@ map their codes linearly onto e.
 
 Stored per node (K components; :func:`channel_names`): Cycles colour, log radius (m), weight (K x 3 each),
 anisotropy (K), each component's largest share of the colour (K), unreachable flags (3), clamp counts (3),
-biophysical (5), log luminance of the model's colour (1: the exposure is Y(albedo) / that, so it stays exact
-in the albedo's brightness).  Interpolation is trilinear.
+biophysical (5, as the logit of each parameter's position in its range: the encoder's output before its
+sigmoid, smooth where the parameters saturate), log luminance of the model's colour (1: the exposure is
+Y(albedo) / that, so it stays exact in the albedo's brightness).  Interpolation is trilinear.
 The physical maps are derived from the Cycles ones by Cycles' own forward maps (alpha = f(color, g),
 sigma_t = 4 pi / (radius (1 - g))), which invert exactly what the collapse did.
 
@@ -52,7 +53,7 @@ from exporters.constants import PARAM_NAMES, PARAM_RANGES
 from exporters.maps import sha256_file
 from exporters.texel_records import CollapseOptions
 
-FORMAT = "spectral_skin_sss texel table v1"
+FORMAT = "spectral_skin_sss texel table v2"
 #: The shipped table, beside the model it was made from.
 DEFAULT_PATH = Path(__file__).resolve().parents[1] / "blender_addon" / "models" / "skin_inversion_table.npz"
 #: skin space = COORDS @ sRGB-encoded RGB (module docstring).
@@ -63,6 +64,8 @@ DEFAULT_BOX: tuple[tuple[float, float], ...] = ((0.0, 1.0), (-0.06, 0.40), (-0.0
 #: Grid step in skin space (the same on every axis).  Measured against exact evaluation (exporters.bench):
 #: 0.015 keeps the baked Cycles appearance within mean ΔE76 ~0.05, max ~0.13 on skin textures, in a 2 MB file.
 DEFAULT_STEP: float = 0.015
+#: The biophysical vector is stored as the logit of its position in its range, clipped this far from 0 and 1.
+_LOGIT_EPS = 1e-7
 #: 16-bit code marking a node outside the RGB cube.
 INVALID = 65535
 _Q_MAX = 65534
@@ -83,7 +86,7 @@ def channel_names(k: int) -> tuple[str, ...]:
     names += [f"share_k{i}" for i in range(1, k + 1)]
     names += [f"unreachable_{c}" for c in "rgb"]
     names += ["n_low", "n_high", "n_capped"]
-    names += [f"bio_{p}" for p in PARAM_NAMES]
+    names += [f"logit_{p}" for p in PARAM_NAMES]
     names += ["log_y_model"]
     return tuple(names)
 
@@ -194,7 +197,8 @@ class TexelTable:
 
         lo = np.array([PARAM_RANGES[p][0] for p in PARAM_NAMES])
         hi = np.array([PARAM_RANGES[p][1] for p in PARAM_NAMES])
-        bio = np.clip(values[:, col[f"bio_{PARAM_NAMES[0]}"]:col[f"bio_{PARAM_NAMES[-1]}"] + 1], lo, hi)
+        z = values[:, col[f"logit_{PARAM_NAMES[0]}"]:col[f"logit_{PARAM_NAMES[-1]}"] + 1].astype(np.float64)
+        bio = np.clip(lo + (hi - lo) / (1.0 + np.exp(-z)), lo, hi)
         y_model = np.exp(values[:, col["log_y_model"]].astype(np.float64))
         rec = {"biophysical": bio.astype(np.float64),
                "exposure": texel_records.albedo_luminance(rgb) / np.maximum(y_model, 1e-6)}
@@ -303,8 +307,17 @@ def _node_channels(rec: dict[str, np.ndarray], k: int) -> np.ndarray:
     counts = np.stack([rec["n_low"], rec["n_high"], rec["n_capped"]], axis=1)
     parts = [rec["color"].reshape(n, 3 * k), np.log(rec["radius_m"]).reshape(n, 3 * k), rec["weight"].reshape(n, 3 * k),
              rec["anisotropy"], rec["max_share"], rec["unreachable"], counts,
-             rec["biophysical"], np.log(np.maximum(rec["y_model"], 1e-30))[:, None]]
+             bio_logit(rec["biophysical"]), np.log(np.maximum(rec["y_model"], 1e-30))[:, None]]
     return np.concatenate([np.asarray(p, np.float64) for p in parts], axis=1)
+
+
+def bio_logit(p: np.ndarray) -> np.ndarray:
+    """Logit of the biophysical vector (N, 5) over its ranges: the encoder's output before its sigmoid, which
+    interpolates far better near saturation (measured: so2 error 0.8 % -> 0.06 % of its range at step 0.015)."""
+    lo = np.array([PARAM_RANGES[q][0] for q in PARAM_NAMES])
+    hi = np.array([PARAM_RANGES[q][1] for q in PARAM_NAMES])
+    u = np.clip((np.asarray(p, np.float64) - lo) / (hi - lo), _LOGIT_EPS, 1.0 - _LOGIT_EPS)
+    return np.log(u) - np.log1p(-u)
 
 
 def save(table: TexelTable, path: str | os.PathLike, overwrite: bool = False) -> Path:
