@@ -19,6 +19,8 @@ trilinear lookups in torch):
   area.  Between centres the interpolant is linear in ``log r``; below the first centre it holds the
   first bin's value; between the last centre and the last edge it holds the last value; beyond the last
   edge it is 0 (nothing is tabulated there).
+* sigma_t is clamped to ``SIGMA_T_RANGE`` (1e-100..1e100 cm^-1; 1e-18..1e18 for float32 tables), where
+  sigma_t^2 is still finite.
 * Extinction enters by the separability of a homogeneous medium (Chiang et al. 2016; paper eq.
   separability): P(r | alpha, g, sigma_t) = sigma_t^2 P(sigma_t r | alpha, g, 1), r in cm, sigma_t in
   cm^-1, result in cm^-2.
@@ -44,6 +46,18 @@ from pathlib import Path
 import numpy as np
 import torch
 
+#: sigma_t is clamped to this range (cm^-1) in the profile lookups: beyond it sigma_t^2 over- or underflows
+#: float64 (inf * 0 = NaN).  At 1e100 cm^-1 the whole profile lies inside 1e-96 cm of the origin.  Tables
+#: in float32 use 1e-18..1e18 (``_clamp_sigma``).
+SIGMA_T_RANGE: tuple[float, float] = (1e-100, 1e100)
+
+
+def _clamp_sigma(sigma_t: torch.Tensor) -> torch.Tensor:
+    """sigma_t within SIGMA_T_RANGE, narrowed to where sigma_t^2 is finite and normal in its dtype."""
+    fi = torch.finfo(sigma_t.dtype)
+    lo = max(SIGMA_T_RANGE[0], 10.0 ** math.ceil(math.log10(math.sqrt(fi.tiny)) + 1))
+    hi = min(SIGMA_T_RANGE[1], 10.0 ** math.floor(math.log10(math.sqrt(fi.max)) - 1))
+    return sigma_t.clamp(lo, hi)
 #: Keys of the LUT .npz file (SPEC §2).
 LUT_KEYS: tuple[str, ...] = ("albedo", "g", "r_edges_mfp", "R", "P")
 
@@ -204,7 +218,7 @@ class LookupTables:
         r_cm = self._as_tensors(r_cm)[0]
         lead = torch.broadcast_shapes(alpha.shape, g.shape, sigma_t.shape, r_cm.shape[:-1])
         rows = self.profile_rows(alpha.expand(lead), g.expand(lead))  # lead + (NR,)
-        sig = sigma_t.expand(lead)
+        sig = _clamp_sigma(sigma_t.expand(lead))
         # log radius in mfp; r = 0 maps to a huge negative number (holds the first bin).
         log_r = torch.log(r_cm.clamp_min(1e-300)).expand(*lead, r_cm.shape[-1])
         x = log_r + torch.log(sig)[..., None]
@@ -275,6 +289,7 @@ class LookupTables:
         rows = lo + (hi - lo) * ta_
         rows_a = (hi - lo) * (ha * qa)[..., None]
         rows_g = ((p01 - p00) * (1 - ta_) + (p11 - p10) * ta_) * (hg * qg)[..., None]
+        sigma_t = _clamp_sigma(sigma_t)
         log_s = torch.log(sigma_t)
         x = torch.log(r_cm.clamp_min(1e-300)) + log_s[..., None]
         ir, tr, qr, hr = self._radial_weights(x)
