@@ -9,6 +9,7 @@ import pytest
 import torch
 
 from training.model import ModelConfig
+from training.model.chain import SkinModel
 from training.train.cli import SIZES
 from training.train.cli import main as train_main
 from training.train.data import load_split
@@ -122,3 +123,21 @@ def test_cli_refuses_inconsistent_runs(toy, tmp_path, capsys):
     assert "another train" in capsys.readouterr().err
     rec = json.loads((tmp_path / "r" / "run.json").read_text())
     assert rec["commands"][0].startswith("python -m training train --dataset")
+
+
+def test_exposure_prior_adds_the_mean_log_exposure():
+    """colour_loss with a prior = the paper's colour L1 + prior * mean |ln gamma|, gamma = Y(A) / Y(A_hat)
+    recomputed here from the luminance row of the sRGB matrix (Rec. 709: 0.2126, 0.7152, 0.0722)."""
+    from training.train import losses as TL
+
+    torch.manual_seed(0)
+    model = SkinModel(ModelConfig(**SIZES["tiny"]))
+    albedo = torch.tensor([[0.6, 0.4, 0.3], [0.05, 0.03, 0.02], [0.2, 0.2, 0.25]])
+    with torch.no_grad():
+        rgb = model.colour.rgb(model.dec_r(model.enc(albedo)))
+        y = torch.tensor([0.2126, 0.7152, 0.0722])
+        gamma = (albedo @ y) / (rgb @ y)
+        plain = TL.colour_loss(model, albedo)
+        torch.testing.assert_close(plain, (albedo - gamma[:, None] * rgb).abs().mean(), rtol=1e-4, atol=1e-7)
+        with_prior = TL.colour_loss(model, albedo, exposure_prior=0.01)
+        torch.testing.assert_close(with_prior - plain, 0.01 * gamma.log().abs().mean(), rtol=1e-3, atol=1e-7)

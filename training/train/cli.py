@@ -52,7 +52,10 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("--batch", type=lambda s: _triple(s, int), default=d.batch, help="B or B1,B2,B3")
     p.add_argument("--lr", type=lambda s: _triple(s, float), default=d.lr, help="L or L1,L2,L3")
     p.add_argument("--synthetic", type=int, default=d.synthetic, help="stage 2: albedos rendered by Dec_R")
-    p.add_argument("--exposure-jitter", type=float, default=d.exposure_jitter)
+    p.add_argument("--exposure-jitter", type=float, default=d.exposure_jitter,
+                   help="stage 2: synthetic albedos scaled by exp(U(-j, j))")
+    p.add_argument("--exposure-prior", type=float, default=d.exposure_prior,
+                   help="stage 2: weight of mean |ln exposure| in the colour loss (0: the paper's loss)")
     p.add_argument("--k", type=int, default=3, help="mixture components (fits group K{k})")
     p.add_argument("--size", choices=sorted(SIZES), default="paper")
     p.add_argument("--seed", type=int, default=0)
@@ -73,7 +76,8 @@ def main(argv: list[str]) -> int:
     want = (1, 2, 3) if args.stage == "all" else (int(args.stage),)
     mcfg = ModelConfig(k=args.k, **SIZES[args.size])
     tcfg = TrainConfig(seed=args.seed, epochs=args.epochs, batch=args.batch, lr=args.lr,
-                       synthetic=args.synthetic, exposure_jitter=args.exposure_jitter)
+                       synthetic=args.synthetic, exposure_jitter=args.exposure_jitter,
+                       exposure_prior=args.exposure_prior)
     command = "python -m training train " + shlex.join(argv)
     try:
         if 3 in want and args.fits is None:

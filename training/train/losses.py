@@ -4,7 +4,8 @@ Shapes: N tones, W wavelengths, K components; ``u`` tensors are Dec_T's normalis
 (N, 4, K, W) with channels (alpha, g, sigma_t, weight), see ``training.model.networks``.
 
 * Stage 1: spectral L1, mean |R_hat - R_d| over tones and all 376 wavelengths.
-* Stage 2: colour L1, mean |A_RGB - gamma * CMF(Dec_R(Enc(A_RGB)))| with the analytic exposure gamma.
+* Stage 2: colour L1, mean |A_RGB - gamma * CMF(Dec_R(Enc(A_RGB)))| with the analytic exposure gamma,
+  plus an optional prior on |ln gamma| (``colour_loss``; 0 is the paper's loss).
 * Stage 3: L = L_param + LAMBDA_R L_refl + LAMBDA_SMOOTH L_smooth (paper eq. total_loss):
   - L_param = (1/|C|) sum_c phi_c Huber(u_c, u*_c), each channel averaged over its elements (at the
     fitted wavelengths: ``fit --wavelength-stride`` may fit every n-th only), phi_alpha
@@ -34,12 +35,18 @@ def spectral_l1(pred: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
     return (pred - target).abs().mean()
 
 
-def colour_loss(model: SkinModel, albedo_rgb: torch.Tensor) -> torch.Tensor:
-    """|A - gamma * rgb(Dec_R(Enc(A)))|_1 (mean), for albedos already in the model's domain."""
+def colour_loss(model: SkinModel, albedo_rgb: torch.Tensor, exposure_prior: float = 0.0) -> torch.Tensor:
+    """|A - gamma * rgb(Dec_R(Enc(A)))|_1 (mean) + exposure_prior * mean |ln gamma|, for albedos already in
+    the model's domain.  The prior (0 = the paper) prefers, among tones of the input's chromaticity, the
+    one of its brightness: without it the encoder is free to answer a light colour with a dark tone at
+    exposure 50 (measured on the laptop model), which fits the colour and nothing else."""
     refl = model.dec_r(model.enc(albedo_rgb))
     rgb = model.colour.rgb(refl)
     gamma = model.colour.exposure(albedo_rgb, rgb)
-    return (albedo_rgb - gamma * rgb).abs().mean()
+    loss = (albedo_rgb - gamma * rgb).abs().mean()
+    if exposure_prior > 0:
+        loss = loss + exposure_prior * torch.log(gamma.clamp_min(1e-6)).abs().mean()
+    return loss
 
 
 def param_loss(u: torch.Tensor, u_target: torch.Tensor) -> torch.Tensor:

@@ -42,6 +42,7 @@ class TrainConfig:
     lr: list[float] = field(default_factory=lambda: [1e-3, 1e-3, 3e-4])
     synthetic: int = 20_000
     exposure_jitter: float = 0.25
+    exposure_prior: float = 0.0
 
 
 
@@ -141,5 +142,5 @@ def _spec(stage: int, model: SkinModel, lut: LookupTables, train_data: SplitData
         return stages.stage1(model, train_data, val_data, t.epochs[i], t.batch[i], t.lr[i])
     if stage == 2:
         return stages.stage2(model, train_data, val_data, t.epochs[i], t.batch[i], t.lr[i], t.synthetic,
-                             t.exposure_jitter, t.seed)
+                             t.exposure_jitter, t.seed, t.exposure_prior)
     return stages.stage3(model, lut, train_data, val_data, t.epochs[i], t.batch[i], t.lr[i])

@@ -45,14 +45,14 @@ def synthetic_albedos(model: SkinModel, n: int, exposure_jitter: float, seed: in
 
 
 def stage2(model: SkinModel, train: SplitData, val: SplitData, epochs: int, batch: int, lr: float,
-           synthetic: int, exposure_jitter: float, seed: int) -> StageSpec:
+           synthetic: int, exposure_jitter: float, seed: int, exposure_prior: float = 0.0) -> StageSpec:
     albedo = train.albedo_rgb.clamp(0.0, 1.0)
     if synthetic > 0:
         albedo = torch.cat([albedo, synthetic_albedos(model, synthetic, exposure_jitter, seed)])
     val_albedo = val.albedo_rgb.clamp(0.0, 1.0)
 
     def step(idx: torch.Tensor) -> dict[str, torch.Tensor]:
-        return {"loss": L.colour_loss(model, albedo[idx])}
+        return {"loss": L.colour_loss(model, albedo[idx], exposure_prior)}
 
     def evaluate() -> dict[str, float]:
         return {"colour_l1": float(L.colour_loss(model, val_albedo))}
