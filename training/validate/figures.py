@@ -13,6 +13,7 @@
 
 from __future__ import annotations
 
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -36,9 +37,9 @@ def _display(linear_rgb: np.ndarray) -> np.ndarray:
 
 
 def k_progression(path: Path, tone_names: list[str], row_labels: list[str], edge_rgb: np.ndarray,
-                  delta_e: np.ndarray, exposure: float = 2.0) -> None:
-    """``edge_rgb`` (rows, tones, P, 3) linear sRGB, row 0 the ground truth; ``delta_e`` (rows, tones)
-    (row 0 ignored).  Images are shown at ``exposure`` x (skin reflects 0.003-0.5)."""
+                  delta_e: np.ndarray, edge_delta_e: np.ndarray, exposure: float = 2.0) -> None:
+    """``edge_rgb`` (rows, tones, P, 3) linear sRGB, row 0 the ground truth; ``delta_e`` and ``edge_delta_e``
+    (rows, tones) (row 0 ignored).  Images are shown at ``exposure`` x (skin reflects 0.003-0.5)."""
     plt = _plt()
     n_rows, n_tones, n_px, _ = edge_rgb.shape
     height = max(8, n_px // 3)
@@ -51,15 +52,17 @@ def k_progression(path: Path, tone_names: list[str], row_labels: list[str], edge
             ax.set_xticks([])
             ax.set_yticks([])
             if r > 0:
-                ax.text(0.5, 0.06, f"{delta_e[r, t]:.1f}", transform=ax.transAxes, ha="center", va="bottom",
-                        fontsize=6, color="white", bbox=dict(facecolor="black", alpha=0.5, pad=0.5, lw=0))
+                ax.text(0.5, 0.06, f"{delta_e[r, t]:.1f} | {edge_delta_e[r, t]:.1f}", transform=ax.transAxes,
+                        ha="center", va="bottom", fontsize=6, color="white",
+                        bbox=dict(facecolor="black", alpha=0.5, pad=0.5, lw=0))
             if r == 0:
                 ax.set_title(tone_names[t], fontsize=7)
             if t == 0:
                 ax.set_ylabel(row_labels[r], fontsize=6, rotation=0, ha="right", va="center")
     fig.suptitle(f"Edge images (slab lit left of the middle, +-2 mm, D65, exposure x{exposure:g});\n"
-                 "numbers: Delta E76 of the slab colour vs the Monte Carlo ground truth", fontsize=7)
-    fig.tight_layout(pad=0.3, rect=(0.02, 0, 1, 1))
+                 "numbers: Delta E76 vs the Monte Carlo ground truth of the slab colour | of the edge image",
+                 fontsize=7)
+    fig.tight_layout(pad=0.3, rect=(0.02, 0, 1, 0.95))
     fig.savefig(path, dpi=130)
     plt.close(fig)
 
@@ -129,17 +132,17 @@ def cross_sections(path: Path, tone_names: list[str], wavelength_nm: np.ndarray,
                 ax.set_ylabel(tone_names[t], fontsize=7)
     fig.suptitle(f"Ground-truth exitance around a point of entry (+-2 mm, log10 of the peak-normalised value, "
                  f"{decades:g} decades)", fontsize=7)
-    fig.tight_layout(pad=0.3)
+    fig.tight_layout(pad=0.3, rect=(0, 0, 1, 0.97))
     fig.savefig(path, dpi=130)
     plt.close(fig)
 
 
 def reflectance_and_profiles(path: Path, wavelength_nm: np.ndarray, tone_names: list[str], R_d: np.ndarray,
-                             srgb: np.ndarray, heat_tones: list[int], profiles: np.ndarray, stderr: np.ndarray,
-                             fit_profiles: dict[str, np.ndarray], max_rel_stderr: float = 0.3) -> None:
+                             srgb: np.ndarray, heat_tones: list[int], profiles: np.ndarray, used: np.ndarray,
+                             fit_profiles: dict[str, np.ndarray]) -> None:
     """Left: R_d (tones, W) in each tone's colour ``srgb`` (tones, 3).  Right: for the tones ``heat_tones``,
-    log10 profile (W, 512) and log10(fit / MC) of each entry of ``fit_profiles`` (label -> (tones, W, 512));
-    bins whose MC relative standard error (``stderr`` like ``profiles``) exceeds ``max_rel_stderr`` are blank."""
+    log10 r^2 profile (W, 512) and log10(fit / MC) of each entry of ``fit_profiles`` (label -> (tones, W, 512)),
+    shown on the bins the fitter's loss uses (``used``, boolean like ``profiles``), blank elsewhere."""
     plt = _plt()
     n_h = len(heat_tones)
     n_c = 1 + len(fit_profiles)
@@ -156,12 +159,15 @@ def reflectance_and_profiles(path: Path, wavelength_nm: np.ndarray, tone_names: 
     centres[0] = R_EDGES_CM[1] / 2
     extent = [np.log10(centres[0]), np.log10(centres[-1]), wavelength_nm[-1], wavelength_nm[0]]
     for i, t in enumerate(heat_tones):
-        ok = (profiles[t] > 0) & (stderr[t] <= max_rel_stderr * profiles[t])
-        prof = np.where(ok, profiles[t], np.nan)
-        lp = np.log10(prof)
+        prof = np.where(used[t] & (profiles[t] > 0), profiles[t], np.nan)
+        # light per unit log radius, r^2 R_d(r), normalised per wavelength: where each wavelength's light exits
+        per_log_r = prof * centres**2
+        with warnings.catch_warnings(), np.errstate(invalid="ignore"):
+            warnings.simplefilter("ignore", RuntimeWarning)  # wavelengths with no resolved bin stay blank
+            lp = np.log10(per_log_r / np.nanmax(per_log_r, axis=1, keepdims=True))
         a = fig.add_subplot(grid[i, 1])
-        a.imshow(lp, aspect="auto", extent=extent, cmap="magma", vmin=np.nanmax(lp) - 6, vmax=np.nanmax(lp))
-        a.set_title(f"{tone_names[t]}: log10 R_d(r) MC", fontsize=7)
+        a.imshow(lp, aspect="auto", extent=extent, cmap="magma", vmin=-4, vmax=0)
+        a.set_title(f"{tone_names[t]}: log10 r² R_d(r) (MC, per-λ max)", fontsize=7)
         for j, (label, fp) in enumerate(fit_profiles.items()):
             with np.errstate(divide="ignore", invalid="ignore"):
                 ratio = np.log10(fp[t] / prof)

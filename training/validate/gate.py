@@ -16,7 +16,7 @@ For each gate tone (``training/skin/tones.csv``: 10 representative + 10 outliers
 5. **Render** every configuration with our mixture renderer (``training.validate.mixture``; each
    component walked with all photons, combined with w_k(lambda), exact by linearity) at the validation
    wavelengths inside 360-830 nm, with radial tallies; one batched walk per tone, cached in
-   ``cache/render_<tone>.npz`` with the parameters it rendered (a changed model re-renders).
+   ``cache/render_<tone>.npz`` with the parameters it rendered (a changed model re-renders its rows).
 
 Everything is deterministic for a fixed configuration and seed.
 """
@@ -315,21 +315,24 @@ RENDER_KEYS = ("R_d", "R_d_stderr", "profile", "profile_stderr", "seconds", "tru
 
 def render_tone(cache: Cache, name: str, rows: dict[str, Params], photons: int, seed: int,
                 max_steps: int = 100_000) -> dict[str, dict]:
-    """``render_rows`` for one tone, cached in ``render_<name>.npz`` together with the parameters rendered;
-    a cached render of other parameters (a new model, new fits) is rendered again."""
+    """``render_rows`` for one tone, cached in ``render_<name>.npz`` together with the parameters rendered.
+    Rows whose parameters changed since (a new model, new fits) are rendered again, in one walk; the
+    others are kept (so after a model change their Monte Carlo noise is that of the first run)."""
     path = cache.path(f"render_{name}.npz")
-    old = Cache.load(path)
+    old = Cache.load(path) or {}
+
     def same(n: str) -> bool:
         return (f"{n}_params" in old and f"{n}_truncated" in old and old[f"{n}_params"].shape == rows[n].stacked().shape
                 and np.allclose(old[f"{n}_params"], rows[n].stacked(), rtol=1e-6, atol=0))
 
-    if old is not None and all(same(n) for n in rows):
-        return {n: {key: old[f"{n}_{key}"] for key in RENDER_KEYS} for n in rows}
-    out = render_rows(rows, photons, seed, max_steps)
-    flat = {f"{n}_{key}": v for n, rec in out.items() for key, v in rec.items()}
-    flat |= {f"{n}_params": rows[n].stacked() for n in rows}
-    Cache.save(path, **flat)
-    return out
+    out = {n: {key: old[f"{n}_{key}"] for key in RENDER_KEYS} for n in rows if same(n)}
+    todo = {n: p for n, p in rows.items() if n not in out}
+    if todo:
+        out |= render_rows(todo, photons, seed, max_steps)
+        flat = {f"{n}_{key}": v for n, rec in out.items() for key, v in rec.items()}
+        flat |= {f"{n}_params": rows[n].stacked() for n in rows}
+        Cache.save(path, **flat)
+    return {n: out[n] for n in rows}
 
 
 def params_digest(rows: dict[str, Params]) -> str:

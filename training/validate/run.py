@@ -37,6 +37,8 @@ QUICK = dict(wavelength_step=10, gt_photons=400, photons=150, fit_steps=QUICK_ST
 QUICK_LUT = dict(albedo_n=24, g_n=5, photons=400, max_steps=20_000)
 #: Wavelengths of the cross-section figure (nm; the nearest validation wavelength is shown).
 CROSS_SECTION_NM = (250, 350, 450, 550, 650, 750, 850, 1000)
+#: Per-tone metrics of Table 1 (summarised as means over the representative, outlier and all tones).
+METRICS = ("delta_e", "noise_floor", "delta_e_edge", "sam_vis", "shape_vis_lut", "shape_vis_lut_fit_weighting")
 #: Tones of the profile heat maps (those present are used).
 HEAT_TONES = ("R01", "R05", "R09", "R10")
 OUTPUTS = ("tables.md", "tables.json", "fig_k_progression.png", "fig_spectral_parameters.png",
@@ -113,8 +115,9 @@ def run(opts: Options) -> dict:
     except (OSError, EOFError, KeyError, zipfile.BadZipFile) as exc:
         raise ValueError(f"cannot read the LUT {opts.lut}: {exc or type(exc).__name__}") from None
     timings = {"lut_load": time.perf_counter() - t0}
-    manifest = {"config": G.config_record(cfg), "lut_sha256": lut_sha,
-                "model_sha256": {n: sha256_file(p) for n, p in files.items() if n != "card"}}
+    # the model is not in the manifest: a new model re-renders only its own rows (gate.render_tone)
+    models = {"sha256": {n: sha256_file(p) for n, p in files.items() if n != "card"}, "card": _card_info(files["card"])}
+    manifest = {"config": G.config_record(cfg), "lut_sha256": lut_sha}
     cache = G.Cache(opts.out / "cache", manifest)
     cache.open(reset=opts.overwrite)
     tones = G.gate_tones(cfg.tones)
@@ -152,7 +155,7 @@ def run(opts: Options) -> dict:
 
     t0 = time.perf_counter()
     record = _gate_tables(lut, tones, gt, wl_val, wl_r, col_r, rows_per_tone, renders, fits, cfg, albedo)
-    record["banded"] = _banded(tones, fits, wl_val, record)
+    record["banded"] = _banded(lut, tones, gt, fits, wl_val, record, cfg.gt_photons)
     record["profile_fidelity"] = _profile_fidelity(opts, lut, files, record)
     record["goals"] = _goals(record)
     timings["metrics"] = time.perf_counter() - t0
@@ -173,7 +176,9 @@ def run(opts: Options) -> dict:
     _figures(opts, lut, tones, gt, wl_val, wl_r, col_r, rows_per_tone, renders, fits, nn_full, record)
     timings["figures"] = time.perf_counter() - t0
     timings["total"] = time.perf_counter() - t_start
-    record["run"] = _run_record(opts, cfg, files, lut, lut_sha, gt, fits, timings, manifest)
+    if {n: sha256_file(p) for n, p in files.items() if n != "card"} != models["sha256"]:
+        raise ValueError(f"the model in {opts.model_dir} changed during the run: run the command again.")
+    record["run"] = _run_record(opts, cfg, lut, lut_sha, gt, fits, timings, models, renders)
     from training.validate.tables import notes, write_tables
 
     record["notes"] = notes(record)
@@ -269,18 +274,24 @@ def _gate_tables(lut, tones, gt, wl_val, wl_r, col_r, rows_per_tone, renders, fi
                 "delta_e_edge": M.edge_delta_e(rend["profile"].astype(np.float64), rend["R_d"], g_prof, g_r, wl),
                 "sam_vis": M.spectral_angle(rend["R_d"], g_r, vis),
                 "shape_vis_lut": float(np.mean(G.lut_mixture_shape_error(lut, rows_per_tone[i][r], target, vis_rows))),
+                "shape_vis_lut_fit_weighting": float(np.mean(G.lut_mixture_shape_error(
+                    lut, rows_per_tone[i][r], target, vis_rows, "fit"))),
                 "linear_srgb": M.linear_srgb(rend["R_d"], wl).tolist(),
                 "truncated_max": float(np.max(rend["truncated"])),
             }
             per_row[r][name] = rec
         nn_vs_k3[name] = float(M.delta_e(renders[i]["nn"]["R_d"], renders[i]["k3"]["R_d"], wl))
+        # the network's render times its exposure (what --match-exposure bakes): its colour without the
+        # brightness that the exposure absorbs
+        exposure = rows_per_tone[i]["nn"].extra["exposure"]
+        per_row["nn"][name]["delta_e_times_exposure"] = float(M.delta_e(exposure * renders[i]["nn"]["R_d"], g_r, wl))
     kinds = {"representative": [n for n, k in zip(tones.names, tones.kinds, strict=True) if k == "representative"],
              "outlier": [n for n, k in zip(tones.names, tones.kinds, strict=True) if k == "outlier"],
              "all": list(tones.names)}
     summary = {}
     for r in G.ROWS:
         summary[r] = {"label": G.ROW_LABELS[r]}
-        for metric in ("delta_e", "noise_floor", "delta_e_edge", "sam_vis", "shape_vis_lut"):
+        for metric in METRICS:
             summary[r][metric] = {kind: _mean(per_row[r][n][metric] for n in names) if names else None
                                   for kind, names in kinds.items()}
     k1 = summary["k1"]["delta_e"]["representative"]
@@ -296,28 +307,30 @@ def _gate_tables(lut, tones, gt, wl_val, wl_r, col_r, rows_per_tone, renders, fi
                      "ground_truth": gt_rec}}
 
 
-def _banded(tones, fits, wl_val, record) -> dict:
-    """Table 2: per band the fits' mean L_shape (representative tones) for K = 1, 2, 3 and the reductions;
-    the rendered visible SAM of every configuration (representative tones)."""
+def _banded(lut, tones, gt, fits, wl_val, record, photons) -> dict:
+    """Table 2: per band the fits' mean L_shape (representative tones) for K = 1, 2, 3 and the reductions,
+    also of the excess over the ground truth's Monte Carlo noise (``training.fit.loss``: Target.noise,
+    shape_excess); the rendered visible SAM of every configuration (representative tones)."""
+    from training.fit import loss as L
+
     rep = [n for n, k in zip(tones.names, tones.kinds, strict=True) if k == "representative"]
-    out: dict = {"tones": rep, "shape": {}, "reduction": {}}
+    out: dict = {"tones": rep, "shape": {}, "reduction": {}, "excess": {}, "excess_reduction": {}}
     if not rep:
         return out
     wl = WAVELENGTHS_NM[wl_val]
-    for band in M.BANDS:
-        mask = M.band_mask(wl, band)
-        vals = {}
-        for k in (1, 2, 3):
-            data = np.stack([fits[n][f"k{k}_shape_rmse"] for n in rep])  # (T, W) on wl_val
-            vals[f"K{k}"] = float(np.mean(data[:, mask])) if mask.any() else None
-        out["shape"][band] = vals
-        ok = all(vals[k] for k in ("K1", "K2", "K3"))
-        out["reduction"][band] = {"K1_to_K2": M.relative_reduction(vals["K1"], vals["K2"]) if ok else None,
-                                  "K2_to_K3": M.relative_reduction(vals["K2"], vals["K3"]) if ok else None}
-    all_w = {f"K{k}": float(np.mean(np.stack([fits[n][f"k{k}_shape_rmse"] for n in rep]))) for k in (1, 2, 3)}
-    out["shape"]["all"] = all_w
-    out["reduction"]["all"] = {"K1_to_K2": M.relative_reduction(all_w["K1"], all_w["K2"]),
-                               "K2_to_K3": M.relative_reduction(all_w["K2"], all_w["K3"])}
+    all_cols = np.arange(wl_val.size)
+    noise = np.stack([_target(lut, gt, tones.names.index(n), all_cols, photons).noise.numpy() for n in rep])
+    shape = {k: np.stack([fits[n][f"k{k}_shape_rmse"] for n in rep]) for k in (1, 2, 3)}  # (T, W) on wl_val
+    excess = {k: L.shape_excess(torch.as_tensor(v), torch.as_tensor(noise)).numpy() for k, v in shape.items()}
+    out["noise"] = {}
+    for band in (*M.BANDS, "all"):
+        mask = M.band_mask(wl, band) if band != "all" else np.ones(wl.size, bool)
+        out["noise"][band] = float(np.mean(noise[:, mask])) if mask.any() else None
+        for key, data, red in (("shape", shape, "reduction"), ("excess", excess, "excess_reduction")):
+            vals = {f"K{k}": float(np.mean(data[k][:, mask])) if mask.any() else None for k in (1, 2, 3)}
+            out[key][band] = vals
+            out[red][band] = {a + "_to_" + b: (M.relative_reduction(vals[a], vals[b]) if vals[a] and vals[b]
+                                               is not None else None) for a, b in (("K1", "K2"), ("K2", "K3"))}
     rows = record["gate"]["rows"]
     out["sam_vis"] = {r: rows[r]["sam_vis"]["representative"] for r in G.ROWS}
     sam = [out["sam_vis"][f"k{k}"] for k in (1, 2, 3)]
@@ -356,7 +369,17 @@ def _goals(record) -> dict:
             "gate representative tones, all validation wavelengths (Table 3 not available)"
     met = None if red is None else bool(red >= paper.PROFILE_REDUCTION)
     goals["k2_profile_reduction_at_least_paper"] = {"ours": red, "paper": paper.PROFILE_REDUCTION, "source": source,
-                                                    "met": met}
+                                                    "met": met, "excess_over_noise": None}
+    summ = (prof or {}).get("fitter_summary")
+    if not prof and record["banded"].get("excess_reduction"):
+        b = record["banded"]
+        goals["k2_profile_reduction_at_least_paper"]["excess_over_noise"] = {
+            "reduction": b["excess_reduction"]["all"]["K1_to_K2"], "noise": b["noise"]["all"]}
+    elif summ:  # the same reduction on the excess over the bins' Monte Carlo noise (training.fit.dataset.summarise)
+        ks = {int(k): v for k, v in summ["K"].items()}
+        if 1 in ks and 2 in ks and ks[1]["shape_excess"] > 0:
+            goals["k2_profile_reduction_at_least_paper"]["excess_over_noise"] = {
+                "reduction": 1.0 - ks[2]["shape_excess"] / ks[1]["shape_excess"], "noise": summ["noise"]}
     return goals
 
 
@@ -374,14 +397,15 @@ def _figures(opts, lut, tones, gt, wl_val, wl_r, col_r, rows_per_tone, renders, 
             cells.append(M.linear_srgb(M.edge_exitance(rend["profile"].astype(np.float64), rend["R_d"], x), wl))
         edge.append(np.stack(cells))  # (rows, P, 3)
     edge_rgb = np.stack(edge, axis=1)  # (rows, tones, P, 3)
-    de = np.zeros(edge_rgb.shape[:2])
+    de, de_edge = np.zeros(edge_rgb.shape[:2]), np.zeros(edge_rgb.shape[:2])
     per_tone = record["gate"]["per_tone"]
     for j, i in enumerate(rep):
         for r_i, r in enumerate(G.ROWS):
             de[r_i + 1, j] = per_tone[r][tones.names[i]]["delta_e"]
+            de_edge[r_i + 1, j] = per_tone[r][tones.names[i]]["delta_e_edge"]
     names = [tones.names[i] for i in rep]
     figures.k_progression(opts.out / "fig_k_progression.png", names, ["MC ground truth"] +
-                          [G.ROW_LABELS[r].replace(" (", "\n(") for r in G.ROWS], edge_rgb, de)
+                          [G.ROW_LABELS[r].replace(" (", "\n(") for r in G.ROWS], edge_rgb, de, de_edge)
     figures.spectral_parameters(opts.out / "fig_spectral_parameters.png", WAVELENGTHS_NM, nn_full["alpha"],
                                 nn_full["sigma_t"], nn_full["weight"],
                                 f"skin_inversion.onnx on the {len(tones.names)} gate tones' albedos: median and IQR")
@@ -397,12 +421,15 @@ def _figures(opts, lut, tones, gt, wl_val, wl_r, col_r, rows_per_tone, renders, 
             arr[i] = _lut_profile(lut, G.fit_params(fits[tones.names[i]], k, wl_val))
         fit_prof[f"K={k}"] = arr
     srgb = np.array([record["gate"]["ground_truth"][n]["srgb"] for n in names])
+    used = np.zeros((len(rep), wl_val.size, R_EDGES_CM.size - 1), bool)  # the bins the fitter's loss uses
+    for j, i in enumerate(rep):
+        if i in heat:
+            used[j] = _target(lut, gt, i, np.arange(wl_val.size), opts.config.gt_photons).mask.numpy() > 0
     from exporters.colorimetry import srgb_encode
 
     figures.reflectance_and_profiles(opts.out / "fig_reflectance_profiles.png", WAVELENGTHS_NM[wl_val], names,
                                      gt["R_d"][rep], srgb_encode(srgb), [rep.index(i) for i in heat],
-                                     gt["profile"][rep].astype(np.float64),
-                                     gt["profile_stderr"][rep].astype(np.float64),
+                                     gt["profile"][rep].astype(np.float64), used,
                                      {k: v[rep] for k, v in fit_prof.items()})
 
 
@@ -430,7 +457,7 @@ def _card_info(card: Path) -> dict:
             "sha256": {n: v.get("sha256") for n, v in c.get("files", {}).items()}}
 
 
-def _run_record(opts, cfg, files, lut, lut_sha, gt, fits, timings, manifest) -> dict:
+def _run_record(opts, cfg, lut, lut_sha, gt, fits, timings, models, renders) -> dict:
     rep_fit_seconds = float(sum(float(f["seconds"]) for f in fits.values()))
     return {
         "command": opts.command, "quick": opts.quick, "config": G.config_record(cfg),
@@ -441,10 +468,14 @@ def _run_record(opts, cfg, files, lut, lut_sha, gt, fits, timings, manifest) -> 
                         "n_rendered": int(G.render_indices(cfg.wavelength_step).size)},
         "lut": {"path": str(opts.lut), "sha256": lut_sha, "albedo_n": int(lut.albedo.numel()),
                 "g_n": int(lut.g.numel()), "g_range": list(lut.g_range)},
-        "model": {"dir": str(opts.model_dir), "sha256": manifest["model_sha256"], "card": _card_info(files["card"])},
+        "model": {"dir": str(opts.model_dir), "sha256": models["sha256"], "card": models["card"]},
         "ground_truth": {"estimator": "reweighted (training.data.reweight)", "photons": int(gt["photons"]),
                          "walk_seconds": float(gt["walk_seconds"])},
-        "fits": {"method": cfg.fit_method, "steps": cfg.steps(), "seconds": rep_fit_seconds},
+        "fits": {"method": cfg.fit_method, "steps": cfg.steps(), "anchor_every": cfg.anchor_every,
+                 "seconds": rep_fit_seconds},
+        "compute_seconds": {"ground_truth": float(gt["seconds"]), "fits": rep_fit_seconds,
+                            # rows rendered in one walk share its seconds: count each walk once
+                            "renders": float(sum(sum({float(r["seconds"]) for r in t.values()}) for t in renders))},
         "timings_s": {k: round(v, 2) for k, v in timings.items()},
         "threads": opts.threads, "machine": {"python": platform.python_version(), "torch": torch.__version__,
                                              "cpu": platform.processor() or platform.machine()},

@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from training.validate import gate as G
+from training.validate import metrics as M
 from training.validate import paper
 from training.validate.baselines import BLENDER_DEFAULT_SCALE_M, METHODS
 from training.validate.metrics import BANDS, EDGE_HALF_WIDTH_CM, EDGE_STEP_CM
@@ -37,8 +38,9 @@ def table1(record: dict) -> list[str]:
            "ΔE76 between the D65 colour of the rendered slab and the Monte Carlo ground truth (mean over tones; "
            f"{len(groups['representative'])} representative, {len(groups['outlier'])} outlier tones). "
            "*Edge ΔE76*: the same slab lit on one half-plane (±2 mm image, mean over pixels) — sees translucency. "
-           "*Shape Vis*: L_shape (log-profile RMSE) of the configuration's rendered profile through the LUT, "
-           "400–700 nm. *Noise floor*: the ΔE76 that Monte Carlo noise alone gives.", ""]
+           "*Shape Vis*: L_shape (log-profile RMSE, 400–700 nm) of the configuration's profile through the LUT, "
+           "as rendered (Σ w_k R_k P_k / Σ w_k R_k: a path picks medium k with probability w_k) and as the fitter's "
+           "loss weighs it (Σ w_k P_k). *Noise floor*: the ΔE76 that Monte Carlo noise alone gives.", ""]
     body = []
     for r in G.ROWS:
         s = rows[r]
@@ -46,9 +48,11 @@ def table1(record: dict) -> list[str]:
         body.append([s["label"], _f(s["delta_e"]["representative"]), _f(s.get("vs_k1"), 1) + "×" if s.get("vs_k1")
                      else "—", _f(s["delta_e"]["outlier"]), _f(s["delta_e"]["all"]), _f(pap),
                      _f(s["noise_floor"]["representative"]), _f(s["delta_e_edge"]["representative"]),
-                     _f(s["sam_vis"]["representative"], 3), _f(s["shape_vis_lut"]["representative"], 3)])
+                     _f(s["sam_vis"]["representative"], 3), _f(s["shape_vis_lut"]["representative"], 3),
+                     _f(s["shape_vis_lut_fit_weighting"]["representative"], 3)])
     out += _table(["Configuration", "ΔE76 rep.", "vs K=1", "ΔE76 outliers", "ΔE76 all", "paper rep.",
-                   "noise floor rep.", "edge ΔE76 rep.", "SAM Vis rep. (rad)", "shape Vis rep."], body)
+                   "noise floor rep.", "edge ΔE76 rep.", "SAM Vis rep. (rad)", "shape Vis rep. (rendered)",
+                   "shape Vis rep. (Σ w_k P_k)"], body)
     nv = record["gate"]["nn_vs_k3"]
     out += ["", f"Network vs the joint-optimised K = 3 reference (ΔE76 between the two renders): representative "
             f"{_f(nv['delta_e']['representative'])}, outliers {_f(nv['delta_e']['outlier'])}, all "
@@ -93,6 +97,14 @@ def table2(record: dict) -> list[str]:
     body.append(["SAM Vis (rad)"] + [f"{_f(sam[f'k{k}'], 3)} ({paper.TABLE2_SAM_VIS[k - 1]})" for k in (1, 2, 3)]
                 + [_f(b["sam_reduction"]["K1_to_K2"], pct=True), _f(b["sam_reduction"]["K2_to_K3"], pct=True)])
     out += _table(["Band", "Shape K=1", "K=2", "K=3", "K=1→2", "K=2→3"], body)
+    ex, exr, nz = b["excess"], b["excess_reduction"], b["noise"]
+    out += ["", "The same with the ground truth's Monte Carlo noise taken out (excess sqrt(L² − noise²), "
+            "`training.fit.loss.shape_excess`; noise = the L_shape that the bins' noise alone gives):", ""]
+    out += _table(["Band", "noise", "excess K=1", "K=2", "K=3", "K=1→2", "K=2→3"],
+                  [[band if band != "all" else "all wavelengths", _f(nz[band], 3)]
+                   + [_f(ex[band][f"K{k}"], 3) for k in (1, 2, 3)]
+                   + [_f(exr[band]["K1_to_K2"], pct=True), _f(exr[band]["K2_to_K3"], pct=True)]
+                   for band in (*BANDS, "all")])
     out += ["", "Visible SAM of the other configurations (rep.): " + ", ".join(
         f"{G.ROW_LABELS[r]} {_f(sam[r], 3)}" for r in G.ROWS if not r.startswith("k")) + ".",
         "Mean relative reflectance error of the fits (LUT, rep.): " + ", ".join(
@@ -119,6 +131,16 @@ def table3(record: dict) -> list[str]:
                         + ([f"{paper.PROFILE_K1} → {paper.PROFILE_K2} (−{100 * paper.PROFILE_REDUCTION:.1f} %)"]
                            if key == "mean" else ["—"]))
         out += _table(["Wavelengths", "K=1", "K=2", "K=3", "K=1→2", "K=2→3", "paper"], body) + [""]
+        summ = fits.get("fitter_summary")
+        if summ:
+            ks = {int(k): v for k, v in summ["K"].items()}
+            ex = [ks[k]["shape_excess"] for k in sorted(ks)]
+            red = M.relative_reduction(ex[0], ex[1]) if len(ex) > 1 and ex[0] > 0 else None
+            out += [f"The fitter's summary (`training.fit.dataset.summarise`): the Monte Carlo noise of the bins "
+                    f"alone gives L_shape ≈ {summ['noise']:.4f}; the excess over it, sqrt(L² − noise²), is "
+                    + ", ".join(f"K={k} {_f(ks[k]['shape_excess'], 4)}" for k in sorted(ks))
+                    + f" (K = 1 → 2: {_f(red, pct=True)}); mean |ΔR|/R "
+                    + ", ".join(f"K={k} {_f(ks[k]['refl_rel_err'], pct=True)}" for k in sorted(ks)) + ".", ""]
     net = pf.get("network")
     if net:
         n = net["nn_decoder"]
@@ -133,11 +155,14 @@ def goals_md(record: dict) -> list[str]:
     g = record["goals"]
     a, b = g["nn_delta_e_at_most_paper"], g["k2_profile_reduction_at_least_paper"]
     met = lambda m: "—" if m is None else ("met" if m else "NOT met")  # noqa: E731
+    ex = b.get("excess_over_noise")
+    extra = (f" On the excess over the bins' Monte Carlo noise (L_shape ≈ {ex['noise']:.3f} from noise alone) the "
+             f"reduction is {_f(ex['reduction'], pct=True)}." if ex else "")
     return ["## Goals of the issue", "",
             f"- Network rendering ΔE76 on the representative gate tones ≤ the paper's {a['paper']}: ours "
             f"{_f(a['ours'])} — {met(a['met'])}.",
             f"- K = 2 reduces the profile error by ≥ {100 * b['paper']:.1f} %: ours {_f(b['ours'], pct=True)} on the "
-            f"{b['source']} — {met(b['met'])}.", ""]
+            f"{b['source']} — {met(b['met'])}.{extra}", ""]
 
 
 def notes(record: dict) -> list[str]:
@@ -208,8 +233,11 @@ def notes(record: dict) -> list[str]:
                "boundaries) would render R/A = " + ", ".join(f"{mth} {dark[mth]:.2f}" for mth in METHODS)
                + " (mean over tones, visible band) under it. RGB → spectrum: Mallett & Yuksel 2019.")
     exp = list(record["network"]["exposure"].values())
+    nn_x = [v["delta_e_times_exposure"] for n, v in g["per_tone"]["nn"].items() if n in g["groups"]["representative"]]
     out.append(f"Network exposure (Y of the input over Y of its own reflectance): {min(exp):.3f}–{max(exp):.3f} over "
-               "the gate tones (1 = the encoder found the input's brightness).")
+               "the gate tones (1 = the encoder found the input's brightness). The gate renders the network's media as "
+               "they are; its rendered R_d times the exposure (the add-on's --match-exposure) would score ΔE76 "
+               f"{_f(float(np.mean(nn_x)) if nn_x else None)} (rep.).")
     k1, k1p = rows["k1"]["delta_e"]["representative"], paper.TABLE1_DELTA_E["k1"]
     rr = record["banded"].get("refl_rel_err", {})
     if k1 is not None:
@@ -224,11 +252,17 @@ def notes(record: dict) -> list[str]:
                    f"whole-set mean ({paper.PROFILE_K1} → {paper.PROFILE_K2}) nor of its training-set fits "
                    f"({paper.TRAIN_SHAPE_K2}, {paper.TRAIN_SHAPE_K3}); the paper does not define the band metric "
                    "further. Ours is the fitter's L_shape; compare the K = 1 → 2 reductions, not the values.")
+    sv = {r: (rows[r]["shape_vis_lut"]["representative"], rows[r]["shape_vis_lut_fit_weighting"]["representative"])
+          for r in ("k1", "k2", "k3")}
     out.append("Rendered vs fitted profile: the paper's loss (and our fitter) weights normalised component profiles by "
-               "w_k (Σ w_k P_k), while a renderer that picks medium k with probability w_k produces Σ w_k R_k P_k; "
-               "'shape Vis' in Table 1 and the edge images measure the latter.")
-    t = run["timings_s"]
-    out.append("Run time (s): " + ", ".join(f"{k} {v:.0f}" for k, v in t.items()) + f"; {run['threads']} thread(s).")
+               "w_k (Σ w_k P_k), while a renderer that picks medium k with probability w_k produces Σ w_k R_k P_k "
+               "(the paper's own eq. for R_d^fit). Visible L_shape of the fits (rep.) as fitted → as rendered: "
+               + ", ".join(f"K={r[1]} {_f(sv[r][1], 3)} → {_f(sv[r][0], 3)}" for r in sv)
+               + ". Where K ≥ 2 renders worse than it fits, the fitter optimises a profile the renderer does not make.")
+    t, c = run["timings_s"], run["compute_seconds"]
+    out.append("Compute time of the (cached) pieces: " + ", ".join(f"{k} {v:.0f} s" for k, v in c.items())
+               + "; this invocation (s): " + ", ".join(f"{k} {v:.0f}" for k, v in t.items())
+               + f"; {run['threads']} thread(s).")
     return out
 
 
