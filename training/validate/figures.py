@@ -3,7 +3,7 @@
 * ``k_progression``: ground truth, joint-optimised K = 1, 2, 3, the network and the baselines for the
   representative tones, each cell the *edge image* of ``metrics`` (the slab lit left of the middle,
   +-2 mm; colour and the light carried into the shadow) with its Delta E76 against the ground truth.
-* ``spectral_parameters``: the network's alpha(lambda) and sigma_t(lambda) per component, median and
+* ``spectral_parameters``: the decoder's alpha(lambda), sigma_t(lambda) and weights per component, median and
   inter-quartile band over the tones given; weights inset.
 * ``cross_sections``: the ground truth's exitance around a point of entry (top view, +-2 mm, log scale
   normalised to each cell's peak) per wavelength (columns) and tone (rows).

@@ -132,7 +132,7 @@ def run(opts: Options) -> dict:
 
     fits = _fits(opts, lut, tones, gt, wl_val, wl_r, cache, timings)
     t0 = time.perf_counter()
-    inv, dec, nn_full = _network(opts, files, albedo, tones.values, wl_r)
+    inv, dec, dec_full = _network(opts, files, albedo, tones.values, wl_r)
     scales, calib = _baseline_scales(opts, lut, tones, gt, albedo, wl_val)
     timings["network_and_calibration"] = time.perf_counter() - t0
 
@@ -173,7 +173,7 @@ def run(opts: Options) -> dict:
                          "biophysical_true": {n: tones.values[i].tolist() for i, n in enumerate(tones.names)}}
     t0 = time.perf_counter()
     opts.out.mkdir(parents=True, exist_ok=True)
-    _figures(opts, lut, tones, gt, wl_val, wl_r, col_r, rows_per_tone, renders, fits, nn_full, record)
+    _figures(opts, lut, tones, gt, wl_val, wl_r, col_r, rows_per_tone, renders, fits, dec_full, record)
     timings["figures"] = time.perf_counter() - t0
     timings["total"] = time.perf_counter() - t_start
     if {n: sha256_file(p) for n, p in files.items() if n != "card"} != models["sha256"]:
@@ -211,7 +211,7 @@ def _fits(opts, lut, tones, gt, wl_val, wl_r, cache, timings) -> dict[str, dict]
 
 def _network(opts, files, albedo, tones, wl_r):
     """The network's mixtures at the render wavelengths (inversion on the albedo, decoder on the true p),
-    and the inversion's full outputs (for the figures)."""
+    and the decoder's full outputs (T, K, 376) for the figures (the paper's Fig. spectral_params)."""
     from exporters import inference
     from exporters.mitsuba import decode
 
@@ -221,11 +221,13 @@ def _network(opts, files, albedo, tones, wl_r):
                     out["weight"][i][:, wl_r],
                     extra={"exposure": float(out["exposure"][i, 0]), "biophysical": out["biophysical"][i].tolist()})
            for i in range(len(albedo))]
-    dec = []
+    dec, full = [], {"alpha": [], "sigma_t": [], "weight": []}
     for tone in tones:
         m = decode(tone, files["skin_decoder.onnx"])
         dec.append(G.Params(m.alpha[:, wl_r], m.sigma_t[:, wl_r], m.g[:, wl_r], m.weight[:, wl_r]))
-    return inv, dec, out
+        for key in full:
+            full[key].append(getattr(m, key))
+    return inv, dec, {k: np.stack(v) for k, v in full.items()}
 
 
 def _baseline_scales(opts, lut, tones, gt, albedo, wl_val) -> tuple[dict[str, float], dict]:
@@ -384,7 +386,7 @@ def _goals(record) -> dict:
 
 
 # ------------------------------------------------------------------------------------------ figures
-def _figures(opts, lut, tones, gt, wl_val, wl_r, col_r, rows_per_tone, renders, fits, nn_full, record) -> None:
+def _figures(opts, lut, tones, gt, wl_val, wl_r, col_r, rows_per_tone, renders, fits, dec_full, record) -> None:
     wl = WAVELENGTHS_NM[wl_r]
     rep = [i for i, k in enumerate(tones.kinds) if k == "representative"] or list(range(len(tones.names)))
     x = M.edge_positions_cm()
@@ -406,9 +408,9 @@ def _figures(opts, lut, tones, gt, wl_val, wl_r, col_r, rows_per_tone, renders, 
     names = [tones.names[i] for i in rep]
     figures.k_progression(opts.out / "fig_k_progression.png", names, ["MC ground truth"] +
                           [G.ROW_LABELS[r].replace(" (", "\n(") for r in G.ROWS], edge_rgb, de, de_edge)
-    figures.spectral_parameters(opts.out / "fig_spectral_parameters.png", WAVELENGTHS_NM, nn_full["alpha"],
-                                nn_full["sigma_t"], nn_full["weight"],
-                                f"skin_inversion.onnx on the {len(tones.names)} gate tones' albedos: median and IQR")
+    figures.spectral_parameters(opts.out / "fig_spectral_parameters.png", WAVELENGTHS_NM, dec_full["alpha"],
+                                dec_full["sigma_t"], dec_full["weight"],
+                                f"skin_decoder.onnx on the true p of the {len(tones.names)} gate tones: median and IQR")
     cols = [int(np.argmin(np.abs(WAVELENGTHS_NM[wl_val] - w))) for w in CROSS_SECTION_NM]
     cols = list(dict.fromkeys(cols))
     figures.cross_sections(opts.out / "fig_cross_sections.png", names, WAVELENGTHS_NM[wl_val][cols],
