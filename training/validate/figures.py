@@ -4,11 +4,11 @@
   representative tones, each cell the *edge image* of ``metrics`` (the slab lit left of the middle,
   +-2 mm; colour and the light carried into the shadow) with its Delta E76 against the ground truth.
 * ``spectral_parameters``: the decoder's alpha(lambda), sigma_t(lambda) and weights per component, median and
-  inter-quartile band over the tones given; weights inset.
+  inter-quartile band over the tones given.
 * ``cross_sections``: the ground truth's exitance around a point of entry (top view, +-2 mm, log scale
   normalised to each cell's peak) per wavelength (columns) and tone (rows).
 * ``reflectance_and_profiles``: R_d(lambda) of the tones (left) and profile heat maps
-  log10 R_d(r, lambda) of a few tones with the log-ratio of the K = 1 and K = 3 fits to it (right).
+  log10 r^2 R_d(r, lambda) of a few tones with the log-ratio of the K = 1 and K = 3 fits to it (right).
 """
 
 from __future__ import annotations
