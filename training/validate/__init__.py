@@ -1,6 +1,9 @@
-"""Validation of the model (paper §6, SPEC §6): our mixture renderer, the Mitsuba 3 path and its strips.
+"""Validation of the model (paper §6, SPEC §6): the rendering gate and its tables, the Mitsuba 3 path, strips.
 
 Modules: ``mixture`` (our Monte Carlo renderer of a K-media mixture, the rendering gate's renderer),
-``compare`` (``python -m training mitsuba``: Mitsuba vs ours vs the biophysical ground truth),
-``strips`` (the teaser-like sphere strips), ``cli`` (``python -m training validate``), ``bench``.
+``gate`` (ground truth, joint-optimised fits, network and baseline media, renders, cache), ``baselines``
+(Chiang 2016 / Wrenninge 2017 albedo inversion), ``metrics`` (colour and edge-image Delta E76, SAM, bands),
+``profile_set`` (Table 3 from the validation fits), ``tables`` (tables.md / tables.json), ``figures``,
+``paper`` (the paper's numbers), ``run`` and ``cli`` (``python -m training validate``), ``compare``
+(``python -m training mitsuba``), ``strips`` (the teaser-like sphere strips), ``bench``.
 """
