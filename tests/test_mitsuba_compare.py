@@ -28,7 +28,9 @@ def test_mitsuba_and_ours_agree_three_tones_five_wavelengths():
         ours = mixture_reflectance(mix.alpha, mix.sigma_t, mix.g, mix.weight, photons=20000, seed=1)
         se = np.hypot(mit.R_d_stderr, ours.R_d_stderr)
         diff = np.abs(mit.R_d - ours.R_d)
-        assert np.all(mit.R_d > 0) and np.all(ours.R_d > 0)
+        # Mitsuba's estimate has the exact specular part subtracted: for the darkest tone (R ~ 0.002 in the
+        # blue with the laptop model) it may dip below 0 within its own noise
+        assert np.all(mit.R_d > -4 * mit.R_d_stderr) and np.all(ours.R_d > 0)
         ok = (diff <= 0.02 * ours.R_d) | (diff <= 4 * se)
         assert ok.all(), (name, mit.R_d, ours.R_d, se)
 
