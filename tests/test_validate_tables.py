@@ -80,6 +80,8 @@ def test_update_card_keeps_other_keys(quick_run):
     assert _finite(v["gate"]["nn_delta_e"]["representative"])
     assert "banded" in v and "profile_shape" in v
     for key, value in before.items():
+        if key == "validation":  # the shipped card may already hold a full run's entry: replaced
+            continue
         if key == "validation_tables" and value == VALIDATION_PLACEHOLDER:
             assert after[key]["status"].startswith("filled")
         else:
