@@ -212,8 +212,8 @@ def test_warm_starts_from_anchor_wavelengths_match_the_full_schedule(lut):
 
 def test_relative_reflectance_term_keeps_dark_targets_accurate(lut):
     """A dark target (R = 0.028) that no K = 1 medium matches in both shape and R (a mixture with a
-    low-albedo part): the paper's absolute term lets R drift by a factor of several (600 % when written),
-    the relative one keeps it near (12 %) at almost the same shape error."""
+    low-albedo part): the paper's absolute term lets R drift by a factor of several (750 % when written),
+    the relative one keeps it near (1.2 %) at a shape error 22 % higher."""
     profile, R = _dipole_mixture_target([[0.3, 0.999]], [[0.8, 0.8]], [[2000.0, 60.0]], [[0.97, 0.03]])
     args = (lut, profile, R, torch.tensor(R_EDGES_CM), 1e9, torch.full((1,), 0.8))
     rel = fit_schedule(*args, ks=(1,))[1]
@@ -221,4 +221,39 @@ def test_relative_reflectance_term_keeps_dark_targets_accurate(lut):
     assert float(R[0]) < 0.05
     assert float(rel.refl_rel_err[0]) < 0.2
     assert float(paper.refl_rel_err[0]) > 10 * float(rel.refl_rel_err[0])
-    assert float(rel.shape_rmse[0]) < 1.2 * float(paper.shape_rmse[0])
+    assert float(rel.shape_rmse[0]) < 1.3 * float(paper.shape_rmse[0])
+
+
+def test_mixture_profile_is_the_rendered_one_and_the_lm_jacobian_is_its_derivative(lut):
+    """P_hat = sum_k w_k R_k P_k / sum_k w_k R_k (what a renderer picking medium k with probability w_k
+    gives), and the hand-written LM Jacobian equals autograd's on it for K = 1, 2, 3."""
+    from training.fit.mixture import components, mix, radial_profile
+    from training.fit.optimize import Problem
+
+    profile, R = _dipole_mixture_target(**TWO_SCALE)
+    t = L.make_target(profile, R, torch.tensor(R_EDGES_CM), photons=1e9)
+    prob = Problem(lut, t)
+    gen = torch.Generator().manual_seed(3)
+    for k in (1, 2, 3):
+        theta = torch.randn(2, n_params(k), generator=gen, dtype=torch.float64)
+        theta[:, 2 * k : 3 * k] += 4.0  # sigma_t ~ e^4 cm^-1: profiles inside the radial grid
+        m = prob.mixture(theta, k)
+        p_k, r_k = components(lut, m, t.r_cm)
+        p_hat, r_hat = mix(p_k, r_k, m.w)
+        # independent: the absolute exitance divided by its integral weight R_hat
+        np.testing.assert_allclose(p_hat.numpy(), (radial_profile(lut, m, t.r_cm) / r_hat[:, None]).numpy(),
+                                   rtol=1e-9, atol=1e-300)
+        for shape_only in (True, False):
+            res, jac = prob.residuals_jacobian(theta, k, shape_only, t)
+
+            def f(th, k=k, shape_only=shape_only):
+                return prob.residuals_jacobian(th, k, shape_only, t)[0]
+
+            auto = torch.stack([torch.autograd.functional.jacobian(f, theta[i : i + 1])[0, :, 0] for i in range(2)])
+            if not shape_only:  # the IRLS weight of the R row is held fixed in LM: compare the shape rows
+                auto, jac = auto[:, :-1], jac[:, :-1]
+            # per parameter column: the table's own profile_grad (forward-mode by hand) differs from autograd
+            # through ``profile`` by up to ~6 % of a column's norm in the far tail, for K = 1 as well; the
+            # weighting of the paper's text (v = w) or a dropped dR_k/dx_k term gives 140 %
+            err = (jac - auto).norm(dim=1) / auto.norm(dim=1).clamp_min(1e-300)
+            assert float(err.max()) < 0.1, (k, shape_only, err)

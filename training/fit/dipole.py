@@ -91,7 +91,7 @@ def dipole_mixture_profile(
     sigma_t^2 shape(sigma_t r) / (the area integral of the shape over the table's radii ``r_edges_mfp``),
     i.e. the normalisation a LUT built by ``dipole_lut(r_edges_mfp=...)`` uses, evaluated at the bin
     centres of ``r_edges_cm`` and zero beyond the table's last radius.  Returns (profile (B, M) cm^-2
-    = R_hat P_hat as in the paper's loss, R (B,)).
+    = sum_k w_k R_k P_k, the exitance of a medium picked with probability w_k, and R (B,) = sum_k w_k R_k).
     """
     alpha, g, sigma_t, w = (np.asarray(x, dtype=np.float64) for x in (alpha, g, sigma_t, w))
     c_mfp = bin_centres(r_edges_mfp)
@@ -101,6 +101,4 @@ def dipole_mixture_profile(
     p_k = sigma_t[..., None] ** 2 * dipole_profile_shape(x, alpha[..., None], g[..., None]) / norm[..., None]
     p_k = np.where(x <= r_edges_mfp[-1], p_k, 0.0)
     r_k = dipole_reflectance(alpha, g)
-    p_hat = (w[..., None] * p_k).sum(-2)
-    r_hat = (w * r_k).sum(-1)
-    return p_hat * r_hat[:, None], r_hat
+    return ((w * r_k)[..., None] * p_k).sum(-2), (w * r_k).sum(-1)

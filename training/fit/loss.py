@@ -4,8 +4,9 @@
     L_R     = ((R_hat - R_MC) / R_MC)^2      (the paper: (R_hat - R_MC)^2; see below)
     L_joint = L_shape + 5 L_R
 
-with P_hat = sum_k w_k P_k and R_hat = sum_k w_k R_k (paper §4; note that the paper's P_hat weights the
-normalised component profiles by w_k alone, not by w_k R_k).
+with P_hat = sum_k w_k R_k P_k / sum_k w_k R_k and R_hat = sum_k w_k R_k (``mixture.mix``: the
+normalised profile of the issue's R_d^fit(r) and of a renderer that picks medium k with probability w_k;
+the paper's §4 text weights the normalised component profiles by w_k alone).
 
 The reflectance term is relative by default (``relative_refl=True`` in ``make_target``; the paper's
 absolute form with ``relative_refl=False``, ``fit --refl-loss paper``).  With the absolute form a

@@ -81,9 +81,27 @@ def components(lut: LookupTables, m: Mixture, r_cm: torch.Tensor) -> tuple[torch
     return lut.profile(r_cm, m.alpha, m.g, m.sigma_t), lut.reflectance(m.alpha, m.g)
 
 
+#: Added to every R_k in the profile weights v_k, so that v stays defined (and sums to 1) when all R_k
+#: vanish (alpha -> 0); it shifts v by less than 1e-10 wherever R_k > 1e-2.
+MIX_R_EPS: float = 1e-12
+
+
+def profile_weights(r_k: torch.Tensor, w: torch.Tensor) -> torch.Tensor:
+    """v_k = w_k R_k / sum_j w_j R_j (..., K): the share of the exiting light that medium k carries."""
+    wr = w * (r_k + MIX_R_EPS)
+    return wr / wr.sum(-1, keepdim=True)
+
+
 def mix(p_k: torch.Tensor, r_k: torch.Tensor, w: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-    """The paper's mixture quantities: P_hat = sum_k w_k P_k (..., M) and R_hat = sum_k w_k R_k (...)."""
-    return (w[..., None] * p_k).sum(-2), (w * r_k).sum(-1)
+    """The mixture's normalised profile P_hat = sum_k w_k R_k P_k / sum_k w_k R_k (..., M) and its
+    reflectance R_hat = sum_k w_k R_k (...).
+
+    P_hat is ``radial_profile`` / R_hat: the profile that a renderer picking medium k with probability w_k
+    produces, and the issue's R_d^fit(r) normalised.  (The paper's §4 text writes sum_k w_k P_k, which
+    differs from the rendered profile whenever the components' R_k differ; fitted that way, K = 2 and 3
+    rendered worse profiles than K = 1 - see the README, "Fitting the dataset".)"""
+    v = profile_weights(r_k, w)
+    return (v[..., None] * p_k).sum(-2), (w * r_k).sum(-1)
 
 
 def radial_profile(lut: LookupTables, m: Mixture, r_cm: torch.Tensor) -> torch.Tensor:

@@ -44,7 +44,7 @@ from dataclasses import dataclass, field
 import torch
 
 from training.fit import loss as L
-from training.fit.mixture import Mixture, g_bounds, mix, pack, unpack
+from training.fit.mixture import MIX_R_EPS, Mixture, g_bounds, mix, pack, profile_weights, unpack
 from training.sim.lut_interp import LookupTables
 
 #: Adam schedule of the paper (steps per stage) and its learning rate.
@@ -149,11 +149,17 @@ class Problem:
         den = p_hat + t.floor[:, None]  # (B, M)
         scale = t.mask / torch.sqrt(t.n_used.clamp_min(1.0))[:, None]  # (B, M)
         res_s = (torch.log(den) - t.log_p) * scale
-        wk = w[..., None]  # (B, K, 1)
-        cols_p = [wk * dpa, wk * dpb, wk * dps]  # d P_hat / d (a, b, s): (B, K, M) each
+        # P_hat = sum v_k P_k with v_k = w_k R'_k / sum_j w_j R'_j (R' = R + MIX_R_EPS, mixture.mix):
+        #   dP_hat/dx_k = v_k dP_k/dx_k + (w_k dR_k/dx_k / sum_j w_j R'_j) (P_k - P_hat)   for x = a, b, s
+        #   dP_hat/dz_k = v_k (P_k - P_hat)                                                 (softmax logit)
+        v = profile_weights(r_k, w)
+        vk = v[..., None]  # (B, K, 1)
+        dev = p_k - p_hat[:, None, :]  # (B, K, M)
+        u = (w / (w * (r_k + MIX_R_EPS)).sum(-1, keepdim=True))[..., None]  # (B, K, 1)
+        cols_p = [vk * dpa + u * dra[..., None] * dev, vk * dpb + u * drb[..., None] * dev, vk * dps]
         cols_r = [w * dra, w * drb, w * drs]  # d R_hat: (B, K)
         if k > 1:
-            cols_p.append((wk * (p_k - p_hat[:, None, :]))[:, 1:])
+            cols_p.append((vk * dev)[:, 1:])
             cols_r.append((w * (r_k - r_hat[:, None]))[:, 1:])
         jp = torch.cat(cols_p, dim=1).transpose(1, 2) * (scale / den)[..., None]  # (B, M, P)
         jr = torch.cat(cols_r, dim=1)  # (B, P)

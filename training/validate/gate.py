@@ -360,8 +360,8 @@ def lut_mixture_shape_error(lut, params: Params, target, rows: np.ndarray, weigh
     MC targets; (len(rows),).
 
     ``weighting="rendered"``: sum_k w_k R_k P_k / sum_k w_k R_k, what a renderer that picks medium k with
-    probability w_k produces; ``"fit"``: sum_k w_k P_k, the paper's loss (training.fit.loss), which the
-    joint-optimised fits minimise."""
+    probability w_k produces; the fitter's loss (training.fit.mixture.mix); ``"fit"``: sum_k w_k P_k, as the paper's
+    §4 text writes its loss (the fitter used it before 2026-11-22)."""
     from training.fit import loss as L
 
     if weighting not in ("rendered", "fit"):

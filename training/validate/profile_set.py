@@ -6,7 +6,8 @@
   finished tone and fitted wavelength, and per band.  The paper: K = 1 0.059 -> K = 2 0.019 (-67.3 %).
 * The network (an addition): ``skin_decoder.onnx`` on each validation tone's true biophysical vector,
   its mixture's profile through the LUT against the tone's MC profile (``gate.lut_mixture_shape_error``,
-  both the fits' weighting sum_k w_k P_k and the rendered one).
+  both the rendered weighting sum_k w_k R_k P_k / sum_k w_k R_k, which the fitter uses, and the
+  paper's text's sum_k w_k P_k).
 """
 
 from __future__ import annotations

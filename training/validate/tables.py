@@ -39,8 +39,9 @@ def table1(record: dict) -> list[str]:
            f"{len(groups['representative'])} representative, {len(groups['outlier'])} outlier tones). "
            "*Edge ΔE76*: the same slab lit on one half-plane (±2 mm image, mean over pixels) — sees translucency. "
            "*Shape Vis*: L_shape (log-profile RMSE, 400–700 nm) of the configuration's profile through the LUT, "
-           "as rendered (Σ w_k R_k P_k / Σ w_k R_k: a path picks medium k with probability w_k) and as the fitter's "
-           "loss weighs it (Σ w_k P_k). *Noise floor*: the ΔE76 that Monte Carlo noise alone gives.", ""]
+           "as rendered (Σ w_k R_k P_k / Σ w_k R_k: a path picks medium k with probability w_k; the fitter's "
+           "loss) and as the paper's §4 text writes it (Σ w_k P_k). "
+           "*Noise floor*: the ΔE76 that Monte Carlo noise alone gives.", ""]
     body = []
     for r in G.ROWS:
         s = rows[r]
@@ -145,8 +146,9 @@ def table3(record: dict) -> list[str]:
     if net:
         n = net["nn_decoder"]
         out += [f"The network's decoder (true p of {net['n_tones']} validation tones) through the LUT: L_shape "
-                f"{_f(n['fit']['mean'], 4)} with the fits' weighting Σ w_k P_k, {_f(n['rendered']['mean'], 4)} with "
-                "the rendered weighting Σ w_k R_k P_k (per band, fit weighting: " + ", ".join(
+                f"{_f(n['fit']['mean'], 4)} with the paper's text weighting Σ w_k P_k, "
+                f"{_f(n['rendered']['mean'], 4)} with "
+                "the rendered weighting Σ w_k R_k P_k (per band, paper's text weighting: " + ", ".join(
                     f"{b} {_f(n['fit'][b], 4)}" for b in BANDS) + ").", ""]
     return out
 
