@@ -3,6 +3,7 @@
     python blender_addon/bake.py --albedo IMAGE --out DIR [--target cycles,physical,spectral]
         [--colorspace auto|srgb|linear] [--unit-scale M_PER_UNIT] [--overwrite] [--model PATH] [--threads N]
         [--exact] [--table PATH] [--force] [--uv-mask IMAGE] [--prune-share S] [--exr-compression piz|zip|...]
+        [--float-maps]
     blender -b --factory-startup --python blender_addon/bake.py -- --albedo IMAGE --out DIR ...
 
 By default texels are looked up in the fast-path table shipped beside the model
@@ -93,6 +94,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--prune-share", type=float, default=None, metavar="S",
                    help="drop components below this share of the colour at every texel (default 0.002; 0 keeps all)")
     p.add_argument("--exr-compression", default=None, help="EXR compression of the maps (default piz)")
+    p.add_argument("--float-maps", action="store_true",
+                   help="store every map as 32-bit float (default on the fast path: colour, weight and anisotropy "
+                        "maps as half floats, step <= 2.4e-4, which halves the write)")
     p.add_argument("--quiet", action="store_true")
     return p
 
@@ -134,7 +138,8 @@ def main(argv: list[str] | None = None) -> int:
                                      force=args.force, texel_mask=_read_mask(args.uv_mask, maps),
                                      prune_share=(baking.DEFAULT_PRUNE_SHARE if args.prune_share is None
                                                   else args.prune_share),
-                                     compression=args.exr_compression or maps.DEFAULT_COMPRESSION)
+                                     compression=args.exr_compression or maps.DEFAULT_COMPRESSION,
+                                     half_maps=False if args.float_maps else None)
         last = [0.0]
 
         def progress(fraction: float) -> None:

@@ -66,6 +66,12 @@ DEFAULT_PRUNE_SHARE = 0.002
 TABLE_CHUNK = 1 << 18
 #: Mantissa bits of fast-path maps (BakeOptions.mantissa_bits).
 FAST_MANTISSA_BITS = 16
+#: Cycles map kinds bounded to [-1, 1] (colour, weights, anisotropy): the fast path stores them as half floats
+#: (BakeOptions.half_maps).  Their rounding (<= 2.4e-4 below 1) is a tenth of the table's interpolation error in
+#: the rendered colour, and halves what PIZ compresses.  Radius and the physical and biophysical maps stay float32:
+#: radii span decades down to 1e-5 m (half's subnormal range), and 1 - alpha of a physical albedo near 1 needs
+#: float's precision.
+HALF_KINDS = frozenset({"color", "weight", "anisotropy"})
 #: Version of the bake key (bump when the maps of the same inputs change).
 KEY_VERSION = 1
 
@@ -137,7 +143,8 @@ class BakeOptions:
     take the maps of the most common covered colour); ``force`` re-bakes an up-to-date folder;
     ``compression`` of the EXR maps (exporters.maps.COMPRESSIONS); ``mantissa_bits``: float32 mantissa bits the
     maps keep (None: 16 when the table is used — relative 7.6e-6, far below its interpolation error, and 25 %
-    faster to compress — and all 23 for exact bakes); ``cache_min_colours``: distinct colours from which a
+    faster to compress — and all 23 for exact bakes); ``half_maps``: the maps of ``HALF_KINDS`` stored as
+    half floats (None: on the fast path, not with ``exact``); ``cache_min_colours``: distinct colours from which a
     bake without a usable table builds one (grid step ``cache_step``) into the user cache."""
 
     targets: tuple[str, ...] = ("cycles",)
@@ -158,6 +165,7 @@ class BakeOptions:
     force: bool = False
     compression: str = maps.DEFAULT_COMPRESSION
     mantissa_bits: int | None = None
+    half_maps: bool | None = None
     cache_min_colours: int = 50_000  # building evaluates ~34,000 grid nodes: it pays off from ~1.5x that
     cache_step: float = texel_table.DEFAULT_STEP
 
@@ -219,7 +227,7 @@ def bake_key(image_id: str, model_sha256: str, stem: str, options: BakeOptions, 
             "targets": sorted(parse_targets(options.targets)), "unit_scale_m": float(options.unit_scale_m),
             **options.collapse_options().as_dict(), "exact": bool(options.exact),
             "prune_share": float(options.prune_share), "uv_mask": mask_sha256, "compression": options.compression,
-            "mantissa_bits": options.mantissa_bits}
+            "mantissa_bits": options.mantissa_bits, "half_maps": options.half_maps}
     return hashlib.sha256(json.dumps(spec, sort_keys=True).encode()).hexdigest()
 
 
@@ -423,6 +431,7 @@ class BakeJob:
                               f"images with {opts.cache_min_colours:,}+ colours build and cache one themselves)")
         self.model_k = self.table.k if self.table is not None else self._load_model().k
         self.mantissa_bits = opts.mantissa_bits or (FAST_MANTISSA_BITS if self.table is not None else 23)
+        self.half_maps = opts.half_maps if opts.half_maps is not None else self.table is not None
         self.components = list(range(1, self.model_k + 1))
         self.specs = map_specs(stem, self.model_k, self.targets)
         self._check_folder()
@@ -569,6 +578,8 @@ class BakeJob:
         self.notes.append(f"built a fast-path table for these options in {self.timings['table_build']:.0f} s, "
                           f"cached as {path} (reused by later bakes)")
         self.mantissa_bits = self.options.mantissa_bits or FAST_MANTISSA_BITS
+        if self.options.half_maps is None:
+            self.half_maps = True
 
     def _prune(self) -> None:
         """Drop components whose share of the colour is below ``prune_share`` for every texel (global mode)."""
@@ -625,7 +636,9 @@ class BakeJob:
             for spec in self.specs:
                 streams.append(maps.MapStream(self.out_dir / spec.name, self.width, self.height, spec.channels,
                                               self._units(spec), overwrite=self.options.overwrite,
-                                              compression=self.options.compression))
+                                              compression=self.options.compression,
+                                              pixel_type="half" if self.half_maps and spec.kind in HALF_KINDS
+                                              else "float"))
         except BaseException:
             for s in streams:
                 s.discard()
@@ -719,7 +732,8 @@ class BakeJob:
                                "path": str(table.path), "sha256": table.sha256, "step": table.meta.get("step"),
                                "model_sha256": table.model_sha256, "command": table.meta.get("command")},
                            "exr_compression": self.options.compression,
-                           "mantissa_bits": self.mantissa_bits},
+                           "mantissa_bits": self.mantissa_bits,
+                           "half_kinds": sorted(HALF_KINDS) if self.half_maps else []},
             "components": {"model_K": self.model_k, "kept": list(self.components),
                            "dropped": [k for k in range(1, self.model_k + 1) if k not in self.components],
                            "prune_share": float(self.options.prune_share),

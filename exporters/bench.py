@@ -146,18 +146,21 @@ def _fast_records(table: texel_table.TexelTable, rgb: np.ndarray) -> tuple[dict,
     return table.records(rgb[inside], values, ("cycles", "physical", "spectral")), inside
 
 
-def _as_stored(rec: dict, bits: int) -> dict:
-    """The map values a bake stores (rounded to ``bits`` mantissa bits), with alpha from the stored colour."""
+def _as_stored(rec: dict, bits: int, half: bool = True) -> dict:
+    """The map values a fast bake stores (colour, weight, anisotropy as half floats when ``half``; the rest
+    rounded to ``bits`` mantissa bits), with alpha from the stored colour."""
     out = dict(rec)
     for name in ("color", "weight", "anisotropy", "radius_m", "sigma_t_cm"):
         out[name] = maps.round_mantissa(rec[name].astype(np.float32), bits).astype(np.float64)
+        if half and name in ("color", "weight", "anisotropy"):  # baking.HALF_KINDS
+            out[name] = rec[name].astype(np.float16).astype(np.float64)
     out["alpha"] = cycles.rw_albedo_forward(np.clip(out["color"], 0, 1), np.clip(out["anisotropy"], 0, 0.9)[..., None])
     return out
 
 
 def compare_fast_exact(table: texel_table.TexelTable, model: inference.SkinModel, rgb: np.ndarray) -> dict:
-    """Fast-path records (as stored: 16 mantissa bits) against exact evaluation for albedo rows ``rgb`` (n, 3):
-    appearance ΔE76 (mean, max), largest parameter differences, fraction of rows inside the table."""
+    """Fast-path records (as stored: half floats and 16 mantissa bits) against exact evaluation for albedo rows
+    ``rgb`` (n, 3): appearance ΔE76 (mean, max), largest parameter differences, fraction of rows inside the table."""
     fast, inside = _fast_records(table, rgb)
     fast = _as_stored(fast, baking.FAST_MANTISSA_BITS)
     exact = texel_records.exact_records(model, rgb[inside], ("cycles", "physical", "spectral"), table.options)
@@ -288,7 +291,8 @@ def _bake_4k_rows(quick: bool, model: inference.SkinModel, texture: np.ndarray) 
                                "+ the same read and write)",
                      "ratio": f"{exact_proj / wall:.1f}x",
                      "error": f"vs exact on {c['n']:,} of its texels: {_errors(c)}",
-                     "notes": f"{runs} inference runs; maps {size:.0f} MB (PIZ, 16 mantissa bits); {load0} before, "
+                     "notes": f"{runs} inference runs; maps {size:.0f} MB (PIZ; colour, weight, anisotropy half, "
+                              f"radius float32 with 16 mantissa bits); {load0} before, "
                               f"{_load()} after (2 cores shared with other jobs: wall > CPU / 2)"})
         raw_out = Path(tmp) / "raw"
         raw_out.mkdir()
@@ -301,6 +305,17 @@ def _bake_4k_rows(quick: bool, model: inference.SkinModel, texture: np.ndarray) 
                      "ratio": f"{cpu / raw_cpu:.1f}x CPU", "error": "identical values (lossless either way)",
                      "notes": f"maps {raw_size:.0f} MB uncompressed vs {size:.0f} MB PIZ; {_load()}"})
         for f in raw.files:
+            f.unlink()
+        fl_out = Path(tmp) / "float"
+        fl_out.mkdir()
+        fl, fl_wall, fl_cpu = _timed_bake(png, fl_out, baking.BakeOptions(threads=2, half_maps=False))
+        fl_size = sum(f.stat().st_size for f in fl.files) / 1e6
+        rows.append({"workload": f"the same {side}x{side} bake with --float-maps (every map float32, 16 mantissa bits)",
+                     "ours": f"{fl_wall:.1f} s wall, {fl_cpu:.1f} s CPU (write {fl.timings_s['write']:.1f} s)",
+                     "anchor": f"half colour/weight/anisotropy: {wall:.1f} s wall, {cpu:.1f} s CPU",
+                     "ratio": f"{fl_cpu / cpu:.1f}x CPU", "error": "half step <= 2.4e-4 (in the error column above)",
+                     "notes": f"maps {fl_size:.0f} MB vs {size:.0f} MB; {_load()}"})
+        for f in fl.files:
             f.unlink()
         before = inference.inference_counts()["runs"]
         t0 = time.perf_counter()

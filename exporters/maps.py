@@ -109,11 +109,19 @@ def set_threads(threads: int) -> None:
     oiio.attribute("exr_threads", n)
 
 
-def _exr_spec(width: int, height: int, channels, units: str, compression: str = DEFAULT_COMPRESSION
-              ) -> oiio.ImageSpec:
+#: Pixel types of the maps: 32-bit float, or 16-bit half (10 mantissa bits: relative 4.9e-4; subnormal,
+#: with an absolute step of 6e-8, below 6.1e-5; largest 65504): half suits values bounded to [-1, 1].
+PIXEL_TYPES = ("float", "half")
+HALF_MAX = 65504.0
+
+
+def _exr_spec(width: int, height: int, channels, units: str, compression: str = DEFAULT_COMPRESSION,
+              pixel_type: str = "float") -> oiio.ImageSpec:
     if compression not in COMPRESSIONS:
         raise ValueError(f"EXR compression must be one of {COMPRESSIONS}, not {compression!r}")
-    spec = oiio.ImageSpec(width, height, len(channels), "float")
+    if pixel_type not in PIXEL_TYPES:
+        raise ValueError(f"EXR pixel type must be one of {PIXEL_TYPES}, not {pixel_type!r}")
+    spec = oiio.ImageSpec(width, height, len(channels), pixel_type)
     spec.channelnames = tuple(channels)
     spec.attribute("oiio:ColorSpace", "Non-Color")
     spec.attribute("spectral_skin_sss:colorspace", "Non-Color")
@@ -474,7 +482,8 @@ def read_exr(path: str | os.PathLike, channels: tuple[str, ...] | list[str] | No
 
 
 class MapStream:
-    """A float32 EXR map written band by band (memory bounded) to a temporary file beside ``path``.
+    """A float32 (or half: ``pixel_type``) EXR map written band by band (memory bounded) to a temporary file
+    beside ``path``.
 
     Nothing appears under ``path`` until :func:`publish_maps`; :meth:`discard` removes the temporary file.
     Checks at creation: the folder exists and is writable, and ``path`` does not exist (unless
@@ -482,8 +491,10 @@ class MapStream:
     """
 
     def __init__(self, path: str | os.PathLike, width: int, height: int, channels: tuple[str, ...] | list[str],
-                 units: str, overwrite: bool = False, compression: str = DEFAULT_COMPRESSION) -> None:
+                 units: str, overwrite: bool = False, compression: str = DEFAULT_COMPRESSION,
+                 pixel_type: str = "float") -> None:
         self.path = Path(path)
+        self.pixel_type = pixel_type
         self.channels = tuple(channels)
         self.units = units
         self.width, self.height = int(width), int(height)
@@ -496,7 +507,7 @@ class MapStream:
         self._rows = 0
         self._out = oiio.ImageOutput.create(str(self.tmp))
         if self._out is None or not self._out.open(str(self.tmp), _exr_spec(self.width, self.height, self.channels,
-                                                                             units, compression)):
+                                                                             units, compression, pixel_type)):
             err = oiio.geterror() or (self._out.geterror() if self._out else "")
             self.discard()
             raise OSError(f"cannot write {self.path}: {err}")
@@ -513,6 +524,9 @@ class MapStream:
                              f"{self.width} x {self.height} x {len(self.channels)} map at row {self._rows}")
         if not finite and not np.all(np.isfinite(arr)):
             raise ValueError(f"map {self.path.name}: NaN/Inf values")
+        if self.pixel_type == "half" and np.any(np.abs(arr) > HALF_MAX):
+            raise ValueError(f"map {self.path.name}: values beyond the half-float range (|v| > {HALF_MAX:g}): "
+                             "write it as float")
         if not self._out.write_scanlines(self._rows, self._rows + h, 0, np.ascontiguousarray(arr)):
             raise OSError(f"cannot write {self.path}: {self._out.geterror()}")
         self._rows += h

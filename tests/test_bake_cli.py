@@ -82,9 +82,10 @@ def test_cycles_target_maps_and_record(skin_png, tmp_path):
         assert not np.array_equal(c[0, 0], c[1, 1])
 
 
-@pytest.mark.parametrize("path, rtol", [("table", 3e-5), ("exact", 1e-5)])
-def test_all_targets_are_consistent(skin_png, tmp_path, path, rtol):
-    # fast-path maps keep 16 mantissa bits (relative 7.6e-6 each; radius, sigma_t and 1 - g combine to ~1.6e-5)
+@pytest.mark.parametrize("path, rtol, half_atol", [("table", 3e-5, 2.5e-4), ("exact", 1e-5, 1e-7)])
+def test_all_targets_are_consistent(skin_png, tmp_path, path, rtol, half_atol):
+    # fast-path maps keep 16 mantissa bits (relative 7.6e-6 each; radius, sigma_t and 1 - g combine to ~1.6e-5);
+    # its colour, weight and anisotropy maps are half floats (rounding <= 2^-12 below 1)
     out = tmp_path / "all"
     proc = bake("--albedo", str(skin_png), "--out", str(out), "--target", "cycles,physical,spectral",
                 "--unit-scale", "0.01", *(["--exact"] if path == "exact" else []))
@@ -102,9 +103,9 @@ def test_all_targets_are_consistent(skin_png, tmp_path, path, rtol):
         color = maps.read_exr(out / f"face_k{k}_color.exr")[0].astype(np.float64)
         radius = maps.read_exr(out / f"face_k{k}_radius.exr")[0].astype(np.float64)
         aniso = maps.read_exr(out / f"face_k{k}_anisotropy.exr")[0].astype(np.float64)
-        np.testing.assert_allclose(g, np.repeat(aniso, 3, axis=2), atol=1e-7)
+        np.testing.assert_allclose(g, np.repeat(aniso, 3, axis=2), atol=half_atol)
         # Cycles' own forward maps (exporters.cycles, kernel formulas) turn the node inputs back into the medium
-        np.testing.assert_allclose(cycles.rw_albedo_forward(color, g), alpha, atol=2e-5)
+        np.testing.assert_allclose(cycles.rw_albedo_forward(color, g), alpha, atol=2e-5 + 4 * half_atol)
         np.testing.assert_allclose(4 * np.pi / (sigma_t * 100 * 0.01 * (1 - g)), radius, rtol=rtol)
         assert np.all((alpha >= 0.2 - 1e-6) & (alpha < 1))
 

@@ -86,10 +86,40 @@ def test_colours_outside_the_table_are_evaluated_exactly(tmp_path):
     fast = bake(png, tmp_path / "fast")
     bake(png, tmp_path / "exact", exact=True)
     assert fast.stats["texels_evaluated_exactly"] == 2 and fast.stats["texels_from_table"] == 2
-    for name in ("odd_k1_color.exr", "odd_k2_radius.exr"):
+    # the non-skin texels: exact, stored as half (colour: step 2^-11 relative) or with 16 mantissa bits (radius)
+    for name, rtol in (("odd_k1_color.exr", 5e-4), ("odd_k2_radius.exr", 2e-5)):
         a, b = maps.read_exr(tmp_path / "fast" / name)[0], maps.read_exr(tmp_path / "exact" / name)[0]
-        np.testing.assert_allclose(a[0, 1], b[0, 1], rtol=2e-5)  # the non-skin texels: exact (16-bit mantissa)
-        np.testing.assert_allclose(a[1, 0], b[1, 0], rtol=2e-5)
+        np.testing.assert_allclose(a[0, 1], b[0, 1], rtol=rtol)
+        np.testing.assert_allclose(a[1, 0], b[1, 0], rtol=rtol)
+
+
+def _pixel_type(path: Path) -> str:
+    import OpenImageIO as oiio
+
+    inp = oiio.ImageInput.open(str(path))
+    try:
+        return str(inp.spec().format)
+    finally:
+        inp.close()
+
+
+def test_fast_bake_stores_bounded_maps_as_half_and_float_maps_keeps_float32(skin_png, tmp_path):
+    """Colour, weight and anisotropy maps (bounded to [-1, 1]) are half floats on the fast path, radius (which
+    spans decades, down to 1e-5 m) stays float32; --float-maps and exact bakes write float32 throughout."""
+    fast = bake(skin_png, tmp_path / "fast")
+    types = {f.name.split("_", 2)[-1]: _pixel_type(f) for f in fast.files if f.suffix == ".exr"}
+    assert types == {"color.exr": "half", "weight.exr": "half", "anisotropy.exr": "half", "radius.exr": "float"}
+    full = bake(skin_png, tmp_path / "full", half_maps=False)
+    assert {_pixel_type(f) for f in full.files if f.suffix == ".exr"} == {"float"}
+    exact = bake(skin_png, tmp_path / "exact", exact=True)
+    assert {_pixel_type(f) for f in exact.files if f.suffix == ".exr"} == {"float"}
+    for name in ("skin_k1_color.exr", "skin_k2_weight.exr"):
+        a, b = maps.read_exr(tmp_path / "fast" / name)[0], maps.read_exr(tmp_path / "full" / name)[0]
+        assert 0 < np.abs(a - b).max() <= 2.5e-4  # half's rounding error below 1: at most 2^-12 = 2.4e-4
+    stream = maps.MapStream(tmp_path / "h.exr", 2, 1, ("Y",), "1", pixel_type="half")
+    with pytest.raises(ValueError, match="half-float range"):
+        stream.write_rows(np.array([[1.0, 7e4]]))
+    stream.discard()
 
 
 def test_table_of_another_model_is_refused_with_a_warning(skin_png, tmp_path):

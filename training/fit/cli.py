@@ -4,9 +4,9 @@
         prints {"fits": [{"K": 1, "shape_rmse": ..., "refl_rel_err": ...}, ...]}: means over the
         wavelengths of the tone file (376 for ``python -m training simulate``).
     python -m training fit --dataset DIR --lut LUT.npz --k 1,2,3 --out DIR [--split train,validation]
-        [--shard I/N] [--wavelength-stride S] [--anchor-every A] [--max-tones M]: every tone x wavelength
-        of the dataset's complete split files into OUT/<split>_fits.h5 (training/fit/dataset.py);
-        resumable, shardable.
+        [--shard I/N] [--wavelength-stride S] [--anchor-every A] [--max-tones M] [--select first|lightness]:
+        every tone x wavelength of the dataset's complete split files into OUT/<split>_fits.h5
+        (training/fit/dataset.py); resumable, shardable.
     python -m training fit --dataset DIR --out DIR --summary: mean errors per split, K and band of those
         fits, with the Monte Carlo noise floor of the shape error; writes OUT/summary.json.
 
@@ -64,7 +64,10 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--anchor-every", type=int, default=0,
                    help="--dataset: full schedule at every n-th fitted wavelength, warm starts from the nearest "
                         "one elsewhere (default 0: full schedule everywhere; 12 is ~4x faster, same losses)")
-    p.add_argument("--max-tones", type=int, default=None, help="--dataset: fit the first n tones of each split")
+    p.add_argument("--max-tones", type=int, default=None, help="--dataset: fit n tones of each split (see --select)")
+    p.add_argument("--select", choices=("first", "lightness"), default="first",
+                   help="--dataset with --max-tones: the first n tones (default), or an equal share of each "
+                        "5-unit band of the albedo's L* (more light skin than the split holds)")
     p.add_argument("--refl-loss", choices=("relative", "paper"), default="relative",
                    help="reflectance term: ((R_hat - R)/R)^2 (default) or the paper's (R_hat - R)^2")
     p.add_argument("--summary", action="store_true",
@@ -174,6 +177,7 @@ def _fit_dataset(args: argparse.Namespace, ks: tuple[int, ...], lut_path: Path) 
             wavelength_stride=args.wavelength_stride,
             anchor_every=args.anchor_every,
             max_tones=args.max_tones,
+            select=args.select,
             relative_refl=args.refl_loss == "relative",
             progress=not args.no_progress,
         )

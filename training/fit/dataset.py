@@ -19,8 +19,12 @@ Speed (what makes a laptop run possible; measured in the README):
   K.  The parameters vary slowly with wavelength, so the warm start is already in the right basin;
   ``anchor_every`` = 0 fits every wavelength with the full schedule.
 * ``wavelength_stride`` = s: fit every s-th wavelength only (the trainer's L_param then uses those).
-* ``max_tones`` = m: fit the first m tones of the split only (a Halton prefix of the training split is
-  itself stratified; the validation tones are uniform random in any order).
+* ``max_tones`` = m: fit m tones of the split only, chosen by ``select``: ``"first"``, the first m (a
+  Halton prefix of the training split is stratified in the biophysical parameters; the validation tones
+  are uniform random in any order), or ``"lightness"``, an equal share of each 5-unit band of the
+  albedo's CIE L* (``select_tones``).  Uniform melanin makes half of the tones near-black (L* < 10) and
+  1.6 % lighter than L* 50 in the laptop set, where most artists' textures lie; ``"lightness"`` gives
+  those tones their share of the decoder's training.
 
 Resumable: tones are fitted a chunk at a time and marked done; rerunning the same command skips them,
 and a file made with other settings is never overwritten (ValueError).  Shards take every n-th tone.
@@ -42,6 +46,43 @@ from training.sim.lut_interp import LookupTables
 
 SPLITS = ("train", "validation")
 
+
+
+#: Width of the CIE L* bands of ``select_tones(how="lightness")``.
+LIGHTNESS_BAND: float = 5.0
+SELECTIONS = ("first", "lightness")
+
+
+def select_tones(albedo_rgb: np.ndarray, m: int | None, how: str = "first") -> np.ndarray:
+    """Positions (sorted, int64) of the ``m`` tones to fit among the split's tones (``albedo_rgb`` (N, 3),
+    linear sRGB under D65); all of them when ``m`` is None or >= N.
+
+    ``"lightness"``: the tones are grouped in bands of ``LIGHTNESS_BAND`` units of L*; each band gets an
+    equal share of ``m`` (a band with fewer tones gives all it has and its remainder goes to the others),
+    taken in split order (the Halton prefix within the band)."""
+    if how not in SELECTIONS:
+        raise ValueError(f"select must be one of {SELECTIONS}, got {how!r}")
+    n = len(albedo_rgb)
+    if m is None or m >= n:
+        return np.arange(n)
+    if how == "first":
+        return np.arange(m)
+    from exporters.colorimetry import linear_srgb_to_lab
+
+    band = np.floor(linear_srgb_to_lab(np.clip(albedo_rgb, 0.0, 1.0))[:, 0] / LIGHTNESS_BAND).astype(int)
+    members = [np.flatnonzero(band == b) for b in np.unique(band)]
+    quota = np.zeros(len(members), dtype=int)
+    left = m
+    while left > 0:  # water-filling: equal shares, capped by what each band holds
+        open_ = [j for j in range(len(members)) if quota[j] < len(members[j])]
+        share = max(left // len(open_), 1)
+        for j in open_:
+            take = min(share, len(members[j]) - quota[j], left)
+            quota[j] += take
+            left -= take
+            if left == 0:
+                break
+    return np.sort(np.concatenate([mem[:q] for mem, q in zip(members, quota, strict=True)]))
 
 
 def out_path(out: Path, split: str, shard: tuple[int, int]) -> Path:
@@ -150,6 +191,7 @@ def fit_split(
     wavelength_stride: int = 1,
     anchor_every: int = 0,
     max_tones: int | None = None,
+    select: str = "first",
     relative_refl: bool = True,
     progress: bool = True,
 ) -> Path:
@@ -164,14 +206,14 @@ def fit_split(
             raise ValueError(f"{src} is incomplete: finish the dataset first")
         if "profile_stderr" not in f:
             raise ValueError(f"{src} has no profile_stderr (made by an older version): rebuild the dataset")
-        n_all = f["tone"].shape[0]
         tones_all = f["tone"][:]
+        albedo_all = f["albedo_rgb"][:]
         wl = f["wavelength_nm"][:]
         edges = f["r_edges_cm"][:]
         photons = float(f.attrs["photons"])
         src_attrs = {f"dataset_{k}": str(v) for k, v in f.attrs.items()}
     i, n = shard
-    index = np.arange(n_all if max_tones is None else min(max_tones, n_all))[i::n]
+    index = select_tones(albedo_all, max_tones, select)[i::n]
     widx = np.arange(0, len(wl), wavelength_stride)
     attrs = {
         "ks": ",".join(map(str, ks)),
@@ -180,6 +222,7 @@ def fit_split(
         "wavelength_stride": wavelength_stride,
         "anchor_every": anchor_every,
         "max_tones": "all" if max_tones is None else max_tones,
+        "select": select,
         "lut_sha256": sha256_file(lut_path),
         "shard": f"{i}/{n}",
         **src_attrs,
