@@ -145,3 +145,29 @@ def test_cli_dataset_errors(setup, capsys):
     with pytest.raises(SystemExit) as exc:  # argparse: usage message and exit status 2
         main(["--dataset", str(ds), "--lut", str(lut_path), "--out", str(d / "o"), "--shard", "2/2"])
     assert exc.value.code == 2 and "--shard" in capsys.readouterr().err
+
+
+def test_lightness_selection_gives_each_lstar_band_its_share():
+    """--select lightness: bands of 5 L* units get equal shares (a band short of tones gives all it has, the
+    rest goes to the others); within a band, split order; 'first' is the prefix."""
+    from exporters.colorimetry import linear_srgb_to_lab
+    from training.fit.dataset import select_tones
+
+    rng = np.random.default_rng(0)
+    # 900 dark tones (L* ~ 10-25), 40 mid (L* ~ 40-45), 4 light (L* ~ 70-75): like uniform melanin
+    grey = np.concatenate([rng.uniform(0.012, 0.045, 900), rng.uniform(0.12, 0.14, 40), rng.uniform(0.41, 0.48, 4)])
+    albedo = np.repeat(grey[:, None], 3, axis=1) * np.array([1.1, 0.95, 0.9])
+    band = np.floor(linear_srgb_to_lab(albedo)[:, 0] / 5).astype(int)
+    np.testing.assert_array_equal(select_tones(albedo, 100, "first"), np.arange(100))
+    np.testing.assert_array_equal(select_tones(albedo, None, "lightness"), np.arange(len(grey)))
+    pick = select_tones(albedo, 100, "lightness")
+    assert len(pick) == len(np.unique(pick)) == 100 and np.all(np.diff(pick) > 0)
+    counts = {b: int(np.sum(band[pick] == b)) for b in np.unique(band)}
+    assert set(range(940, 944)) <= set(pick.tolist())  # every light tone is taken
+    full = [c for b, c in counts.items() if c < np.sum(band == b)]
+    assert max(full) - min(full) <= 1  # the bands that could give more get equal shares
+    for b in np.unique(band):  # split order within a band
+        members = np.flatnonzero(band == b)
+        np.testing.assert_array_equal(pick[band[pick] == b], members[: counts[b]])
+    with pytest.raises(ValueError, match="select"):
+        select_tones(albedo, 10, "darkest")
