@@ -2,7 +2,9 @@
 
 Each concept owns its benchmarks in a ``bench`` module exposing ``benchmarks(quick: bool) -> list[dict]``
 with keys workload, ours, anchor, ratio, error, notes (human-readable, units included).  This module only
-collects them, prints the machine and the versions, and writes the table (SPEC §6).
+collects them, prints the machine and the versions, and writes the tables (SPEC §6): one section per module,
+headed by the module's name, when it ran, in which mode and under which load.  ``--only M ...`` re-runs those
+modules and replaces their sections in an existing file, keeping the others (each keeps its own stamp).
 """
 
 from __future__ import annotations
@@ -12,6 +14,7 @@ import datetime as dt
 import importlib
 import os
 import platform
+import re
 import sys
 import time
 import traceback
@@ -77,31 +80,44 @@ def table(rows: list[dict]) -> str:
     return "\n".join(out)
 
 
+SECTION = re.compile(r"^## `([\w.]+)`$", re.M)
+
+
+def section(name: str, rows: list[dict], quick: bool, seconds: float) -> str:
+    """One module's section: heading, stamp (date, mode, run time, load average) and table."""
+    load = " ".join(f"{x:.1f}" for x in os.getloadavg())
+    stamp = (f"Measured {dt.datetime.now().isoformat(timespec='seconds')} by `python -m training bench"
+             f"{' --quick' if quick else ''} --only {name}` in {seconds:.0f} s; load average before the next "
+             f"module: {load}.")
+    return f"## `{name}`\n\n{stamp}\n\n{table(rows)}\n"
+
+
+def read_sections(text: str) -> dict[str, str]:
+    """The module sections of an existing results file, by module name, in file order."""
+    marks = list(SECTION.finditer(text))
+    return {m.group(1): text[m.start(): marks[i + 1].start() if i + 1 < len(marks) else len(text)].rstrip() + "\n"
+            for i, m in enumerate(marks)}
+
+
 def main(argv: list[str]) -> int:
     parser = argparse.ArgumentParser(prog="python -m training bench", description=__doc__.splitlines()[0])
     parser.add_argument("--out", type=Path, default=Path("bench/results.md"), help="Markdown file to write")
     parser.add_argument("--quick", action="store_true", help="small sizes (about a minute per module)")
-    parser.add_argument("--only", nargs="*", default=None, help="module names to run (default: all)")
+    parser.add_argument("--only", nargs="*", default=None,
+                        help="module names to run (default: all); their sections replace those in --out")
     parser.add_argument("--seed", type=int, default=0, help="CLI contract only: each benchmark uses a fixed seed")
     args = parser.parse_args(argv)
     modules = args.only or BENCH_MODULES
-    rows, started = [], time.perf_counter()
+    sections = read_sections(args.out.read_text()) if args.only and args.out.is_file() else {}
     for name in modules:
         print(f"[bench] {name} ...", file=sys.stderr, flush=True)
-        rows.extend(run_module(name, args.quick))
-    text = "\n".join(
-        [
-            "# Benchmarks",
-            "",
-            f"Written by `python -m training bench{' --quick' if args.quick else ''}` on "
-            f"{dt.datetime.now().isoformat(timespec='seconds')} in {time.perf_counter() - started:.0f} s.",
-            "",
-            *machine_lines(),
-            "",
-            table(rows),
-            "",
-        ]
-    )
+        started = time.perf_counter()
+        rows = run_module(name, args.quick)
+        sections[name] = section(name, rows, args.quick, time.perf_counter() - started)
+    order = [m for m in BENCH_MODULES if m in sections] + [m for m in sections if m not in BENCH_MODULES]
+    text = "\n".join(["# Benchmarks", "", "Written by `python -m training bench` (`make bench`); each section says "
+                      "when, how and under which load it was measured.", "", *machine_lines(), "",
+                      *(sections[m] for m in order)])
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(text)
     print(text)
