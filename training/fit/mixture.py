@@ -81,6 +81,10 @@ def components(lut: LookupTables, m: Mixture, r_cm: torch.Tensor) -> tuple[torch
     return lut.profile(r_cm, m.alpha, m.g, m.sigma_t), lut.reflectance(m.alpha, m.g)
 
 
+#: The fitter's mixture profile, recorded where fits are cached (training.validate) so that fits made with
+#: another one are not reused: "w_k R_k" = sum_k w_k R_k P_k / sum_k w_k R_k (before 2026-11-22: "w_k").
+PROFILE_WEIGHTING: str = "w_k R_k"
+
 #: Added to every R_k in the profile weights v_k, so that v stays defined (and sums to 1) when all R_k
 #: vanish (alpha -> 0); it shifts v by less than 1e-10 wherever R_k > 1e-2.
 MIX_R_EPS: float = 1e-12

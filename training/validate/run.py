@@ -105,6 +105,7 @@ def run(opts: Options) -> dict:
     check_outputs(opts.out, opts.overwrite)
     files = model_files(opts.model_dir)
     torch.set_num_threads(opts.threads)
+    from training.fit.mixture import PROFILE_WEIGHTING
     from training.sim.lut_interp import LookupTables
 
     _log(opts, f"loading LUT {opts.lut}")
@@ -117,7 +118,7 @@ def run(opts: Options) -> dict:
     timings = {"lut_load": time.perf_counter() - t0}
     # the model is not in the manifest: a new model re-renders only its own rows (gate.render_tone)
     models = {"sha256": {n: sha256_file(p) for n, p in files.items() if n != "card"}, "card": _card_info(files["card"])}
-    manifest = {"config": G.config_record(cfg), "lut_sha256": lut_sha}
+    manifest = {"config": G.config_record(cfg), "lut_sha256": lut_sha, "fit_profile_weighting": PROFILE_WEIGHTING}
     cache = G.Cache(opts.out / "cache", manifest)
     cache.open(reset=opts.overwrite)
     tones = G.gate_tones(cfg.tones)
