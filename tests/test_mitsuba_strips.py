@@ -15,6 +15,14 @@ from training.skin.tones import load_tones
 from training.validate import strips
 
 FIGURES = Path(__file__).resolve().parent.parent / "docs" / "figures"
+#: Known defect of the shipped laptop model (issue 6), measured 2026-11-22: for R01 (f_mel 0.001, lighter than
+#: any fitted training tone) at 900 nm the decoder gives g ~ 0, sigma_t 216-242 cm^-1, alpha 0.96-0.98
+#: (sigma_s' ~ 230, sigma_a ~ 5-10 cm^-1) where the fits of the nearest light tones say g 0.88, sigma_t 83-90,
+#: alpha 0.995 (sigma_s' ~ 11, sigma_a ~ 0.45): 20x too dense, so the sphere stays dark in the NIR.  The UV
+#: half is right now (sigma_t 227-2568 cm^-1: opaque).  L_param averages the fits' degenerate (alpha, g,
+#: sigma_t) choices; weighting it by the target weights is the next thing to try.
+NIR_DEFECT = ("known defect of the shipped laptop model (issue 6): R01's NIR media are ~20x too dense, so the "
+              "sphere does not glow at 900 nm (see NIR_DEFECT's comment)")
 REGENERATE = "regenerate with `python -m training validate --mitsuba --out docs/figures --overwrite`"
 
 
@@ -23,9 +31,7 @@ def test_committed_strips_are_for_the_shipped_model():
     assert rec["decoder_sha256"] == sha256_file(em.DEFAULT_DECODER), f"strips are for another model: {REGENERATE}"
 
 
-@pytest.mark.xfail(strict=True, reason="known defect of the shipped laptop model (issue 6): its decoder gives the "
-                   "lightest tones sigma_t ~ 30 cm^-1 in the UV and 260-1300 cm^-1 in the NIR (the fits: 80-130), "
-                   "so R01 renders UV-translucent and NIR-opaque; light tones are ~1 % of the 816 fitted tones")
+@pytest.mark.xfail(strict=True, reason=NIR_DEFECT)
 def test_committed_strips_show_the_physics():
     rec = json.loads((FIGURES / strips.FILES["metrics"]).read_text())
     assert rec["decoder_sha256"] == sha256_file(em.DEFAULT_DECODER), f"strips are for another model: {REGENERATE}"
@@ -44,9 +50,7 @@ def test_committed_strips_show_the_physics():
     assert np.mean(t["nir"][:3]) > np.mean(t["nir"][-3:])
 
 
-@pytest.mark.xfail(strict=True, reason="known defect of the shipped laptop model (issue 6): its decoder gives the "
-                   "lightest tones sigma_t ~ 30 cm^-1 in the UV and 260-1300 cm^-1 in the NIR (the fits: 80-130), "
-                   "so R01 renders UV-translucent and NIR-opaque; light tones are ~1 % of the 816 fitted tones")
+@pytest.mark.xfail(strict=True, reason=NIR_DEFECT)
 def test_live_render_uv_opaque_nir_translucent():
     """A small live render (scalar variant) of the lightest tone: the far side of the sphere glows in the
     NIR and stays black in the UV; the light side is on the left of the image (light towards -x)."""
