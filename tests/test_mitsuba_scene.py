@@ -66,7 +66,9 @@ def test_llvm_paired_specular_cancels_the_boundary_noise():
     assert paired.stderr < 0.7 * exact.stderr
     # a slab that scatters nothing: the twin is the same scene, every sample cancels exactly
     zero = em.slab_reflectance(0.0, 0.0, spp=4096, variant="llvm_ad_rgb", batches=4, specular="paired")
-    assert zero.value == 0.0
+    # nothing enters an absorbing slab: what is left is the float32 rounding of the paired specular
+    # subtraction (seen: 1.2e-8 once under load, 0 otherwise; the specular term itself is ~0.03)
+    assert abs(zero.value) <= 1e-6
 
 
 def test_decoder_mixture_on_and_off_grid():
