@@ -64,7 +64,7 @@ def test_llvm_paired_specular_cancels_the_boundary_noise():
     for est in (paired, exact):
         assert abs(est.value - ref) < 4 * est.stderr + 5e-4, (est, ref)
     assert paired.stderr < 0.7 * exact.stderr
-    # a slab that scatters nothing: the twin is the same scene, every sample cancels exactly
+    # a slab that scatters nothing: the twin is the same scene, so the samples cancel
     zero = em.slab_reflectance(0.0, 0.0, spp=4096, variant="llvm_ad_rgb", batches=4, specular="paired")
     # nothing enters an absorbing slab: what is left is the float32 rounding of the paired specular
     # subtraction (seen: 1.2e-8 once under load, 0 otherwise; the specular term itself is ~0.03)
