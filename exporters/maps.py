@@ -225,6 +225,32 @@ def _split_channels(pixels: np.ndarray, spec: oiio.ImageSpec, path: Path) -> tup
     raise ImageError(f"{path}: unsupported channel layout {spec.channelnames}")
 
 
+def _read_pixels(path: Path, colorspace: str, integer_types: tuple[str, ...]) -> tuple[oiio.ImageSpec, str, object]:
+    """Open an albedo image (alpha unassociated) and read all its channels: (spec, the pixel type read, the
+    pixels).  Files whose type is in ``integer_types`` are read in that type (the callers scale them in
+    float64: OIIO's float conversion is float32), others as float.  Errors as :func:`read_albedo`."""
+    if colorspace not in ("auto", "srgb", "linear"):
+        raise ValueError(f"colorspace must be auto, srgb or linear, not {colorspace!r}")
+    if not path.is_file():
+        raise FileNotFoundError(f"albedo image not found: {path}")
+    config = oiio.ImageSpec()
+    config.attribute("oiio:UnassociatedAlpha", 1)
+    inp = oiio.ImageInput.open(str(path), config)
+    if inp is None:
+        raise ImageError(f"cannot read image {path}: {oiio.geterror()}")
+    try:
+        spec = inp.spec()
+        fmt = str(spec.format)
+        native = fmt if fmt in integer_types else "float"
+        pixels = inp.read_image(0, 0, 0, spec.nchannels, native)
+        err = inp.geterror()
+    finally:
+        inp.close()
+    if pixels is None or err:
+        raise ImageError(f"cannot read pixels of {path}: {err}")
+    return spec, native, pixels
+
+
 def read_albedo(path: str | os.PathLike, colorspace: ColorSpace = "auto",
                 clamp_negative: bool = False) -> AlbedoImage:
     """Read an albedo image (8/16-bit PNG or TIFF, float EXR, ...) as linear sRGB float64.
@@ -238,26 +264,7 @@ def read_albedo(path: str | os.PathLike, colorspace: ColorSpace = "auto",
       ImageError, or clamped to 0 and counted when ``clamp_negative``.
     """
     path = Path(path)
-    if colorspace not in ("auto", "srgb", "linear"):
-        raise ValueError(f"colorspace must be auto, srgb or linear, not {colorspace!r}")
-    if not path.is_file():
-        raise FileNotFoundError(f"albedo image not found: {path}")
-    config = oiio.ImageSpec()
-    config.attribute("oiio:UnassociatedAlpha", 1)
-    inp = oiio.ImageInput.open(str(path), config)
-    if inp is None:
-        raise ImageError(f"cannot read image {path}: {oiio.geterror()}")
-    try:
-        spec = inp.spec()
-        fmt = str(spec.format)
-        # Integer files are read in their own type and scaled in float64 (OIIO's float conversion is float32).
-        native = fmt if fmt in _INT_MAX else "float"
-        pixels = inp.read_image(0, 0, 0, spec.nchannels, native)
-        err = inp.geterror()
-    finally:
-        inp.close()
-    if pixels is None or err:
-        raise ImageError(f"cannot read pixels of {path}: {err}")
+    spec, native, pixels = _read_pixels(path, colorspace, tuple(_INT_MAX))
     pixels = np.asarray(pixels, dtype=np.float64).reshape(spec.height, spec.width, spec.nchannels)
     if native in _INT_MAX:
         pixels /= _INT_MAX[native]
@@ -353,25 +360,8 @@ def read_albedo_indexed(path: str | os.PathLike, colorspace: ColorSpace = "auto"
     the codes, float files by a hash of the float32 values.  Errors as :func:`read_albedo`.
     """
     path = Path(path)
-    if colorspace not in ("auto", "srgb", "linear"):
-        raise ValueError(f"colorspace must be auto, srgb or linear, not {colorspace!r}")
-    if not path.is_file():
-        raise FileNotFoundError(f"albedo image not found: {path}")
-    config = oiio.ImageSpec()
-    config.attribute("oiio:UnassociatedAlpha", 1)
-    inp = oiio.ImageInput.open(str(path), config)
-    if inp is None:
-        raise ImageError(f"cannot read image {path}: {oiio.geterror()}")
-    try:
-        spec = inp.spec()
-        fmt = str(spec.format)
-        native = fmt if fmt in ("uint8", "uint16") else "float"
-        pixels = inp.read_image(0, 0, 0, spec.nchannels, native)
-        err = inp.geterror()
-    finally:
-        inp.close()
-    if pixels is None or err:
-        raise ImageError(f"cannot read pixels of {path}: {err}")
+    spec, native, pixels = _read_pixels(path, colorspace, ("uint8", "uint16"))
+    fmt = str(spec.format)
     colour, has_alpha = _colour_channels(spec, path)
     pixels = np.asarray(pixels).reshape(spec.height, spec.width, spec.nchannels)
     rows = pixels[..., colour].reshape(-1, len(colour))
