@@ -430,8 +430,6 @@ class BakeJob:
                               f"exactly (python -m exporters.texel_table --model {self.model.path} builds one; "
                               f"images with {opts.cache_min_colours:,}+ colours build and cache one themselves)")
         self.model_k = self.table.k if self.table is not None else self._load_model().k
-        self.mantissa_bits = opts.mantissa_bits or (FAST_MANTISSA_BITS if self.table is not None else 23)
-        self.half_maps = opts.half_maps if opts.half_maps is not None else self.table is not None
         self.components = list(range(1, self.model_k + 1))
         self.specs = map_specs(stem, self.model_k, self.targets)
         self._check_folder()
@@ -577,9 +575,17 @@ class BakeJob:
         self.timings["table_build"] = time.perf_counter() - t0
         self.notes.append(f"built a fast-path table for these options in {self.timings['table_build']:.0f} s, "
                           f"cached as {path} (reused by later bakes)")
-        self.mantissa_bits = self.options.mantissa_bits or FAST_MANTISSA_BITS
-        if self.options.half_maps is None:
-            self.half_maps = True
+
+    @property
+    def mantissa_bits(self) -> int:
+        """Mantissa bits the maps keep: the option, else 16 when the table is used (also one built by this bake)
+        and 23 for exact bakes."""
+        return self.options.mantissa_bits or (FAST_MANTISSA_BITS if self.table is not None else 23)
+
+    @property
+    def half_maps(self) -> bool:
+        """Whether the maps of ``HALF_KINDS`` are half floats: the option, else when the table is used."""
+        return self.options.half_maps if self.options.half_maps is not None else self.table is not None
 
     def _prune(self) -> None:
         """Drop components whose share of the colour is below ``prune_share`` for every texel (global mode)."""

@@ -152,7 +152,7 @@ def _as_stored(rec: dict, bits: int, half: bool = True) -> dict:
     out = dict(rec)
     for name in ("color", "weight", "anisotropy", "radius_m", "sigma_t_cm"):
         out[name] = maps.round_mantissa(rec[name].astype(np.float32), bits).astype(np.float64)
-        if half and name in ("color", "weight", "anisotropy"):  # baking.HALF_KINDS
+        if half and name in baking.HALF_KINDS:
             out[name] = rec[name].astype(np.float16).astype(np.float64)
     out["alpha"] = cycles.rw_albedo_forward(np.clip(out["color"], 0, 1), np.clip(out["anisotropy"], 0, 0.9)[..., None])
     return out
