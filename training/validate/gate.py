@@ -363,6 +363,7 @@ def lut_mixture_shape_error(lut, params: Params, target, rows: np.ndarray, weigh
     probability w_k produces; the fitter's loss (training.fit.mixture.mix); ``"fit"``: sum_k w_k P_k, as the paper's
     §4 text writes its loss (the fitter used it before 2026-11-22)."""
     from training.fit import loss as L
+    from training.fit.mixture import mix
 
     if weighting not in ("rendered", "fit"):
         raise ValueError("weighting must be 'rendered' or 'fit'.")
@@ -371,8 +372,10 @@ def lut_mixture_shape_error(lut, params: Params, target, rows: np.ndarray, weigh
     a, s, g, w = (torch.as_tensor(x[:, rows].T, dtype=dt) for x in (params.alpha, params.sigma_t, params.g,
                                                                    params.weight))  # (B, K)
     p_k = lut.profile(t.r_cm, a, g, s)  # (B, K, M)
-    wr = w * lut.reflectance(a, g) if weighting == "rendered" else w
-    p_hat = (wr[..., None] * p_k).sum(1) / wr.sum(1, keepdim=True).clamp_min(1e-300)
+    if weighting == "rendered":
+        p_hat = mix(p_k, lut.reflectance(a, g), w)[0]
+    else:
+        p_hat = (w[..., None] * p_k).sum(1) / w.sum(1, keepdim=True).clamp_min(1e-300)
     return L.shape_loss(p_hat, t).detach().cpu().numpy()
 
 
