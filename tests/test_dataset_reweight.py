@@ -4,6 +4,8 @@ One baseline walk (all 16 epidermis levels) serves every tone; each tone is also
 The wavelengths are a subset (every 4th) to keep the test short; the estimator is the same at all 376.
 """
 
+import json
+
 import numpy as np
 import pytest
 
@@ -96,3 +98,16 @@ def test_store_resumes_chunks_and_refuses_other_walks(tmp_path):
         np.testing.assert_array_equal(getattr(traj, key), getattr(again, key))
     with pytest.raises(ValueError, match="other photons"):
         TrajectoryStore(tmp_path / "t", photons=7, seed=3, chunk_photons=4).trajectories()
+
+
+def test_store_grows_by_whole_chunks_like_a_fresh_walk(tmp_path):
+    """A walk of whole chunks grows (more photons) and shrinks to a prefix; the result is a fresh walk's."""
+    small = TrajectoryStore(tmp_path / "t", photons=8, seed=3, chunk_photons=4).trajectories()
+    grown = TrajectoryStore(tmp_path / "t", photons=12, seed=3, chunk_photons=4).trajectories()
+    fresh = TrajectoryStore(tmp_path / "f", photons=12, seed=3, chunk_photons=4).trajectories()
+    prefix = TrajectoryStore(tmp_path / "t", photons=8, seed=3, chunk_photons=4).trajectories()
+    assert grown.photons == 12 and prefix.photons == 8
+    for key in ("offsets", "w", "bin", "path_cm", "truncated"):
+        np.testing.assert_array_equal(getattr(grown, key), getattr(fresh, key))
+        np.testing.assert_array_equal(getattr(prefix, key), getattr(small, key))
+    assert json.loads((tmp_path / "t" / "manifest.json").read_text())["photons"] == 12

@@ -17,7 +17,7 @@ from training.train.loop import checkpoint_path, load_checkpoint
 from training.train.run import TrainConfig, train
 from training.train.toy import write_toy
 
-TCFG = dict(epochs=[3, 3, 3], batch=[8, 64, 8], lr=[3e-3, 3e-3, 1e-3], synthetic=256)
+TCFG = dict(epochs=[3, 3, 3], batch=[8, 64, 8], lr=[3e-3, 3e-3, 1e-3], synthetic=256, shape_weight=1.0)
 
 
 @pytest.fixture(scope="module")
@@ -89,6 +89,7 @@ def test_staged_training_learns_freezes_and_resumes_exactly(toy, tmp_path):
     for s in (1, 2, 3):
         hist = load_checkpoint(checkpoint_path(full, s))["history"]
         assert hist[-1]["train_loss"] < hist[0]["train_loss"], (s, hist)
+    assert hist[-1]["val_shape"] < hist[0]["val_shape"]  # stage 3 learns the profiles' shape
 
     # a run killed after 2 epochs of stage 1 and after 1 epoch of stage 3, then restarted, ends identical
     part = tmp_path / "part"
@@ -123,6 +124,40 @@ def test_cli_refuses_inconsistent_runs(toy, tmp_path, capsys):
     assert "another train" in capsys.readouterr().err
     rec = json.loads((tmp_path / "r" / "run.json").read_text())
     assert rec["commands"][0].startswith("python -m training train --dataset")
+
+
+def test_shape_loss_scores_the_rendered_mixture_against_the_profiles(toy):
+    """The toy profiles are the K = 3 targets' rendered mixture: L_shape of the targets is ~0 at the
+    fitted wavelengths, and a mixture with every sigma_t doubled (a profile twice as narrow) is far off."""
+    from training.sim.lut_interp import LookupTables
+    from training.train import losses as TL
+
+    data, fits, lut_path = toy
+    lut = LookupTables.load(lut_path, dtype=torch.float32)
+    split = load_split(data, "train", fits, k=3, profiles=True)
+    assert split.shape_target.log_p.shape[:2] == (18, 188)
+    t = split.targets
+    assert float(TL.profile_shape_loss(lut, t, split.shape_target, None)) < 1e-3
+    wider = {**t, "sigma_t": 2 * t["sigma_t"]}
+    assert float(TL.profile_shape_loss(lut, wider, split.shape_target, None)) > 0.1
+    # the decoder's (N, K, 376) outputs are read at the fitted wavelengths
+    full = {k: torch.zeros(18, 3, 376).index_copy_(2, split.target_index, v) for k, v in t.items()}
+    torch.testing.assert_close(TL.profile_shape_loss(lut, full, split.shape_target, split.target_index),
+                               TL.profile_shape_loss(lut, t, split.shape_target, None))
+
+
+def test_old_run_records_resume_with_the_behaviour_they_had(toy, tmp_path):
+    """A run folder made before --shape-weight existed trained stage 3 without it: resuming it with the
+    old value works, asking for the new default does not silently change it."""
+    rec = _train(tmp_path / "r", toy, want=(1,), tcfg={**TCFG, "shape_weight": 0.0})
+    path = tmp_path / "r" / "run.json"
+    old = json.loads(path.read_text())
+    del old["train"]["shape_weight"]
+    path.write_text(json.dumps(old))
+    _train(tmp_path / "r", toy, want=(1,), tcfg={**TCFG, "shape_weight": 0.0})
+    with pytest.raises(ValueError, match="another train"):
+        _train(tmp_path / "r", toy, want=(1,), tcfg={**TCFG, "shape_weight": 1.0})
+    assert rec["train"]["shape_weight"] == 0.0
 
 
 def test_exposure_prior_adds_the_mean_log_exposure():

@@ -262,18 +262,27 @@ class TrajectoryStore:
         return self._traj
 
     def _check_manifest(self) -> None:
-        """Write the walk's settings once; refuse a folder walked with other settings."""
+        """Write the walk's settings; refuse a folder walked with other settings.
+
+        The photon count may change when every stored chunk is full: chunk j does not depend on the
+        total (its seed is ``seed * 1_000_003 + j``), so a walk grows by walking more chunks and shrinks to
+        a prefix of them.  The manifest keeps the largest count walked so far.
+        """
         manifest = {"photons": self.photons, "seed": self.seed, "chunk_photons": self.chunk,
                     "levels_cm": T_EPI_LEVELS_CM.tolist(), "mua0_sum": float(np.sum(self.mua0))}
         path = self.folder / "manifest.json"
         if path.exists():
             old = json.loads(path.read_text())
             diff = [k for k in manifest if not np.allclose(old.get(k, np.nan), manifest[k], rtol=1e-12, atol=0)]
-            if diff:
+            if diff == ["photons"] and old["photons"] % self.chunk == 0 and self.photons % self.chunk == 0:
+                manifest["photons"] = max(int(old["photons"]), self.photons)
+            elif diff:
                 raise ValueError(f"{self.folder} holds a walk with other {', '.join(diff)}: "
-                                 "use another --out folder or delete it to walk again.")
-        else:
-            path.write_text(json.dumps(manifest, indent=1))
+                                 "use another --out folder or delete it to walk again (a walk of whole "
+                                 "chunks can grow or shrink by whole chunks).")
+        tmp = path.with_name(path.name + ".tmp")
+        tmp.write_text(json.dumps(manifest, indent=1))
+        tmp.rename(path)
 
     def prepare(self) -> None:
         """Walk (or load) the trajectories now, so that chunk timings measure the reweighting alone."""

@@ -40,7 +40,7 @@ gradient, where it is not.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 
 import torch
 
@@ -93,10 +93,20 @@ class Target:
             self.noise.repeat(n),
         )
 
+    def to(self, device: str | torch.device | None = None, dtype: torch.dtype | None = None) -> Target:
+        """The same targets on another device and/or floating dtype."""
+        return Target(*(getattr(self, f.name).to(device=device, dtype=dtype) for f in fields(self)))
+
     def rows(self, idx: torch.Tensor) -> Target:
         """The targets of a subset of the problems (indices into the first axis)."""
         return Target(self.r_cm, self.log_p[idx], self.mask[idx], self.n_used[idx], self.floor[idx], self.R[idx],
                       self.r_scale[idx], self.noise[idx])
+
+    def select(self, dim: int, idx: torch.Tensor) -> Target:
+        """The targets of a subset of the problems along leading dimension ``dim`` (e.g. wavelengths)."""
+        pick = lambda x: x.index_select(dim, idx)  # noqa: E731
+        return Target(self.r_cm, pick(self.log_p), pick(self.mask), pick(self.n_used), pick(self.floor),
+                      pick(self.R), pick(self.r_scale), pick(self.noise))
 
     def subset(self, idx: torch.Tensor) -> Target:
         """The same targets on a subset of the radial bins (indices into the last axis)."""

@@ -56,6 +56,8 @@ def parser() -> argparse.ArgumentParser:
                    help="stage 2: synthetic albedos scaled by exp(U(-j, j))")
     p.add_argument("--exposure-prior", type=float, default=d.exposure_prior,
                    help="stage 2: weight of mean |ln exposure| in the colour loss (0: the paper's loss)")
+    p.add_argument("--shape-weight", type=float, default=d.shape_weight,
+                   help="stage 3: weight of the rendered profile-shape loss L_shape (0: the paper's loss)")
     p.add_argument("--k", type=int, default=3, help="mixture components (fits group K{k})")
     p.add_argument("--size", choices=sorted(SIZES), default="paper")
     p.add_argument("--seed", type=int, default=0)
@@ -77,7 +79,7 @@ def main(argv: list[str]) -> int:
     mcfg = ModelConfig(k=args.k, **SIZES[args.size])
     tcfg = TrainConfig(seed=args.seed, epochs=args.epochs, batch=args.batch, lr=args.lr,
                        synthetic=args.synthetic, exposure_jitter=args.exposure_jitter,
-                       exposure_prior=args.exposure_prior)
+                       exposure_prior=args.exposure_prior, shape_weight=args.shape_weight)
     command = "python -m training train " + shlex.join(argv)
     try:
         if 3 in want and args.fits is None:

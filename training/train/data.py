@@ -25,6 +25,8 @@ import h5py
 import numpy as np
 import torch
 
+from training.fit.loss import Target, make_target
+
 FIT_FIELDS: tuple[str, ...] = ("alpha", "g", "sigma_t", "weight")
 
 
@@ -33,7 +35,9 @@ class SplitData:
     """One split in memory (float32 tensors): tone (N, 5), R_d (N, W), albedo_rgb (N, 3) of every simulated
     tone; with fits, ``fitted`` (Nf,) the rows that have fit targets, ``targets`` {name: (Nf, K, Wf)} per
     name in ``FIT_FIELDS`` (sorted by sigma_t, row j belongs to tone ``fitted[j]``) and ``target_index``
-    (Wf,) the wavelengths (indices into the 376) they were fitted at."""
+    (Wf,) the wavelengths (indices into the 376) they were fitted at; with ``profiles``, ``shape_target`` the
+    Monte Carlo profiles of the fitted rows at those wavelengths as the fitter's loss targets (leading dims
+    (Nf, Wf), on the radial bins some problem uses; ``training.fit.loss.make_target``)."""
 
     tone: torch.Tensor
     R_d: torch.Tensor
@@ -42,6 +46,7 @@ class SplitData:
     photons: int = 0
     fitted: torch.Tensor | None = None
     target_index: torch.Tensor | None = None
+    shape_target: Target | None = None
 
     def __len__(self) -> int:
         return int(self.tone.shape[0])
@@ -49,8 +54,9 @@ class SplitData:
     def to(self, device: str | torch.device) -> SplitData:
         t = None if self.targets is None else {k: v.to(device) for k, v in self.targets.items()}
         opt = [None if x is None else x.to(device) for x in (self.fitted, self.target_index)]
+        st = None if self.shape_target is None else self.shape_target.to(device)
         return SplitData(self.tone.to(device), self.R_d.to(device), self.albedo_rgb.to(device), t, self.photons,
-                         *opt)
+                         *opt, st)
 
 
 def dataset_file(dataset_dir: Path, split: str) -> Path:
@@ -100,8 +106,28 @@ def load_fits(paths: list[Path], k: int) -> tuple[np.ndarray, np.ndarray, np.nda
             np.concatenate([p[2] for p in parts]), widx, arrays)
 
 
-def load_split(dataset_dir: Path, split: str, fits_dir: Path | None = None, k: int = 3) -> SplitData:
-    """Load the done rows of ``split`` and, with ``fits_dir``, the fit targets of those that have them."""
+def load_shape_target(path: Path, rows: np.ndarray, wavelength_index: np.ndarray, photons: int) -> Target:
+    """The fitter's profile targets (``make_target``, with the stored standard errors) of dataset rows
+    ``rows`` (Nf,) at ``wavelength_index`` (Wf,), float32, restricted to the radial bins that some
+    (tone, wavelength) uses: leading dims (Nf, Wf)."""
+    with h5py.File(path, "r") as f:
+        edges = torch.as_tensor(np.asarray(f["r_edges_cm"][:], np.float64))
+        R = torch.as_tensor(np.asarray(f["R_d"][:], np.float64)[rows][:, wavelength_index])
+        prof = torch.empty(len(rows), len(wavelength_index), edges.numel() - 1, dtype=torch.float64)
+        se = torch.empty_like(prof)
+        for j, row in enumerate(rows):  # one stored chunk per tone
+            prof[j] = torch.as_tensor(f["profile"][row][wavelength_index].astype(np.float64))
+            se[j] = torch.as_tensor(f["profile_stderr"][row][wavelength_index].astype(np.float64))
+    t = make_target(prof, R, edges, photons, stderr=se)
+    used = torch.nonzero(t.mask.flatten(0, -2).any(0)).squeeze(1)
+    t = t.subset(used)
+    return t.to(dtype=torch.float32)
+
+
+def load_split(dataset_dir: Path, split: str, fits_dir: Path | None = None, k: int = 3,
+               profiles: bool = False) -> SplitData:
+    """Load the done rows of ``split`` and, with ``fits_dir``, the fit targets of those that have them
+    (and, with ``profiles``, their Monte Carlo profile targets: ``SplitData.shape_target``)."""
     path = dataset_file(dataset_dir, split)
     if not path.is_file():
         raise ValueError(f"no dataset split {path}: run `python -m training dataset` first")
@@ -145,4 +171,6 @@ def load_split(dataset_dir: Path, split: str, fits_dir: Path | None = None, k: i
     data.targets = {n: _f32(v) for n, v in kept.items()}
     data.fitted = torch.as_tensor(rows_in_data[index[use][order]], dtype=torch.int64)
     data.target_index = torch.as_tensor(widx, dtype=torch.int64)
+    if profiles:
+        data.shape_target = load_shape_target(path, index[use][order], widx, photons)
     return data

@@ -43,7 +43,12 @@ class TrainConfig:
     synthetic: int = 20_000
     exposure_jitter: float = 0.25
     exposure_prior: float = 0.0
+    shape_weight: float = 1.0
 
+
+
+#: What a run record made before an option existed trained with (its behaviour then).
+LEGACY_TRAIN: dict = {"exposure_prior": 0.0, "shape_weight": 0.0}
 
 
 def _write_json(path: Path, obj: dict) -> None:
@@ -58,6 +63,7 @@ def _check_or_create_record(rundir: Path, record: dict) -> dict:
         _write_json(path, record)
         return record
     old = json.loads(path.read_text())
+    old["train"] = {**LEGACY_TRAIN, **old.get("train", {})}  # runs made before an option existed
     for key in ("model", "train", "lut_sha256"):
         if old.get(key) != record.get(key):
             raise ValueError(f"{rundir} was trained with another {key} ({old.get(key)} != {record.get(key)}): "
@@ -92,9 +98,10 @@ def train(rundir: Path, dataset: Path, fits: Path | None, lut_path: Path, *, wan
     rundir = Path(rundir)
     rundir.mkdir(parents=True, exist_ok=True)
     need_fits = 3 in want
-    train_data = load_split(dataset, "train", fits if need_fits else None, mcfg.k).to(dev)
+    profiles = need_fits and tcfg.shape_weight > 0
+    train_data = load_split(dataset, "train", fits if need_fits else None, mcfg.k, profiles).to(dev)
     val_fits = fits if (need_fits and fits is not None and fits_files(fits, "validation")) else None
-    val_data = load_split(dataset, "validation", val_fits, mcfg.k).to(dev)
+    val_data = load_split(dataset, "validation", val_fits, mcfg.k, profiles and val_fits is not None).to(dev)
     record = {
         "model": mcfg.to_dict(), "train": asdict(tcfg), "lut": str(lut_path), "lut_sha256": sha256_file(lut_path),
         "dataset": str(dataset), "fits": None if fits is None else str(fits),
@@ -143,4 +150,4 @@ def _spec(stage: int, model: SkinModel, lut: LookupTables, train_data: SplitData
     if stage == 2:
         return stages.stage2(model, train_data, val_data, t.epochs[i], t.batch[i], t.lr[i], t.synthetic,
                              t.exposure_jitter, t.seed, t.exposure_prior)
-    return stages.stage3(model, lut, train_data, val_data, t.epochs[i], t.batch[i], t.lr[i])
+    return stages.stage3(model, lut, train_data, val_data, t.epochs[i], t.batch[i], t.lr[i], t.shape_weight)

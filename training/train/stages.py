@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import torch
 
+from training.fit.loss import Target
 from training.model.chain import SkinModel
 from training.sim.lut_interp import LookupTables
 from training.train import losses as L
@@ -60,20 +61,37 @@ def stage2(model: SkinModel, train: SplitData, val: SplitData, epochs: int, batc
     return StageSpec(2, "Enc", [model.enc], albedo.shape[0], batch, epochs, lr, step, evaluate)
 
 
+def shape_batch(data: SplitData, idx: torch.Tensor) -> tuple[Target, torch.Tensor]:
+    """The profile targets of fitted rows ``idx`` for one training step and their wavelengths: every
+    ``SHAPE_WAVELENGTH_GROUPS``-th fitted wavelength from an offset set by the batch (deterministic, so a
+    resumed run replays the same steps) and every ``SHAPE_BIN_STRIDE``-th radial bin."""
+    n_w = data.target_index.numel()
+    cols = torch.arange(int(idx[0]) % L.SHAPE_WAVELENGTH_GROUPS, n_w, L.SHAPE_WAVELENGTH_GROUPS, device=idx.device)
+    t = data.shape_target.rows(idx).select(1, cols)
+    t = t.subset(torch.arange(0, t.r_cm.numel(), L.SHAPE_BIN_STRIDE, device=idx.device))
+    return t, data.target_index[cols]
+
+
 def stage3(model: SkinModel, lut: LookupTables, train: SplitData, val: SplitData, epochs: int, batch: int,
-           lr: float) -> StageSpec:
+           lr: float, shape_weight: float = 0.0) -> StageSpec:
+    """Stage 3; ``shape_weight`` > 0 adds the profile-shape term (needs ``SplitData.shape_target``)."""
     if train.targets is None:
         raise ValueError("stage 3 needs the mixture fits of the training split (--fits)")
+    if shape_weight > 0 and train.shape_target is None:
+        raise ValueError("a shape weight needs the training split's profiles (load_split(..., profiles=True))")
 
     def step(idx: torch.Tensor) -> dict[str, torch.Tensor]:  # idx: positions among the fitted rows
         rows = train.fitted[idx]
         targets = {k: v[idx] for k, v in train.targets.items()}
-        return L.stage3_losses(model, lut, train.tone[rows], train.R_d[rows], targets, train.target_index)
+        shape, shape_index = shape_batch(train, idx) if shape_weight > 0 else (None, None)
+        return L.stage3_losses(model, lut, train.tone[rows], train.R_d[rows], targets, train.target_index,
+                               shape, shape_weight, shape_index)
 
     def evaluate() -> dict[str, float]:
         if val.targets is not None:
             rows = val.fitted
-            out = L.stage3_losses(model, lut, val.tone[rows], val.R_d[rows], val.targets, val.target_index)
+            out = L.stage3_losses(model, lut, val.tone[rows], val.R_d[rows], val.targets, val.target_index,
+                                  val.shape_target, shape_weight)
             return {k: float(v) for k, v in out.items()}
         out = model.dec_t(val.tone, model.dec_r(val.tone))
         return {"refl": float(L.spectral_l1(L.lut_reflectance(model, lut, out), val.R_d))}

@@ -13,12 +13,15 @@ from pathlib import Path
 
 import h5py
 import numpy as np
+import torch
 
 from exporters.colorimetry import spectrum_to_linear_srgb
-from exporters.constants import WAVELENGTHS_NM
+from exporters.constants import R_EDGES_CM, WAVELENGTHS_NM
 from training.data import store
 from training.data.sampling import training_tones, validation_tones
 from training.fit.dipole import dipole_lut
+from training.fit.mixture import mix
+from training.sim.lut_interp import LookupTables, bin_centres
 
 
 def toy_spectra(tones: np.ndarray) -> np.ndarray:
@@ -43,14 +46,27 @@ def toy_targets(tones: np.ndarray, k: int) -> dict[str, np.ndarray]:
     return {"alpha": alpha, "g": g, "sigma_t": sigma_t, "weight": weight}
 
 
+def toy_profiles(lut: LookupTables, tones: np.ndarray, R: np.ndarray) -> np.ndarray:
+    """Radial profiles (N, 376, 512) cm^-2 whose shape is the rendered K = 3 mixture of ``toy_targets``
+    (``mixture.mix`` through ``lut``) and whose integral is the toy reflectance ``R`` (N, 376)."""
+    t = {k: torch.as_tensor(v).transpose(1, 2) for k, v in toy_targets(tones, 3).items()}  # (N, 376, K)
+    p_k = lut.profile(bin_centres(torch.tensor(R_EDGES_CM)), t["alpha"], t["g"], t["sigma_t"])
+    p_hat, _ = mix(p_k, lut.reflectance(t["alpha"], t["g"]), t["weight"])
+    return (p_hat * torch.as_tensor(R)[..., None]).numpy()
+
+
 def write_toy(root: Path, n_train: int = 32, n_validation: int = 8) -> tuple[Path, Path, Path]:
     """Write ``root/dataset/{train,validation}.h5``, ``root/fits/{split}_fits.h5`` and ``root/lut.npz``.
 
-    Returns (dataset_dir, fits_dir, lut_path).
+    Returns (dataset_dir, fits_dir, lut_path).  The profiles have the shape of the K = 3 targets'
+    mixture (``toy_profiles``), with standard errors of 1 %.
     """
     data_dir, fits_dir = root / "dataset", root / "fits"
     data_dir.mkdir(parents=True, exist_ok=True)
     fits_dir.mkdir(parents=True, exist_ok=True)
+    lut_path = root / "lut.npz"
+    np.savez(lut_path, **dipole_lut())
+    lut = LookupTables.load(lut_path)
     for split, tones in (("train", training_tones(n_train, 1)), ("validation", validation_tones(n_validation, 2))):
         path = data_dir / f"{split}.h5"
         store.create(path, tones, np.arange(len(tones)), {"preset": "toy", "split": split, "photons": 0,
@@ -58,9 +74,9 @@ def write_toy(root: Path, n_train: int = 32, n_validation: int = 8) -> tuple[Pat
                                                           "n_total": len(tones), "created_by": "training.train.toy"})
         R = toy_spectra(tones)
         rows = np.arange(len(tones))
-        store.write_rows(path, rows, {"R_d": R, "R_d_stderr": np.zeros_like(R),
-                                      "profile": np.zeros((len(tones), R.shape[1], 512)),
-                                      "profile_stderr": np.zeros((len(tones), R.shape[1], 512)),
+        profile = toy_profiles(lut, tones, R)
+        store.write_rows(path, rows, {"R_d": R, "R_d_stderr": np.zeros_like(R), "profile": profile,
+                                      "profile_stderr": 0.01 * profile,
                                       "albedo_rgb": spectrum_to_linear_srgb(R, "D65")})
         # the fitter's layout; like a `fit --max-tones --wavelength-stride 2` run: the training split's
         # last quarter of tones is not fitted and the targets are at every 2nd wavelength
@@ -74,6 +90,4 @@ def write_toy(root: Path, n_train: int = 32, n_validation: int = 8) -> tuple[Pat
             for k in (1, 2, 3):
                 for name, arr in toy_targets(tones[:n_fit], k).items():
                     f.create_dataset(f"k{k}_{name}", data=arr[..., widx].astype(np.float32))
-    lut_path = root / "lut.npz"
-    np.savez(lut_path, **dipole_lut())
     return data_dir, fits_dir, lut_path
