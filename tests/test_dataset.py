@@ -76,6 +76,9 @@ def test_shards_merge_into_the_unsharded_dataset(tmp_path):
     b = store.read_split(merged, ("tone", "R_d", "profile"))
     for key in a:
         np.testing.assert_array_equal(a[key], b[key])
+    shard_s = [h5py.File(tmp_path / "sharded" / f"validation.shard{i}of2.h5", "r").attrs["seconds"] for i in range(2)]
+    with h5py.File(merged, "r") as f:  # the merged file records the simulation time of every shard
+        assert f.attrs["seconds"] == pytest.approx(sum(shard_s)) and min(shard_s) > 0
     with pytest.raises(ValueError, match="exists already"):
         merge(tmp_path / "sharded", "validation")
 

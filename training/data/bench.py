@@ -10,6 +10,7 @@ noise.  One torch thread (= one core), uncompiled walks, all 376 wavelengths.
 from __future__ import annotations
 
 import time
+from pathlib import Path
 
 import numpy as np
 import torch
@@ -87,6 +88,33 @@ def colour_agreement(photons: int, n_tones: int = 3) -> dict:
     return {"photons": photons, "tones": tones.tolist(), "delta_e76": out, "walk_s": traj.seconds}
 
 
+def equivalent_photons(dataset: Path, photons: int = 3000, n_tones: int = 6, split: str = "train") -> dict:
+    """Direct-simulation photons that give the noise of a built dataset's R_d, on ``n_tones`` of its tones
+    (the darkest, the lightest and luminance quantiles between): per tone and wavelength
+    N_eq = photons * (se_direct / se_dataset)^2 with a direct run of ``photons``.  Returns the tones,
+    the mean variance ratio (dataset photons / N_eq, mean over tones and wavelengths, as in the rows
+    above), the equivalent photons of that mean, and per tone the median N_eq over wavelengths and the
+    share of wavelengths with N_eq below the dataset's photons."""
+    import h5py
+
+    with h5py.File(Path(dataset) / f"{split}.h5", "r") as f:
+        rgb, n_data = f["albedo_rgb"][:], int(f.attrs["photons"])
+        lum = rgb @ np.array([0.2126, 0.7152, 0.0722])
+        order = np.argsort(lum)
+        rows = np.sort(order[np.round(np.linspace(0, len(order) - 1, n_tones)).astype(int)])
+        tones, se_data = f["tone"][:][rows], f["R_d_stderr"][:][rows]
+    se_direct = np.stack([simulate(skin_medium(t), photons, seed=90 + i, compile=True, r_edges_cm=None).R_d_stderr
+                          for i, t in enumerate(tones)])
+    ok = (se_direct > 0) & (se_data > 0)
+    n_eq = np.where(ok, photons * (se_direct / np.where(ok, se_data, 1.0)) ** 2, np.nan)
+    ratio = float(np.nanmean(n_data / n_eq))
+    return {"dataset": str(dataset), "split": split, "dataset_photons": n_data, "direct_photons": photons,
+            "rows": rows.tolist(), "luminance": lum[rows].tolist(), "mean_variance_ratio": ratio,
+            "equivalent_photons_of_mean": n_data / ratio,
+            "median_n_eq_per_tone": np.nanmedian(n_eq, axis=1).tolist(),
+            "share_below_dataset_photons": np.nanmean(n_eq < n_data, axis=1).tolist()}
+
+
 def benchmarks(quick: bool) -> list[dict]:
     """Rows for bench/results.md (see the module docstring)."""
     before = torch.get_num_threads()
@@ -113,6 +141,8 @@ if __name__ == "__main__":
     torch.set_num_threads(1)
     if len(sys.argv) > 2 and sys.argv[1] == "--colour":  # python -m training.data.bench --colour PHOTONS
         print(json.dumps(colour_agreement(int(sys.argv[2]))))
+    elif len(sys.argv) > 2 and sys.argv[1] == "--equivalent":  # ... --equivalent DATASET_DIR [PHOTONS]
+        print(json.dumps(equivalent_photons(Path(sys.argv[2]), *map(int, sys.argv[3:4])), indent=1))
     else:
         for row in benchmarks(quick=True):
             print(row)

@@ -80,7 +80,7 @@ def merge(out: Path, split: str) -> Path:
     with h5py.File(shards[0], "r") as f:
         attrs = dict(f.attrs)
     n_total = int(attrs["n_total"])
-    parts, tone_parts = [], []
+    parts, tone_parts, seconds = [], [], 0.0
     for p in shards:
         with h5py.File(p, "r") as f:
             if not f["done"][:].all():
@@ -89,6 +89,7 @@ def merge(out: Path, split: str) -> Path:
                 if f.attrs[key] != attrs[key]:
                     raise ValueError(f"{p} differs from {shards[0]} in {key}")
             parts.append((p, f["index"][:]))
+            seconds += float(f.attrs.get("seconds", 0.0))
             tone_parts.append(f["tone"][:])
     index = np.concatenate([ix for _, ix in parts])
     if sorted(index.tolist()) != list(range(n_total)):
@@ -98,7 +99,7 @@ def merge(out: Path, split: str) -> Path:
         raise ValueError(f"{target} exists already; move it away to merge again.")
     tones = np.empty((n_total, 5))
     tones[index] = np.concatenate(tone_parts)
-    store.create(target, tones, np.arange(n_total), {**attrs, "shard": "0/1"})
+    store.create(target, tones, np.arange(n_total), {**attrs, "shard": "0/1", "seconds": seconds})  # all shards' time
     with h5py.File(target, "r+") as dst:
         for p, ix in parts:
             with h5py.File(p, "r") as src:
