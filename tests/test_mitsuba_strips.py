@@ -15,14 +15,10 @@ from training.skin.tones import load_tones
 from training.validate import strips
 
 FIGURES = Path(__file__).resolve().parent.parent / "docs" / "figures"
-#: Known defect of the shipped laptop model (issue 6), measured 2026-11-22: for R01 (f_mel 0.001, lighter than
-#: any fitted training tone) at 900 nm the decoder gives g ~ 0, sigma_t 216-242 cm^-1, alpha 0.96-0.98
-#: (sigma_s' ~ 230, sigma_a ~ 5-10 cm^-1) where the fits of the nearest light tones say g 0.88, sigma_t 83-90,
-#: alpha 0.995 (sigma_s' ~ 11, sigma_a ~ 0.45): 20x too dense, so the sphere stays dark in the NIR.  The UV
-#: half is right now (sigma_t 227-2568 cm^-1: opaque).  L_param averages the fits' degenerate (alpha, g,
-#: sigma_t) choices; weighting it by the target weights is the next thing to try.
-NIR_DEFECT = ("known defect of the shipped laptop model (issue 6): R01's NIR media are ~20x too dense, so the "
-              "sphere does not glow at 900 nm (see NIR_DEFECT's comment)")
+#: What the NIR strip can be held to.  Rendered the same way (32 px, 48 spp), the K = 3 fits of the Monte
+#: Carlo ground truth (`validate`'s cache) give a far-side translucency at 898 nm of 0.081, 0.055, 0.040,
+#: 0.070, 0.076 for R01, R03, R05, R08, R10 (2026-11-22): in the NIR melanin absorbs little and the dermis
+#: sets the glow, so it does not fall from light to dark skin.  The visible glow does (melanin).
 REGENERATE = "regenerate with `python -m training validate --mitsuba --out docs/figures --overwrite`"
 
 
@@ -31,7 +27,6 @@ def test_committed_strips_are_for_the_shipped_model():
     assert rec["decoder_sha256"] == sha256_file(em.DEFAULT_DECODER), f"strips are for another model: {REGENERATE}"
 
 
-@pytest.mark.xfail(strict=True, reason=NIR_DEFECT)
 def test_committed_strips_show_the_physics():
     rec = json.loads((FIGURES / strips.FILES["metrics"]).read_text())
     assert rec["decoder_sha256"] == sha256_file(em.DEFAULT_DECODER), f"strips are for another model: {REGENERATE}"
@@ -43,14 +38,14 @@ def test_committed_strips_show_the_physics():
     t = {band: np.asarray(v) for band, v in rec["translucency"].items()}
     names = rec["tones"]
     assert names[0] == "R01" and names[-1] == "R10"
-    # near-opaque in the UV, translucent in the NIR, less so for darker tones
+    # near-opaque in the UV, translucent in the NIR for every tone (the fits: 0.04-0.08, comment above);
+    # in the visible, light skin glows and the darkest does not
     assert np.all(t["uv"] < 0.002)
-    assert np.all(t["nir"][:7] > 5 * np.maximum(t["uv"][:7], 1e-3))
-    assert t["nir"][0] > 3 * t["nir"][-1]
-    assert np.mean(t["nir"][:3]) > np.mean(t["nir"][-3:])
+    assert np.all(t["nir"] > 0.01) and np.all(t["nir"] > 5 * np.maximum(t["uv"], 1e-3))
+    for band in ("vis_E", "vis_A"):
+        assert t[band][0] > 10 * t[band][-1] and np.mean(t[band][:3]) > 3 * np.mean(t[band][-3:]), band
 
 
-@pytest.mark.xfail(strict=True, reason=NIR_DEFECT)
 def test_live_render_uv_opaque_nir_translucent():
     """A small live render (scalar variant) of the lightest tone: the far side of the sphere glows in the
     NIR and stays black in the UV; the light side is on the left of the image (light towards -x)."""
