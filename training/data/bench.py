@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from exporters.colorimetry import delta_e76, spectrum_to_lab
+from exporters.colorimetry import SRGB_LUMINANCE, delta_e76, spectrum_to_lab
 from exporters.constants import WAVELENGTHS_NM
 from training.data.presets import PRESETS
 from training.data.reweight import baseline_absorption, reweight, walk
@@ -99,7 +99,7 @@ def equivalent_photons(dataset: Path, photons: int = 3000, n_tones: int = 6, spl
 
     with h5py.File(Path(dataset) / f"{split}.h5", "r") as f:
         rgb, n_data = f["albedo_rgb"][:], int(f.attrs["photons"])
-        lum = rgb @ np.array([0.2126, 0.7152, 0.0722])
+        lum = rgb @ SRGB_LUMINANCE
         order = np.argsort(lum)
         rows = np.sort(order[np.round(np.linspace(0, len(order) - 1, n_tones)).astype(int)])
         tones, se_data = f["tone"][:][rows], f["R_d_stderr"][:][rows]

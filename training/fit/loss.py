@@ -98,9 +98,8 @@ class Target:
         return Target(*(getattr(self, f.name).to(device=device, dtype=dtype) for f in fields(self)))
 
     def rows(self, idx: torch.Tensor) -> Target:
-        """The targets of a subset of the problems (indices into the first axis)."""
-        return Target(self.r_cm, self.log_p[idx], self.mask[idx], self.n_used[idx], self.floor[idx], self.R[idx],
-                      self.r_scale[idx], self.noise[idx])
+        """The targets of a subset of the problems (integer indices into the first axis)."""
+        return self.select(0, idx)
 
     def select(self, dim: int, idx: torch.Tensor) -> Target:
         """The targets of a subset of the problems along leading dimension ``dim`` (e.g. wavelengths)."""

@@ -106,13 +106,14 @@ def load_fits(paths: list[Path], k: int) -> tuple[np.ndarray, np.ndarray, np.nda
             np.concatenate([p[2] for p in parts]), widx, arrays)
 
 
-def load_shape_target(path: Path, rows: np.ndarray, wavelength_index: np.ndarray, photons: int) -> Target:
+def load_shape_target(path: Path, rows: np.ndarray, wavelength_index: np.ndarray, R_mc: np.ndarray,
+                      photons: int) -> Target:
     """The fitter's profile targets (``make_target``, with the stored standard errors) of dataset rows
-    ``rows`` (Nf,) at ``wavelength_index`` (Wf,), float32, restricted to the radial bins that some
-    (tone, wavelength) uses: leading dims (Nf, Wf)."""
+    ``rows`` (Nf,) at ``wavelength_index`` (Wf,), whose R_d there is ``R_mc`` (Nf, Wf), float32, restricted
+    to the radial bins that some (tone, wavelength) uses: leading dims (Nf, Wf)."""
+    R = torch.as_tensor(np.asarray(R_mc, np.float64))
     with h5py.File(path, "r") as f:
         edges = torch.as_tensor(np.asarray(f["r_edges_cm"][:], np.float64))
-        R = torch.as_tensor(np.asarray(f["R_d"][:], np.float64)[rows][:, wavelength_index])
         prof = torch.empty(len(rows), len(wavelength_index), edges.numel() - 1, dtype=torch.float64)
         se = torch.empty_like(prof)
         for j, row in enumerate(rows):  # one stored chunk per tone
@@ -172,5 +173,6 @@ def load_split(dataset_dir: Path, split: str, fits_dir: Path | None = None, k: i
     data.fitted = torch.as_tensor(rows_in_data[index[use][order]], dtype=torch.int64)
     data.target_index = torch.as_tensor(widx, dtype=torch.int64)
     if profiles:
-        data.shape_target = load_shape_target(path, index[use][order], widx, photons)
+        rows = index[use][order]
+        data.shape_target = load_shape_target(path, rows, widx, R_d[rows][:, widx], photons)
     return data
