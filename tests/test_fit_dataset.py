@@ -171,3 +171,31 @@ def test_lightness_selection_gives_each_lstar_band_its_share():
         np.testing.assert_array_equal(pick[band[pick] == b], members[: counts[b]])
     with pytest.raises(ValueError, match="select"):
         select_tones(albedo, 10, "darkest")
+
+
+def test_reuse_copies_matching_fits_and_fits_the_rest(setup, monkeypatch, capsys):
+    d, ds, lut_path = setup
+    monkeypatch.setattr(optimize, "K2_SPLITS", optimize.K2_SPLITS[:1])
+    lut = LookupTables.load(lut_path)
+    kw = {"steps": STEPS, "wavelength_stride": 16, "progress": False}
+    part = fit_split(ds, "train", lut, lut_path, (1, 2), d / "reuse_part", max_tones=2, **kw)
+    other = fit_split(ds, "train", lut, lut_path, (1,), d / "reuse_other", max_tones=1, **kw)  # other ks
+    with h5py.File(part, "r+") as f:  # mark the copies: a refit would not give these values
+        f["k2_sigma_t"][0] = 123.0
+        f["k1_alpha"][1] = 0.5
+    whole = fit_split(ds, "train", lut, lut_path, (1, 2), d / "reuse_whole", reuse=d / "reuse_part",
+                      **{**kw, "progress": True})
+    assert "2 tones copied" in capsys.readouterr().out
+    with h5py.File(whole, "r") as f, h5py.File(part, "r") as p:
+        assert f["index"][:].tolist() == [0, 1, 2] and f["done"][:].all()
+        for name in ("k1_alpha", "k2_sigma_t", "k2_weight", "k2_shape_rmse"):
+            np.testing.assert_array_equal(f[name][:2], p[name][:])
+        assert np.isfinite(f["k2_sigma_t"][2]).all() and f["k2_sigma_t"][2].min() > 0  # fitted here
+    # a folder fitted with other settings is not a source
+    fresh = fit_split(ds, "train", lut, lut_path, (1, 2), d / "reuse_none", max_tones=1,
+                      reuse=other.parent, **{**kw, "progress": True})
+    assert "0 tones copied" in capsys.readouterr().out
+    with h5py.File(fresh, "r") as f:
+        assert f["done"][:].all()
+    with pytest.raises(ValueError, match="--reuse"):
+        fit_split(ds, "train", lut, lut_path, (1,), d / "reuse_bad", reuse=d / "missing", **kw)

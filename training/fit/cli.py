@@ -4,7 +4,8 @@
         prints {"fits": [{"K": 1, "shape_rmse": ..., "refl_rel_err": ...}, ...]}: means over the
         wavelengths of the tone file (376 for ``python -m training simulate``).
     python -m training fit --dataset DIR --lut LUT.npz --k 1,2,3 --out DIR [--split train,validation]
-        [--shard I/N] [--wavelength-stride S] [--anchor-every A] [--max-tones M] [--select first|lightness]:
+        [--shard I/N] [--wavelength-stride S] [--anchor-every A] [--max-tones M] [--select first|lightness]
+        [--reuse DIR]:
         every tone x wavelength of the dataset's complete split files into OUT/<split>_fits.h5
         (training/fit/dataset.py); resumable, shardable.
     python -m training fit --dataset DIR --out DIR --summary: mean errors per split, K and band of those
@@ -68,6 +69,9 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--select", choices=("first", "lightness"), default="first",
                    help="--dataset with --max-tones: the first n tones (default), or an equal share of each "
                         "5-unit band of the albedo's L* (more light skin than the split holds)")
+    p.add_argument("--reuse", type=Path, default=None,
+                   help="--dataset: copy the tones that the fits in this folder hold with the same settings "
+                        "instead of fitting them again (e.g. to extend a --max-tones run to the whole split)")
     p.add_argument("--refl-loss", choices=("relative", "paper"), default="relative",
                    help="reflectance term: ((R_hat - R)/R)^2 (default) or the paper's (R_hat - R)^2")
     p.add_argument("--summary", action="store_true",
@@ -179,6 +183,7 @@ def _fit_dataset(args: argparse.Namespace, ks: tuple[int, ...], lut_path: Path) 
             max_tones=args.max_tones,
             select=args.select,
             relative_refl=args.refl_loss == "relative",
+            reuse=args.reuse,
             progress=not args.no_progress,
         )
         print(f"{split}: {path}")
