@@ -142,10 +142,10 @@ def _reuse(path: Path, folder: Path, split: str) -> int:
                     continue
                 if not np.array_equal(src["wavelength_index"][:], dst["wavelength_index"][:]):
                     continue
-                done = dst["done"][:]
+                done, src_done = dst["done"][:], src["done"][:]
                 pos = {int(t): j for j, t in enumerate(dst["index"][:])}
                 pairs = [(pos[int(t)], j) for j, t in enumerate(src["index"][:])
-                         if src["done"][j] and int(t) in pos and not done[pos[int(t)]]]
+                         if src_done[j] and int(t) in pos and not done[pos[int(t)]]]
                 if not pairs:
                     continue
                 to, fr = (np.array(x) for x in zip(*pairs, strict=True))

@@ -26,6 +26,7 @@ import numpy as np
 import torch
 
 from exporters.constants import R_EDGES_CM, WAVELENGTHS_NM, anisotropy
+from training.validate.cli import DEFAULT_MODEL_DIR
 
 #: f_blood, t_epi [cm], so2, b_mel of the sweep (a typical adult: 3 % blood, 120 um epidermis).
 SWEEP_BASE: tuple[float, float, float, float] = (0.03, 0.012, 0.75, 0.7)
@@ -153,7 +154,7 @@ def main(argv: list[str]) -> int:
     p = argparse.ArgumentParser(prog="python -m training.validate.trends", description=__doc__.splitlines()[0])
     p.add_argument("--lut", type=Path, required=True, help="LUT .npz of `python -m training lut`")
     p.add_argument("--photons", type=int, default=20000, help="photons per wavelength of the shared walk")
-    p.add_argument("--model-dir", type=Path, default=Path(__file__).resolve().parents[2] / "blender_addon" / "models")
+    p.add_argument("--model-dir", type=Path, default=DEFAULT_MODEL_DIR, help="folder with skin_decoder.onnx")
     p.add_argument("--out", type=Path, default=None, help="folder for trends.json and fig_trends.png")
     args = p.parse_args(argv)
     from training.sim.lut_interp import LookupTables
