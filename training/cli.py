@@ -24,6 +24,7 @@ COMMANDS: dict[str, tuple[str | None, str]] = {
     "bench": ("training.bench", "Run the benchmark suite and write bench/results.md."),
     "swatches": ("training.skin.swatches", "Plot the colours of the representative and outlier tones."),
     "mitsuba": ("training.validate.compare", "Mitsuba 3 reflectance of the network's mixture vs ours vs ground truth."),
+    "realskin": ("training.realskin.cli", "Fit the skin model to measured human skin reflectance (NIST)."),
     "demo": ("training.demo", "What `make demo` runs: the best end-to-end path available today."),
 }
 

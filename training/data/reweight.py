@@ -129,12 +129,17 @@ class Trajectories:
 def walk(
     photons: int, *, seed: int, mua0: np.ndarray, levels_cm: np.ndarray = T_EPI_LEVELS_CM,
     channels: np.ndarray | None = None, device: str = "cpu", compile: bool | str = "auto",
+    illumination: str = "diffuse",
 ) -> Trajectories:
-    """One baseline walk: ``photons`` per channel (diffuse illumination, like the dataset)."""
+    """One baseline walk: ``photons`` per channel.
+
+    ``illumination``: "diffuse" (the dataset's cosine-weighted lobe) or "normal" (a collimated beam, the
+    geometry of reflectance spectrophotometers; ``training.realskin``).
+    """
     ch_idx = np.arange(np.asarray(mua0).size) if channels is None else np.asarray(channels, dtype=np.int64)
     medium = slab_medium(np.asarray(mua0)[ch_idx], levels_cm, ch_idx)
     t0 = time.perf_counter()
-    rec = simulate_records(medium, photons, illumination="diffuse", seed=seed, device=device, compile=compile)
+    rec = simulate_records(medium, photons, illumination=illumination, seed=seed, device=device, compile=compile)
     refl = rec.kind == KIND_REFLECTED
     order = np.argsort(rec.ch[refl], kind="stable")
     ch = rec.ch[refl][order]

@@ -1,0 +1,89 @@
+"""The skin model against measured human skin (NIST odd subjects): geometry, forward model, fits, CLI."""
+
+import json
+import math
+
+import numpy as np
+import pytest
+import torch
+
+from exporters.constants import N_TISSUE, WAVELENGTHS_NM
+from training.cli import main as training_main
+from training.data.reweight import baseline_absorption, walk
+from training.realskin.forward import T_EPI_FINE_LEVELS_CM, MonteCarloForward
+from training.realskin.geometry import rough_specular, smooth_specular
+from training.realskin.measurements import NIST_FILE, grid_channels, read_measurements
+from training.sim.transport import simulate
+from training.skin.tissue import skin_medium
+
+
+def test_shipped_measurements_are_read_on_the_model_grid():
+    meas = read_measurements()
+    assert len(meas) == 50 and meas.names[0] == "subject_001"
+    assert all(int(n.split("_")[1]) % 2 == 1 for n in meas.names)  # the held-out even subjects are not here
+    assert "Cooksey" in NIST_FILE.read_text()[:1000]  # the source header travels with the data
+    channels, measured = grid_channels(meas)
+    assert channels.size == 126  # 250, 256, ..., 1000 nm: shared by the 3 nm file and the 2 nm grid
+    np.testing.assert_array_equal(WAVELENGTHS_NM[channels], np.arange(250, 1001, 6))
+    col = list(meas.wavelength_nm).index(550.0)
+    np.testing.assert_array_equal(measured[:, (550 - 250) // 6], meas.reflectance[:, col])
+
+
+@pytest.mark.parametrize("text, words", [
+    ("nm,a\n400,0.1\n1000,0.2\n", "wavelength_nm"),
+    ("wavelength_nm,a\n400,10\n1000,20\n", "not percent"),
+    ("wavelength_nm,a\n400,0.1\n700,0.2\n", "400-1000"),
+    ("wavelength_nm,a\n400,0.1\n1000,x\n", "not a number"),
+])
+def test_bad_measurement_files_are_named(tmp_path, text, words):
+    path = tmp_path / "m.csv"
+    path.write_text(text)
+    with pytest.raises(ValueError, match=words):
+        read_measurements(path)
+
+
+def test_specular_of_the_measurement_geometry():
+    # smooth n = 1.4 at normal incidence: ((n - 1) / (n + 1))^2 = 0.02778 (8 degrees changes it by < 1e-4)
+    assert smooth_specular() == pytest.approx(((N_TISSUE - 1) / (N_TISSUE + 1)) ** 2, abs=1e-4)
+    # a nearly smooth Beckmann surface tends to Fresnel; skin's roughness adds a little (facets tilt)
+    assert rough_specular(roughness=0.05) == pytest.approx(smooth_specular(), rel=1e-3)
+    s = rough_specular()
+    assert smooth_specular() < s < smooth_specular() + 2e-3
+
+
+@pytest.fixture(scope="module")
+def fine_walk():
+    channels = np.arange(0, 376, 25)
+    return walk(600, seed=5, mua0=baseline_absorption(), levels_cm=T_EPI_FINE_LEVELS_CM, channels=channels,
+                illumination="normal")
+
+
+def test_forward_model_equals_a_direct_normal_incidence_run(fine_walk):
+    """Reweighted R_d (+ specular) against direct absorbing runs, on a slab level and between levels."""
+    fw = MonteCarloForward(fine_walk, specular=0.0)
+    for i, tone in enumerate([[0.02, 0.02, 0.008, 0.7, 0.7], [0.1, 0.05, 0.0125, 0.9, 0.3]]):
+        got = fw(torch.tensor([tone], dtype=torch.float64))[0].numpy()
+        d = simulate(skin_medium(tone).select_channels(fine_walk.channels), 600, illumination="normal",
+                     seed=40 + i, r_edges_cm=None)
+        # the reweighted estimator's error is at most ~1.6x the direct one's (test_dataset_reweight)
+        sigma = d.R_d_stderr * math.hypot(1.0, 1.6)
+        z = (got - d.R_d) / sigma
+        assert np.all(np.abs(z) < 4.5), (tone, z)
+        assert abs(z.mean()) < 1.2, (tone, z.mean())
+
+
+def test_forward_model_is_continuous_and_differentiable_in_thickness(fine_walk):
+    fw = MonteCarloForward(fine_walk)
+    t = torch.tensor([[0.03, 0.02, 0.0101, 0.7, 0.7]], dtype=torch.float64, requires_grad=True)
+    r = fw(t)
+    r.sum().backward()
+    assert torch.isfinite(t.grad).all() and t.grad[0, 2] < 0  # a thicker melanin layer is darker
+    ts = np.linspace(0.0091, 0.0109, 7)
+    rs = [float(fw(torch.tensor([[0.03, 0.02, x, 0.7, 0.7]], dtype=torch.float64)).sum()) for x in ts]
+    assert np.all(np.diff(rs) < 0)  # monotone across the level at 100 um, no jump
+
+
+def test_realskin_cli_rejects_bad_input(tmp_path, capsys):
+    assert training_main(["realskin", "--data", str(tmp_path / "missing.csv")]) == 2
+    assert "no such file" in capsys.readouterr().err
+    assert training_main(["realskin", "--photons", "10"]) == 2

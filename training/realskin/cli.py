@@ -1,0 +1,94 @@
+"""``python -m training realskin``: the skin model against measured human skin (SPEC §2).
+
+    python -m training realskin [--data FILE] [--out DIR] [--json] [--photons 20000] [--seed 1]
+                                [--decoder blender_addon/models/skin_decoder.onnx | --no-decoder]
+                                [--subjects N] [--cache DIR]
+
+Fits the biophysical parameters of every measured spectrum with the project's Monte Carlo (one walk of
+a collimated normal beam, every tone a reweighting of it; ``forward``) and, for comparison, the shipped
+decoder, exposure fixed at 1 and free, in the measurement's geometry (``geometry``).  Prints the table
+(or the JSON of SPEC §2 with ``--json``); ``--out DIR`` also writes realskin.json, realskin.md and
+fig_realskin.png.  The walk is cached (``--cache``, default DIR/cache or ~/.cache/spectral_skin_sss/realskin):
+a rerun with the same skin model, photons and seed fits at once.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import time
+from pathlib import Path
+
+from exporters.constants import WAVELENGTHS_NM
+from training.realskin import report
+from training.realskin.fit import fit_subjects
+from training.realskin.forward import DecoderForward, MonteCarloForward, cached_walk
+from training.realskin.measurements import NIST_FILE, grid_channels, read_measurements
+
+DEFAULT_DECODER = Path(__file__).resolve().parents[2] / "blender_addon" / "models" / "skin_decoder.onnx"
+
+
+def _parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="python -m training realskin", description=__doc__.split("\n\n")[2],
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--data", type=Path, default=NIST_FILE, help="measured spectra (NIST layout); default: the shipped file")
+    p.add_argument("--out", type=Path, help="write realskin.json, realskin.md and fig_realskin.png here")
+    p.add_argument("--json", action="store_true", help="print the JSON report instead of the table")
+    p.add_argument("--photons", type=int, default=20_000, help="photons per wavelength of the walk (default 20000)")
+    p.add_argument("--seed", type=int, default=1)
+    p.add_argument("--device", choices=("cpu", "cuda"), default="cpu")
+    p.add_argument("--decoder", type=Path, default=DEFAULT_DECODER, help="skin_decoder.onnx to compare with")
+    p.add_argument("--no-decoder", action="store_true", help="fit the Monte Carlo only")
+    p.add_argument("--subjects", type=int, help="fit only the first N subjects")
+    p.add_argument("--cache", type=Path, help="folder of cached walks")
+    return p
+
+
+def _cache_dir(args) -> Path:
+    if args.cache is not None:
+        return args.cache
+    if args.out is not None:
+        return args.out / "cache"
+    return Path(os.environ.get("SPECTRAL_SKIN_SSS_CACHE", Path.home() / ".cache" / "spectral_skin_sss")) / "realskin"
+
+
+def main(argv: list[str]) -> int:
+    args = _parser().parse_args(argv)
+    try:
+        meas = read_measurements(args.data)
+    except ValueError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    if args.photons < 100:
+        print("error: --photons must be at least 100 per wavelength.", file=sys.stderr)
+        return 2
+    if not args.no_decoder and not args.decoder.is_file():
+        print(f"error: decoder {args.decoder} not found (pass --decoder PATH or --no-decoder).", file=sys.stderr)
+        return 2
+    channels, measured = grid_channels(meas)
+    names = list(meas.names)
+    if args.subjects is not None:
+        names, measured = names[: args.subjects], measured[: args.subjects]
+    wl = WAVELENGTHS_NM[channels]
+    t0 = time.perf_counter()
+    traj = cached_walk(channels, args.photons, args.seed, _cache_dir(args), args.device, progress=not args.json)
+    t_walk = time.perf_counter() - t0
+    mc = MonteCarloForward(traj)
+    fits = {free: fit_subjects(mc, names, measured, wl, mc.specular, free, seed=args.seed) for free in (False, True)}
+    dec = {False: None, True: None}
+    if not args.no_decoder:
+        df = DecoderForward(args.decoder, channels, mc.specular)
+        dec = {free: fit_subjects(df, names, measured, wl, mc.specular, free, seed=args.seed) for free in (False, True)}
+    lightness = report.measured_lightness(meas, mc.specular)[: len(names)]
+    settings = {"data": args.data.name, "photons": args.photons, "seed": args.seed, "specular": round(mc.specular, 5),
+                "walk_seconds": round(traj.seconds, 1), "seconds": round(time.perf_counter() - t0, 1),
+                "walk_cached": t_walk < 0.5 * traj.seconds}
+    rep = report.summary(names, lightness, fits[False], fits[True], dec[False], dec[True], settings)
+    md = report.markdown(rep)
+    if args.out is not None:
+        report.write(args.out, rep, md)
+        report.figure(args.out / "fig_realskin.png", wl, measured, names, lightness, fits[False], dec[False])
+    print(json.dumps(rep) if args.json else md)
+    return 0

@@ -1,0 +1,126 @@
+"""Forward models of measured skin reflectance, tone -> R_measured at chosen channels (training.realskin).
+
+* :class:`MonteCarloForward`: the project's own Monte Carlo, in the measurement's geometry (collimated
+  normal beam, plus the rough surface's specular, ``geometry``).  One absorption-reduced walk per
+  channel (``training.data.reweight``) serves every tone: a tone's reflectance is a reweighting of the
+  walk's exiting photons.  The epidermis thickness is continuous: the walk is cut into thin slabs and the
+  path a photon spent above depth t is interpolated linearly between slab boundaries (exact where the
+  photon's path density is uniform within the 10 um slab).  Differentiable in the tone (torch).
+* :class:`DecoderForward`: the shipped ``skin_decoder.onnx`` (the dataset's geometry: diffuse
+  illumination, specular-free R_d) plus the same specular term, for comparison.
+"""
+
+from __future__ import annotations
+
+import hashlib
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from exporters.constants import PARAM_NAMES, PARAM_RANGES
+from training.data.reweight import Trajectories, baseline_absorption, walk
+from training.realskin.geometry import rough_specular
+from training.skin.model import absorption, scattering
+
+#: Epidermis thickness levels of the walk, cm: every 10 um over the SPEC range (0.005-0.035 cm).
+T_EPI_FINE_LEVELS_CM = np.round(np.arange(0.005, 0.035 + 1e-9, 0.001), 6)
+_T = PARAM_NAMES.index("t_epi")
+
+
+def model_fingerprint(channels: np.ndarray) -> str:
+    """SHA-256 (16 hex) of the skin model's scattering and box-minimum absorption at ``channels``.
+
+    A cached walk is reused only if the fingerprint matches: a changed skin model walks again.
+    """
+    mus, g = scattering()
+    mua0 = baseline_absorption()
+    blob = np.concatenate([mus.numpy()[channels], g.numpy()[channels], mua0[channels]]).astype(np.float64)
+    return hashlib.sha256(blob.tobytes() + np.asarray(channels, np.int64).tobytes()).hexdigest()[:16]
+
+
+def cached_walk(channels: np.ndarray, photons: int, seed: int, cache: Path | None, device: str = "cpu",
+                progress: bool = False) -> Trajectories:
+    """The normal-incidence walk at ``channels`` (photons per channel), from ``cache`` when it holds it."""
+    key = f"walk_normal_{model_fingerprint(channels)}_{photons}_{seed}.npz"
+    path = None if cache is None else Path(cache) / key
+    if path is not None and path.exists():
+        return Trajectories.load(path)
+    if progress:
+        print(f"walking {photons} photons x {len(channels)} wavelengths (collimated normal beam) ...", flush=True)
+    traj = walk(photons, seed=seed, mua0=baseline_absorption(), levels_cm=T_EPI_FINE_LEVELS_CM,
+                channels=np.asarray(channels), device=device, illumination="normal")
+    if path is not None:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        traj.save(path)
+    return traj
+
+
+class MonteCarloForward:
+    """R_measured (B, C) of tones (B, 5) at the walk's channels: specular + reweighted R_d (normal beam)."""
+
+    def __init__(self, traj: Trajectories, specular: float | None = None) -> None:
+        if traj.levels_cm.size < 2:
+            raise ValueError("the walk needs at least two epidermis levels")
+        self.channels = np.asarray(traj.channels)
+        self.levels = torch.as_tensor(traj.levels_cm, dtype=torch.float64)
+        self.photons = traj.photons
+        self.specular = rough_specular() if specular is None else float(specular)
+        self.mua0 = torch.as_tensor(traj.mua0, dtype=torch.float64)
+        counts = np.diff(traj.offsets)
+        n_max, n_ch, n_lev = int(counts.max()), self.channels.size, traj.levels_cm.size
+        # Padded per-channel photon arrays: cum (n_lev + 1, C, n) path above each level and in total,
+        # log_w (C, n) baseline exit weight (-inf for padding).
+        cum = np.zeros((n_lev + 1, n_ch, n_max), dtype=np.float32)
+        log_w = np.full((n_ch, n_max), -np.inf, dtype=np.float32)
+        for c in range(n_ch):
+            lo, hi = int(traj.offsets[c]), int(traj.offsets[c + 1])
+            cum[:, c, : hi - lo] = np.cumsum(traj.path_cm[lo:hi], axis=1).T
+            with np.errstate(divide="ignore"):
+                log_w[c, : hi - lo] = np.log(traj.w[lo:hi])
+        self.cum, self.log_w = torch.from_numpy(cum), torch.from_numpy(log_w)
+
+    def _path_above(self, t_epi: torch.Tensor) -> torch.Tensor:
+        """Path above depth t_epi (B,) per photon: (B, C, n), linear between slab boundaries."""
+        lev = self.levels
+        t = t_epi.clamp(float(lev[0]), float(lev[-1]))
+        j = torch.searchsorted(lev, t.detach(), right=True).clamp(1, lev.numel() - 1)  # lev[j-1] <= t < lev[j]
+        frac = ((t - lev[j - 1]) / (lev[j] - lev[j - 1])).to(torch.float32)[:, None, None]
+        return self.cum[j - 1] * (1 - frac) + self.cum[j] * frac
+
+    def __call__(self, tones: torch.Tensor) -> torch.Tensor:
+        """R_measured (B, C), float64; ``tones`` (B, 5) float64 (differentiable)."""
+        mua_epi, mua_derm = absorption(tones)
+        ch = torch.as_tensor(self.channels)
+        d_epi = (mua_epi[:, ch] - self.mua0).to(torch.float32)[:, :, None]
+        d_derm = (mua_derm[:, ch] - self.mua0).to(torch.float32)[:, :, None]
+        above = self._path_above(tones[:, _T])
+        total = self.cum[-1][None]
+        expo = self.log_w[None] - (d_epi - d_derm) * above - d_derm * total
+        r_d = torch.exp(expo.clamp_min(-87.0)).sum(-1, dtype=torch.float64) / self.photons
+        return r_d + self.specular
+
+
+class DecoderForward:
+    """R_measured (B, C) of tones from ``skin_decoder.onnx``: its R_d (dataset geometry) + the specular."""
+
+    def __init__(self, decoder_path: Path, channels: np.ndarray, specular: float | None = None) -> None:
+        import onnxruntime as ort
+
+        opts = ort.SessionOptions()
+        opts.intra_op_num_threads = 1
+        self.session = ort.InferenceSession(str(decoder_path), opts, providers=["CPUExecutionProvider"])
+        self.channels = np.asarray(channels)
+        self.specular = rough_specular() if specular is None else float(specular)
+
+    def __call__(self, tones: torch.Tensor) -> torch.Tensor:
+        x = tones.detach().cpu().numpy().astype(np.float32)
+        (refl,) = self.session.run(["reflectance"], {"biophysical": x})
+        return torch.from_numpy(refl[:, self.channels].astype(np.float64)) + self.specular
+
+
+def box() -> tuple[np.ndarray, np.ndarray]:
+    """Lower and upper bounds (5,) of the biophysical vector (SPEC ranges, ``exporters.constants``)."""
+    lo = np.array([PARAM_RANGES[n][0] for n in PARAM_NAMES])
+    hi = np.array([PARAM_RANGES[n][1] for n in PARAM_NAMES])
+    return lo, hi

@@ -1,0 +1,113 @@
+"""Tables, JSON and the figure of ``python -m training realskin``."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from exporters.colorimetry import spectrum_to_lab
+from exporters.constants import PARAM_NAMES, WAVELENGTHS_NM
+from training.realskin.fit import BANDS_NM, FIT_BAND_NM, SubjectFit
+from training.realskin.measurements import Measurements
+
+
+def measured_lightness(meas: Measurements, specular: float) -> np.ndarray:
+    """CIE L* (D65) of each measured spectrum without its specular part (S,)."""
+    grid = np.stack([np.interp(WAVELENGTHS_NM, meas.wavelength_nm, r) for r in meas.reflectance]) - specular
+    return spectrum_to_lab(np.clip(grid, 0.0, 1.0))[:, 0]
+
+
+def _mean(fits: list[SubjectFit], band: str) -> float:
+    return float(np.mean([f.rmse[band] for f in fits]))
+
+
+def summary(names, lightness, mc_fixed, mc_free, dec_fixed=None, dec_free=None, settings: dict | None = None) -> dict:
+    """The JSON report (SPEC §2 keys, plus the free-exposure fits, the decoder's and the run's settings)."""
+    subjects = []
+    for i, name in enumerate(names):
+        f, g = mc_fixed[i], mc_free[i]
+        row = {"name": name, "L_star": round(float(lightness[i]), 2),
+               **{f"rmse_{b}": round(f.rmse[b], 5) for b in BANDS_NM},
+               "exposure_free": round(g.exposure, 4), "p": [round(float(v), 5) for v in f.p],
+               "rmse_400_1000_free": round(g.rmse["400_1000"], 5), "p_free": [round(float(v), 5) for v in g.p]}
+        if dec_fixed is not None:
+            row["decoder"] = {"rmse_400_1000": round(dec_fixed[i].rmse["400_1000"], 5),
+                              "exposure_free": round(dec_free[i].exposure, 4),
+                              "rmse_400_1000_free": round(dec_free[i].rmse["400_1000"], 5),
+                              "p": [round(float(v), 5) for v in dec_fixed[i].p]}
+        subjects.append(row)
+    out = {"subjects": subjects, "mean_rmse_400_1000": round(_mean(mc_fixed, "400_1000"), 5),
+           "mean": {b: round(_mean(mc_fixed, b), 5) for b in BANDS_NM},
+           "mean_free": {b: round(_mean(mc_free, b), 5) for b in BANDS_NM},
+           "exposure_free_range": [round(min(f.exposure for f in mc_free), 4),
+                                   round(max(f.exposure for f in mc_free), 4)],
+           "param_names": list(PARAM_NAMES), "fit_band_nm": list(FIT_BAND_NM)}
+    if dec_fixed is not None:
+        out["decoder"] = {"mean": {b: round(_mean(dec_fixed, b), 5) for b in BANDS_NM},
+                          "mean_free": {b: round(_mean(dec_free, b), 5) for b in BANDS_NM},
+                          "exposure_free_range": [round(min(f.exposure for f in dec_free), 4),
+                                                  round(max(f.exposure for f in dec_free), 4)]}
+    if settings:
+        out["settings"] = settings
+    return out
+
+
+def markdown(report: dict) -> str:
+    """The per-subject table and the means, as Markdown."""
+    dec = "decoder" in report
+    head = ("| subject | L* | RMSE UV | Vis | NIR | 400–1000 | f_mel | f_blood | t_epi (µm) | so2 | b_mel "
+            "| exposure (free) | RMSE free |" + (" decoder RMSE | decoder exposure |" if dec else ""))
+    lines = [head, "|" + "---|" * (head.count("|") - 1)]
+    for s in report["subjects"]:
+        p = s["p"]
+        row = (f"| {s['name']} | {s['L_star']:.1f} | {s['rmse_uv']:.4f} | {s['rmse_vis']:.4f} | {s['rmse_nir']:.4f} "
+               f"| {s['rmse_400_1000']:.4f} | {p[0]:.4f} | {p[1]:.4f} | {p[2] * 1e4:.0f} | {p[3]:.2f} | {p[4]:.2f} "
+               f"| {s['exposure_free']:.3f} | {s['rmse_400_1000_free']:.4f} |")
+        if dec:
+            row += f" {s['decoder']['rmse_400_1000']:.4f} | {s['decoder']['exposure_free']:.3f} |"
+        lines.append(row)
+    m, mf = report["mean"], report["mean_free"]
+    lines += ["", f"Mean RMSE at exposure 1 (Monte Carlo): UV {m['uv']:.4f}, Vis {m['vis']:.4f}, NIR {m['nir']:.4f}, "
+              f"400–1000 nm **{m['400_1000']:.4f}**; exposure free: 400–1000 nm {mf['400_1000']:.4f} at factors "
+              f"{report['exposure_free_range'][0]:.3f}–{report['exposure_free_range'][1]:.3f}."]
+    if dec:
+        d = report["decoder"]
+        lines.append(f"Shipped decoder: 400–1000 nm {d['mean']['400_1000']:.4f} at exposure 1, "
+                     f"{d['mean_free']['400_1000']:.4f} free at factors {d['exposure_free_range'][0]:.3f}–"
+                     f"{d['exposure_free_range'][1]:.3f}.")
+    return "\n".join(lines) + "\n"
+
+
+def figure(path: Path, wavelength_nm: np.ndarray, measured: np.ndarray, names, lightness, mc_fixed,
+           dec_fixed=None) -> None:
+    """Measured against modelled spectra for the lightest, the median and the darkest subject."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    order = np.argsort(lightness)
+    picks = [("light", order[-1]), ("medium", order[len(order) // 2]), ("dark", order[0])]
+    fig, axes = plt.subplots(1, 3, figsize=(13, 3.8), sharey=True)
+    for ax, (label, i) in zip(axes, picks, strict=True):
+        ax.plot(wavelength_nm, measured[i], "k-", lw=1.6, label="measured (NIST)")
+        ax.plot(wavelength_nm, mc_fixed[i].model, "C0-", lw=1.2, label="Monte Carlo fit, exposure 1")
+        if dec_fixed is not None:
+            ax.plot(wavelength_nm, dec_fixed[i].model, "C3--", lw=1.0, label="shipped decoder fit, exposure 1")
+        ax.axvspan(wavelength_nm[0], FIT_BAND_NM[0], color="0.93", lw=0)
+        ax.set_title(f"{label}: {names[i]} (L* {lightness[i]:.0f}), RMSE {mc_fixed[i].rmse['400_1000']:.3f}")
+        ax.set_xlabel("wavelength (nm)")
+    axes[0].set_ylabel("reflectance (specular included)")
+    axes[0].legend(fontsize=8, loc="upper left")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def write(out: Path, report: dict, md: str) -> None:
+    """realskin.json and realskin.md in ``out``."""
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "realskin.json").write_text(json.dumps(report, indent=1) + "\n")
+    (out / "realskin.md").write_text(md)
