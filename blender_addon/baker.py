@@ -46,7 +46,8 @@ class BakeSettings:
     "PACK" (images packed into the .blend) or "FILES" (EXR files in ``output_dir``, default a folder
     beside the saved .blend).  ``backend``: "AUTO", "SVM" or "OSL".  ``exact``: every distinct colour through
     the model instead of the fast-path table; ``uv_coverage``: evaluate only the texels the active mesh's UVs
-    cover (the others take the maps of the most common covered colour)."""
+    cover (the others take the maps of the most common covered colour); ``unit_scale_m``: metres per Blender
+    unit for the radii (None: the scene's, :func:`scene_unit_scale`)."""
 
     model_path: str
     filepath: str = ""
@@ -61,6 +62,14 @@ class BakeSettings:
     chunk: int = 2048
     exact: bool = False
     uv_coverage: bool = True
+    unit_scale_m: float | None = None
+
+
+def scene_unit_scale(scene: bpy.types.Scene) -> float:
+    """Metres per Blender unit: the scene's Unit Scale (Scene ▸ Units), 1 when the unit system is None (Blender
+    then greys the Unit Scale out and lengths are plain numbers)."""
+    units = scene.unit_settings
+    return float(units.scale_length or 1.0) if units.system != "NONE" else 1.0
 
 
 def active_image_node(material: bpy.types.Material | None) -> bpy.types.Node | None:
@@ -205,8 +214,8 @@ class AddonBake:
         mask, self.uv_note = (mesh_uv_mask(obj, self.source_node, width, height) if settings.uv_coverage
                               else (None, "off"))
         self.out_dir, self._temp_dir = self._output_folder()
-        scale = self.scene.unit_settings.scale_length if self.scene.unit_settings.system != "NONE" else 1.0
-        self.options = baking.BakeOptions(targets=("cycles",), unit_scale_m=float(scale or 1.0),
+        scale = scene_unit_scale(self.scene) if settings.unit_scale_m is None else float(settings.unit_scale_m)
+        self.options = baking.BakeOptions(targets=("cycles",), unit_scale_m=scale,
                                           threads=settings.threads, chunk=settings.chunk,
                                           match_exposure=settings.match_exposure, overwrite=settings.overwrite,
                                           exact=settings.exact, texel_mask=mask)
@@ -363,8 +372,7 @@ class AddonBake:
                 previous_surface = [(ln.from_socket, ln.to_socket) for ln in out_links]
                 gnode = nodes.wire_into_material(self.material, group, images)
                 created_nodes = [n.name for n in self.material.node_tree.nodes if n.name not in before]
-                gnode.inputs["IOR"].default_value = self.options.ior
-                gnode.inputs["Roughness"].default_value = 0.0
+                gnode.inputs["IOR"].default_value = self.options.ior  # the IOR the maps were baked for
                 self._follow_source_uv(gnode)
                 report += f", {self.backend} node group wired into '{self.material.name}'"
             else:

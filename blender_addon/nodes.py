@@ -3,7 +3,11 @@
 Inputs, for each component k = 1..K (the baked maps of SPEC §4, ``--target cycles``):
 ``k{k} Color`` (Subsurface Color, RGB), ``k{k} Radius`` (RANDOM_WALK radius in Blender units, RGB),
 ``k{k} Weight`` (RGB, summing to 1 over k per channel), ``k{k} Anisotropy`` (one g in [0, 0.9]);
-plus ``IOR`` and ``Roughness`` of Cycles' refractive entry bounce.  Output: ``BSSRDF`` (a shader).
+then ``IOR`` (the tissue index: the specular coat's Fresnel and the closures' refractive entry, which the
+bake's tables assume), ``Roughness`` (the coat's specular roughness, Blender's perceptual roughness, GGX
+alpha = Roughness^2) and ``Normal`` (normal/bump map; unlinked: the shading normal), which feeds the coat,
+its Fresnel weight and every subsurface closure.  Output: ``BSSRDF`` (the whole surface shader: coat plus
+mixture; the name is kept for files wired before the coat existed).
 
 Why a sum of closures weighted by w_k *is* "pick component k with probability w_k, then walk in medium k"
 (Cycles 5.0.1 kernel): shader nodes never choose a closure; Mix/Add Shader only scale and collect closure
@@ -25,13 +29,52 @@ never the mean.  Per-channel weights need the closure weight to differ from A pe
   the factor A_k is required because the kernel divides by the albedo (as Blender's own
   node_subsurface_scattering.osl does).
 
+The specular coat (skin's surface reflection: highlights, pores and wrinkles through the normal map)::
+
+    shader = F(cos) x Glossy(Multiscatter GGX, white, Roughness, Normal)
+             + (1 - F(cos)) / (1 - F_dr(IOR)) x mixture
+
+with F the Fresnel reflectance of the view direction at the shading normal (Cycles' Fresnel node) and F_dr
+the cosine-weighted mean of F (exporters.cycles.DIFFUSE_FRESNEL_POLY).  Why this layering and not another:
+
+* **Energy.**  The coat reflects F and leaves 1 - F to the skin, so no light is counted twice; the white
+  Multiscatter GGX lobe keeps its albedo at 1 for every roughness, so the coat reflects F, not less.
+* **The maps already hold the body reflectance behind the boundary.**  A bake targets the model's
+  reflectance, which excludes the specular part and includes the Fresnel losses of entering and leaving
+  (exporters.collapse step 1).  Weighting the mixture by 1 - F alone would take those losses twice and
+  darken skin by F_dr (7.7 % at n = 1.4).  Dividing by 1 - F_dr keeps the cosine-weighted mean of the
+  mixture's weight at exactly 1 while its angular shape is the physical 1 - F (brighter than the bare
+  mixture face-on, darker at grazing where the coat takes over): the flat-slab test renders the model's
+  colour plus the specular part within 1.3 % (tests/test_bake_fidelity.py; the walk's reflectance varies a
+  little with the view angle, so the body loses 0.2-1.2 %).  The reflectance stays <= F + (1 - F) = 1
+  wherever the mixture reflects at most 1 - F_dr, as a body behind a Fresnel boundary does.
+* **Why not the Principled BSDF's own layering** (Subsurface Weight 1): a Principled BSDF holds ONE
+  BSSRDF (one colour, radius, anisotropy); K x 3 of them would add the specular 3 times (sum over k, c of
+  w_kc = 3) and would weight the mixture by 1 - (specular albedo), the double loss above.
+* **Why not OSL's ``layer()``** on the OSL path: SVM has no equivalent, and both paths must render the same
+  (tests/test_cycles_mixture.py compares them).
+* Mix Shader clamps its Fac to [0, 1] but the scale (1 - F)/(1 - F_dr) exceeds 1 at most angles (face-on
+  (1 - F0)/(1 - F_dr) = 1.053 at IOR 1.4): the mixture feeds two Mix Shaders, Fac = min(scale, 1) and
+  max(scale - 1, 0), added; Cycles sums the weights of a closure reached along several paths (checked: two
+  Mix Shaders of 0.9 and 0.3 over one Diffuse BSDF render 1.2 x the Diffuse; and the SVM group renders
+  F0 + 1.053 x the bare walk, tests/test_cycles_mixture.py).
+* The coat's Fresnel uses the shading normal, not each microfacet's: for a rough coat the reflected share
+  at grazing angles is a little high (the usual Fresnel-node layering), never above 1.
+* The subsurface closures keep a smooth entry (roughness 0) and the group's IOR, exactly as the bake's
+  Cycles reflectance tables assume (exporters.reflectance_tables); IOR 1 switches the coat off.
+
 Both paths are checked against each other and against single-component renders in
-tests/test_cycles_mixture.py.
+tests/test_cycles_mixture.py; the coat's highlight, normal map and wiring in tests/test_skin_specular.py.
 """
 
 from __future__ import annotations
 
+import math
+
 import bpy
+
+from exporters import cycles
+from exporters.constants import N_TISSUE
 
 from . import osl
 
@@ -43,9 +86,19 @@ KINDS = ("Color", "Radius", "Weight", "Anisotropy")
 FRAME_LABEL = "Spectral Skin SSS"
 #: Custom property remembering what fed the Material Output before wiring (for the user to restore).
 PREVIOUS_SURFACE_PROP = "spectral_skin_sss_previous_surface"
-#: Entry bounce defaults: tissue index (SPEC §1) and a smooth interface.
-DEFAULT_IOR = 1.4
-DEFAULT_ROUGHNESS = 0.0
+#: The tissue index (SPEC §1): the coat's Fresnel and the closures' entry bounce.
+DEFAULT_IOR = N_TISSUE
+#: Roughness of the subsurface closures' refractive entry: smooth, as the bake's Cycles tables assume.
+ENTRY_ROUGHNESS = 0.0
+#: rms facet slope of facial skin, Beckmann m: Weyrich et al. 2006 ("Analysis of human faces using a
+#: measurement-based skin reflectance model", ACM TOG 25(3):1013) fit a Torrance-Sparrow lobe per face region,
+#: m between about 0.3 and 0.45; 0.4 is used for a whole face (training/realskin takes 0.35 for the smoother
+#: forearm).
+SKIN_FACET_SLOPE = 0.4
+#: Default specular Roughness of the coat when the material has no Principled BSDF to take it from.  Cycles'
+#: Roughness socket is perceptual: GGX alpha = Roughness^2, and GGX alpha matches Beckmann m (Walter et al.
+#: 2007), so Roughness = sqrt(m) = 0.63 (typing 0.4 into the socket would mean m = 0.16, a wet look).
+SKIN_ROUGHNESS = math.sqrt(SKIN_FACET_SLOPE)
 
 
 def socket_name(k: int, kind: str) -> str:
@@ -66,16 +119,18 @@ def _new_interface(group: bpy.types.NodeTree, k_count: int) -> None:
             else:
                 sock.default_value = (0.0, 0.0, 0.0, 1.0)
     ior = iface.new_socket("IOR", in_out="INPUT", socket_type="NodeSocketFloat")
-    ior.min_value, ior.max_value, ior.default_value = 1.01, 3.8, DEFAULT_IOR
+    ior.min_value, ior.max_value, ior.default_value = 1.0, 3.8, DEFAULT_IOR
     rough = iface.new_socket("Roughness", in_out="INPUT", socket_type="NodeSocketFloat")
-    rough.min_value, rough.max_value, rough.default_value = 0.0, 1.0, DEFAULT_ROUGHNESS
+    rough.min_value, rough.max_value, rough.default_value = 0.0, 1.0, SKIN_ROUGHNESS
+    normal = iface.new_socket("Normal", in_out="INPUT", socket_type="NodeSocketVector")
+    normal.hide_value = True  # like the Principled BSDF's Normal: unlinked means the shading normal
     iface.new_socket("BSSRDF", in_out="OUTPUT", socket_type="NodeSocketShader")
 
 
 def _group_io(group: bpy.types.NodeTree) -> tuple[bpy.types.Node, bpy.types.Node]:
     gin = group.nodes.new("NodeGroupInput")
     gout = group.nodes.new("NodeGroupOutput")
-    gin.location, gout.location = (-1200.0, 0.0), (900.0, 0.0)
+    gin.location, gout.location = (-1200.0, 0.0), (1250.0, 0.0)
     return gin, gout
 
 
@@ -107,9 +162,16 @@ def _fresh_group(name: str, k_count: int, backend: str):
 
 def build_svm_group(k_count: int = 3, name: str = GROUP_NAME) -> bpy.types.NodeTree:
     """Build (or rebuild) the SVM node group with ``k_count`` components; returns the node tree."""
-    if not 1 <= k_count <= 7:  # 3K closures + margin must stay below Cycles' MAX_CLOSURE = 64
+    if not 1 <= k_count <= 7:  # 3K closures + coat + margin must stay below Cycles' MAX_CLOSURE = 64
         raise ValueError("k_count must be in 1..7")
     group, gin, gout = _fresh_group(name, k_count, "SVM")
+    mixture = _svm_mixture(group, gin, k_count)
+    group.links.new(_svm_coat(group, gin, mixture), gout.inputs["BSSRDF"])
+    return group
+
+
+def _svm_mixture(group: bpy.types.NodeTree, gin: bpy.types.Node, k_count: int) -> bpy.types.NodeSocket:
+    """The 3K single-channel closures, each scaled by w_kc and summed (module docstring); returns the sum."""
     total = None
     for k in range(1, k_count + 1):
         y0 = -(k - 1) * 1500.0
@@ -121,36 +183,109 @@ def build_svm_group(k_count: int = 3, name: str = GROUP_NAME) -> bpy.types.NodeT
             seps[kind] = sep
         for c in range(3):
             y = y0 - c * 450.0
-            col = _single_channel(group, seps["Color"], c, -700.0, y)
-            rad = _single_channel(group, seps["Radius"], c, -700.0, y - 150.0)
-            sss = group.nodes.new("ShaderNodeSubsurfaceScattering")
-            sss.location = (-450.0, y)
-            sss.label = f"k{k} {CHANNELS[c]}"
-            sss.inputs["Scale"].default_value = 1.0
-            sss.falloff = "RANDOM_WALK"
-            group.links.new(col.outputs[0], sss.inputs["Color"])
-            group.links.new(rad.outputs[0], sss.inputs["Radius"])
-            group.links.new(gin.outputs[socket_name(k, "Anisotropy")], sss.inputs["Anisotropy"])
-            group.links.new(gin.outputs["IOR"], sss.inputs["IOR"])
-            group.links.new(gin.outputs["Roughness"], sss.inputs["Roughness"])
+            sss = _channel_closure(group, gin, seps, k, c, y)
             mix = group.nodes.new("ShaderNodeMixShader")
             mix.location = (-200.0, y)
             group.links.new(seps["Weight"].outputs[c], mix.inputs["Fac"])
             group.links.new(sss.outputs["BSSRDF"], mix.inputs[2])
             if total is None:
-                total = mix
+                total = mix.outputs[0]
             else:
                 add = group.nodes.new("ShaderNodeAddShader")
                 add.location = (50.0 + 20.0 * k, y)
-                group.links.new(total.outputs[0], add.inputs[0])
+                group.links.new(total, add.inputs[0])
                 group.links.new(mix.outputs[0], add.inputs[1])
-                total = add
-    group.links.new(total.outputs[0], gout.inputs["BSSRDF"])
-    return group
+                total = add.outputs[0]
+    return total
+
+
+def _channel_closure(group, gin, seps: dict, k: int, c: int, y: float) -> bpy.types.Node:
+    """Subsurface Scattering node of component k, channel c (smooth entry at the group's IOR)."""
+    col = _single_channel(group, seps["Color"], c, -700.0, y)
+    rad = _single_channel(group, seps["Radius"], c, -700.0, y - 150.0)
+    sss = group.nodes.new("ShaderNodeSubsurfaceScattering")
+    sss.location = (-450.0, y)
+    sss.label = f"k{k} {CHANNELS[c]}"
+    sss.falloff = "RANDOM_WALK"
+    sss.inputs["Scale"].default_value = 1.0
+    sss.inputs["Roughness"].default_value = ENTRY_ROUGHNESS
+    group.links.new(col.outputs[0], sss.inputs["Color"])
+    group.links.new(rad.outputs[0], sss.inputs["Radius"])
+    group.links.new(gin.outputs[socket_name(k, "Anisotropy")], sss.inputs["Anisotropy"])
+    group.links.new(gin.outputs["IOR"], sss.inputs["IOR"])
+    group.links.new(gin.outputs["Normal"], sss.inputs["Normal"])
+    return sss
+
+
+def _math(group: bpy.types.NodeTree, operation: str, a, b=None, c=None, x: float = 0.0,
+          y: float = 0.0) -> bpy.types.NodeSocket:
+    """A Math node ``operation`` of inputs a, b, c (sockets or numbers); returns its output socket."""
+    node = group.nodes.new("ShaderNodeMath")
+    node.operation = operation
+    node.location = (x, y)
+    for i, value in enumerate((a, b, c)):
+        if isinstance(value, bpy.types.NodeSocket):
+            group.links.new(value, node.inputs[i])
+        elif value is not None:
+            node.inputs[i].default_value = float(value)
+    return node.outputs[0]
+
+
+def _diffuse_fresnel(group: bpy.types.NodeTree, ior: bpy.types.NodeSocket) -> bpy.types.NodeSocket:
+    """F_dr(IOR) with Math nodes: Horner's rule on exporters.cycles.DIFFUSE_FRESNEL_POLY in x = (n-1)/(n+1)."""
+    n = _math(group, "MAXIMUM", ior, 1.0, x=-950.0, y=900.0)
+    x = _math(group, "DIVIDE", _math(group, "SUBTRACT", n, 1.0, x=-800.0, y=950.0),
+              _math(group, "ADD", n, 1.0, x=-800.0, y=850.0), x=-650.0, y=900.0)
+    poly = cycles.DIFFUSE_FRESNEL_POLY[-1]
+    for i, coeff in enumerate(reversed(cycles.DIFFUSE_FRESNEL_POLY[:-1])):
+        poly = _math(group, "MULTIPLY_ADD", poly, x, coeff, x=-500.0 + 120.0 * i, y=900.0)
+    return _math(group, "MULTIPLY", poly, x, x=0.0, y=900.0)
+
+
+def _svm_coat(group: bpy.types.NodeTree, gin: bpy.types.Node,
+              mixture: bpy.types.NodeSocket) -> bpy.types.NodeSocket:
+    """F x Glossy + (1 - F)/(1 - F_dr) x mixture (module docstring); returns the shader output."""
+    fresnel = group.nodes.new("ShaderNodeFresnel")
+    fresnel.location = (-650.0, 700.0)
+    group.links.new(gin.outputs["IOR"], fresnel.inputs["IOR"])
+    group.links.new(gin.outputs["Normal"], fresnel.inputs["Normal"])
+    f = fresnel.outputs["Fac"]
+    scale = _math(group, "DIVIDE", _math(group, "SUBTRACT", 1.0, f, x=-450.0, y=700.0),
+                  _math(group, "SUBTRACT", 1.0, _diffuse_fresnel(group, gin.outputs["IOR"]), x=150.0, y=900.0),
+                  x=300.0, y=800.0)
+    body = None
+    for i, fac in enumerate((_math(group, "MINIMUM", scale, 1.0, x=450.0, y=850.0),
+                             _math(group, "MAXIMUM", _math(group, "SUBTRACT", scale, 1.0, x=450.0, y=700.0),
+                                   0.0, x=600.0, y=700.0))):
+        part = group.nodes.new("ShaderNodeMixShader")
+        part.location = (750.0, 500.0 - 200.0 * i)
+        group.links.new(fac, part.inputs["Fac"])
+        group.links.new(mixture, part.inputs[2])
+        body = part.outputs[0] if body is None else _add_shader(group, body, part.outputs[0], 900.0, 400.0)
+    glossy = group.nodes.new("ShaderNodeBsdfGlossy")
+    glossy.location = (450.0, 1150.0)
+    glossy.distribution = "MULTI_GGX"
+    glossy.inputs["Color"].default_value = (1.0, 1.0, 1.0, 1.0)
+    group.links.new(gin.outputs["Roughness"], glossy.inputs["Roughness"])
+    group.links.new(gin.outputs["Normal"], glossy.inputs["Normal"])
+    coat = group.nodes.new("ShaderNodeMixShader")
+    coat.location = (750.0, 1000.0)
+    group.links.new(f, coat.inputs["Fac"])
+    group.links.new(glossy.outputs[0], coat.inputs[2])
+    return _add_shader(group, coat.outputs[0], body, 1050.0, 700.0)
+
+
+def _add_shader(group: bpy.types.NodeTree, a: bpy.types.NodeSocket, b: bpy.types.NodeSocket, x: float,
+                y: float) -> bpy.types.NodeSocket:
+    add = group.nodes.new("ShaderNodeAddShader")
+    add.location = (x, y)
+    group.links.new(a, add.inputs[0])
+    group.links.new(b, add.inputs[1])
+    return add.outputs[0]
 
 
 def build_osl_group(k_count: int = 3, name: str = GROUP_NAME_OSL) -> bpy.types.NodeTree:
-    """The same interface as :func:`build_svm_group`, computed by one OSL Script node (CPU/OptiX only).
+    """The same interface and shader as :func:`build_svm_group`, computed by one OSL Script node (CPU/OptiX only).
 
     Needs ``scene.cycles.shading_system = True`` to render.  Raises RuntimeError if the script does not
     compile (no sockets appear, or no bytecode).
@@ -158,18 +293,19 @@ def build_osl_group(k_count: int = 3, name: str = GROUP_NAME_OSL) -> bpy.types.N
     if not 1 <= k_count <= 16:
         raise ValueError("k_count must be in 1..16")
     group, gin, gout = _fresh_group(name, k_count, "OSL")
-    script = osl.script_node(group.nodes, osl.mixture_source(k_count), f"spectral_skin_sss_k{k_count}.osl")
+    source = osl.mixture_source(k_count, SKIN_ROUGHNESS)
+    script = osl.script_node(group.nodes, source, f"spectral_skin_sss_k{k_count}.osl")
     for k in range(1, k_count + 1):
         for kind in KINDS:
             group.links.new(gin.outputs[socket_name(k, kind)], script.inputs[osl.param_name(k, kind)])
-    group.links.new(gin.outputs["IOR"], script.inputs["ior"])
-    group.links.new(gin.outputs["Roughness"], script.inputs["roughness"])
+    for name, param in (("IOR", "ior"), ("Roughness", "roughness"), ("Normal", "Normal")):
+        group.links.new(gin.outputs[name], script.inputs[param])
     group.links.new(script.outputs["BSSRDF"], gout.inputs["BSSRDF"])
     return group
 
 
 #: Custom property marking the group layout version (bump when the generated nodes change).
-GROUP_VERSION = 1
+GROUP_VERSION = 2  # 2: specular coat, Normal input
 
 
 def ensure_group(k_count: int, backend: str) -> bpy.types.NodeTree:
@@ -217,9 +353,12 @@ def wire_into_material(material: bpy.types.Material, group: bpy.types.NodeTree,
 
     Every existing node and link is kept except the link into the active Material Output's Surface,
     which now comes from the group; the name of the node that fed it is stored in
-    ``material[PREVIOUS_SURFACE_PROP]``.  New nodes sit in a frame labelled "Spectral Skin SSS".  Images are
-    set to Non-Color.  ``interpolation`` defaults to Closest because the maps hold Cycles' colour A, not
-    the albedo alpha = f(A), and f is non-linear (linear filtering gives a small bias at texel edges).
+    ``material[PREVIOUS_SURFACE_PROP]``.  If that node is a Principled BSDF (or a group wired here before),
+    what feeds its Normal (normal map, bump chain) also feeds the group's Normal, and its Roughness (the
+    link, else the value) becomes the coat's; otherwise the coat gets :data:`SKIN_ROUGHNESS`.  New nodes
+    sit in a frame labelled "Spectral Skin SSS".  Images are set to Non-Color.  ``interpolation`` defaults to
+    Closest because the maps hold Cycles' colour A, not the albedo alpha = f(A), and f is non-linear
+    (linear filtering gives a small bias at texel edges).
     Undo: call from an operator with ``bl_options = {'REGISTER', 'UNDO'}``.
     """
     tree = material.node_tree
@@ -232,10 +371,13 @@ def wire_into_material(material: bpy.types.Material, group: bpy.types.NodeTree,
     gnode.location = (out.location.x - 300.0, out.location.y)
     gnode.parent = frame
     surface = out.inputs["Surface"]
+    previous = None
     for link in list(surface.links):
-        material[PREVIOUS_SURFACE_PROP] = link.from_node.name
+        previous = link.from_node
+        material[PREVIOUS_SURFACE_PROP] = previous.name
         tree.links.remove(link)
     tree.links.new(gnode.outputs["BSSRDF"], surface)
+    _take_surface_inputs(tree, previous, gnode)
     for i, ((k, kind), image) in enumerate(sorted((images or {}).items())):
         image.colorspace_settings.name = "Non-Color"
         tex = tree.nodes.new("ShaderNodeTexImage")
@@ -246,3 +388,39 @@ def wire_into_material(material: bpy.types.Material, group: bpy.types.NodeTree,
         tex.parent = frame
         tree.links.new(tex.outputs["Color"], gnode.inputs[socket_name(k, kind)])
     return gnode
+
+
+def _surface_source(node: bpy.types.Node | None) -> bpy.types.Node | None:
+    """``node`` if it is a Principled BSDF or a mixture group of this add-on (a re-wire), else None."""
+    if node is None:
+        return None
+    if node.bl_idname == "ShaderNodeBsdfPrincipled":
+        return node
+    tree = getattr(node, "node_tree", None)
+    if node.bl_idname == "ShaderNodeGroup" and tree is not None and "spectral_skin_sss_k" in tree:
+        return node
+    return None
+
+
+def _feeding_socket(socket: bpy.types.NodeSocket) -> bpy.types.NodeSocket | None:
+    """The output socket linked into ``socket`` (muted links ignored), or None."""
+    for link in socket.links:
+        if not link.is_muted:
+            return link.from_socket
+    return None
+
+
+def _take_surface_inputs(tree: bpy.types.NodeTree, previous: bpy.types.Node | None,
+                        gnode: bpy.types.Node) -> None:
+    """Give the group node ``gnode`` the Normal and Roughness of the surface node it replaces (a Principled
+    BSDF or an earlier mixture group): the same links, or Roughness's value; :data:`SKIN_ROUGHNESS` when
+    ``previous`` is anything else.  Nothing of the user's is changed."""
+    source = _surface_source(previous)
+    if source is None:
+        gnode.inputs["Roughness"].default_value = SKIN_ROUGHNESS
+        return
+    for name in ("Normal", "Roughness"):
+        feed = _feeding_socket(source.inputs[name])
+        if feed is not None:
+            tree.links.new(feed, gnode.inputs[name])
+    gnode.inputs["Roughness"].default_value = source.inputs["Roughness"].default_value

@@ -71,11 +71,13 @@ class SPECTRAL_SKIN_OT_invert_albedo(bpy.types.Operator):
     _timer = None
 
     def _settings(self, context) -> baker.BakeSettings:
+        """The operator's options, the add-on preferences and the scene's unit scale (radii in its units)."""
         return baker.BakeSettings(model_path=preferences.model_path(context), filepath=self.filepath,
                                   image_name=self.image_name, storage=self.storage, output_dir=self.output_dir,
                                   colorspace=self.colorspace, backend=self.backend, overwrite=self.overwrite,
                                   match_exposure=self.match_exposure, threads=preferences.threads(context),
-                                  exact=self.exact, uv_coverage=self.uv_coverage)
+                                  exact=self.exact, uv_coverage=self.uv_coverage,
+                                  unit_scale_m=baker.scene_unit_scale(context.scene))
 
     def execute(self, context):
         try:

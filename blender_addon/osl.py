@@ -18,6 +18,9 @@ import sys
 
 import bpy
 
+from exporters.constants import N_TISSUE
+from exporters.cycles import DIFFUSE_FRESNEL_POLY
+
 #: OSL parameter suffix for each map kind of nodes.KINDS.
 _PARAM_SUFFIX = {"Color": "color", "Radius": "radius", "Weight": "weight", "Anisotropy": "anisotropy"}
 
@@ -63,11 +66,17 @@ def ensure_oslquery() -> None:
     _register_bundled_oiio_types(site_packages)
 
 
-def mixture_source(k_count: int) -> str:
-    """OSL shader: sum over k of ``(w_k * A_k) * bssrdf("random_walk", N, r_k, A_k, ...)``.
+def mixture_source(k_count: int, roughness: float) -> str:
+    """OSL shader: the specular coat over the mixture of K random-walk media (blender_addon/nodes.py)::
+
+        F * microfacet_multi_ggx_aniso(Normal, white)  +  (1 - F)/(1 - F_dr(ior)) * sum_k (w_k * A_k) * bssrdf(...)
 
     The factor A_k cancels the kernel's division of the throughput by the albedo, so the expected
-    contribution of component k in channel c is w_kc times the walk in medium k (see nodes.py).
+    contribution of component k in channel c is w_kc times the walk in medium k.  F is Cycles' Fresnel node
+    (``fresnel_dielectric_cos`` of node_fresnel.h, 1/IOR on back faces), F_dr the same polynomial as the SVM
+    group (exporters.cycles.DIFFUSE_FRESNEL_POLY); the closures keep a smooth entry (roughness 0).  A zero
+    ``Normal`` (an unlinked group input on some paths) falls back to N, as Cycles' closures do.
+    ``roughness``: the default of the coat's roughness parameter.
     """
     params = []
     terms = []
@@ -76,22 +85,35 @@ def mixture_source(k_count: int) -> str:
         params += [f"    color {c} = 0.0,", f"    color {r} = 0.0,", f"    color {w} = {1.0 / k_count!r},",
                    f"    float {g} = 0.0,"]
         terms.append(
-            f"    BSSRDF += ({w} * {c}) * bssrdf(\"random_walk\", N, vector({r}), {c},\n"
-            f"        \"ior\", ior, \"anisotropy\", {g}, \"roughness\", roughness);"
+            f"    mixture += ({w} * {c}) * bssrdf(\"random_walk\", Nn, vector({r}), {c},\n"
+            f"        \"ior\", ior, \"anisotropy\", {g}, \"roughness\", 0.0);"
         )
+    poly = " + x * (".join(repr(c) for c in DIFFUSE_FRESNEL_POLY) + ")" * (len(DIFFUSE_FRESNEL_POLY) - 1)
     return "\n".join(
         [
-            "// Spectral Skin SSS: mixture of K random-walk media with per-channel weights (generated).",
+            "// Spectral Skin SSS: specular coat over a mixture of K random-walk media with per-channel weights"
+            " (generated).",
             '#include "stdcycles.h"',
+            '#include "node_fresnel.h"',
             "",
             f"shader spectral_skin_sss_k{k_count}(",
             *params,
-            "    float ior = 1.4,",
-            "    float roughness = 0.0,",
+            f"    float ior = {N_TISSUE!r},",
+            f"    float roughness = {float(roughness)!r},",
+            "    normal Normal = N,",
             "    output closure color BSSRDF = 0)",
             "{",
-            "    BSSRDF = 0;",
+            "    normal Nn = (length(Normal) > 0.0) ? normalize(Normal) : N;",
+            "    float eta = max(ior, 1.0);",
+            "    float F = fresnel_dielectric_cos(dot(I, Nn), backfacing() ? 1.0 / eta : eta);",
+            "    float x = (eta - 1.0) / (eta + 1.0);",
+            f"    float F_dr = x * ({poly});",
+            "    float alpha = clamp(roughness, 0.0, 1.0);",
+            "    alpha = alpha * alpha;",
+            "    closure color mixture = 0;",
             *terms,
+            "    BSSRDF = F * microfacet_multi_ggx_aniso(Nn, vector(0.0), alpha, alpha, color(1.0))",
+            "        + ((1.0 - F) / (1.0 - F_dr)) * mixture;",
             "}",
             "",
         ]

@@ -362,3 +362,47 @@ def medium_to_cycles(alpha, sigma_t_cm, g, unit_scale_m=1.0, g_common=None,
     color, radius, gg = np.broadcast_arrays(inv.color, radius, sim.g)
     return CyclesInputs(color=color, radius=radius, g=gg, saturated=inv.saturated,
                         approximate=inv.approximate, g_moved=sim.changed)
+
+
+# --- Specular coat over the subsurface mixture (blender_addon/nodes.py) -----------------------------------
+
+#: Hemispherical Fresnel reflectance of a smooth dielectric (air -> n) for cosine-weighted light,
+#: F_dr(n) = 2 int_0^1 F(mu; n) mu dmu, as a polynomial in x = (n - 1)/(n + 1) with no constant term (x^1..x^5).
+#: Least-squares fit to Gauss-Legendre quadrature (exporters.mitsuba.diffuse_specular) on n in [1, 3.8], held
+#: exact at n = 1.4 (0.0768115): |error| <= 1.1e-3 over [1, 3.8], <= 7e-5 for n in [1.25, 1.7].  A polynomial
+#: because the node group evaluates it with Math nodes (the closed form cancels catastrophically in float32
+#: near n = 1).
+DIFFUSE_FRESNEL_POLY: tuple[float, ...] = (0.5747379285, -1.418261621, 5.688563564, -8.559370577, 5.338668414)
+
+
+def fresnel_dielectric(cos_i, n) -> np.ndarray:
+    """Unpolarised Fresnel reflectance of a smooth dielectric (air -> n), Cycles' ``fresnel_dielectric_cos``
+    (kernel/closure/bsdf_util.h, the Fresnel node): ``cos_i`` the cosine to the normal, 1 for total internal
+    reflection (n < 1 only)."""
+    c = np.abs(_finite("cos_i", cos_i))
+    eta = _finite("n", n)
+    g2 = eta * eta - 1.0 + c * c
+    with np.errstate(invalid="ignore", divide="ignore"):
+        g = np.sqrt(np.maximum(g2, 0.0))
+        a = (g - c) / (g + c)
+        b = (c * (g + c) - 1.0) / (c * (g - c) + 1.0)
+        f = 0.5 * a * a * (1.0 + b * b)
+    return np.where(g2 > 0.0, f, 1.0)
+
+
+def diffuse_fresnel(n) -> np.ndarray:
+    """F_dr(n) of :data:`DIFFUSE_FRESNEL_POLY`; ``n`` below 1 counts as 1 (no coat, F_dr = 0)."""
+    eta = np.maximum(_finite("n", n), 1.0)
+    x = (eta - 1.0) / (eta + 1.0)
+    return x * np.polynomial.polynomial.polyval(x, DIFFUSE_FRESNEL_POLY)
+
+
+def coat_body_scale(cos_i, n) -> np.ndarray:
+    """Weight of the subsurface mixture under the specular coat seen at ``cos_i``: (1 - F(cos_i)) / (1 - F_dr(n)).
+
+    The baked maps already carry the skin's *body* reflectance behind its Fresnel boundary (the model's
+    reflectance excludes the specular part, exporters.collapse step 1), so the coat only redistributes it over
+    viewing angles: the cosine-weighted mean of this factor is 1 (up to the F_dr fit), and F + (1 - F) x body
+    / (1 - F_dr) <= 1 wherever the body reflectance is physical (at most 1 - F_dr)."""
+    eta = np.maximum(_finite("n", n), 1.0)
+    return (1.0 - fresnel_dielectric(cos_i, eta)) / (1.0 - diffuse_fresnel(eta))

@@ -75,6 +75,8 @@ def test_bake_svm_packed_wired_and_renders(addon, albedo_png, reference_maps):
     assert out.inputs["Surface"].links[0].from_node == gnode
     assert mat[nodes.PREVIOUS_SURFACE_PROP] == "Principled BSDF"
     assert gnode.inputs["IOR"].default_value == pytest.approx(1.4)
+    principled = tree.nodes["Principled BSDF"]  # the coat takes the user's roughness (0.5, Blender's default)
+    assert gnode.inputs["Roughness"].default_value == pytest.approx(principled.inputs["Roughness"].default_value)
     uv = next(n for n in tree.nodes if n.bl_idname == "ShaderNodeUVMap")
     for k in range(1, K + 1):
         for kind in nodes.KINDS:
