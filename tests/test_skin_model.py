@@ -7,7 +7,7 @@ import pytest
 import torch
 
 from exporters.constants import WAVELENGTHS_NM
-from training.skin import model
+from training.skin import constants, model
 from training.skin.chromophores import DATA_DIR, grid_spectra, read_table
 from training.skin.tones import load_tones
 
@@ -27,21 +27,36 @@ def test_melanin_published_values():
 
 def test_baseline_published_values():
     wl = torch.tensor([250.0, 350.0, 1000.0], dtype=torch.float64)
-    base = model.baseline_mua(wl)
-    # notes/skin_optics.md: 0.47 mm^-1 at 350 nm, 2.0 mm^-1 at 250 nm; tends to 0.0244 mm^-1 in the NIR
+    base = model.baseline_mua(wl, constants.JACQUES_1998)
+    # Jacques 1998 (OMLC): 0.47 mm^-1 at 350 nm, 2.0 mm^-1 at 250 nm; tends to 0.0244 mm^-1 in the NIR
     assert float(base[0]) == pytest.approx(20.0, rel=0.03)
     assert float(base[1]) == pytest.approx(4.7, rel=0.01)
     assert float(base[2]) == pytest.approx(0.244, abs=1e-3)
+    # the adopted model keeps the exponential and halves the NIR offset (training/skin/README.md)
+    adopted = model.baseline_mua(wl)
+    assert float(adopted[1]) == pytest.approx(4.7 - 0.244 + 0.12, rel=0.01)
+    assert float(adopted[2]) == pytest.approx(0.12, abs=1e-3)
 
 
 def test_scattering_and_anisotropy_published_values():
-    wl = torch.tensor([250.0, 500.0, 1000.0], dtype=torch.float64)
-    # Jacques 1998: mu_s' = 2e5 lambda^-1.5 + 2e12 lambda^-4 = 49.9 cm^-1 at 500 nm
-    assert float(model.reduced_scattering(wl)[1]) == pytest.approx(49.9, abs=0.05)
+    wl = torch.tensor([250.0, 500.0, 850.0, 1000.0], dtype=torch.float64)
+    # Jacques 1998: mu_s' = 2e5 lambda^-1.5 + 2e12 lambda^-4 = 49.9 cm^-1 at 500 nm, 11.9 at 850 nm
+    old = model.reduced_scattering(wl, constants.JACQUES_1998)
+    assert float(old[1]) == pytest.approx(49.9, abs=0.05)
+    assert float(old[2]) == pytest.approx(2e5 * 850**-1.5 + 2e12 * 850**-4, rel=1e-12)
+    # Jacques 2013 Table 2 (skin): 46.0 (lambda/500)^-1.421 -> 46.0 at 500 nm, 21.6 at 850 nm
+    new = model.reduced_scattering(wl)
+    assert float(new[1]) == pytest.approx(46.0, rel=1e-12)
+    assert float(new[2]) == pytest.approx(21.6, abs=0.05)
+    # Bashkatov as tabled by Jacques 2013: 1.1e12 lambda^-4 + 73.7 lambda^-0.22 (36.4 cm^-1 at 500 nm)
+    bash = model.reduced_scattering(wl, constants.SkinModelSpec("b", constants.BASHKATOV_SCATTERING,
+                                                                constants.JACQUES_1998_BASELINE))
+    assert float(bash[1]) == pytest.approx(1.1e12 * 500**-4 + 73.7 * 500**-0.22, rel=0.01)
+    assert float(bash[3]) == pytest.approx(1.1e12 * 1000**-4 + 73.7 * 1000**-0.22, rel=0.02)
     mus, g = model.scattering()
     # van Gemert 1989: g = 0.6925 at 250 nm, 0.765 at 500 nm, 0.91 at 1000 nm
     assert [at(g, 250), at(g, 500), at(g, 1000)] == pytest.approx([0.6925, 0.765, 0.91], abs=1e-12)
-    assert at(mus, 500) == pytest.approx(49.9 / (1 - 0.765), rel=1e-3)
+    assert at(mus, 500) == pytest.approx(46.0 / (1 - 0.765), rel=1e-3)
 
 
 def test_blood_absorption_uses_150_g_per_litre():

@@ -35,6 +35,7 @@ from training.data.sampling import T_EPI_LEVELS_CM
 from training.sim.kernel import KIND_REFLECTED, KIND_TRUNCATED
 from training.sim.medium import LayeredMedium
 from training.sim.transport import mean_stderr, simulate_records
+from training.skin.constants import SKIN_MODEL, SkinModelSpec
 from training.skin.model import absorption, scattering
 
 #: Photons per wavelength walked (and saved) at once: ~1.9e6 packets, a few hundred MB of records.
@@ -43,7 +44,7 @@ WALK_CHUNK_PHOTONS = 5_000
 N_BINS = R_EDGES_CM.size - 1
 
 
-def baseline_absorption(extra_tones: np.ndarray | None = None) -> np.ndarray:
+def baseline_absorption(extra_tones: np.ndarray | None = None, spec: SkinModelSpec = SKIN_MODEL) -> np.ndarray:
     """mu_a0 (W,), cm^-1: the smallest absorption of either layer over the SPEC parameter box.
 
     mu_a of each layer is multilinear in (f_mel, f_blood, so2, b_mel) (``training.skin.model``), so its
@@ -52,13 +53,14 @@ def baseline_absorption(extra_tones: np.ndarray | None = None) -> np.ndarray:
     """
     corners = np.array(list(itertools.product(*[PARAM_RANGES[n] for n in PARAM_NAMES])), dtype=np.float64)
     tones = corners if extra_tones is None else np.concatenate([corners, np.atleast_2d(extra_tones)])
-    mua_epi, mua_derm = absorption(tones)
+    mua_epi, mua_derm = absorption(tones, spec=spec)
     return torch.minimum(mua_epi.min(0).values, mua_derm.min(0).values).numpy()
 
 
-def slab_medium(mua0: np.ndarray, levels_cm: np.ndarray, channels: np.ndarray | None = None) -> LayeredMedium:
+def slab_medium(mua0: np.ndarray, levels_cm: np.ndarray, channels: np.ndarray | None = None,
+                spec: SkinModelSpec = SKIN_MODEL) -> LayeredMedium:
     """The baseline medium: slabs with boundaries at ``levels_cm`` over a semi-infinite rest, (W,) channels."""
-    mus, g = scattering()
+    mus, g = scattering(spec=spec)
     mua0_t = torch.as_tensor(mua0, dtype=torch.float64)
     if channels is not None:
         mus, g = mus[channels], g[channels]
@@ -129,7 +131,7 @@ class Trajectories:
 def walk(
     photons: int, *, seed: int, mua0: np.ndarray, levels_cm: np.ndarray = T_EPI_LEVELS_CM,
     channels: np.ndarray | None = None, device: str = "cpu", compile: bool | str = "auto",
-    illumination: str = "diffuse",
+    illumination: str = "diffuse", spec: SkinModelSpec = SKIN_MODEL,
 ) -> Trajectories:
     """One baseline walk: ``photons`` per channel.
 
@@ -137,7 +139,7 @@ def walk(
     geometry of reflectance spectrophotometers; ``training.realskin``).
     """
     ch_idx = np.arange(np.asarray(mua0).size) if channels is None else np.asarray(channels, dtype=np.int64)
-    medium = slab_medium(np.asarray(mua0)[ch_idx], levels_cm, ch_idx)
+    medium = slab_medium(np.asarray(mua0)[ch_idx], levels_cm, ch_idx, spec)
     t0 = time.perf_counter()
     rec = simulate_records(medium, photons, illumination=illumination, seed=seed, device=device, compile=compile)
     refl = rec.kind == KIND_REFLECTED

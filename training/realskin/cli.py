@@ -1,15 +1,17 @@
 """``python -m training realskin``: the skin model against measured human skin (SPEC §2).
 
-    python -m training realskin [--data FILE] [--out DIR] [--json] [--photons 20000] [--seed 1]
+    python -m training realskin [--data FILE] [--out DIR] [--json] [--photons 10000] [--seed 1]
                                 [--decoder blender_addon/models/skin_decoder.onnx | --no-decoder]
                                 [--subjects N] [--cache DIR]
+    python -m training realskin --study [--out DIR] [--photons 3000]
 
 Fits the biophysical parameters of every measured spectrum with the project's Monte Carlo (one walk of
 a collimated normal beam, every tone a reweighting of it; ``forward``) and, for comparison, the shipped
 decoder, exposure fixed at 1 and free, in the measurement's geometry (``geometry``).  Prints the table
 (or the JSON of SPEC §2 with ``--json``); ``--out DIR`` also writes realskin.json, realskin.md and
 fig_realskin.png.  The walk is cached (``--cache``, default DIR/cache or ~/.cache/spectral_skin_sss/realskin):
-a rerun with the same skin model, photons and seed fits at once.
+a rerun with the same skin model, photons and seed fits at once.  ``--study`` runs the cause study
+instead (``study``: each candidate modelling choice fitted the same way; DIR/study.md and study.json).
 """
 
 from __future__ import annotations
@@ -22,7 +24,7 @@ import time
 from pathlib import Path
 
 from exporters.constants import WAVELENGTHS_NM
-from training.realskin import report
+from training.realskin import report, study
 from training.realskin.fit import fit_subjects
 from training.realskin.forward import DecoderForward, MonteCarloForward, cached_walk
 from training.realskin.measurements import NIST_FILE, grid_channels, read_measurements
@@ -33,16 +35,21 @@ DEFAULT_DECODER = Path(__file__).resolve().parents[2] / "blender_addon" / "model
 def _parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="python -m training realskin", description=__doc__.split("\n\n")[2],
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--data", type=Path, default=NIST_FILE, help="measured spectra (NIST layout); default: the shipped file")
+    p.add_argument("--data", type=Path, default=NIST_FILE,
+                   help="measured spectra (NIST layout); default: the shipped file")
     p.add_argument("--out", type=Path, help="write realskin.json, realskin.md and fig_realskin.png here")
     p.add_argument("--json", action="store_true", help="print the JSON report instead of the table")
-    p.add_argument("--photons", type=int, default=20_000, help="photons per wavelength of the walk (default 20000)")
+    p.add_argument("--photons", type=int, help="photons per wavelength of the walk (default 10000; study 3000)")
     p.add_argument("--seed", type=int, default=1)
     p.add_argument("--device", choices=("cpu", "cuda"), default="cpu")
     p.add_argument("--decoder", type=Path, default=DEFAULT_DECODER, help="skin_decoder.onnx to compare with")
     p.add_argument("--no-decoder", action="store_true", help="fit the Monte Carlo only")
     p.add_argument("--subjects", type=int, help="fit only the first N subjects")
+    p.add_argument("--wavelength-stride", type=int, default=1,
+                   help="compare at every n-th shared wavelength (default 1: all 126, every 6 nm)")
     p.add_argument("--cache", type=Path, help="folder of cached walks")
+    p.add_argument("--study", action="store_true",
+                   help="run the cause study (every candidate model choice; default 3000 photons)")
     return p
 
 
@@ -61,16 +68,26 @@ def main(argv: list[str]) -> int:
     except ValueError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
+    if args.photons is None:
+        args.photons = 3_000 if args.study else 10_000
     if args.photons < 100:
         print("error: --photons must be at least 100 per wavelength.", file=sys.stderr)
         return 2
     if not args.no_decoder and not args.decoder.is_file():
         print(f"error: decoder {args.decoder} not found (pass --decoder PATH or --no-decoder).", file=sys.stderr)
         return 2
+    if args.wavelength_stride < 1:
+        print("error: --wavelength-stride must be >= 1.", file=sys.stderr)
+        return 2
     channels, measured = grid_channels(meas)
+    channels, measured = channels[:: args.wavelength_stride], measured[:, :: args.wavelength_stride]
     names = list(meas.names)
     if args.subjects is not None:
         names, measured = names[: args.subjects], measured[: args.subjects]
+    if args.study:
+        print(study.run_study(names, measured, channels, args.photons, args.seed, _cache_dir(args), args.out,
+                              args.device))
+        return 0
     wl = WAVELENGTHS_NM[channels]
     t0 = time.perf_counter()
     traj = cached_walk(channels, args.photons, args.seed, _cache_dir(args), args.device, progress=not args.json)
@@ -83,6 +100,7 @@ def main(argv: list[str]) -> int:
         dec = {free: fit_subjects(df, names, measured, wl, mc.specular, free, seed=args.seed) for free in (False, True)}
     lightness = report.measured_lightness(meas, mc.specular)[: len(names)]
     settings = {"data": args.data.name, "photons": args.photons, "seed": args.seed, "specular": round(mc.specular, 5),
+                "wavelengths": int(channels.size), "skin_model": mc.spec.name,
                 "walk_seconds": round(traj.seconds, 1), "seconds": round(time.perf_counter() - t0, 1),
                 "walk_cached": t_walk < 0.5 * traj.seconds}
     rep = report.summary(names, lightness, fits[False], fits[True], dec[False], dec[True], settings)

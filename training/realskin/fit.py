@@ -60,6 +60,19 @@ def band_rmse(model: np.ndarray, measured: np.ndarray, wavelength_nm: np.ndarray
     return out
 
 
+def at_edge(p: np.ndarray, tol: float = 0.02) -> np.ndarray:
+    """Which fitted parameters (..., 5) lie within ``tol`` of their search range's width from an edge.
+
+    Measured in the search space: log f_mel and log f_blood (a fraction of 0.0012 is at the 0.001 edge,
+    0.01 is not), linear t_epi, so2 and b_mel.
+    """
+    lo, hi = _x_bounds(False)
+    x = np.array(p, dtype=np.float64, copy=True)
+    x[..., _LOG] = np.log(x[..., _LOG])
+    w = tol * (hi - lo)
+    return (x - lo < w) | (hi - x < w)
+
+
 def _to_p(x: np.ndarray) -> np.ndarray:
     p = np.array(x[..., :5], dtype=np.float64, copy=True)
     p[..., _LOG] = np.exp(p[..., _LOG])

@@ -18,9 +18,10 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from exporters.constants import PARAM_NAMES, PARAM_RANGES
+from exporters.constants import PARAM_NAMES, PARAM_RANGES, R_EDGES_CM
 from training.data.reweight import Trajectories, baseline_absorption, walk
-from training.realskin.geometry import rough_specular
+from training.realskin.geometry import port_collection, rough_specular
+from training.skin.constants import SKIN_MODEL, SkinModelSpec
 from training.skin.model import absorption, scattering
 
 #: Epidermis thickness levels of the walk, cm: every 10 um over the SPEC range (0.005-0.035 cm).
@@ -28,28 +29,31 @@ T_EPI_FINE_LEVELS_CM = np.round(np.arange(0.005, 0.035 + 1e-9, 0.001), 6)
 _T = PARAM_NAMES.index("t_epi")
 
 
-def model_fingerprint(channels: np.ndarray) -> str:
+def model_fingerprint(channels: np.ndarray, spec: SkinModelSpec = SKIN_MODEL, illumination: str = "normal") -> str:
     """SHA-256 (16 hex) of the skin model's scattering and box-minimum absorption at ``channels``.
 
     A cached walk is reused only if the fingerprint matches: a changed skin model walks again.
     """
-    mus, g = scattering()
-    mua0 = baseline_absorption()
+    mus, g = scattering(spec=spec)
+    mua0 = baseline_absorption(spec=spec)
     blob = np.concatenate([mus.numpy()[channels], g.numpy()[channels], mua0[channels]]).astype(np.float64)
-    return hashlib.sha256(blob.tobytes() + np.asarray(channels, np.int64).tobytes()).hexdigest()[:16]
+    key = blob.tobytes() + np.asarray(channels, np.int64).tobytes() + illumination.encode()
+    return hashlib.sha256(key).hexdigest()[:16]
 
 
 def cached_walk(channels: np.ndarray, photons: int, seed: int, cache: Path | None, device: str = "cpu",
-                progress: bool = False) -> Trajectories:
-    """The normal-incidence walk at ``channels`` (photons per channel), from ``cache`` when it holds it."""
-    key = f"walk_normal_{model_fingerprint(channels)}_{photons}_{seed}.npz"
+                progress: bool = False, spec: SkinModelSpec = SKIN_MODEL, illumination: str = "normal") -> Trajectories:
+    """The walk of ``spec`` at ``channels`` (photons per channel; collimated normal beam unless
+    ``illumination`` is "diffuse"), from ``cache`` when it holds it."""
+    key = f"walk_{illumination}_{model_fingerprint(channels, spec, illumination)}_{photons}_{seed}.npz"
     path = None if cache is None else Path(cache) / key
     if path is not None and path.exists():
         return Trajectories.load(path)
     if progress:
-        print(f"walking {photons} photons x {len(channels)} wavelengths (collimated normal beam) ...", flush=True)
-    traj = walk(photons, seed=seed, mua0=baseline_absorption(), levels_cm=T_EPI_FINE_LEVELS_CM,
-                channels=np.asarray(channels), device=device, illumination="normal")
+        print(f"walking {photons} photons x {len(channels)} wavelengths ({illumination} illumination, "
+              f"skin model {spec.name}) ...", flush=True)
+    traj = walk(photons, seed=seed, mua0=baseline_absorption(spec=spec), levels_cm=T_EPI_FINE_LEVELS_CM,
+                channels=np.asarray(channels), device=device, illumination=illumination, spec=spec)
     if path is not None:
         path.parent.mkdir(parents=True, exist_ok=True)
         traj.save(path)
@@ -57,11 +61,21 @@ def cached_walk(channels: np.ndarray, photons: int, seed: int, cache: Path | Non
 
 
 class MonteCarloForward:
-    """R_measured (B, C) of tones (B, 5) at the walk's channels: specular + reweighted R_d (normal beam)."""
+    """R_measured (B, C) of tones (B, 5) at the walk's channels: specular + reweighted R_d (normal beam).
 
-    def __init__(self, traj: Trajectories, specular: float | None = None) -> None:
+    ``port_cm`` = (beam radius, port radius): count only light leaving through a sample port of that radius
+    around a uniformly lit beam disc (``geometry.port_collection``); None: all of R_d (a port much wider
+    than the light's lateral spread).
+    """
+
+    def __init__(self, traj: Trajectories, specular: float | None = None, spec: SkinModelSpec = SKIN_MODEL,
+                 port_cm: tuple[float, float] | None = None) -> None:
         if traj.levels_cm.size < 2:
             raise ValueError("the walk needs at least two epidermis levels")
+        if np.any(baseline_absorption(spec=spec)[traj.channels] < traj.mua0 - 1e-9):
+            raise ValueError(f"the walk's baseline absorbs more than skin model {spec.name!r} can: walk with its "
+                             "baseline_absorption(spec=...)")
+        self.spec = spec
         self.channels = np.asarray(traj.channels)
         self.levels = torch.as_tensor(traj.levels_cm, dtype=torch.float64)
         self.photons = traj.photons
@@ -73,11 +87,14 @@ class MonteCarloForward:
         # log_w (C, n) baseline exit weight (-inf for padding).
         cum = np.zeros((n_lev + 1, n_ch, n_max), dtype=np.float32)
         log_w = np.full((n_ch, n_max), -np.inf, dtype=np.float32)
+        w = traj.w.astype(np.float64)
+        if port_cm is not None:
+            w = w * port_collection(_bin_centres_cm()[traj.bin.astype(np.int64)], *port_cm)
         for c in range(n_ch):
             lo, hi = int(traj.offsets[c]), int(traj.offsets[c + 1])
             cum[:, c, : hi - lo] = np.cumsum(traj.path_cm[lo:hi], axis=1).T
             with np.errstate(divide="ignore"):
-                log_w[c, : hi - lo] = np.log(traj.w[lo:hi])
+                log_w[c, : hi - lo] = np.log(w[lo:hi])
         self.cum, self.log_w = torch.from_numpy(cum), torch.from_numpy(log_w)
 
     def _path_above(self, t_epi: torch.Tensor) -> torch.Tensor:
@@ -90,7 +107,7 @@ class MonteCarloForward:
 
     def __call__(self, tones: torch.Tensor) -> torch.Tensor:
         """R_measured (B, C), float64; ``tones`` (B, 5) float64 (differentiable)."""
-        mua_epi, mua_derm = absorption(tones)
+        mua_epi, mua_derm = absorption(tones, spec=self.spec)
         ch = torch.as_tensor(self.channels)
         d_epi = (mua_epi[:, ch] - self.mua0).to(torch.float32)[:, :, None]
         d_derm = (mua_derm[:, ch] - self.mua0).to(torch.float32)[:, :, None]
@@ -117,6 +134,13 @@ class DecoderForward:
         x = tones.detach().cpu().numpy().astype(np.float32)
         (refl,) = self.session.run(["reflectance"], {"biophysical": x})
         return torch.from_numpy(refl[:, self.channels].astype(np.float64)) + self.specular
+
+
+def _bin_centres_cm() -> np.ndarray:
+    """Exit radius of each stored radial bin (513,), cm: geometric bin centres; bin 0 at half its edge, the
+    overflow bin (beyond 5 cm) far outside any port."""
+    e = R_EDGES_CM
+    return np.r_[0.5 * e[1], np.sqrt(e[1:-1] * e[2:]), 1e3]
 
 
 def box() -> tuple[np.ndarray, np.ndarray]:

@@ -37,7 +37,8 @@ def rough_specular(n: float = N_TISSUE, roughness: float = SKIN_ROUGHNESS, incid
     """Hemispherical specular reflectance of a rough dielectric (Beckmann facets, single bounce), in [0, 1].
 
     Integrates F(i . h) over facet normals h weighted by the projected area each presents to the beam:
-    S = integral D(h) max(i . h, 0) F(i . h) dh / (i . z), with integral D(h) (h . z) dh = 1.  Quadrature on a polar grid of h.
+    S = integral D(h) max(i . h, 0) F(i . h) dh / (i . z), where integral D(h) (h . z) dh = 1;
+    quadrature on a polar grid of h.
     Hand-written: no package here integrates a rough dielectric's specular albedo.
     """
     th = (np.arange(nodes) + 0.5) * (0.5 * math.pi / nodes)  # facet polar angle, midpoint rule
@@ -58,3 +59,26 @@ def smooth_specular(n: float = N_TISSUE, incidence_deg: float = INCIDENCE_DEG) -
     """Fresnel reflectance of the smooth boundary at the measurement's incidence (for comparison)."""
     cos_i = torch.tensor([math.cos(math.radians(incidence_deg))], dtype=torch.float64)
     return float(fresnel_unpolarised(cos_i, 1.0, n)[0])
+
+
+def port_collection(r_cm: np.ndarray, beam_radius_cm: float, port_radius_cm: float) -> np.ndarray:
+    """Share of light that exits at distance ``r_cm`` from where it entered and still leaves through the port.
+
+    The beam lights a uniform disc of radius ``beam_radius_cm`` centred in a sample port of radius
+    ``port_radius_cm``; light leaving the skin outside the port is not collected by the sphere (the lateral
+    loss of small ports: Takiwaki et al. 2002, Skin Res Technol 8:94, measured up to ~10 % more reflectance
+    at 700 nm through an 11 mm than a 5 mm aperture).  For an entry point uniform in the beam and an exit
+    direction uniform in angle, the share is the area of the lens where the beam disc and the port disc
+    shifted by r overlap, over the beam's area (closed form; ``r_cm`` any shape, result in [0, 1]).
+    """
+    a, b = float(beam_radius_cm), float(port_radius_cm)
+    if a <= 0 or b <= 0:
+        raise ValueError("beam and port radii must be positive (cm)")
+    d = np.asarray(r_cm, dtype=np.float64)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ca = np.clip((d**2 + a**2 - b**2) / (2 * d * a), -1.0, 1.0)
+        cb = np.clip((d**2 + b**2 - a**2) / (2 * d * b), -1.0, 1.0)
+        k = np.clip((-d + a + b) * (d + a - b) * (d - a + b) * (d + a + b), 0.0, None)
+        lens = a**2 * np.arccos(ca) + b**2 * np.arccos(cb) - 0.5 * np.sqrt(k)
+    lens = np.where(d <= abs(b - a), math.pi * min(a, b) ** 2, np.where(d >= a + b, 0.0, lens))
+    return np.clip(lens / (math.pi * a**2), 0.0, 1.0)

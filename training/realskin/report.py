@@ -9,7 +9,7 @@ import numpy as np
 
 from exporters.colorimetry import spectrum_to_lab
 from exporters.constants import PARAM_NAMES, WAVELENGTHS_NM
-from training.realskin.fit import BANDS_NM, FIT_BAND_NM, SubjectFit
+from training.realskin.fit import BANDS_NM, FIT_BAND_NM, SubjectFit, at_edge
 from training.realskin.measurements import Measurements
 
 
@@ -31,7 +31,8 @@ def summary(names, lightness, mc_fixed, mc_free, dec_fixed=None, dec_free=None, 
         row = {"name": name, "L_star": round(float(lightness[i]), 2),
                **{f"rmse_{b}": round(f.rmse[b], 5) for b in BANDS_NM},
                "exposure_free": round(g.exposure, 4), "p": [round(float(v), 5) for v in f.p],
-               "rmse_400_1000_free": round(g.rmse["400_1000"], 5), "p_free": [round(float(v), 5) for v in g.p]}
+               "rmse_400_1000_free": round(g.rmse["400_1000"], 5), "p_free": [round(float(v), 5) for v in g.p],
+               "at_edge": [n for n, e in zip(PARAM_NAMES, at_edge(f.p), strict=True) if e]}
         if dec_fixed is not None:
             row["decoder"] = {"rmse_400_1000": round(dec_fixed[i].rmse["400_1000"], 5),
                               "exposure_free": round(dec_free[i].exposure, 4),
@@ -43,6 +44,8 @@ def summary(names, lightness, mc_fixed, mc_free, dec_fixed=None, dec_free=None, 
            "mean_free": {b: round(_mean(mc_free, b), 5) for b in BANDS_NM},
            "exposure_free_range": [round(min(f.exposure for f in mc_free), 4),
                                    round(max(f.exposure for f in mc_free), 4)],
+           "edge_share": dict(zip(PARAM_NAMES, at_edge(np.array([f.p for f in mc_fixed])).mean(0).round(3).tolist(),
+                                  strict=True)),
            "param_names": list(PARAM_NAMES), "fit_band_nm": list(FIT_BAND_NM)}
     if dec_fixed is not None:
         out["decoder"] = {"mean": {b: round(_mean(dec_fixed, b), 5) for b in BANDS_NM},
@@ -71,7 +74,9 @@ def markdown(report: dict) -> str:
     m, mf = report["mean"], report["mean_free"]
     lines += ["", f"Mean RMSE at exposure 1 (Monte Carlo): UV {m['uv']:.4f}, Vis {m['vis']:.4f}, NIR {m['nir']:.4f}, "
               f"400–1000 nm **{m['400_1000']:.4f}**; exposure free: 400–1000 nm {mf['400_1000']:.4f} at factors "
-              f"{report['exposure_free_range'][0]:.3f}–{report['exposure_free_range'][1]:.3f}."]
+              f"{report['exposure_free_range'][0]:.3f}–{report['exposure_free_range'][1]:.3f}.",
+              "Share of subjects whose fitted parameter (exposure 1) is at an edge of its range: "
+              + ", ".join(f"{n} {v:.0%}" for n, v in report["edge_share"].items()) + "."]
     if dec:
         d = report["decoder"]
         lines.append(f"Shipped decoder: 400–1000 nm {d['mean']['400_1000']:.4f} at exposure 1, "

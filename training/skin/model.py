@@ -56,18 +56,17 @@ def pheomelanin_mua(wavelength_nm: torch.Tensor) -> torch.Tensor:
     return k.PHEOMELANIN_SCALE * wavelength_nm ** (-k.PHEOMELANIN_EXPONENT)
 
 
-def baseline_mua(wavelength_nm: torch.Tensor) -> torch.Tensor:
-    """Bloodless-tissue baseline absorption, cm^-1: 0.244 + 85.3 exp(-(lambda - 154)/66.2) (Jacques 1998)."""
-    return k.BASELINE_OFFSET + k.BASELINE_AMPLITUDE * torch.exp(
-        -(wavelength_nm - k.BASELINE_CENTRE_NM) / k.BASELINE_WIDTH_NM
-    )
+def baseline_mua(wavelength_nm: torch.Tensor, spec: k.SkinModelSpec = k.SKIN_MODEL) -> torch.Tensor:
+    """Bloodless-tissue baseline absorption, cm^-1: offset + amplitude exp(-(lambda - centre)/width) (spec's)."""
+    b = spec.baseline
+    return b.offset + b.amplitude * torch.exp(-(wavelength_nm - b.centre_nm) / b.width_nm)
 
 
-def reduced_scattering(wavelength_nm: torch.Tensor) -> torch.Tensor:
-    """Reduced scattering mu_s', cm^-1: 2e5 lambda^-1.5 + 2e12 lambda^-4 (Jacques 1998, Mie + Rayleigh)."""
-    return k.MIE_SCALE * wavelength_nm ** (-k.MIE_EXPONENT) + k.RAYLEIGH_SCALE * wavelength_nm ** (
-        -k.RAYLEIGH_EXPONENT
-    )
+def reduced_scattering(wavelength_nm: torch.Tensor, spec: k.SkinModelSpec = k.SKIN_MODEL) -> torch.Tensor:
+    """Reduced scattering mu_s', cm^-1: a_500 [f_ray (l/500)^-4 + (1 - f_ray)(l/500)^-b_mie] (spec's law)."""
+    s = spec.scattering
+    x = wavelength_nm / 500.0
+    return s.a_500 * (s.f_ray * x**-4.0 + (1.0 - s.f_ray) * x ** (-s.b_mie))
 
 
 def _molar_mua(eps: np.ndarray, grams_per_litre: float, molar_mass: float, like: torch.Tensor) -> torch.Tensor:
@@ -75,7 +74,8 @@ def _molar_mua(eps: np.ndarray, grams_per_litre: float, molar_mass: float, like:
     return torch.as_tensor(LN10 * eps * grams_per_litre / molar_mass, dtype=like.dtype, device=like.device)
 
 
-def chromophore_mua(dtype: torch.dtype = torch.float64, device: torch.device | str | None = None) -> dict:
+def chromophore_mua(dtype: torch.dtype = torch.float64, device: torch.device | str | None = None,
+                    spec: k.SkinModelSpec = k.SKIN_MODEL) -> dict:
     """Every fixed absorption spectrum of the model on the grid, cm^-1, each (W,).
 
     Keys: eumelanin, pheomelanin, baseline, hbo2, hb (whole blood), bilirubin_blood (in whole blood),
@@ -86,7 +86,7 @@ def chromophore_mua(dtype: torch.dtype = torch.float64, device: torch.device | s
     return {
         "eumelanin": eumelanin_mua(wl),
         "pheomelanin": pheomelanin_mua(wl),
-        "baseline": baseline_mua(wl),
+        "baseline": baseline_mua(wl, spec),
         "hbo2": _molar_mua(data["eps_hbo2"], k.HB_CONCENTRATION_G_PER_L, k.HB_MOLAR_MASS, wl),
         "hb": _molar_mua(data["eps_hb"], k.HB_CONCENTRATION_G_PER_L, k.HB_MOLAR_MASS, wl),
         "bilirubin_blood": _molar_mua(data["eps_bilirubin"], k.BILIRUBIN_G_PER_L_BLOOD, k.BILIRUBIN_MOLAR_MASS, wl),
@@ -125,35 +125,38 @@ def validate_tones(tones: torch.Tensor | np.ndarray) -> torch.Tensor:
     return t
 
 
-def scattering(dtype: torch.dtype = torch.float64, device: torch.device | str | None = None):
+def scattering(dtype: torch.dtype = torch.float64, device: torch.device | str | None = None,
+               spec: k.SkinModelSpec = k.SKIN_MODEL):
     """Wavelength-only scattering of both layers: (mu_s (W,) cm^-1, g (W,)).  The same for every tone."""
     wl = _grid(dtype, device)
     g = torch.as_tensor(anisotropy(WAVELENGTHS_NM), dtype=dtype, device=device)
-    return reduced_scattering(wl) / (1.0 - g), g
+    return reduced_scattering(wl, spec) / (1.0 - g), g
 
 
 def absorption(
-    tones: torch.Tensor | np.ndarray, dtype: torch.dtype = torch.float64, device: torch.device | str | None = None
+    tones: torch.Tensor | np.ndarray, dtype: torch.dtype = torch.float64, device: torch.device | str | None = None,
+    spec: k.SkinModelSpec = k.SKIN_MODEL,
 ) -> tuple[torch.Tensor, torch.Tensor]:
     """Absorption of the two layers for a batch of tones: (mu_a,epi (B, W), mu_a,derm (B, W)) in cm^-1."""
     t = validate_tones(tones).to(dtype=dtype, device=device)
     f_mel, f_blood, _, so2, b_mel = (t[:, i : i + 1] for i in range(5))
-    c = chromophore_mua(dtype, device)
+    c = chromophore_mua(dtype, device, spec)
     melanin = b_mel * c["eumelanin"] + (1.0 - b_mel) * c["pheomelanin"]
     mua_epi = f_mel * melanin + (1.0 - f_mel) * (c["baseline"] + c["carotene_epi"])
     blood = so2 * c["hbo2"] + (1.0 - so2) * c["hb"] + c["bilirubin_blood"]
-    bloodless = c["baseline"] + k.DERMIS_WATER_FRACTION * c["water"] + c["carotene_derm"]
+    bloodless = c["baseline"] + spec.dermis_water_fraction * c["water"] + c["carotene_derm"]
     mua_derm = f_blood * blood + (1.0 - f_blood) * bloodless
     return mua_epi, mua_derm
 
 
 def layer_optics(
-    tones: torch.Tensor | np.ndarray, dtype: torch.dtype = torch.float64, device: torch.device | str | None = None
+    tones: torch.Tensor | np.ndarray, dtype: torch.dtype = torch.float64, device: torch.device | str | None = None,
+    spec: k.SkinModelSpec = k.SKIN_MODEL,
 ) -> SkinOptics:
     """Optical properties of both layers for tones (B, 5) or (5,), at all 376 wavelengths."""
     t = validate_tones(tones).to(dtype=dtype, device=device)
-    mua_epi, mua_derm = absorption(t, dtype, device)
-    mus, g = scattering(dtype, device)
+    mua_epi, mua_derm = absorption(t, dtype, device, spec)
+    mus, g = scattering(dtype, device, spec)
     shape = mua_epi.shape
     return SkinOptics(
         mua_epi=mua_epi,
