@@ -13,3 +13,17 @@ def _one_torch_thread():
     torch.set_num_threads(1)
     yield
     torch.set_num_threads(before)
+
+
+@pytest.fixture()
+def addon():
+    """The extension enabled in a fresh factory scene (one bake thread); yields its preferences."""
+    import addon_utils
+    import bpy
+
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    assert addon_utils.enable("blender_addon", default_set=True, handle_error=None) is not None
+    prefs = bpy.context.preferences.addons["blender_addon"].preferences
+    prefs.threads = 1
+    yield prefs
+    addon_utils.disable("blender_addon", default_set=True)

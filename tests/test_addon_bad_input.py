@@ -3,7 +3,6 @@ maps; bad ones give a clear message and change nothing (images, node groups, mat
 
 from __future__ import annotations
 
-import importlib
 import os
 import stat
 import subprocess
@@ -22,20 +21,8 @@ from exporters import baking, colorimetry, maps  # noqa: E402
 from tests.addon_scene import run_invert, skin_object, snapshot, write_image  # noqa: E402
 from tests.onnx_fakes import missing_outputs_model, wrong_input_model  # noqa: E402
 
-addon_utils = importlib.import_module("addon_utils")
-ADDON = "blender_addon"
 ROOT = Path(__file__).resolve().parents[1]
 CODES = np.array([[[224, 172, 150], [150, 100, 80]], [[90, 60, 45], [224, 172, 150]]], np.uint8)  # 2 x 2
-
-
-@pytest.fixture()
-def addon():
-    bpy.ops.wm.read_factory_settings(use_empty=True)
-    assert addon_utils.enable(ADDON, default_set=True, handle_error=None) is not None
-    prefs = bpy.context.preferences.addons[ADDON].preferences
-    prefs.threads = 1
-    yield prefs
-    addon_utils.disable(ADDON, default_set=True)
 
 
 def bake_files(path: Path, out: Path) -> Path:

@@ -31,17 +31,6 @@ ADDON = "blender_addon"
 K = baking.inference.load_model(preferences.DEFAULT_MODEL, threads=1).k
 
 
-@pytest.fixture()
-def addon():
-    bpy.ops.wm.read_factory_settings(use_empty=True)
-    mod = addon_utils.enable(ADDON, default_set=True, handle_error=None)
-    assert mod is not None
-    prefs = bpy.context.preferences.addons[ADDON].preferences
-    prefs.threads = 1
-    yield prefs
-    addon_utils.disable(ADDON, default_set=True)
-
-
 @pytest.fixture(scope="module")
 def albedo_png(tmp_path_factory) -> Path:
     return write_image(tmp_path_factory.mktemp("alb") / "albedo.png", skin_codes(), "uint8")

@@ -86,17 +86,6 @@ def test_bake_py_reports_an_up_to_date_folder(png, tmp_path):
     assert len(record["bake"]["key"]) == 64 and set(record["bake"]["files"]) == set(record["files"])
 
 
-@pytest.fixture()
-def addon():
-    import addon_utils
-
-    bpy.ops.wm.read_factory_settings(use_empty=True)
-    assert addon_utils.enable("blender_addon", default_set=True, handle_error=None) is not None
-    bpy.context.preferences.addons["blender_addon"].preferences.threads = 1
-    yield
-    addon_utils.disable("blender_addon", default_set=True)
-
-
 def test_invert_twice_reuses_the_packed_maps(addon, png):
     obj, mat, tex = skin_object(png)
     assert run_invert(obj, backend="SVM", exact=True) == {"FINISHED"}

@@ -15,7 +15,6 @@ argument of blender_addon/nodes.py), and the F_dr polynomial matches the quadrat
 
 from __future__ import annotations
 
-import importlib
 import json
 import os
 import sys
@@ -240,18 +239,6 @@ def test_diffuse_fresnel_fit_and_coat_scale():
     mu = 0.5 * (x + 1.0)
     mean = np.sum(w * mu * cycles.coat_body_scale(mu, 1.4))  # 2 int scale(mu) mu dmu
     assert mean == pytest.approx(1.0, abs=1e-6)
-
-
-addon_utils = importlib.import_module("addon_utils")
-
-
-@pytest.fixture()
-def addon():
-    bpy.ops.wm.read_factory_settings(use_empty=True)
-    assert addon_utils.enable("blender_addon", default_set=True, handle_error=None) is not None
-    bpy.context.preferences.addons["blender_addon"].preferences.threads = 1
-    yield
-    addon_utils.disable("blender_addon", default_set=True)
 
 
 def test_invert_takes_the_scene_unit_scale(addon, tmp_path):
