@@ -7,7 +7,7 @@ semi-infinite dermis:
 * epidermis  mu_a = f_mel * [b_mel mu_a,eu + (1 - b_mel) mu_a,pheo] + (1 - f_mel) * (mu_a,base + mu_a,car,epi)
 * dermis     mu_a = f_blood * (mu_a,blood + mu_a,bili) + (1 - f_blood) * (mu_a,base + w mu_a,water + mu_a,car,derm)
   with mu_a,blood = so2 mu_a,HbO2 + (1 - so2) mu_a,Hb for whole blood (150 g/L haemoglobin);
-* both layers mu_s = mu_s' / (1 - g), mu_s' from Jacques 1998, g = 0.62 + 0.00029 lambda.
+* both layers mu_s = mu_s' / (1 - g), mu_s' of the spec (SKIN_MODEL: Jacques 2013 skin), g = 0.62 + 0.00029 lambda.
 
 Scattering and anisotropy depend on the wavelength only; the tone changes absorption and the epidermis
 thickness (the dataset's reweighting relies on this).  Sources and choices: training/skin/README.md.
