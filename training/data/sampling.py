@@ -16,8 +16,9 @@ from exporters.constants import PARAM_NAMES, PARAM_RANGES
 #: Quantised epidermis thicknesses, cm: 16 levels from 50 to 350 um in 20 um steps.
 T_EPI_LEVELS_CM: np.ndarray = np.round(np.linspace(0.005, 0.035, 16), 6)
 T_EPI_LEVELS_CM.setflags(write=False)
-_LOW = np.array([PARAM_RANGES[name][0] for name in PARAM_NAMES])
-_HIGH = np.array([PARAM_RANGES[name][1] for name in PARAM_NAMES])
+#: Lower and upper bounds (5,) of the biophysical vector in SPEC order (the default sampling ranges).
+PARAM_LOW = np.array([PARAM_RANGES[name][0] for name in PARAM_NAMES])
+PARAM_HIGH = np.array([PARAM_RANGES[name][1] for name in PARAM_NAMES])
 _T_EPI = PARAM_NAMES.index("t_epi")
 
 
@@ -34,7 +35,7 @@ def training_tones(n: int, seed: int) -> np.ndarray:
     if n < 1:
         raise ValueError(f"need at least one tone, got n={n}")
     unit = qmc.Halton(d=len(PARAM_NAMES), scramble=True, seed=seed).random(n)
-    return quantise_thickness(_LOW + unit * (_HIGH - _LOW))
+    return quantise_thickness(PARAM_LOW + unit * (PARAM_HIGH - PARAM_LOW))
 
 
 def validation_tones(n: int, seed: int) -> np.ndarray:
@@ -42,4 +43,4 @@ def validation_tones(n: int, seed: int) -> np.ndarray:
     if n < 1:
         raise ValueError(f"need at least one tone, got n={n}")
     unit = np.random.default_rng(seed).random((n, len(PARAM_NAMES)))
-    return quantise_thickness(_LOW + unit * (_HIGH - _LOW))
+    return quantise_thickness(PARAM_LOW + unit * (PARAM_HIGH - PARAM_LOW))

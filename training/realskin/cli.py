@@ -28,8 +28,9 @@ from training.realskin import report, study
 from training.realskin.fit import fit_subjects
 from training.realskin.forward import DecoderForward, MonteCarloForward, cached_walk
 from training.realskin.measurements import NIST_FILE, grid_channels, read_measurements
+from training.validate.cli import DEFAULT_MODEL_DIR
 
-DEFAULT_DECODER = Path(__file__).resolve().parents[2] / "blender_addon" / "models" / "skin_decoder.onnx"
+DEFAULT_DECODER = DEFAULT_MODEL_DIR / "skin_decoder.onnx"
 
 
 def _parser() -> argparse.ArgumentParser:

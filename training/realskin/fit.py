@@ -23,7 +23,7 @@ import torch
 from scipy.optimize import least_squares
 from scipy.stats import qmc
 
-from training.realskin.forward import box
+from training.data.sampling import PARAM_HIGH, PARAM_LOW
 
 #: Wavelengths fitted (and the acceptance's RMSE band), nm.
 FIT_BAND_NM = (400.0, 1000.0)
@@ -80,8 +80,7 @@ def _to_p(x: np.ndarray) -> np.ndarray:
 
 
 def _x_bounds(free: bool) -> tuple[np.ndarray, np.ndarray]:
-    lo, hi = box()
-    lo, hi = lo.copy(), hi.copy()
+    lo, hi = PARAM_LOW.copy(), PARAM_HIGH.copy()
     lo[list(_LOG)], hi[list(_LOG)] = np.log(lo[list(_LOG)]), np.log(hi[list(_LOG)])
     if free:
         lo, hi = np.r_[lo, np.log(EXPOSURE_RANGE[0])], np.r_[hi, np.log(EXPOSURE_RANGE[1])]

@@ -18,9 +18,11 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from exporters.constants import PARAM_NAMES, PARAM_RANGES, R_EDGES_CM
+from exporters.constants import PARAM_NAMES, R_EDGES_CM
 from training.data.reweight import Trajectories, baseline_absorption, walk
+from training.export.graphs import session
 from training.realskin.geometry import port_collection, rough_specular
+from training.sim.lut_interp import bin_centres
 from training.skin.constants import SKIN_MODEL, SkinModelSpec
 from training.skin.model import absorption, scattering
 
@@ -122,11 +124,7 @@ class DecoderForward:
     """R_measured (B, C) of tones from ``skin_decoder.onnx``: its R_d (dataset geometry) + the specular."""
 
     def __init__(self, decoder_path: Path, channels: np.ndarray, specular: float | None = None) -> None:
-        import onnxruntime as ort
-
-        opts = ort.SessionOptions()
-        opts.intra_op_num_threads = 1
-        self.session = ort.InferenceSession(str(decoder_path), opts, providers=["CPUExecutionProvider"])
+        self.session = session(Path(decoder_path).read_bytes(), threads=1)
         self.channels = np.asarray(channels)
         self.specular = rough_specular() if specular is None else float(specular)
 
@@ -137,14 +135,6 @@ class DecoderForward:
 
 
 def _bin_centres_cm() -> np.ndarray:
-    """Exit radius of each stored radial bin (513,), cm: geometric bin centres; bin 0 at half its edge, the
-    overflow bin (beyond 5 cm) far outside any port."""
-    e = R_EDGES_CM
-    return np.r_[0.5 * e[1], np.sqrt(e[1:-1] * e[2:]), 1e3]
-
-
-def box() -> tuple[np.ndarray, np.ndarray]:
-    """Lower and upper bounds (5,) of the biophysical vector (SPEC ranges, ``exporters.constants``)."""
-    lo = np.array([PARAM_RANGES[n][0] for n in PARAM_NAMES])
-    hi = np.array([PARAM_RANGES[n][1] for n in PARAM_NAMES])
-    return lo, hi
+    """Exit radius of each stored radial bin (513,), cm: the LUT's bin centres, and the overflow bin (beyond
+    5 cm) far outside any port."""
+    return np.r_[bin_centres(R_EDGES_CM), 1e3]
