@@ -52,7 +52,8 @@ def test_head_is_life_sized_with_ears_standing_out():
     head, left, right = demo_subject.build_head()
     lo, hi = _extent(head)
     width, depth, height = hi - lo
-    # adult head (ISO 7250 / anthropometric tables: breadth ~15 cm, length ~19-20 cm, crown to chin ~23 cm; plus neck)
+    # an adult head (anthropometric surveys such as ANSUR II: breadth about 15 cm, length 19-20 cm, chin to
+    # crown about 23 cm; the depth here includes the nose, the height the neck)
     assert 0.12 < width < 0.17 and 0.18 < depth < 0.26 and 0.25 < height < 0.36
     for ear, side in ((left, -1), (right, 1)):
         elo, ehi = _extent(ear)

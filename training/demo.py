@@ -45,6 +45,7 @@ def main(argv: list[str]) -> int:
     args = parser.parse_args(argv)
     import torch
 
+    demo_start = time.perf_counter()
     torch.set_num_threads(max(1, args.threads))
     tones = load_tones()
     name = "R05"
@@ -61,6 +62,7 @@ def main(argv: list[str]) -> int:
     print(f"[demo] colour under D65: sRGB {np.round(np.clip(srgb, 0, 1) * 255).astype(int).tolist()}, "
           f"Lab {np.round(lab, 2).tolist()}  ({seconds:.1f} s of simulation)")
     _artist_path(args)
+    print(f"[demo] done in {time.perf_counter() - demo_start:.0f} s.")
     return 0
 
 
@@ -77,11 +79,9 @@ def _artist_path(args) -> None:
         print(f"[demo] baked {tone}: {len(rec['files'])} maps (K={rec['K']}, {w}x{h}, "
               f"{rec['stats']['distinct_texels']} distinct texels) in {t['bake_' + tone]:.1f} s "
               f"into {args.out / 'maps' / tone}")
-        for note in rec["notes"]:
-            print(f"[demo]   note: {note}")
     renders = sum(v for k, v in t.items() if k.startswith("render_"))
     print(f"[demo] rendered 9 views ({args.render_size} px, {args.samples} spp + OpenImageDenoise) in {renders:.1f} s: "
-          f"{args.out / 'translucency.png'}")
+          f"{args.out / 'translucency.png'}" + (f" and {args.figure}" if args.figure else ""))
     ear = info["ear_mean_srgb"]
     for tone in info["records"]:
         means = ", ".join(f"{m} {np.mean(ear[tone + '/' + m]):.2f}" for m, _ in demo_render.METHODS)
