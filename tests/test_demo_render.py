@@ -69,7 +69,7 @@ def test_head_is_life_sized_with_ears_standing_out():
 
 def test_tiny_demo_shows_translucency(tmp_path):
     info = demo_render.run(tmp_path, texture_size=32, render_size=48, samples=4)
-    figure = demo_render.read_png(tmp_path / "translucency.png")
+    figure = demo_render.read_image(tmp_path / "translucency.png")
     assert figure.shape[0] > 3 * 48 and figure.shape[1] > 3 * 48
     assert (tmp_path / "maps_contact_sheet.png").is_file()
     panels = {}
@@ -78,7 +78,7 @@ def test_tiny_demo_shows_translucency(tmp_path):
         assert rec["unit_scale_m_per_blender_unit"] == 1.0  # the head is modelled in metres
         assert rec["image_size"] == [32, 32]
         for method, _ in demo_render.METHODS:
-            panels[method] = demo_render.read_png(tmp_path / f"render_{tone}_{method}.png")
+            panels[method] = demo_render.read_image(tmp_path / f"render_{tone}_{method}.png")
             assert panels[method].shape == (48, 48, 3) and np.all(np.isfinite(panels[method]))
         ear = {m: np.array(info["ear_mean_srgb"][f"{tone}/{m}"]) for m, _ in demo_render.METHODS}
         # the visible side of the ear gets no direct light: a Diffuse ear is dark, a subsurface ear shows the

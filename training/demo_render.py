@@ -32,8 +32,8 @@ import numpy as np
 
 from exporters.colorimetry import srgb_decode, srgb_encode
 
-#: Base colours of the three demo textures, sRGB 8-bit codes: light, medium and dark skin (within the range of
-#: the shipped tones' simulated colours, docs/figures/swatches.png).
+#: Base colours of the three demo textures, sRGB 8-bit codes: painted albedos of light, medium and dark skin,
+#: chosen for the demo (not measured).
 TONES: dict[str, tuple[int, int, int]] = {"light": (224, 178, 155), "medium": (176, 120, 90), "dark": (96, 62, 46)}
 #: Tint of red patches and of freckles, relative to the base colour (linear sRGB factors per channel).
 REDNESS_TINT = (1.0, 0.6, 0.65)
@@ -44,8 +44,8 @@ METHODS: tuple[tuple[str, str], ...] = (
     ("principled", "(b) Principled BSDF, Random Walk (Skin)\nBlender's default radius"),
     ("spectral", "(c) Spectral Skin SSS\nInvert Skin Albedo, defaults"),
 )
-#: Camera (metres, looking at TARGET) and lights: (location, power W, radius m).  The back light stands behind
-#: the head on the camera's side, so the head hides it and it lights only the back of the left ear.
+#: Camera (metres, looking at TARGET) and point lights: (location, power W, radius m).  The back light stands
+#: behind the head, which hides it from the camera: it lights the back of the ears and a rim of the head only.
 CAMERA_M, TARGET_M, LENS_MM = (-0.56, -0.50, 0.05), (-0.035, -0.02, -0.01), 100.0
 BACK_LIGHT = ((0.02, 0.50, 0.05), 40.0, 0.015)
 KEY_LIGHT = ((0.28, -0.62, 0.12), 20.0, 0.03)
@@ -98,7 +98,7 @@ def skin_albedo_texture(size: int = 512, seed: int = 0, base: tuple[int, int, in
     return np.round(np.clip(srgb_encode(np.clip(lin, 0.0, 1.0)), 0.0, 1.0) * 255).astype(np.uint8)
 
 
-def write_png(path: Path, codes: np.ndarray) -> Path:
+def write_image(path: Path, codes: np.ndarray) -> Path:
     """Write (H, W, C) uint8 ``codes``; the format follows the extension (.png, or .jpg at quality 90)."""
     import OpenImageIO as oiio
 
@@ -114,7 +114,7 @@ def write_png(path: Path, codes: np.ndarray) -> Path:
     return path
 
 
-def read_png(path: Path) -> np.ndarray:
+def read_image(path: Path) -> np.ndarray:
     """(H, W, 3) float32 in [0, 1] of an 8-bit image, top row first."""
     import OpenImageIO as oiio
 
@@ -158,7 +158,7 @@ def _scene(size: int, samples: int):
     scene.cycles.use_denoising = True  # OpenImageDenoise: clean panels at few samples
     scene.cycles.denoiser = "OPENIMAGEDENOISE"
     scene.cycles.seed = 1
-    scene.cycles.max_bounces = 6
+    scene.cycles.max_bounces = 6  # Blender: 12; a near-black world and two lights need fewer
     scene.render.resolution_x = scene.render.resolution_y = size
     scene.render.resolution_percentage = 100
     scene.view_settings.view_transform = "Standard"
@@ -217,7 +217,7 @@ def _render(scene, path: Path) -> np.ndarray:
     scene.render.image_settings.color_depth = "8"
     scene.render.filepath = str(path)
     bpy.ops.render.render(write_still=True)
-    return read_png(path)
+    return read_image(path)
 
 
 def _ear_mask(scene, parts, path: Path) -> np.ndarray:
@@ -320,7 +320,7 @@ def comparison_figure(panels: dict[tuple[str, str], np.ndarray], tones: list[str
     fig.canvas.draw()
     codes = np.asarray(fig.canvas.buffer_rgba())[..., :3].copy()
     plt.close(fig)
-    return [write_png(path, codes) for path in paths]
+    return [write_image(path, codes) for path in paths]
 
 
 # ------------------------------------------------------------------------------------------------ run
@@ -370,7 +370,7 @@ def run(out: Path, texture_size: int = 512, render_size: int = RENDER_SIZE, samp
         for tone in tones:
             t0 = time.perf_counter()
             textures[tone] = skin_albedo_texture(texture_size, seed=0, base=TONES[tone])
-            image = bpy.data.images.load(str(write_png(out / f"skin_{tone}.png", textures[tone])))
+            image = bpy.data.images.load(str(write_image(out / f"skin_{tone}.png", textures[tone])))
             for method, shader in zip((m for m, _ in METHODS), ("diffuse", "principled_skin", "principled"),
                                       strict=True):
                 materials[tone, method] = _material(f"{tone} {method}", image, shader)
