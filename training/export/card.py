@@ -123,3 +123,33 @@ def update_validation(path: Path, validation: dict) -> None:
     tmp = path.with_name(path.name + ".tmp")
     tmp.write_text(json.dumps(card, indent=2) + "\n")
     tmp.replace(path)
+
+
+def summary(card: dict) -> str:
+    """One line saying what the model of ``card`` (a parsed model card) is, from the card alone: its name, K,
+    export date, the dataset it was trained on (preset, tone counts, photons per wavelength) and the colour
+    errors it was measured at (validation round trip; the validation gate's representative tones).  Whatever
+    the card lacks is left out."""
+    head = [card.get("name", "unnamed model")]
+    if "K" in card:
+        head.append(f"K = {card['K']}")
+    if card.get("created"):
+        head.append(f"exported {str(card['created'])[:10]}")
+    facts = []
+    ds = card.get("dataset", {})
+    if ds.get("n_train"):
+        preset = ds.get("train_attrs", {}).get("preset")
+        trained = f"trained on {'the ' + preset + ' dataset, ' if preset else ''}{ds['n_train']:,} training"
+        if ds.get("n_validation"):
+            trained += f" + {ds['n_validation']:,} validation"
+        trained += " tones"
+        if ds.get("photons"):
+            trained += f" at {ds['photons']:,} photons per wavelength"
+        facts.append(trained)
+    round_trip = card.get("metrics", {}).get("validation", {}).get("enc_delta_e76", {}).get("mean")
+    if round_trip is not None:
+        facts.append(f"colour round trip ΔE76 {round_trip:.2f} mean on its validation tones")
+    gate = card.get("validation", {}).get("gate", {}).get("nn_delta_e", {}).get("representative")
+    if gate is not None:
+        facts.append(f"validation gate ΔE76 {gate:.2f} on the representative tones")
+    return ", ".join(head) + (f": {'; '.join(facts)}" if facts else "")
