@@ -80,7 +80,7 @@ def basis() -> np.ndarray:
     blue = _logistic((SPLIT_NM[0] - wl) / SPLIT_WIDTH_NM)
     red = _logistic((wl - SPLIT_NM[1]) / SPLIT_WIDTH_NM)
     b = window * np.stack([blue, 1.0 - blue - red, red])
-    b[b < BASIS_FLOOR] = 0.0  # c is exactly 1 far from the visible (below ~290 and above ~850 nm)
+    b[b < BASIS_FLOOR] = 0.0  # c is exactly 1 far from the visible (below 286 and above 848 nm)
     b.setflags(write=False)
     return b
 

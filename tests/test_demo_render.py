@@ -32,7 +32,7 @@ def test_tiny_demo_run(tmp_path):
                  "maps_contact_sheet.png"):
         assert (tmp_path / name).is_file(), name
     record = json.loads((tmp_path / "maps" / "skin_albedo_maps.json").read_text())
-    assert record["image_size"] == [16, 16] and record["collapse"]["match_exposure"] is True
+    assert record["image_size"] == [16, 16] and record["collapse"]["colour"] == "painted"
     preview = oiio.ImageBuf(str(tmp_path / "preview.png")).get_pixels(oiio.FLOAT)
     assert preview.shape[:2] == (24, 24) and np.all(np.isfinite(preview))
     assert info["timings_s"]["bake"] > 0
