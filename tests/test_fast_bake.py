@@ -86,8 +86,8 @@ def test_colours_outside_the_table_are_evaluated_exactly(tmp_path):
     fast = bake_png(png, tmp_path / "fast")
     bake_png(png, tmp_path / "exact", exact=True)
     assert fast.stats["texels_evaluated_exactly"] == 2 and fast.stats["texels_from_table"] == 2
-    # the non-skin texels: exact, stored as half (colour: step 2^-11 relative) or with 16 mantissa bits (radius)
-    for name, rtol in (("odd_k1_color.exr", 5e-4), ("odd_k2_radius.exr", 2e-5)):
+    # the non-skin texels: exact, stored as half (relative step 2^-11 for colour and for radii in half's range)
+    for name, rtol in (("odd_k1_color.exr", 5e-4), ("odd_k2_radius.exr", 5e-4)):
         a, b = maps.read_exr(tmp_path / "fast" / name)[0], maps.read_exr(tmp_path / "exact" / name)[0]
         np.testing.assert_allclose(a[0, 1], b[0, 1], rtol=rtol)
         np.testing.assert_allclose(a[1, 0], b[1, 0], rtol=rtol)
@@ -104,11 +104,19 @@ def _pixel_type(path: Path) -> str:
 
 
 def test_fast_bake_stores_bounded_maps_as_half_and_float_maps_keeps_float32(skin_png, tmp_path):
-    """Colour, weight and anisotropy maps (bounded to [-1, 1]) are half floats on the fast path, radius (which
-    spans decades, down to 1e-5 m) stays float32; --float-maps and exact bakes write float32 throughout."""
+    """Colour, weight and anisotropy maps (bounded to [-1, 1]) are half floats on the fast path, and so is the
+    radius when every radius lies in half's normal range (relative rounding <= 4.9e-4; here at unit scale 1, but
+    not in kilometre units, where skin's radii would be subnormal halves); --float-maps and exact bakes write
+    float32 throughout."""
     fast = bake_png(skin_png, tmp_path / "fast")
     types = {f.name.split("_", 2)[-1]: _pixel_type(f) for f in fast.files if f.suffix == ".exr"}
-    assert types == {"color.exr": "half", "weight.exr": "half", "anisotropy.exr": "half", "radius.exr": "float"}
+    assert types == {"color.exr": "half", "weight.exr": "half", "anisotropy.exr": "half", "radius.exr": "half"}
+    km = bake_png(skin_png, tmp_path / "km", unit_scale_m=1000.0)
+    assert {f.name.split("_", 2)[-1]: _pixel_type(f) for f in km.files if f.suffix == ".exr"}["radius.exr"] == "float"
+    radius = maps.read_exr(tmp_path / "fast" / "skin_k1_radius.exr")[0]
+    np.testing.assert_allclose(maps.read_exr(tmp_path / "km" / "skin_k1_radius.exr")[0] * 1000.0, radius, rtol=5e-4)
+    record = json.loads((tmp_path / "fast" / "skin_maps.json").read_text())
+    assert record["evaluation"]["half_kinds"] == ["anisotropy", "color", "radius", "weight"]
     full = bake_png(skin_png, tmp_path / "full", half_maps=False)
     assert {_pixel_type(f) for f in full.files if f.suffix == ".exr"} == {"float"}
     exact = bake_png(skin_png, tmp_path / "exact", exact=True)
@@ -116,6 +124,8 @@ def test_fast_bake_stores_bounded_maps_as_half_and_float_maps_keeps_float32(skin
     for name in ("skin_k1_color.exr", "skin_k2_weight.exr"):
         a, b = maps.read_exr(tmp_path / "fast" / name)[0], maps.read_exr(tmp_path / "full" / name)[0]
         assert 0 < np.abs(a - b).max() <= 2.5e-4  # half's rounding error below 1: at most 2^-12 = 2.4e-4
+    a, b = (maps.read_exr(tmp_path / d / "skin_k2_radius.exr")[0] for d in ("fast", "full"))
+    assert 0 < np.abs(a / b - 1).max() <= 4.9e-4  # normal halves: relative rounding at most 2^-11
     stream = maps.MapStream(tmp_path / "h.exr", 2, 1, ("Y",), "1", pixel_type="half")
     with pytest.raises(ValueError, match="half-float range"):
         stream.write_rows(np.array([[1.0, 7e4]]))

@@ -39,7 +39,8 @@ class BakeOptions:
     ``compression`` of the EXR maps (exporters.maps.COMPRESSIONS); ``mantissa_bits``: float32 mantissa bits the
     maps keep (None: 16 when the table is used — relative 7.6e-6, far below its interpolation error, and 25 %
     faster to compress — and all 23 for exact bakes); ``half_maps``: the maps of ``HALF_KINDS`` stored as
-    half floats (None: on the fast path, not with ``exact``); ``cache_min_colours``: distinct colours from which a
+    half floats, and the radius maps too when every radius lies in half's normal range (None: on the fast
+    path, not with ``exact``); ``cache_min_colours``: distinct colours from which a
     bake without a usable table builds one (grid step ``cache_step``) into the user cache."""
 
     targets: tuple[str, ...] = ("cycles",)

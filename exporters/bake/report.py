@@ -10,7 +10,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from exporters import collapse, maps, painted
-from exporters.bake.targets import HALF_KINDS, units_of
+from exporters.bake.targets import units_of
 from exporters.texel_records import CLAMPED_CYCLES, CLAMPED_SPECTRAL, needs_media
 
 if TYPE_CHECKING:
@@ -100,7 +100,7 @@ def write_record(job: BakeJob, timings: dict[str, float], files: list[Path], fil
                            "model_sha256": table.model_sha256, "command": table.meta.get("command")},
                        "exr_compression": opts.compression,
                        "mantissa_bits": job.mantissa_bits,
-                       "half_kinds": sorted(HALF_KINDS) if job.half_maps else []},
+                       "half_kinds": sorted({s.kind for s in job.specs if job.pixel_types.get(s.name) == "half"})},
         "components": {"model_K": job.model_k, "kept": list(job.components),
                        "dropped": [k for k in range(1, job.model_k + 1) if k not in job.components],
                        "prune_share": float(opts.prune_share),

@@ -20,9 +20,10 @@ UNITS = {
 }
 #: Cycles map kinds bounded to [-1, 1] (colour, weights, anisotropy): the fast path stores them as half floats
 #: (BakeOptions.half_maps).  Their rounding (<= 2.4e-4 below 1) is a tenth of the table's interpolation error in
-#: the rendered colour, and halves what PIZ compresses.  Radius and the physical and biophysical maps stay float32:
-#: radii span decades down to 1e-5 m (half's subnormal range), and 1 - alpha of a physical albedo near 1 needs
-#: float's precision.
+#: the rendered colour, and halves what PIZ compresses.  Radius maps are half too when every radius of the bake
+#: lies in half's normal range (exporters.bake.job; skin's radii, >= 4 pi x 10 um, do at unit scales up to ~1):
+#: relative rounding 4.9e-4, 1/70 of the table's radius error.  The physical and biophysical maps stay float32:
+#: 1 - alpha of a physical albedo near 1 needs float's precision.
 HALF_KINDS = frozenset({"color", "weight", "anisotropy"})
 
 
