@@ -26,7 +26,7 @@ CODES = np.array([[[224, 172, 150], [150, 100, 80]], [[90, 60, 45], [224, 172, 1
 
 
 def bake_files(path: Path, out: Path) -> Path:
-    """Bake ``path`` with exporters.baking (every texel through the model) into ``out``."""
+    """Bake ``path`` with exporters.bake (every texel through the model) into ``out``."""
     out.mkdir()
     bake.bake(path, out, preferences.DEFAULT_MODEL, bake.BakeOptions(threads=1))
     return out
