@@ -97,3 +97,17 @@ def test_bad_input_raises(network):
         painted.paint_mixture(*args, SKIN[:2])
     with pytest.raises(ValueError, match="share a shape"):
         painted.paint_mixture(args[0][..., :10], *args[1:], SKIN[:1])
+
+
+def test_mitsuba_mixture_takes_the_painted_colour():
+    from exporters.mitsuba import decode
+
+    tone = decode([0.035, 0.025, 0.012, 0.75, 0.78])  # R05 of tones.csv
+    rgb = np.array([0.40, 0.22, 0.15])
+    paint = tone.painted(rgb)
+    g = np.clip(tone.g, 0, 0.95)
+    mix = np.sum(tone.weight * reflectance_tables.reflectance("model", paint.alpha, g), axis=0)
+    np.testing.assert_allclose(spectrum_to_linear_srgb(mix), rgb, rtol=2e-3)
+    np.testing.assert_array_equal(paint.g, tone.g)
+    with pytest.raises(ValueError, match="376-sample grid"):
+        tone.at([450.0, 550.0]).painted(rgb)
