@@ -61,6 +61,21 @@ def test_quick_writes_tables_and_figures(quick_run, monkeypatch):
     assert "3.19" in md and "51.40" in md  # the paper's numbers beside ours
 
 
+def test_painted_row_renders_the_painted_colour(quick_run):
+    """The gate's painted-colour row (the bake's default): the network's media corrected to the ground truth's
+    colour, rendered by our Monte Carlo, show that colour within the quick run's noise; the network's own media
+    do not (R01, very light: the network answers with a skin 1.9x darker)."""
+    out, _, _, _, _ = quick_run
+    rec = json.loads((out / "tables.json").read_text())
+    painted, own = rec["gate"]["per_tone"]["nn_painted"], rec["gate"]["per_tone"]["nn"]
+    for tone, vals in painted.items():
+        assert vals["clamped"] is False, tone
+        assert vals["delta_e"] <= 2 * vals["noise_floor"] + 1.0, (tone, vals["delta_e"], vals["noise_floor"])
+    assert painted["R01"]["delta_e"] < own["R01"]["delta_e"] / 3
+    assert _finite(rec["gate"]["rows"]["nn_painted"]["delta_e_edge"]["representative"])
+    assert "painted colour" in (out / "tables.md").read_text()
+
+
 def test_rerun_refuses_then_resumes_from_the_cache(quick_run):
     out, models, _, _, first = quick_run
     base = ["--out", str(out), "--quick", "--model-dir", str(models), "--no-progress"]

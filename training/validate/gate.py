@@ -10,8 +10,10 @@ For each gate tone (``training/skin/tones.csv``: 10 representative + 10 outliers
    (``training.fit.optimize.fit_schedule``, the fitter of the dataset fits): at every validation
    wavelength for the representative tones (Table 2 needs UV and NIR), in the colour range for outliers.
 3. **Network**: ``skin_inversion.onnx`` on the ground truth's linear-sRGB albedo (what a user's texel
-   gives, the paper's "K = 3 NN"), and ``skin_decoder.onnx`` on the tone's true biophysical vector
-   (the translucency decoder alone).
+   gives, the paper's "K = 3 NN"); the same media with the painted colour (``exporters.painted``: the bake's
+   default, the albedo being the ground truth's colour), whose slab colour is the albedo by construction and
+   whose edge ΔE shows the translucency the network keeps; and ``skin_decoder.onnx`` on the tone's true
+   biophysical vector (the translucency decoder alone).
 4. **Baselines**: Chiang 2016 and Wrenninge 2017 albedo inversion (``training.validate.baselines``).
 5. **Render** every configuration with our mixture renderer (``training.validate.mixture``; each
    component walked with all photons, combined with w_k(lambda), exact by linearity) at the validation
@@ -42,11 +44,13 @@ from training.validate.mixture import check_mixture, combine, render_media
 
 #: Rows of the gate: joint-optimised fits, the network (RGB input; decoder on the true p), baselines.
 FIT_ROWS: tuple[str, ...] = ("k1", "k2", "k3")
-NN_ROWS: tuple[str, ...] = ("nn", "nn_decoder")
+NN_ROWS: tuple[str, ...] = ("nn", "nn_painted", "nn_decoder")
 ROWS: tuple[str, ...] = FIT_ROWS + NN_ROWS + bl.METHODS
 ROW_LABELS: dict[str, str] = {
     "k1": "K = 1 (joint-opt)", "k2": "K = 2 (joint-opt)", "k3": "K = 3 (joint-opt)",
-    "nn": "K = 3 NN (skin_inversion.onnx, RGB in)", "nn_decoder": "K = 3 NN decoder (true p in)",
+    "nn": "K = 3 NN (skin_inversion.onnx, RGB in)",
+    "nn_painted": "K = 3 NN, painted colour (RGB in; the bake's default)",
+    "nn_decoder": "K = 3 NN decoder (true p in)",
     **bl.LABELS,
 }
 #: Photons per ground-truth walk chunk (saved between chunks).

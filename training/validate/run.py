@@ -133,7 +133,7 @@ def run(opts: Options) -> dict:
 
     fits = _fits(opts, lut, tones, gt, wl_val, wl_r, cache, timings)
     t0 = time.perf_counter()
-    inv, dec, dec_full = _network(opts, files, albedo, tones.values, wl_r)
+    inv, painted, dec, dec_full = _network(opts, files, albedo, tones.values, wl_r)
     scales, calib = _baseline_scales(opts, lut, tones, gt, albedo, wl_val)
     timings["network_and_calibration"] = time.perf_counter() - t0
 
@@ -142,7 +142,7 @@ def run(opts: Options) -> dict:
         rows = {}
         for k in (1, 2, 3):
             rows[f"k{k}"], held[f"{name}_k{k}"] = G.hold_lut_albedo(G.fit_params(fits[name], k, wl_r), lut)
-        rows |= {"nn": inv[i], "nn_decoder": dec[i]}
+        rows |= {"nn": inv[i], "nn_painted": painted[i], "nn_decoder": dec[i]}
         rows |= {m: G.baseline_params(m, albedo[i], scales[m], wl_r) for m in bl.METHODS}
         rows_per_tone.append(rows)
     t0 = time.perf_counter()
@@ -211,10 +211,12 @@ def _fits(opts, lut, tones, gt, wl_val, wl_r, cache, timings) -> dict[str, dict]
 
 
 def _network(opts, files, albedo, tones, wl_r):
-    """The network's mixtures at the render wavelengths (inversion on the albedo, decoder on the true p),
-    and the decoder's full outputs (T, K, 376) for the figures (the paper's Fig. spectral_params)."""
+    """The network's mixtures at the render wavelengths (inversion on the albedo, as it is and with the painted
+    colour of the albedo; decoder on the true p), and the decoder's full outputs (T, K, 376) for the figures
+    (the paper's Fig. spectral_params)."""
     from exporters import inference
     from exporters.mitsuba import decode
+    from exporters.painted import paint_mixture
 
     model = inference.load_model(files["skin_inversion.onnx"], threads=opts.threads)
     out = model.run(np.asarray(albedo, dtype=np.float32))
@@ -222,13 +224,16 @@ def _network(opts, files, albedo, tones, wl_r):
                     out["weight"][i][:, wl_r],
                     extra={"exposure": float(out["exposure"][i, 0]), "biophysical": out["biophysical"][i].tolist()})
            for i in range(len(albedo))]
+    p = paint_mixture(out["alpha"], out["sigma_t"], out["g"], out["weight"], albedo)
+    painted = [G.Params(p.alpha[i][:, wl_r], p.sigma_t[i][:, wl_r], out["g"][i][:, wl_r], out["weight"][i][:, wl_r],
+                        extra={"clamped": bool(p.clamped[i])}) for i in range(len(albedo))]
     dec, full = [], {"alpha": [], "sigma_t": [], "weight": []}
     for tone in tones:
         m = decode(tone, files["skin_decoder.onnx"])
         dec.append(G.Params(m.alpha[:, wl_r], m.sigma_t[:, wl_r], m.g[:, wl_r], m.weight[:, wl_r]))
         for key in full:
             full[key].append(getattr(m, key))
-    return inv, dec, {k: np.stack(v) for k, v in full.items()}
+    return inv, painted, dec, {k: np.stack(v) for k, v in full.items()}
 
 
 def _baseline_scales(opts, lut, tones, gt, albedo, wl_val) -> tuple[dict[str, float], dict]:
@@ -284,10 +289,7 @@ def _gate_tables(lut, tones, gt, wl_val, wl_r, col_r, rows_per_tone, renders, fi
             }
             per_row[r][name] = rec
         nn_vs_k3[name] = float(M.delta_e(renders[i]["nn"]["R_d"], renders[i]["k3"]["R_d"], wl))
-        # the network's render times its exposure (what --match-exposure bakes): its colour without the
-        # brightness that the exposure absorbs
-        exposure = rows_per_tone[i]["nn"].extra["exposure"]
-        per_row["nn"][name]["delta_e_times_exposure"] = float(M.delta_e(exposure * renders[i]["nn"]["R_d"], g_r, wl))
+        per_row["nn_painted"][name]["clamped"] = rows_per_tone[i]["nn_painted"].extra["clamped"]
     kinds = {"representative": [n for n, k in zip(tones.names, tones.kinds, strict=True) if k == "representative"],
              "outlier": [n for n, k in zip(tones.names, tones.kinds, strict=True) if k == "outlier"],
              "all": list(tones.names)}
@@ -496,6 +498,7 @@ def headline(record: dict) -> dict:
         "gate": {
             "tones": record["gate"]["tones"],
             "nn_delta_e": rows["nn"]["delta_e"],
+            "nn_painted_delta_e": rows["nn_painted"]["delta_e"],
             "nn_decoder_delta_e": rows["nn_decoder"]["delta_e"],
             "joint_opt_delta_e": {f"K{k}": rows[f"k{k}"]["delta_e"] for k in (1, 2, 3)},
             "baseline_delta_e": {m: rows[m]["delta_e"] for m in bl.METHODS},

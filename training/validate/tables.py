@@ -235,11 +235,16 @@ def notes(record: dict) -> list[str]:
                "boundaries) would render R/A = " + ", ".join(f"{mth} {dark[mth]:.2f}" for mth in METHODS)
                + " (mean over tones, visible band) under it. RGB → spectrum: Mallett & Yuksel 2019.")
     exp = list(record["network"]["exposure"].values())
-    nn_x = [v["delta_e_times_exposure"] for n, v in g["per_tone"]["nn"].items() if n in g["groups"]["representative"]]
+    clamped = [n for n, v in g["per_tone"]["nn_painted"].items() if v.get("clamped")]
     out.append(f"Network exposure (Y of the input over Y of its own reflectance): {min(exp):.3f}–{max(exp):.3f} over "
-               "the gate tones (1 = the encoder found the input's brightness). The gate renders the network's media as "
-               "they are; its rendered R_d times the exposure (the add-on's --match-exposure) would score ΔE76 "
-               f"{_f(float(np.mean(nn_x)) if nn_x else None)} (rep.).")
+               "the gate tones (1 = the encoder found the input's brightness). The row "
+               f"'{G.ROW_LABELS['nn']}' renders the network's media as they are; '{G.ROW_LABELS['nn_painted']}' "
+               "renders them with the painted colour (exporters.painted: a smooth correction of the visible albedo "
+               "spectrum, within a factor 4, so that the mixture's colour at the model's boundary is the input's; "
+               "radii kept), what a bake renders by default: its slab ΔE76 is the painted colour through our Monte "
+               "Carlo (noise, the reflectance table and the wavelength sampling), its edge ΔE76 the translucency "
+               "the network keeps. Tones whose painted colour had to be clamped: "
+               f"{', '.join(clamped) if clamped else 'none'}.")
     k1, k1p = rows["k1"]["delta_e"]["representative"], paper.TABLE1_DELTA_E["k1"]
     rr = record["banded"].get("refl_rel_err", {})
     if k1 is not None:
