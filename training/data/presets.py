@@ -29,10 +29,10 @@ class Preset:
 
 PRESETS: dict[str, Preset] = {
     # Smoke: the smallest build with every kind of piece (3 walk chunks per split, several reweighting
-    # chunks) for tests of the plumbing (resume, shards, Dask): a few seconds per walk chunk.  Its walk cap
-    # of 2,000 steps leaves weight alive in the NIR (recorded as `truncated`): not for science.
+    # chunks) for tests of the plumbing (resume, shards, Dask): 1-3 s per walk chunk.  Its walk cap
+    # of 500 steps leaves ~12 % of the weight alive (recorded as `truncated`): not for science.
     "smoke": Preset("smoke", n_train=6, n_validation=4, photons=60, chunk_tones=2, reweighted_chunk_tones=2,
-                    walk_chunk_photons=20, walk_max_steps=2_000),
+                    walk_chunk_photons=20, walk_max_steps=500),
     # CI: under 2 minutes on 2 CPU cores; enough to exercise every later stage end to end.
     "ci": Preset("ci", n_train=24, n_validation=8, photons=500, chunk_tones=8),
     # Laptop: >= 5,000 + 1,000 tones at noise equal to >= 1e5 direct photons per wavelength (a few hours,
