@@ -74,11 +74,14 @@ def single(tmp_path_factory) -> Path:
 
 @pytest.fixture(scope="module")
 def cluster():
-    """A LocalCluster of 2 single-threaded worker processes, reached by its tcp:// address."""
+    """A LocalCluster of 2 single-threaded worker processes, started as README "Scaling out" says workers
+    started by hand should be (engine.WORKER_ENV), reached by its tcp:// address."""
+    import dask
     from distributed import LocalCluster
 
-    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None,
-                      memory_limit=0, silence_logs=logging.ERROR) as c:
+    with dask.config.set(engine.WORKER_CONFIG), LocalCluster(
+            n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None, memory_limit=0,
+            silence_logs=logging.ERROR) as c:
         yield c
 
 
@@ -141,6 +144,10 @@ def test_a_killed_lut_run_resumes_with_the_same_command(single, tmp_path):
 def test_fit_through_a_running_scheduler_matches_one_process(single, cluster, tmp_path):
     address = cluster.scheduler_address
     assert engine.parse_scheduler(address) == engine.Scheduler("tcp", address=address)
+    from distributed import Client
+
+    with Client(address) as client:  # the allocator settings reached the workers (else: a warning, 4x slower)
+        assert engine.check_worker_env(client) == []
     assert fit_main(["--dataset", str(single / "ds"), "--lut", str(single / "lut.npz"), "--out",
                      str(tmp_path / "fits"), *FIT_ARGS, "--scheduler", address]) == 0
     _same_h5(single / "fits" / "validation_fits.h5", tmp_path / "fits" / "validation_fits.h5")
@@ -198,7 +205,8 @@ def test_slurm_cluster_from_dask_configuration(monkeypatch):
             cluster.close()
     # one single-threaded worker per core, memory from SLURM_DEFAULTS (the configuration is silent on it)
     for line in ("#SBATCH -p gpu", "#SBATCH -A skin", "#SBATCH -t 02:00:00", "#SBATCH --gres=gpu:4",
-                 "#SBATCH --cpus-per-task=4", "#SBATCH --mem=8G", "--nworkers 4", "--nthreads 1"):
+                 "#SBATCH --cpus-per-task=4", "#SBATCH --mem=8G", "--nworkers 4", "--nthreads 1",
+                 "export MALLOC_MMAP_THRESHOLD_=33554432 MALLOC_TRIM_THRESHOLD_=67108864"):
         assert line in script, script
     monkeypatch.setitem(sys.modules, "dask_jobqueue", None)  # as if it were not installed
     with pytest.raises(ValueError, match="needs dask-jobqueue: pip install"):

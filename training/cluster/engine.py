@@ -20,6 +20,7 @@ import argparse
 import logging
 import os
 import re
+import sys
 import uuid
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
@@ -35,6 +36,17 @@ SLURM_JOBS = 4
 #: What a SLURM job asks for when dask's ``jobqueue.slurm`` config leaves it unset: one single-threaded
 #: worker (the walker and the fitter run best on one thread per core), memory for a ``laptop`` walk.
 SLURM_DEFAULTS: dict[str, Any] = {"cores": 1, "memory": "8GiB"}
+#: The allocator settings of the workers we start.  distributed's nanny sets MALLOC_TRIM_THRESHOLD_=65536 in
+#: every worker by default, which also freezes glibc's mmap threshold at 128 KiB: each of the walker's
+#: per-step tensors then becomes an mmap/munmap pair, and a walk took 4.2x the CPU of the same walk in one
+#: process (85 s against 20 s, 500 photons x 376 wavelengths, 1,500 steps; measured here).  These are the
+#: values glibc's own dynamic thresholds reach on 64-bit (32 MiB, twice that for trimming): the walk then
+#: costs what it costs in one process.
+WORKER_ENV = {"MALLOC_MMAP_THRESHOLD_": "33554432", "MALLOC_TRIM_THRESHOLD_": "67108864"}
+#: Dask settings of the workers we start: WORKER_ENV, and no statistical profiler (it samples the task's
+#: stack every 10 ms for the dashboard: ~8 % of a walk's CPU here).
+WORKER_CONFIG = {**{f"distributed.nanny.pre-spawn-environ.{k}": v for k, v in WORKER_ENV.items()},
+                 "distributed.worker.profile.enabled": False}
 SCHEDULER_HELP = ("run the work on a Dask cluster: local:N (N worker processes here), tcp://HOST:PORT (a running "
                   "scheduler) or slurm[:JOBS] (dask-jobqueue; README 'Scaling out'); default: this process")
 
@@ -84,6 +96,9 @@ def slurm_cluster(**overrides):
     conf = dask.config.get("jobqueue.slurm")
     kwargs = {k: conf.get(k) or v for k, v in SLURM_DEFAULTS.items()}
     kwargs["processes"] = conf.get("processes") or kwargs["cores"]  # one thread per worker
+    env = {**WORKER_ENV, "DASK_DISTRIBUTED__WORKER__PROFILE__ENABLED": "False"}
+    kwargs["job_script_prologue"] = [*(conf.get("job-script-prologue") or []),
+                                     "export " + " ".join(f"{k}={v}" for k, v in env.items())]
     return SLURMCluster(**{**kwargs, **overrides})
 
 
@@ -95,14 +110,17 @@ def client(spec: Scheduler) -> Iterator[Any]:
     except ImportError:
         raise ValueError("--scheduler needs dask and distributed: pip install 'distributed==2026.8.0' "
                          "(or the project's [cluster] extra)") from None
+    import dask
+
     cluster = None
-    if spec.kind == "local":
-        # memory_limit=0: no worker pause/kill on memory (one process has no limit either)
-        cluster = LocalCluster(n_workers=spec.n, threads_per_worker=1, processes=True, dashboard_address=None,
-                               memory_limit=0, silence_logs=logging.ERROR)
-    elif spec.kind == "slurm":
-        cluster = slurm_cluster()
-        cluster.scale(jobs=spec.n)
+    with dask.config.set(WORKER_CONFIG):  # read by the nannies when they start (and restart) workers
+        if spec.kind == "local":
+            # memory_limit=0: no worker pause/kill on memory (one process has no limit either)
+            cluster = LocalCluster(n_workers=spec.n, threads_per_worker=1, processes=True, dashboard_address=None,
+                                   memory_limit=0, silence_logs=logging.ERROR)
+        elif spec.kind == "slurm":
+            cluster = slurm_cluster()
+            cluster.scale(jobs=spec.n)
     try:
         try:
             c = Client(cluster) if cluster is not None else Client(spec.address, timeout="30s")
@@ -134,6 +152,15 @@ def check_shared(dask_client, paths: list[Path]) -> None:
         if blind:
             raise ValueError(f"workers {blind} do not see {path}: --scheduler needs the data on a file system "
                              "shared by the client and every worker, at the same path")
+
+
+def check_worker_env(dask_client) -> list[str]:
+    """Workers whose allocator runs with distributed's slow default (MALLOC_TRIM_THRESHOLD_ set, no
+    MALLOC_MMAP_THRESHOLD_; see WORKER_ENV); the command warns about them (workers started by hand)."""
+    def env() -> tuple[str | None, str | None]:
+        return os.environ.get("MALLOC_TRIM_THRESHOLD_"), os.environ.get("MALLOC_MMAP_THRESHOLD_")
+
+    return [w for w, (trim, mmap) in dask_client.run(env).items() if trim is not None and mmap is None]
 
 
 class TaskError(RuntimeError):
@@ -217,6 +244,11 @@ def job(spec: Scheduler | None, desc: str, *, shared: list[Path] = (), threads: 
         return
     with client(spec) as c:
         check_shared(c, [Path(p) for p in shared])
+        slow = check_worker_env(c)
+        if slow:
+            print(f"warning: {len(slow)} worker(s) run with MALLOC_TRIM_THRESHOLD_ but no MALLOC_MMAP_THRESHOLD_ "
+                  "(distributed's default): the walker is ~4x slower there; start them with "
+                  + " ".join(f"{k}={v}" for k, v in WORKER_ENV.items()), file=sys.stderr)
         j = Job(c, desc, threads=threads, progress=progress)
         try:
             yield j
