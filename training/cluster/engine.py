@@ -21,6 +21,7 @@ import logging
 import os
 import re
 import sys
+import threading
 import uuid
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
@@ -257,15 +258,18 @@ def job(spec: Scheduler | None, desc: str, *, shared: list[Path] = (), threads: 
 
 
 _MEMO: dict[str, tuple[Any, Any]] = {}
+_MEMO_LOCK = threading.Lock()
 
 
 def memo(kind: str, key: Any, make: Callable[[], Any]) -> Any:
     """Per-process cache of one value per ``kind`` (a worker's LUT, its loaded walk): ``make()`` when ``key``
-    differs from the cached one (the old value is dropped first, so two never sit in memory together)."""
-    held = _MEMO.get(kind)
-    if held is not None and held[0] == key:
-        return held[1]
-    _MEMO.pop(kind, None)
-    value = make()
-    _MEMO[kind] = (key, value)
-    return value
+    differs from the cached one (the old value is dropped first, so two never sit in memory together).
+    Thread-safe: the tasks of a multi-threaded worker share one copy."""
+    with _MEMO_LOCK:
+        held = _MEMO.get(kind)
+        if held is not None and held[0] == key:
+            return held[1]
+        _MEMO.pop(kind, None)
+        value = make()
+        _MEMO[kind] = (key, value)
+        return value
