@@ -198,7 +198,7 @@ def test_slurm_cluster_from_dask_configuration(monkeypatch):
     conf = {"jobqueue.slurm.queue": "gpu", "jobqueue.slurm.account": "skin", "jobqueue.slurm.walltime": "02:00:00",
             "jobqueue.slurm.cores": 4, "jobqueue.slurm.job-extra-directives": ["--gres=gpu:4"]}
     with dask.config.set(conf):
-        cluster = engine.slurm_cluster(dashboard_address=None)
+        cluster = engine.slurm_cluster(scheduler_options={"dashboard_address": ":0"})  # any free port
         try:
             script = cluster.job_script()
         finally:

@@ -11,7 +11,10 @@ as tasks with ``retries=RETRIES``, shows one progress bar over them (done / tota
 hands each result to the stage's writer on the client as it arrives; a task that still fails after its
 retries is reported by name (``TaskError``), never dropped.  The stages' tasks write (or return for the
 client to write) exactly the files their single-process path writes, so workers must see the output
-folder at the same path (a shared file system; ``check_shared`` verifies it).
+folder at the same path (a shared file system; ``check_shared`` verifies it).  Bit for bit: every seed
+belongs to a piece, and a task runs torch on the command's ``--threads`` as one process does (sums whose
+last bit depends on the thread count, such as OpenBLAS's threaded products, are kept off numpy's BLAS:
+``training.sim.lut._matmul``).
 """
 
 from __future__ import annotations

@@ -49,6 +49,7 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--device", choices=("cpu", "cuda"), default="cpu")
     p.add_argument("--compile", choices=("auto", "on", "off"), default="auto",
                    help="torch.compile the walker step (auto: when photons x g-n > 4M)")
+    p.add_argument("--threads", type=int, default=1, help="torch CPU threads (the walker is fastest on 1)")
     p.add_argument("--no-progress", action="store_true")
     engine.add_option(p)
     return p
@@ -57,11 +58,12 @@ def _parser() -> argparse.ArgumentParser:
 def main(argv: list[str]) -> int:
     """Run the command; returns the exit status (2 for bad input)."""
     args = _parser().parse_args(argv)
+    import torch
+
+    torch.set_num_threads(max(1, args.threads))
     compile_ = {"on": True, "off": False, "auto": args.photons * args.g_n > (1 << 22)}[args.compile]
     try:
         if args.device == "cuda" and args.scheduler is None:  # on a cluster, the workers' GPUs count
-            import torch
-
             if not torch.cuda.is_available():
                 raise ValueError("device 'cuda' requested but CUDA is not available")
         if args.max_steps < 1:
@@ -69,7 +71,8 @@ def main(argv: list[str]) -> int:
         if args.scheduler is not None and args.shard != (0, 1):
             raise ValueError("--shard and --scheduler exclude each other: the cluster takes every g node")
         out = Path(args.out).resolve() if args.scheduler is not None else args.out  # workers need its full path
-        with engine.job(args.scheduler, "lut", shared=[Path(out).parent], progress=not args.no_progress) as job:
+        with engine.job(args.scheduler, "lut", shared=[Path(out).parent], threads=max(1, args.threads),
+                        progress=not args.no_progress) as job:
             build_lut(
                 out, args.albedo_n, args.g_n, args.photons, seed=args.seed, device=args.device,
                 albedo_range=(args.albedo_min, args.albedo_max), g_range=(args.g_min, args.g_max),

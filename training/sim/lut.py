@@ -122,6 +122,14 @@ class _Histograms:
         }
 
 
+def _matmul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """a @ b (float64) by torch, on the torch threads the command set (``--threads``, 1 by default): numpy's
+    BLAS picks its own thread count, and OpenBLAS's sums differ in the last bit between 1 and 2 threads,
+    so one process and a cluster's single-threaded workers would not write the same table bit for bit."""
+    return (torch.from_numpy(np.ascontiguousarray(a, dtype=np.float64))
+            @ torch.from_numpy(np.ascontiguousarray(b, dtype=np.float64))).numpy()
+
+
 def reweight(hist: dict[str, np.ndarray], albedo: np.ndarray, photons: int, r_edges: np.ndarray,
              bins: CountBins) -> dict[str, np.ndarray]:
     """Tables of one g column from its histograms.
@@ -137,11 +145,11 @@ def reweight(hist: dict[str, np.ndarray], albedo: np.ndarray, photons: int, r_ed
     log_a = np.log(albedo)
     e = np.exp(np.outer(nbar, log_a))  # (NB, NA): albedo^nbar
     dev = hwn - hw * nbar[None, :]  # first-order term: sum w (n - nbar)
-    praw = (hw @ e + (dev @ e) * log_a[None, :]) / photons  # (NR + 1, NA), overflow bin last
+    praw = (_matmul(hw, e) + _matmul(dev, e) * log_a[None, :]) / photons  # (NR + 1, NA), overflow bin last
     # the first-order term can dip below 0 in far bins holding a handful of photons; the exact sum is >= 0
     praw = np.clip(praw, 0.0, None)
     r_tot = praw.sum(0)
-    ev2 = (hw2 @ np.exp(np.outer(nbar, 2.0 * log_a))) / photons
+    ev2 = _matmul(hw2[None], np.exp(np.outer(nbar, 2.0 * log_a)))[0] / photons
     r_se = np.sqrt(np.clip(ev2 - r_tot**2, 0.0, None) / max(photons - 1, 1))
     inside = praw[:-1].sum(0)
     area = math.pi * np.diff(r_edges**2)
