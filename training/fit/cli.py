@@ -228,6 +228,8 @@ def main(argv: list[str]) -> int:
         torch.set_num_threads(max(1, args.threads))
     try:
         ks = _parse_k(args.k)
+        if args.scheduler is not None and args.dataset is None:
+            raise ValueError("--scheduler runs `fit --dataset` on a cluster; a --tone-file is fitted here")
         if args.device == "cuda" and args.scheduler is None and not torch.cuda.is_available():
             raise ValueError("--device cuda: no CUDA device available")
         if args.dataset is not None and args.summary:  # reads the fits files only

@@ -160,6 +160,9 @@ def main(argv: list[str]) -> int:
         print("error: give --out DIR (the folder for the tables and figures).", file=sys.stderr)
         return 2
     if args.mitsuba:
+        if args.scheduler is not None:
+            print("error: --scheduler runs the gate on a cluster; the --mitsuba strips render here.", file=sys.stderr)
+            return 2
         return _mitsuba(args)
     from training.validate import run as R
 
