@@ -48,7 +48,7 @@ SLURM_DEFAULTS: dict[str, Any] = {"cores": 1, "memory": "8GiB"}
 #: costs what it costs in one process.
 WORKER_ENV = {"MALLOC_MMAP_THRESHOLD_": "33554432", "MALLOC_TRIM_THRESHOLD_": "67108864"}
 #: Dask settings of the workers we start: WORKER_ENV, and no statistical profiler (it samples the task's
-#: stack every 10 ms for the dashboard: ~8 % of a walk's CPU here).
+#: stack every 10 ms for the dashboard: ~9 % of a walk's CPU here).
 WORKER_CONFIG = {**{f"distributed.nanny.pre-spawn-environ.{k}": v for k, v in WORKER_ENV.items()},
                  "distributed.worker.profile.enabled": False}
 SCHEDULER_HELP = ("run the work on a Dask cluster: local:N (N worker processes here), tcp://HOST:PORT (a running "
