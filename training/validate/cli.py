@@ -4,7 +4,9 @@
         [--gt-photons N] [--model-dir blender_addon/models] [--update-card] [--threads 1] [--overwrite]
 
 writes ``DIR/tables.md``, ``DIR/tables.json`` and the figures ``DIR/fig_*.png`` (``training.validate.run``;
-the gate is cached in ``DIR/cache``, so rerunning the same command after a kill continues).  The LUT is
+the gate is cached in ``DIR/cache``, so rerunning the same command after a kill continues;
+``--scheduler local:N | tcp://HOST:PORT | slurm`` walks the ground truth and fits and renders the tones
+on a Dask cluster, into the same cache).  The LUT is
 ``--lut`` or ``$SKIN_SSS_LUT``; ``--quick`` without one builds a tiny Monte Carlo LUT in ``DIR/cache``.
 ``--update-card`` writes the headline numbers into the model card's ``validation`` entry.
 
@@ -22,6 +24,7 @@ import sys
 from pathlib import Path
 
 from exporters import mitsuba as em
+from training.cluster import engine
 
 DEFAULT_MODEL_DIR = Path(__file__).resolve().parents[2] / "blender_addon" / "models"
 
@@ -57,6 +60,7 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--device", choices=("cpu",), default="cpu", help="the gate runs on the CPU")
     p.add_argument("--overwrite", action="store_true", help="replace existing outputs in --out")
     p.add_argument("--no-progress", action="store_true")
+    engine.add_option(p)
     m = p.add_argument_group("--mitsuba strips")
     m.add_argument("--mitsuba", action="store_true", help="render the teaser-like Mitsuba 3 strips (PNG) into --out")
     m.add_argument("--size", type=int, default=64, help="pixels per tone (square)")
@@ -135,7 +139,8 @@ def _options(args):
         if len(sys.argv) > 1 and sys.argv[1] == "validate" else "python -m training validate (called from Python)"
     return R.Options(out=args.out, config=config, lut=Path(lut), model_dir=args.model_dir, dataset=args.dataset,
                      fits=args.fits, threads=args.threads, overwrite=args.overwrite, progress=not args.no_progress,
-                     quick=args.quick, nn_profile_tones=args.nn_profile_tones, command=command)
+                     quick=args.quick, nn_profile_tones=args.nn_profile_tones, command=command,
+                     scheduler=args.scheduler)
 
 
 def _summary(record: dict) -> str:
@@ -155,6 +160,9 @@ def main(argv: list[str]) -> int:
         print("error: give --out DIR (the folder for the tables and figures).", file=sys.stderr)
         return 2
     if args.mitsuba:
+        if args.scheduler is not None:
+            print("error: --scheduler runs the gate on a cluster; the --mitsuba strips render here.", file=sys.stderr)
+            return 2
         return _mitsuba(args)
     from training.validate import run as R
 
@@ -168,6 +176,9 @@ def main(argv: list[str]) -> int:
     except (ValueError, FileExistsError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
+    except engine.TaskError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 1
     print(_summary(record))
     print(f"wrote {args.out / 'tables.md'}, tables.json and the figures ({record['run']['timings_s']['total']:.0f} s)")
     return 0

@@ -168,11 +168,22 @@ class Cache:
 
 
 # ------------------------------------------------------------------------------------------ ground truth
+def walk_gt_chunk(path: Path, j: int, count: int, seed: int, mua0: np.ndarray, levels: np.ndarray,
+                  wl_idx: np.ndarray, compile_: bool) -> str:
+    """Walk ground-truth chunk ``j`` (``count`` photons, seed ``seed * 1_000_003 + j``) into ``path``."""
+    from training.data.reweight import walk
+
+    walk(count, seed=seed * 1_000_003 + j, mua0=mua0, levels_cm=levels, channels=wl_idx, compile=compile_).save(path)
+    return str(path)
+
+
 def ground_truth(tones: np.ndarray, wl_idx: np.ndarray, photons: int, seed: int, cache: Cache,
-                 progress: Callable[[str], None] | None = None) -> dict[str, np.ndarray]:
+                 progress: Callable[[str], None] | None = None, job=None) -> dict[str, np.ndarray]:
     """R_d, R_d_stderr (T, W), profile, profile_stderr (T, W, 512) cm^-2 of the tones at grid indices
-    ``wl_idx`` by the dataset's reweighted estimator (module docstring); cached."""
-    from training.data.reweight import Trajectories, baseline_absorption, reweight, walk
+    ``wl_idx`` by the dataset's reweighted estimator (module docstring); cached.  ``job``
+    (``training.cluster.engine.Job``): the missing walk chunks are its tasks (same files), the
+    reweighting stays here."""
+    from training.data.reweight import Trajectories, baseline_absorption, reweight
 
     done = Cache.load(cache.path("gt.npz"))
     if done is not None:
@@ -190,10 +201,14 @@ def ground_truth(tones: np.ndarray, wl_idx: np.ndarray, photons: int, seed: int,
         path = folder / f"chunk{j:04d}.npz"
         if path.exists():
             continue
+        if job is not None:
+            job.submit(f"ground truth chunk {j}", walk_gt_chunk, path, j, count, seed, mua0, levels, wl_idx, compile_)
+            continue
         if progress:
             progress(f"ground truth: walking chunk {j + 1}/{n_chunks} ({count} photons x {wl_idx.size} wavelengths)")
-        walk(count, seed=seed * 1_000_003 + j, mua0=mua0, levels_cm=levels, channels=wl_idx,
-             compile=compile_).save(path)
+        walk_gt_chunk(path, j, count, seed, mua0, levels, wl_idx, compile_)
+    if job is not None:
+        job.wait()
     traj = Trajectories.concat([Trajectories.load(folder / f"chunk{j:04d}.npz") for j, _ in chunks])
     res = reweight(traj, tones)
     out = {"R_d": res["R_d"], "R_d_stderr": res["R_d_stderr"], "profile": res["profile"].astype(np.float32),
@@ -225,6 +240,18 @@ def fit_tone(lut, profile: np.ndarray, R_d: np.ndarray, stderr: np.ndarray, wl_i
         for name in ("alpha", "g", "sigma_t", "weight", "shape_rmse", "refl_rel_err"):
             out[f"k{k}_{name}"] = f[name][0].detach().cpu().numpy().astype(np.float64)
     return out
+
+
+def fit_tone_into(path: Path, lut_path: Path, lut_sha256: str, *args) -> dict[str, np.ndarray]:
+    """``fit_tone(lut, *args)`` on a cluster worker, saved to the cache file ``path``; the LUT is loaded once
+    per worker, as ``training.validate.run`` loads it."""
+    from training.cluster.engine import memo
+    from training.sim.lut_interp import LookupTables
+
+    lut = memo("lut", (str(lut_path), lut_sha256, "cpu"), lambda: LookupTables.load(lut_path))
+    fit = fit_tone(lut, *args)
+    Cache.save(path, **fit)
+    return fit
 
 
 # ------------------------------------------------------------------------------------------ configurations

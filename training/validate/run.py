@@ -61,6 +61,7 @@ class Options:
     quick: bool = False
     nn_profile_tones: int | None = None
     command: str = ""
+    scheduler: object = None  # training.cluster.engine.Scheduler: ground-truth walk, fits and renders on Dask
 
 
 def _log(opts: Options, text: str) -> None:
@@ -68,10 +69,11 @@ def _log(opts: Options, text: str) -> None:
         print(text, file=sys.stderr, flush=True)
 
 
-def _bar(opts: Options, total: int, desc: str):
+def _bar(opts: Options, total: int, desc: str, job=None):
+    """A stage's bar (off under a cluster ``job``: its own bar counts the tasks)."""
     from tqdm import tqdm
 
-    return tqdm(total=total, desc=desc, disable=not opts.progress, file=sys.stderr)
+    return tqdm(total=total, desc=desc, disable=not opts.progress or job is not None, file=sys.stderr)
 
 
 def _mean(values) -> float | None:
@@ -119,19 +121,29 @@ def run(opts: Options) -> dict:
     # the model is not in the manifest: a new model re-renders only its own rows (gate.render_tone)
     models = {"sha256": {n: sha256_file(p) for n, p in files.items() if n != "card"}, "card": _card_info(files["card"])}
     manifest = {"config": G.config_record(cfg), "lut_sha256": lut_sha, "fit_profile_weighting": PROFILE_WEIGHTING}
-    cache = G.Cache(opts.out / "cache", manifest)
+    cache = G.Cache(opts.out.resolve() / "cache", manifest)  # absolute: cluster workers write there too
     cache.open(reset=opts.overwrite)
+    from training.cluster import engine
+
+    with engine.job(opts.scheduler, "validate", shared=[cache.folder, opts.lut.resolve()], threads=opts.threads,
+                    progress=opts.progress) as job:
+        return _run(opts, files, lut, lut_sha, cache, models, timings, t_start, job)
+
+
+def _run(opts, files, lut, lut_sha, cache, models, timings, t_start, job) -> dict:
+    """``run`` after the LUT and the cache are open; ``job``: a ``training.cluster.engine.Job`` or None."""
+    cfg = opts.config
     tones = G.gate_tones(cfg.tones)
     wl_val = G.validation_indices(cfg.wavelength_step)
     wl_r = G.render_indices(cfg.wavelength_step)
     col_r = np.searchsorted(wl_val, wl_r)
 
     t0 = time.perf_counter()
-    gt = G.ground_truth(tones.values, wl_val, cfg.gt_photons, cfg.seed, cache, lambda s: _log(opts, s))
+    gt = G.ground_truth(tones.values, wl_val, cfg.gt_photons, cfg.seed, cache, lambda s: _log(opts, s), job)
     timings["ground_truth"] = time.perf_counter() - t0
     albedo = G.albedo_rgb_of(gt["R_d"], wl_val)
 
-    fits = _fits(opts, lut, tones, gt, wl_val, wl_r, cache, timings)
+    fits = _fits(opts, lut, lut_sha, tones, gt, wl_val, wl_r, cache, timings, job)
     t0 = time.perf_counter()
     inv, painted, dec, dec_full = _network(opts, files, albedo, tones.values, wl_r)
     scales, calib = _baseline_scales(opts, lut, tones, gt, albedo, wl_val)
@@ -146,11 +158,17 @@ def run(opts: Options) -> dict:
         rows |= {m: G.baseline_params(m, albedo[i], scales[m], wl_r) for m in bl.METHODS}
         rows_per_tone.append(rows)
     t0 = time.perf_counter()
-    renders = []
-    bar = _bar(opts, len(tones.names), "gate renders")
+    renders = [None] * len(tones.names)
+    bar = _bar(opts, len(tones.names), "gate renders", job)
     for i, name in enumerate(tones.names):
-        renders.append(G.render_tone(cache, name, rows_per_tone[i], cfg.photons, cfg.seed * 1000 + i, cfg.max_steps))
+        args = (cache, name, rows_per_tone[i], cfg.photons, cfg.seed * 1000 + i, cfg.max_steps)
+        if job is not None:
+            job.submit(f"render {name}", G.render_tone, *args, on_done=lambda r, i=i: renders.__setitem__(i, r))
+            continue
+        renders[i] = G.render_tone(*args)
         bar.update(1)
+    if job is not None:
+        job.wait()
     bar.close()
     timings["renders"] = time.perf_counter() - t0
 
@@ -187,24 +205,32 @@ def run(opts: Options) -> dict:
     return record
 
 
-def _fits(opts, lut, tones, gt, wl_val, wl_r, cache, timings) -> dict[str, dict]:
+def _fits(opts, lut, lut_sha, tones, gt, wl_val, wl_r, cache, timings, job=None) -> dict[str, dict]:
     """Joint-optimised fits per tone (cached): all validation wavelengths for the representative tones,
-    the render wavelengths for the others."""
+    the render wavelengths for the others.  ``job``: the missing ones as its tasks."""
     cfg = opts.config
     t0 = time.perf_counter()
     fits = {}
-    bar = _bar(opts, len(tones.names), "joint-optimised fits K=1,2,3")
+    bar = _bar(opts, len(tones.names), "joint-optimised fits K=1,2,3", job)
     for i, name in enumerate(tones.names):
         idx = wl_val if tones.kinds[i] == "representative" else wl_r
         cols = np.searchsorted(wl_val, idx)
         path = cache.path(f"fit_{name}.npz")
         fit = G.Cache.load(path)
         if fit is None or not np.array_equal(fit["wl_idx"], idx):
-            fit = G.fit_tone(lut, gt["profile"][i][cols], gt["R_d"][i][cols], gt["profile_stderr"][i][cols], idx,
-                             cfg.gt_photons, cfg.fit_method, cfg.steps(), cfg.anchor_every)
+            args = (gt["profile"][i][cols], gt["R_d"][i][cols], gt["profile_stderr"][i][cols], idx,
+                    cfg.gt_photons, cfg.fit_method, cfg.steps(), cfg.anchor_every)
+            if job is not None:
+                job.submit(f"fit {name}", G.fit_tone_into, path, opts.lut.resolve(), lut_sha, *args,
+                           on_done=lambda f, name=name: fits.__setitem__(name, f))
+                continue
+            fit = G.fit_tone(lut, *args)
             G.Cache.save(path, **fit)
         fits[name] = fit
         bar.update(1)
+    if job is not None:
+        job.wait()
+        fits = {name: fits[name] for name in tones.names}  # in the tones' order
     bar.close()
     timings["fits"] = time.perf_counter() - t0
     return fits
