@@ -55,6 +55,16 @@ def test_quick_writes_tables_and_figures(quick_run, monkeypatch):
                 assert _finite(vals[key]), (row, tone, key, vals[key])
     for band in ("UV", "Vis", "NIR"):
         assert all(_finite(v) for v in rec["banded"]["shape"][band].values())
+        for row in ("nn", "nn_painted", "nn_decoder"):  # the network's profile shape per band too
+            assert _finite(rec["banded"]["network_shape"][row]["representative"][band]), (row, band)
+    # the tables render the gate (noise-free: the floor is the ground truth's alone, the same for every row);
+    # our Monte Carlo renders every row too, as their check
+    assert rec["gate"]["renderer"] == "lut"
+    floors = {per_tone[r]["R01"]["noise_floor"] for r in ROWS}
+    assert len(floors) == 1, floors
+    for row in ROWS:
+        check = rec["gate"]["mc_check"][row]
+        assert _finite(check["delta_e_mc_vs_lut"]) and _finite(check["mc_noise_floor"]), row
     md = (out / "tables.md").read_text()
     for heading in ("## Table 1", "## Table 2", "## Table 3", "## Notes", "Quick mode"):
         assert heading in md, heading

@@ -20,6 +20,7 @@ from exporters.constants import WAVELENGTHS_NM
 from training.export.graphs import output_shapes
 from training.model.chain import DECODER_OUTPUTS, INVERSION_OUTPUTS
 from training.model.config import FALLBACK_ALBEDO_RGB
+from training.paths import portable
 
 INPUT_DOMAIN = (
     "albedo_rgb: linear sRGB (D65). A row with any NaN/Inf component is replaced by the fallback colour "
@@ -83,12 +84,12 @@ def build_card(run: dict, graphs: dict[str, bytes], weights: str, parity: dict, 
                   "albedo_rgb": "linear sRGB (D65)"},
         "input_domain": INPUT_DOMAIN,
         "architecture": run["model"],
-        "dataset": {"path": str(dataset), **run.get("dataset_info", {}),
+        "dataset": {"path": portable(dataset), **run.get("dataset_info", {}),
                     "train_attrs": _h5_attrs(dataset / "train.h5"),
                     "validation_attrs": _h5_attrs(dataset / "validation.h5")},
-        "fits": {"path": run.get("fits"),
+        "fits": {"path": portable(run.get("fits")),
                  "train_attrs": _fits_attrs(Path(run["fits"])) if run.get("fits") else {}},
-        "lut": {"path": run["lut"], "sha256": run["lut_sha256"]},
+        "lut": {"path": portable(run["lut"]), "sha256": run["lut_sha256"]},
         "training": {"commands": run.get("commands", []), "config": run["train"], "losses": run.get("losses", {}),
                      "slab_depth_cm": run.get("slab_depth_cm")},
         "metrics": run.get("metrics", {}),

@@ -1,7 +1,8 @@
 """``python -m training validate``: the paper's validation (SPEC §6).
 
     python -m training validate --out DIR [--quick] [--lut LUT] [--dataset DIR --fits FITS] [--photons N]
-        [--gt-photons N] [--model-dir blender_addon/models] [--update-card] [--threads 1] [--overwrite]
+        [--gt-photons N] [--renderer lut|mc] [--model-dir blender_addon/models] [--update-card] [--threads 1]
+        [--overwrite]
 
 writes ``DIR/tables.md``, ``DIR/tables.json`` and the figures ``DIR/fig_*.png`` (``training.validate.run``;
 the gate is cached in ``DIR/cache``, so rerunning the same command after a kill continues;
@@ -41,9 +42,12 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--model-dir", type=Path, default=DEFAULT_MODEL_DIR,
                    help="folder with skin_inversion.onnx, skin_decoder.onnx and the card skin_inversion.json")
     p.add_argument("--photons", type=int, default=None,
-                   help="render photons per component and wavelength (default 2000; quick 150)")
+                   help="Monte Carlo render photons per component and wavelength, the check of the tables' renders "
+                        "(default 2000; quick 150; 0 skips them)")
     p.add_argument("--gt-photons", type=int, default=None,
-                   help="ground-truth photons per wavelength (default 50000; quick 400)")
+                   help="ground-truth photons per wavelength (default 500000, the paper's; quick 400)")
+    p.add_argument("--renderer", choices=("lut", "mc"), default="lut",
+                   help="what renders the gate's slabs: the lookup tables (default, noise-free) or our Monte Carlo")
     p.add_argument("--wavelength-step-nm", type=int, default=None,
                    help="validation wavelengths every N nm, a multiple of 2 (default 4; quick 20)")
     p.add_argument("--tones", default=None, help="comma-separated tone names of tones.csv (default: all 20)")
@@ -123,7 +127,7 @@ def _options(args):
         kw["gt_photons"] = args.gt_photons
     G.gate_tones(tones)  # unknown names: ValueError now, not after the LUT has loaded
     config = G.GateConfig(tones=tones, fit_method=args.fit_method, seed=args.seed, anchor_every=args.anchor_every,
-                          baseline_scale_m=args.baseline_scale, **kw)
+                          baseline_scale_m=args.baseline_scale, renderer=args.renderer, **kw)
     lut = args.lut or (Path(os.environ["SKIN_SSS_LUT"]) if os.environ.get("SKIN_SSS_LUT") else None)
     if lut is None:
         if not args.quick:

@@ -21,6 +21,7 @@ import torch
 
 from exporters.constants import R_EDGES_CM, WAVELENGTHS_NM
 from exporters.maps import sha256_file
+from training.paths import portable
 from training.validate import baselines as bl
 from training.validate import figures, paper
 from training.validate import gate as G
@@ -145,7 +146,9 @@ def _run(opts, files, lut, lut_sha, cache, models, timings, t_start, job) -> dic
 
     fits = _fits(opts, lut, lut_sha, tones, gt, wl_val, wl_r, cache, timings, job)
     t0 = time.perf_counter()
-    inv, painted, dec, dec_full = _network(opts, files, albedo, tones.values, wl_r)
+    inv, painted, dec, dec_full = _network(opts, files, albedo, tones.values, wl_val)
+    nn_val = {"nn": inv, "nn_painted": painted, "nn_decoder": dec}  # at every validation wavelength
+    inv, painted, dec = ([p.cols(col_r) for p in ps] for ps in (inv, painted, dec))
     scales, calib = _baseline_scales(opts, lut, tones, gt, albedo, wl_val)
     timings["network_and_calibration"] = time.perf_counter() - t0
 
@@ -158,23 +161,19 @@ def _run(opts, files, lut, lut_sha, cache, models, timings, t_start, job) -> dic
         rows |= {m: G.baseline_params(m, albedo[i], scales[m], wl_r) for m in bl.METHODS}
         rows_per_tone.append(rows)
     t0 = time.perf_counter()
-    renders = [None] * len(tones.names)
-    bar = _bar(opts, len(tones.names), "gate renders", job)
-    for i, name in enumerate(tones.names):
-        args = (cache, name, rows_per_tone[i], cfg.photons, cfg.seed * 1000 + i, cfg.max_steps)
-        if job is not None:
-            job.submit(f"render {name}", G.render_tone, *args, on_done=lambda r, i=i: renders.__setitem__(i, r))
-            continue
-        renders[i] = G.render_tone(*args)
-        bar.update(1)
-    if job is not None:
-        job.wait()
-    bar.close()
-    timings["renders"] = time.perf_counter() - t0
+    mc = _mc_renders(opts, cache, tones, rows_per_tone, job) if cfg.photons > 0 else None
+    timings["mc_renders"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    tables = [{r: G.lut_render(lut, p) for r, p in rows.items()} for rows in rows_per_tone]
+    timings["lut_renders"] = time.perf_counter() - t0
+    renders = tables if cfg.renderer == "lut" else mc
 
     t0 = time.perf_counter()
     record = _gate_tables(lut, tones, gt, wl_val, wl_r, col_r, rows_per_tone, renders, fits, cfg, albedo)
+    record["gate"]["renderer"] = cfg.renderer
+    record["gate"]["mc_check"] = None if mc is None else _mc_check(tones, wl_r, tables, mc, cfg.seed)
     record["banded"] = _banded(lut, tones, gt, fits, wl_val, record, cfg.gt_photons)
+    record["banded"]["network_shape"] = _network_shape(lut, tones, gt, wl_val, nn_val, cfg.gt_photons)
     record["profile_fidelity"] = _profile_fidelity(opts, lut, files, record)
     record["goals"] = _goals(record)
     timings["metrics"] = time.perf_counter() - t0
@@ -197,7 +196,7 @@ def _run(opts, files, lut, lut_sha, cache, models, timings, t_start, job) -> dic
     timings["total"] = time.perf_counter() - t_start
     if {n: sha256_file(p) for n, p in files.items() if n != "card"} != models["sha256"]:
         raise ValueError(f"the model in {opts.model_dir} changed during the run: run the command again.")
-    record["run"] = _run_record(opts, cfg, lut, lut_sha, gt, fits, timings, models, renders)
+    record["run"] = _run_record(opts, cfg, lut, lut_sha, gt, fits, timings, models, mc or renders)
     from training.validate.tables import notes, write_tables
 
     record["notes"] = notes(record)
@@ -236,27 +235,79 @@ def _fits(opts, lut, lut_sha, tones, gt, wl_val, wl_r, cache, timings, job=None)
     return fits
 
 
-def _network(opts, files, albedo, tones, wl_r):
-    """The network's mixtures at the render wavelengths (inversion on the albedo, as it is and with the painted
-    colour of the albedo; decoder on the true p), and the decoder's full outputs (T, K, 376) for the figures
-    (the paper's Fig. spectral_params)."""
+def _mc_renders(opts, cache, tones, rows_per_tone, job) -> list[dict]:
+    """Every configuration of every tone rendered by our Monte Carlo mixture renderer (cached per tone)."""
+    cfg = opts.config
+    renders = [None] * len(tones.names)
+    bar = _bar(opts, len(tones.names), "gate renders (Monte Carlo)", job)
+    for i, name in enumerate(tones.names):
+        args = (cache, name, rows_per_tone[i], cfg.photons, cfg.seed * 1000 + i, cfg.max_steps)
+        if job is not None:
+            job.submit(f"render {name}", G.render_tone, *args, on_done=lambda r, i=i: renders.__setitem__(i, r))
+            continue
+        renders[i] = G.render_tone(*args)
+        bar.update(1)
+    if job is not None:
+        job.wait()
+    bar.close()
+    return renders
+
+
+def _mc_check(tones, wl_r, tables, mc, seed: int) -> dict:
+    """The tables' renders against the Monte Carlo ones, per row: mean ΔE76 between the two slab colours over
+    all tones, beside the ΔE76 that the Monte Carlo renders' noise alone gives (M.noise_floor)."""
+    wl = WAVELENGTHS_NM[wl_r]
+    out = {}
+    for r in G.ROWS:
+        de = [float(M.delta_e(mc[i][r]["R_d"], tables[i][r]["R_d"], wl)) for i in range(len(tones.names))]
+        nf = [M.noise_floor(tables[i][r]["R_d"], 0.0 * tables[i][r]["R_d"], mc[i][r]["R_d_stderr"], wl, seed=seed + i)
+              for i in range(len(tones.names))]
+        out[r] = {"delta_e_mc_vs_lut": float(np.mean(de)), "mc_noise_floor": float(np.mean(nf)),
+                  "max_delta_e_mc_vs_lut": float(np.max(de))}
+    return out
+
+
+def _network_shape(lut, tones, gt, wl_val, nn_val, photons) -> dict:
+    """The network rows' L_shape through the LUT (rendered weighting) per band at every validation wavelength:
+    means over the representative tones and over all tones (the fits' own are in Table 2)."""
+    wl = WAVELENGTHS_NM[wl_val]
+    all_cols = np.arange(wl_val.size)
+    errs = {r: [] for r in nn_val}
+    for i in range(len(tones.names)):
+        target = _target(lut, gt, i, all_cols, photons)
+        for r, params in nn_val.items():
+            errs[r].append(G.lut_mixture_shape_error(lut, params[i], target, all_cols))
+    groups = {"representative": [i for i, k in enumerate(tones.kinds) if k == "representative"],
+              "all": list(range(len(tones.names)))}
+    out = {}
+    for r, e in errs.items():
+        e = np.stack(e)  # (T, W)
+        out[r] = {kind: {band: (float(np.mean(e[idx][:, M.band_mask(wl, band)])) if idx and M.band_mask(wl, band).any()
+                                else None) for band in M.BANDS} for kind, idx in groups.items()}
+    return out
+
+
+def _network(opts, files, albedo, tones, wl_idx):
+    """The network's mixtures at the grid indices ``wl_idx`` (inversion on the albedo, as it is and with the
+    painted colour of the albedo; decoder on the true p), and the decoder's full outputs (T, K, 376) for the
+    figures (the paper's Fig. spectral_params)."""
     from exporters import inference
     from exporters.mitsuba import decode
     from exporters.painted import paint_mixture
 
     model = inference.load_model(files["skin_inversion.onnx"], threads=opts.threads)
     out = model.run(np.asarray(albedo, dtype=np.float32))
-    inv = [G.Params(out["alpha"][i][:, wl_r], out["sigma_t"][i][:, wl_r], out["g"][i][:, wl_r],
-                    out["weight"][i][:, wl_r],
+    inv = [G.Params(out["alpha"][i][:, wl_idx], out["sigma_t"][i][:, wl_idx], out["g"][i][:, wl_idx],
+                    out["weight"][i][:, wl_idx],
                     extra={"exposure": float(out["exposure"][i, 0]), "biophysical": out["biophysical"][i].tolist()})
            for i in range(len(albedo))]
     p = paint_mixture(out["alpha"], out["sigma_t"], out["g"], out["weight"], albedo)
-    painted = [G.Params(p.alpha[i][:, wl_r], p.sigma_t[i][:, wl_r], out["g"][i][:, wl_r], out["weight"][i][:, wl_r],
-                        extra={"clamped": bool(p.clamped[i])}) for i in range(len(albedo))]
+    painted = [G.Params(p.alpha[i][:, wl_idx], p.sigma_t[i][:, wl_idx], out["g"][i][:, wl_idx],
+                        out["weight"][i][:, wl_idx], extra={"clamped": bool(p.clamped[i])}) for i in range(len(albedo))]
     dec, full = [], {"alpha": [], "sigma_t": [], "weight": []}
     for tone in tones:
         m = decode(tone, files["skin_decoder.onnx"])
-        dec.append(G.Params(m.alpha[:, wl_r], m.sigma_t[:, wl_r], m.g[:, wl_r], m.weight[:, wl_r]))
+        dec.append(G.Params(m.alpha[:, wl_idx], m.sigma_t[:, wl_idx], m.g[:, wl_idx], m.weight[:, wl_idx]))
         for key in full:
             full[key].append(getattr(m, key))
     return inv, painted, dec, {k: np.stack(v) for k, v in full.items()}
@@ -478,10 +529,10 @@ def _lut_profile(lut, params: G.Params) -> np.ndarray:
 # ------------------------------------------------------------------------------------------ record
 def _card_info(card: Path) -> dict:
     if not card.is_file():
-        return {"path": str(card), "missing": True}
+        return {"path": portable(card), "missing": True}
     c = json.loads(card.read_text())
     ds = c.get("dataset", {})
-    return {"path": str(card), "created": c.get("created"), "K": c.get("K"),
+    return {"path": portable(card), "created": c.get("created"), "K": c.get("K"),
             "dataset": {k: ds.get(k) for k in ("path", "n_train", "n_validation", "photons")},
             "preset": ds.get("train_attrs", {}).get("preset"), "lut": c.get("lut", {}).get("path"),
             "notes": c.get("notes", [])[:1],
@@ -497,9 +548,9 @@ def _run_record(opts, cfg, lut, lut_sha, gt, fits, timings, models, renders) -> 
                                         float(WAVELENGTHS_NM[G.render_indices(cfg.wavelength_step)][-1])],
                         "n_validation": int(G.validation_indices(cfg.wavelength_step).size),
                         "n_rendered": int(G.render_indices(cfg.wavelength_step).size)},
-        "lut": {"path": str(opts.lut), "sha256": lut_sha, "albedo_n": int(lut.albedo.numel()),
+        "lut": {"path": portable(opts.lut), "sha256": lut_sha, "albedo_n": int(lut.albedo.numel()),
                 "g_n": int(lut.g.numel()), "g_range": list(lut.g_range)},
-        "model": {"dir": str(opts.model_dir), "sha256": models["sha256"], "card": models["card"]},
+        "model": {"dir": portable(opts.model_dir), "sha256": models["sha256"], "card": models["card"]},
         "ground_truth": {"estimator": "reweighted (training.data.reweight)", "photons": int(gt["photons"]),
                          "walk_seconds": float(gt["walk_seconds"])},
         "fits": {"method": cfg.fit_method, "steps": cfg.steps(), "anchor_every": cfg.anchor_every,
@@ -510,7 +561,7 @@ def _run_record(opts, cfg, lut, lut_sha, gt, fits, timings, models, renders) -> 
         "timings_s": {k: round(v, 2) for k, v in timings.items()},
         "threads": opts.threads, "machine": {"python": platform.python_version(), "torch": torch.__version__,
                                              "cpu": platform.processor() or platform.machine()},
-        "dataset": str(opts.dataset) if opts.dataset else None, "fits_dir": str(opts.fits) if opts.fits else None,
+        "dataset": portable(opts.dataset), "fits_dir": portable(opts.fits),
     }
 
 
