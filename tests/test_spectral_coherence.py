@@ -141,3 +141,38 @@ def test_shipped_decoder_is_spectrally_coherent(lut):
     wavelength against ~1 % elsewhere (README, "Training the model")."""
     res = shipped_coherence(lut)
     assert res["acceptance"]["all"], res
+
+
+def test_sweep_fits_stay_in_one_basin_and_fit_as_well(lut):
+    """``fit --continuity sweep`` against the nearest-anchor warm starts on the same problems (closed-form
+    dipole mixtures of two media varying smoothly with wavelength, 1 % standard errors): the sweep's fits
+    are matched along wavelength, their dominant medium switches less often between neighbouring fitted
+    wavelengths, and their mean joint loss is no higher."""
+    from exporters.constants import R_EDGES_CM, anisotropy
+    from training.fit.dataset import fit_tones
+    from training.fit.dipole import dipole_mixture_profile
+    from training.fit.sweep import fit_tones_sweep
+
+    widx = np.arange(0, 376, 16)
+    wl, x, T = WAVELENGTHS_NM[widx], (WAVELENGTHS_NM[widx] - 250.0) / 750.0, 3
+    ones = np.ones((T, widx.size, 1))
+    a = np.stack([0.9 + 0.09 * x, 0.6 + 0.3 * x], -1) * ones * np.array([1.0, 0.99, 0.98])[:, None, None]
+    s = np.stack([300 * np.exp(-1.5 * x), 60 * np.exp(-x)], -1) * ones
+    w = np.array([0.6, 0.4]) * ones
+    prof, R = dipole_mixture_profile(R_EDGES_CM, DIPOLE_EDGES_MFP, a.reshape(-1, 2), np.full((a.size // 2, 2), 0.8),
+                                     s.reshape(-1, 2), w.reshape(-1, 2))
+    prof, R = torch.tensor(prof.reshape(T, widx.size, -1)), torch.tensor(R.reshape(T, widx.size))
+    args = (lut.to(dtype=torch.float64), prof, R, 0.01 * prof, torch.tensor(R_EDGES_CM), 1e6,
+            torch.tensor(anisotropy(wl)), (2,))
+    stats: dict = {}
+    sweep = fit_tones_sweep(*args, anchor_every=8, wavelength_nm=wl, stats=stats)[2]
+    near = fit_tones(*args, anchor_every=8)[2]
+    fields = ("alpha", "g", "sigma_t", "weight")
+    sw = {name: {f: v[f].numpy() for f in fields} for name, v in (("sweep", sweep), ("near", near))}
+    order = match_along_wavelength(sw["sweep"], wl)
+    np.testing.assert_array_equal(order, np.broadcast_to(np.arange(2)[None, :, None], order.shape))
+    assert stats["anchors_checked"] == T * 2 * 2  # K = 1, 2 at the anchors after the first
+    switch = {name: float(C.step_changes(v)[0].mean()) for name, v in sw.items()}
+    assert switch["sweep"] <= switch["near"]
+    assert float(sweep["joint"].mean()) <= 1.02 * float(near["joint"].mean())
+    assert torch.isfinite(sweep["shape_rmse"]).all() and (sweep["weight"].sum(1) - 1).abs().max() < 1e-9

@@ -29,6 +29,8 @@ tones of a chunk: a larger ``--chunk-tones`` amortises the per-call overhead (me
 
 from __future__ import annotations
 
+import time
+
 import numpy as np
 import torch
 
@@ -83,7 +85,8 @@ def fit_tones_sweep(
     ``wavelength_nm`` (W,) for the matching's reference wavelength.  Returns the layout of
     ``training.fit.dataset.fit_tones``: {K: {alpha, g, sigma_t, weight: (T, K, W); shape_rmse,
     refl_rel_err, joint: (T, W)}}, components matched along wavelength.  ``stats``, if given, is
-    incremented with counts: anchors_checked, anchors_kept (per K summed), repaired (tone x K segments)."""
+    incremented with counts: anchors_checked, anchors_kept (per K summed), repaired (tone x K segments), and
+    the CPU seconds of each step (cpu_anchors, cpu_sweep, cpu_repair)."""
     T, W, _ = profile.shape
     dev = profile.device
     kall = tuple(range(1, max(ks) + 1))
@@ -96,6 +99,14 @@ def fit_tones_sweep(
 
     warm_steps = {k: min(v, (steps or {}).get(k, v)) for k, v in WARM_LM_ITERS.items()}  # steps cut them short
     tones = torch.arange(T, device=dev)
+    clock = time.process_time()
+
+    def lap(name: str) -> None:
+        nonlocal clock
+        if stats is not None:
+            stats[name] = stats.get(name, 0.0) + time.process_time() - clock
+        clock = time.process_time()
+
     # 1. anchors: the full schedule, batched over tones x anchors
     ta = tones.repeat_interleave(len(anchors))
     ca = torch.as_tensor(anchors, device=dev).repeat(T)
@@ -104,6 +115,7 @@ def fit_tones_sweep(
                       **{m: getattr(indep[k], m).reshape(T, len(anchors)) for m in METRICS}} for k in kall}
     for k in kall:
         store.put(k, ta, ca, indep[k])
+    lap("cpu_anchors")
     # 2. the forward sweep
     rank = {int(a): j for j, a in enumerate(anchors)}
     lost = {k: torch.zeros(T, len(anchors), dtype=torch.bool, device=dev) for k in kall}
@@ -122,8 +134,10 @@ def fit_tones_sweep(
             if stats is not None:
                 stats["anchors_checked"] = stats.get("anchors_checked", 0) + T
                 stats["anchors_kept"] = stats.get("anchors_kept", 0) + int(keep.sum())
+    lap("cpu_sweep")
     # 3. repair the segments ending at a rejected anchor
     _repair(solve, store, anchors, lost, kall, warm_steps, stats)
+    lap("cpu_repair")
     # 4. physical parameters, matched along wavelength
     lo, hi = g_bounds(lut)
     out: dict[int, dict[str, torch.Tensor]] = {}

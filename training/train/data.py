@@ -42,6 +42,10 @@ FIT_FIELDS: tuple[str, ...] = ("alpha", "g", "sigma_t", "weight")
 #: How stage 3 uses the fits (``TrainConfig.targets``): "dense", matched and at every wavelength (issue 23);
 #: "fitted", sorted by sigma_t and at the fitted wavelengths only (before issue 23).
 TARGET_MODES: tuple[str, ...] = ("dense", "fitted")
+#: Least model floor of L_shape in float32 training (cm^-2; ``loss.FLOOR_REL``): 1e-3 x the smallest used MC
+#: value can be subnormal in float32 (near-black tones at few photons use bins down to 1e-37), and 1 / floor
+#: then overflows in the gradient (NaN on the ``ci`` preset); the floor only acts where the model underflows.
+FLOAT32_FLOOR: float = 1e-30
 #: Tones per read when loading the profile targets (bounds the float64 working set: 128 x 376 x 512).
 SHAPE_CHUNK: int = 128
 
@@ -149,15 +153,18 @@ def load_shape_target(path: Path, rows: np.ndarray, wavelength_index: np.ndarray
             used |= t.mask.flatten(0, -2).any(0) > 0
         used = torch.nonzero(used).squeeze(1)[::bin_stride]
         parts = [t.subset(used).to(dtype=torch.float32) for t in chunks()]
-    return Target(parts[0].r_cm, *(torch.cat([getattr(p, name) for p in parts]) for name in
-                                   ("log_p", "mask", "n_used", "floor", "R", "r_scale", "noise")))
+    t = Target(parts[0].r_cm, *(torch.cat([getattr(p, name) for p in parts]) for name in
+                                ("log_p", "mask", "n_used", "floor", "R", "r_scale", "noise")))
+    t.floor = t.floor.clamp_min(FLOAT32_FLOOR)
+    return t
 
 
 def load_split(dataset_dir: Path, split: str, fits_dir: Path | None = None, k: int = 3,
-               profiles: bool = False, targets: str = "dense", bin_stride: int = 1) -> SplitData:
+               profiles: bool = False, targets: str = "dense", bin_stride: int = 1, shape_every: int = 1) -> SplitData:
     """Load the done rows of ``split`` and, with ``fits_dir``, the fit targets of those that have them
     (and, with ``profiles``, their Monte Carlo profile targets: ``SplitData.shape_target``, on every
-    ``bin_stride``-th used radial bin); ``targets`` one of ``TARGET_MODES`` (module docstring)."""
+    ``bin_stride``-th used radial bin, at every ``shape_every``-th wavelength with ``targets="dense"``);
+    ``targets`` one of ``TARGET_MODES`` (module docstring)."""
     if targets not in TARGET_MODES:
         raise ValueError(f"targets must be one of {TARGET_MODES}, got {targets!r}")
     path = dataset_file(dataset_dir, split)
@@ -206,7 +213,7 @@ def load_split(dataset_dir: Path, split: str, fits_dir: Path | None = None, k: i
     data.target_index = torch.as_tensor(widx, dtype=torch.int64)
     if profiles:
         rows = index[use][order]
-        sidx = np.arange(w) if targets == "dense" else widx
+        sidx = np.arange(0, w, shape_every) if targets == "dense" else widx
         data.shape_target = load_shape_target(path, rows, sidx, R_d[rows][:, sidx], photons, bin_stride)
         data.shape_index = torch.as_tensor(sidx, dtype=torch.int64)
     return data

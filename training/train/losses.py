@@ -51,6 +51,10 @@ HUBER_DELTA: float = 0.05
 #: SHAPE_BIN_STRIDE-th radial bin (the training split's targets are loaded so); validation uses all bins.
 SHAPE_WAVELENGTHS_PER_STEP: int = 16
 SHAPE_BIN_STRIDE: int = 2
+#: The validation L_shape of each epoch, with dense targets: every 2nd of the 376 wavelengths (the fitted
+#: every 4th and the midpoints between them), all bins; at all 376 the evaluation alone cost 0.5x a laptop
+#: epoch (measured in the README).
+VALIDATION_SHAPE_EVERY: int = 2
 
 
 def spectral_l1(pred: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
@@ -109,14 +113,14 @@ def stage3_losses(model: SkinModel, lut: LookupTables, p: torch.Tensor, R_mc: to
                   targets: dict[str, torch.Tensor], target_index: torch.Tensor | None = None,
                   shape_target: fit_loss.Target | None = None, shape_weight: float = 0.0,
                   shape_index: torch.Tensor | None = None, interp: torch.Tensor | None = None,
-                  weighted: bool = False) -> dict[str, torch.Tensor]:
+                  weighted: bool = False, report: bool = False) -> dict[str, torch.Tensor]:
     """All stage-3 terms for true tones ``p`` (N, 5), MC reflectance (N, W) and fit targets (N, K, Wf) at
     the wavelengths ``target_index`` (Wf,) (None: all W).  ``interp`` (Wf, W) (``spectral.interpolation_matrix``):
     L_param compares at all W with the targets interpolated; None: at ``target_index`` only.  ``weighted``:
     L_param weighted by the target weights (module docstring).  L_refl and L_smooth use all W.  With
     ``shape_target`` (leading dims (N, Ws)) L_shape is reported, at ``shape_index`` (Ws,) (None:
-    ``target_index``), and added with ``shape_weight``.  Reported: "param" the L_param optimised,
-    "param_plain" / "param_weighted" both variants."""
+    ``target_index``), and added with ``shape_weight``.  "param" is the L_param optimised; with ``report``
+    both variants are returned too ("param_plain", "param_weighted")."""
     with torch.no_grad():
         refl = model.dec_r(p)  # frozen Dec_R
     out = model.dec_t(p, refl)
@@ -125,12 +129,13 @@ def stage3_losses(model: SkinModel, lut: LookupTables, p: torch.Tensor, R_mc: to
         u, u_t = out["u"], interpolate(u_t, interp)
     else:
         u = out["u"] if target_index is None else out["u"][..., target_index]
-    plain, with_w = param_loss(u, u_t), param_loss(u, u_t, weighted=True)
-    l_param = with_w if weighted else plain
+    l_param = param_loss(u, u_t, weighted)
     l_refl = spectral_l1(lut_reflectance(model, lut, out), R_mc)
     l_smooth = smooth_loss(out["u"])
     total = l_param + LAMBDA_R * l_refl + LAMBDA_SMOOTH * l_smooth
-    terms = {"param": l_param, "param_plain": plain, "param_weighted": with_w, "refl": l_refl, "smooth": l_smooth}
+    terms = {"param": l_param, "refl": l_refl, "smooth": l_smooth}
+    if report:
+        terms.update(param_plain=param_loss(u, u_t), param_weighted=param_loss(u, u_t, weighted=True))
     if shape_target is not None:
         index = target_index if shape_index is None else shape_index
         terms["shape"] = profile_shape_loss(lut, out, shape_target, index)

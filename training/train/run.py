@@ -28,9 +28,9 @@ from training.model.config import ModelConfig, g_range_for_lut
 from training.sim.lut_interp import LookupTables
 from training.train import stages
 from training.train.data import TARGET_MODES, SplitData, fits_files, load_split
-from training.train.losses import SHAPE_BIN_STRIDE
 from training.train.evaluate import evaluate_split
 from training.train.loop import checkpoint_path, load_checkpoint, run_stage, save_atomic
+from training.train.losses import SHAPE_BIN_STRIDE, VALIDATION_SHAPE_EVERY
 
 
 @dataclass
@@ -110,7 +110,7 @@ def train(rundir: Path, dataset: Path, fits: Path | None, lut_path: Path, *, wan
                             SHAPE_BIN_STRIDE).to(dev)
     val_fits = fits if (need_fits and fits is not None and fits_files(fits, "validation")) else None
     val_data = load_split(dataset, "validation", val_fits, mcfg.k, profiles and val_fits is not None,
-                          tcfg.targets).to(dev)
+                          tcfg.targets, shape_every=VALIDATION_SHAPE_EVERY).to(dev)
     record = {
         "model": mcfg.to_dict(), "train": asdict(tcfg), "lut": str(lut_path), "lut_sha256": sha256_file(lut_path),
         "dataset": str(dataset), "fits": None if fits is None else str(fits),

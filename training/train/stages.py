@@ -107,7 +107,7 @@ def stage3(model: SkinModel, lut: LookupTables, train: SplitData, val: SplitData
                 st = None if val.shape_target is None else val.shape_target.rows(part)
                 out = L.stage3_losses(model, lut, val.tone[rows], val.R_d[rows], {k: v[part] for k, v in
                                       val.targets.items()}, val.target_index, st, shape_weight, val.shape_index,
-                                      v_interp, weighted)
+                                      v_interp, weighted, report=True)
                 for k, v in out.items():
                     sums[k] = sums.get(k, 0.0) + float(v) * len(part) / n
             return sums

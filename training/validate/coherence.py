@@ -136,6 +136,13 @@ def _exitance_distance(lut: LookupTables, a: Mixture, b: Mixture) -> np.ndarray:
     return ((ea - eb).abs().sum(-1) / ref.clamp_min(1e-30)).numpy()
 
 
+def _mixture_at(dec: Decoded, tone: np.ndarray, col: np.ndarray, weight_col: np.ndarray) -> Mixture:
+    """The media of tones ``tone`` (J,) at wavelength columns ``col`` (J,) with the weights of ``weight_col``
+    (J,): fields (J, K)."""
+    media = [torch.as_tensor(dec[f][tone, :, col]) for f in ("alpha", "g", "sigma_t")]
+    return Mixture(*media, torch.as_tensor(dec["weight"][tone, :, weight_col]))
+
+
 def weight_jumps(dec: Decoded, lut: LookupTables, chunk: int = 1024) -> dict[str, np.ndarray]:
     """The weight jumps of ``dec`` (module docstring): {tone, step (J,) int; dw (J,): the largest |dw_k|;
     actual, weight_only (J,): the exitance distances; explained (J,) bool}."""
@@ -143,13 +150,8 @@ def weight_jumps(dec: Decoded, lut: LookupTables, chunk: int = 1024) -> dict[str
     tone, step = np.nonzero(dw > JUMP_DW)
     actual, alone = np.zeros(len(tone)), np.zeros(len(tone))
     for s in range(0, len(tone), chunk):
-        t, l = tone[s : s + chunk], step[s : s + chunk]
-
-        def mix(col: np.ndarray, wcol: np.ndarray) -> Mixture:
-            at = {f: torch.as_tensor(dec[f][t, :, col]) for f in FIELDS}  # (J, K)
-            return Mixture(at["alpha"], at["g"], at["sigma_t"], torch.as_tensor(dec["weight"][t, :, wcol]))
-
-        here, there, moved = mix(l, l), mix(l + 1, l + 1), mix(l, l + 1)
+        t, c = tone[s : s + chunk], step[s : s + chunk]
+        here, there, moved = _mixture_at(dec, t, c, c), _mixture_at(dec, t, c + 1, c + 1), _mixture_at(dec, t, c, c + 1)
         actual[s : s + chunk] = _exitance_distance(lut, here, there)
         alone[s : s + chunk] = _exitance_distance(lut, here, moved)
     return {"tone": tone, "step": step, "dw": dw[tone, step], "actual": actual, "weight_only": alone,
