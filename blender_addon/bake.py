@@ -2,11 +2,13 @@
 
     python blender_addon/bake.py --albedo IMAGE --out DIR [--target cycles,physical,spectral]
         [--colorspace auto|srgb|linear] [--unit-scale M_PER_UNIT] [--overwrite] [--model PATH] [--threads N]
-        [--exact] [--table PATH] [--force] [--uv-mask IMAGE] [--prune-share S] [--exr-compression piz|zip|...]
-        [--float-maps]
+        [--model-colour] [--exact] [--table PATH] [--force] [--uv-mask IMAGE] [--prune-share S]
+        [--exr-compression piz|zip|...] [--float-maps]
     blender -b --factory-startup --python blender_addon/bake.py -- --albedo IMAGE --out DIR ...
 
-By default texels are looked up in the fast-path table shipped beside the model
+By default the maps render the painted albedo, per channel (exporters.painted); ``--model-colour`` renders the
+model's own reflectance instead (the colour of the biophysical skin the network found).  Texels are looked
+up in the fast-path table shipped beside the model
 (``skin_inversion_table.npz``, exporters.texel_table; colours outside it are evaluated exactly); ``--exact``
 evaluates every distinct colour with the model.  Re-running a bake whose maps in DIR are up to date (same
 image content, model and options) does nothing and says so (``--force`` re-bakes).
@@ -78,9 +80,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--model", default=str(DEFAULT_MODEL), help="skin_inversion.onnx (default: the bundled one)")
     p.add_argument("--threads", type=int, default=0, help="onnxruntime CPU threads (0 = all cores)")
     p.add_argument("--memory-mb", type=float, default=512.0, help="memory budget of one inference chunk (MiB)")
-    p.add_argument("--match-exposure", action="store_true",
-                   help="reproduce the painted brightness (model reflectance x exposure) instead of the model's "
-                        "unit-exposure reflectance")
+    p.add_argument("--model-colour", action="store_true",
+                   help="render the model's own reflectance (the colour of the skin the network found, physically "
+                        "consistent, often darker than painted) instead of the painted albedo (the default)")
+    p.add_argument("--match-exposure", action="store_true", help=argparse.SUPPRESS)
     p.add_argument("--ior", type=float, default=1.4,
                    help="IOR of the Cycles closures (the node group's IOR input; default 1.4, tissue)")
     p.add_argument("--exact", action="store_true",
@@ -119,27 +122,31 @@ def main(argv: list[str] | None = None) -> int:
         print(f"bake.py: error: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
     _make_importable()
-    from exporters import baking, inference, maps
+    from exporters import bake, inference, maps
 
     bad_input = (FileNotFoundError, FileExistsError, PermissionError, NotADirectoryError, maps.ImageError,
-                 inference.ModelError, baking.BakeError, ValueError)
+                 inference.ModelError, bake.BakeError, ValueError)
+    if args.match_exposure:
+        print("bake.py: error: --match-exposure is gone: the maps now render the painted albedo by default (its "
+              "brightness and its hue); --model-colour renders the model's own reflectance", file=sys.stderr)
+        return EXIT_BAD_INPUT
     out = Path(args.out)
     created = False
     try:
         if not out.exists():
             if not out.parent.is_dir():
-                raise baking.BakeError(f"output folder's parent does not exist: {out.parent}")
+                raise bake.BakeError(f"output folder's parent does not exist: {out.parent}")
             out.mkdir()
             created = True
-        options = baking.BakeOptions(targets=baking.parse_targets(args.target), unit_scale_m=args.unit_scale,
-                                     threads=args.threads, memory_mb=args.memory_mb,
-                                     match_exposure=args.match_exposure, ior=args.ior,
-                                     overwrite=args.overwrite, exact=args.exact, table_path=args.table,
-                                     force=args.force, texel_mask=_read_mask(args.uv_mask, maps),
-                                     prune_share=(baking.DEFAULT_PRUNE_SHARE if args.prune_share is None
-                                                  else args.prune_share),
-                                     compression=args.exr_compression or maps.DEFAULT_COMPRESSION,
-                                     half_maps=False if args.float_maps else None)
+        options = bake.BakeOptions(targets=bake.parse_targets(args.target), unit_scale_m=args.unit_scale,
+                                   threads=args.threads, memory_mb=args.memory_mb,
+                                   model_colour=args.model_colour, ior=args.ior,
+                                   overwrite=args.overwrite, exact=args.exact, table_path=args.table,
+                                   force=args.force, texel_mask=_read_mask(args.uv_mask, maps),
+                                   prune_share=(bake.DEFAULT_PRUNE_SHARE if args.prune_share is None
+                                                else args.prune_share),
+                                   compression=args.exr_compression or maps.DEFAULT_COMPRESSION,
+                                   half_maps=False if args.float_maps else None)
         last = [0.0]
 
         def progress(fraction: float) -> None:
@@ -148,7 +155,7 @@ def main(argv: list[str] | None = None) -> int:
                 print(f"bake.py: {100 * fraction:.0f} %", flush=True)
 
         t0 = time.perf_counter()
-        result = baking.bake(args.albedo, out, args.model, options, colorspace=args.colorspace, progress=progress)
+        result = bake.bake(args.albedo, out, args.model, options, colorspace=args.colorspace, progress=progress)
     except bad_input as exc:
         if created:
             _remove_if_empty(out)

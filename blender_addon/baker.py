@@ -1,4 +1,4 @@
-"""The Blender side of a bake: find the albedo, run an exporters.baking.BakeJob, turn the maps into images
+"""The Blender side of a bake: find the albedo, run an exporters.bake.BakeJob, turn the maps into images
 and wire the node group into the material.
 
 :class:`AddonBake` is what the operator drives, synchronously (``execute``, scripts and tests) or one
@@ -20,11 +20,11 @@ from pathlib import Path
 import bpy
 import numpy as np
 
-from exporters import baking, inference, maps, uv_coverage
+from exporters import bake, inference, maps, uv_coverage
 
 from . import nodes
 
-#: Custom properties on baked images: the bake key (exporters.baking.bake_key), component, map kind, K of the bake.
+#: Custom properties on baked images: the bake key (exporters.bake.bake_key), component, map kind, K of the bake.
 KEY_PROP, K_PROP = "spectral_skin_sss_bake_key", "spectral_skin_sss_k"
 KIND_PROP, KCOUNT_PROP = "spectral_skin_sss_kind", "spectral_skin_sss_k_count"
 #: Colour-space names of Blender's OCIO config that mean "not sRGB-encoded" (data or linear).
@@ -44,7 +44,8 @@ class BakeSettings:
     """What the operator asks for.  ``filepath`` (a file on disk) wins over ``image_name`` (an image
     datablock), which wins over the active Image Texture node of the active material.  ``storage``:
     "PACK" (images packed into the .blend) or "FILES" (EXR files in ``output_dir``, default a folder
-    beside the saved .blend).  ``backend``: "AUTO", "SVM" or "OSL".  ``exact``: every distinct colour through
+    beside the saved .blend).  ``backend``: "AUTO", "SVM" or "OSL".  ``model_colour``: the maps render the
+    model's own reflectance instead of the painted albedo.  ``exact``: every distinct colour through
     the model instead of the fast-path table; ``uv_coverage``: evaluate only the texels the active mesh's UVs
     cover (the others take the maps of the most common covered colour); ``unit_scale_m``: metres per Blender
     unit for the radii (None: the scene's, :func:`scene_unit_scale`)."""
@@ -57,7 +58,7 @@ class BakeSettings:
     colorspace: str = "FROM_IMAGE"
     backend: str = "AUTO"
     overwrite: bool = False
-    match_exposure: bool = False
+    model_colour: bool = False
     threads: int = 0
     chunk: int = 2048
     exact: bool = False
@@ -215,17 +216,17 @@ class AddonBake:
                               else (None, "off"))
         self.out_dir, self._temp_dir = self._output_folder()
         scale = scene_unit_scale(self.scene) if settings.unit_scale_m is None else float(settings.unit_scale_m)
-        self.options = baking.BakeOptions(targets=("cycles",), unit_scale_m=scale,
-                                          threads=settings.threads, chunk=settings.chunk,
-                                          match_exposure=settings.match_exposure, overwrite=settings.overwrite,
-                                          exact=settings.exact, texel_mask=mask)
+        self.options = bake.BakeOptions(targets=("cycles",), unit_scale_m=scale,
+                                        threads=settings.threads, chunk=settings.chunk,
+                                        model_colour=settings.model_colour, overwrite=settings.overwrite,
+                                        exact=settings.exact, texel_mask=mask)
         try:
-            self.albedo = baking.BakeJob.index(self.albedo)
-            image_id = self.image_id or baking.pixels_id(self.albedo)
-            self.key = baking.bake_key(image_id, self.model.sha256, self.stem, self.options,
-                                       baking.mask_sha256(mask, self.albedo.shape))
+            self.albedo = bake.BakeJob.index(self.albedo)
+            image_id = self.image_id or bake.pixels_id(self.albedo)
+            self.key = bake.bake_key(image_id, self.model.sha256, self.stem, self.options,
+                                     bake.mask_sha256(mask, self.albedo.shape))
             self.reused_images = self._packed_up_to_date() if settings.storage == "PACK" else None
-            self.job = None if self.reused_images is not None else baking.BakeJob(
+            self.job = None if self.reused_images is not None else bake.BakeJob(
                 self.albedo, self.out_dir, self.stem, self.model, self.options, input_image=self.input_name,
                 image_id=image_id)
         except BaseException:
@@ -233,7 +234,7 @@ class AddonBake:
             raise
         self._steps = None
         self.fraction = 0.0
-        self.result: baking.BakeResult | None = None
+        self.result: bake.BakeResult | None = None
 
     # -- inputs --------------------------------------------------------------------------------------------
     def _read_file(self, path: str, colorspace: str) -> maps.IndexedAlbedo:
@@ -389,8 +390,6 @@ class AddonBake:
         if self.backend == "OSL" and not osl_before:
             report += "; Open Shading Language enabled for the scene"
         notes = list(self.result.notes) if self.result is not None else []
-        if self.result is not None and self.result.stats.get("unreachable_channels"):
-            notes.append(f"{self.result.stats['unreachable_channels']} texel channel(s) brighter than Cycles can show")
         return report + ("; note: " + "; ".join(notes) if notes else "")
 
     def _images(self, created: list[bpy.types.Image]) -> dict[tuple[int, str], bpy.types.Image]:
@@ -398,7 +397,7 @@ class AddonBake:
         file already loaded is reused and reloaded)."""
         images = {}
         k_count = self.result.k
-        for spec in self.job.specs or baking.map_specs(self.stem, k_count, ("cycles",)):
+        for spec in self.job.specs or bake.map_specs(self.stem, k_count, ("cycles",)):
             path = str(self.out_dir / spec.name)
             if self.settings.storage == "PACK":
                 image = bpy.data.images.load(path, check_existing=False)

@@ -27,6 +27,10 @@ _BACKENDS = [
     ("SVM", "SVM nodes", "3K single-channel Subsurface Scattering nodes: every Cycles device"),
     ("OSL", "OSL", "One OSL Script node with K bssrdf closures: CPU and OptiX only"),
 ]
+#: The model-colour option's tooltip (operator and panel).
+MODEL_COLOUR_HELP = ("Render the model's own reflectance (the colour of the biophysical skin the network found, "
+                     "physically consistent, often darker than painted) instead of the painted albedo, which the "
+                     "maps reproduce per channel by default")
 #: Exceptions that mean bad input or a failed bake (reported, nothing changed).
 _EXPECTED = (OSError, ValueError, RuntimeError)
 
@@ -53,10 +57,11 @@ class SPECTRAL_SKIN_OT_invert_albedo(bpy.types.Operator):
     colorspace: bpy.props.EnumProperty(name="Colour space", items=_COLORSPACES, default="FROM_IMAGE")
     backend: bpy.props.EnumProperty(name="Shading", items=_BACKENDS, default="AUTO")
     overwrite: bpy.props.BoolProperty(name="Overwrite files", default=False)
-    match_exposure: bpy.props.BoolProperty(
-        name="Match painted brightness", default=False,
-        description="Scale the target colour by the model's exposure (shows the texture's brightness instead of "
-                    "the model's physically consistent reflectance)")
+    model_colour: bpy.props.BoolProperty(
+        name="Model's own colour", default=False, description=MODEL_COLOUR_HELP)
+    #: Scripts written before the painted colour became the default passed match_exposure=True (the painted
+    #: brightness): the default now renders the painted brightness and hue, so it is accepted and ignored.
+    match_exposure: bpy.props.BoolProperty(default=False, options={"HIDDEN", "SKIP_SAVE"})
 
     exact: bpy.props.BoolProperty(
         name="Exact (slow)", default=False,
@@ -75,7 +80,7 @@ class SPECTRAL_SKIN_OT_invert_albedo(bpy.types.Operator):
         return baker.BakeSettings(model_path=preferences.model_path(context), filepath=self.filepath,
                                   image_name=self.image_name, storage=self.storage, output_dir=self.output_dir,
                                   colorspace=self.colorspace, backend=self.backend, overwrite=self.overwrite,
-                                  match_exposure=self.match_exposure, threads=preferences.threads(context),
+                                  model_colour=self.model_colour, threads=preferences.threads(context),
                                   exact=self.exact, uv_coverage=self.uv_coverage,
                                   unit_scale_m=baker.scene_unit_scale(context.scene))
 
@@ -92,7 +97,7 @@ class SPECTRAL_SKIN_OT_invert_albedo(bpy.types.Operator):
             bake.cancel()
             self.report({"ERROR"}, _one_line(exc))
             return {"CANCELLED"}
-        self.report({"INFO"}, message)
+        self.report(_level(message), message)
         return {"FINISHED"}
 
     def invoke(self, context, event):
@@ -131,7 +136,7 @@ class SPECTRAL_SKIN_OT_invert_albedo(bpy.types.Operator):
             self.report({"ERROR"}, _one_line(exc))
             return {"CANCELLED"}
         self._stop(context)
-        self.report({"INFO"}, message)
+        self.report(_level(message), message)
         return {"FINISHED"}
 
     def _stop(self, context) -> None:
@@ -141,6 +146,11 @@ class SPECTRAL_SKIN_OT_invert_albedo(bpy.types.Operator):
             self._timer = None
         wm.progress_end()
         _set_progress(context, 0.0, running=False)
+
+
+def _level(message: str) -> set[str]:
+    """WARNING when the report carries a warning (e.g. painted colours that had to be clamped), else INFO."""
+    return {"WARNING"} if "warning: " in message else {"INFO"}
 
 
 def _set_progress(context, fraction: float, running: bool) -> None:

@@ -21,7 +21,8 @@ class SpectralSkinSettings(bpy.types.PropertyGroup):
     colorspace: bpy.props.EnumProperty(name="Colour space", items=operators._COLORSPACES, default="FROM_IMAGE")
     backend: bpy.props.EnumProperty(name="Shading", items=operators._BACKENDS, default="AUTO")
     overwrite: bpy.props.BoolProperty(name="Overwrite files", default=False)
-    match_exposure: bpy.props.BoolProperty(name="Match painted brightness", default=False)
+    model_colour: bpy.props.BoolProperty(name="Model's own colour", default=False,
+                                         description=operators.MODEL_COLOUR_HELP)
     exact: bpy.props.BoolProperty(name="Exact (slow)", default=False,
                                   description="Every distinct colour through the network, not the fast-path table")
     uv_coverage: bpy.props.BoolProperty(name="Only UV-covered texels", default=True,
@@ -55,7 +56,7 @@ def _draw(layout, context) -> None:
             col.prop(settings, "output_dir")
             col.prop(settings, "overwrite")
         col.prop(settings, "backend")
-        col.prop(settings, "match_exposure")
+        col.prop(settings, "model_colour")
         col.prop(settings, "exact")
         col.prop(settings, "uv_coverage")
     op = layout.operator("spectral_skin.invert_albedo", icon="IMAGE_DATA")
@@ -63,7 +64,7 @@ def _draw(layout, context) -> None:
         op.image_name = settings.image.name if settings.image is not None else ""
         op.storage, op.output_dir = settings.storage, settings.output_dir
         op.colorspace, op.backend = settings.colorspace, settings.backend
-        op.overwrite, op.match_exposure = settings.overwrite, settings.match_exposure
+        op.overwrite, op.model_colour = settings.overwrite, settings.model_colour
         op.exact, op.uv_coverage = settings.exact, settings.uv_coverage
     layout.operator("spectral_skin.add_mixture", icon="NODETREE")
 

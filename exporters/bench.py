@@ -11,6 +11,7 @@ differences, fast minus exact.
 
 from __future__ import annotations
 
+import json
 import os
 import resource
 import tempfile
@@ -20,7 +21,7 @@ from pathlib import Path
 import numpy as np
 import OpenImageIO as oiio
 
-from exporters import baking, collapse, cycles, inference, maps, texel_records, texel_table
+from exporters import bake, collapse, cycles, inference, maps, texel_records, texel_table
 from exporters.colorimetry import delta_e76, linear_srgb_to_lab, srgb_decode, srgb_encode
 from exporters.constants import PARAM_NAMES, PARAM_RANGES
 
@@ -85,7 +86,7 @@ def _bake_row(quick: bool) -> dict:
         out.mkdir()
         rss0 = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
         t0 = time.perf_counter()
-        result = baking.bake(exr, out, MODEL, baking.BakeOptions(threads=2, memory_mb=128, exact=True))
+        result = bake.bake(exr, out, MODEL, bake.BakeOptions(threads=2, memory_mb=128, exact=True))
         seconds = time.perf_counter() - t0
         rss1 = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
     n = side * side
@@ -147,12 +148,14 @@ def _fast_records(table: texel_table.TexelTable, rgb: np.ndarray) -> tuple[dict,
 
 
 def _as_stored(rec: dict, bits: int, half: bool = True) -> dict:
-    """The map values a fast bake stores (colour, weight, anisotropy as half floats when ``half``; the rest
-    rounded to ``bits`` mantissa bits), with alpha from the stored colour."""
+    """The map values a fast bake stores (colour, weight, anisotropy as half floats when ``half``, and the radius
+    (at unit scale 1) when it fits half's normal range; the rest rounded to ``bits`` mantissa bits), with alpha
+    from the stored colour."""
     out = dict(rec)
+    half_names = {"color", "weight", "anisotropy"} | ({"radius_m"} if maps.fits_half(rec["radius_m"]) else set())
     for name in ("color", "weight", "anisotropy", "radius_m", "sigma_t_cm"):
         out[name] = maps.round_mantissa(rec[name].astype(np.float32), bits).astype(np.float64)
-        if half and name in baking.HALF_KINDS:
+        if half and name in half_names:
             out[name] = rec[name].astype(np.float16).astype(np.float64)
     out["alpha"] = cycles.rw_albedo_forward(np.clip(out["color"], 0, 1), np.clip(out["anisotropy"], 0, 0.9)[..., None])
     return out
@@ -162,7 +165,7 @@ def compare_fast_exact(table: texel_table.TexelTable, model: inference.SkinModel
     """Fast-path records (as stored: half floats and 16 mantissa bits) against exact evaluation for albedo rows
     ``rgb`` (n, 3): appearance ΔE76 (mean, max), largest parameter differences, fraction of rows inside the table."""
     fast, inside = _fast_records(table, rgb)
-    fast = _as_stored(fast, baking.FAST_MANTISSA_BITS)
+    fast = _as_stored(fast, bake.FAST_MANTISSA_BITS)
     exact = texel_records.exact_records(model, rgb[inside], ("cycles", "physical", "spectral"), table.options)
     ior = table.options.ior
 
@@ -248,9 +251,14 @@ def _table_rows(quick: bool, model: inference.SkinModel, texture: np.ndarray) ->
     return rows
 
 
-def _timed_bake(png: Path, out: Path, options: baking.BakeOptions) -> tuple[baking.BakeResult, float, float]:
+def _half_kinds(result: bake.BakeResult) -> list[str]:
+    """The map kinds a bake wrote as half floats (from its S_maps.json)."""
+    return json.loads(result.json_path.read_text())["evaluation"]["half_kinds"]
+
+
+def _timed_bake(png: Path, out: Path, options: bake.BakeOptions) -> tuple[bake.BakeResult, float, float]:
     c0, t0 = time.process_time(), time.perf_counter()
-    result = baking.bake(png, out, MODEL, options)
+    result = bake.bake(png, out, MODEL, options)
     return result, time.perf_counter() - t0, time.process_time() - c0
 
 
@@ -273,7 +281,7 @@ def _bake_4k_rows(quick: bool, model: inference.SkinModel, texture: np.ndarray) 
         out.mkdir()
         before = inference.inference_counts()["runs"]
         load0 = _load()
-        result, wall, cpu = _timed_bake(png, out, baking.BakeOptions(threads=2))
+        result, wall, cpu = _timed_bake(png, out, bake.BakeOptions(threads=2))
         t = result.timings_s
         size = sum(f.stat().st_size for f in result.files) / 1e6
         runs = inference.inference_counts()["runs"] - before
@@ -291,12 +299,12 @@ def _bake_4k_rows(quick: bool, model: inference.SkinModel, texture: np.ndarray) 
                                "+ the same read and write)",
                      "ratio": f"{exact_proj / wall:.1f}x",
                      "error": f"vs exact on {c['n']:,} of its texels: {_errors(c)}",
-                     "notes": f"{runs} inference runs; maps {size:.0f} MB (PIZ; colour, weight, anisotropy half, "
-                              f"radius float32 with 16 mantissa bits); {load0} before, "
+                     "notes": f"{runs} inference runs; maps {size:.0f} MB (PIZ; half: "
+                              f"{', '.join(_half_kinds(result))}); painted colour; {load0} before, "
                               f"{_load()} after (2 cores shared with other jobs: wall > CPU / 2)"})
         raw_out = Path(tmp) / "raw"
         raw_out.mkdir()
-        raw, raw_wall, raw_cpu = _timed_bake(png, raw_out, baking.BakeOptions(threads=2, compression="none"))
+        raw, raw_wall, raw_cpu = _timed_bake(png, raw_out, bake.BakeOptions(threads=2, compression="none"))
         rt = raw.timings_s
         raw_size = sum(f.stat().st_size for f in raw.files) / 1e6
         rows.append({"workload": f"the same {side}x{side} bake with --exr-compression none (what PIZ costs)",
@@ -308,18 +316,19 @@ def _bake_4k_rows(quick: bool, model: inference.SkinModel, texture: np.ndarray) 
             f.unlink()
         fl_out = Path(tmp) / "float"
         fl_out.mkdir()
-        fl, fl_wall, fl_cpu = _timed_bake(png, fl_out, baking.BakeOptions(threads=2, half_maps=False))
+        fl, fl_wall, fl_cpu = _timed_bake(png, fl_out, bake.BakeOptions(threads=2, half_maps=False))
         fl_size = sum(f.stat().st_size for f in fl.files) / 1e6
         rows.append({"workload": f"the same {side}x{side} bake with --float-maps (every map float32, 16 mantissa bits)",
                      "ours": f"{fl_wall:.1f} s wall, {fl_cpu:.1f} s CPU (write {fl.timings_s['write']:.1f} s)",
-                     "anchor": f"half colour/weight/anisotropy: {wall:.1f} s wall, {cpu:.1f} s CPU",
-                     "ratio": f"{fl_cpu / cpu:.1f}x CPU", "error": "half step <= 2.4e-4 (in the error column above)",
+                     "anchor": f"half maps: {wall:.1f} s wall, {cpu:.1f} s CPU",
+                     "ratio": f"{fl_cpu / cpu:.1f}x CPU", "error": "half step <= 2.4e-4 below 1, relative <= 4.9e-4 "
+                     "(in the error column above)",
                      "notes": f"maps {fl_size:.0f} MB vs {size:.0f} MB; {_load()}"})
         for f in fl.files:
             f.unlink()
         before = inference.inference_counts()["runs"]
         t0 = time.perf_counter()
-        again = baking.bake(png, out, MODEL, baking.BakeOptions(threads=2))
+        again = bake.bake(png, out, MODEL, bake.BakeOptions(threads=2))
         rerun = time.perf_counter() - t0
         rows.append({"workload": f"the same {side}x{side} bake again (up to date)", "ours": f"{rerun:.2f} s",
                      "anchor": f"first bake {wall:.1f} s", "ratio": f"{wall / rerun:,.0f}x",
@@ -328,7 +337,7 @@ def _bake_4k_rows(quick: bool, model: inference.SkinModel, texture: np.ndarray) 
                               "model SHA-256, options"})
         spec_out = Path(tmp) / "spectral"
         spec_out.mkdir()
-        result, wall, cpu = _timed_bake(png, spec_out, baking.BakeOptions(threads=2, targets=("spectral",)))
+        result, wall, cpu = _timed_bake(png, spec_out, bake.BakeOptions(threads=2, targets=("spectral",)))
         rows.append({"workload": f"bake {side}x{side} PNG -> --target spectral (biophysical + exposure), fast path",
                      "ours": f"{wall:.1f} s wall, {cpu:.1f} s CPU", "anchor": "-", "ratio": "-",
                      "error": f"biophysical max {c['bio_pct']:.3f} % of the parameter range, exposure rel. "
@@ -347,7 +356,7 @@ def _worst_case_row(quick: bool) -> dict:
         out = Path(tmp) / "maps"
         out.mkdir()
         rss0 = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
-        result, wall, cpu = _timed_bake(exr, out, baking.BakeOptions(threads=2))
+        result, wall, cpu = _timed_bake(exr, out, bake.BakeOptions(threads=2))
         grew = max(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - rss0, 0) / 1024
     t = result.timings_s
     return {"workload": f"bake {side}x{side} float EXR, every texel distinct ({result.stats['distinct_texels']:,}), "

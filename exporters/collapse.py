@@ -7,15 +7,20 @@ component k, then walks in its medium; blender_addon/nodes.py) shows what the sp
 
 What "shows" means, and the method
 ----------------------------------
-1. **Target colour.**  T_c = sum_lambda M_c(lambda) R(lambda), the linear-sRGB colour of the model's
-   reflectance under D65 (``exporters.colorimetry.spectrum_to_linear_srgb``; M_c has negative lobes,
-   T is what a viewer sees).  Optionally times the model's exposure (``target_scale``).
+1. **Target colour.**  By default (``painted``) T_c = A_c, the painted linear-sRGB albedo of the texel
+   (clamped to [0, 1]): what the artist painted is what renders.  With the model's colour (``painted=None``,
+   the bake's ``--model-colour``) T_c = sum_lambda M_c(lambda) R(lambda), the linear-sRGB colour of the
+   model's reflectance under D65 (``exporters.colorimetry.spectrum_to_linear_srgb``; M_c has negative lobes,
+   T is what a viewer sees).
 2. **Channel sensitivity.**  omega_c(lambda) = max(M_c(lambda), 0), normalised to sum 1: where channel
    c looks.  Used for every per-channel average below.
 3. **Light carried by each component.**  E_k(lambda) = w_k R_model(alpha_k, g_k), with R_model the
    semi-infinite diffuse reflectance at the model's own boundary (n = 1.4 below air, specular excluded:
    ``exporters.reflectance_tables``).  Component k's share of channel c is
-   s_kc = <omega_c, E_k> / sum_j <omega_c, E_j>  (sums to 1 over k).
+   s_kc = <omega_c, E_k> / sum_j <omega_c, E_j>  (sums to 1 over k).  With the painted colour, E_k is
+   that of the painted spectral media (exporters.painted: E_k times a smooth, bounded correction c(lambda)
+   whose mixture has the colour A at the model's boundary), so the Cycles channels split the light as the
+   painted spectral mixture does.
 4. **Reflectance.**  Cycles' walk has no Fresnel boundary, so the same alpha would render brighter than
    the model's medium.  Each component gets the Cycles albedo whose Cycles reflectance carries its share:
    w_kc R_cycles(alpha_kc, g_k) = s_kc T_c, with w_kc = <omega_c, w_k> (the channel's mean weight) and
@@ -29,6 +34,12 @@ What "shows" means, and the method
    1, Cycles' Mix Shader limit; beyond that alpha may rise to 1 - 1e-6 and texels that still miss T are
    counted in ``unreachable``).  The profile width does not depend on this split (step 6).  Weights then sum to
    at most 1 per channel (the rest is absorbed), or above 1 when a bright share needs it.
+   With the painted colour the lower bound is alpha*(g) (:func:`face_on_albedo`) instead of 0.2: under the
+   node group's coat, a walk of lower albedo renders face-on (a camera straight above, the artist's check
+   against a Diffuse BSDF) up to 15 % darker than its reflectance averaged over view directions, a higher one
+   up to 5 % brighter; at alpha* both agree, so the painted colour holds face-on and on average.  The share
+   goes into the weight (the profile width is kept, step 6: at a fixed diffusion length the median exit
+   radius changes by at most ~25 % between alpha 0.4 and 0.98), and walks get longer (~1 / (1 - alpha*)).
 5. **Anisotropy.**  One g per component (Cycles takes one per closure; SPEC §4 stores one channel):
    the light-weighted mean of g_k over the visible channels, capped at 0.7 (above it Cycles 5.0's walk
    is biased high: exporters.cycles.RECOMMENDED_G_MAX).  The reflectance of step 4 is solved at this g,
@@ -50,13 +61,13 @@ All arrays are float64; every output is finite for finite input (non-finite inpu
 from __future__ import annotations
 
 import sys
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import cache
 from pathlib import Path
 
 import numpy as np
 
-from exporters import cycles, reflectance_tables
+from exporters import cycles, painted, reflectance_tables
 from exporters.colorimetry import xyz_to_linear_srgb_matrix, xyz_weights
 from exporters.constants import N_WAVELENGTHS
 
@@ -122,7 +133,9 @@ class ChannelMedia:
     (N, K) anisotropy; ``weight`` (N, K, 3); ``target`` (N, 3) the linear-sRGB channel reflectance the
     mixture reproduces (sum_k weight R_cycles(alpha, g) = target where reachable); ``low``/``high`` (N, K, 3)
     shares clamped at alpha = 0.2 / raised weight; ``unreachable`` (N, 3) channels brighter than Cycles
-    can show with weights <= 1; ``mfp_capped`` (N, K, 3) extinction capped at 1 / min_mfp_cm.
+    can show with weights <= 1; ``mfp_capped`` (N, K, 3) extinction capped at 1 / min_mfp_cm;
+    ``spectral_clamped`` (N,) with the painted colour: texels whose painted spectral media miss the painted
+    colour (exporters.painted; None for the model's colour).
     """
 
     alpha: np.ndarray
@@ -135,6 +148,7 @@ class ChannelMedia:
     unreachable: np.ndarray
     mfp_capped: np.ndarray | None = None
     ior: float = reflectance_tables.CYCLES_IOR
+    spectral_clamped: np.ndarray | None = None
 
     def cycles_reflectance(self) -> np.ndarray:
         """(N, 3): sum_k weight R_cycles(alpha, g), the diffuse reflectance these media render in Cycles."""
@@ -161,15 +175,15 @@ def _check_shapes(reflectance, alpha, sigma_t, g, weight) -> None:
         raise ValueError("need alpha in [0, 1], sigma_t > 0, |g| < 1 and weight >= 0")
 
 
-def collapse(reflectance, alpha, sigma_t_cm, g, weight, target_scale=None, g_max: float = G_MAX,
+def collapse(reflectance, alpha, sigma_t_cm, g, weight, painted_rgb=None, g_max: float = G_MAX,
              ior: float = reflectance_tables.CYCLES_IOR, min_mfp_cm: float = MIN_MFP_CM) -> ChannelMedia:
     """Collapse spectral mixtures to per-channel Cycles media (method: module docstring).
 
     ``reflectance`` (N, 376); ``alpha``, ``sigma_t_cm`` (cm^-1), ``g``, ``weight`` (N, K, 376) as the model
-    outputs them; ``target_scale`` (N,) optional factor on the target colour (the model's exposure, to
-    match the painted brightness instead of the model's unit-exposure reflectance); ``ior``: the IOR of
-    the Cycles closures (the node group's IOR input), which sets how the view ray enters the medium;
-    ``min_mfp_cm``: the smallest mean free path handed to Cycles (step 7; 0 disables the cap).
+    outputs them; ``painted_rgb`` (N, 3): the painted linear-sRGB albedo the channels reproduce (None: the
+    colour of the model's reflectance); ``ior``: the IOR of the Cycles closures (the node group's IOR
+    input), which sets how the view ray enters the medium; ``min_mfp_cm``: the smallest mean free path
+    handed to Cycles (step 7; 0 disables the cap).
     """
     refl = _finite("reflectance", reflectance)
     # The per-wavelength work runs in float32 (the model's own precision; sums of 236 terms keep ~1e-6).
@@ -178,17 +192,19 @@ def collapse(reflectance, alpha, sigma_t_cm, g, weight, target_scale=None, g_max
     if al.ndim != 3:
         raise ValueError(f"alpha must have shape (N, K, {N_WAVELENGTHS}), got {al.shape}")
     _check_shapes(refl, al, st, gg, w)
-    target = np.maximum(refl @ channel_matrix().T, 0.0)  # (N, 3)
-    if target_scale is not None:
-        scale = _finite("target_scale", target_scale).reshape(-1)
-        if scale.shape != (len(refl),) or np.any(scale < 0):
-            raise ValueError("target_scale must be (N,) and >= 0")
-        target = target * scale[:, None]
+    if painted_rgb is None:
+        target = np.maximum(refl @ channel_matrix().T, 0.0)  # (N, 3)
+    else:
+        target = painted.target_colour(painted_rgb)
+        if target.shape != (len(refl), 3):
+            raise ValueError(f"painted_rgb must have shape ({len(refl)}, 3), got {target.shape}")
     sup = _support()
     omega = channel_weights()[:, sup].astype(np.float32).T  # (L', 3)
     al, st, gg, w = al[..., sup], st[..., sup], gg[..., sup], w[..., sup]
-    al_c = np.minimum(al, np.float32(reflectance_tables.ALPHA_TABLE_MAX))
-    light = w * reflectance_tables.reflectance("model", al_c, np.clip(gg, np.float32(0), np.float32(0.95)))  # E_k
+    al_c, g_c, light = _light(al, gg, w)
+    spectral_clamped = None
+    if painted_rgb is not None:  # the painted spectral media's light (exporters.painted)
+        light, spectral_clamped = _painted_light(light, w, g_c, target)
     diff_len = 1.0 / (st * np.sqrt(3.0 * (1.0 - al_c) * (1.0 - al_c * gg)))  # D_k in cm, (N, K, L')
     # One matrix product for all six channel averages: E, w, E D, w D, E g, w g against omega.
     sums = (np.stack([light, w, light * diff_len, w * diff_len, light * gg, w * gg]) @ omega).astype(np.float64)
@@ -206,7 +222,68 @@ def collapse(reflectance, alpha, sigma_t_cm, g, weight, target_scale=None, g_max
     g_eff = np.clip(np.where(light_all > _TINY, g_light, g_weight), cycles.G_MIN, g_max)
     if min_mfp_cm < 0:
         raise ValueError("min_mfp_cm must be >= 0")
-    return _solve_channels(share * target[:, None, :], w_mean, g_eff, d_mean, target, ior, min_mfp_cm)
+    media = _solve_channels(share * target[:, None, :], w_mean, g_eff, d_mean, target, ior, min_mfp_cm,
+                            face_on=painted_rgb is not None)
+    return replace(media, spectral_clamped=spectral_clamped)
+
+
+def _light(al: np.ndarray, gg: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(alpha, g clipped to the tables, E_k = w_k R_model(alpha_k, g_k)) of float32 components (N, K, L')."""
+    al_c = np.minimum(al, np.float32(reflectance_tables.ALPHA_TABLE_MAX))
+    g_c = np.clip(gg, np.float32(0), np.float32(0.95))
+    return al_c, g_c, w * reflectance_tables.reflectance("model", al_c, g_c)
+
+
+def _painted_light(light: np.ndarray, w: np.ndarray, g_c: np.ndarray, target: np.ndarray
+                   ) -> tuple[np.ndarray, np.ndarray]:
+    """The light E'_k (N, K, L') of the painted spectral media on the support (exporters.painted) and which
+    texels (N,) miss the painted colour."""
+    sup = _support()
+    cap = w * painted.brightest(g_c).astype(np.float32)
+    corr = painted.solve(light, cap, channel_matrix()[:, sup], target, columns=sup)
+    return np.minimum(corr.factor(sup).astype(np.float32)[:, None, :] * light, cap), corr.clamped
+
+
+def painted_clamped(alpha, g, weight, painted_rgb) -> np.ndarray:
+    """(N,) bool: texels whose painted colour (N, 3) the painted spectral media of the components (N, K, 376)
+    cannot take (exporters.painted; what ``collapse(..., painted_rgb)`` reports as ``spectral_clamped``)."""
+    sup = _support()
+    al, gg, w = (_finite(n, x, np.float32)[..., sup] for n, x in (("alpha", alpha), ("g", g), ("weight", weight)))
+    _, g_c, light = _light(al, gg, w)
+    return _painted_light(light, w, g_c, painted.target_colour(painted_rgb))[1]
+
+
+@cache
+def _face_on_nodes(ior: float) -> np.ndarray:
+    """alpha* (N_G,) at the reflectance tables' g nodes for closure IOR ``ior`` (:func:`face_on_albedo`)."""
+    u = reflectance_tables.u_grid()
+    alpha = 1.0 - u**2  # decreasing along the grid
+    coat = float(cycles.coat_body_scale(1.0, ior)) if ior > 1.0 else 1.0
+    out = np.full(reflectance_tables.N_G, ALPHA_MIN)
+    for i, g in enumerate(reflectance_tables.g_grid()):
+        mean = reflectance_tables.reflectance("cycles", alpha, g, ior)
+        face_on = coat * reflectance_tables.normal_reflectance(alpha, g)
+        ratio = np.divide(face_on, mean, out=np.ones_like(mean), where=mean > 0.0) - 1.0
+        below = np.flatnonzero(ratio < 0.0)  # face-on darker than the mean: these albedos are too low
+        if below.size == 0 or below[0] == 0:
+            continue  # no crossing (face-on never or always as bright): no floor
+        j = below[0]  # ratio[j - 1] >= 0 > ratio[j]: interpolate in u
+        f = ratio[j - 1] / (ratio[j - 1] - ratio[j])
+        out[i] = max(ALPHA_MIN, 1.0 - (u[j - 1] + f * (u[j] - u[j - 1])) ** 2)
+    out.setflags(write=False)
+    return out
+
+
+def face_on_albedo(g, ior: float = reflectance_tables.CYCLES_IOR) -> np.ndarray:
+    """alpha*(g): the albedo at which Cycles' walk under the node group's coat renders face-on what it renders
+    on average over view directions, (1 - F(1)) / (1 - F_dr) R1(alpha, g; mu = 1) = H(alpha, g; ior).
+
+    Below it a medium looks darker from straight above than its (cosine-weighted) reflectance, by up to ~15 %
+    at alpha 0.6 (the view ray enters along the normal and is absorbed deeper); above it a little brighter
+    (up to the coat's face-on 1 - F(1) over 1 - F_dr, 5 % at IOR 1.4).  0.91 at g = 0, 0.976 at g = 0.5,
+    0.987 at g = 0.7 (IOR 1.4); ALPHA_MIN where no albedo balances (IOR near 1: no coat)."""
+    gg = np.clip(np.asarray(g, np.float64), 0.0, (reflectance_tables.N_G - 1) * reflectance_tables.G_STEP)
+    return np.interp(gg, reflectance_tables.g_grid(), _face_on_nodes(round(float(ior), 6)))
 
 
 def alpha_soft_max(g) -> np.ndarray:
@@ -215,11 +292,15 @@ def alpha_soft_max(g) -> np.ndarray:
     return ALPHA_STAR_SOFT_MAX / (1.0 - gg + ALPHA_STAR_SOFT_MAX * gg)
 
 
-def _solve_channels(contribution, w_mean, g_eff, d_mean, target, ior: float, min_mfp_cm: float) -> ChannelMedia:
-    """Per (N, K, 3): alpha and weight with w R_cycles(alpha, g) = contribution; sigma_t from D."""
+def _solve_channels(contribution, w_mean, g_eff, d_mean, target, ior: float, min_mfp_cm: float,
+                    face_on: bool = False) -> ChannelMedia:
+    """Per (N, K, 3): alpha and weight with w R_cycles(alpha, g) = contribution; sigma_t from D.  ``face_on``:
+    albedos at least face_on_albedo(g) (step 4)."""
     g3 = np.broadcast_to(g_eff[..., None], contribution.shape)
-    r_lo = reflectance_tables.reflectance("cycles", ALPHA_MIN, g3, ior)
-    r_soft = reflectance_tables.reflectance("cycles", alpha_soft_max(g3), g3, ior)
+    a_soft = alpha_soft_max(g3)
+    a_lo = np.minimum(face_on_albedo(g3, ior), a_soft) if face_on else ALPHA_MIN
+    r_lo = reflectance_tables.reflectance("cycles", a_lo, g3, ior)
+    r_soft = reflectance_tables.reflectance("cycles", a_soft, g3, ior)
     r_hard = reflectance_tables.reflectance("cycles", ALPHA_HARD_MAX, g3, ior)
     used = w_mean > 1e-12
     rho = np.where(used, contribution / np.maximum(w_mean, 1e-12), 0.0)

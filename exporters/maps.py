@@ -113,6 +113,17 @@ def set_threads(threads: int) -> None:
 #: with an absolute step of 6e-8, below 6.1e-5; largest 65504): half suits values bounded to [-1, 1].
 PIXEL_TYPES = ("float", "half")
 HALF_MAX = 65504.0
+#: Smallest normal half: above it half keeps 11 significant bits (relative rounding <= 2^-11 = 4.9e-4).
+HALF_MIN_NORMAL = 2.0**-14
+
+
+def fits_half(values: np.ndarray) -> bool:
+    """Whether every value is 0 or has a magnitude in half's normal range [2^-14, 65504] (relative rounding
+    <= 4.9e-4: no subnormal loss of precision, no overflow)."""
+    a = np.abs(np.asarray(values))
+    nonzero = a[a != 0]
+    return bool(np.all(np.isfinite(a)) and (nonzero.size == 0 or (nonzero.min() >= HALF_MIN_NORMAL
+                                                                    and nonzero.max() <= HALF_MAX)))
 
 
 def _exr_spec(width: int, height: int, channels, units: str, compression: str = DEFAULT_COMPRESSION,
@@ -504,8 +515,11 @@ class MapStream:
 
     def write_rows(self, data: np.ndarray, finite: bool = False) -> None:
         """Append the next rows, ``data`` (h, W) or (h, W, C), top to bottom; finite values only (checked here
-        unless the caller passes ``finite=True`` because it checked the values they were gathered from)."""
-        arr = np.asarray(data, dtype=np.float32)
+        unless the caller passes ``finite=True`` because it checked the values they were gathered from).  A
+        half map takes float16 data as it is (no conversion: the caller rounded once per distinct value)."""
+        arr = np.asarray(data)
+        if not (self.pixel_type == "half" and arr.dtype == np.float16):
+            arr = arr.astype(np.float32, copy=False)
         if arr.ndim == 2:
             arr = arr[..., None]
         h = arr.shape[0]
@@ -514,7 +528,7 @@ class MapStream:
                              f"{self.width} x {self.height} x {len(self.channels)} map at row {self._rows}")
         if not finite and not np.all(np.isfinite(arr)):
             raise ValueError(f"map {self.path.name}: NaN/Inf values")
-        if self.pixel_type == "half" and np.any(np.abs(arr) > HALF_MAX):
+        if self.pixel_type == "half" and arr.dtype != np.float16 and np.any(np.abs(arr) > HALF_MAX):
             raise ValueError(f"map {self.path.name}: values beyond the half-float range (|v| > {HALF_MAX:g}): "
                              "write it as float")
         if not self._out.write_scanlines(self._rows, self._rows + h, 0, np.ascontiguousarray(arr)):

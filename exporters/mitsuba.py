@@ -168,6 +168,18 @@ class Mixture:
     def k(self) -> int:
         return int(self.alpha.shape[0])
 
+    def painted(self, albedo_rgb) -> Mixture:
+        """The mixture with the painted colour ``albedo_rgb`` (3,) linear sRGB (exporters.painted, what a bake
+        renders by default): alpha and sigma_t corrected in the visible, the rest unchanged.  On the 376-sample
+        grid only (decode first, then :meth:`at`)."""
+        from exporters.painted import paint_mixture
+
+        if self.wavelength_nm.shape != WAVELENGTHS_NM.shape or not np.allclose(self.wavelength_nm, WAVELENGTHS_NM):
+            raise ValueError("paint the mixture on the model's 376-sample grid (before Mixture.at)")
+        p = paint_mixture(self.alpha[None], self.sigma_t[None], self.g[None], self.weight[None],
+                          np.asarray(albedo_rgb, np.float64).reshape(1, 3))
+        return Mixture(self.wavelength_nm, p.alpha[0], p.sigma_t[0], self.g, self.weight, self.reflectance)
+
     def at(self, wavelengths_nm) -> Mixture:
         """The mixture at other wavelengths (W',) inside its range: every field linearly interpolated
         (exact at the 2 nm grid points); weights renormalised to sum to 1."""

@@ -208,6 +208,22 @@ def reflectance(boundary: Boundary, alpha, g, ior: float | None = None) -> np.nd
     else:
         t = _table(boundary, ior)
         al, gg = np.broadcast_arrays(_finite("alpha", alpha), _finite("g", g))
+    return _bilinear(t, al, gg)
+
+
+def normal_reflectance(alpha, g) -> np.ndarray:
+    """What Cycles' RANDOM_WALK renders for a camera straight above under uniform white light: R1(mu_t = 1),
+    the stored directional reflectance at its quadrature cosine 1 (the view ray enters along the normal
+    whatever the IOR).  Bilinear in (sqrt(1 - alpha), g) as :func:`reflectance`; float64."""
+    t = _load()
+    if not np.isclose(t["mu"][-1], 1.0):
+        raise RuntimeError(f"{TABLE_PATH} has no directional reflectance at mu = 1; rebuild it")
+    al, gg = np.broadcast_arrays(_finite("alpha", alpha), _finite("g", g))
+    return _bilinear(t["directional"][..., -1], al, gg)
+
+
+def _bilinear(t: np.ndarray, al: np.ndarray, gg: np.ndarray) -> np.ndarray:
+    """Table t[g node, u node] at (alpha, g), bilinear in (u, g)."""
     u = _u_of_alpha(al)
     xu = (u - U_MIN) * ((N_U - 1) / (1.0 - U_MIN))
     j = np.minimum(xu.astype(np.intp), N_U - 2)  # xu >= 0: truncation is floor

@@ -12,9 +12,11 @@ model's K components (arrays in a dict, float64 unless said otherwise):
 * ``max_share`` (N, K): each component's largest share of the rendered colour over the three channels,
   w_kc R_cycles(alpha_kc, g_k) / sum_j w_jc R_cycles(alpha_jc, g_j) (components below a small share
   everywhere are dropped from a bake);
-* clamp counts per texel (N,) int: ``n_low`` (channels whose albedo was raised to 0.2), ``n_high`` (weights
-  raised above the channel mean), ``n_unreachable`` (colour channels Cycles cannot reach), ``n_capped``
-  (extinctions capped at the smallest mean free path): exporters.collapse.
+* clamp counts per texel (N,) int: ``n_low`` (channels whose albedo was raised to the collapse's floor),
+  ``n_high`` (weights raised above the channel mean), ``n_unreachable`` (colour channels Cycles cannot reach),
+  ``n_capped`` (extinctions capped at the smallest mean free path): exporters.collapse;
+* with the painted colour, ``spectral_clamped`` (N,) 0/1: the painted spectral media miss the painted colour
+  (exporters.painted).
 
 :func:`exact_records` evaluates the model (exporters.inference) and the collapse (exporters.collapse) and
 fills only the fields the targets need (``spectral`` alone needs no collapse).  The fast path
@@ -34,23 +36,36 @@ from exporters.colorimetry import SRGB_LUMINANCE
 MEDIA_TARGETS = ("cycles", "physical")
 COUNT_FIELDS = ("n_low", "n_high", "n_unreachable", "n_capped")
 #: Stats keys of S_maps.json for each count field (texel x component x channel events, summed over texels).
-STAT_NAMES = {"n_low": "alpha_raised_to_0.2", "n_high": "weight_raised", "n_unreachable": "unreachable_channels",
+STAT_NAMES = {"n_low": "alpha_raised_to_floor", "n_high": "weight_raised", "n_unreachable": "unreachable_channels",
               "n_capped": "sigma_t_capped"}
+#: Stats counting texels (not channels) whose painted colour was clamped: in Cycles (cycles, physical targets) and
+#: in the spectral media (spectral target).
+CLAMPED_CYCLES = "texels_colour_unreachable_in_cycles"
+CLAMPED_SPECTRAL = "texels_colour_clamped_spectral"
+#: What the maps' colour reproduces (CollapseOptions.colour).
+COLOURS = ("painted", "model")
 
 
 @dataclass(frozen=True)
 class CollapseOptions:
-    """The bake options that change per-texel values (besides the model): ``match_exposure`` (target colour
-    times the model's exposure), ``ior`` of the Cycles closures, ``min_mfp_cm`` (exporters.collapse step 7).
-    The unit scale is not here: it only divides the radius."""
+    """The bake options that change per-texel values (besides the model): ``colour`` ("painted": the albedo as
+    painted, exporters.painted; "model": the model's own reflectance), ``ior`` of the Cycles closures,
+    ``min_mfp_cm`` (exporters.collapse step 7).  The unit scale is not here: it only divides the radius."""
 
-    match_exposure: bool = False
+    colour: str = "painted"
     ior: float = reflectance_tables.CYCLES_IOR
     min_mfp_cm: float = collapse.MIN_MFP_CM
 
+    def __post_init__(self) -> None:
+        if self.colour not in COLOURS:
+            raise ValueError(f"colour must be one of {COLOURS}, not {self.colour!r}")
+
+    @property
+    def painted(self) -> bool:
+        return self.colour == "painted"
+
     def as_dict(self) -> dict:
-        return {"match_exposure": bool(self.match_exposure), "ior": round(float(self.ior), 6),
-                "min_mfp_cm": float(self.min_mfp_cm)}
+        return {"colour": self.colour, "ior": round(float(self.ior), 6), "min_mfp_cm": float(self.min_mfp_cm)}
 
 
 def needs_media(targets: tuple[str, ...]) -> bool:
@@ -81,11 +96,16 @@ def exact_records(model, rgb: np.ndarray, targets: tuple[str, ...], options: Col
                                   "exposure": out["exposure"][:, 0].astype(np.float64)}
     if with_luminance:
         rec["y_model"] = model_luminance(out["reflectance"])
+    painted_rgb = np.asarray(rgb, np.float64) if options.painted else None
     if not needs_media(targets):
+        if painted_rgb is not None and "spectral" in targets:
+            rec["spectral_clamped"] = collapse.painted_clamped(out["alpha"], out["g"], out["weight"],
+                                                               painted_rgb).astype(np.int64)
         return rec
-    scale = rec["exposure"] if options.match_exposure else None
     media = collapse.collapse(out["reflectance"], out["alpha"], out["sigma_t"], out["g"], out["weight"],
-                              target_scale=scale, ior=options.ior, min_mfp_cm=options.min_mfp_cm)
+                              painted_rgb=painted_rgb, ior=options.ior, min_mfp_cm=options.min_mfp_cm)
+    if media.spectral_clamped is not None:
+        rec["spectral_clamped"] = media.spectral_clamped.astype(np.int64)
     cyc = collapse.to_cycles(media, 1.0)
     rec.update(color=cyc.color, radius_m=cyc.radius, weight=media.weight, anisotropy=media.g, alpha=media.alpha,
                sigma_t_cm=media.sigma_t_cm, unreachable=media.unreachable.astype(np.float64),
@@ -103,9 +123,11 @@ def max_share(contributions: np.ndarray) -> np.ndarray:
     return share.max(axis=2)
 
 
-def empty_records(k: int, targets: tuple[str, ...]) -> dict[str, np.ndarray]:
+def empty_records(k: int, targets: tuple[str, ...], painted: bool = False) -> dict[str, np.ndarray]:
     """Records of zero texels (the shapes of :func:`exact_records`)."""
     rec = {"biophysical": np.zeros((0, 5)), "exposure": np.zeros(0)}
+    if painted and (needs_media(targets) or "spectral" in targets):
+        rec["spectral_clamped"] = np.zeros(0, np.int64)
     if needs_media(targets):
         for name in ("color", "radius_m", "weight", "alpha", "sigma_t_cm"):
             rec[name] = np.zeros((0, k, 3))
@@ -128,7 +150,7 @@ def take_records(rec: dict[str, np.ndarray], rows) -> dict[str, np.ndarray]:
 
 
 def map_values(kind: str, k: int, rec: dict[str, np.ndarray], unit_scale_m: float) -> np.ndarray:
-    """Rows (N, channels) float32 of one SPEC §4 map: ``kind`` as in exporters.baking.UNITS, component ``k``
+    """Rows (N, channels) float32 of one SPEC §4 map: ``kind`` as in exporters.bake.UNITS, component ``k``
     (1-based; ignored for "biophysical").  Radii below Cycles' minimum (1e-8 Blender units, which would turn
     the channel into a diffuse BSDF) raise ValueError: use a larger unit scale."""
     i = k - 1
@@ -147,11 +169,18 @@ def map_values(kind: str, k: int, rec: dict[str, np.ndarray], unit_scale_m: floa
     return rec[field][:, i].astype(np.float32)
 
 
-def count_stats(rec: dict[str, np.ndarray], counts: np.ndarray) -> dict[str, int]:
+def count_stats(rec: dict[str, np.ndarray], counts: np.ndarray, targets: tuple[str, ...] = ()) -> dict[str, int]:
     """Clamp statistics of S_maps.json: per-texel counts of ``rec`` weighted by how many texels share the
-    colour (``counts`` (N,))."""
-    return {STAT_NAMES[name]: int(np.dot(np.rint(rec[name]).astype(np.int64), counts))
-            for name in COUNT_FIELDS if name in rec}
+    colour (``counts`` (N,)); with the painted colour also the texels whose colour was clamped, for the
+    ``targets`` they concern (CLAMPED_CYCLES, CLAMPED_SPECTRAL)."""
+    out = {STAT_NAMES[name]: int(np.dot(np.rint(rec[name]).astype(np.int64), counts))
+           for name in COUNT_FIELDS if name in rec}
+    if "spectral_clamped" in rec:  # painted colour
+        if needs_media(targets):
+            out[CLAMPED_CYCLES] = int(np.dot(rec["n_unreachable"] > 0, counts))
+        if "spectral" in targets:
+            out[CLAMPED_SPECTRAL] = int(np.dot(np.rint(rec["spectral_clamped"]) > 0, counts))
+    return out
 
 
 def cycles_contributions(rec: dict[str, np.ndarray], ior: float) -> np.ndarray:

@@ -15,7 +15,8 @@ range at exposures 0.7-2.5 falls 99.7 % inside; the rest is evaluated exactly). 
 map their codes linearly onto e.
 
 Stored per node (K components; :func:`channel_names`): Cycles colour, log radius (m), weight (K x 3 each),
-anisotropy (K), each component's largest share of the colour (K), unreachable flags (3), clamp counts (3),
+anisotropy (K), each component's largest share of the colour (K), unreachable flags (3), clamp counts (3), the
+painted spectral media's clamp flag (1; 0 for the model's colour),
 biophysical (5, as the logit of each parameter's position in its range: the encoder's output before its
 sigmoid, smooth where the parameters saturate), log luminance of the model's colour (1: the exposure is
 Y(albedo) / that, so it stays exact in the albedo's brightness).  Interpolation is trilinear.
@@ -27,7 +28,7 @@ nodes outside the RGB cube), the grid, and a JSON header with the SHA-256 of the
 K, the collapse options, the channel names and the command that built it.  A table whose model SHA-256
 differs from the model's is refused (the bake falls back to exact evaluation with a warning).
 
-Build (about 20 s for the shipped step 0.015 on 2 cores)::
+Build (about 30 s of CPU for the shipped step 0.015 on 2 cores; the painted colour solves a 3 x 3 system per node)::
 
     python -m exporters.texel_table --model blender_addon/models/skin_inversion.onnx \\
         --out blender_addon/models/skin_inversion_table.npz --overwrite
@@ -53,7 +54,7 @@ from exporters.constants import PARAM_NAMES, PARAM_RANGES
 from exporters.maps import sha256_file
 from exporters.texel_records import CollapseOptions
 
-FORMAT = "spectral_skin_sss texel table v2"
+FORMAT = "spectral_skin_sss texel table v3"
 #: The shipped table, beside the model it was made from.
 DEFAULT_PATH = Path(__file__).resolve().parents[1] / "blender_addon" / "models" / "skin_inversion_table.npz"
 #: skin space = COORDS @ sRGB-encoded RGB (module docstring).
@@ -62,7 +63,7 @@ COORDS_INV = np.linalg.inv(COORDS)
 #: Box of the grid in skin space: l, c1, c2.
 DEFAULT_BOX: tuple[tuple[float, float], ...] = ((0.0, 1.0), (-0.06, 0.40), (-0.08, 0.24))
 #: Grid step in skin space (the same on every axis).  Measured against exact evaluation (exporters.bench):
-#: 0.015 keeps the baked Cycles appearance within mean ΔE76 ~0.05, max ~0.13 on skin textures, in a 2 MB file.
+#: 0.015 keeps the baked Cycles appearance (painted colour) within mean ΔE76 0.017, max 0.05 on skin, in a 2.7 MB file.
 DEFAULT_STEP: float = 0.015
 #: The biophysical vector is stored as the logit of its position in its range, clipped this far from 0 and 1.
 _LOGIT_EPS = 1e-7
@@ -85,7 +86,7 @@ def channel_names(k: int) -> tuple[str, ...]:
     names += [f"anisotropy_k{i}" for i in range(1, k + 1)]
     names += [f"share_k{i}" for i in range(1, k + 1)]
     names += [f"unreachable_{c}" for c in "rgb"]
-    names += ["n_low", "n_high", "n_capped"]
+    names += ["n_low", "n_high", "n_capped", "spectral_clamped"]
     names += [f"logit_{p}" for p in PARAM_NAMES]
     names += ["log_y_model"]
     return tuple(names)
@@ -202,6 +203,8 @@ class TexelTable:
         y_model = np.exp(values[:, col["log_y_model"]].astype(np.float64))
         rec = {"biophysical": bio.astype(np.float64),
                "exposure": texel_records.albedo_luminance(rgb) / np.maximum(y_model, 1e-6)}
+        if self.options.painted:
+            rec["spectral_clamped"] = (values[:, col["spectral_clamped"]] > 0.5).astype(np.int64)
         if not texel_records.needs_media(targets):
             return rec
         g = np.clip(values[:, col["anisotropy_k1"]:col[f"anisotropy_k{k}"] + 1].astype(np.float64), cycles.G_MIN,
@@ -293,8 +296,8 @@ def _command_args(model: inference.SkinModel, options: CollapseOptions, step: fl
     path = model.path.resolve()
     shown = path.relative_to(root) if path.is_relative_to(root) else path
     args = ["--model", str(shown), "--step", f"{step:g}"]
-    if options.match_exposure:
-        args.append("--match-exposure")
+    if not options.painted:
+        args.append("--model-colour")
     if options.ior != CollapseOptions().ior:
         args += ["--ior", f"{options.ior:g}"]
     if options.min_mfp_cm != CollapseOptions().min_mfp_cm:
@@ -304,7 +307,8 @@ def _command_args(model: inference.SkinModel, options: CollapseOptions, step: fl
 
 def _node_channels(rec: dict[str, np.ndarray], k: int) -> np.ndarray:
     n = len(rec["exposure"])
-    counts = np.stack([rec["n_low"], rec["n_high"], rec["n_capped"]], axis=1)
+    counts = np.stack([rec["n_low"], rec["n_high"], rec["n_capped"],
+                       rec.get("spectral_clamped", np.zeros(n, np.int64))], axis=1)
     parts = [rec["color"].reshape(n, 3 * k), np.log(rec["radius_m"]).reshape(n, 3 * k), rec["weight"].reshape(n, 3 * k),
              rec["anisotropy"], rec["max_share"], rec["unreachable"], counts,
              bio_logit(rec["biophysical"]), np.log(np.maximum(rec["y_model"], 1e-30))[:, None]]
@@ -361,7 +365,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--model", type=Path, default=inference.DEFAULT_MODEL_PATH, help="skin_inversion.onnx")
     parser.add_argument("--out", type=Path, default=DEFAULT_PATH, help="table file (.npz)")
     parser.add_argument("--step", type=float, default=DEFAULT_STEP, help="grid step in skin space")
-    parser.add_argument("--match-exposure", action="store_true", help="table for bakes with --match-exposure")
+    parser.add_argument("--model-colour", action="store_true", help="table for bakes with --model-colour")
     parser.add_argument("--ior", type=float, default=CollapseOptions().ior, help="IOR of the Cycles closures")
     parser.add_argument("--min-mfp-m", type=float, default=CollapseOptions().min_mfp_cm / 100,
                         help="smallest mean free path given to Cycles, metres")
@@ -380,7 +384,8 @@ def main(argv: list[str] | None = None) -> int:
         print(f"error: {args.out} exists; pass --overwrite", file=sys.stderr)
         return 2
     model = inference.load_model(args.model, threads=args.threads)
-    options = CollapseOptions(match_exposure=args.match_exposure, ior=args.ior, min_mfp_cm=args.min_mfp_m * 100)
+    options = CollapseOptions(colour="model" if args.model_colour else "painted", ior=args.ior,
+                              min_mfp_cm=args.min_mfp_m * 100)
     table = build(model, options, args.step)
     save(table, args.out, overwrite=args.overwrite)
     m = table.meta

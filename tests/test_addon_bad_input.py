@@ -17,7 +17,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from blender_addon import bake as bake_cli  # noqa: E402
 from blender_addon import preferences  # noqa: E402
-from exporters import baking, colorimetry, maps  # noqa: E402
+from exporters import bake, colorimetry, maps  # noqa: E402
 from tests.addon_scene import run_invert, skin_object, snapshot, write_image  # noqa: E402
 from tests.onnx_fakes import missing_outputs_model, wrong_input_model  # noqa: E402
 
@@ -26,9 +26,9 @@ CODES = np.array([[[224, 172, 150], [150, 100, 80]], [[90, 60, 45], [224, 172, 1
 
 
 def bake_files(path: Path, out: Path) -> Path:
-    """Bake ``path`` with exporters.baking (every texel through the model) into ``out``."""
+    """Bake ``path`` with exporters.bake (every texel through the model) into ``out``."""
     out.mkdir()
-    baking.bake(path, out, preferences.DEFAULT_MODEL, baking.BakeOptions(threads=1))
+    bake.bake(path, out, preferences.DEFAULT_MODEL, bake.BakeOptions(threads=1))
     return out
 
 

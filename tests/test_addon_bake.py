@@ -15,7 +15,7 @@ import pytest
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from blender_addon import baker, nodes, preferences  # noqa: E402
-from exporters import baking, maps  # noqa: E402
+from exporters import bake, inference, maps  # noqa: E402
 from tests.addon_scene import (  # noqa: E402
     image_pixels,
     render_small,
@@ -28,7 +28,7 @@ from tests.addon_scene import (  # noqa: E402
 
 addon_utils = importlib.import_module("addon_utils")
 ADDON = "blender_addon"
-K = baking.inference.load_model(preferences.DEFAULT_MODEL, threads=1).k
+K = inference.load_model(preferences.DEFAULT_MODEL, threads=1).k
 
 
 @pytest.fixture(scope="module")
@@ -38,9 +38,9 @@ def albedo_png(tmp_path_factory) -> Path:
 
 @pytest.fixture(scope="module")
 def reference_maps(albedo_png, tmp_path_factory) -> Path:
-    """The same PNG baked by exporters.baking (no Blender involved): what the images must hold."""
+    """The same PNG baked by exporters.bake (no Blender involved): what the images must hold."""
     out = tmp_path_factory.mktemp("ref")
-    baking.bake(albedo_png, out, preferences.DEFAULT_MODEL, baking.BakeOptions(threads=1))
+    bake.bake(albedo_png, out, preferences.DEFAULT_MODEL, bake.BakeOptions(threads=1))
     return out
 
 
@@ -125,9 +125,9 @@ def test_generated_image_and_shared_group(addon, tmp_path):
     assert run_invert(obj2, image_name="painted", backend="SVM") == {"FINISHED"}
     g1, g2 = group_node(mat1), group_node(mat2)
     assert g1.node_tree == g2.node_tree  # one shared group, the first material still has it
-    model = baking.inference.load_model(preferences.DEFAULT_MODEL, threads=1)
+    model = inference.load_model(preferences.DEFAULT_MODEL, threads=1)
     albedo = maps.AlbedoImage(rgb=rows, alpha=None, colorspace="linear", source_format="float", n_clamped=0)
-    job = baking.BakeJob(albedo, tmp_path, "ref", model, baking.BakeOptions(threads=1))
+    job = bake.BakeJob(albedo, tmp_path, "ref", model, bake.BakeOptions(threads=1))
     for _ in job.steps():
         pass
     job.finish()

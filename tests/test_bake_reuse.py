@@ -17,7 +17,7 @@ import pytest
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import blender_addon  # noqa: E402,F401
-from exporters import baking, inference  # noqa: E402
+from exporters import bake, inference  # noqa: E402
 from tests.addon_scene import run_invert, skin_codes, skin_object, write_image  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -37,13 +37,13 @@ def state(folder: Path) -> dict:
 def test_rerun_does_no_inference(png, tmp_path):
     out = tmp_path / "maps"
     out.mkdir()
-    opts = baking.BakeOptions(threads=1, exact=True, targets=("cycles", "spectral"))
+    opts = bake.BakeOptions(threads=1, exact=True, targets=("cycles", "spectral"))
     before = inference.inference_counts()
-    first = baking.bake(png, out, MODEL, opts)
+    first = bake.bake(png, out, MODEL, opts)
     after_first = inference.inference_counts()
     assert not first.reused and after_first["texels"] - before["texels"] >= 35  # the 35 colours (+ load probe)
     files = state(out)
-    again = baking.bake(png, out, MODEL, opts)
+    again = bake.bake(png, out, MODEL, opts)
     assert inference.inference_counts() == after_first  # no session run, not even a model load
     assert again.reused and any("up to date" in n for n in again.notes)
     assert state(out) == files  # nothing rewritten
@@ -53,24 +53,24 @@ def test_rerun_does_no_inference(png, tmp_path):
 def test_what_makes_a_bake_out_of_date(png, tmp_path):
     out = tmp_path / "maps"
     out.mkdir()
-    opts = baking.BakeOptions(threads=1)
-    baking.bake(png, out, MODEL, opts)
+    opts = bake.BakeOptions(threads=1)
+    bake.bake(png, out, MODEL, opts)
     files = state(out)
-    for changed in (baking.BakeOptions(threads=1, unit_scale_m=0.01), baking.BakeOptions(threads=1, exact=True),
-                    baking.BakeOptions(threads=1, targets=("spectral",))):  # other options: not this bake
-        with pytest.raises(baking.BakeError, match="exist"):
-            baking.bake(png, out, MODEL, changed)
+    for changed in (bake.BakeOptions(threads=1, unit_scale_m=0.01), bake.BakeOptions(threads=1, exact=True),
+                    bake.BakeOptions(threads=1, targets=("spectral",))):  # other options: not this bake
+        with pytest.raises(bake.BakeError, match="exist"):
+            bake.bake(png, out, MODEL, changed)
     assert state(out) == files
-    assert baking.bake(png, out, MODEL, baking.BakeOptions(threads=1, force=True, overwrite=True)).reused is False
+    assert bake.bake(png, out, MODEL, bake.BakeOptions(threads=1, force=True, overwrite=True)).reused is False
     # a map edited since: the folder is no longer an up-to-date bake of this image
     color = out / "face_k1_color.exr"
     os.utime(color, ns=(color.stat().st_atime_ns, color.stat().st_mtime_ns + 10**9))
-    with pytest.raises(baking.BakeError, match="exist"):
-        baking.bake(png, out, MODEL, opts)
+    with pytest.raises(bake.BakeError, match="exist"):
+        bake.bake(png, out, MODEL, opts)
     # other image content under the same name
     write_image(png, skin_codes(5, 7), "uint8")
-    with pytest.raises(baking.BakeError, match="exist"):
-        baking.bake(png, out, MODEL, opts)
+    with pytest.raises(bake.BakeError, match="exist"):
+        bake.bake(png, out, MODEL, opts)
 
 
 def test_bake_py_reports_an_up_to_date_folder(png, tmp_path):

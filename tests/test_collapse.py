@@ -136,12 +136,13 @@ def test_dark_and_bright_shares_move_into_the_weights():
     assert np.all(dark.alpha >= collapse.ALPHA_MIN) and dark.low.any()
     assert np.all(dark.weight.sum(axis=1) < 1.0)  # the rest is absorbed
     np.testing.assert_allclose(dark.cycles_reflectance(), dark.target, rtol=1e-6)
-    bright = collapse.collapse(refl[1:], al[1:], s[1:], gg[1:], w[1:], target_scale=np.array([3.0]))
-    np.testing.assert_allclose(bright.target, 0.9, rtol=3e-3)
+    bright = collapse.collapse(refl[1:], al[1:], s[1:], gg[1:], w[1:], painted_rgb=np.full((1, 3), 0.9))
+    np.testing.assert_allclose(bright.target, 0.9, rtol=1e-12)
     assert np.all(bright.weight <= 1.0) and not bright.unreachable.any()
     np.testing.assert_allclose(bright.cycles_reflectance(), bright.target, rtol=1e-6)
-    white = collapse.collapse(refl[1:], al[1:], s[1:], gg[1:], w[1:], target_scale=np.array([12.0]))
-    assert white.unreachable.all()  # 3.6: more than K closures of weight 1 can show
+    one = [x[1:, :1] for x in (al, s, gg)]  # a single component cannot show white: R_cycles(1 - 1e-6) < 1
+    white = collapse.collapse(refl[1:], *one, np.ones_like(one[0]), painted_rgb=np.ones((1, 3)))
+    assert white.unreachable.all() and np.all(white.weight <= 1.0)
     for m in (dark, bright, white):
         assert np.all(np.isfinite(m.sigma_t_cm)) and np.all(m.sigma_t_cm > 0)
         assert np.all(m.alpha <= collapse.ALPHA_HARD_MAX)

@@ -25,11 +25,23 @@ def test_sampling_covers_the_ranges_and_quantises_thickness():
         for i, (low, high) in enumerate(PARAM_RANGES.values()):
             assert tones[:, i].min() >= low - 1e-12 and tones[:, i].max() <= high + 1e-12
         assert set(np.unique(tones[:, 2])) <= set(T_EPI_LEVELS_CM)
-    # Halton stratifies: each decile of every (non-quantised) marginal holds close to 10 % of the tones
-    for i in (0, 1, 3, 4):
+    # Halton stratifies: each decile of so2 and b_mel (uniform in both parts of the mixture) holds ~10 %
+    for i in (3, 4):
         low, high = list(PARAM_RANGES.values())[i]
         counts = np.histogram(train[:, i], bins=10, range=(low, high))[0]
         assert counts.min() >= 45 and counts.max() <= 58, counts
+    for tones in (train, val):
+        # the whole box stays covered: the fractions reach both ends of their range, on a log scale
+        for i in (0, 1):
+            low, high = list(PARAM_RANGES.values())[i]
+            x = np.log(tones[:, i] / low) / np.log(high / low)
+            assert x.min() < 0.02 and x.max() > 0.95
+            counts = np.histogram(x, bins=5, range=(0, 1))[0]
+            assert counts.min() > 0.08 * len(tones), counts
+        # a quarter of the tones come from the skin core (f_mel <= 0.2): with those from the box below 0.2,
+        # 0.25 + 0.75 * P(box f_mel <= 0.2) = 0.25 + 0.75 * ln(200) / ln(650)
+        expected = 0.25 + 0.75 * np.log(0.2 / 0.001) / np.log(0.65 / 0.001)
+        assert abs(np.mean(tones[:, 0] <= 0.2) - expected) < 0.05
     assert not np.allclose(train[:8], val[:8])
     np.testing.assert_array_equal(training_tones(16, seed=1), train[:16])  # deterministic
 

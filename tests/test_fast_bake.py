@@ -14,7 +14,7 @@ import numpy as np
 import onnx
 import pytest
 
-from exporters import baking, cycles, inference, maps, reflectance_tables, texel_table
+from exporters import bake, cycles, inference, maps, reflectance_tables, texel_records, texel_table
 from exporters.bench import skin_texture
 from exporters.colorimetry import delta_e76, linear_srgb_to_lab
 from exporters.constants import PARAM_NAMES, PARAM_RANGES
@@ -32,9 +32,9 @@ def skin_png(tmp_path_factory) -> Path:
     return write_image(tmp_path_factory.mktemp("skin") / "skin.png", skin_texture(48, seed=3), "uint8")
 
 
-def bake(png: Path, out: Path, **options) -> baking.BakeResult:
+def bake_png(png: Path, out: Path, **options) -> bake.BakeResult:
     out.mkdir(exist_ok=True)
-    return baking.bake(png, out, MODEL, baking.BakeOptions(threads=1, **options))
+    return bake.bake(png, out, MODEL, bake.BakeOptions(threads=1, **options))
 
 
 def appearance(folder: Path, stem: str, k: int) -> np.ndarray:
@@ -52,7 +52,7 @@ def appearance(folder: Path, stem: str, k: int) -> np.ndarray:
 
 def test_shipped_table_was_made_from_the_shipped_model():
     table = texel_table.load(texel_table.DEFAULT_PATH)
-    assert texel_table.DEFAULT_PATH == baking.default_table_path(MODEL)
+    assert texel_table.DEFAULT_PATH == bake.default_table_path(MODEL)
     assert table.model_sha256 == maps.sha256_file(MODEL) == CARD["files"]["skin_inversion.onnx"]["sha256"], \
         "rebuild the table: python -m exporters.texel_table --overwrite"
     assert table.k == CARD["K"] and table.options == texel_table.CollapseOptions()
@@ -64,8 +64,8 @@ def test_shipped_table_was_made_from_the_shipped_model():
 
 
 def test_table_bake_matches_exact_bake(skin_png, tmp_path):
-    fast = bake(skin_png, tmp_path / "fast", targets=("cycles", "spectral"))
-    exact = bake(skin_png, tmp_path / "exact", targets=("cycles", "spectral"), exact=True)
+    fast = bake_png(skin_png, tmp_path / "fast", targets=("cycles", "spectral"))
+    exact = bake_png(skin_png, tmp_path / "exact", targets=("cycles", "spectral"), exact=True)
     assert fast.stats["texels_from_table"] == 48 * 48 and exact.stats["texels_evaluated_exactly"] == 48 * 48
     de = delta_e76(appearance(tmp_path / "fast", "skin", fast.k), appearance(tmp_path / "exact", "skin", exact.k))
     assert de.mean() <= 0.1 and de.max() <= 0.5, (de.mean(), de.max())
@@ -83,11 +83,11 @@ def test_table_bake_matches_exact_bake(skin_png, tmp_path):
 def test_colours_outside_the_table_are_evaluated_exactly(tmp_path):
     codes = np.array([[[224, 172, 150], [30, 60, 220]], [[0, 255, 0], [150, 100, 80]]], np.uint8)  # blue, green
     png = write_image(tmp_path / "odd.png", codes, "uint8")
-    fast = bake(png, tmp_path / "fast")
-    bake(png, tmp_path / "exact", exact=True)
+    fast = bake_png(png, tmp_path / "fast")
+    bake_png(png, tmp_path / "exact", exact=True)
     assert fast.stats["texels_evaluated_exactly"] == 2 and fast.stats["texels_from_table"] == 2
-    # the non-skin texels: exact, stored as half (colour: step 2^-11 relative) or with 16 mantissa bits (radius)
-    for name, rtol in (("odd_k1_color.exr", 5e-4), ("odd_k2_radius.exr", 2e-5)):
+    # the non-skin texels: exact, stored as half (relative step 2^-11 for colour and for radii in half's range)
+    for name, rtol in (("odd_k1_color.exr", 5e-4), ("odd_k2_radius.exr", 5e-4)):
         a, b = maps.read_exr(tmp_path / "fast" / name)[0], maps.read_exr(tmp_path / "exact" / name)[0]
         np.testing.assert_allclose(a[0, 1], b[0, 1], rtol=rtol)
         np.testing.assert_allclose(a[1, 0], b[1, 0], rtol=rtol)
@@ -104,18 +104,28 @@ def _pixel_type(path: Path) -> str:
 
 
 def test_fast_bake_stores_bounded_maps_as_half_and_float_maps_keeps_float32(skin_png, tmp_path):
-    """Colour, weight and anisotropy maps (bounded to [-1, 1]) are half floats on the fast path, radius (which
-    spans decades, down to 1e-5 m) stays float32; --float-maps and exact bakes write float32 throughout."""
-    fast = bake(skin_png, tmp_path / "fast")
+    """Colour, weight and anisotropy maps (bounded to [-1, 1]) are half floats on the fast path, and so is the
+    radius when every radius lies in half's normal range (relative rounding <= 4.9e-4; here at unit scale 1, but
+    not in kilometre units, where skin's radii would be subnormal halves); --float-maps and exact bakes write
+    float32 throughout."""
+    fast = bake_png(skin_png, tmp_path / "fast")
     types = {f.name.split("_", 2)[-1]: _pixel_type(f) for f in fast.files if f.suffix == ".exr"}
-    assert types == {"color.exr": "half", "weight.exr": "half", "anisotropy.exr": "half", "radius.exr": "float"}
-    full = bake(skin_png, tmp_path / "full", half_maps=False)
+    assert types == {"color.exr": "half", "weight.exr": "half", "anisotropy.exr": "half", "radius.exr": "half"}
+    km = bake_png(skin_png, tmp_path / "km", unit_scale_m=1000.0)
+    assert {f.name.split("_", 2)[-1]: _pixel_type(f) for f in km.files if f.suffix == ".exr"}["radius.exr"] == "float"
+    radius = maps.read_exr(tmp_path / "fast" / "skin_k1_radius.exr")[0]
+    np.testing.assert_allclose(maps.read_exr(tmp_path / "km" / "skin_k1_radius.exr")[0] * 1000.0, radius, rtol=5e-4)
+    record = json.loads((tmp_path / "fast" / "skin_maps.json").read_text())
+    assert record["evaluation"]["half_kinds"] == ["anisotropy", "color", "radius", "weight"]
+    full = bake_png(skin_png, tmp_path / "full", half_maps=False)
     assert {_pixel_type(f) for f in full.files if f.suffix == ".exr"} == {"float"}
-    exact = bake(skin_png, tmp_path / "exact", exact=True)
+    exact = bake_png(skin_png, tmp_path / "exact", exact=True)
     assert {_pixel_type(f) for f in exact.files if f.suffix == ".exr"} == {"float"}
     for name in ("skin_k1_color.exr", "skin_k2_weight.exr"):
         a, b = maps.read_exr(tmp_path / "fast" / name)[0], maps.read_exr(tmp_path / "full" / name)[0]
         assert 0 < np.abs(a - b).max() <= 2.5e-4  # half's rounding error below 1: at most 2^-12 = 2.4e-4
+    a, b = (maps.read_exr(tmp_path / d / "skin_k2_radius.exr")[0] for d in ("fast", "full"))
+    assert 0 < np.abs(a / b - 1).max() <= 4.9e-4  # normal halves: relative rounding at most 2^-11
     stream = maps.MapStream(tmp_path / "h.exr", 2, 1, ("Y",), "1", pixel_type="half")
     with pytest.raises(ValueError, match="half-float range"):
         stream.write_rows(np.array([[1.0, 7e4]]))
@@ -156,7 +166,7 @@ def test_table_file_round_trip_and_bad_files(tmp_path):
     i = np.argwhere(np.all(ok, axis=3))[len(np.argwhere(np.all(ok, axis=3))) // 2]
     rgb, inside = texel_table.rgb_of_coords((back.origin + back.step * i)[None])
     assert inside[0] and np.all(i < n)
-    exact = baking.texel_records.exact_records(model, rgb.astype(np.float32), ("cycles", "spectral"), back.options)
+    exact = texel_records.exact_records(model, rgb.astype(np.float32), ("cycles", "spectral"), back.options)
     node = back.values[tuple(i)]
     k1 = back.channel("color_k1_r")
     assert node[k1] == pytest.approx(exact["color"][0, 0, 0], abs=span[k1] / 65534 + 1e-6)
@@ -170,29 +180,29 @@ def test_table_file_round_trip_and_bad_files(tmp_path):
 
 def test_other_options_build_and_cache_a_table(skin_png, tmp_path, monkeypatch):
     monkeypatch.setenv("SPECTRAL_SKIN_SSS_CACHE", str(tmp_path / "cache"))
-    opts = {"match_exposure": True, "cache_min_colours": 100, "cache_step": 0.1}
-    first = bake(skin_png, tmp_path / "a", **opts)
+    opts = {"model_colour": True, "cache_min_colours": 100, "cache_step": 0.1}
+    first = bake_png(skin_png, tmp_path / "a", **opts)
     assert any("built a fast-path table" in n for n in first.notes)
     cached = list((tmp_path / "cache").glob("table_*.npz"))
-    assert len(cached) == 1 and texel_table.load(cached[0]).options.match_exposure
+    assert len(cached) == 1 and texel_table.load(cached[0]).options.colour == "model"
     before = inference.inference_counts()
-    second = bake(skin_png, tmp_path / "b", **opts)  # another folder: a new bake, served by the cached table
+    second = bake_png(skin_png, tmp_path / "b", **opts)  # another folder: a new bake, served by the cached table
     assert not any("built" in n for n in second.notes)
     inferred = inference.inference_counts()["texels"] - before["texels"]  # distinct colours (+ 1: the load probe)
     assert inferred <= second.stats["texels_evaluated_exactly"] + 1 < second.stats["distinct_texels"] / 10
     record = json.loads((tmp_path / "b" / "skin_maps.json").read_text())
     assert record["evaluation"]["table"]["path"] == str(cached[0])
-    few = bake(skin_png, tmp_path / "c", match_exposure=True, ior=1.3, cache_step=0.1)  # 1,500 colours: no build
+    few = bake_png(skin_png, tmp_path / "c", model_colour=True, ior=1.3, cache_step=0.1)  # 1,500 colours: no build
     assert any("no fast-path table" in n for n in few.notes) and few.stats["texels_evaluated_exactly"] == 48 * 48
 
 
 def test_negligible_components_are_dropped(tmp_path):
     png = write_image(tmp_path / "u.png", np.full((2, 3, 3), (224, 172, 150), np.uint8), "uint8")
-    full = bake(png, tmp_path / "full")
+    full = bake_png(png, tmp_path / "full")
     shares = json.loads((tmp_path / "full" / "u_maps.json").read_text())["components"]["max_share"]
     assert full.k == CARD["K"] and min(shares) < 0.5  # no component of the shipped model is negligible
     threshold = float(np.sort(shares)[0] + 1e-3)  # just above the smallest component's share
-    pruned = bake(png, tmp_path / "pruned", prune_share=threshold)
+    pruned = bake_png(png, tmp_path / "pruned", prune_share=threshold)
     drop = int(np.argmin(shares)) + 1
     assert pruned.k == CARD["K"] - 1 and pruned.components == [k for k in range(1, CARD["K"] + 1) if k != drop]
     names = {p.name for p in (tmp_path / "pruned").iterdir()}
@@ -205,11 +215,11 @@ def test_negligible_components_are_dropped(tmp_path):
 
 
 def test_only_the_targets_asked_for(skin_png, tmp_path):
-    spectral = bake(skin_png, tmp_path / "s", targets=("spectral",), exact=True)
+    spectral = bake_png(skin_png, tmp_path / "s", targets=("spectral",), exact=True)
     assert {p.name for p in (tmp_path / "s").iterdir()} == {"skin_biophysical.exr", "skin_maps.json"}
-    assert "alpha_raised_to_0.2" not in spectral.stats  # the collapse never ran
-    cyc = bake(skin_png, tmp_path / "c", targets=("cycles",), exact=True)
-    assert "alpha_raised_to_0.2" in cyc.stats and not any("alpha" in p.name for p in (tmp_path / "c").iterdir())
+    assert "alpha_raised_to_floor" not in spectral.stats  # the collapse never ran
+    cyc = bake_png(skin_png, tmp_path / "c", targets=("cycles",), exact=True)
+    assert "alpha_raised_to_floor" in cyc.stats and not any("alpha" in p.name for p in (tmp_path / "c").iterdir())
 
 
 def test_uv_mask_evaluates_only_covered_texels(tmp_path):
@@ -219,12 +229,12 @@ def test_uv_mask_evaluates_only_covered_texels(tmp_path):
     png = write_image(tmp_path / "half.png", codes, "uint8")
     mask = np.zeros((4, 6), bool)
     mask[:, :3] = True
-    result = bake(png, tmp_path / "m", texel_mask=mask)
+    result = bake_png(png, tmp_path / "m", texel_mask=mask)
     assert result.stats["texels_not_covered_by_uvs"] == 12 and result.stats["distinct_texels"] == 2
     assert result.stats["texels_evaluated_exactly"] == 0  # the blue half was never evaluated
     color = maps.read_exr(tmp_path / "m" / "half_k1_color.exr")[0]
     np.testing.assert_array_equal(color[:, 3:], np.broadcast_to(color[1, 1], (4, 3, 3)))  # most common covered
-    with pytest.raises(baking.BakeError, match="shape"):
-        bake(png, tmp_path / "bad", texel_mask=np.ones((3, 3), bool))
-    with pytest.raises(baking.BakeError, match="cover no texel"):
-        bake(png, tmp_path / "none", texel_mask=np.zeros((4, 6), bool))
+    with pytest.raises(bake.BakeError, match="shape"):
+        bake_png(png, tmp_path / "bad", texel_mask=np.ones((3, 3), bool))
+    with pytest.raises(bake.BakeError, match="cover no texel"):
+        bake_png(png, tmp_path / "none", texel_mask=np.zeros((4, 6), bool))

@@ -256,4 +256,4 @@ def test_invert_takes_the_scene_unit_scale(addon, tmp_path):
         radii[scale] = image_pixels(gnode.inputs["k1 Radius"].links[0].from_node.image)[..., :3]
     ratio = radii[0.01] / radii[1.0]
     print(f"\nk1 radius at unit scale 0.01 / at 1.0: {ratio.min():.6f} .. {ratio.max():.6f}")
-    np.testing.assert_allclose(ratio, 100.0, rtol=1e-5)
+    np.testing.assert_allclose(ratio, 100.0, rtol=1e-3)  # fast-path radius maps are half floats (2^-11 each)

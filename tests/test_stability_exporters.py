@@ -294,6 +294,31 @@ def test_collapse_refuses_nan_and_inf(mix, bad, which, i):
 
 
 @SETTINGS
+@given(mixtures(), st.integers(0, 2**32 - 1))
+def test_collapse_to_the_painted_colour_is_finite_and_reaches_it(mix, seed):
+    n = len(mix[0])
+    rgb = np.random.default_rng(seed).choice([0.0, TINY, 1e-4, 0.3, 1.0, 1.5, HUGE], (n, 3))
+    media = collapse.collapse(*mix, painted_rgb=rgb)
+    np.testing.assert_array_equal(media.target, np.clip(rgb, 0.0, 1.0))
+    for name in ("alpha", "sigma_t_cm", "g", "weight"):
+        assert np.all(np.isfinite(getattr(media, name))), name
+    assert np.all((media.alpha >= collapse.ALPHA_MIN) & (media.alpha <= collapse.ALPHA_HARD_MAX))
+    assert media.spectral_clamped.shape == (n,) and media.spectral_clamped.dtype == bool
+    ok = ~media.unreachable
+    np.testing.assert_allclose(media.cycles_reflectance()[ok], media.target[ok], rtol=2e-3, atol=1e-12)
+    if n:
+        with pytest.raises(ValueError, match="finite"):
+            collapse.collapse(*mix, painted_rgb=with_bad(rgb, np.nan, seed))
+
+
+@SETTINGS
+@given(floats(0.0, 0.99), floats(1.0, 3.8))
+def test_face_on_albedo_is_an_albedo(g, ior):
+    value = collapse.face_on_albedo(g, ior)
+    assert np.isfinite(value) and collapse.ALPHA_MIN <= value < 1.0
+
+
+@SETTINGS
 @given(floats(-HUGE, HUGE))
 def test_alpha_soft_max(g):
     value = collapse.alpha_soft_max(np.clip(g, 0.0, 0.99))

@@ -199,3 +199,25 @@ def test_profile_fidelity_from_a_fits_file(tmp_path):
     assert rec["fits"]["K1"]["UV"] == pytest.approx(errs[1][done][:, uv].astype(np.float32).mean(), rel=1e-6)
     with pytest.raises(ValueError, match="validation_fits"):
         fit_profile_fidelity(tmp_path / "nothing")
+
+
+def test_lut_render_is_the_tables_mixture_in_closed_form():
+    """``gate.lut_render`` of a K = 2 mixture through a LUT filled from the dipole (albedo and g on the table's
+    nodes) against the dipole mixture in closed form (``training.fit.dipole``): R_d, and the profile in cm^-2
+    wherever it holds light (radial interpolation between bin centres only)."""
+    from training.fit.dipole import dipole_lut, dipole_mixture_profile
+    from training.sim.lut_interp import LookupTables
+    from training.validate.gate import Params, lut_render
+
+    tab = dipole_lut()
+    lut = LookupTables.from_arrays(**tab)
+    alpha = np.array([[tab["albedo"][30]] * 3, [tab["albedo"][36]] * 3])  # (K, W)
+    g = np.array([[tab["g"][9]] * 3, [tab["g"][10]] * 3])
+    sigma_t = np.array([[80.0, 150.0, 400.0], [30.0, 60.0, 90.0]])
+    w = np.array([[0.3, 0.5, 0.8], [0.7, 0.5, 0.2]])
+    out = lut_render(lut, Params(alpha, sigma_t, g, w))
+    ref_prof, ref_r = dipole_mixture_profile(R_EDGES_CM, tab["r_edges_mfp"], alpha.T, g.T, sigma_t.T, w.T)
+    np.testing.assert_allclose(out["R_d"], ref_r, rtol=1e-6)
+    assert np.all(out["R_d_stderr"] == 0) and np.all(out["truncated"] == 0)
+    lit = ref_prof > 1e-6 * ref_prof.max(axis=1, keepdims=True)
+    np.testing.assert_allclose(out["profile"][lit], ref_prof[lit], rtol=0.03)

@@ -55,10 +55,35 @@ def test_quick_writes_tables_and_figures(quick_run, monkeypatch):
                 assert _finite(vals[key]), (row, tone, key, vals[key])
     for band in ("UV", "Vis", "NIR"):
         assert all(_finite(v) for v in rec["banded"]["shape"][band].values())
+        for row in ("nn", "nn_painted", "nn_decoder"):  # the network's profile shape per band too
+            assert _finite(rec["banded"]["network_shape"][row]["representative"][band]), (row, band)
+    # the tables render the gate (noise-free: the floor is the ground truth's alone, the same for every row);
+    # our Monte Carlo renders every row too, as their check
+    assert rec["gate"]["renderer"] == "lut"
+    floors = {per_tone[r]["R01"]["noise_floor"] for r in ROWS}
+    assert len(floors) == 1, floors
+    for row in ROWS:
+        check = rec["gate"]["mc_check"][row]
+        assert _finite(check["delta_e_mc_vs_lut"]) and _finite(check["mc_noise_floor"]), row
     md = (out / "tables.md").read_text()
     for heading in ("## Table 1", "## Table 2", "## Table 3", "## Notes", "Quick mode"):
         assert heading in md, heading
     assert "3.19" in md and "51.40" in md  # the paper's numbers beside ours
+
+
+def test_painted_row_renders_the_painted_colour(quick_run):
+    """The gate's painted-colour row (the bake's default): the network's media corrected to the ground truth's
+    colour, rendered by our Monte Carlo, show that colour within the quick run's noise; the network's own media
+    do not (R01, very light: the network answers with a skin 1.9x darker)."""
+    out, _, _, _, _ = quick_run
+    rec = json.loads((out / "tables.json").read_text())
+    painted, own = rec["gate"]["per_tone"]["nn_painted"], rec["gate"]["per_tone"]["nn"]
+    for tone, vals in painted.items():
+        assert vals["clamped"] is False, tone
+        assert vals["delta_e"] <= 2 * vals["noise_floor"] + 1.0, (tone, vals["delta_e"], vals["noise_floor"])
+    assert painted["R01"]["delta_e"] < own["R01"]["delta_e"] / 3
+    assert _finite(rec["gate"]["rows"]["nn_painted"]["delta_e_edge"]["representative"])
+    assert "painted colour" in (out / "tables.md").read_text()
 
 
 def test_rerun_refuses_then_resumes_from_the_cache(quick_run):

@@ -31,6 +31,7 @@ BENCH_MODULES = [
     "blender_addon.bench",
     "exporters.bench",
     "training.validate.bench",
+    "training.cluster.bench",
 ]
 COLUMNS = ["workload", "ours", "anchor", "ratio", "error", "notes"]
 PACKAGES = ["torch", "numpy", "onnxruntime", "OpenImageIO", "colour-science", "bpy", "iadpython", "mitsuba"]

@@ -1,16 +1,19 @@
 """``make demo``: the best end-to-end path that exists today, saying what it did.
 
 1. Physics: simulate one representative skin tone with the Monte Carlo simulator at all 376 wavelengths,
-   print its reflectance and colour, and plot the swatches of the shipped tones.
-2. Artist path (training/demo_render.py): generate a skin albedo texture (light-to-dark, freckles,
-   redness), bake it with the Blender add-on's Invert Skin Albedo (the shipped model), apply it to
-   Suzanne and render with Cycles (demo/out/preview.png, beside an albedo-only render), and draw a
-   contact sheet of the baked maps.
+   print its reflectance and colour (the swatches of all 20 shipped tones are ``python -m training swatches``:
+   about 3 CPU-minutes, too long for the demo's 3-minute budget).
+2. Artist path (training/demo_render.py): generate light, medium and dark skin albedo textures (mottling,
+   freckles, redness), put them on a life-sized procedural head with ears and render each with Cycles three
+   ways: albedo only, Blender's Principled BSDF Random Walk (Skin) at its default radius, and Spectral Skin
+   SSS (the add-on's Invert Skin Albedo with the shipped model, default settings), lit so that translucency
+   shows (demo/out/translucency.png); and draw a contact sheet of the baked maps.
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import time
 from pathlib import Path
 
@@ -18,22 +21,31 @@ import numpy as np
 
 from exporters.colorimetry import spectrum_to_lab, spectrum_to_srgb
 from exporters.constants import WAVELENGTHS_NM
-from training.skin.swatches import plot_swatches, simulate_spectra
+from training import demo_render
+from training.export.card import summary
+from training.skin.swatches import simulate_spectra
 from training.skin.tones import load_tones
+from training.validate.cli import DEFAULT_MODEL_DIR
 
 
 def main(argv: list[str]) -> int:
     parser = argparse.ArgumentParser(prog="python -m training demo", description=__doc__.splitlines()[0])
     parser.add_argument("--out", type=Path, default=Path("demo/out"))
-    parser.add_argument("--photons", type=int, default=300, help="photons per wavelength (swatches: a fifth)")
+    parser.add_argument("--photons", type=int, default=300, help="photons per wavelength of the Monte Carlo tone")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--threads", type=int, default=1,
                         help="torch CPU threads (1 is fastest for the walker on a busy 2-core machine)")
-    parser.add_argument("--render-size", type=int, default=256, help="preview size in pixels")
-    parser.add_argument("--samples", type=int, default=64, help="Cycles samples of the preview")
+    parser.add_argument("--render-size", type=int, default=demo_render.RENDER_SIZE,
+                        help="size of each render in pixels")
+    parser.add_argument("--samples", type=int, default=demo_render.SAMPLES,
+                        help="Cycles samples per pixel of each render (then OpenImageDenoise)")
+    parser.add_argument("--figure", type=Path, default=None,
+                        help="also write the comparison figure here (.png or .jpg; the README's is "
+                             "docs/figures/demo_translucency.jpg)")
     args = parser.parse_args(argv)
     import torch
 
+    demo_start = time.perf_counter()
     torch.set_num_threads(max(1, args.threads))
     tones = load_tones()
     name = "R05"
@@ -49,29 +61,29 @@ def main(argv: list[str]) -> int:
     lab = spectrum_to_lab(spectrum, "D65")
     print(f"[demo] colour under D65: sRGB {np.round(np.clip(srgb, 0, 1) * 255).astype(int).tolist()}, "
           f"Lab {np.round(lab, 2).tolist()}  ({seconds:.1f} s of simulation)")
-    swatches = args.out / "swatches.png"
-    spectra = simulate_spectra(tones.values, max(args.photons // 5, 20), args.seed)
-    plot_swatches(tones, spectrum_to_srgb(spectra, "D65"), swatches,
-                  f"Simulated skin colours (D65), {max(args.photons // 5, 20)} photons per wavelength")
-    print(f"[demo] wrote {swatches}: the 10 representative and 10 outlier tones.")
     _artist_path(args)
+    print(f"[demo] done in {time.perf_counter() - demo_start:.0f} s.")
     return 0
 
 
 def _artist_path(args) -> None:
-    from training import demo_render
-
-    print("[demo] 2/2 artist path: procedural albedo -> Invert Skin Albedo (Blender add-on, shipped model) -> "
-          "Cycles render of Suzanne")
-    info = demo_render.run(args.out, render_size=args.render_size, samples=args.samples)
-    rec = info["record"]
+    card = json.loads((DEFAULT_MODEL_DIR / "skin_inversion.json").read_text())
+    print("[demo] 2/2 artist path: light, medium and dark procedural albedos on a life-sized head (Unit Scale 1 m), "
+          "each rendered\n[demo] (a) albedo only, (b) Principled BSDF Random Walk (Skin) at Blender's default radius, "
+          "(c) Spectral Skin SSS\n[demo] (Invert Skin Albedo, default settings) with the shipped model:\n"
+          f"[demo]   {summary(card)}")
+    info = demo_render.run(args.out, render_size=args.render_size, samples=args.samples, figure=args.figure)
     t = info["timings_s"]
-    print(f"[demo] baked {len(rec['files'])} maps (K={rec['K']}, {rec['image_size'][0]}x{rec['image_size'][1]}, "
-          f"{rec['stats']['distinct_texels']} distinct texels) in {t['bake']:.1f} s into {args.out / 'maps'}")
-    for note in rec["notes"]:
-        print(f"[demo]   note: {note}")
-    print(f"[demo] rendered {args.out / 'preview.png'} ({args.render_size} px, {args.samples} spp, "
-          f"{t['render']:.1f} s); albedo-only vs spectral SSS side by side: {args.out / 'preview_compare.png'}")
+    for tone, rec in info["records"].items():
+        w, h = rec["image_size"]
+        print(f"[demo] baked {tone}: {len(rec['files'])} maps (K={rec['K']}, {w}x{h}, "
+              f"{rec['stats']['distinct_texels']} distinct texels) in {t['bake_' + tone]:.1f} s "
+              f"into {args.out / 'maps' / tone}")
+    renders = sum(v for k, v in t.items() if k.startswith("render_"))
+    print(f"[demo] rendered 9 views ({args.render_size} px, {args.samples} spp + OpenImageDenoise) in {renders:.1f} s: "
+          f"{args.out / 'translucency.png'}" + (f" and {args.figure}" if args.figure else ""))
+    ear = info["ear_mean_srgb"]
+    for tone in info["records"]:
+        means = ", ".join(f"{m} {np.mean(ear[tone + '/' + m]):.2f}" for m, _ in demo_render.METHODS)
+        print(f"[demo]   back-lit ear, mean display value ({tone}): {means}")
     print(f"[demo] contact sheet of the maps: {args.out / 'maps_contact_sheet.png'}")
-    print("[demo] The shipped model is an integration model (16 training tones): the preview matches the painted "
-          "brightness\n[demo] (Match painted brightness on); its colours are only as good as that model.")

@@ -1,8 +1,23 @@
-"""The Blender half of ``make demo``: a procedural skin albedo texture, baked by the add-on's Invert Skin
-Albedo, applied to Suzanne and rendered with Cycles; a contact sheet of the maps.
+"""The Blender half of ``make demo``: what the method changes, shown on a life-sized head.
 
-Nothing is downloaded: the texture is generated here (light-to-dark variation, freckles, redness, pores).
-Run as ``python -m training.demo_render --out demo/out`` (``python -m training demo`` calls it).
+Three procedural skin albedo textures (light, medium, dark: mottling, redness, freckles, pores) on a
+procedural head with ears (training/demo_subject.py, metres, Unit Scale 1), each rendered three ways with
+Cycles under the same lights:
+
+(a) **albedo only**: the texture through a Diffuse BSDF (no light travels under the surface);
+(b) **Principled BSDF, Random Walk (Skin)**: Subsurface Weight 1, the texture as Base Color and Blender's
+    default Subsurface Radius and Scale (what an artist gets today by turning subsurface on);
+(c) **Spectral Skin SSS**: the add-on's Invert Skin Albedo on the texture at its default settings (maps
+    baked at the scene's Unit Scale, the node group wired into the material).
+
+The lights are set for translucency: a back light behind the head that reaches only the back of the ear
+(the ear's visible side has no direct light: whatever it shows came through it), and a key light from the
+front-right whose terminator crosses the cheek (subsurface light softens and reddens it).  A grid of the
+nine renders (demo/out/translucency.png; the README opens with it), the single renders, the ear's pixel
+mask, the bakes and a contact sheet of the medium tone's maps are written.
+
+Nothing is downloaded.  Run as ``python -m training.demo_render --out demo/out`` (``python -m training demo``
+calls it).
 """
 
 from __future__ import annotations
@@ -17,11 +32,27 @@ import numpy as np
 
 from exporters.colorimetry import srgb_decode, srgb_encode
 
-#: sRGB (0-255) anchors of the procedural texture.
-LIGHT = (236, 196, 176)
-DARK = (120, 80, 62)
-RED = (214, 120, 112)
-FRECKLE = (156, 98, 70)
+#: Base colours of the three demo textures, sRGB 8-bit codes: painted albedos of light, medium and dark skin,
+#: chosen for the demo (not measured).
+TONES: dict[str, tuple[int, int, int]] = {"light": (224, 178, 155), "medium": (176, 120, 90), "dark": (96, 62, 46)}
+#: Tint of red patches and of freckles, relative to the base colour (linear sRGB factors per channel).
+REDNESS_TINT = (1.0, 0.6, 0.65)
+FRECKLE_TINT = (0.45, 0.32, 0.25)
+#: The three ways the textures are rendered: key, label of the figure's column.
+METHODS: tuple[tuple[str, str], ...] = (
+    ("albedo", "(a) albedo only\nDiffuse BSDF"),
+    ("principled", "(b) Principled BSDF, Random Walk (Skin)\nBlender's default radius"),
+    ("spectral", "(c) Spectral Skin SSS\nInvert Skin Albedo, defaults"),
+)
+#: Camera (metres, looking at TARGET) and point lights: (location, power W, radius m).  The back light stands
+#: behind the head, which hides it from the camera: it lights the back of the ears and a rim of the head only.
+CAMERA_M, TARGET_M, LENS_MM = (-0.56, -0.50, 0.05), (-0.035, -0.02, -0.01), 100.0
+BACK_LIGHT = ((0.02, 0.50, 0.05), 40.0, 0.015)
+KEY_LIGHT = ((0.28, -0.62, 0.12), 20.0, 0.03)
+WORLD_GREY = 0.04
+#: Default size of each render (pixels, square) and Cycles samples per pixel (then OpenImageDenoise): the
+#: whole ``make demo`` stays within 3 minutes on 2 cores (README, Demo).
+RENDER_SIZE, SAMPLES = 256, 16
 
 
 def _value_noise(rng: np.random.Generator, size: int, cells: int) -> np.ndarray:
@@ -31,120 +62,191 @@ def _value_noise(rng: np.random.Generator, size: int, cells: int) -> np.ndarray:
     i = t.astype(int)
     f = t - i
     f = f * f * (3.0 - 2.0 * f)
-    rows = grid[i][:, None, :] * (1 - f)[:, None, None] + grid[i + 1][:, None, :] * f[:, None, None]  # (s, 1, c+1)
-    rows = rows[:, 0, :]
+    rows = grid[i] * (1 - f)[:, None] + grid[i + 1] * f[:, None]  # (size, cells+1)
     return rows[:, i] * (1 - f)[None, :] + rows[:, i + 1] * f[None, :]
 
 
-def skin_albedo_texture(size: int = 512, seed: int = 0) -> np.ndarray:
-    """(size, size, 3) uint8 sRGB skin albedo: a light-to-dark gradient from top to bottom (Suzanne's UV
-    halves are mirrored side by side, so a vertical gradient looks the same on both) with mottling, red
-    patches (cheek-like blotches), freckles (small dark spots, denser in the upper half) and pore noise."""
-    rng = np.random.default_rng(seed)
-    light, dark, red, freckle = (srgb_decode(np.array(c) / 255.0) for c in (LIGHT, DARK, RED, FRECKLE))
-    y = np.linspace(0.0, 1.0, size)[:, None, None]
-    mottle = (0.6 * _value_noise(rng, size, 5) + 0.4 * _value_noise(rng, size, 17) - 0.5)[..., None] * 0.3
-    tone = np.clip(y + mottle, 0.0, 1.0)
-    lin = light * (1.0 - tone) + dark * tone
-    blotch = 0.7 * _value_noise(rng, size, 4) + 0.3 * _value_noise(rng, size, 13)
-    redness = 0.45 * np.clip((blotch - 0.5) * 3.0, 0.0, 1.0)[..., None] ** 1.5
-    lin = lin * (1.0 - redness) + red * (lin / light) * redness
+def _freckles(rng: np.random.Generator, size: int, count: int) -> np.ndarray:
+    """(size, size) in [0, 1]: ``count`` small Gaussian spots (radius 0.8-2.6 texels at 512: 1-3 mm on the head)."""
     yy, xx = np.mgrid[0:size, 0:size]
-    n_freckles = size * size // 900
-    cy = rng.beta(1.6, 2.6, n_freckles) * size
-    cx = rng.uniform(0, size, n_freckles)
-    radius = rng.uniform(0.8, 2.6, n_freckles) * size / 512
+    cy = rng.uniform(0, size, count)
+    cx = rng.uniform(0, size, count)
+    radius = rng.uniform(0.8, 2.6, count) * size / 512
     spots = np.zeros((size, size))
     for y0, x0, r in zip(cy, cx, radius, strict=True):
         y1, y2, x1, x2 = (int(max(0, y0 - 4 * r)), int(min(size, y0 + 4 * r + 1)), int(max(0, x0 - 4 * r)),
                           int(min(size, x0 + 4 * r + 1)))
         d2 = (yy[y1:y2, x1:x2] - y0) ** 2 + (xx[y1:y2, x1:x2] - x0) ** 2
         spots[y1:y2, x1:x2] = np.maximum(spots[y1:y2, x1:x2], np.exp(-d2 / (2 * r * r)))
-    spots = (0.75 * spots)[..., None]
-    lin = lin * (1.0 - spots) + freckle * (lin / light) * spots
+    return spots
+
+
+def skin_albedo_texture(size: int = 512, seed: int = 0, base: tuple[int, int, int] = TONES["light"]) -> np.ndarray:
+    """(size, size, 3) uint8 sRGB skin albedo around ``base`` (sRGB codes): mottling (±15 % in brightness),
+    red patches (cheek-like blotches), freckles (small dark spots) and pore noise.  Rows run top to bottom
+    (v = 1 first)."""
+    rng = np.random.default_rng(seed)
+    lin = np.broadcast_to(srgb_decode(np.asarray(base, np.float64) / 255.0), (size, size, 3))
+    mottle = 0.6 * _value_noise(rng, size, 5) + 0.4 * _value_noise(rng, size, 17) - 0.5
+    lin = lin * (1.0 + 0.3 * mottle)[..., None]
+    blotch = 0.7 * _value_noise(rng, size, 4) + 0.3 * _value_noise(rng, size, 13)
+    redness = (0.6 * np.clip((blotch - 0.4) * 2.5, 0.0, 1.0) ** 1.5)[..., None]
+    lin = lin * (1.0 - redness + redness * np.asarray(REDNESS_TINT))
+    spots = (0.75 * _freckles(rng, size, size * size // 900))[..., None]
+    lin = lin * (1.0 - spots + spots * np.asarray(FRECKLE_TINT))
     lin = lin * (1.0 + 0.03 * rng.standard_normal((size, size, 1)))
     return np.round(np.clip(srgb_encode(np.clip(lin, 0.0, 1.0)), 0.0, 1.0) * 255).astype(np.uint8)
 
 
-def write_png(path: Path, codes: np.ndarray) -> Path:
+def write_image(path: Path, codes: np.ndarray) -> Path:
+    """Write (H, W, C) uint8 ``codes``; the format follows the extension (.png, or .jpg at quality 90)."""
     import OpenImageIO as oiio
 
     h, w, c = codes.shape
+    spec = oiio.ImageSpec(w, h, c, "uint8")
+    if Path(path).suffix.lower() in (".jpg", ".jpeg"):
+        spec.attribute("Compression", "jpeg:90")
     out = oiio.ImageOutput.create(str(path))
-    if out is None or not out.open(str(path), oiio.ImageSpec(w, h, c, "uint8")):
+    if out is None or not out.open(str(path), spec):
         raise OSError(f"cannot write {path}: {oiio.geterror()}")
     out.write_image(np.ascontiguousarray(codes))
     out.close()
     return path
 
 
-def _scene(albedo: Path, size: int, samples: int):
-    """Suzanne (subdivided, smooth) with a Principled material reading ``albedo``; camera, lights."""
+def read_image(path: Path) -> np.ndarray:
+    """(H, W, 3) float32 in [0, 1] of an 8-bit image, top row first."""
+    import OpenImageIO as oiio
+
+    buf = oiio.ImageBuf(str(path))
+    if buf.has_error:
+        raise OSError(f"cannot read {path}: {buf.geterror()}")
+    return buf.get_pixels(oiio.FLOAT)[..., :3]
+
+
+# ------------------------------------------------------------------------------------------------ scene
+def _look_at(obj, location, target) -> None:
+    from mathutils import Vector
+
+    obj.location = location
+    obj.rotation_euler = (Vector(target) - Vector(location)).to_track_quat("-Z", "Y").to_euler()
+
+
+def _point_light(scene, name: str, spec) -> None:
     import bpy
+
+    location, power, radius = spec
+    light = bpy.data.lights.new(name, "POINT")
+    light.energy, light.shadow_soft_size = power, radius
+    obj = bpy.data.objects.new(name, light)
+    obj.location = location
+    scene.collection.objects.link(obj)
+
+
+def _scene(size: int, samples: int):
+    """Empty factory scene at Unit Scale 1 (metres): the head, camera, back and key lights, a near-black world;
+    Cycles on the CPU with OpenImageDenoise.  Returns (scene, [head, left ear, right ear])."""
+    import bpy
+
+    from training import demo_subject
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
     scene = bpy.context.scene
     scene.render.engine = "CYCLES"
     scene.cycles.device = "CPU"
     scene.cycles.samples = samples
-    scene.cycles.use_denoising = True  # OpenImageDenoise: a clean preview at few samples
+    scene.cycles.use_denoising = True  # OpenImageDenoise: clean panels at few samples
+    scene.cycles.denoiser = "OPENIMAGEDENOISE"
     scene.cycles.seed = 1
+    scene.cycles.max_bounces = 6  # Blender: 12; a near-black world and two lights need fewer
     scene.render.resolution_x = scene.render.resolution_y = size
     scene.render.resolution_percentage = 100
     scene.view_settings.view_transform = "Standard"
     scene.unit_settings.system = "METRIC"
-    scene.unit_settings.scale_length = 0.1  # Suzanne is ~2.7 units wide: a 27 cm head
-    bpy.ops.mesh.primitive_monkey_add(size=2.0, calc_uvs=True)
-    obj = bpy.context.active_object
-    mod = obj.modifiers.new("Subdivision", "SUBSURF")
-    mod.levels = mod.render_levels = 2
-    for poly in obj.data.polygons:
-        poly.use_smooth = True
-    mat = bpy.data.materials.new("Skin")
-    obj.data.materials.append(mat)
-    tree = mat.node_tree
-    tex = tree.nodes.new("ShaderNodeTexImage")
-    tex.image = bpy.data.images.load(str(albedo))
-    tex.location = (-500.0, 200.0)
-    tree.links.new(tex.outputs["Color"], tree.nodes["Principled BSDF"].inputs["Base Color"])
-    tree.nodes.active = tex
+    scene.unit_settings.scale_length = 1.0  # the head is modelled in metres: the bake's radii are in metres
+    parts = demo_subject.build_head(scene.collection)
     world = bpy.data.worlds.new("World")
     scene.world = world
-    world.node_tree.nodes["Background"].inputs["Color"].default_value = (0.6, 0.65, 0.75, 1.0)
-    world.node_tree.nodes["Background"].inputs["Strength"].default_value = 0.35
+    world.node_tree.nodes["Background"].inputs["Color"].default_value = (WORLD_GREY,) * 3 + (1.0,)
     cam = bpy.data.objects.new("Camera", bpy.data.cameras.new("Camera"))
-    cam.location = (0.0, -7.0, 0.3)
-    cam.rotation_euler = (np.radians(88.0), 0.0, 0.0)
-    cam.data.lens = 85.0
+    cam.data.lens = LENS_MM
+    _look_at(cam, CAMERA_M, TARGET_M)
     scene.collection.objects.link(cam)
     scene.camera = cam
-    key = bpy.data.objects.new("Key", bpy.data.lights.new("Key", "AREA"))
-    key.data.energy, key.data.size = 600.0, 2.0
-    key.location = (-4.0, -4.0, 3.0)
-    key.rotation_euler = (np.radians(55.0), 0.0, np.radians(-45.0))
-    scene.collection.objects.link(key)
-    rim = bpy.data.objects.new("Rim", bpy.data.lights.new("Rim", "AREA"))
-    rim.data.energy, rim.data.size = 500.0, 1.0
-    rim.location = (3.5, 3.0, 1.5)
-    rim.rotation_euler = (np.radians(-70.0), 0.0, np.radians(45.0))
-    scene.collection.objects.link(rim)
-    return scene, obj
+    _point_light(scene, "Back light", BACK_LIGHT)
+    _point_light(scene, "Key light", KEY_LIGHT)
+    return scene, parts
+
+
+def _material(name: str, image, shader: str):
+    """A material reading ``image`` (sRGB) into ``shader``: "diffuse" (Diffuse BSDF), "principled_skin"
+    (Principled BSDF, Subsurface Weight 1, Random Walk (Skin), default radius and scale) or "principled"
+    (the Principled BSDF as it comes, before Invert Skin Albedo).  The image node is the active node."""
+    import bpy
+
+    mat = bpy.data.materials.new(name)
+    tree = mat.node_tree
+    principled = tree.nodes["Principled BSDF"]
+    tex = tree.nodes.new("ShaderNodeTexImage")
+    tex.image = image
+    tex.location = (-500.0, 200.0)
+    if shader == "diffuse":
+        diffuse = tree.nodes.new("ShaderNodeBsdfDiffuse")
+        tree.nodes.remove(principled)
+        tree.links.new(tex.outputs["Color"], diffuse.inputs["Color"])
+        tree.links.new(diffuse.outputs["BSDF"], tree.nodes["Material Output"].inputs["Surface"])
+    else:
+        tree.links.new(tex.outputs["Color"], principled.inputs["Base Color"])
+        if shader == "principled_skin":
+            principled.inputs["Subsurface Weight"].default_value = 1.0
+            principled.subsurface_method = "RANDOM_WALK_SKIN"
+    tree.nodes.active = tex
+    return mat
+
+
+def _assign(parts, material) -> None:
+    for obj in parts:
+        obj.data.materials.clear()
+        obj.data.materials.append(material)
 
 
 def _render(scene, path: Path) -> np.ndarray:
     import bpy
 
     scene.render.image_settings.file_format = "PNG"
+    scene.render.image_settings.color_depth = "8"
     scene.render.filepath = str(path)
     bpy.ops.render.render(write_still=True)
-    img = bpy.data.images.load(str(path))
-    px = np.empty(img.size[0] * img.size[1] * img.channels, np.float32)
-    img.pixels.foreach_get(px)
-    px = px.reshape(img.size[1], img.size[0], img.channels)[::-1, :, :3]
-    bpy.data.images.remove(img)
-    return px
+    return read_image(path)
 
 
+def _ear_mask(scene, parts, path: Path) -> np.ndarray:
+    """(H, W) bool: pixels where the camera sees the left ear (an emission-only render: ear white, head black,
+    no lights, no denoising)."""
+    import bpy
+
+    def emission(name: str, strength: float):
+        mat = bpy.data.materials.new(name)
+        tree = mat.node_tree
+        tree.nodes.remove(tree.nodes["Principled BSDF"])
+        node = tree.nodes.new("ShaderNodeEmission")
+        node.inputs["Strength"].default_value = strength
+        tree.links.new(node.outputs["Emission"], tree.nodes["Material Output"].inputs["Surface"])
+        return mat
+
+    head, left, right = parts
+    _assign([head, right], emission("Mask black", 0.0))
+    _assign([left], emission("Mask white", 1.0))
+    saved = (scene.cycles.samples, scene.cycles.use_denoising, scene.world)
+    scene.cycles.samples, scene.cycles.use_denoising, scene.world = 16, False, None
+    try:
+        mask = _render(scene, path)[..., 0] > 0.5
+    finally:
+        scene.cycles.samples, scene.cycles.use_denoising, scene.world = saved
+    return mask
+
+
+# ------------------------------------------------------------------------------------------------ figures
 def contact_sheet(maps_dir: Path, stem: str, k_count: int, albedo: np.ndarray, path: Path) -> Path:
     """Grid figure: the albedo, and per component the colour, radius (log10, channel mean), weight and
     anisotropy maps."""
@@ -186,73 +288,129 @@ def contact_sheet(maps_dir: Path, stem: str, k_count: int, albedo: np.ndarray, p
     return path
 
 
-def run(out: Path, texture_size: int = 512, render_size: int = 256, samples: int = 64) -> dict:
-    """Generate, bake (through the add-on's operator), render; returns what was written and timings."""
+def comparison_figure(panels: dict[tuple[str, str], np.ndarray], tones: list[str], paths: list[Path],
+                      footer: str = "") -> list[Path]:
+    """One row per tone, one column per method (METHODS), panels (H, W, 3) in [0, 1] shown pixel for pixel
+    under a header; ``footer``: a line of small print below.  Written to each of ``paths`` (.png or .jpg)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    h, w = next(iter(panels.values())).shape[:2]
+    gap, left, top, bottom = 4, 70, 44, 22 if footer else 4
+    grid = np.ones((len(tones) * (h + gap) - gap, len(METHODS) * (w + gap) - gap, 3), np.float32)
+    for i, tone in enumerate(tones):
+        for j, (method, _) in enumerate(METHODS):
+            grid[i * (h + gap):i * (h + gap) + h, j * (w + gap):j * (w + gap) + w] = panels[tone, method]
+    width, height = grid.shape[1] + left, grid.shape[0] + top + bottom
+    dpi = 100
+    fig = plt.figure(figsize=(width / dpi, height / dpi), dpi=dpi)
+    ax = fig.add_axes((left / width, bottom / height, grid.shape[1] / width, grid.shape[0] / height))
+    ax.imshow(np.clip(grid, 0.0, 1.0), interpolation="nearest")
+    ax.axis("off")
+    for j, (_, label) in enumerate(METHODS):
+        fig.text((left + j * (w + gap) + w / 2) / width, 1 - 4 / height, label, ha="center", va="top", fontsize=8.5)
+    for i, tone in enumerate(tones):
+        fig.text(6 / width, 1 - (top + i * (h + gap) + h / 2) / height, f"{tone}\nskin", ha="left", va="center",
+                 fontsize=9)
+    if footer:
+        fig.text(6 / width, 4 / height, footer, ha="left", va="bottom", fontsize=7, color="0.3")
+    fig.set_facecolor("white")
+    fig.canvas.draw()
+    codes = np.asarray(fig.canvas.buffer_rgba())[..., :3].copy()
+    plt.close(fig)
+    return [write_image(path, codes) for path in paths]
+
+
+# ------------------------------------------------------------------------------------------------ run
+def _fresh_dir(path: Path) -> Path:
+    """The demo's own output folder, emptied (it is replaced on every run)."""
+    if path.exists():
+        for f in path.iterdir():
+            f.unlink()
+    else:
+        path.mkdir(parents=True)
+    return path
+
+
+def _bake(obj, material, maps_dir: Path) -> dict:
+    """Invert Skin Albedo on ``material``'s image at the operator's default settings (maps saved as files in
+    ``maps_dir``); returns the bake's record (S_maps.json)."""
+    import bpy
+
+    obj.active_material = material
+    with bpy.context.temp_override(object=obj, active_object=obj):
+        result = bpy.ops.spectral_skin.invert_albedo(storage="FILES", output_dir=str(maps_dir))
+    if result != {"FINISHED"}:
+        raise RuntimeError(f"Invert Skin Albedo returned {result}")
+    return json.loads(next(maps_dir.glob("*_maps.json")).read_text())
+
+
+def run(out: Path, texture_size: int = 512, render_size: int = RENDER_SIZE, samples: int = SAMPLES,
+        tones: tuple[str, ...] = tuple(TONES), figure: Path | None = None) -> dict:
+    """Generate the textures, build the scene, bake (through the add-on's operator) and render every tone with
+    every method; write the figure (``out``/translucency.png, and ``figure`` when given).  Returns what was
+    written, the timings (s), the bake records and, per tone and method, the mean of the render (display sRGB
+    in [0, 1]) over the left ear's pixels."""
     import bpy
 
     sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
     import blender_addon
 
     out.mkdir(parents=True, exist_ok=True)
-    timings = {}
+    timings: dict[str, float] = {}
     t0 = time.perf_counter()
-    codes = skin_albedo_texture(texture_size)
-    albedo = write_png(out / "skin_albedo.png", codes)
-    timings["texture"] = time.perf_counter() - t0
-    maps_dir = out / "maps"
-    if maps_dir.exists():  # the demo's own output folder: replaced on every run
-        for f in maps_dir.iterdir():
-            f.unlink()
-    else:
-        maps_dir.mkdir()
-    scene, obj = _scene(albedo, render_size, samples)
+    scene, parts = _scene(render_size, samples)
+    timings["scene"] = time.perf_counter() - t0
+    ear = _ear_mask(scene, parts, out / "ear_mask.png")
+    materials, records, textures = {}, {}, {}
     blender_addon.register()
     try:
-        t0 = time.perf_counter()
-        _render(scene, out / "preview_albedo_only.png")
-        timings["render_albedo_only"] = time.perf_counter() - t0
-        t0 = time.perf_counter()
-        with bpy.context.temp_override(object=obj, active_object=obj):
-            result = bpy.ops.spectral_skin.invert_albedo(storage="FILES", output_dir=str(maps_dir),
-                                                         match_exposure=True, backend="AUTO")
-        timings["bake"] = time.perf_counter() - t0
-        if result != {"FINISHED"}:
-            raise RuntimeError(f"Invert Skin Albedo returned {result}")
-        t0 = time.perf_counter()
-        sss = _render(scene, out / "preview.png")
-        timings["render"] = time.perf_counter() - t0
+        for tone in tones:
+            t0 = time.perf_counter()
+            textures[tone] = skin_albedo_texture(texture_size, seed=0, base=TONES[tone])
+            image = bpy.data.images.load(str(write_image(out / f"skin_{tone}.png", textures[tone])))
+            for method, shader in zip((m for m, _ in METHODS), ("diffuse", "principled_skin", "principled"),
+                                      strict=True):
+                materials[tone, method] = _material(f"{tone} {method}", image, shader)
+            timings[f"texture_{tone}"] = time.perf_counter() - t0
+            t0 = time.perf_counter()
+            records[tone] = _bake(parts[0], materials[tone, "spectral"], _fresh_dir(out / "maps" / tone))
+            timings[f"bake_{tone}"] = time.perf_counter() - t0
     finally:
         blender_addon.unregister()
-    flat = _render_compare(out)
-    record = json.loads((maps_dir / "skin_albedo_maps.json").read_text())
-    contact_sheet(maps_dir, "skin_albedo", record["K"], codes, out / "maps_contact_sheet.png")
-    return {"files": ["skin_albedo.png", "maps/", "preview.png", "preview_albedo_only.png", "preview_compare.png",
-                      "maps_contact_sheet.png"], "timings_s": timings, "record": record,
-            "mean_rgb": {"albedo_only": flat, "spectral_sss": sss.reshape(-1, 3).mean(axis=0).tolist()}}
-
-
-def _render_compare(out: Path) -> list[float]:
-    """Side-by-side PNG: albedo-only render | spectral SSS render."""
-    import OpenImageIO as oiio
-
-    a = oiio.ImageBuf(str(out / "preview_albedo_only.png"))
-    b = oiio.ImageBuf(str(out / "preview.png"))
-    pa, pb = a.get_pixels(oiio.FLOAT), b.get_pixels(oiio.FLOAT)
-    both = np.concatenate([pa, np.ones((pa.shape[0], 4, pa.shape[2]), np.float32), pb], axis=1)
-    codes = np.round(np.clip(both, 0, 1) * 255).astype(np.uint8)
-    write_png(out / "preview_compare.png", codes)
-    return pa[..., :3].reshape(-1, 3).mean(axis=0).tolist()
+    panels, ear_means = {}, {}
+    for tone in tones:
+        for method, _ in METHODS:
+            _assign(parts, materials[tone, method])
+            t0 = time.perf_counter()
+            panels[tone, method] = _render(scene, out / f"render_{tone}_{method}.png")
+            timings[f"render_{tone}_{method}"] = time.perf_counter() - t0
+            ear_means[f"{tone}/{method}"] = panels[tone, method][ear].mean(axis=0).tolist()
+    footer = (f"Cycles {bpy.app.version_string}, {render_size} px, {samples} spp + OpenImageDenoise; head modelled "
+              f"in metres (Unit Scale 1), back light behind the ear, key light from the front right.")
+    comparison_figure(panels, list(tones), [out / "translucency.png", *([figure] if figure else [])], footer)
+    sheet_tone = "medium" if "medium" in tones else tones[0]
+    rec = records[sheet_tone]
+    contact_sheet(out / "maps" / sheet_tone, f"skin_{sheet_tone}", rec["K"], textures[sheet_tone],
+                  out / "maps_contact_sheet.png")
+    return {"files": ["translucency.png", "render_*.png", "skin_*.png", "ear_mask.png", "maps/",
+                      "maps_contact_sheet.png"],
+            "timings_s": timings, "records": records, "ear_mean_srgb": ear_means,
+            "ear_pixels": int(ear.sum())}
 
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m training.demo_render", description=__doc__.splitlines()[0])
     parser.add_argument("--out", type=Path, default=Path("demo/out"))
     parser.add_argument("--texture-size", type=int, default=512)
-    parser.add_argument("--render-size", type=int, default=256)
-    parser.add_argument("--samples", type=int, default=64)
+    parser.add_argument("--render-size", type=int, default=RENDER_SIZE)
+    parser.add_argument("--samples", type=int, default=SAMPLES)
+    parser.add_argument("--figure", type=Path, default=None, help="also write the figure here (.png or .jpg)")
     args = parser.parse_args(argv)
-    info = run(args.out, args.texture_size, args.render_size, args.samples)
-    print(json.dumps({k: v for k, v in info.items() if k != "record"}, indent=1))
+    info = run(args.out, args.texture_size, args.render_size, args.samples, figure=args.figure)
+    print(json.dumps({k: v for k, v in info.items() if k != "records"}, indent=1))
     return 0
 
 

@@ -35,11 +35,10 @@ def shard_path(out: Path, split: str, shard: tuple[int, int]) -> Path:
     return out / (f"{split}.h5" if n == 1 else f"{split}.shard{i}of{n}.h5")
 
 
-def build_split(
-    preset: Preset, split: str, out: Path, simulate: SimulateFn, *, method: str,
-    shard: tuple[int, int] = (0, 1), device: str = "cpu", progress: bool = True, chunk_tones: int | None = None,
-) -> Path:
-    """Simulate this shard's tones of ``split`` into ``out``; resumes a partial file of the same run."""
+def open_split(preset: Preset, split: str, out: Path, method: str, shard: tuple[int, int]
+               ) -> tuple[Path, np.ndarray, np.ndarray, int]:
+    """Create (or check, to resume) this shard's file of ``split``; returns (path, tones of the split,
+    positions of the shard's tones in it, the split's seed)."""
     tones, seed = split_tones(preset, split)
     i, n = shard
     index = np.arange(len(tones))[i::n]  # round-robin: every shard gets the same mix of tones
@@ -51,19 +50,55 @@ def build_split(
         store.check_matches(path, tones[index], attrs)
     else:
         store.create(path, tones[index], index, attrs)
+    return path, tones, index, seed
+
+
+def simulate_chunk(simulate: SimulateFn, tones: np.ndarray, photons: int, seed: int, device: str,
+                   *after) -> tuple[dict[str, np.ndarray], float]:
+    """One chunk of tones (B, 5): the stored fields (``store.SIMULATED``) and the seconds it took.
+
+    The chunk's seed derives from its first tone's position in the split: results do not depend on
+    sharding, resuming or where the chunk runs.  ``after``: what a cluster task waited for (the split's
+    walk chunks), unused.
+    """
+    if hasattr(simulate, "prepare"):
+        simulate.prepare()  # e.g. load the shared walk: not part of the chunk's time
+    t0 = time.perf_counter()
+    values = simulate(tones, photons, seed, device)
+    values["albedo_rgb"] = spectrum_to_linear_srgb(values["R_d"], "D65")
+    return values, time.perf_counter() - t0
+
+
+def build_split(
+    preset: Preset, split: str, out: Path, simulate: SimulateFn, *, method: str,
+    shard: tuple[int, int] = (0, 1), device: str = "cpu", progress: bool = True, chunk_tones: int | None = None,
+    job=None,
+) -> Path:
+    """Simulate this shard's tones of ``split`` into ``out``; resumes a partial file of the same run.
+
+    ``job`` (``training.cluster.engine.Job``): the chunks (and the missing walk chunks of a reweighting
+    ``simulate``) are submitted as its tasks, written here as they finish; call ``job.wait()`` after.
+    """
+    path, tones, index, seed = open_split(preset, split, out, method, shard)
     todo = store.pending(path)
-    if len(todo) and hasattr(simulate, "prepare"):
-        simulate.prepare()  # e.g. the reweighted estimator's shared walk, before per-chunk timing
-    bar = tqdm(total=len(index), initial=len(index) - len(todo), desc=f"{split} {i}/{n}", disable=not progress)
     chunk = chunk_tones or preset.chunk_tones
-    for start in range(0, len(todo), chunk):
-        rows = todo[start : start + chunk]
-        t0 = time.perf_counter()
-        # per-tone seeds derive from the global index: results do not depend on sharding or resuming
-        values = simulate(tones[index[rows]], preset.photons, seed * 1_000_003 + int(index[rows[0]]), device)
-        values["albedo_rgb"] = spectrum_to_linear_srgb(values["R_d"], "D65")
-        store.write_rows(path, rows, values, seconds=time.perf_counter() - t0)
-        bar.set_postfix(s_per_tone=f"{(time.perf_counter() - t0) / len(rows):.2f}")
+    chunks = [todo[start : start + chunk] for start in range(0, len(todo), chunk)]
+    if job is not None:
+        after = simulate.submit_walk(job) if len(todo) and hasattr(simulate, "submit_walk") else []
+        for rows in chunks:
+            job.submit(f"{split} tones {index[rows[0]]}-{index[rows[-1]]}", simulate_chunk, simulate,
+                       tones[index[rows]], preset.photons, seed * 1_000_003 + int(index[rows[0]]), device, *after,
+                       on_done=lambda res, rows=rows: store.write_rows(path, rows, res[0], seconds=res[1]))
+        return path
+    if len(todo) and hasattr(simulate, "prepare"):
+        simulate.prepare()  # the reweighted estimator's walk, before the bar starts
+    i, n = shard
+    bar = tqdm(total=len(index), initial=len(index) - len(todo), desc=f"{split} {i}/{n}", disable=not progress)
+    for rows in chunks:
+        values, seconds = simulate_chunk(simulate, tones[index[rows]], preset.photons,
+                                         seed * 1_000_003 + int(index[rows[0]]), device)
+        store.write_rows(path, rows, values, seconds=seconds)
+        bar.set_postfix(s_per_tone=f"{seconds / len(rows):.2f}")
         bar.update(len(rows))
     bar.close()
     return path

@@ -5,7 +5,9 @@
   python -m training dataset --summary --out DIR      # counts, times, sizes -> summary.json, summary.png
 
 Killing the job loses at most the chunk in flight: run the same command again to resume.  N machines
-(or N processes) each run one ``--shard I/N``; ``--merge`` checks the shards and joins them.
+(or N processes) each run one ``--shard I/N``; ``--merge`` checks the shards and joins them.  Or
+``--scheduler local:N | tcp://HOST:PORT | slurm[:JOBS]`` (``training.cluster``): the walk chunks, then the
+reweighting chunks, as Dask tasks; the same files as one process (no merge), resumed the same way.
 
 --method reweighted (default): one baseline walk per split (saved in DIR/trajectories_<split>/, in
 photon chunks, shared by the shards of a split) reweighted for every tone; --method direct: one full
@@ -20,6 +22,7 @@ import sys
 from pathlib import Path
 
 from training.cli import parse_shard
+from training.cluster import engine
 from training.data.build import SPLITS, build_split, merge
 from training.data.presets import PRESETS
 
@@ -34,8 +37,10 @@ def _estimator(args: argparse.Namespace, preset, split: str):
     from training.data.reweight import TrajectoryStore
 
     seed = split_tones(preset, split)[1]
+    walk = {k: v for k, v in (("chunk_photons", preset.walk_chunk_photons), ("max_steps", preset.walk_max_steps))
+            if v is not None}
     store = TrajectoryStore(args.out / f"trajectories_{split}", preset.photons, seed, device=args.device,
-                            shard=args.shard, progress=not args.no_progress)
+                            shard=args.shard, progress=not args.no_progress, **walk)
     return store, preset.reweighted_chunk_tones
 
 
@@ -55,6 +60,7 @@ def main(argv: list[str]) -> int:
     parser.add_argument("--device", default="cpu", help="cpu or cuda")
     parser.add_argument("--threads", type=int, default=1, help="torch CPU threads (the walker is fastest on 1)")
     parser.add_argument("--no-progress", action="store_true")
+    engine.add_option(parser)
     args = parser.parse_args(argv)
     import torch
 
@@ -75,12 +81,27 @@ def main(argv: list[str]) -> int:
             from dataclasses import replace
 
             preset = replace(preset, train_seed=args.seed, validation_seed=args.seed + 1)
-        for split in splits:
-            simulate, chunk = _estimator(args, preset, split)
-            path = build_split(preset, split, args.out, simulate, method=args.method, shard=args.shard,
-                               device=args.device, progress=not args.no_progress, chunk_tones=chunk)
-            print(path)
+        if args.scheduler is not None:
+            if args.shard != (0, 1):
+                raise ValueError("--shard and --scheduler exclude each other: the cluster takes every chunk")
+            args.out = args.out.resolve()  # the workers write the walk chunks there
+        with engine.job(args.scheduler, f"dataset {args.preset}", shared=[args.out], threads=max(1, args.threads),
+                        progress=not args.no_progress) as job:
+            paths = []
+            for split in splits:
+                simulate, chunk = _estimator(args, preset, split)
+                paths.append(build_split(preset, split, args.out, simulate, method=args.method, shard=args.shard,
+                                         device=args.device, progress=not args.no_progress, chunk_tones=chunk,
+                                         job=job))
+                if job is None:
+                    print(paths[-1])
+            if job is not None:
+                job.wait()
+                print("\n".join(map(str, paths)))
     except ValueError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
+    except engine.TaskError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 1
     return 0

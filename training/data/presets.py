@@ -10,7 +10,9 @@ class Preset:
     """How many tones, how many photons per wavelength, and how many tones per stored chunk.
 
     chunk_tones is for the direct estimator (minutes per tone); the reweighted estimator writes
-    ``reweighted_chunk_tones`` at a time (a chunk of it takes about a minute on one CPU core).
+    ``reweighted_chunk_tones`` at a time (a chunk of it takes about a minute on one CPU core).  Its walk
+    is saved in chunks of ``walk_chunk_photons`` photons (None: ``reweight.WALK_CHUNK_PHOTONS``) with a walk
+    cap of ``walk_max_steps`` steps per photon (None: ``reweight.WALK_MAX_STEPS``, the walker's default).
     """
 
     name: str
@@ -21,9 +23,16 @@ class Preset:
     reweighted_chunk_tones: int = 128
     train_seed: int = 1
     validation_seed: int = 2
+    walk_chunk_photons: int | None = None
+    walk_max_steps: int | None = None
 
 
 PRESETS: dict[str, Preset] = {
+    # Smoke: the smallest build with every kind of piece (3 walk chunks per split, several reweighting
+    # chunks) for tests of the plumbing (resume, shards, Dask): 1-3 s per walk chunk.  Its walk cap
+    # of 500 steps leaves ~12 % of the weight alive (recorded as `truncated`): not for science.
+    "smoke": Preset("smoke", n_train=6, n_validation=4, photons=60, chunk_tones=2, reweighted_chunk_tones=2,
+                    walk_chunk_photons=20, walk_max_steps=500),
     # CI: under 2 minutes on 2 CPU cores; enough to exercise every later stage end to end.
     "ci": Preset("ci", n_train=24, n_validation=8, photons=500, chunk_tones=8),
     # Laptop: >= 5,000 + 1,000 tones at noise equal to >= 1e5 direct photons per wavelength (a few hours,

@@ -23,6 +23,7 @@ from __future__ import annotations
 import itertools
 import json
 import math
+import os
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -31,15 +32,19 @@ import numpy as np
 import torch
 
 from exporters.constants import N_TISSUE, PARAM_NAMES, PARAM_RANGES, R_EDGES_CM
+from training.cluster.engine import memo
 from training.data.sampling import T_EPI_LEVELS_CM
 from training.sim.kernel import KIND_REFLECTED, KIND_TRUNCATED
 from training.sim.medium import LayeredMedium
 from training.sim.transport import mean_stderr, simulate_records
+from training.sim.walker import WalkConfig
 from training.skin.constants import SKIN_MODEL, SkinModelSpec
 from training.skin.model import absorption, scattering
 
 #: Photons per wavelength walked (and saved) at once: ~1.9e6 packets, a few hundred MB of records.
 WALK_CHUNK_PHOTONS = 5_000
+#: The walk cap per photon (steps) of the dataset's walks: the walker's default.
+WALK_MAX_STEPS = WalkConfig.max_steps
 #: Records are stored in bins of ``R_EDGES_CM`` (512 bins, index 512 = beyond 5 cm).
 N_BINS = R_EDGES_CM.size - 1
 
@@ -131,17 +136,19 @@ class Trajectories:
 def walk(
     photons: int, *, seed: int, mua0: np.ndarray, levels_cm: np.ndarray = T_EPI_LEVELS_CM,
     channels: np.ndarray | None = None, device: str = "cpu", compile: bool | str = "auto",
-    illumination: str = "diffuse", spec: SkinModelSpec = SKIN_MODEL,
+    illumination: str = "diffuse", spec: SkinModelSpec = SKIN_MODEL, max_steps: int = WALK_MAX_STEPS,
 ) -> Trajectories:
     """One baseline walk: ``photons`` per channel.
 
     ``illumination``: "diffuse" (the dataset's cosine-weighted lobe) or "normal" (a collimated beam, the
-    geometry of reflectance spectrophotometers; ``training.realskin``).
+    geometry of reflectance spectrophotometers; ``training.realskin``).  ``max_steps``: the walk cap per
+    photon (the weight still alive there is ``truncated``).
     """
     ch_idx = np.arange(np.asarray(mua0).size) if channels is None else np.asarray(channels, dtype=np.int64)
     medium = slab_medium(np.asarray(mua0)[ch_idx], levels_cm, ch_idx, spec)
     t0 = time.perf_counter()
-    rec = simulate_records(medium, photons, illumination=illumination, seed=seed, device=device, compile=compile)
+    rec = simulate_records(medium, photons, illumination=illumination, seed=seed, device=device, compile=compile,
+                           max_steps=max_steps)
     refl = rec.kind == KIND_REFLECTED
     order = np.argsort(rec.ch[refl], kind="stable")
     ch = rec.ch[refl][order]
@@ -232,19 +239,44 @@ class TrajectoryStore:
     ``seed * 1_000_003 + j``; a killed walk loses at most the chunk in flight.  Shards of a split
     share the folder: shard I/N walks chunks j = I (mod N) first, then whatever is still missing (a
     chunk may then be walked twice, never corrupted: chunks are deterministic and renamed into place).
+    On a Dask cluster (``submit_walk``) each missing chunk is a task that writes its file the same way.
     """
 
     def __init__(self, folder: Path, photons: int, seed: int, *, device: str = "cpu",
                  shard: tuple[int, int] = (0, 1), chunk_photons: int = WALK_CHUNK_PHOTONS,
-                 progress: bool = False) -> None:
+                 max_steps: int = WALK_MAX_STEPS, progress: bool = False) -> None:
         self.folder, self.photons, self.seed, self.device = Path(folder), int(photons), int(seed), device
-        self.shard, self.chunk, self.progress = shard, int(chunk_photons), progress
+        self.shard, self.chunk, self.max_steps, self.progress = shard, int(chunk_photons), int(max_steps), progress
         self.mua0 = baseline_absorption()
         self._traj: Trajectories | None = None
+
+    def __getstate__(self) -> dict:
+        return {**self.__dict__, "_traj": None}  # what a cluster task receives: the settings, not the walk
 
     def _chunks(self) -> list[tuple[int, int]]:
         n = math.ceil(self.photons / self.chunk)
         return [(j, min(self.chunk, self.photons - j * self.chunk)) for j in range(n)]
+
+    def chunk_path(self, j: int) -> Path:
+        return self.folder / f"chunk{j:04d}.npz"
+
+    def walk_chunk(self, j: int, count: int, verbose: bool = False) -> str:
+        """Walk chunk ``j`` (``count`` photons, seed ``seed * 1_000_003 + j``) into its file unless it is there."""
+        path = self.chunk_path(j)
+        if not path.exists():
+            if verbose:
+                print(f"walking trajectory chunk {j + 1}/{len(self._chunks())} ({count} photons x {self.mua0.size} "
+                      f"wavelengths) into {self.folder}", flush=True)
+            walk(count, seed=self.seed * 1_000_003 + j, mua0=self.mua0, device=self.device,
+                 compile=self.photons * self.mua0.size > (1 << 23), max_steps=self.max_steps).save(path)
+        return str(path)
+
+    def submit_walk(self, job) -> list:
+        """The missing chunks as tasks of ``job`` (``training.cluster.engine.Job``); their futures."""
+        self.folder.mkdir(parents=True, exist_ok=True)
+        self._check_manifest()
+        return [job.submit(f"walk {self.folder.name} chunk {j}", self.walk_chunk, j, count)
+                for j, count in self._chunks() if not self.chunk_path(j).exists()]
 
     def trajectories(self) -> Trajectories:
         """Walk the missing chunks (resumably) and return the whole walk (cached in memory)."""
@@ -255,17 +287,13 @@ class TrajectoryStore:
         chunks = self._chunks()
         i, n = self.shard
         todo = [c for c in chunks if c[0] % n == i] + [c for c in chunks if c[0] % n != i]
-        compile_ = self.photons * self.mua0.size > (1 << 23)
         for j, count in todo:
-            path = self.folder / f"chunk{j:04d}.npz"
-            if path.exists():
-                continue
-            if self.progress:
-                print(f"walking trajectory chunk {j + 1}/{len(chunks)} ({count} photons x {self.mua0.size} "
-                      f"wavelengths) into {self.folder}", flush=True)
-            walk(count, seed=self.seed * 1_000_003 + j, mua0=self.mua0, device=self.device,
-                 compile=compile_).save(path)
-        self._traj = Trajectories.concat([Trajectories.load(self.folder / f"chunk{j:04d}.npz") for j, _ in chunks])
+            self.walk_chunk(j, count, verbose=self.progress)
+        paths = [self.chunk_path(j) for j, _ in chunks]
+        # one loaded walk per process, shared by the store objects that a cluster worker's tasks unpickle
+        key = (str(self.folder.resolve()), self.photons, self.seed, self.chunk,
+               tuple(p.stat().st_mtime_ns for p in paths))
+        self._traj = memo("trajectories", key, lambda: Trajectories.concat([Trajectories.load(p) for p in paths]))
         return self._traj
 
     def _check_manifest(self) -> None:
@@ -276,10 +304,11 @@ class TrajectoryStore:
         a prefix of them.  The manifest keeps the largest count walked so far.
         """
         manifest = {"photons": self.photons, "seed": self.seed, "chunk_photons": self.chunk,
-                    "levels_cm": T_EPI_LEVELS_CM.tolist(), "mua0_sum": float(np.sum(self.mua0))}
+                    "levels_cm": T_EPI_LEVELS_CM.tolist(), "mua0_sum": float(np.sum(self.mua0)),
+                    "max_steps": self.max_steps}
         path = self.folder / "manifest.json"
         if path.exists():
-            old = json.loads(path.read_text())
+            old = {"max_steps": WALK_MAX_STEPS, **json.loads(path.read_text())}  # walks from before the cap was kept
             diff = [k for k in manifest if not np.allclose(old.get(k, np.nan), manifest[k], rtol=1e-12, atol=0)]
             if diff == ["photons"] and old["photons"] % self.chunk == 0 and self.photons % self.chunk == 0:
                 manifest["photons"] = max(int(old["photons"]), self.photons)
@@ -287,7 +316,7 @@ class TrajectoryStore:
                 raise ValueError(f"{self.folder} holds a walk with other {', '.join(diff)}: "
                                  "use another --out folder or delete it to walk again (a walk of whole "
                                  "chunks can grow or shrink by whole chunks).")
-        tmp = path.with_name(path.name + ".tmp")
+        tmp = path.with_name(f"{path.name}.{os.getpid()}.tmp")  # processes of one split may write it at once
         tmp.write_text(json.dumps(manifest, indent=1))
         tmp.rename(path)
 

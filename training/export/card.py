@@ -20,6 +20,7 @@ from exporters.constants import WAVELENGTHS_NM
 from training.export.graphs import output_shapes
 from training.model.chain import DECODER_OUTPUTS, INVERSION_OUTPUTS
 from training.model.config import FALLBACK_ALBEDO_RGB
+from training.paths import portable
 
 INPUT_DOMAIN = (
     "albedo_rgb: linear sRGB (D65). A row with any NaN/Inf component is replaced by the fallback colour "
@@ -83,12 +84,12 @@ def build_card(run: dict, graphs: dict[str, bytes], weights: str, parity: dict, 
                   "albedo_rgb": "linear sRGB (D65)"},
         "input_domain": INPUT_DOMAIN,
         "architecture": run["model"],
-        "dataset": {"path": str(dataset), **run.get("dataset_info", {}),
+        "dataset": {"path": portable(dataset), **run.get("dataset_info", {}),
                     "train_attrs": _h5_attrs(dataset / "train.h5"),
                     "validation_attrs": _h5_attrs(dataset / "validation.h5")},
-        "fits": {"path": run.get("fits"),
+        "fits": {"path": portable(run.get("fits")),
                  "train_attrs": _fits_attrs(Path(run["fits"])) if run.get("fits") else {}},
-        "lut": {"path": run["lut"], "sha256": run["lut_sha256"]},
+        "lut": {"path": portable(run["lut"]), "sha256": run["lut_sha256"]},
         "training": {"commands": run.get("commands", []), "config": run["train"], "losses": run.get("losses", {}),
                      "slab_depth_cm": run.get("slab_depth_cm")},
         "metrics": run.get("metrics", {}),
@@ -123,3 +124,33 @@ def update_validation(path: Path, validation: dict) -> None:
     tmp = path.with_name(path.name + ".tmp")
     tmp.write_text(json.dumps(card, indent=2) + "\n")
     tmp.replace(path)
+
+
+def summary(card: dict) -> str:
+    """One line saying what the model of ``card`` (a parsed model card) is, from the card alone: its name, K,
+    export date, the dataset it was trained on (preset, tone counts, photons per wavelength) and the colour
+    errors it was measured at (validation round trip; the validation gate's representative tones).  Whatever
+    the card lacks is left out."""
+    head = [card.get("name", "unnamed model")]
+    if "K" in card:
+        head.append(f"K = {card['K']}")
+    if card.get("created"):
+        head.append(f"exported {str(card['created'])[:10]}")
+    facts = []
+    ds = card.get("dataset", {})
+    if ds.get("n_train"):
+        preset = ds.get("train_attrs", {}).get("preset")
+        trained = f"trained on {'the ' + preset + ' dataset, ' if preset else ''}{ds['n_train']:,} training"
+        if ds.get("n_validation"):
+            trained += f" + {ds['n_validation']:,} validation"
+        trained += " tones"
+        if ds.get("photons"):
+            trained += f" at {ds['photons']:,} photons per wavelength"
+        facts.append(trained)
+    round_trip = card.get("metrics", {}).get("validation", {}).get("enc_delta_e76", {}).get("mean")
+    if round_trip is not None:
+        facts.append(f"colour round trip ΔE76 {round_trip:.2f} mean on its validation tones")
+    gate = card.get("validation", {}).get("gate", {}).get("nn_delta_e", {}).get("representative")
+    if gate is not None:
+        facts.append(f"validation gate ΔE76 {gate:.2f} on the representative tones")
+    return ", ".join(head) + (f": {'; '.join(facts)}" if facts else "")

@@ -7,7 +7,8 @@
         [--shard I/N] [--wavelength-stride S] [--anchor-every A] [--continuity sweep|anchors] [--max-tones M]
         [--select first|lightness] [--reuse DIR]:
         every tone x wavelength of the dataset's complete split files into OUT/<split>_fits.h5
-        (training/fit/dataset.py); resumable, shardable.
+        (training/fit/dataset.py); resumable, shardable; ``--scheduler local:N | tcp://HOST:PORT | slurm``
+        fits the chunks on a Dask cluster instead (``training.cluster``), into the same files.
     python -m training fit --dataset DIR --out DIR --summary: mean errors per split, K and band of those
         fits, with the Monte Carlo noise floor of the shape error; writes OUT/summary.json.
 
@@ -28,6 +29,7 @@ import torch
 
 from exporters.constants import anisotropy
 from training.cli import parse_shard
+from training.cluster import engine
 from training.fit.optimize import fit_schedule
 from training.sim.lut_interp import LookupTables
 
@@ -82,6 +84,7 @@ def _parser() -> argparse.ArgumentParser:
                    help="--dataset: do not fit; print (and write OUT/summary.json) the mean errors per split, K "
                         "and band of the fits in --out, with the MC noise floor of the shape error")
     p.add_argument("--no-progress", action="store_true")
+    engine.add_option(p)
     p.add_argument("--device", choices=("cpu", "cuda"), default="cpu")
     p.add_argument("--seed", type=int, default=0, help="torch seed (the fit itself is deterministic)")
     p.add_argument(
@@ -170,28 +173,41 @@ def _fit_dataset(args: argparse.Namespace, ks: tuple[int, ...], lut_path: Path) 
     if args.summary:
         return _summary(args.dataset, args.out, splits)
     shard = args.shard
-    lut = LookupTables.load(lut_path, dtype=torch.float64, device=args.device)
-    for split in splits:
-        path = fit_split(
-            args.dataset,
-            split,
-            lut,
-            lut_path,
-            ks,
-            args.out,
-            method=args.method,
-            shard=shard,
-            chunk_tones=args.chunk_tones,
-            wavelength_stride=args.wavelength_stride,
-            anchor_every=args.anchor_every,
-            max_tones=args.max_tones,
-            select=args.select,
-            relative_refl=args.refl_loss == "relative",
-            reuse=args.reuse,
-            progress=not args.no_progress,
-            continuity=args.continuity or ("sweep" if args.method == "lm" else "anchors"),
-        )
-        print(f"{split}: {path}")
+    if args.scheduler is not None and shard != (0, 1):
+        raise ValueError("--shard and --scheduler exclude each other: the cluster takes every chunk")
+    # on a cluster the workers load the LUT
+    lut = None if args.scheduler else LookupTables.load(lut_path, dtype=torch.float64, device=args.device)
+    shared = [args.dataset.resolve(), lut_path.resolve()]  # what the workers read
+    with engine.job(args.scheduler, "fit", shared=shared, threads=max(1, args.threads),
+                    progress=not args.no_progress) as job:
+        paths = {}
+        for split in splits:
+            paths[split] = fit_split(
+                args.dataset,
+                split,
+                lut,
+                lut_path,
+                ks,
+                args.out,
+                method=args.method,
+                shard=shard,
+                chunk_tones=args.chunk_tones,
+                wavelength_stride=args.wavelength_stride,
+                anchor_every=args.anchor_every,
+                max_tones=args.max_tones,
+                select=args.select,
+                relative_refl=args.refl_loss == "relative",
+                reuse=args.reuse,
+                progress=not args.no_progress,
+                job=job,
+                device=args.device,
+                continuity=args.continuity or ("sweep" if args.method == "lm" else "anchors"),
+            )
+            if job is None:
+                print(f"{split}: {paths[split]}")
+        if job is not None:
+            job.wait()
+            print("\n".join(f"{split}: {path}" for split, path in paths.items()))
     return 0
 
 
@@ -217,7 +233,9 @@ def main(argv: list[str]) -> int:
         torch.set_num_threads(max(1, args.threads))
     try:
         ks = _parse_k(args.k)
-        if args.device == "cuda" and not torch.cuda.is_available():
+        if args.scheduler is not None and args.dataset is None:
+            raise ValueError("--scheduler runs `fit --dataset` on a cluster; a --tone-file is fitted here")
+        if args.device == "cuda" and args.scheduler is None and not torch.cuda.is_available():
             raise ValueError("--device cuda: no CUDA device available")
         if args.dataset is not None and args.summary:  # reads the fits files only
             return _fit_dataset(args, ks, Path())
@@ -237,6 +255,9 @@ def main(argv: list[str]) -> int:
     except ValueError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
+    except engine.TaskError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 1
     if args.out is not None:
         if args.out.exists():
             print(f"error: {args.out} exists; not overwriting", file=sys.stderr)

@@ -245,8 +245,15 @@ def fit_split(
     reuse: Path | None = None,
     progress: bool = True,
     continuity: str = "sweep",
+    job=None,
+    device: str = "cpu",
 ) -> Path:
-    """Fit one split of ``dataset`` into ``out`` (see the module docstring); returns the output path."""
+    """Fit one split of ``dataset`` into ``out`` (see the module docstring); returns the output path.
+
+    ``job`` (``training.cluster.engine.Job``): the chunks are submitted as its tasks (each worker loads
+    the LUT at ``lut_path`` once onto ``device``, in float64 as the command does; ``lut`` may be None) and
+    written here as they finish; call ``job.wait()`` after.
+    """
     if wavelength_stride < 1 or anchor_every < 0 or (max_tones is not None and max_tones < 1):
         raise ValueError("wavelength_stride must be >= 1, anchor_every >= 0 and max_tones >= 1")
     if continuity not in CONTINUITY or (continuity == "sweep" and method != "lm"):
@@ -263,8 +270,6 @@ def fit_split(
         tones_all = f["tone"][:]
         albedo_all = f["albedo_rgb"][:]
         wl = f["wavelength_nm"][:]
-        edges = f["r_edges_cm"][:]
-        photons = float(f.attrs["photons"])
         src_attrs = {f"dataset_{k}": str(v) for k, v in f.attrs.items()}
     i, n = shard
     index = select_tones(albedo_all, max_tones, select)[i::n]
@@ -296,35 +301,63 @@ def fit_split(
             print(f"{split}: {copied} tones copied from {reuse}")
     with h5py.File(path, "r") as f:
         todo = np.flatnonzero(~f["done"][:])
-    dt, dev = lut.P.dtype, lut.P.device
-    g0 = torch.tensor(anisotropy(wl[widx]), dtype=dt, device=dev)
-    e = torch.tensor(edges, dtype=dt, device=dev)
+    chunks = [todo[start : start + chunk_tones] for start in range(0, len(todo), chunk_tones)]
+    opts = {"ks": ks, "method": method, "anchor_every": anchor_every, "relative_refl": relative_refl, "steps": steps,
+            "continuity": continuity}
+    if job is not None:
+        for rows in chunks:
+            job.submit(f"fit {split} tones {index[rows[0]]}-{index[rows[-1]]}", fit_rows_with, Path(lut_path).resolve(),
+                       attrs["lut_sha256"], src.resolve(), index[rows], widx, opts, device,
+                       on_done=lambda fits, rows=rows: _write_rows(path, rows, fits))
+        return path
     bar = tqdm(total=len(index), initial=len(index) - len(todo), desc=f"fit {split} {i}/{n}", disable=not progress)
-    for start in range(0, len(todo), chunk_tones):
-        rows = todo[start : start + chunk_tones]
-        with h5py.File(src, "r") as f:
-            arrs = [np.stack([f[name][index[r]][widx] for r in rows]).astype(np.float64)
-                    for name in ("profile", "R_d", "profile_stderr")]
-        prof, R, se = (torch.tensor(a, dtype=dt, device=dev) for a in arrs)
-        if continuity == "sweep":
-            fits = fit_tones_sweep(lut, prof, R, se, e, photons, g0, ks, anchor_every=anchor_every,
-                                   relative_refl=relative_refl, steps=steps, wavelength_nm=wl[widx])
-        else:
-            fits = fit_tones(lut, prof, R, se, e, photons, g0, ks, method=method, anchor_every=anchor_every,
-                             relative_refl=relative_refl, steps=steps)
-        with h5py.File(path, "r+") as f:
-            for k in ks:
-                for name, val in fits[k].items():
-                    arr = val.cpu().numpy().astype(np.float32)
-                    for j, r in enumerate(rows):
-                        f[f"k{k}_{name}"][r] = arr[j]
-            done = f["done"][:]
-            done[rows] = True
-            f["done"][:] = done
-            f.flush()
+    for rows in chunks:
+        _write_rows(path, rows, fit_rows(lut, src, index[rows], widx, **opts))
         bar.update(len(rows))
     bar.close()
     return path
+
+
+def fit_rows(lut: LookupTables, src: Path, rows: np.ndarray, widx: np.ndarray, *, ks: tuple[int, ...],
+             continuity: str = "sweep", method: str = "lm", **options) -> dict[str, np.ndarray]:
+    """Fit the tones at positions ``rows`` of the split file ``src`` at wavelength indices ``widx``
+    (``fit_tones_sweep`` with ``continuity`` "sweep", ``fit_tones`` with "anchors"; ``options`` theirs);
+    the rows of the fits file: {"k{K}_{name}": (len(rows), ...) float32}."""
+    dt, dev = lut.P.dtype, lut.P.device
+    with h5py.File(src, "r") as f:
+        wl, edges, photons = f["wavelength_nm"][:], f["r_edges_cm"][:], float(f.attrs["photons"])
+        arrs = [np.stack([f[name][r][widx] for r in rows]).astype(np.float64)
+                for name in ("profile", "R_d", "profile_stderr")]
+    prof, R, se = (torch.tensor(a, dtype=dt, device=dev) for a in arrs)
+    g0 = torch.tensor(anisotropy(wl[widx]), dtype=dt, device=dev)
+    e = torch.tensor(edges, dtype=dt, device=dev)
+    if continuity == "sweep":
+        fits = fit_tones_sweep(lut, prof, R, se, e, photons, g0, ks, wavelength_nm=wl[widx], **options)
+    else:
+        fits = fit_tones(lut, prof, R, se, e, photons, g0, ks, method=method, **options)
+    return {f"k{k}_{name}": val.cpu().numpy().astype(np.float32) for k in ks for name, val in fits[k].items()}
+
+
+def fit_rows_with(lut_path: Path, lut_sha256: str, src: Path, rows: np.ndarray, widx: np.ndarray, options: dict,
+                  device: str = "cpu") -> dict[str, np.ndarray]:
+    """``fit_rows`` on a cluster worker: the LUT is loaded once per worker (float64, as the command loads it)."""
+    from training.cluster.engine import memo
+
+    lut = memo("lut", (str(lut_path), lut_sha256, device),
+               lambda: LookupTables.load(lut_path, dtype=torch.float64, device=device))
+    return fit_rows(lut, src, rows, widx, **options)
+
+
+def _write_rows(path: Path, rows: np.ndarray, fits: dict[str, np.ndarray]) -> None:
+    """Store fitted rows (``fit_rows``) at local ``rows`` of the fits file and mark them done."""
+    with h5py.File(path, "r+") as f:
+        for name, arr in fits.items():
+            for j, r in enumerate(rows):
+                f[name][r] = arr[j]
+        done = f["done"][:]
+        done[rows] = True
+        f["done"][:] = done
+        f.flush()
 
 
 #: Bands of the paper's Table 2 (nm, lower bound inclusive).

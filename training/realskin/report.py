@@ -13,10 +13,15 @@ from training.realskin.fit import BANDS_NM, FIT_BAND_NM, SubjectFit, at_edge
 from training.realskin.measurements import Measurements
 
 
+def measured_lab(meas: Measurements, specular: float) -> np.ndarray:
+    """CIE Lab (D65) of each measured spectrum without its specular part (S, 3)."""
+    grid = np.stack([np.interp(WAVELENGTHS_NM, meas.wavelength_nm, r) for r in meas.reflectance]) - specular
+    return spectrum_to_lab(np.clip(grid, 0.0, 1.0))
+
+
 def measured_lightness(meas: Measurements, specular: float) -> np.ndarray:
     """CIE L* (D65) of each measured spectrum without its specular part (S,)."""
-    grid = np.stack([np.interp(WAVELENGTHS_NM, meas.wavelength_nm, r) for r in meas.reflectance]) - specular
-    return spectrum_to_lab(np.clip(grid, 0.0, 1.0))[:, 0]
+    return measured_lab(meas, specular)[:, 0]
 
 
 def _mean(fits: list[SubjectFit], band: str) -> float:

@@ -10,14 +10,20 @@ default min(g-n, 48) g nodes are simulated and the other columns interpolated al
 
     python -m training lut --albedo-n 800 --g-n 800 --photons 1000000 --out lut.npz --shard 0/2 &
     python -m training lut --albedo-n 800 --g-n 800 --photons 1000000 --out lut.npz --shard 1/2
+
+or, with Dask (``training.cluster``; one task per batch of g nodes, the same files)::
+
+    python -m training lut --albedo-n 800 --g-n 800 --photons 1000000 --out lut.npz --scheduler local:2
 """
 
 from __future__ import annotations
 
 import argparse
 import sys
+from pathlib import Path
 
 from training.cli import parse_shard
+from training.cluster import engine
 from training.sim.lut import ALBEDO_MAX, ALBEDO_MIN, G_MAX, G_MIN, G_NODES, MAX_STEPS, build_lut
 
 
@@ -43,30 +49,40 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--device", choices=("cpu", "cuda"), default="cpu")
     p.add_argument("--compile", choices=("auto", "on", "off"), default="auto",
                    help="torch.compile the walker step (auto: when photons x g-n > 4M)")
+    p.add_argument("--threads", type=int, default=1, help="torch CPU threads (the walker is fastest on 1)")
     p.add_argument("--no-progress", action="store_true")
+    engine.add_option(p)
     return p
 
 
 def main(argv: list[str]) -> int:
     """Run the command; returns the exit status (2 for bad input)."""
     args = _parser().parse_args(argv)
+    import torch
+
+    torch.set_num_threads(max(1, args.threads))
     compile_ = {"on": True, "off": False, "auto": args.photons * args.g_n > (1 << 22)}[args.compile]
     try:
-        if args.device == "cuda":
-            import torch
-
+        if args.device == "cuda" and args.scheduler is None:  # on a cluster, the workers' GPUs count
             if not torch.cuda.is_available():
                 raise ValueError("device 'cuda' requested but CUDA is not available")
         if args.max_steps < 1:
             raise ValueError("--max-steps must be >= 1")
-        build_lut(
-            args.out, args.albedo_n, args.g_n, args.photons, seed=args.seed, device=args.device,
-            albedo_range=(args.albedo_min, args.albedo_max), g_range=(args.g_min, args.g_max),
-            g_nodes=args.g_nodes, max_steps=args.max_steps, compile=compile_, shard=args.shard,
-            progress=not args.no_progress,
-            log=lambda s: print(s, file=sys.stderr),
-        )
+        if args.scheduler is not None and args.shard != (0, 1):
+            raise ValueError("--shard and --scheduler exclude each other: the cluster takes every g node")
+        out = Path(args.out).resolve() if args.scheduler is not None else args.out  # workers need its full path
+        with engine.job(args.scheduler, "lut", shared=[Path(out).parent], threads=max(1, args.threads),
+                        progress=not args.no_progress) as job:
+            build_lut(
+                out, args.albedo_n, args.g_n, args.photons, seed=args.seed, device=args.device,
+                albedo_range=(args.albedo_min, args.albedo_max), g_range=(args.g_min, args.g_max),
+                g_nodes=args.g_nodes, max_steps=args.max_steps, compile=compile_, shard=args.shard,
+                progress=not args.no_progress, log=lambda s: print(s, file=sys.stderr), job=job,
+            )
     except ValueError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
+    except engine.TaskError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 1
     return 0

@@ -122,6 +122,14 @@ class _Histograms:
         }
 
 
+def _matmul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """a @ b (float64) by torch, on the torch threads the command set (``--threads``, 1 by default): numpy's
+    BLAS picks its own thread count, and OpenBLAS's sums differ in the last bit between 1 and 2 threads,
+    so one process and a cluster's single-threaded workers would not write the same table bit for bit."""
+    return (torch.from_numpy(np.ascontiguousarray(a, dtype=np.float64))
+            @ torch.from_numpy(np.ascontiguousarray(b, dtype=np.float64))).numpy()
+
+
 def reweight(hist: dict[str, np.ndarray], albedo: np.ndarray, photons: int, r_edges: np.ndarray,
              bins: CountBins) -> dict[str, np.ndarray]:
     """Tables of one g column from its histograms.
@@ -137,11 +145,11 @@ def reweight(hist: dict[str, np.ndarray], albedo: np.ndarray, photons: int, r_ed
     log_a = np.log(albedo)
     e = np.exp(np.outer(nbar, log_a))  # (NB, NA): albedo^nbar
     dev = hwn - hw * nbar[None, :]  # first-order term: sum w (n - nbar)
-    praw = (hw @ e + (dev @ e) * log_a[None, :]) / photons  # (NR + 1, NA), overflow bin last
+    praw = (_matmul(hw, e) + _matmul(dev, e) * log_a[None, :]) / photons  # (NR + 1, NA), overflow bin last
     # the first-order term can dip below 0 in far bins holding a handful of photons; the exact sum is >= 0
     praw = np.clip(praw, 0.0, None)
     r_tot = praw.sum(0)
-    ev2 = (hw2 @ np.exp(np.outer(nbar, 2.0 * log_a))) / photons
+    ev2 = _matmul(hw2[None], np.exp(np.outer(nbar, 2.0 * log_a)))[0] / photons
     r_se = np.sqrt(np.clip(ev2 - r_tot**2, 0.0, None) / max(photons - 1, 1))
     inside = praw[:-1].sum(0)
     area = math.pi * np.diff(r_edges**2)
@@ -214,6 +222,7 @@ def build_lut(
     shard: tuple[int, int] = (0, 1),
     progress: bool = False,
     log=print,
+    job=None,
 ) -> Path | None:
     """Build the LUT file ``out`` (.npz, SPEC §2 keys plus R_stderr, R_trunc_bound, frac_inside, photons,
     g_nodes).
@@ -227,7 +236,9 @@ def build_lut(
     Resumable: g nodes are walked COLUMN_BATCH at a time and each is written to
     ``<out>.parts/g_XXXX.npz``; a rerun with the same arguments skips finished batches (a kill loses at
     most the batch in progress).  ``shard`` (I, N): this process walks batches b = I (mod N); the table
-    is written by whichever process finds every batch done (returns None otherwise).
+    is written by whichever process finds every batch done (returns None otherwise).  ``job``
+    (``training.cluster.engine.Job``): the unfinished batches are walked as its tasks instead, each writing
+    its nodes' files as this process would (same seeds, same files, same table).
     """
     out = Path(out)
     if photons < 2:
@@ -248,7 +259,13 @@ def build_lut(
         raise ValueError(f"{parts} holds columns of a different LUT build; remove it or change --out")
     mpath.write_text(json.dumps(manifest))
     t0 = time.perf_counter()
-    _walk_nodes(parts, nodes, albedo, photons, seed, device, max_steps, compile, shard, progress)
+    if job is None:
+        _walk_nodes(parts, nodes, albedo, photons, seed, device, max_steps, compile, shard, progress)
+    else:
+        for batch in _pending_batches(parts, nodes.size, shard):
+            job.submit(f"lut g nodes {batch[0]}-{batch[-1]}", walk_batch, parts, nodes, batch, albedo, photons, seed,
+                       device, max_steps, compile)
+        job.wait()
     missing = [j for j in range(n_nodes) if not (parts / f"g_{j:04d}.npz").exists()]
     if missing:
         log(f"shard {shard[0]}/{shard[1]} done; {len(missing)} g nodes left to other shards: run any shard "
@@ -265,12 +282,35 @@ def build_lut(
     return out
 
 
+def _batches(n_nodes: int, shard: tuple[int, int]) -> list[list[int]]:
+    """This shard's batches of g-node indices (COLUMN_BATCH at a time; batch b goes to shard b mod N)."""
+    batches = [list(range(b, min(b + COLUMN_BATCH, n_nodes))) for b in range(0, n_nodes, COLUMN_BATCH)]
+    return [b for i, b in enumerate(batches) if i % shard[1] == shard[0]]
+
+
+def _pending_batches(parts: Path, n_nodes: int, shard: tuple[int, int]) -> list[list[int]]:
+    """This shard's batches with a node file still missing."""
+    return [b for b in _batches(n_nodes, shard) if not all((parts / f"g_{j:04d}.npz").exists() for j in b)]
+
+
+def walk_batch(parts: Path, nodes: np.ndarray, batch: list[int], albedo: np.ndarray, photons: int, seed: int,
+               device: str, max_steps: int, compile: bool, progress=None) -> list[str]:
+    """Walk the g nodes ``batch`` in one run (seed ``column_seed(seed, batch[0])``) and write each node's
+    tables to parts/g_XXXX.npz (renamed into place: a kill leaves no half file); returns the files."""
+    cols = simulate_columns(nodes[batch], albedo, photons, seed=column_seed(seed, batch[0]), device=device,
+                            max_steps=max_steps, compile=compile, progress=progress)
+    for j, col in zip(batch, cols, strict=True):
+        tmp = parts / f"g_{j:04d}.tmp.npz"
+        np.savez(tmp, **col)
+        tmp.replace(parts / f"g_{j:04d}.npz")
+    return [str(parts / f"g_{j:04d}.npz") for j in batch]
+
+
 def _walk_nodes(parts: Path, nodes: np.ndarray, albedo: np.ndarray, photons: int, seed: int, device: str,
                 max_steps: int, compile: bool, shard: tuple[int, int], progress: bool) -> None:
     """Walk this shard's unfinished batches of g nodes; each node's table goes to parts/g_XXXX.npz."""
-    batches = [list(range(b, min(b + COLUMN_BATCH, nodes.size))) for b in range(0, nodes.size, COLUMN_BATCH)]
-    mine = [b for i, b in enumerate(batches) if i % shard[1] == shard[0]]
-    todo = [b for b in mine if not all((parts / f"g_{j:04d}.npz").exists() for j in b)]
+    mine = _batches(nodes.size, shard)
+    todo = _pending_batches(parts, nodes.size, shard)
     bar = None
     if progress:
         from tqdm import tqdm
@@ -278,12 +318,8 @@ def _walk_nodes(parts: Path, nodes: np.ndarray, albedo: np.ndarray, photons: int
         bar = tqdm(total=sum(len(b) for b in mine) * photons, unit="photon", unit_scale=True, smoothing=0.05)
         bar.update(sum(len(b) for b in mine if b not in todo) * photons)
     for batch in todo:
-        cols = simulate_columns(nodes[batch], albedo, photons, seed=column_seed(seed, batch[0]), device=device,
-                                max_steps=max_steps, compile=compile, progress=bar.update if bar else None)
-        for j, col in zip(batch, cols, strict=True):
-            tmp = parts / f"g_{j:04d}.tmp.npz"
-            np.savez(tmp, **col)
-            tmp.replace(parts / f"g_{j:04d}.npz")
+        walk_batch(parts, nodes, batch, albedo, photons, seed, device, max_steps, compile,
+                   progress=bar.update if bar else None)
     if bar:
         bar.close()
 

@@ -1,10 +1,13 @@
 """``python -m training validate``: the paper's validation (SPEC §6).
 
     python -m training validate --out DIR [--quick] [--lut LUT] [--dataset DIR --fits FITS] [--photons N]
-        [--gt-photons N] [--model-dir blender_addon/models] [--update-card] [--threads 1] [--overwrite]
+        [--gt-photons N] [--renderer lut|mc] [--model-dir blender_addon/models] [--update-card] [--threads 1]
+        [--overwrite]
 
 writes ``DIR/tables.md``, ``DIR/tables.json`` and the figures ``DIR/fig_*.png`` (``training.validate.run``;
-the gate is cached in ``DIR/cache``, so rerunning the same command after a kill continues).  The LUT is
+the gate is cached in ``DIR/cache``, so rerunning the same command after a kill continues;
+``--scheduler local:N | tcp://HOST:PORT | slurm`` walks the ground truth and fits and renders the tones
+on a Dask cluster, into the same cache).  The LUT is
 ``--lut`` or ``$SKIN_SSS_LUT``; ``--quick`` without one builds a tiny Monte Carlo LUT in ``DIR/cache``.
 ``--update-card`` writes the headline numbers into the model card's ``validation`` entry.
 
@@ -22,6 +25,7 @@ import sys
 from pathlib import Path
 
 from exporters import mitsuba as em
+from training.cluster import engine
 
 DEFAULT_MODEL_DIR = Path(__file__).resolve().parents[2] / "blender_addon" / "models"
 
@@ -38,9 +42,12 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--model-dir", type=Path, default=DEFAULT_MODEL_DIR,
                    help="folder with skin_inversion.onnx, skin_decoder.onnx and the card skin_inversion.json")
     p.add_argument("--photons", type=int, default=None,
-                   help="render photons per component and wavelength (default 2000; quick 150)")
+                   help="Monte Carlo render photons per component and wavelength, the check of the tables' renders "
+                        "(default 2000; quick 150; 0 skips them)")
     p.add_argument("--gt-photons", type=int, default=None,
-                   help="ground-truth photons per wavelength (default 50000; quick 400)")
+                   help="ground-truth photons per wavelength (default 500000, the paper's; quick 400)")
+    p.add_argument("--renderer", choices=("lut", "mc"), default="lut",
+                   help="what renders the gate's slabs: the lookup tables (default, noise-free) or our Monte Carlo")
     p.add_argument("--wavelength-step-nm", type=int, default=None,
                    help="validation wavelengths every N nm, a multiple of 2 (default 4; quick 20)")
     p.add_argument("--tones", default=None, help="comma-separated tone names of tones.csv (default: all 20)")
@@ -57,6 +64,7 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--device", choices=("cpu",), default="cpu", help="the gate runs on the CPU")
     p.add_argument("--overwrite", action="store_true", help="replace existing outputs in --out")
     p.add_argument("--no-progress", action="store_true")
+    engine.add_option(p)
     m = p.add_argument_group("--mitsuba strips")
     m.add_argument("--mitsuba", action="store_true", help="render the teaser-like Mitsuba 3 strips (PNG) into --out")
     m.add_argument("--size", type=int, default=64, help="pixels per tone (square)")
@@ -119,7 +127,7 @@ def _options(args):
         kw["gt_photons"] = args.gt_photons
     G.gate_tones(tones)  # unknown names: ValueError now, not after the LUT has loaded
     config = G.GateConfig(tones=tones, fit_method=args.fit_method, seed=args.seed, anchor_every=args.anchor_every,
-                          baseline_scale_m=args.baseline_scale, **kw)
+                          baseline_scale_m=args.baseline_scale, renderer=args.renderer, **kw)
     lut = args.lut or (Path(os.environ["SKIN_SSS_LUT"]) if os.environ.get("SKIN_SSS_LUT") else None)
     if lut is None:
         if not args.quick:
@@ -135,7 +143,8 @@ def _options(args):
         if len(sys.argv) > 1 and sys.argv[1] == "validate" else "python -m training validate (called from Python)"
     return R.Options(out=args.out, config=config, lut=Path(lut), model_dir=args.model_dir, dataset=args.dataset,
                      fits=args.fits, threads=args.threads, overwrite=args.overwrite, progress=not args.no_progress,
-                     quick=args.quick, nn_profile_tones=args.nn_profile_tones, command=command)
+                     quick=args.quick, nn_profile_tones=args.nn_profile_tones, command=command,
+                     scheduler=args.scheduler)
 
 
 def _summary(record: dict) -> str:
@@ -155,6 +164,9 @@ def main(argv: list[str]) -> int:
         print("error: give --out DIR (the folder for the tables and figures).", file=sys.stderr)
         return 2
     if args.mitsuba:
+        if args.scheduler is not None:
+            print("error: --scheduler runs the gate on a cluster; the --mitsuba strips render here.", file=sys.stderr)
+            return 2
         return _mitsuba(args)
     from training.validate import run as R
 
@@ -168,6 +180,9 @@ def main(argv: list[str]) -> int:
     except (ValueError, FileExistsError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
+    except engine.TaskError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 1
     print(_summary(record))
     print(f"wrote {args.out / 'tables.md'}, tables.json and the figures ({record['run']['timings_s']['total']:.0f} s)")
     return 0

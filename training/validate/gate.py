@@ -10,13 +10,21 @@ For each gate tone (``training/skin/tones.csv``: 10 representative + 10 outliers
    (``training.fit.optimize.fit_schedule``, the fitter of the dataset fits): at every validation
    wavelength for the representative tones (Table 2 needs UV and NIR), in the colour range for outliers.
 3. **Network**: ``skin_inversion.onnx`` on the ground truth's linear-sRGB albedo (what a user's texel
-   gives, the paper's "K = 3 NN"), and ``skin_decoder.onnx`` on the tone's true biophysical vector
-   (the translucency decoder alone).
+   gives, the paper's "K = 3 NN"); the same media with the painted colour (``exporters.painted``: the bake's
+   default, the albedo being the ground truth's colour), whose slab colour is the albedo by construction and
+   whose edge ΔE shows the translucency the network keeps; and ``skin_decoder.onnx`` on the tone's true
+   biophysical vector (the translucency decoder alone).
 4. **Baselines**: Chiang 2016 and Wrenninge 2017 albedo inversion (``training.validate.baselines``).
-5. **Render** every configuration with our mixture renderer (``training.validate.mixture``; each
-   component walked with all photons, combined with w_k(lambda), exact by linearity) at the validation
-   wavelengths inside 360-830 nm, with radial tallies; one batched walk per tone, cached in
-   ``cache/render_<tone>.npz`` with the parameters it rendered (a changed model re-renders its rows).
+5. **Render** every configuration at the validation wavelengths inside 360-830 nm, with radial profiles.
+   ``renderer="lut"`` (default): through the paper-scale lookup tables (``lut_render``): the slab's R_d and
+   profile are sum_k w_k R(alpha_k, g_k) and sum_k w_k R_k P(r | alpha_k, g_k, sigma_t,k) (exact by
+   linearity), and R, P are the tabulated Monte Carlo of exactly this slab (10^6 photons per simulated g
+   node, within 4.3e-4 of adding-doubling in R): noise-free at the gate's scale, so the noise floor is the
+   ground truth's alone.  Every configuration is also rendered by our Monte Carlo mixture renderer
+   (``training.validate.mixture``; each component walked with ``photons``, combined with w_k(lambda)), one
+   batched walk per tone cached in ``cache/render_<tone>.npz`` with the parameters it rendered (a changed model
+   re-renders its rows): the independent check of the tables' renders (``mc_check``), and the renderer
+   itself with ``renderer="mc"``.  ``photons=0`` skips it.
 
 Everything is deterministic for a fixed configuration and seed.
 """
@@ -42,13 +50,17 @@ from training.validate.mixture import check_mixture, combine, render_media
 
 #: Rows of the gate: joint-optimised fits, the network (RGB input; decoder on the true p), baselines.
 FIT_ROWS: tuple[str, ...] = ("k1", "k2", "k3")
-NN_ROWS: tuple[str, ...] = ("nn", "nn_decoder")
+NN_ROWS: tuple[str, ...] = ("nn", "nn_painted", "nn_decoder")
 ROWS: tuple[str, ...] = FIT_ROWS + NN_ROWS + bl.METHODS
 ROW_LABELS: dict[str, str] = {
     "k1": "K = 1 (joint-opt)", "k2": "K = 2 (joint-opt)", "k3": "K = 3 (joint-opt)",
-    "nn": "K = 3 NN (skin_inversion.onnx, RGB in)", "nn_decoder": "K = 3 NN decoder (true p in)",
+    "nn": "K = 3 NN (skin_inversion.onnx, RGB in)",
+    "nn_painted": "K = 3 NN, painted colour (RGB in; the bake's default)",
+    "nn_decoder": "K = 3 NN decoder (true p in)",
     **bl.LABELS,
 }
+#: Renderers of the gate's slabs (module docstring step 5).
+RENDERERS: tuple[str, ...] = ("lut", "mc")
 #: Photons per ground-truth walk chunk (saved between chunks).
 GT_CHUNK_PHOTONS = 5_000
 #: Walker packets above which torch.compile pays for itself (~10 s once per process; measured 3-5x faster).
@@ -60,7 +72,9 @@ class GateConfig:
     """Everything that determines the gate's numbers.
 
     ``wavelength_step``: grid samples between validation wavelengths (2 = every 4 nm);
-    ``gt_photons``: ground-truth photons per wavelength; ``photons``: render photons per component and
+    ``gt_photons``: ground-truth photons per wavelength (the paper's 500,000); ``renderer``: "lut" (the
+    tables, noise-free) or "mc" (our Monte Carlo renderer), module docstring step 5; ``photons``: Monte Carlo
+    render photons per component and
     wavelength; ``fit_steps``: per-stage iteration overrides of the fitter (None = its defaults);
     ``baseline_scale_m``: the baselines' Subsurface Scale (None = calibrated on ``calibration_tone``);
     ``anchor_every``: the fitter's anchor spacing (``training.fit.dataset``; 0 = full schedule everywhere);
@@ -70,8 +84,9 @@ class GateConfig:
 
     tones: tuple[str, ...]
     wavelength_step: int = 2
-    gt_photons: int = 50_000
+    gt_photons: int = 500_000
     photons: int = 2_000
+    renderer: str = "lut"
     fit_method: str = "lm"
     fit_steps: tuple[tuple[str, int], ...] | None = None
     anchor_every: int = 4
@@ -86,8 +101,12 @@ class GateConfig:
             raise ValueError("the gate needs at least one tone.")
         if self.wavelength_step < 1:
             raise ValueError("wavelength_step must be >= 1 grid sample.")
-        if self.gt_photons < 10 or self.photons < 10:
-            raise ValueError("photon counts must be >= 10.")
+        if self.gt_photons < 10 or not (self.photons == 0 or self.photons >= 10):
+            raise ValueError("photon counts must be >= 10 (render photons: 0 skips the Monte Carlo renders).")
+        if self.renderer not in RENDERERS:
+            raise ValueError(f"renderer must be one of {RENDERERS}.")
+        if self.renderer == "mc" and self.photons == 0:
+            raise ValueError("renderer 'mc' needs render photons > 0.")
         if self.anchor_every < 0:
             raise ValueError("anchor_every must be >= 0.")
         if self.fit_method not in ("lm", "paper"):
@@ -164,11 +183,22 @@ class Cache:
 
 
 # ------------------------------------------------------------------------------------------ ground truth
+def walk_gt_chunk(path: Path, j: int, count: int, seed: int, mua0: np.ndarray, levels: np.ndarray,
+                  wl_idx: np.ndarray, compile_: bool) -> str:
+    """Walk ground-truth chunk ``j`` (``count`` photons, seed ``seed * 1_000_003 + j``) into ``path``."""
+    from training.data.reweight import walk
+
+    walk(count, seed=seed * 1_000_003 + j, mua0=mua0, levels_cm=levels, channels=wl_idx, compile=compile_).save(path)
+    return str(path)
+
+
 def ground_truth(tones: np.ndarray, wl_idx: np.ndarray, photons: int, seed: int, cache: Cache,
-                 progress: Callable[[str], None] | None = None) -> dict[str, np.ndarray]:
+                 progress: Callable[[str], None] | None = None, job=None) -> dict[str, np.ndarray]:
     """R_d, R_d_stderr (T, W), profile, profile_stderr (T, W, 512) cm^-2 of the tones at grid indices
-    ``wl_idx`` by the dataset's reweighted estimator (module docstring); cached."""
-    from training.data.reweight import Trajectories, baseline_absorption, reweight, walk
+    ``wl_idx`` by the dataset's reweighted estimator (module docstring); cached.  ``job``
+    (``training.cluster.engine.Job``): the missing walk chunks are its tasks (same files), the
+    reweighting stays here."""
+    from training.data.reweight import Trajectories, baseline_absorption, reweight
 
     done = Cache.load(cache.path("gt.npz"))
     if done is not None:
@@ -186,10 +216,14 @@ def ground_truth(tones: np.ndarray, wl_idx: np.ndarray, photons: int, seed: int,
         path = folder / f"chunk{j:04d}.npz"
         if path.exists():
             continue
+        if job is not None:
+            job.submit(f"ground truth chunk {j}", walk_gt_chunk, path, j, count, seed, mua0, levels, wl_idx, compile_)
+            continue
         if progress:
             progress(f"ground truth: walking chunk {j + 1}/{n_chunks} ({count} photons x {wl_idx.size} wavelengths)")
-        walk(count, seed=seed * 1_000_003 + j, mua0=mua0, levels_cm=levels, channels=wl_idx,
-             compile=compile_).save(path)
+        walk_gt_chunk(path, j, count, seed, mua0, levels, wl_idx, compile_)
+    if job is not None:
+        job.wait()
     traj = Trajectories.concat([Trajectories.load(folder / f"chunk{j:04d}.npz") for j, _ in chunks])
     res = reweight(traj, tones)
     out = {"R_d": res["R_d"], "R_d_stderr": res["R_d_stderr"], "profile": res["profile"].astype(np.float32),
@@ -223,6 +257,18 @@ def fit_tone(lut, profile: np.ndarray, R_d: np.ndarray, stderr: np.ndarray, wl_i
     return out
 
 
+def fit_tone_into(path: Path, lut_path: Path, lut_sha256: str, *args) -> dict[str, np.ndarray]:
+    """``fit_tone(lut, *args)`` on a cluster worker, saved to the cache file ``path``; the LUT is loaded once
+    per worker, as ``training.validate.run`` loads it."""
+    from training.cluster.engine import memo
+    from training.sim.lut_interp import LookupTables
+
+    lut = memo("lut", (str(lut_path), lut_sha256, "cpu"), lambda: LookupTables.load(lut_path))
+    fit = fit_tone(lut, *args)
+    Cache.save(path, **fit)
+    return fit
+
+
 # ------------------------------------------------------------------------------------------ configurations
 @dataclass
 class Params:
@@ -245,6 +291,10 @@ class Params:
     def stacked(self) -> np.ndarray:
         """(4, K, W) for caching and comparison."""
         return np.stack([self.alpha, self.sigma_t, self.g, self.weight])
+
+    def cols(self, cols: np.ndarray) -> Params:
+        """The mixture at wavelength columns ``cols`` (same ``extra``)."""
+        return Params(self.alpha[:, cols], self.sigma_t[:, cols], self.g[:, cols], self.weight[:, cols], self.extra)
 
 
 def fit_params(fit: dict[str, np.ndarray], k: int, wl_idx: np.ndarray) -> Params:
@@ -311,6 +361,25 @@ def render_rows(rows: dict[str, Params], photons: int, seed: int, max_steps: int
 
 
 RENDER_KEYS = ("R_d", "R_d_stderr", "profile", "profile_stderr", "seconds", "truncated")
+
+
+def lut_render(lut, params: Params) -> dict[str, np.ndarray]:
+    """A mixture's slab through the lookup tables, in ``render_rows``' form: R_d (W,) = sum_k w_k R_k and
+    profile (W, 512) cm^-2 = sum_k w_k R_k P_k at the bin centres of ``R_EDGES_CM``; standard errors and
+    ``truncated`` 0 (module docstring step 5).  Albedos beyond the tables' range take their edge value."""
+    from training.sim.lut_interp import bin_centres
+
+    t0 = time.perf_counter()
+    dt = lut.P.dtype
+    a, s, g, w = (torch.as_tensor(np.asarray(v, np.float64).T, dtype=dt)
+                  for v in (params.alpha, params.sigma_t, params.g, params.weight))  # (W, K)
+    r_k = lut.reflectance(a, g)
+    p_k = lut.profile(torch.as_tensor(bin_centres(R_EDGES_CM), dtype=dt), a, g, s)  # (W, K, 512)
+    r_d = (w * r_k).sum(1).double().numpy()
+    prof = ((w * r_k)[..., None] * p_k).sum(1).numpy().astype(np.float32)
+    zeros = np.zeros_like(r_d)
+    return {"R_d": r_d, "R_d_stderr": zeros, "profile": prof, "profile_stderr": np.zeros_like(prof),
+            "seconds": np.float64(time.perf_counter() - t0), "truncated": zeros}
 
 
 def render_tone(cache: Cache, name: str, rows: dict[str, Params], photons: int, seed: int,

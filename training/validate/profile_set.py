@@ -18,6 +18,7 @@ import h5py
 import numpy as np
 
 from exporters.constants import WAVELENGTHS_NM
+from training.paths import portable
 from training.validate.metrics import BANDS, band_mask
 
 KS = (1, 2, 3)
@@ -73,7 +74,7 @@ def fit_profile_fidelity(fits_dir: Path, dataset: Path | None = None) -> dict:
             table[f"K{a}_to_K{b}_reduction"] = {key: 1.0 - table[f"K{b}"][key] / table[f"K{a}"][key]
                                                for key in ("mean", *BANDS) if table[f"K{a}"][key]}
     out = {"fits": table, "n_tones": n_tones, "n_tones_in_files": n_total, "n_wavelengths": int(wl.size),
-           "files": [str(p) for p in files], "attrs": attrs, "fitter_summary": None}
+           "files": [portable(p) for p in files], "attrs": attrs, "fitter_summary": None}
     if dataset is not None:
         from training.fit.dataset import summarise
 
@@ -118,4 +119,4 @@ def network_profile_fidelity(dataset_dir: Path, lut, decoder: Path, *, max_tones
             for weighting in errs:
                 errs[weighting].append(lut_mixture_shape_error(lut, p, target, all_rows, weighting))
     return {"nn_decoder": {w: _summary(np.stack(v)) for w, v in errs.items()}, "n_tones": int(rows.size),
-            "dataset": str(dataset_dir), "dataset_attrs": ds_attrs}
+            "dataset": portable(dataset_dir), "dataset_attrs": ds_attrs}

@@ -21,6 +21,7 @@ import torch
 
 from exporters.constants import R_EDGES_CM, WAVELENGTHS_NM
 from exporters.maps import sha256_file
+from training.paths import portable
 from training.validate import baselines as bl
 from training.validate import figures, paper
 from training.validate import gate as G
@@ -61,6 +62,7 @@ class Options:
     quick: bool = False
     nn_profile_tones: int | None = None
     command: str = ""
+    scheduler: object = None  # training.cluster.engine.Scheduler: ground-truth walk, fits and renders on Dask
 
 
 def _log(opts: Options, text: str) -> None:
@@ -68,10 +70,11 @@ def _log(opts: Options, text: str) -> None:
         print(text, file=sys.stderr, flush=True)
 
 
-def _bar(opts: Options, total: int, desc: str):
+def _bar(opts: Options, total: int, desc: str, job=None):
+    """A stage's bar (off under a cluster ``job``: its own bar counts the tasks)."""
     from tqdm import tqdm
 
-    return tqdm(total=total, desc=desc, disable=not opts.progress, file=sys.stderr)
+    return tqdm(total=total, desc=desc, disable=not opts.progress or job is not None, file=sys.stderr)
 
 
 def _mean(values) -> float | None:
@@ -119,21 +122,33 @@ def run(opts: Options) -> dict:
     # the model is not in the manifest: a new model re-renders only its own rows (gate.render_tone)
     models = {"sha256": {n: sha256_file(p) for n, p in files.items() if n != "card"}, "card": _card_info(files["card"])}
     manifest = {"config": G.config_record(cfg), "lut_sha256": lut_sha, "fit_profile_weighting": PROFILE_WEIGHTING}
-    cache = G.Cache(opts.out / "cache", manifest)
+    cache = G.Cache(opts.out.resolve() / "cache", manifest)  # absolute: cluster workers write there too
     cache.open(reset=opts.overwrite)
+    from training.cluster import engine
+
+    with engine.job(opts.scheduler, "validate", shared=[cache.folder, opts.lut.resolve()], threads=opts.threads,
+                    progress=opts.progress) as job:
+        return _run(opts, files, lut, lut_sha, cache, models, timings, t_start, job)
+
+
+def _run(opts, files, lut, lut_sha, cache, models, timings, t_start, job) -> dict:
+    """``run`` after the LUT and the cache are open; ``job``: a ``training.cluster.engine.Job`` or None."""
+    cfg = opts.config
     tones = G.gate_tones(cfg.tones)
     wl_val = G.validation_indices(cfg.wavelength_step)
     wl_r = G.render_indices(cfg.wavelength_step)
     col_r = np.searchsorted(wl_val, wl_r)
 
     t0 = time.perf_counter()
-    gt = G.ground_truth(tones.values, wl_val, cfg.gt_photons, cfg.seed, cache, lambda s: _log(opts, s))
+    gt = G.ground_truth(tones.values, wl_val, cfg.gt_photons, cfg.seed, cache, lambda s: _log(opts, s), job)
     timings["ground_truth"] = time.perf_counter() - t0
     albedo = G.albedo_rgb_of(gt["R_d"], wl_val)
 
-    fits = _fits(opts, lut, tones, gt, wl_val, wl_r, cache, timings)
+    fits = _fits(opts, lut, lut_sha, tones, gt, wl_val, wl_r, cache, timings, job)
     t0 = time.perf_counter()
-    inv, dec, dec_full = _network(opts, files, albedo, tones.values, wl_r)
+    inv, painted, dec, dec_full = _network(opts, files, albedo, tones.values, wl_val)
+    nn_val = {"nn": inv, "nn_painted": painted, "nn_decoder": dec}  # at every validation wavelength
+    inv, painted, dec = ([p.cols(col_r) for p in ps] for ps in (inv, painted, dec))
     scales, calib = _baseline_scales(opts, lut, tones, gt, albedo, wl_val)
     timings["network_and_calibration"] = time.perf_counter() - t0
 
@@ -142,21 +157,23 @@ def run(opts: Options) -> dict:
         rows = {}
         for k in (1, 2, 3):
             rows[f"k{k}"], held[f"{name}_k{k}"] = G.hold_lut_albedo(G.fit_params(fits[name], k, wl_r), lut)
-        rows |= {"nn": inv[i], "nn_decoder": dec[i]}
+        rows |= {"nn": inv[i], "nn_painted": painted[i], "nn_decoder": dec[i]}
         rows |= {m: G.baseline_params(m, albedo[i], scales[m], wl_r) for m in bl.METHODS}
         rows_per_tone.append(rows)
     t0 = time.perf_counter()
-    renders = []
-    bar = _bar(opts, len(tones.names), "gate renders")
-    for i, name in enumerate(tones.names):
-        renders.append(G.render_tone(cache, name, rows_per_tone[i], cfg.photons, cfg.seed * 1000 + i, cfg.max_steps))
-        bar.update(1)
-    bar.close()
-    timings["renders"] = time.perf_counter() - t0
+    mc = _mc_renders(opts, cache, tones, rows_per_tone, job) if cfg.photons > 0 else None
+    timings["mc_renders"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    tables = [{r: G.lut_render(lut, p) for r, p in rows.items()} for rows in rows_per_tone]
+    timings["lut_renders"] = time.perf_counter() - t0
+    renders = tables if cfg.renderer == "lut" else mc
 
     t0 = time.perf_counter()
     record = _gate_tables(lut, tones, gt, wl_val, wl_r, col_r, rows_per_tone, renders, fits, cfg, albedo)
+    record["gate"]["renderer"] = cfg.renderer
+    record["gate"]["mc_check"] = None if mc is None else _mc_check(tones, wl_r, tables, mc, cfg.seed)
     record["banded"] = _banded(lut, tones, gt, fits, wl_val, record, cfg.gt_photons)
+    record["banded"]["network_shape"] = _network_shape(lut, tones, gt, wl_val, nn_val, cfg.gt_photons)
     record["profile_fidelity"] = _profile_fidelity(opts, lut, files, record)
     record["goals"] = _goals(record)
     timings["metrics"] = time.perf_counter() - t0
@@ -179,7 +196,7 @@ def run(opts: Options) -> dict:
     timings["total"] = time.perf_counter() - t_start
     if {n: sha256_file(p) for n, p in files.items() if n != "card"} != models["sha256"]:
         raise ValueError(f"the model in {opts.model_dir} changed during the run: run the command again.")
-    record["run"] = _run_record(opts, cfg, lut, lut_sha, gt, fits, timings, models, renders)
+    record["run"] = _run_record(opts, cfg, lut, lut_sha, gt, fits, timings, models, mc or renders)
     from training.validate.tables import notes, write_tables
 
     record["notes"] = notes(record)
@@ -187,48 +204,113 @@ def run(opts: Options) -> dict:
     return record
 
 
-def _fits(opts, lut, tones, gt, wl_val, wl_r, cache, timings) -> dict[str, dict]:
+def _fits(opts, lut, lut_sha, tones, gt, wl_val, wl_r, cache, timings, job=None) -> dict[str, dict]:
     """Joint-optimised fits per tone (cached): all validation wavelengths for the representative tones,
-    the render wavelengths for the others."""
+    the render wavelengths for the others.  ``job``: the missing ones as its tasks."""
     cfg = opts.config
     t0 = time.perf_counter()
     fits = {}
-    bar = _bar(opts, len(tones.names), "joint-optimised fits K=1,2,3")
+    bar = _bar(opts, len(tones.names), "joint-optimised fits K=1,2,3", job)
     for i, name in enumerate(tones.names):
         idx = wl_val if tones.kinds[i] == "representative" else wl_r
         cols = np.searchsorted(wl_val, idx)
         path = cache.path(f"fit_{name}.npz")
         fit = G.Cache.load(path)
         if fit is None or not np.array_equal(fit["wl_idx"], idx):
-            fit = G.fit_tone(lut, gt["profile"][i][cols], gt["R_d"][i][cols], gt["profile_stderr"][i][cols], idx,
-                             cfg.gt_photons, cfg.fit_method, cfg.steps(), cfg.anchor_every)
+            args = (gt["profile"][i][cols], gt["R_d"][i][cols], gt["profile_stderr"][i][cols], idx,
+                    cfg.gt_photons, cfg.fit_method, cfg.steps(), cfg.anchor_every)
+            if job is not None:
+                job.submit(f"fit {name}", G.fit_tone_into, path, opts.lut.resolve(), lut_sha, *args,
+                           on_done=lambda f, name=name: fits.__setitem__(name, f))
+                continue
+            fit = G.fit_tone(lut, *args)
             G.Cache.save(path, **fit)
         fits[name] = fit
         bar.update(1)
+    if job is not None:
+        job.wait()
+        fits = {name: fits[name] for name in tones.names}  # in the tones' order
     bar.close()
     timings["fits"] = time.perf_counter() - t0
     return fits
 
 
-def _network(opts, files, albedo, tones, wl_r):
-    """The network's mixtures at the render wavelengths (inversion on the albedo, decoder on the true p),
-    and the decoder's full outputs (T, K, 376) for the figures (the paper's Fig. spectral_params)."""
+def _mc_renders(opts, cache, tones, rows_per_tone, job) -> list[dict]:
+    """Every configuration of every tone rendered by our Monte Carlo mixture renderer (cached per tone)."""
+    cfg = opts.config
+    renders = [None] * len(tones.names)
+    bar = _bar(opts, len(tones.names), "gate renders (Monte Carlo)", job)
+    for i, name in enumerate(tones.names):
+        args = (cache, name, rows_per_tone[i], cfg.photons, cfg.seed * 1000 + i, cfg.max_steps)
+        if job is not None:
+            job.submit(f"render {name}", G.render_tone, *args, on_done=lambda r, i=i: renders.__setitem__(i, r))
+            continue
+        renders[i] = G.render_tone(*args)
+        bar.update(1)
+    if job is not None:
+        job.wait()
+    bar.close()
+    return renders
+
+
+def _mc_check(tones, wl_r, tables, mc, seed: int) -> dict:
+    """The tables' renders against the Monte Carlo ones, per row: mean ΔE76 between the two slab colours over
+    all tones, beside the ΔE76 that the Monte Carlo renders' noise alone gives (M.noise_floor)."""
+    wl = WAVELENGTHS_NM[wl_r]
+    out = {}
+    for r in G.ROWS:
+        de = [float(M.delta_e(mc[i][r]["R_d"], tables[i][r]["R_d"], wl)) for i in range(len(tones.names))]
+        nf = [M.noise_floor(tables[i][r]["R_d"], 0.0 * tables[i][r]["R_d"], mc[i][r]["R_d_stderr"], wl, seed=seed + i)
+              for i in range(len(tones.names))]
+        out[r] = {"delta_e_mc_vs_lut": float(np.mean(de)), "mc_noise_floor": float(np.mean(nf)),
+                  "max_delta_e_mc_vs_lut": float(np.max(de))}
+    return out
+
+
+def _network_shape(lut, tones, gt, wl_val, nn_val, photons) -> dict:
+    """The network rows' L_shape through the LUT (rendered weighting) per band at every validation wavelength:
+    means over the representative tones and over all tones (the fits' own are in Table 2)."""
+    wl = WAVELENGTHS_NM[wl_val]
+    all_cols = np.arange(wl_val.size)
+    errs = {r: [] for r in nn_val}
+    for i in range(len(tones.names)):
+        target = _target(lut, gt, i, all_cols, photons)
+        for r, params in nn_val.items():
+            errs[r].append(G.lut_mixture_shape_error(lut, params[i], target, all_cols))
+    groups = {"representative": [i for i, k in enumerate(tones.kinds) if k == "representative"],
+              "all": list(range(len(tones.names)))}
+    out = {}
+    for r, e in errs.items():
+        e = np.stack(e)  # (T, W)
+        out[r] = {kind: {band: (float(np.mean(e[idx][:, M.band_mask(wl, band)])) if idx and M.band_mask(wl, band).any()
+                                else None) for band in M.BANDS} for kind, idx in groups.items()}
+    return out
+
+
+def _network(opts, files, albedo, tones, wl_idx):
+    """The network's mixtures at the grid indices ``wl_idx`` (inversion on the albedo, as it is and with the
+    painted colour of the albedo; decoder on the true p), and the decoder's full outputs (T, K, 376) for the
+    figures (the paper's Fig. spectral_params)."""
     from exporters import inference
     from exporters.mitsuba import decode
+    from exporters.painted import paint_mixture
 
     model = inference.load_model(files["skin_inversion.onnx"], threads=opts.threads)
     out = model.run(np.asarray(albedo, dtype=np.float32))
-    inv = [G.Params(out["alpha"][i][:, wl_r], out["sigma_t"][i][:, wl_r], out["g"][i][:, wl_r],
-                    out["weight"][i][:, wl_r],
+    inv = [G.Params(out["alpha"][i][:, wl_idx], out["sigma_t"][i][:, wl_idx], out["g"][i][:, wl_idx],
+                    out["weight"][i][:, wl_idx],
                     extra={"exposure": float(out["exposure"][i, 0]), "biophysical": out["biophysical"][i].tolist()})
            for i in range(len(albedo))]
+    p = paint_mixture(out["alpha"], out["sigma_t"], out["g"], out["weight"], albedo)
+    painted = [G.Params(p.alpha[i][:, wl_idx], p.sigma_t[i][:, wl_idx], out["g"][i][:, wl_idx],
+                        out["weight"][i][:, wl_idx], extra={"clamped": bool(p.clamped[i])}) for i in range(len(albedo))]
     dec, full = [], {"alpha": [], "sigma_t": [], "weight": []}
     for tone in tones:
         m = decode(tone, files["skin_decoder.onnx"])
-        dec.append(G.Params(m.alpha[:, wl_r], m.sigma_t[:, wl_r], m.g[:, wl_r], m.weight[:, wl_r]))
+        dec.append(G.Params(m.alpha[:, wl_idx], m.sigma_t[:, wl_idx], m.g[:, wl_idx], m.weight[:, wl_idx]))
         for key in full:
             full[key].append(getattr(m, key))
-    return inv, dec, {k: np.stack(v) for k, v in full.items()}
+    return inv, painted, dec, {k: np.stack(v) for k, v in full.items()}
 
 
 def _baseline_scales(opts, lut, tones, gt, albedo, wl_val) -> tuple[dict[str, float], dict]:
@@ -284,10 +366,7 @@ def _gate_tables(lut, tones, gt, wl_val, wl_r, col_r, rows_per_tone, renders, fi
             }
             per_row[r][name] = rec
         nn_vs_k3[name] = float(M.delta_e(renders[i]["nn"]["R_d"], renders[i]["k3"]["R_d"], wl))
-        # the network's render times its exposure (what --match-exposure bakes): its colour without the
-        # brightness that the exposure absorbs
-        exposure = rows_per_tone[i]["nn"].extra["exposure"]
-        per_row["nn"][name]["delta_e_times_exposure"] = float(M.delta_e(exposure * renders[i]["nn"]["R_d"], g_r, wl))
+        per_row["nn_painted"][name]["clamped"] = rows_per_tone[i]["nn_painted"].extra["clamped"]
     kinds = {"representative": [n for n, k in zip(tones.names, tones.kinds, strict=True) if k == "representative"],
              "outlier": [n for n, k in zip(tones.names, tones.kinds, strict=True) if k == "outlier"],
              "all": list(tones.names)}
@@ -450,10 +529,10 @@ def _lut_profile(lut, params: G.Params) -> np.ndarray:
 # ------------------------------------------------------------------------------------------ record
 def _card_info(card: Path) -> dict:
     if not card.is_file():
-        return {"path": str(card), "missing": True}
+        return {"path": portable(card), "missing": True}
     c = json.loads(card.read_text())
     ds = c.get("dataset", {})
-    return {"path": str(card), "created": c.get("created"), "K": c.get("K"),
+    return {"path": portable(card), "created": c.get("created"), "K": c.get("K"),
             "dataset": {k: ds.get(k) for k in ("path", "n_train", "n_validation", "photons")},
             "preset": ds.get("train_attrs", {}).get("preset"), "lut": c.get("lut", {}).get("path"),
             "notes": c.get("notes", [])[:1],
@@ -469,9 +548,9 @@ def _run_record(opts, cfg, lut, lut_sha, gt, fits, timings, models, renders) -> 
                                         float(WAVELENGTHS_NM[G.render_indices(cfg.wavelength_step)][-1])],
                         "n_validation": int(G.validation_indices(cfg.wavelength_step).size),
                         "n_rendered": int(G.render_indices(cfg.wavelength_step).size)},
-        "lut": {"path": str(opts.lut), "sha256": lut_sha, "albedo_n": int(lut.albedo.numel()),
+        "lut": {"path": portable(opts.lut), "sha256": lut_sha, "albedo_n": int(lut.albedo.numel()),
                 "g_n": int(lut.g.numel()), "g_range": list(lut.g_range)},
-        "model": {"dir": str(opts.model_dir), "sha256": models["sha256"], "card": models["card"]},
+        "model": {"dir": portable(opts.model_dir), "sha256": models["sha256"], "card": models["card"]},
         "ground_truth": {"estimator": "reweighted (training.data.reweight)", "photons": int(gt["photons"]),
                          "walk_seconds": float(gt["walk_seconds"])},
         "fits": {"method": cfg.fit_method, "steps": cfg.steps(), "anchor_every": cfg.anchor_every,
@@ -482,7 +561,7 @@ def _run_record(opts, cfg, lut, lut_sha, gt, fits, timings, models, renders) -> 
         "timings_s": {k: round(v, 2) for k, v in timings.items()},
         "threads": opts.threads, "machine": {"python": platform.python_version(), "torch": torch.__version__,
                                              "cpu": platform.processor() or platform.machine()},
-        "dataset": str(opts.dataset) if opts.dataset else None, "fits_dir": str(opts.fits) if opts.fits else None,
+        "dataset": portable(opts.dataset), "fits_dir": portable(opts.fits),
     }
 
 
@@ -496,6 +575,7 @@ def headline(record: dict) -> dict:
         "gate": {
             "tones": record["gate"]["tones"],
             "nn_delta_e": rows["nn"]["delta_e"],
+            "nn_painted_delta_e": rows["nn_painted"]["delta_e"],
             "nn_decoder_delta_e": rows["nn_decoder"]["delta_e"],
             "joint_opt_delta_e": {f"K{k}": rows[f"k{k}"]["delta_e"] for k in (1, 2, 3)},
             "baseline_delta_e": {m: rows[m]["delta_e"] for m in bl.METHODS},

@@ -106,6 +106,13 @@ def table2(record: dict) -> list[str]:
                    + [_f(ex[band][f"K{k}"], 3) for k in (1, 2, 3)]
                    + [_f(exr[band]["K1_to_K2"], pct=True), _f(exr[band]["K2_to_K3"], pct=True)]
                    for band in (*BANDS, "all")])
+    ns = b.get("network_shape")
+    if ns:
+        out += ["", "The network's L_shape through the LUT, as rendered, at every validation wavelength (the fits' "
+                "own are above; representative tones / all tones):", ""]
+        out += _table(["Band", *(G.ROW_LABELS[r] for r in ns)],
+                      [[band] + [f"{_f(ns[r]['representative'][band], 3)} / {_f(ns[r]['all'][band], 3)}" for r in ns]
+                       for band in BANDS])
     out += ["", "Visible SAM of the other configurations (rep.): " + ", ".join(
         f"{G.ROW_LABELS[r]} {_f(sam[r], 3)}" for r in G.ROWS if not r.startswith("k")) + ".",
         "Mean relative reflectance error of the fits (LUT, rep.): " + ", ".join(
@@ -174,11 +181,20 @@ def notes(record: dict) -> list[str]:
     if run["quick"]:
         out.append("QUICK MODE: a smoke test (few tones, wavelengths and photons, a tiny LUT, few fitter "
                    "iterations); its numbers are not the validation.")
+    renderer = ("the lookup tables (Σ w_k R_k and Σ w_k R_k P_k of the tabulated Monte Carlo of this very slab, "
+                "noise-free at this scale; gate step 5)" if cfg.get("renderer", "lut") == "lut" else
+                "our Monte Carlo mixture renderer")
     out.append(f"Photons: ground truth {run['ground_truth']['photons']:,} per wavelength (the dataset's reweighted "
-               f"estimator, one walk for all gate tones); renders {cfg['photons']:,} per component and wavelength "
-               f"(every component walks all photons; exact by linearity). The paper: {paper.GATE_PHOTONS:,} per "
-               f"wavelength. MC noise floor of the colour ΔE76 (rep.): "
+               f"estimator, one walk for all gate tones; the paper: {paper.GATE_PHOTONS:,}). Slabs rendered by "
+               f"{renderer}. MC noise floor of the colour ΔE76 (rep.): "
                + ", ".join(f"{r} {_f(rows[r]['noise_floor']['representative'])}" for r in G.ROWS) + ".")
+    mc = g.get("mc_check")
+    if mc:
+        out.append(f"Check of the renders: our Monte Carlo renderer ({cfg['photons']:,} photons per component and "
+                   "wavelength, every component walks all of them; exact by linearity) against the tables' renders, "
+                   "mean ΔE76 over all tones (its own noise alone would give): "
+                   + ", ".join(f"{r} {_f(v['delta_e_mc_vs_lut'])} ({_f(v['mc_noise_floor'])})" for r, v in mc.items())
+                   + ".")
     tr = record["truncated_max"]
     out.append(f"Walk cap {cfg['max_steps']:,} steps per photon: the largest weight still alive at the cap (an upper "
                "bound on the reflectance it cut, per wavelength) is " + ", ".join(f"{r} {tr[r]:.1e}" for r in G.ROWS)
@@ -235,11 +251,16 @@ def notes(record: dict) -> list[str]:
                "boundaries) would render R/A = " + ", ".join(f"{mth} {dark[mth]:.2f}" for mth in METHODS)
                + " (mean over tones, visible band) under it. RGB → spectrum: Mallett & Yuksel 2019.")
     exp = list(record["network"]["exposure"].values())
-    nn_x = [v["delta_e_times_exposure"] for n, v in g["per_tone"]["nn"].items() if n in g["groups"]["representative"]]
+    clamped = [n for n, v in g["per_tone"]["nn_painted"].items() if v.get("clamped")]
     out.append(f"Network exposure (Y of the input over Y of its own reflectance): {min(exp):.3f}–{max(exp):.3f} over "
-               "the gate tones (1 = the encoder found the input's brightness). The gate renders the network's media as "
-               "they are; its rendered R_d times the exposure (the add-on's --match-exposure) would score ΔE76 "
-               f"{_f(float(np.mean(nn_x)) if nn_x else None)} (rep.).")
+               "the gate tones (1 = the encoder found the input's brightness). The row "
+               f"'{G.ROW_LABELS['nn']}' renders the network's media as they are; '{G.ROW_LABELS['nn_painted']}' "
+               "renders them with the painted colour (exporters.painted: a smooth correction of the visible albedo "
+               "spectrum, within a factor 4, so that the mixture's colour at the model's boundary is the input's; "
+               "radii kept), what a bake renders by default: its slab ΔE76 is the painted colour through our Monte "
+               "Carlo (noise, the reflectance table and the wavelength sampling), its edge ΔE76 the translucency "
+               "the network keeps. Tones whose painted colour had to be clamped: "
+               f"{', '.join(clamped) if clamped else 'none'}.")
     k1, k1p = rows["k1"]["delta_e"]["representative"], paper.TABLE1_DELTA_E["k1"]
     rr = record["banded"].get("refl_rel_err", {})
     if k1 is not None:

@@ -1,0 +1,43 @@
+"""Bake an albedo texture into the maps of SPEC §4 (bpy-free core of bake.py and of the Blender operator).
+
+Pipeline.  Every value a bake writes depends on the texel's colour only, so:
+
+1. **Distinct colours** (exporters.palette, :mod:`exporters.bake.masking`): the image becomes a palette and a
+   per-texel index; with a UV coverage mask (``BakeOptions.texel_mask``, from the mesh) texels no face covers
+   take the most common covered colour, so their colours are never evaluated.
+2. **Records per distinct colour** (:mod:`exporters.bake.evaluate`, exporters.texel_records): by default from
+   the fast-path table (exporters.texel_table: trilinear interpolation over skin colours, made from this very
+   model — its SHA-256 is checked, :mod:`exporters.bake.table_cache`; colours outside it are evaluated
+   exactly), or all exactly (``exact=True``: onnxruntime + the collapse).  Only what the targets need is
+   computed (``spectral`` alone skips the collapse).  By default the maps render the painted albedo
+   (exporters.painted); ``model_colour`` renders the model's own reflectance.
+3. **Components** whose share of the rendered colour stays below ``prune_share`` for every texel are
+   dropped (the remaining ones are numbered k1..kK').
+4. **Maps**, band by band (:mod:`exporters.bake.job`): each map's rows gathered through the index and written
+   to temporary EXR files beside their final names, one map per thread, OpenEXR compressing on the same
+   threads.  Only when every band is done are the maps moved into place (all or none), then ``S_maps.json``
+   is written (:mod:`exporters.bake.report`).  Cancelling or any error leaves the output folder as it was.
+
+A bake that is already up to date (:mod:`exporters.bake.reuse`) — ``S_maps.json`` in the folder records the
+same key (image content, model SHA-256, options) and every map it lists is unchanged — is reused: nothing is
+read, loaded, evaluated or written (``force=True`` re-bakes).
+
+When the distinct colours are too many to hold their values in memory (more than about
+``4 x memory_mb`` MiB, e.g. a noisy float image), step 2 runs per band instead and step 3 is skipped.
+
+:class:`BakeJob` runs step by step (one chunk per step) so that Blender can drive it from a timer with a
+progress bar; :func:`bake` runs it to the end.  What to ask for: :class:`BakeOptions`
+(:mod:`exporters.bake.options`); what is written: :mod:`exporters.bake.targets`.
+"""
+
+from exporters.bake.job import BakeJob, bake
+from exporters.bake.options import DEFAULT_BAND_TEXELS, DEFAULT_PRUNE_SHARE, FAST_MANTISSA_BITS, BakeOptions
+from exporters.bake.report import BakeResult, input_notes
+from exporters.bake.reuse import KEY_VERSION, bake_key, find_up_to_date, mask_sha256, pixels_id
+from exporters.bake.table_cache import cached_table_path, default_table_path, find_table, table_cache_dir
+from exporters.bake.targets import HALF_KINDS, TARGETS, UNITS, BakeError, MapSpec, map_specs, parse_targets
+
+__all__ = ["DEFAULT_BAND_TEXELS", "DEFAULT_PRUNE_SHARE", "FAST_MANTISSA_BITS", "HALF_KINDS", "KEY_VERSION", "TARGETS",
+           "UNITS", "BakeError", "BakeJob", "BakeOptions", "BakeResult", "MapSpec", "bake", "bake_key",
+           "cached_table_path", "default_table_path", "find_table", "find_up_to_date", "input_notes", "map_specs",
+           "mask_sha256", "parse_targets", "pixels_id", "table_cache_dir"]

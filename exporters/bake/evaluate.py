@@ -1,0 +1,125 @@
+"""Records per distinct colour: from the fast-path table where it covers them, else by the model and the
+collapse (exporters.texel_records), in chunks; the map rows made from them; the statistics of what was done."""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Iterator
+
+import numpy as np
+
+from exporters import inference, maps, texel_records, texel_table
+from exporters.bake.table_cache import cached_table_path
+from exporters.bake.targets import BakeError, MapSpec
+from exporters.texel_records import CollapseOptions
+
+#: Distinct colours looked up in the fast-path table per step (the UI stays responsive: ~0.1 s each).
+TABLE_CHUNK = 1 << 18
+
+
+class Evaluator:
+    """Evaluates distinct colours of ``palette`` (n, 3) linear sRGB for ``targets``: ``table`` (or None: every
+    colour exactly), ``model`` (loaded only when a colour must be evaluated exactly), ``options`` of the
+    collapse, ``threads`` for the table lookups, ``chunk`` rows per exact step.  Accumulates ``timings``
+    (seconds), ``stats`` (clamp counts over texels), ``counted`` (texels from the table / exactly) and
+    ``max_share`` (K,): each component's largest share of the colour over every texel evaluated.  K comes
+    from the table, else from the model (then loaded here)."""
+
+    def __init__(self, palette: np.ndarray, targets: tuple[str, ...], model: inference.ModelFile,
+                 table: texel_table.TexelTable | None, options: CollapseOptions, threads: int,
+                 timings: dict[str, float], chunk: int | None = None,
+                 memory_mb: float = inference.DEFAULT_MEMORY_MB) -> None:
+        self.palette, self.targets, self.model, self.table = palette, targets, model, table
+        self.options, self.threads, self.timings = options, threads, timings
+        self.model_k = table.k if table is not None else self.load_model().k
+        self.chunk = chunk or inference.chunk_rows_for_k(self.model_k, memory_mb)
+        self.stats: dict[str, int] = {}
+        self.counted = {"texels_from_table": 0, "texels_evaluated_exactly": 0}
+        self.max_share = np.zeros(self.model_k)
+
+    def load_model(self) -> inference.SkinModel:
+        if not self.model.loaded:
+            t0 = time.perf_counter()
+            self.model.load()
+            self.timings["load_model"] += time.perf_counter() - t0
+        return self.model.load()
+
+    def records(self, rgb: np.ndarray) -> tuple[dict[str, np.ndarray], np.ndarray]:
+        """Records of distinct colours ``rgb`` (n, 3) float32 (table where it covers them, else exact) and
+        which rows came from the table."""
+        inside = np.zeros(len(rgb), bool)
+        parts: dict[str, np.ndarray] | None = None
+        if self.table is not None:
+            t0 = time.perf_counter()
+            inside, base, frac = self.table.locate(rgb)
+            if inside.any():
+                vals = self.table.interpolate(base, frac, self.threads)
+                parts = self.table.records(rgb[inside], vals, self.targets)
+            self.timings["table"] += time.perf_counter() - t0
+        if inside.all():
+            rec = parts if parts is not None else texel_records.empty_records(self.model_k, self.targets,
+                                                                             self.options.painted)
+            return rec, inside
+        model = self.load_model()
+        t0 = time.perf_counter()
+        exact = texel_records.exact_records(model, rgb[~inside], self.targets, self.options)
+        self.timings["inference"] += time.perf_counter() - t0
+        if parts is None:
+            return exact, inside
+        rec = {}
+        for key, value in parts.items():
+            full = np.empty((len(rgb), *value.shape[1:]), value.dtype)
+            full[inside], full[~inside] = value, exact[key]
+            rec[key] = full
+        return rec, inside
+
+    def values(self, rec: dict[str, np.ndarray], specs: list[MapSpec], unit_scale_m: float,
+               mantissa_bits: int) -> dict[str, np.ndarray]:
+        """Map rows (n, channels) float32 of ``specs`` from records, rounded to ``mantissa_bits``."""
+        out = {}
+        for spec in specs:
+            try:
+                v = texel_records.map_values(spec.kind, spec.source_k or spec.k, rec, unit_scale_m)
+            except ValueError as exc:
+                raise BakeError(str(exc)) from None
+            if not np.all(np.isfinite(v)):
+                raise RuntimeError(f"non-finite values for {spec.name}")  # records are checked; never expected
+            out[spec.name] = maps.round_mantissa(v, mantissa_bits)
+        return out
+
+    def evaluate(self, ids: np.ndarray, counts: np.ndarray, specs: list[MapSpec], into: dict[str, np.ndarray],
+                 unit_scale_m: float, mantissa_bits: int, progress: Callable[[float], float]) -> Iterator[float]:
+        """Values of palette entries ``ids`` for ``specs`` into ``into`` (rows in ``ids`` order), in chunks;
+        ``counts``: texels per entry (for the statistics).  Yields ``progress(fraction of ids done)``."""
+        step = TABLE_CHUNK if self.table is not None else self.chunk
+        for spec in specs:
+            into[spec.name] = np.empty((len(ids), len(spec.channels)), np.float32)
+        for start in range(0, len(ids), step):
+            sl = slice(start, min(start + step, len(ids)))
+            t0 = time.perf_counter()
+            rgb = self.palette[ids[sl]].astype(np.float32)
+            rec, inside = self.records(rgb)
+            for name, v in self.values(rec, specs, unit_scale_m, mantissa_bits).items():
+                into[name][sl] = v
+            c = counts[sl]
+            self.counted["texels_from_table"] += int(c[inside].sum())
+            self.counted["texels_evaluated_exactly"] += int(c[~inside].sum())
+            for key, value in texel_records.count_stats(rec, c, self.targets).items():
+                self.stats[key] = int(self.stats.get(key, 0)) + value
+            if "max_share" in rec and len(rec["max_share"]):
+                self.max_share = np.maximum(self.max_share, rec["max_share"].max(axis=0))
+            self.timings["evaluate"] += time.perf_counter() - t0
+            yield progress(sl.stop / max(len(ids), 1))
+
+    def make_table(self, step: float, notes: list[str]) -> Iterator[float]:
+        """Build the table for these options into the user cache (first step of a big bake without one) and
+        use it; yields the fraction built."""
+        path = cached_table_path(self.model.sha256, self.options, step)
+        t0 = time.perf_counter()
+        table = yield from texel_table.build_steps(self.load_model(), self.options, step)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        texel_table.save(table, path, overwrite=True)
+        self.table = texel_table.load(path)
+        self.timings["table_build"] = time.perf_counter() - t0
+        notes.append(f"built a fast-path table for these options in {self.timings['table_build']:.0f} s, "
+                     f"cached as {path} (reused by later bakes)")
