@@ -40,13 +40,28 @@ def _states(rundir):
     return {s: load_checkpoint(checkpoint_path(rundir, s))["model"] for s in (1, 2, 3)}
 
 
-def test_fits_are_read_sorted_by_sigma_t(toy):
+def test_fits_are_read_matched_along_wavelength(toy, tmp_path):
+    """dense (default): the components are matched along wavelength; the toy's media never cross in sigma_t,
+    so that is the sigma_t order.  A copy of the fits with the components shuffled per (tone, wavelength)
+    reads back identical (matching undoes it); the old mode sorts each wavelength on its own."""
     data, fits, _ = toy
     split = load_split(data, "train", fits, k=3)
     assert len(split) == 24 and split.targets["sigma_t"].shape == (18, 3, 188)  # toy: 18 fitted, every 2nd λ
     assert (torch.diff(split.targets["sigma_t"], dim=1) >= 0).all()
     torch.testing.assert_close(split.targets["weight"].sum(1), torch.ones(18, 188), atol=1e-5, rtol=0)
     assert split.fitted.tolist() == list(range(18)) and split.target_index.tolist() == list(range(0, 376, 2))
+    rng = np.random.default_rng(3)
+    order = np.argsort(rng.random((18, 3, 188)), axis=1)
+    with h5py.File(fits / "train_fits.h5", "r") as src, h5py.File(tmp_path / "train_fits.h5", "w") as dst:
+        for name in ("index", "tone", "done", "wavelength_index"):
+            dst[name] = src[name][:]
+        for field in ("alpha", "g", "sigma_t", "weight"):
+            dst[f"k3_{field}"] = np.take_along_axis(src[f"k3_{field}"][:], order, axis=1)
+    shuffled = load_split(data, "train", tmp_path, k=3)
+    for name, v in split.targets.items():
+        torch.testing.assert_close(shuffled.targets[name], v, rtol=0, atol=0)
+    old = load_split(data, "train", tmp_path, k=3, targets="fitted")
+    torch.testing.assert_close(old.targets["sigma_t"], split.targets["sigma_t"], rtol=0, atol=0)
 
 
 def test_fits_of_shards_are_aligned_by_index(toy, tmp_path):
@@ -134,7 +149,7 @@ def test_shape_loss_scores_the_rendered_mixture_against_the_profiles(toy):
 
     data, fits, lut_path = toy
     lut = LookupTables.load(lut_path, dtype=torch.float32)
-    split = load_split(data, "train", fits, k=3, profiles=True)
+    split = load_split(data, "train", fits, k=3, profiles=True, targets="fitted")
     assert split.shape_target.log_p.shape[:2] == (18, 188)
     t = split.targets
     assert float(TL.profile_shape_loss(lut, t, split.shape_target, None)) < 1e-3
@@ -144,6 +159,16 @@ def test_shape_loss_scores_the_rendered_mixture_against_the_profiles(toy):
     full = {k: torch.zeros(18, 3, 376).index_copy_(2, split.target_index, v) for k, v in t.items()}
     torch.testing.assert_close(TL.profile_shape_loss(lut, full, split.shape_target, split.target_index),
                                TL.profile_shape_loss(lut, t, split.shape_target, None))
+    # dense: profiles at all 376 wavelengths; the targets interpolated there from every 2nd one render them
+    # (the toy's alpha is linear in wavelength, its other parameters constant: interpolation is exact but
+    # for the last wavelength, where the last fitted one is repeated)
+    from training.train.spectral import interpolate, interpolation_matrix
+
+    dense = load_split(data, "train", fits, k=3, profiles=True)
+    assert dense.shape_target.log_p.shape[:2] == (18, 376) and dense.shape_index.tolist() == list(range(376))
+    m = interpolation_matrix(dense.target_index.numpy(), 376)
+    at_all = {k: interpolate(v, m) for k, v in dense.targets.items()}
+    assert float(TL.profile_shape_loss(lut, at_all, dense.shape_target, dense.shape_index)) < 1e-3
 
 
 def test_old_run_records_resume_with_the_behaviour_they_had(toy, tmp_path):
@@ -176,3 +201,22 @@ def test_exposure_prior_adds_the_mean_log_exposure():
         torch.testing.assert_close(plain, (albedo - gamma[:, None] * rgb).abs().mean(), rtol=1e-4, atol=1e-7)
         with_prior = TL.colour_loss(model, albedo, exposure_prior=0.01)
         torch.testing.assert_close(with_prior - plain, 0.01 * gamma.log().abs().mean(), rtol=1e-3, atol=1e-7)
+
+
+def test_weighted_param_loss_ignores_the_media_of_weightless_components():
+    """L_param weighted by the target weights: equal weights give the plain loss; the alpha, g, sigma_t of a
+    component whose target weight is 0 do not count, its weight does; a target of weight 1 counts K times."""
+    from training.train.losses import param_loss
+
+    torch.manual_seed(0)
+    u, u_t = torch.rand(5, 4, 3, 7), torch.rand(5, 4, 3, 7)
+    u_t[:, 3] = 1.0 / 3.0
+    torch.testing.assert_close(param_loss(u, u_t, weighted=True), param_loss(u, u_t))
+    u_t[:, 3] = torch.tensor([0.6, 0.4, 0.0])[None, :, None]
+    moved = u.clone()
+    moved[:, :3, 2] += 0.3  # the weightless component's media
+    torch.testing.assert_close(param_loss(moved, u_t, weighted=True), param_loss(u, u_t, weighted=True))
+    assert float(param_loss(moved, u_t)) > float(param_loss(u, u_t))
+    moved_w = u.clone()
+    moved_w[:, 3, 2] += 0.3  # its weight still counts
+    assert float(param_loss(moved_w, u_t, weighted=True)) > float(param_loss(u, u_t, weighted=True))

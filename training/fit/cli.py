@@ -4,8 +4,8 @@
         prints {"fits": [{"K": 1, "shape_rmse": ..., "refl_rel_err": ...}, ...]}: means over the
         wavelengths of the tone file (376 for ``python -m training simulate``).
     python -m training fit --dataset DIR --lut LUT.npz --k 1,2,3 --out DIR [--split train,validation]
-        [--shard I/N] [--wavelength-stride S] [--anchor-every A] [--max-tones M] [--select first|lightness]
-        [--reuse DIR]:
+        [--shard I/N] [--wavelength-stride S] [--anchor-every A] [--continuity sweep|anchors] [--max-tones M]
+        [--select first|lightness] [--reuse DIR]:
         every tone x wavelength of the dataset's complete split files into OUT/<split>_fits.h5
         (training/fit/dataset.py); resumable, shardable; ``--scheduler local:N | tcp://HOST:PORT | slurm``
         fits the chunks on a Dask cluster instead (``training.cluster``), into the same files.
@@ -67,6 +67,10 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--anchor-every", type=int, default=0,
                    help="--dataset: full schedule at every n-th fitted wavelength, warm starts from the nearest "
                         "one elsewhere (default 0: full schedule everywhere; 12 is ~4x faster, same losses)")
+    p.add_argument("--continuity", choices=("sweep", "anchors"), default=None,
+                   help="--dataset: sweep = each wavelength warm-started from the previous one, components matched "
+                        "along wavelength (default with --method lm; issue 23); anchors = from the nearest anchor "
+                        "(the older fits; the default with --method paper)")
     p.add_argument("--max-tones", type=int, default=None, help="--dataset: fit n tones of each split (see --select)")
     p.add_argument("--select", choices=("first", "lightness"), default="first",
                    help="--dataset with --max-tones: the first n tones (default), or an equal share of each "
@@ -197,6 +201,7 @@ def _fit_dataset(args: argparse.Namespace, ks: tuple[int, ...], lut_path: Path) 
                 progress=not args.no_progress,
                 job=job,
                 device=args.device,
+                continuity=args.continuity or ("sweep" if args.method == "lm" else "anchors"),
             )
             if job is None:
                 print(f"{split}: {paths[split]}")

@@ -14,10 +14,12 @@ training/data/store.py), which must be complete.  Output, per split, ``OUT/<spli
 Speed (what makes a laptop run possible; measured in the README):
 
 * ``anchor_every`` = a > 0: per tone, every a-th fitted wavelength (an *anchor*) gets the full schedule
-  (coarse search, K = 1 -> 2 -> 3 with all the starts of ``fit_schedule``); every other wavelength
-  starts from its nearest anchor's K = 1, 2, 3 fits (``fit_schedule(warm=...)``), one short LM run per
-  K.  The parameters vary slowly with wavelength, so the warm start is already in the right basin;
-  ``anchor_every`` = 0 fits every wavelength with the full schedule.
+  (coarse search, K = 1 -> 2 -> 3 with all the starts of ``fit_schedule``); every other wavelength is
+  one short warm LM run per K (``fit_schedule(warm=...)``).  ``continuity`` "sweep" (default): warm
+  from the previous wavelength's kept solution, in wavelength order, the anchors checking that it is as
+  good as an independent fit, components matched along wavelength (``training.fit.sweep``, issue 23);
+  "anchors": warm from the nearest anchor (the fits before issue 23; neighbouring wavelengths can sit
+  in different basins of the degenerate fit).  ``anchor_every`` = 0 makes every wavelength an anchor.
 * ``wavelength_stride`` = s: fit every s-th wavelength only (the trainer's L_param then uses those).
 * ``max_tones`` = m: fit m tones of the split only, chosen by ``select``: ``"first"``, the first m (a
   Halton prefix of the training split is stratified in the biophysical parameters; the validation tones
@@ -48,13 +50,18 @@ from tqdm import tqdm
 from exporters.constants import anisotropy
 from exporters.maps import sha256_file
 from training.fit.optimize import WARM_LM_ITERS, fit_schedule
+from training.fit.sweep import fit_tones_sweep
 from training.sim.lut_interp import LookupTables
 
 SPLITS = ("train", "validation")
 
 #: Attributes that fix a tone's fits (besides the ``dataset_*`` ones): files agreeing on them are
 #: interchangeable row by row (``reuse``).
-FIT_KEYS = ("ks", "method", "refl_loss", "wavelength_stride", "anchor_every", "lut_sha256")
+FIT_KEYS = ("ks", "method", "refl_loss", "wavelength_stride", "anchor_every", "continuity", "lut_sha256")
+#: How a tone's wavelengths are chained (``continuity``): "sweep", in wavelength order from the previous
+#: solution, components matched (training/fit/sweep.py; issue 23); "anchors", each from its nearest
+#: anchor, components in the fitter's order (the fits before issue 23).
+CONTINUITY = ("sweep", "anchors")
 
 
 #: Width of the CIE L* bands of ``select_tones(how="lightness")``.
@@ -237,6 +244,7 @@ def fit_split(
     relative_refl: bool = True,
     reuse: Path | None = None,
     progress: bool = True,
+    continuity: str = "sweep",
     job=None,
     device: str = "cpu",
 ) -> Path:
@@ -248,6 +256,9 @@ def fit_split(
     """
     if wavelength_stride < 1 or anchor_every < 0 or (max_tones is not None and max_tones < 1):
         raise ValueError("wavelength_stride must be >= 1, anchor_every >= 0 and max_tones >= 1")
+    if continuity not in CONTINUITY or (continuity == "sweep" and method != "lm"):
+        raise ValueError(f"continuity must be one of {CONTINUITY}, and 'sweep' needs method 'lm' (got {continuity!r}, "
+                         f"{method!r}): use --continuity anchors with --method paper")
     src = dataset / f"{split}.h5"
     if not src.is_file():
         raise ValueError(f"{src} not found (run `python -m training dataset` and merge its shards first)")
@@ -269,6 +280,7 @@ def fit_split(
         "refl_loss": "relative" if relative_refl else "paper",
         "wavelength_stride": wavelength_stride,
         "anchor_every": anchor_every,
+        "continuity": continuity,
         "max_tones": "all" if max_tones is None else max_tones,
         "select": select,
         "lut_sha256": sha256_file(lut_path),
@@ -290,7 +302,8 @@ def fit_split(
     with h5py.File(path, "r") as f:
         todo = np.flatnonzero(~f["done"][:])
     chunks = [todo[start : start + chunk_tones] for start in range(0, len(todo), chunk_tones)]
-    opts = {"ks": ks, "method": method, "anchor_every": anchor_every, "relative_refl": relative_refl, "steps": steps}
+    opts = {"ks": ks, "method": method, "anchor_every": anchor_every, "relative_refl": relative_refl, "steps": steps,
+            "continuity": continuity}
     if job is not None:
         for rows in chunks:
             job.submit(f"fit {split} tones {index[rows[0]]}-{index[rows[-1]]}", fit_rows_with, Path(lut_path).resolve(),
@@ -306,9 +319,10 @@ def fit_split(
 
 
 def fit_rows(lut: LookupTables, src: Path, rows: np.ndarray, widx: np.ndarray, *, ks: tuple[int, ...],
-             **options) -> dict[str, np.ndarray]:
+             continuity: str = "sweep", method: str = "lm", **options) -> dict[str, np.ndarray]:
     """Fit the tones at positions ``rows`` of the split file ``src`` at wavelength indices ``widx``
-    (``fit_tones`` with ``options``); the rows of the fits file: {"k{K}_{name}": (len(rows), ...) float32}."""
+    (``fit_tones_sweep`` with ``continuity`` "sweep", ``fit_tones`` with "anchors"; ``options`` theirs);
+    the rows of the fits file: {"k{K}_{name}": (len(rows), ...) float32}."""
     dt, dev = lut.P.dtype, lut.P.device
     with h5py.File(src, "r") as f:
         wl, edges, photons = f["wavelength_nm"][:], f["r_edges_cm"][:], float(f.attrs["photons"])
@@ -316,7 +330,11 @@ def fit_rows(lut: LookupTables, src: Path, rows: np.ndarray, widx: np.ndarray, *
                 for name in ("profile", "R_d", "profile_stderr")]
     prof, R, se = (torch.tensor(a, dtype=dt, device=dev) for a in arrs)
     g0 = torch.tensor(anisotropy(wl[widx]), dtype=dt, device=dev)
-    fits = fit_tones(lut, prof, R, se, torch.tensor(edges, dtype=dt, device=dev), photons, g0, ks, **options)
+    e = torch.tensor(edges, dtype=dt, device=dev)
+    if continuity == "sweep":
+        fits = fit_tones_sweep(lut, prof, R, se, e, photons, g0, ks, wavelength_nm=wl[widx], **options)
+    else:
+        fits = fit_tones(lut, prof, R, se, e, photons, g0, ks, method=method, **options)
     return {f"k{k}_{name}": val.cpu().numpy().astype(np.float32) for k in ks for name, val in fits[k].items()}
 
 

@@ -164,8 +164,10 @@ def make_target(
 
 
 def shape_residuals(p_hat: torch.Tensor, t: Target) -> torch.Tensor:
-    """Masked log residuals scaled so that their squared sum is L_shape^2; shape (..., M)."""
-    d = torch.log(p_hat + t.floor[..., None]) - t.log_p
+    """Masked log residuals scaled so that their squared sum is L_shape^2; shape (..., M).  Masked bins
+    take no log at all (a model value of 0 there gives 0, with a zero gradient, not 0 x inf = NaN)."""
+    den = torch.where(t.mask > 0, p_hat + t.floor[..., None], torch.ones_like(p_hat))
+    d = torch.log(den) - t.log_p
     return d * t.mask / torch.sqrt(t.n_used.clamp_min(1.0))[..., None]
 
 

@@ -92,6 +92,7 @@ def bench_training_step(quick: bool) -> dict:
     from training.model import ModelConfig, SkinModel
     from training.sim.lut_interp import LookupTables, bin_centres
     from training.train import losses as L
+    from training.train.spectral import interpolation_matrix
 
     torch.manual_seed(0)
     model = SkinModel(ModelConfig())
@@ -104,21 +105,28 @@ def bench_training_step(quick: bool) -> dict:
         tgt = model.dec_t(p, model.dec_r(p))
     targets = {k: tgt[k][..., fitted].clone() * (1.0 if k == "weight" else 0.9)
                for k in ("alpha", "g", "sigma_t", "weight")}
-    cols = torch.arange(0, fitted.numel(), L.SHAPE_WAVELENGTH_GROUPS)  # as stages.shape_batch
+    interp = interpolation_matrix(fitted.numpy(), 376)
     edges = torch.tensor(R_EDGES_CM)
     lut64 = LookupTables.from_arrays(**dipole_lut(), dtype=torch.float64)
-    with torch.no_grad():  # profile targets: the targets' rendered mixture (the shape term's cost, not its value)
-        a, g, st, w = (targets[k][..., cols].transpose(1, 2).double() for k in ("alpha", "g", "sigma_t", "weight"))
-        prof, refl = mix(lut64.profile(bin_centres(edges), a, g, st), lut64.reflectance(a, g), w)
-    shape = make_target(prof * refl[..., None], refl, edges, 1e5, stderr=0.01 * prof * refl[..., None])
-    shape = shape.subset(torch.arange(0, shape.r_cm.numel(), L.SHAPE_BIN_STRIDE)).to(dtype=torch.float32)
+
+    def shape_at(cols: torch.Tensor):  # the profile targets at wavelengths cols, as stages.shape_batch sees them
+        with torch.no_grad():  # the targets' rendered mixture (the shape term's cost, not its value)
+            a, g, st, w = (tgt[k][..., cols].transpose(1, 2).double() for k in ("alpha", "g", "sigma_t", "weight"))
+            prof, refl = mix(lut64.profile(bin_centres(edges), a, g, st), lut64.reflectance(a, g), w)
+        shape = make_target(prof * refl[..., None], refl, edges, 1e5, stderr=0.01 * prof * refl[..., None])
+        return shape.subset(torch.arange(0, shape.r_cm.numel(), L.SHAPE_BIN_STRIDE)).to(dtype=torch.float32)
+
+    dense_cols = torch.arange(0, 376, round(376 / L.SHAPE_WAVELENGTHS_PER_STEP))  # issue 23: all 376
+    fitted_cols = fitted[torch.arange(0, fitted.numel(), round(fitted.numel() / L.SHAPE_WAVELENGTHS_PER_STEP))]
+    shapes = {True: shape_at(dense_cols), False: shape_at(fitted_cols)}
     params = list(model.dec_t.parameters()) + list(model.slab.parameters())
     opt = torch.optim.Adam(params, lr=1e-4)
 
-    def full_step(shape_weight: float = 1.0):
+    def full_step(shape_weight: float = 1.0, dense: bool = True):
         opt.zero_grad()
-        L.stage3_losses(model, lut, p, R, targets, fitted, shape if shape_weight else None, shape_weight,
-                        fitted[cols])["loss"].backward()
+        cols = dense_cols if dense else fitted_cols
+        L.stage3_losses(model, lut, p, R, targets, fitted, shapes[dense] if shape_weight else None, shape_weight,
+                        cols, interp if dense else None, weighted=dense)["loss"].backward()
         opt.step()
 
     def mse_step():
@@ -128,14 +136,17 @@ def bench_training_step(quick: bool) -> dict:
         opt.step()
 
     repeats = 3 if quick else 20
-    t_full, t_paper, t_mse = _interleaved([full_step, lambda: full_step(0.0), mse_step], repeats)
+    t_full, t_fitted, t_paper, t_mse = _interleaved(
+        [full_step, lambda: full_step(dense=False), lambda: full_step(0.0, dense=False), mse_step], repeats)
     return {"workload": f"stage-3 training step, paper-sized Dec_T (4 x 768, K=3), batch {n}, CPU "
                         f"({torch.get_num_threads()} threads)",
             "ours": f"{t_full * 1e3:.0f} ms/step", "anchor": f"{t_mse * 1e3:.0f} ms/step (same net, plain MSE)",
             "ratio": f"{t_full / t_mse:.2f}x", "error": "",
-            "notes": f"default loss = L_param + 15 L_refl (LUT, slab factor) + 0.5 L_smooth + L_shape "
-                     f"({len(cols)} of 94 fitted wavelengths, every 2nd bin); the paper's loss alone "
-                     f"{t_paper * 1e3:.0f} ms/step; dipole LUT for timing"}
+            "notes": f"default loss = L_param (weighted, targets interpolated to all 376 wavelengths from every 4th) "
+                     f"+ 15 L_refl (LUT, slab factor) + 0.5 L_smooth + L_shape ({len(dense_cols)} of 376 wavelengths, "
+                     f"every 2nd bin); before issue 23 (L_param and L_shape at the fitted wavelengths only) "
+                     f"{t_fitted * 1e3:.0f} ms/step; the paper's loss alone {t_paper * 1e3:.0f} ms/step; dipole LUT "
+                     "for timing"}
 
 
 def benchmarks(quick: bool) -> list[dict]:

@@ -2,7 +2,8 @@
 
     python -m training train --dataset DIR --fits DIR --lut LUT.npz --out RUNDIR
         [--stage 1|2|3|all] [--epochs E1,E2,E3] [--batch B1,B2,B3] [--lr L1,L2,L3] [--k 3]
-        [--size paper|small|tiny] [--synthetic N] [--seed S] [--device cpu|cuda]
+        [--size paper|small|tiny] [--synthetic N] [--seed S] [--device cpu|cuda] [--targets dense|fitted]
+        [--uniform-param]
         [--checkpoint-interval SECONDS] [--no-progress]
 
 --dataset: folder with train.h5 and validation.h5 (``python -m training dataset``).
@@ -58,6 +59,11 @@ def parser() -> argparse.ArgumentParser:
                    help="stage 2: weight of mean |ln exposure| in the colour loss (0: the paper's loss)")
     p.add_argument("--shape-weight", type=float, default=d.shape_weight,
                    help="stage 3: weight of the rendered profile-shape loss L_shape (0: the paper's loss)")
+    p.add_argument("--targets", choices=("dense", "fitted"), default=d.targets,
+                   help="stage 3: dense = fits matched along wavelength, L_param and L_shape at all 376 wavelengths "
+                        "(default; issue 23); fitted = sorted by sigma_t, at the fitted wavelengths only (before)")
+    p.add_argument("--uniform-param", action="store_true",
+                   help="stage 3: L_param without weighting each component's alpha, g, sigma_t by its weight")
     p.add_argument("--k", type=int, default=3, help="mixture components (fits group K{k})")
     p.add_argument("--size", choices=sorted(SIZES), default="paper")
     p.add_argument("--seed", type=int, default=0)
@@ -79,7 +85,8 @@ def main(argv: list[str]) -> int:
     mcfg = ModelConfig(k=args.k, **SIZES[args.size])
     tcfg = TrainConfig(seed=args.seed, epochs=args.epochs, batch=args.batch, lr=args.lr,
                        synthetic=args.synthetic, exposure_jitter=args.exposure_jitter,
-                       exposure_prior=args.exposure_prior, shape_weight=args.shape_weight)
+                       exposure_prior=args.exposure_prior, shape_weight=args.shape_weight, targets=args.targets,
+                       weighted_param=not args.uniform_param)
     command = "python -m training train " + shlex.join(argv)
     try:
         if 3 in want and args.fits is None:

@@ -11,9 +11,18 @@ wavelength was fitted (absent: all 376); or its shards ``{split}_fits.shard{i}of
 cover a subset of the tones (``fit --max-tones``, or an unfinished run): every simulated tone still
 serves stages 1 and 2, and stage 3 draws its batches from the fitted ones (``SplitData.fitted``).
 
-Component order: the fitter's component order is arbitrary (it depends on which start won), so the
-targets are sorted per (tone, wavelength) by increasing sigma_t before training.  The network's
-component k therefore learns "the k-th slowest-decaying medium", a well-defined function of the tone.
+Component order: the fitter's component order is arbitrary (it depends on which start won).  With
+``targets="dense"`` (issue 23, the default) the components are matched along wavelength on loading
+(``training.fit.matching``: sorted by sigma_t at 600 nm, then each wavelength permuted to the nearest
+of its neighbour), so the network's component k is one medium followed across the spectrum; fits of
+any version are read this way (``fit --continuity sweep`` stores them matched already, and matching is
+idempotent).  ``targets="fitted"`` is the trainer before issue 23: sorted by increasing sigma_t per
+(tone, wavelength), "the k-th slowest-decaying medium" at each wavelength on its own, whose identities
+swap wherever two sigma_t cross.
+
+Profiles (``profiles=True``): the Monte Carlo profile targets of the fitted rows, at every wavelength
+(``"dense"``) or at the fitted ones (``"fitted"``), read a chunk of tones at a time (``SHAPE_CHUNK``)
+and kept on every ``bin_stride``-th of the radial bins that some (tone, wavelength) uses.
 """
 
 from __future__ import annotations
@@ -25,9 +34,20 @@ import h5py
 import numpy as np
 import torch
 
+from exporters.constants import WAVELENGTHS_NM
 from training.fit.loss import Target, make_target
+from training.fit.matching import matched
 
 FIT_FIELDS: tuple[str, ...] = ("alpha", "g", "sigma_t", "weight")
+#: How stage 3 uses the fits (``TrainConfig.targets``): "dense", matched and at every wavelength (issue 23);
+#: "fitted", sorted by sigma_t and at the fitted wavelengths only (before issue 23).
+TARGET_MODES: tuple[str, ...] = ("dense", "fitted")
+#: Least model floor of L_shape in float32 training (cm^-2; ``loss.FLOOR_REL``): 1e-3 x the smallest used MC
+#: value can be subnormal in float32 (near-black tones at few photons use bins down to 1e-37), and 1 / floor
+#: then overflows in the gradient (NaN on the ``ci`` preset); the floor only acts where the model underflows.
+FLOAT32_FLOOR: float = 1e-30
+#: Tones per read when loading the profile targets (bounds the float64 working set: 128 x 376 x 512).
+SHAPE_CHUNK: int = 128
 
 
 @dataclass
@@ -36,8 +56,8 @@ class SplitData:
     tone; with fits, ``fitted`` (Nf,) the rows that have fit targets, ``targets`` {name: (Nf, K, Wf)} per
     name in ``FIT_FIELDS`` (sorted by sigma_t, row j belongs to tone ``fitted[j]``) and ``target_index``
     (Wf,) the wavelengths (indices into the 376) they were fitted at; with ``profiles``, ``shape_target`` the
-    Monte Carlo profiles of the fitted rows at those wavelengths as the fitter's loss targets (leading dims
-    (Nf, Wf), on the radial bins some problem uses; ``training.fit.loss.make_target``)."""
+    Monte Carlo profiles of the fitted rows at the wavelengths ``shape_index`` (Ws,) as the fitter's loss
+    targets (leading dims (Nf, Ws), on the radial bins some problem uses; ``training.fit.loss.make_target``)."""
 
     tone: torch.Tensor
     R_d: torch.Tensor
@@ -47,6 +67,7 @@ class SplitData:
     fitted: torch.Tensor | None = None
     target_index: torch.Tensor | None = None
     shape_target: Target | None = None
+    shape_index: torch.Tensor | None = None
 
     def __len__(self) -> int:
         return int(self.tone.shape[0])
@@ -55,8 +76,9 @@ class SplitData:
         t = None if self.targets is None else {k: v.to(device) for k, v in self.targets.items()}
         opt = [None if x is None else x.to(device) for x in (self.fitted, self.target_index)]
         st = None if self.shape_target is None else self.shape_target.to(device)
+        si = None if self.shape_index is None else self.shape_index.to(device)
         return SplitData(self.tone.to(device), self.R_d.to(device), self.albedo_rgb.to(device), t, self.photons,
-                         *opt, st)
+                         *opt, st, si)
 
 
 def dataset_file(dataset_dir: Path, split: str) -> Path:
@@ -107,28 +129,44 @@ def load_fits(paths: list[Path], k: int) -> tuple[np.ndarray, np.ndarray, np.nda
 
 
 def load_shape_target(path: Path, rows: np.ndarray, wavelength_index: np.ndarray, R_mc: np.ndarray,
-                      photons: int) -> Target:
+                      photons: int, bin_stride: int = 1) -> Target:
     """The fitter's profile targets (``make_target``, with the stored standard errors) of dataset rows
     ``rows`` (Nf,) at ``wavelength_index`` (Wf,), whose R_d there is ``R_mc`` (Nf, Wf), float32, restricted
-    to the radial bins that some (tone, wavelength) uses: leading dims (Nf, Wf)."""
+    to every ``bin_stride``-th of the radial bins that some (tone, wavelength) uses: leading dims (Nf, Wf).
+    Read ``SHAPE_CHUNK`` tones at a time, twice (the bins used, then the targets)."""
     R = torch.as_tensor(np.asarray(R_mc, np.float64))
     with h5py.File(path, "r") as f:
         edges = torch.as_tensor(np.asarray(f["r_edges_cm"][:], np.float64))
-        prof = torch.empty(len(rows), len(wavelength_index), edges.numel() - 1, dtype=torch.float64)
-        se = torch.empty_like(prof)
-        for j, row in enumerate(rows):  # one stored chunk per tone
-            prof[j] = torch.as_tensor(f["profile"][row][wavelength_index].astype(np.float64))
-            se[j] = torch.as_tensor(f["profile_stderr"][row][wavelength_index].astype(np.float64))
-    t = make_target(prof, R, edges, photons, stderr=se)
-    used = torch.nonzero(t.mask.flatten(0, -2).any(0)).squeeze(1)
-    t = t.subset(used)
-    return t.to(dtype=torch.float32)
+
+        def chunks():
+            for s in range(0, len(rows), SHAPE_CHUNK):
+                part = rows[s : s + SHAPE_CHUNK]
+                prof = torch.empty(len(part), len(wavelength_index), edges.numel() - 1, dtype=torch.float64)
+                se = torch.empty_like(prof)
+                for j, row in enumerate(part):  # one stored chunk per tone
+                    prof[j] = torch.as_tensor(f["profile"][row][wavelength_index].astype(np.float64))
+                    se[j] = torch.as_tensor(f["profile_stderr"][row][wavelength_index].astype(np.float64))
+                yield make_target(prof, R[s : s + SHAPE_CHUNK], edges, photons, stderr=se)
+
+        used = torch.zeros(edges.numel() - 1, dtype=torch.bool)
+        for t in chunks():
+            used |= t.mask.flatten(0, -2).any(0) > 0
+        used = torch.nonzero(used).squeeze(1)[::bin_stride]
+        parts = [t.subset(used).to(dtype=torch.float32) for t in chunks()]
+    t = Target(parts[0].r_cm, *(torch.cat([getattr(p, name) for p in parts]) for name in
+                                ("log_p", "mask", "n_used", "floor", "R", "r_scale", "noise")))
+    t.floor = t.floor.clamp_min(FLOAT32_FLOOR)
+    return t
 
 
 def load_split(dataset_dir: Path, split: str, fits_dir: Path | None = None, k: int = 3,
-               profiles: bool = False) -> SplitData:
+               profiles: bool = False, targets: str = "dense", bin_stride: int = 1, shape_every: int = 1) -> SplitData:
     """Load the done rows of ``split`` and, with ``fits_dir``, the fit targets of those that have them
-    (and, with ``profiles``, their Monte Carlo profile targets: ``SplitData.shape_target``)."""
+    (and, with ``profiles``, their Monte Carlo profile targets: ``SplitData.shape_target``, on every
+    ``bin_stride``-th used radial bin, at every ``shape_every``-th wavelength with ``targets="dense"``);
+    ``targets`` one of ``TARGET_MODES`` (module docstring)."""
+    if targets not in TARGET_MODES:
+        raise ValueError(f"targets must be one of {TARGET_MODES}, got {targets!r}")
     path = dataset_file(dataset_dir, split)
     if not path.is_file():
         raise ValueError(f"no dataset split {path}: run `python -m training dataset` first")
@@ -161,7 +199,7 @@ def load_split(dataset_dir: Path, split: str, fits_dir: Path | None = None, k: i
         raise ValueError(f"{fpath}: no fitted rows yet (finish `python -m training fit --dataset`)")
     order = np.argsort(index[use], kind="stable")  # dataset order
     rows_in_data = np.cumsum(done) - 1  # position of each dataset row among the done rows
-    kept = sort_by_sigma_t({n: v[use][order] for n, v in arrays.items()})
+    kept = {n: v[use][order] for n, v in arrays.items()}
     for n, v in kept.items():
         if not np.all(np.isfinite(v)):
             raise ValueError(f"{fpath}: non-finite k{k}_{n}")
@@ -169,10 +207,13 @@ def load_split(dataset_dir: Path, split: str, fits_dir: Path | None = None, k: i
     widx = np.arange(w) if widx is None else widx
     if widx.min(initial=0) < 0 or widx.max(initial=-1) >= w or kept["alpha"].shape[-1] != len(widx):
         raise ValueError(f"{fpath}: its wavelength_index does not match {w} wavelengths")
+    kept = matched(kept, WAVELENGTHS_NM[widx]) if targets == "dense" else sort_by_sigma_t(kept)
     data.targets = {n: _f32(v) for n, v in kept.items()}
     data.fitted = torch.as_tensor(rows_in_data[index[use][order]], dtype=torch.int64)
     data.target_index = torch.as_tensor(widx, dtype=torch.int64)
     if profiles:
         rows = index[use][order]
-        data.shape_target = load_shape_target(path, rows, widx, R_d[rows][:, widx], photons)
+        sidx = np.arange(0, w, shape_every) if targets == "dense" else widx
+        data.shape_target = load_shape_target(path, rows, sidx, R_d[rows][:, sidx], photons, bin_stride)
+        data.shape_index = torch.as_tensor(sidx, dtype=torch.int64)
     return data

@@ -7,11 +7,17 @@ Shapes: N tones, W wavelengths, K components; ``u`` tensors are Dec_T's normalis
 * Stage 2: colour L1, mean |A_RGB - gamma * CMF(Dec_R(Enc(A_RGB)))| with the analytic exposure gamma,
   plus an optional prior on |ln gamma| (``colour_loss``; 0 is the paper's loss).
 * Stage 3: L = L_param + LAMBDA_R L_refl + LAMBDA_SMOOTH L_smooth (paper eq. total_loss):
-  - L_param = (1/|C|) sum_c phi_c Huber(u_c, u*_c), each channel averaged over its elements (at the
-    fitted wavelengths: ``fit --wavelength-stride`` may fit every n-th only), phi_alpha
+  - L_param = (1/|C|) sum_c phi_c Huber(u_c, u*_c), each channel averaged over its elements, phi_alpha
     = 2, others 1.  Comparing in ``u`` puts sigma_t on a log scale (a difference of 0.05 is a factor
     exp(0.05 ln 1e6) = 2.0 in sigma_t) and g on its range.  Huber's transition HUBER_DELTA = 0.05 (our
-    choice; the paper gives none): L1-like beyond it.
+    choice; the paper gives none): L1-like beyond it.  Where: at every wavelength, the targets
+    interpolated from the fitted ones (``training.train.spectral``; issue 23), or at the fitted
+    wavelengths only (before; ``fit --wavelength-stride`` fits every n-th), which taught Dec_T a comb.
+    Weighted (ours, issue 23; ``weighted=True``): the alpha, g and sigma_t terms of component k count
+    with the target's weight w*_k (times K, so that equal weights give the unweighted mean): a component
+    with w ~ 0 adds nothing to the profile, so its fitted alpha, g, sigma_t are whatever the optimiser
+    left there, and pulling the decoder toward them only teaches it noise.  The weight channel itself
+    counts in full.
   - L_refl = mean |sum_k w_k R(alpha_k, g_k) (1 - exp(-C sigma_t,k c(lambda))) - R_MC| (eq. lrefl_lut
     with the slab-depth factor of eq. slab_factor), R from the LUT (bilinear).
   - L_smooth = mean |u[..., l + 1] - u[..., l]| over all channels (finite differences over lambda).
@@ -33,16 +39,22 @@ from training.fit import loss as fit_loss
 from training.fit.mixture import mix
 from training.model.chain import SkinModel
 from training.sim.lut_interp import LookupTables
+from training.train.spectral import interpolate
 
 LAMBDA_R: float = 15.0
 LAMBDA_SMOOTH: float = 0.5
 PHI: tuple[float, float, float, float] = (2.0, 1.0, 1.0, 1.0)  # alpha, g, sigma_t, weight
 HUBER_DELTA: float = 0.05
-#: Cost of L_shape in a training step (our choice, see the module docstring): a batch sees every
-#: SHAPE_WAVELENGTH_GROUPS-th fitted wavelength (the offset changes from batch to batch) and every
-#: SHAPE_BIN_STRIDE-th radial bin; validation uses all.  12x cheaper than every wavelength and bin.
-SHAPE_WAVELENGTH_GROUPS: int = 6
+#: Cost of L_shape in a training step (our choice, see the module docstring): a batch sees about
+#: SHAPE_WAVELENGTHS_PER_STEP of the profile wavelengths (every n-th, n = their count / this, rounded; the
+#: offset changes from batch to batch: every 6th of 94 fitted ones, every 24th of all 376) and every
+#: SHAPE_BIN_STRIDE-th radial bin (the training split's targets are loaded so); validation uses all bins.
+SHAPE_WAVELENGTHS_PER_STEP: int = 16
 SHAPE_BIN_STRIDE: int = 2
+#: The validation L_shape of each epoch, with dense targets: every 2nd of the 376 wavelengths (the fitted
+#: every 4th and the midpoints between them), all bins; at all 376 the evaluation alone cost 0.5x a laptop
+#: epoch (measured in the README).
+VALIDATION_SHAPE_EVERY: int = 2
 
 
 def spectral_l1(pred: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
@@ -63,9 +75,14 @@ def colour_loss(model: SkinModel, albedo_rgb: torch.Tensor, exposure_prior: floa
     return loss
 
 
-def param_loss(u: torch.Tensor, u_target: torch.Tensor) -> torch.Tensor:
-    """(1/|C|) sum_c phi_c mean Huber(u_c, u*_c) over the 4 channels of (N, 4, K, W) tensors."""
-    per = F.huber_loss(u, u_target, reduction="none", delta=HUBER_DELTA).mean(dim=(0, 2, 3))  # (4,)
+def param_loss(u: torch.Tensor, u_target: torch.Tensor, weighted: bool = False) -> torch.Tensor:
+    """(1/|C|) sum_c phi_c mean Huber(u_c, u*_c) over the 4 channels of (N, 4, K, W) tensors; ``weighted``:
+    the alpha, g, sigma_t terms times K w*_k (module docstring)."""
+    per = F.huber_loss(u, u_target, reduction="none", delta=HUBER_DELTA)
+    if weighted:
+        w = u_target[:, 3:4]  # (N, 1, K, W)
+        per = per * torch.cat([u.shape[2] * w.expand(-1, 3, -1, -1), torch.ones_like(w)], dim=1)
+    per = per.mean(dim=(0, 2, 3))  # (4,)
     phi = torch.tensor(PHI, dtype=u.dtype, device=u.device)
     return (phi * per).mean()
 
@@ -95,21 +112,30 @@ def smooth_loss(u: torch.Tensor) -> torch.Tensor:
 def stage3_losses(model: SkinModel, lut: LookupTables, p: torch.Tensor, R_mc: torch.Tensor,
                   targets: dict[str, torch.Tensor], target_index: torch.Tensor | None = None,
                   shape_target: fit_loss.Target | None = None, shape_weight: float = 0.0,
-                  shape_index: torch.Tensor | None = None) -> dict[str, torch.Tensor]:
+                  shape_index: torch.Tensor | None = None, interp: torch.Tensor | None = None,
+                  weighted: bool = False, report: bool = False) -> dict[str, torch.Tensor]:
     """All stage-3 terms for true tones ``p`` (N, 5), MC reflectance (N, W) and fit targets (N, K, Wf) at
-    the wavelengths ``target_index`` (Wf,) (None: all W).  L_param compares at those wavelengths only;
-    L_refl and L_smooth use all W.  With ``shape_target`` (leading dims (N, Ws)) L_shape is reported, at
-    ``shape_index`` (Ws,) (None: ``target_index``), and added with ``shape_weight``."""
+    the wavelengths ``target_index`` (Wf,) (None: all W).  ``interp`` (Wf, W) (``spectral.interpolation_matrix``):
+    L_param compares at all W with the targets interpolated; None: at ``target_index`` only.  ``weighted``:
+    L_param weighted by the target weights (module docstring).  L_refl and L_smooth use all W.  With
+    ``shape_target`` (leading dims (N, Ws)) L_shape is reported, at ``shape_index`` (Ws,) (None:
+    ``target_index``), and added with ``shape_weight``.  "param" is the L_param optimised; with ``report``
+    both variants are returned too ("param_plain", "param_weighted")."""
     with torch.no_grad():
         refl = model.dec_r(p)  # frozen Dec_R
     out = model.dec_t(p, refl)
     u_t = model.dec_t.to_unit(targets["alpha"], targets["g"], targets["sigma_t"], targets["weight"])
-    u = out["u"] if target_index is None else out["u"][..., target_index]
-    l_param = param_loss(u, u_t)
+    if interp is not None:
+        u, u_t = out["u"], interpolate(u_t, interp)
+    else:
+        u = out["u"] if target_index is None else out["u"][..., target_index]
+    l_param = param_loss(u, u_t, weighted)
     l_refl = spectral_l1(lut_reflectance(model, lut, out), R_mc)
     l_smooth = smooth_loss(out["u"])
     total = l_param + LAMBDA_R * l_refl + LAMBDA_SMOOTH * l_smooth
     terms = {"param": l_param, "refl": l_refl, "smooth": l_smooth}
+    if report:
+        terms.update(param_plain=param_loss(u, u_t), param_weighted=param_loss(u, u_t, weighted=True))
     if shape_target is not None:
         index = target_index if shape_index is None else shape_index
         terms["shape"] = profile_shape_loss(lut, out, shape_target, index)

@@ -27,9 +27,10 @@ from training.model.chain import SkinModel
 from training.model.config import ModelConfig, g_range_for_lut
 from training.sim.lut_interp import LookupTables
 from training.train import stages
-from training.train.data import SplitData, fits_files, load_split
+from training.train.data import TARGET_MODES, SplitData, fits_files, load_split
 from training.train.evaluate import evaluate_split
 from training.train.loop import checkpoint_path, load_checkpoint, run_stage, save_atomic
+from training.train.losses import SHAPE_BIN_STRIDE, VALIDATION_SHAPE_EVERY
 
 
 @dataclass
@@ -44,11 +45,15 @@ class TrainConfig:
     exposure_jitter: float = 0.25
     exposure_prior: float = 0.0
     shape_weight: float = 1.0
-
+    #: stage 3 (issue 23): "dense" = targets matched along wavelength and compared at all 376 (interpolated),
+    #: L_shape at all 376; "fitted" = sorted by sigma_t, at the fitted wavelengths only (before)
+    targets: str = "dense"
+    #: stage 3: L_param's alpha, g, sigma_t terms weighted by the target weights (losses.param_loss)
+    weighted_param: bool = True
 
 
 #: What a run record made before an option existed trained with (its behaviour then).
-LEGACY_TRAIN: dict = {"exposure_prior": 0.0, "shape_weight": 0.0}
+LEGACY_TRAIN: dict = {"exposure_prior": 0.0, "shape_weight": 0.0, "targets": "fitted", "weighted_param": False}
 
 
 def _write_json(path: Path, obj: dict) -> None:
@@ -99,9 +104,13 @@ def train(rundir: Path, dataset: Path, fits: Path | None, lut_path: Path, *, wan
     rundir.mkdir(parents=True, exist_ok=True)
     need_fits = 3 in want
     profiles = need_fits and tcfg.shape_weight > 0
-    train_data = load_split(dataset, "train", fits if need_fits else None, mcfg.k, profiles).to(dev)
+    if tcfg.targets not in TARGET_MODES:
+        raise ValueError(f"targets must be one of {TARGET_MODES}, got {tcfg.targets!r}")
+    train_data = load_split(dataset, "train", fits if need_fits else None, mcfg.k, profiles, tcfg.targets,
+                            SHAPE_BIN_STRIDE).to(dev)
     val_fits = fits if (need_fits and fits is not None and fits_files(fits, "validation")) else None
-    val_data = load_split(dataset, "validation", val_fits, mcfg.k, profiles and val_fits is not None).to(dev)
+    val_data = load_split(dataset, "validation", val_fits, mcfg.k, profiles and val_fits is not None,
+                          tcfg.targets, shape_every=VALIDATION_SHAPE_EVERY).to(dev)
     record = {
         "model": mcfg.to_dict(), "train": asdict(tcfg), "lut": str(lut_path), "lut_sha256": sha256_file(lut_path),
         "dataset": str(dataset), "fits": None if fits is None else str(fits),
@@ -150,4 +159,5 @@ def _spec(stage: int, model: SkinModel, lut: LookupTables, train_data: SplitData
     if stage == 2:
         return stages.stage2(model, train_data, val_data, t.epochs[i], t.batch[i], t.lr[i], t.synthetic,
                              t.exposure_jitter, t.seed, t.exposure_prior)
-    return stages.stage3(model, lut, train_data, val_data, t.epochs[i], t.batch[i], t.lr[i], t.shape_weight)
+    return stages.stage3(model, lut, train_data, val_data, t.epochs[i], t.batch[i], t.lr[i], t.shape_weight,
+                         t.targets == "dense", t.weighted_param)

@@ -21,6 +21,7 @@ from training.sim.lut_interp import LookupTables
 from training.train import losses as L
 from training.train.data import SplitData
 from training.train.loop import StageSpec
+from training.train.spectral import interpolation_matrix
 
 
 def stage1(model: SkinModel, train: SplitData, val: SplitData, epochs: int, batch: int, lr: float) -> StageSpec:
@@ -62,37 +63,54 @@ def stage2(model: SkinModel, train: SplitData, val: SplitData, epochs: int, batc
 
 
 def shape_batch(data: SplitData, idx: torch.Tensor) -> tuple[Target, torch.Tensor]:
-    """The profile targets of fitted rows ``idx`` for one training step and their wavelengths: every
-    ``SHAPE_WAVELENGTH_GROUPS``-th fitted wavelength from an offset set by the batch (deterministic, so a
-    resumed run replays the same steps) and every ``SHAPE_BIN_STRIDE``-th radial bin."""
-    n_w = data.target_index.numel()
-    cols = torch.arange(int(idx[0]) % L.SHAPE_WAVELENGTH_GROUPS, n_w, L.SHAPE_WAVELENGTH_GROUPS, device=idx.device)
-    t = data.shape_target.rows(idx).select(1, cols)
-    t = t.subset(torch.arange(0, t.r_cm.numel(), L.SHAPE_BIN_STRIDE, device=idx.device))
-    return t, data.target_index[cols]
+    """The profile targets of fitted rows ``idx`` for one training step and their wavelengths: about
+    ``SHAPE_WAVELENGTHS_PER_STEP`` of the profile wavelengths (``SplitData.shape_index``), every n-th from an
+    offset set by the batch (deterministic, so a resumed run replays the same steps); the radial bins as
+    loaded (every ``SHAPE_BIN_STRIDE``-th)."""
+    n_w = data.shape_index.numel()
+    every = max(1, round(n_w / L.SHAPE_WAVELENGTHS_PER_STEP))
+    cols = torch.arange(int(idx[0]) % every, n_w, every, device=idx.device)
+    return data.shape_target.rows(idx).select(1, cols), data.shape_index[cols]
+
+
+#: Validation tones per evaluation chunk in stage 3 (bounds the memory of L_shape at 376 wavelengths).
+EVAL_CHUNK: int = 64
 
 
 def stage3(model: SkinModel, lut: LookupTables, train: SplitData, val: SplitData, epochs: int, batch: int,
-           lr: float, shape_weight: float = 0.0) -> StageSpec:
-    """Stage 3; ``shape_weight`` > 0 adds the profile-shape term (needs ``SplitData.shape_target``)."""
+           lr: float, shape_weight: float = 0.0, dense: bool = True, weighted: bool = True) -> StageSpec:
+    """Stage 3; ``shape_weight`` > 0 adds the profile-shape term (needs ``SplitData.shape_target``).
+    ``dense``: L_param at every wavelength, targets interpolated (``training.train.spectral``); else at the
+    fitted wavelengths only.  ``weighted``: L_param weighted by the target weights (``losses.param_loss``)."""
     if train.targets is None:
         raise ValueError("stage 3 needs the mixture fits of the training split (--fits)")
     if shape_weight > 0 and train.shape_target is None:
         raise ValueError("a shape weight needs the training split's profiles (load_split(..., profiles=True))")
+    n_w = train.R_d.shape[1]
+    interp = interpolation_matrix(train.target_index.cpu().numpy(), n_w).to(train.R_d.device) if dense else None
 
     def step(idx: torch.Tensor) -> dict[str, torch.Tensor]:  # idx: positions among the fitted rows
         rows = train.fitted[idx]
         targets = {k: v[idx] for k, v in train.targets.items()}
         shape, shape_index = shape_batch(train, idx) if shape_weight > 0 else (None, None)
         return L.stage3_losses(model, lut, train.tone[rows], train.R_d[rows], targets, train.target_index,
-                               shape, shape_weight, shape_index)
+                               shape, shape_weight, shape_index, interp, weighted)
 
     def evaluate() -> dict[str, float]:
         if val.targets is not None:
-            rows = val.fitted
-            out = L.stage3_losses(model, lut, val.tone[rows], val.R_d[rows], val.targets, val.target_index,
-                                  val.shape_target, shape_weight)
-            return {k: float(v) for k, v in out.items()}
+            v_interp = interpolation_matrix(val.target_index.cpu().numpy(), n_w).to(val.R_d.device) if dense else None
+            sums: dict[str, float] = {}
+            n = len(val.fitted)
+            for s in range(0, n, EVAL_CHUNK):  # every term is a mean over tones: chunk means weighted by size
+                part = torch.arange(s, min(s + EVAL_CHUNK, n), device=val.fitted.device)
+                rows = val.fitted[part]
+                st = None if val.shape_target is None else val.shape_target.rows(part)
+                out = L.stage3_losses(model, lut, val.tone[rows], val.R_d[rows], {k: v[part] for k, v in
+                                      val.targets.items()}, val.target_index, st, shape_weight, val.shape_index,
+                                      v_interp, weighted, report=True)
+                for k, v in out.items():
+                    sums[k] = sums.get(k, 0.0) + float(v) * len(part) / n
+            return sums
         out = model.dec_t(val.tone, model.dec_r(val.tone))
         return {"refl": float(L.spectral_l1(L.lut_reflectance(model, lut, out), val.R_d))}
 
