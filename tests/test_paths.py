@@ -1,8 +1,12 @@
 """Shipped files record paths without the build machine's absolute paths (training.paths)."""
 
+import json
+import re
 from pathlib import Path
 
-from training.paths import REPO_ROOT, portable
+import pytest
+
+from training.paths import REPO_ROOT, portable, portable_command, portable_strings
 
 
 def test_paths_inside_the_repository_are_relative_to_its_root():
@@ -22,3 +26,30 @@ def test_paths_outside_keep_only_their_last_two_parts(tmp_path):
 def test_relative_paths_are_taken_from_the_working_folder(monkeypatch):
     monkeypatch.chdir(REPO_ROOT)
     assert portable("data/fits_laptop") == "data/fits_laptop"
+
+
+def test_command_lines_lose_absolute_paths_and_keep_the_rest(tmp_path):
+    cmd = portable_command("python -m training train",
+                           ["--dataset", str(REPO_ROOT / "data" / "laptop"), f"--lut={tmp_path / 'x' / 'l.npz'}",
+                            "--note", "two words", "--epochs", "1,2,3"])
+    assert cmd == "python -m training train --dataset data/laptop --lut=x/l.npz --note 'two words' --epochs 1,2,3"
+    assert portable_strings({"a": [str(REPO_ROOT / "data")], "c": "python -m training validate --out /tmp/v",
+                             "n": 3}) == {"a": ["data"], "c": "python -m training validate --out tmp/v", "n": 3}
+
+
+SHIPPED = ["blender_addon/models/skin_inversion.json", "docs/validation/tables.json", "docs/validation/tables.md",
+           "docs/figures/mitsuba_strips.json"]
+
+
+@pytest.mark.parametrize("name", SHIPPED)
+def test_shipped_files_record_no_absolute_paths(name):
+    text = (REPO_ROOT / name).read_text()
+    found = re.findall(r"""(?:^|[\s"'=(])(/(?:work|root|home|tmp|Users|scratch|mnt|data)/[^\s"']*)""", text)
+    assert not found, f"{name} records machine paths: {found[:3]}"
+
+
+def test_card_counts_the_fitted_tones_stage_3_learnt_from():
+    card = json.loads((REPO_ROOT / SHIPPED[0]).read_text())
+    d = card["dataset"]
+    assert card["fits"]["path"] and d["n_train_fitted"] > 0 and d["fitted_wavelengths"] > 0
+    assert d["n_train_fitted"] <= d["n_train"] and d["n_validation_fitted"] <= d["n_validation"]

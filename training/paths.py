@@ -7,6 +7,7 @@ parts (``/scratch/me/lut_paper.npz`` -> ``me/lut_paper.npz``), enough to tell fi
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 #: The repository root (the folder holding training/ and exporters/).
@@ -22,3 +23,32 @@ def portable(path: str | Path | None) -> str | None:
         return p.relative_to(REPO_ROOT).as_posix() or "."
     except ValueError:
         return Path(*p.parts[-2:]).as_posix() if len(p.parts) > 2 else p.name
+
+
+def portable_command(program: str, argv: list[str]) -> str:
+    """The command line ``program argv...`` as a shipped file records it: every argument that is an absolute
+    path (alone or as ``--option=/path``) made ``portable``; the rest kept as typed (shell-quoted)."""
+    import shlex
+
+    def one(arg: str) -> str:
+        opt, eq, value = arg.partition("=") if arg.startswith("--") else ("", "", arg)
+        return f"{opt}{eq}{portable(value)}" if Path(value).is_absolute() else arg
+
+    return " ".join([program, *(shlex.quote(one(a)) for a in argv)])
+
+
+#: An absolute path inside a text: starts at the text's start or after a space, quote, "=", "(" or "`"; ends
+#: before a space, quote, backtick, comma, semicolon or closing parenthesis; two parts at least (" /2" is no path).
+_PATH_IN_TEXT = re.compile(r"""(?:(?<=^)|(?<=[\s"'=(`]))(?:/[^\s"'`,;()/]+){2,}""")
+
+
+def portable_strings(obj):
+    """``obj`` (JSON-like: dicts, lists, strings, numbers) with every absolute path, whole or inside a text
+    (a command line, a note), made ``portable``."""
+    if isinstance(obj, dict):
+        return {k: portable_strings(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [portable_strings(v) for v in obj]
+    if isinstance(obj, str):
+        return _PATH_IN_TEXT.sub(lambda m: portable(m.group(0)), obj)
+    return obj

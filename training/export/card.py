@@ -20,7 +20,7 @@ from exporters.constants import WAVELENGTHS_NM
 from training.export.graphs import output_shapes
 from training.model.chain import DECODER_OUTPUTS, INVERSION_OUTPUTS
 from training.model.config import FALLBACK_ALBEDO_RGB
-from training.paths import portable
+from training.paths import portable, portable_strings
 
 INPUT_DOMAIN = (
     "albedo_rgb: linear sRGB (D65). A row with any NaN/Inf component is replaced by the fallback colour "
@@ -48,10 +48,12 @@ def _io(names: tuple[str, ...], k: int) -> dict[str, list]:
 
 
 def _h5_attrs(path: Path) -> dict:
+    """The file's attributes as the card records them: absolute paths of the building machine made portable."""
     if not path.is_file():
         return {}
     with h5py.File(path, "r") as f:
-        return {k: (v.item() if hasattr(v, "item") else str(v)) for k, v in f.attrs.items()}
+        attrs = {k: (v.item() if hasattr(v, "item") else str(v)) for k, v in f.attrs.items()}
+    return {k: portable(v) if isinstance(v, str) and Path(v).is_absolute() else v for k, v in attrs.items()}
 
 
 def _fits_attrs(fits_dir: Path) -> dict:
@@ -101,7 +103,7 @@ def build_card(run: dict, graphs: dict[str, bytes], weights: str, parity: dict, 
 
 
 def write_card(path: Path, card: dict) -> None:
-    path.write_text(json.dumps(card, indent=2) + "\n")
+    path.write_text(json.dumps(portable_strings(card), indent=2) + "\n")
 
 
 def update_validation(path: Path, validation: dict) -> None:
@@ -122,7 +124,7 @@ def update_validation(path: Path, validation: dict) -> None:
     if card.get("validation_tables") == VALIDATION_PLACEHOLDER:
         card["validation_tables"] = {"status": "filled: see `validation` (python -m training validate)"}
     tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(json.dumps(card, indent=2) + "\n")
+    tmp.write_text(json.dumps(portable_strings(card), indent=2) + "\n")
     tmp.replace(path)
 
 

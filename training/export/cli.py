@@ -15,12 +15,12 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import shlex
 import sys
 from pathlib import Path
 
 from training.export.card import build_card, write_card
 from training.export.graphs import PARITY_TOL, export_graphs, parity, parity_failures, rounding_cost
+from training.paths import portable_command
 from training.train.run import load_model
 
 CARD_NAME = "skin_inversion.json"
@@ -84,7 +84,7 @@ def export_run(run_dir: Path, out: Path, *, weights: str = "auto", max_mb: float
 
 def main(argv: list[str]) -> int:
     args = parser().parse_args(argv)
-    command = "python -m training export " + shlex.join(argv)
+    command = portable_command("python -m training export", argv)
     try:
         card = export_run(args.run, args.out, weights=args.weights, max_mb=args.max_mb, parity_n=args.parity_n,
                           notes=args.note, overwrite=args.overwrite, seed=args.seed, command=command)

@@ -17,11 +17,11 @@ quick experiments and tests.
 from __future__ import annotations
 
 import argparse
-import shlex
 import sys
 from pathlib import Path
 
 from training.model.config import ModelConfig
+from training.paths import portable_command
 from training.train.run import TrainConfig, train
 
 SIZES: dict[str, dict[str, int]] = {
@@ -87,7 +87,7 @@ def main(argv: list[str]) -> int:
                        synthetic=args.synthetic, exposure_jitter=args.exposure_jitter,
                        exposure_prior=args.exposure_prior, shape_weight=args.shape_weight, targets=args.targets,
                        weighted_param=not args.uniform_param)
-    command = "python -m training train " + shlex.join(argv)
+    command = portable_command("python -m training train", argv)
     try:
         if 3 in want and args.fits is None:
             raise ValueError("stage 3 needs --fits DIR (train_fits.h5 of `python -m training fit --dataset`)")

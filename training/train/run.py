@@ -74,6 +74,8 @@ def _check_or_create_record(rundir: Path, record: dict) -> dict:
             raise ValueError(f"{rundir} was trained with another {key} ({old.get(key)} != {record.get(key)}): "
                              "use another --out folder")
     old["commands"] = old.get("commands", []) + record["commands"]
+    if record.get("fits") is not None:  # stage 3 loads the fits that stages 1-2 did not: count what it learns from
+        old["fits"], old["dataset_info"] = record["fits"], record["dataset_info"]
     return old
 
 
@@ -112,8 +114,10 @@ def train(rundir: Path, dataset: Path, fits: Path | None, lut_path: Path, *, wan
     val_data = load_split(dataset, "validation", val_fits, mcfg.k, profiles and val_fits is not None,
                           tcfg.targets, shape_every=VALIDATION_SHAPE_EVERY).to(dev)
     record = {
-        "model": mcfg.to_dict(), "train": asdict(tcfg), "lut": str(lut_path), "lut_sha256": sha256_file(lut_path),
-        "dataset": str(dataset), "fits": None if fits is None else str(fits),
+        "model": mcfg.to_dict(), "train": asdict(tcfg), "lut": str(Path(lut_path).resolve()),
+        "lut_sha256": sha256_file(lut_path),
+        "dataset": str(Path(dataset).resolve()),
+        "fits": None if fits is None or not need_fits else str(Path(fits).resolve()),
         "dataset_info": {"n_train": len(train_data), "n_validation": len(val_data), "photons": train_data.photons,
                          "n_train_fitted": 0 if train_data.fitted is None else len(train_data.fitted),
                          "n_validation_fitted": 0 if val_data.fitted is None else len(val_data.fitted),

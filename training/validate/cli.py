@@ -20,12 +20,12 @@ from __future__ import annotations
 
 import argparse
 import os
-import shlex
 import sys
 from pathlib import Path
 
 from exporters import mitsuba as em
 from training.cluster import engine
+from training.paths import portable_command
 
 DEFAULT_MODEL_DIR = Path(__file__).resolve().parents[2] / "blender_addon" / "models"
 
@@ -139,7 +139,7 @@ def _options(args):
         path = getattr(args, name)
         if path is not None and not path.is_dir():
             raise ValueError(f"--{name} {path}: no such folder.")
-    command = "python -m training validate " + " ".join(shlex.quote(a) for a in sys.argv[2:]) \
+    command = portable_command("python -m training validate", sys.argv[2:]) \
         if len(sys.argv) > 1 and sys.argv[1] == "validate" else "python -m training validate (called from Python)"
     return R.Options(out=args.out, config=config, lut=Path(lut), model_dir=args.model_dir, dataset=args.dataset,
                      fits=args.fits, threads=args.threads, overwrite=args.overwrite, progress=not args.no_progress,

@@ -31,6 +31,7 @@ from exporters import mitsuba as em
 from exporters.colorimetry import SRGB_LUMINANCE, srgb_encode, xyz_to_linear_srgb, xyz_weights
 from exporters.constants import WAVELENGTHS_NM
 from exporters.maps import sha256_file
+from training.paths import portable_strings
 from training.skin.tones import load_tones
 
 BANDS = ("uv", "vis_E", "vis_A", "nir")
@@ -206,7 +207,7 @@ def render_strips(out_dir: Path, config: StripConfig = StripConfig(), overwrite:
               "decoder": Path(config.decoder).name, "decoder_sha256": sha256_file(config.decoder),
               "translucency_definition": f"mean radiance where cos(normal, light centre) < {far_cos(setup):.3f} "
                                          f"(no direct light) over the mean where it is > {LIT_COS}"}
-    (out_dir / FILES["metrics"]).write_text(json.dumps(record, indent=1))
+    (out_dir / FILES["metrics"]).write_text(json.dumps(portable_strings(record), indent=1))
     return record
 
 

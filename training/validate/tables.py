@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
+from training.paths import portable_strings
 from training.validate import gate as G
 from training.validate import metrics as M
 from training.validate import paper
@@ -318,5 +319,6 @@ def _jsonable(x):
 def write_tables(out: Path, record: dict) -> None:
     """Write ``tables.json`` and ``tables.md`` into ``out``."""
     out.mkdir(parents=True, exist_ok=True)
-    (out / "tables.json").write_text(json.dumps(_jsonable(record), indent=1) + "\n")
+    record = portable_strings(_jsonable(record))  # shipped: no absolute paths of the building machine
+    (out / "tables.json").write_text(json.dumps(record, indent=1) + "\n")
     (out / "tables.md").write_text(markdown(record))
