@@ -35,8 +35,9 @@ $(MITSUBA_STAMP): $(STAMP)
 	else echo "warning: libllvm19 needs root and apt-get; Mitsuba's scalar variants still work"; fi
 	touch $@
 
+# Two workers (pytest-xdist), one per core, each taking whole test files (module fixtures are built once).
 test: $(STAMP) $(MITSUBA_STAMP)
-	$(PY) -m pytest -q tests
+	$(PY) -m pytest -q -n 2 --dist loadfile tests
 
 lint: $(STAMP)
 	$(PY) -m ruff check exporters training blender_addon tests

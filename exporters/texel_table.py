@@ -332,7 +332,7 @@ def save(table: TexelTable, path: str | os.PathLike, overwrite: bool = False) ->
         raise FileExistsError(f"{path} exists; pass --overwrite to replace it")
     q, lo, hi = _quantise(table.values.astype(np.float64))
     meta = dict(table.meta, quantisation={"lo": lo.tolist(), "hi": hi.tolist(), "levels": _Q_MAX})
-    tmp = path.with_name(f".{path.name}.tmp.npz")
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp.npz")  # two processes may save the same table
     np.savez_compressed(tmp, q=q, origin=table.origin, step=table.step, meta=np.array(json.dumps(meta)))
     os.replace(tmp, path)
     return path

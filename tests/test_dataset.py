@@ -1,6 +1,7 @@
 """The dataset: sampling, resumable chunked storage, shards and merge — with the real simulator (tiny photon counts)."""
 
 from dataclasses import replace
+from functools import partial
 
 import h5py
 import numpy as np
@@ -13,10 +14,13 @@ from training.data.cli import main as dataset_main
 from training.data.presets import PRESETS
 from training.data.reweight import TrajectoryStore
 from training.data.sampling import T_EPI_LEVELS_CM, training_tones, validation_tones
-from training.data.simulate import simulate_direct
+from training.data.simulate import simulate_direct as simulate_uncapped
 from training.data.summary import write_summary
 
-TINY = replace(PRESETS["ci"], name="ci", n_train=3, n_validation=2, photons=20, chunk_tones=1)
+#: The storage tests check bookkeeping (chunks, shards, resume), not physics: packets are capped at 2,000 steps
+#: (the walker's default 100,000 lets a few NIR packets in the bloodless dermis wander for most of a test's time).
+TINY = replace(PRESETS["ci"], name="ci", n_train=3, n_validation=2, photons=20, chunk_tones=1, walk_max_steps=2_000)
+simulate_direct = partial(simulate_uncapped, max_steps=TINY.walk_max_steps)
 
 
 def test_sampling_covers_the_ranges_and_quantises_thickness():
@@ -110,7 +114,8 @@ def test_refuses_to_mix_runs_in_one_folder(tmp_path, capsys):
 def test_reweighted_build_shards_and_merge(tmp_path):
     """The default estimator: shards share the split's walk and merge into the unsharded result."""
     def make(folder, shard):
-        walk = TrajectoryStore(folder / "trajectories_validation", TINY.photons, TINY.validation_seed, shard=shard)
+        walk = TrajectoryStore(folder / "trajectories_validation", TINY.photons, TINY.validation_seed, shard=shard,
+                               max_steps=TINY.walk_max_steps)
         return build_split(TINY, "validation", folder, walk, method="reweighted", shard=shard, progress=False)
 
     whole = make(tmp_path / "whole", (0, 1))

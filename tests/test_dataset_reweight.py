@@ -16,6 +16,10 @@ from training.sim.transport import simulate
 from training.skin.tissue import skin_medium
 
 CHANNELS = np.arange(0, 376, 4)
+#: The store tests check bookkeeping, not physics: packets capped at 2,000 steps (the default 100,000 lets a few
+#: NIR packets wander in the bloodless dermis for most of the test's time).
+CAP = 2_000
+PHYSICS_CAP = 20_000
 PHOTONS = 400
 L = T_EPI_LEVELS_CM
 TONES = np.array([
@@ -29,9 +33,12 @@ TONES = np.array([
 
 @pytest.fixture(scope="module")
 def both():
-    traj = walk(PHOTONS, seed=11, mua0=baseline_absorption(), channels=CHANNELS)
+    # a cap of 20,000 steps truncates none of this walk's packets (asserted) and saves a third of its time
+    traj = walk(PHOTONS, seed=11, mua0=baseline_absorption(), channels=CHANNELS, max_steps=PHYSICS_CAP)
+    assert not np.any(traj.truncated)
     rw = reweight(traj, TONES)
-    direct = [simulate(skin_medium(t).select_channels(CHANNELS), PHOTONS, seed=100 + i) for i, t in enumerate(TONES)]
+    direct = [simulate(skin_medium(t).select_channels(CHANNELS), PHOTONS, seed=100 + i, max_steps=PHYSICS_CAP)
+              for i, t in enumerate(TONES)]
     return traj, rw, direct
 
 
@@ -88,24 +95,24 @@ def test_tones_must_be_on_a_level_and_above_the_baseline(both):
 
 def test_store_resumes_chunks_and_refuses_other_walks(tmp_path):
     """The dataset's on-disk walk: chunks survive a restart, another photon count is refused."""
-    st = TrajectoryStore(tmp_path / "t", photons=6, seed=3, chunk_photons=4)
+    st = TrajectoryStore(tmp_path / "t", photons=6, seed=3, chunk_photons=4, max_steps=CAP)
     traj = st.trajectories()
     assert traj.photons == 6 and sorted(p.name for p in (tmp_path / "t").glob("chunk*.npz")) == [
         "chunk0000.npz", "chunk0001.npz"]
     (tmp_path / "t" / "chunk0001.npz").unlink()  # as if killed while walking the second chunk
-    again = TrajectoryStore(tmp_path / "t", photons=6, seed=3, chunk_photons=4).trajectories()
+    again = TrajectoryStore(tmp_path / "t", photons=6, seed=3, chunk_photons=4, max_steps=CAP).trajectories()
     for key in ("offsets", "w", "bin", "path_cm"):
         np.testing.assert_array_equal(getattr(traj, key), getattr(again, key))
     with pytest.raises(ValueError, match="other photons"):
-        TrajectoryStore(tmp_path / "t", photons=7, seed=3, chunk_photons=4).trajectories()
+        TrajectoryStore(tmp_path / "t", photons=7, seed=3, chunk_photons=4, max_steps=CAP).trajectories()
 
 
 def test_store_grows_by_whole_chunks_like_a_fresh_walk(tmp_path):
     """A walk of whole chunks grows (more photons) and shrinks to a prefix; the result is a fresh walk's."""
-    small = TrajectoryStore(tmp_path / "t", photons=8, seed=3, chunk_photons=4).trajectories()
-    grown = TrajectoryStore(tmp_path / "t", photons=12, seed=3, chunk_photons=4).trajectories()
-    fresh = TrajectoryStore(tmp_path / "f", photons=12, seed=3, chunk_photons=4).trajectories()
-    prefix = TrajectoryStore(tmp_path / "t", photons=8, seed=3, chunk_photons=4).trajectories()
+    small = TrajectoryStore(tmp_path / "t", photons=8, seed=3, chunk_photons=4, max_steps=CAP).trajectories()
+    grown = TrajectoryStore(tmp_path / "t", photons=12, seed=3, chunk_photons=4, max_steps=CAP).trajectories()
+    fresh = TrajectoryStore(tmp_path / "f", photons=12, seed=3, chunk_photons=4, max_steps=CAP).trajectories()
+    prefix = TrajectoryStore(tmp_path / "t", photons=8, seed=3, chunk_photons=4, max_steps=CAP).trajectories()
     assert grown.photons == 12 and prefix.photons == 8
     for key in ("offsets", "w", "bin", "path_cm", "truncated"):
         np.testing.assert_array_equal(getattr(grown, key), getattr(fresh, key))
