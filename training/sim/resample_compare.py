@@ -1,0 +1,248 @@
+"""``python -m training resampling``: profile estimators compared at equal photons (paper §3).
+
+The paper reports its CDF-based conservative resampling at 4x lower RMSR than uniform binning and 2x
+lower than a kernel density estimate at 10^5 photons.  Here, for a few homogeneous media (sigma_t =
+100 cm^-1) and one skin tone at two wavelengths (the two-layer model, direct estimator), one walk of
+``repeats`` x ``photons`` photons is split by photon id into ``repeats`` independent runs of
+``photons`` each.  Every run's exits give four estimates of the profile on the SPEC's 512 log bins:
+
+* ``histogram``: the plain tally in the 512 log bins (what the simulator writes by default);
+* ``uniform``: a histogram in 512 bins uniform in r over [0, 5 cm], remapped conservatively onto the
+  log bins (density constant in area within a uniform bin) - "uniform binning" read literally;
+* ``kde``: a weighted Gaussian KDE of log r (scipy, Scott's bandwidth), integrated over each bin;
+* ``cdf``: ``training.sim.resample.cdf_resample`` at several ``min_count`` (the default marked).
+
+Reference: for run i, the pooled histogram of the other runs ((repeats - 1) x photons: independent of
+run i).  RMSR (root-mean-square relative residual) of an estimate p against the reference q over the
+bins S where the pooled reference of all runs has a relative standard error below ``SUPPORT_REL_SE`` (10 %):
+    RMSR^2 = mean_S ((p - q) / q)^2 - mean_S (se_q / q)^2,
+the second term removing the reference's own noise (its per-bin standard error), clipped at 0.  Mean
+over the runs.  Everything is deterministic for a seed.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from exporters.constants import R_EDGES_CM, WAVELENGTHS_NM
+from training.sim.medium import LayeredMedium
+from training.sim.resample import MIN_COUNT, cdf_resample, histogram_profile, kde_profile
+from training.sim.transport import simulate_records
+
+#: Bins where the pooled reference's relative standard error is below this count in the RMSR (``--quick``:
+#: SUPPORT_REL_SE_QUICK, its reference being small).
+SUPPORT_REL_SE, SUPPORT_REL_SE_QUICK = 0.1, 0.3
+#: min_count values of the CDF resampler compared (MIN_COUNT is the default).
+MIN_COUNTS = (100, 200, 400, 800, 1600)
+#: Representative tone R05 of training/skin/tones.csv (medium skin) and the wavelengths used (nm).
+SKIN_TONE = ("R05", (0.035, 0.02, 0.01, 0.75, 0.8))
+SKIN_WAVELENGTHS_NM = (450, 650)
+SIGMA_T = 100.0  #: cm^-1, extinction of the homogeneous media
+HOMOGENEOUS = ((0.9, 0.8), (0.99, 0.8), (0.998, 0.85))  #: (albedo, g)
+
+
+def _cases(quick: bool) -> list[dict]:
+    from training.skin.tissue import skin_medium
+
+    media = HOMOGENEOUS[:1] if quick else HOMOGENEOUS
+    cases = [{"name": f"homogeneous a={a} g={g}", "kind": "homogeneous", "albedo": a, "g": g, "sigma_t": SIGMA_T,
+              "medium": LayeredMedium.homogeneous(SIGMA_T * (1 - a), SIGMA_T * a, g, n_medium=1.4)}
+             for a, g in media]
+    wls = SKIN_WAVELENGTHS_NM[:1] if quick else SKIN_WAVELENGTHS_NM
+    idx = [int(np.argmin(np.abs(np.asarray(WAVELENGTHS_NM) - w))) for w in wls]
+    skin = skin_medium(np.array(SKIN_TONE[1])).select_channels(idx)
+    for c, w in enumerate(wls):
+        cases.append({"name": f"skin {SKIN_TONE[0]} {w} nm", "kind": "skin", "tone": list(SKIN_TONE[1]),
+                      "wavelength_nm": w, "medium": skin.select_channels([c])})
+    return cases
+
+
+def uniform_profile(r: np.ndarray, w: np.ndarray, photons: int, r_edges: np.ndarray, n_bins: int) -> np.ndarray:
+    """Histogram in ``n_bins`` bins uniform in r over [0, r_edges[-1]], remapped onto ``r_edges`` (cm^-2).
+
+    The cumulative energy is linear in r^2 inside a uniform bin (constant density per area), so the
+    remap is conservative: np.interp of the cumulative energy at the target edges' r^2.
+    """
+    lin = np.linspace(0.0, r_edges[-1], n_bins + 1)
+    e = np.histogram(r, bins=lin, weights=w)[0] / photons
+    cum = np.concatenate([[0.0], np.cumsum(e)])
+    return histogram_profile(np.diff(np.interp(r_edges**2, lin**2, cum)), r_edges)
+
+
+def _tally(r: np.ndarray, w: np.ndarray, r_edges: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Sums of exit weights and of their squares per bin of ``r_edges`` (exits beyond the last edge dropped)."""
+    return np.histogram(r, bins=r_edges, weights=w)[0], np.histogram(r, bins=r_edges, weights=w * w)[0]
+
+
+def _mean_se(s1: np.ndarray, s2: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Per-photon mean and its standard error from sums of weights and squared weights over n photons."""
+    mean = s1 / n
+    return mean, np.sqrt(np.maximum(s2 / n - mean**2, 0.0) / n)
+
+
+def _rmsr(p: np.ndarray, q: np.ndarray, se_q: np.ndarray, support: np.ndarray) -> float:
+    rel = (p[support] - q[support]) / q[support]
+    return float(math.sqrt(max(np.mean(rel**2) - np.mean((se_q[support] / q[support]) ** 2), 0.0)))
+
+
+def compare_case(medium: LayeredMedium, photons: int, repeats: int, seed: int,
+                 support_rel_se: float = SUPPORT_REL_SE, r_edges: np.ndarray = R_EDGES_CM) -> dict:
+    """RMSR of every estimator for one single-channel medium (module docstring); per-run curves of run 0."""
+    rec = simulate_records(medium, photons * repeats, seed=seed, compile=False)
+    refl = rec.kind == 1
+    r, w, run = rec.r_cm[refl], rec.w[refl], rec.pid[refl] % repeats
+    tallies = [_tally(r[run == i], w[run == i], r_edges) for i in range(repeats)]
+    s1, s2 = np.sum([t[0] for t in tallies], axis=0), np.sum([t[1] for t in tallies], axis=0)
+    mean_all, se_all = _mean_se(s1, s2, photons * repeats)
+    support = (mean_all > 0) & (se_all < support_rel_se * mean_all)
+    if support.sum() < 10:
+        raise ValueError(f"only {int(support.sum())} bins of the pooled reference are resolved to "
+                         f"{support_rel_se:.0%}: raise --photons or --repeats")
+    rmsr: dict[str, list[float]] = {}
+    curves = {}
+    for i in range(repeats):
+        e_ref, se_ref = _mean_se(s1 - tallies[i][0], s2 - tallies[i][1], photons * (repeats - 1))
+        q, se_q = histogram_profile(e_ref, r_edges), histogram_profile(se_ref, r_edges)
+        sel = run == i
+        e, e2 = tallies[i][0] / photons, tallies[i][1] / photons
+        est = {
+            "histogram": histogram_profile(e, r_edges),
+            "uniform": uniform_profile(r[sel], w[sel], photons, r_edges, r_edges.size - 1),
+            "kde": kde_profile(r[sel & (r < r_edges[-1])], w[sel & (r < r_edges[-1])], photons, r_edges),
+        }
+        for m in MIN_COUNTS:
+            est["cdf" if m == MIN_COUNT else f"cdf_m{m}"] = cdf_resample(e, e2, r_edges, photons, min_count=m)
+        for k, p in est.items():
+            rmsr.setdefault(k, []).append(_rmsr(p, q, se_q, support))
+        if i == 0:
+            curves = {"reference": q, **{k: est[k] for k in ("histogram", "uniform", "kde", "cdf")}}
+    mean = {k: float(np.mean(v)) for k, v in rmsr.items()}
+    return {"rmsr": mean, "rmsr_runs": rmsr, "support_bins": int(support.sum()),
+            "ratio_histogram_over_cdf": mean["histogram"] / mean["cdf"],
+            "ratio_uniform_over_cdf": mean["uniform"] / mean["cdf"],
+            "ratio_kde_over_cdf": mean["kde"] / mean["cdf"], "walk_seconds": rec.seconds,
+            "_curves": curves, "_support": support}
+
+
+def _figure(results: list[dict], path: Path, photons: int) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    centres = np.sqrt(R_EDGES_CM[1:-1] * R_EDGES_CM[2:])
+    n = len(results)
+    fig, axes = plt.subplots(1, n + 1, figsize=(3.6 * (n + 1), 3.4))
+    for ax, res in zip(axes[:-1], results, strict=True):
+        cv, sup = res["_curves"], res["_support"][1:]
+        q = cv["reference"][1:]
+        for k, col in (("histogram", "0.6"), ("kde", "tab:orange"), ("cdf", "tab:blue")):
+            rel = np.where(sup, cv[k][1:] / np.where(q > 0, q, 1.0) - 1.0, np.nan)
+            ax.plot(centres, rel, color=col, lw=0.8, label=k)
+        ax.set_xscale("log")
+        ax.set_ylim(-1.0, 1.0)
+        ax.set_title(res["name"], fontsize=8)
+        ax.set_xlabel("r (cm)")
+    axes[0].set_ylabel(f"estimate / reference - 1 ({photons:,} photons)")
+    axes[0].legend(fontsize=7)
+    keys = ("histogram", "uniform", "kde", "cdf")
+    x = np.arange(n)
+    for j, k in enumerate(keys):
+        axes[-1].bar(x + (j - 1.5) * 0.2, [r["rmsr"][k] for r in results], 0.2, label=k)
+    axes[-1].set_xticks(x, [r["name"].replace("homogeneous ", "") for r in results], rotation=30, fontsize=6,
+                        ha="right")
+    axes[-1].set_yscale("log")
+    axes[-1].set_title("RMSR (mean over runs)", fontsize=8)
+    axes[-1].legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+def run(out: Path, photons: int, repeats: int, seed: int, quick: bool, log=print) -> dict:
+    """Compare the estimators on every case; write resampling.json, resampling.md, fig_resampling.png."""
+    t0 = time.perf_counter()
+    results = []
+    support_rel_se = SUPPORT_REL_SE_QUICK if quick else SUPPORT_REL_SE
+    for c, case in enumerate(_cases(quick)):
+        res = compare_case(case.pop("medium"), photons, repeats, seed + c, support_rel_se)
+        results.append({**case, **res})
+        log(f"{case['name']}: RMSR " + ", ".join(f"{k} {v:.3f}" for k, v in res["rmsr"].items()))
+    out.mkdir(parents=True, exist_ok=True)
+    _figure(results, out / "fig_resampling.png", photons)
+    keys = ("histogram", "uniform", "kde", "cdf")
+    mean = {k: float(np.mean([r["rmsr"][k] for r in results])) for k in results[0]["rmsr"]}
+    summary = {
+        "command": "python -m training resampling" + (" --quick" if quick else "")
+        + f" --photons {photons} --repeats {repeats} --seed {seed}",
+        "photons": photons, "repeats": repeats, "reference_photons": photons * (repeats - 1),
+        "support_rel_se": support_rel_se, "default_min_count": MIN_COUNT,
+        "cases": [{k: v for k, v in r.items() if not k.startswith("_")} for r in results],
+        "mean_rmsr": mean,
+        "ratio_histogram_over_cdf": mean["histogram"] / mean["cdf"],
+        "ratio_uniform_over_cdf": mean["uniform"] / mean["cdf"],
+        "ratio_kde_over_cdf": mean["kde"] / mean["cdf"],
+        "paper": {"ratio_uniform_over_cdf": 4.0, "ratio_kde_over_cdf": 2.0, "photons": 100_000},
+        "seconds": time.perf_counter() - t0,
+    }
+    (out / "resampling.json").write_text(json.dumps(summary, indent=1))
+    lines = [f"# Profile estimators at {photons:,} photons (`{summary['command']}`)", "",
+             f"RMSR against a leave-one-out reference of {photons * (repeats - 1):,} photons, mean over "
+             f"{repeats} runs, over bins where the pooled reference's relative standard error < "
+             f"{support_rel_se:.0%} (the reference's own noise removed; `training/sim/resample_compare.py`).", "",
+             "| case | bins | " + " | ".join(keys) + " | histogram / cdf | uniform / cdf | kde / cdf |",
+             "|---|---|" + "---|" * (len(keys) + 3)]
+    for r in results:
+        lines.append(f"| {r['name']} | {r['support_bins']} | " + " | ".join(f"{r['rmsr'][k]:.3f}" for k in keys)
+                     + f" | {r['ratio_histogram_over_cdf']:.2f} | {r['ratio_uniform_over_cdf']:.2f} | "
+                     f"{r['ratio_kde_over_cdf']:.2f} |")
+    lines.append("| mean | | " + " | ".join(f"{mean[k]:.3f}" for k in keys)
+                 + f" | {summary['ratio_histogram_over_cdf']:.2f} | {summary['ratio_uniform_over_cdf']:.2f} | "
+                 f"{summary['ratio_kde_over_cdf']:.2f} |")
+    lines += ["", "CDF resampling at other `min_count` (mean RMSR): "
+              + ", ".join(f"{m}: {mean['cdf' if m == MIN_COUNT else f'cdf_m{m}']:.3f}" for m in MIN_COUNTS)
+              + f" (default {MIN_COUNT}).", "",
+              "Paper (§3, 10^5 photons): CDF resampling 4x lower RMSR than uniform binning, 2x lower than a KDE.", ""]
+    (out / "resampling.md").write_text("\n".join(lines))
+    return summary
+
+
+def _parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="python -m training resampling",
+                                description="Radial profile estimators (histogram, uniform bins, KDE, CDF "
+                                "resampling) against a high-photon reference at equal photons.")
+    p.add_argument("--out", type=Path, required=True, help="folder for resampling.json/.md, fig_resampling.png")
+    p.add_argument("--photons", type=int, default=None, help="photons per run (default 100000; --quick 10000)")
+    p.add_argument("--repeats", type=int, default=None, help="independent runs per case (default 4; --quick 3)")
+    p.add_argument("--quick", action="store_true", help="one medium, one skin wavelength, few photons (seconds)")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--device", choices=("cpu",), default="cpu", help="the comparison runs on the CPU")
+    p.add_argument("--threads", type=int, default=1)
+    return p
+
+
+def main(argv: list[str]) -> int:
+    """Run the command; returns the exit status (2 for bad input)."""
+    args = _parser().parse_args(argv)
+    photons = args.photons or (10_000 if args.quick else 100_000)
+    repeats = args.repeats or (3 if args.quick else 4)
+    if photons < 10 or repeats < 2:
+        print("error: --photons must be >= 10 and --repeats >= 2 (the reference is the other runs)", file=sys.stderr)
+        return 2
+    torch.set_num_threads(args.threads)
+    try:
+        s = run(args.out, photons, repeats, args.seed, args.quick)
+    except ValueError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    print(f"mean RMSR: " + ", ".join(f"{k} {v:.3f}" for k, v in s["mean_rmsr"].items())
+          + f" -> {args.out / 'resampling.md'}")
+    return 0
