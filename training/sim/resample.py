@@ -9,8 +9,9 @@ count-adaptive CDF resampler for weighted tallies), ``cdf_resample``:
    effective photon count n_i = (sum w)^2 / sum w^2 (Kish's effective sample size; = the photon count
    for unit weights).
 2. Knots on the bin edges: the cumulative energy C(r) is kept exactly at a knot placed whenever at
-   least ``min_count`` effective photons have been collected since the previous knot (so knots are one
-   bin apart where the profile is well sampled and spread out where it is sparse), at the first edge
+   least ``min_count`` effective photons have been collected since the previous knot or the interval
+   spans ``max_span`` bins (so knots are one bin apart where the profile is well sampled and spread
+   out, up to ``max_span`` bins, where it is sparse), at the first edge
    (r_1: the bin [0, r_1] keeps its tallied energy) and at the outer edge of the last bin that holds
    any light (nothing is spread beyond the photons' reach).
 3. Between knots C is interpolated monotonically (PCHIP in log r: no overshoot, so every bin gets
@@ -30,8 +31,12 @@ import math
 import numpy as np
 
 #: Effective photons per knot interval of ``cdf_resample`` (relative noise of an interval's energy
-#: ~ 1 / sqrt(MIN_COUNT) = 5 %); chosen with ``python -m training resampling`` (docs/validation/resampling.md).
+#: ~ 1 / sqrt(MIN_COUNT) = 5 %).  MIN_COUNT and MAX_SPAN were chosen on the cases of ``python -m training
+#: resampling`` at 10^5 photons (a sweep of 50-400 x 4-32 bins; docs/validation/resampling.md).
 MIN_COUNT: int = 400
+#: Widest knot interval of ``cdf_resample``, in bins (8 SPEC bins = 0.07 decades of r): bounds the bias
+#: where the profile falls steeply and photons are sparse (without it, RMSR in the tails grows past 1).
+MAX_SPAN: int = 8
 
 
 def histogram_profile(energy: np.ndarray, r_edges: np.ndarray) -> np.ndarray:
@@ -39,28 +44,35 @@ def histogram_profile(energy: np.ndarray, r_edges: np.ndarray) -> np.ndarray:
     return energy / (math.pi * np.diff(r_edges**2))
 
 
-def _knots(energy: np.ndarray, n_eff: np.ndarray, min_count: float) -> np.ndarray:
+def _knots(energy: np.ndarray, n_eff: np.ndarray, min_count: float, max_span: int) -> np.ndarray:
     """Edge indices (into the NB + 1 edges) kept exactly, for one channel (see the module docstring).
 
-    A knot closes a bin wherever the running effective count (from bin 1 on) passes a multiple of
-    ``min_count``; a remainder under half of it joins the previous interval.
+    Walking out from bin 1, a knot closes the interval when it holds ``min_count`` effective photons or
+    spans ``max_span`` bins; a last interval holding under half of ``min_count`` joins the previous one
+    (unless that would exceed ``max_span`` bins).
     """
     nb = energy.size
     filled = np.flatnonzero(energy > 0)
     if filled.size == 0:
         return np.array([0, nb])
     last = int(filled[-1]) + 1  # outer edge of the last bin holding light
-    level = np.floor(np.cumsum(n_eff[1:last]) / min_count)  # bins 1 .. last - 1
-    closes = np.flatnonzero(np.diff(np.concatenate([[0.0], level])) > 0) + 2  # edge after each such bin
-    total = float(n_eff[1:last].sum())
-    if closes.size and closes[-1] != last and total - min_count * level[-1] < min_count / 2:
-        closes = closes[:-1]  # the thin remainder joins the previous interval
-    knots = np.concatenate([[0, 1], closes, [last, nb]])
-    return np.unique(knots)
+    knots, acc, start = [0, 1], 0.0, 1
+    for i in range(1, last):
+        acc += n_eff[i]
+        if acc >= min_count or i + 1 - start >= max_span:
+            knots.append(i + 1)
+            acc, start = 0.0, i + 1
+    if knots[-1] != last:
+        if acc < min_count / 2 and len(knots) > 2 and last - knots[-2] <= max_span:
+            knots[-1] = last
+        else:
+            knots.append(last)
+    knots.append(nb)
+    return np.unique(np.array(knots))
 
 
 def cdf_resample(energy: np.ndarray, energy_sq: np.ndarray, r_edges: np.ndarray, photons: int,
-                 min_count: float = MIN_COUNT) -> np.ndarray:
+                 min_count: float = MIN_COUNT, max_span: int = MAX_SPAN) -> np.ndarray:
     """CDF-based conservative resampling of tallied bin energies (module docstring) -> profile cm^-2.
 
     ``energy`` (..., NB): sum of exit weights per bin / photons (per unit incident power);
@@ -82,7 +94,7 @@ def cdf_resample(energy: np.ndarray, energy_sq: np.ndarray, r_edges: np.ndarray,
     out = np.empty_like(flat_e)
     for c, (e, s) in enumerate(zip(flat_e, flat_s, strict=True)):
         n_eff = photons * np.where(s > 0, e * e / np.where(s > 0, s, 1.0), 0.0)
-        knots = _knots(e, n_eff, min_count)
+        knots = _knots(e, n_eff, min_count, max_span)
         cum = np.concatenate([[0.0], np.cumsum(e)])
         inner = knots[knots >= 1]
         c_edges = np.empty(r_edges.size)
@@ -95,6 +107,18 @@ def cdf_resample(energy: np.ndarray, energy_sq: np.ndarray, r_edges: np.ndarray,
         c_edges[knots] = cum[knots]  # exact at the knots (PCHIP passes through them; rounding aside)
         out[c] = np.clip(np.diff(c_edges), 0.0, None)
     return histogram_profile(out.reshape(energy.shape), r_edges)
+
+
+def cdf_resample_profile(profile: np.ndarray, stderr: np.ndarray, r_edges: np.ndarray, photons: int,
+                         min_count: float = MIN_COUNT, max_span: int = MAX_SPAN) -> np.ndarray:
+    """``cdf_resample`` of a tallied profile given as (profile, profile_stderr) (..., NB) cm^-2 over
+    ``photons``, as ``simulate`` and the dataset write them (``training.sim.transport.mean_stderr``):
+    the per-photon sums are recovered as energy = profile x area and energy_sq = (stderr x area)^2
+    (photons - 1) + energy^2.  Returns the resampled profile (..., NB) cm^-2."""
+    area = math.pi * np.diff(r_edges**2)
+    e = np.asarray(profile, dtype=np.float64) * area
+    e2 = (np.asarray(stderr, dtype=np.float64) * area) ** 2 * max(photons - 1, 1) + e * e
+    return cdf_resample(e, e2, r_edges, photons, min_count, max_span)
 
 
 def kde_profile(r: np.ndarray, w: np.ndarray, photons: int, r_edges: np.ndarray) -> np.ndarray:
