@@ -31,9 +31,10 @@ import math
 import numpy as np
 
 #: Effective photons per knot interval of ``cdf_resample`` (relative noise of an interval's energy
-#: ~ 1 / sqrt(MIN_COUNT) = 5 %).  MIN_COUNT and MAX_SPAN were chosen on the cases of ``python -m training
-#: resampling`` at 10^5 photons (a sweep of 50-400 x 4-32 bins; docs/validation/resampling.md).
-MIN_COUNT: int = 400
+#: ~ 1 / sqrt(MIN_COUNT) = 3.5 %).  MIN_COUNT and MAX_SPAN were chosen on the cases of ``python -m training
+#: resampling`` at 10^5 photons (a sweep of min_count 50-1600 x max_span 4-32 bins: span 8 best, min_count
+#: 800 and 1600 within 7 % of each other; docs/validation/resampling.md).
+MIN_COUNT: int = 800
 #: Widest knot interval of ``cdf_resample``, in bins (8 SPEC bins = 0.07 decades of r): bounds the bias
 #: where the profile falls steeply and photons are sparse (without it, RMSR in the tails grows past 1).
 MAX_SPAN: int = 8

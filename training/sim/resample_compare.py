@@ -43,7 +43,7 @@ from training.sim.transport import simulate_records
 SUPPORTS = {"resolved": 0.1, "with_tails": 0.3}
 SUPPORTS_QUICK = {"resolved": 0.3, "with_tails": 0.5}
 #: min_count values of the CDF resampler compared (MIN_COUNT is the default).
-MIN_COUNTS = (100, 200, 400, 800)
+MIN_COUNTS = (200, 400, 800, 1600)
 #: Representative tone R05 of training/skin/tones.csv (medium skin) and the wavelengths used (nm).
 SKIN_TONE = ("R05", (0.035, 0.02, 0.01, 0.75, 0.8))
 SKIN_WAVELENGTHS_NM = (450, 650)
