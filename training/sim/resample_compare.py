@@ -149,29 +149,35 @@ def _figure(results: list[dict], path: Path, photons: int) -> None:
     import matplotlib.pyplot as plt
 
     centres = np.sqrt(R_EDGES_CM[1:-1] * R_EDGES_CM[2:])
+    colours = {"histogram": "0.55", "uniform": "tab:green", "kde": "tab:orange", "cdf": "tab:blue"}
     n = len(results)
-    fig, axes = plt.subplots(1, n + 1, figsize=(3.6 * (n + 1), 3.4))
-    for ax, res in zip(axes[:-1], results, strict=True):
+    cols = min(n + 1, 3)
+    rows = math.ceil((n + 1) / cols)
+    fig, axes = plt.subplots(rows, cols, figsize=(4.2 * cols, 3.3 * rows), squeeze=False)
+    axes = axes.ravel()
+    for ax in axes[n + 1:]:
+        ax.axis("off")
+    for ax, res in zip(axes[:n], results, strict=True):
         cv, sup = res["_curves"], res["_support"][1:]
         q = cv["reference"][1:]
-        for k, col in (("histogram", "0.6"), ("kde", "tab:orange"), ("cdf", "tab:blue")):
+        for k in ("histogram", "kde", "cdf"):
             rel = np.where(sup, cv[k][1:] / np.where(q > 0, q, 1.0) - 1.0, np.nan)
-            ax.plot(centres, rel, color=col, lw=0.8, label=k)
+            ax.plot(centres, rel, color=colours[k], lw=0.8, label=k)
         ax.set_xscale("log")
         ax.set_ylim(-1.0, 1.0)
         ax.set_title(res["name"], fontsize=8)
         ax.set_xlabel("r (cm)")
-    axes[0].set_ylabel(f"estimate / reference - 1 ({photons:,} photons)")
-    axes[0].legend(fontsize=7)
-    keys = ("histogram", "uniform", "kde", "cdf")
+        ax.set_ylabel("estimate / reference - 1", fontsize=8)
+    axes[0].legend(fontsize=7, title=f"one run, {photons:,} photons", title_fontsize=7)
+    bar_ax = axes[n]
     x = np.arange(n)
-    for j, k in enumerate(keys):
-        axes[-1].bar(x + (j - 1.5) * 0.2, [r["rmsr"][k] for r in results], 0.2, label=k)
-    axes[-1].set_xticks(x, [r["name"].replace("homogeneous ", "") for r in results], rotation=30, fontsize=6,
-                        ha="right")
-    axes[-1].set_yscale("log")
-    axes[-1].set_title("RMSR (mean over runs)", fontsize=8)
-    axes[-1].legend(fontsize=7)
+    for j, k in enumerate(colours):
+        bar_ax.bar(x + (j - 1.5) * 0.2, [r["rmsr"][k] for r in results], 0.2, label=k, color=colours[k])
+    bar_ax.set_xticks(x, [r["name"].replace("homogeneous ", "") for r in results], rotation=30, fontsize=6,
+                      ha="right")
+    bar_ax.set_yscale("log")
+    bar_ax.set_title("RMSR (mean over runs)", fontsize=8)
+    bar_ax.legend(fontsize=7)
     fig.tight_layout()
     fig.savefig(path, dpi=120)
     plt.close(fig)
