@@ -25,6 +25,8 @@ COMMANDS: dict[str, tuple[str | None, str]] = {
     "swatches": ("training.skin.swatches", "Plot the colours of the representative and outlier tones."),
     "mitsuba": ("training.validate.compare", "Mitsuba 3 reflectance of the network's mixture vs ours vs ground truth."),
     "realskin": ("training.realskin.cli", "Fit the skin model to measured human skin reflectance (NIST)."),
+    "resampling": ("training.sim.resample_compare", "Radial profile estimators (histogram, KDE, CDF resampling) "
+                   "compared at equal photons (paper §3)."),
     "demo": ("training.demo", "What `make demo` runs: the best end-to-end path available today."),
 }
 

@@ -51,13 +51,15 @@ from exporters.constants import anisotropy
 from exporters.maps import sha256_file
 from training.fit.optimize import WARM_LM_ITERS, fit_schedule
 from training.fit.sweep import fit_tones_sweep
+from training.sim.lut_extend import extension_record
 from training.sim.lut_interp import LookupTables
 
 SPLITS = ("train", "validation")
 
 #: Attributes that fix a tone's fits (besides the ``dataset_*`` ones): files agreeing on them are
 #: interchangeable row by row (``reuse``).
-FIT_KEYS = ("ks", "method", "refl_loss", "wavelength_stride", "anchor_every", "continuity", "lut_sha256")
+FIT_KEYS = ("ks", "method", "refl_loss", "wavelength_stride", "anchor_every", "continuity", "lut_sha256",
+            "lut_albedo_extension")
 #: How a tone's wavelengths are chained (``continuity``): "sweep", in wavelength order from the previous
 #: solution, components matched (training/fit/sweep.py; issue 23); "anchors", each from its nearest
 #: anchor, components in the fitter's order (the fits before issue 23).
@@ -284,6 +286,7 @@ def fit_split(
         "max_tones": "all" if max_tones is None else max_tones,
         "select": select,
         "lut_sha256": sha256_file(lut_path),
+        "lut_albedo_extension": extension_record(lut_path),  # the LUT's rows above its last albedo
         "shard": f"{i}/{n}",
         **src_attrs,
     }

@@ -4,7 +4,8 @@ Epidermis of thickness t_epi over a semi-infinite dermis, n = 1.4, air above, di
 ``--method direct`` walks the absorbing medium; ``--method reweighted`` is the dataset's estimator
 (``training.data.reweight``): a walk at the baseline absorption, each reflected photon weighted by
 exp(-(mua_epi - mua0) L_epi - (mua_derm - mua0) L_derm) (same estimand).  Both write the SPEC keys plus
-``profile_stderr``.
+``profile_stderr``.  ``--profile cdf`` resamples the profile through its CDF (``training.sim.resample``;
+``profile_stderr`` stays the histogram's).
 
 Example::
 
@@ -20,7 +21,8 @@ from pathlib import Path
 import numpy as np
 
 from exporters.constants import R_EDGES_CM, WAVELENGTHS_NM
-from training.sim.transport import simulate
+from training.sim.resample import cdf_resample_profile
+from training.sim.transport import PROFILE_ESTIMATORS, simulate
 from training.skin.tissue import skin_medium
 
 
@@ -41,6 +43,9 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--photons", type=int, required=True, help="photons per wavelength")
     p.add_argument("--out", type=Path, required=True)
     p.add_argument("--method", choices=("direct", "reweighted"), default="direct")
+    p.add_argument("--profile", choices=PROFILE_ESTIMATORS, default=PROFILE_ESTIMATORS[0],
+                   help="radial profile estimator: the plain histogram or CDF-based conservative resampling of "
+                   "the same tallies (paper §3; `python -m training resampling` compares them)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--device", choices=("cpu", "cuda"), default="cpu")
     p.add_argument("--compile", choices=("auto", "on", "off"), default="auto")
@@ -63,10 +68,13 @@ def main(argv: list[str]) -> int:
                    "profile_stderr": r.profile_stderr}
         else:
             res = {k: v[0] for k, v in reweighted(tone, args.photons, args.seed, args.device, compile_).items()}
+        if args.profile == "cdf":
+            res["profile"] = cdf_resample_profile(res["profile"], res["profile_stderr"], np.array(R_EDGES_CM),
+                                                  args.photons)
     except ValueError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
     args.out.parent.mkdir(parents=True, exist_ok=True)
     np.savez(args.out, wavelength_nm=np.array(WAVELENGTHS_NM), r_edges_cm=np.array(R_EDGES_CM), tone=tone,
-             photons=np.int64(args.photons), method=args.method, **res)
+             photons=np.int64(args.photons), method=args.method, profile_estimator=args.profile, **res)
     return 0

@@ -24,7 +24,9 @@ trilinear lookups in torch):
 * Extinction enters by the separability of a homogeneous medium (Chiang et al. 2016; paper eq.
   separability): P(r | alpha, g, sigma_t) = sigma_t^2 P(sigma_t r | alpha, g, 1), r in cm, sigma_t in
   cm^-1, result in cm^-2.
-* Outside the (albedo, g) grid the value at the nearest grid edge is held (zero gradient there);
+* Outside the (albedo, g) grid the value at the nearest grid edge is held (zero gradient there).  Tables
+  loaded from a file ending at albedo >= 0.999 are first extended analytically up to albedo 1
+  (``training.sim.lut_extend``), so no albedo lies beyond them;
   inside, the interpolation weights are not clamped, so gradients flow everywhere in the interior.
 
 Binned form (``profile_binned``): by default the interpolant is evaluated at the geometric centre of
@@ -120,6 +122,7 @@ class LookupTables:
                 raise ValueError(f"LUT axis {name!r} must be strictly increasing")
         if not (bool(torch.isfinite(self.R).all()) and bool(torch.isfinite(self.P).all())):
             raise ValueError("LUT contains NaN or Inf")
+        self.albedo_extended = False  # set by ``load`` when it added the analytic rows above the last albedo
         self.log_centres = torch.log(bin_centres(self.r_edges_mfp))
         self.log_r_max = float(torch.log(self.r_edges_mfp[-1]))
         # Fast path: log-spaced edges put the centres from index 1 on a uniform grid in log r, where the
@@ -146,19 +149,35 @@ class LookupTables:
 
     @classmethod
     def load(
-        cls, path: str | Path, dtype: torch.dtype = torch.float64, device: str | torch.device = "cpu"
+        cls, path: str | Path, dtype: torch.dtype = torch.float64, device: str | torch.device = "cpu",
+        extend_albedo: bool = True,
     ) -> LookupTables:
-        """Load a LUT .npz written by ``python -m training lut`` (SPEC §2)."""
+        """Load a LUT .npz written by ``python -m training lut`` (SPEC §2).
+
+        ``extend_albedo``: a table ending at albedo >= ``lut_extend.EXTEND_FROM`` gets analytic rows up to
+        albedo 1 (``training.sim.lut_extend``; the file is not changed); ``self.albedo_extended`` says
+        whether it did."""
+        from training.sim.lut_extend import EXTEND_FROM
+        from training.sim.lut_extend import extend_albedo as extend
+
         with np.load(path) as data:
             missing = [k for k in LUT_KEYS if k not in data]
             if missing:
                 raise ValueError(f"{path}: not a LUT file, missing keys {missing}")
-            return cls.from_arrays(*(data[k] for k in LUT_KEYS), dtype=dtype, device=device)
+            arrays = {k: data[k] for k in LUT_KEYS}
+        if not (extend_albedo and EXTEND_FROM <= float(arrays["albedo"][-1]) < 1.0):
+            return cls.from_arrays(*arrays.values(), dtype=dtype, device=device)
+        arrays = extend(**arrays)  # new float64 arrays: handed to torch without another copy
+        lut = cls(*(torch.as_tensor(arrays[k], dtype=dtype, device=device) for k in LUT_KEYS))
+        lut.albedo_extended = True
+        return lut
 
     def to(self, device: str | torch.device | None = None, dtype: torch.dtype | None = None) -> LookupTables:
         """A copy on ``device`` with floating dtype ``dtype`` (either may be None = unchanged)."""
         ts = (self.albedo, self.g, self.r_edges_mfp, self.R, self.P)
-        return LookupTables(*(t.to(device=device, dtype=dtype) for t in ts))
+        out = LookupTables(*(t.to(device=device, dtype=dtype) for t in ts))
+        out.albedo_extended = self.albedo_extended
+        return out
 
     @property
     def g_range(self) -> tuple[float, float]:

@@ -315,8 +315,9 @@ def hold_lut_albedo(params: Params, lut) -> tuple[Params, int]:
     """A fit's mixture with alpha held within the LUT's albedo range, and how many values moved.
 
     The LUT holds its edge value beyond its range (``training.sim.lut_interp``), so a fitted alpha of
-    1 - 1e-6 *means* the LUT's last albedo (0.9999 for the paper-scale table): the fitter cannot tell them
-    apart, while a walk at 1 - 1e-6 is ~100x longer and reflects more."""
+    1 - 1e-6 *means* the LUT's last albedo: the fitter cannot tell them apart, while a walk at 1 - 1e-6 is
+    ~100x longer and reflects more.  (The paper-scale table is loaded extended up to albedo 1,
+    ``training.sim.lut_extend``: then nothing moves.)"""
     lo, hi = float(params_lut_range(lut)[0]), float(params_lut_range(lut)[1])
     a = np.clip(params.alpha, lo, hi)
     return Params(a, params.sigma_t, params.g, params.weight), int(np.count_nonzero(a != params.alpha))

@@ -109,6 +109,7 @@ def run(opts: Options) -> dict:
     files = model_files(opts.model_dir)
     torch.set_num_threads(opts.threads)
     from training.fit.mixture import PROFILE_WEIGHTING
+    from training.sim.lut_extend import extension_record
     from training.sim.lut_interp import LookupTables
 
     _log(opts, f"loading LUT {opts.lut}")
@@ -121,7 +122,8 @@ def run(opts: Options) -> dict:
     timings = {"lut_load": time.perf_counter() - t0}
     # the model is not in the manifest: a new model re-renders only its own rows (gate.render_tone)
     models = {"sha256": {n: sha256_file(p) for n, p in files.items() if n != "card"}, "card": _card_info(files["card"])}
-    manifest = {"config": G.config_record(cfg), "lut_sha256": lut_sha, "fit_profile_weighting": PROFILE_WEIGHTING}
+    manifest = {"config": G.config_record(cfg), "lut_sha256": lut_sha, "fit_profile_weighting": PROFILE_WEIGHTING,
+                "lut_albedo_extension": extension_record(opts.lut)}
     cache = G.Cache(opts.out.resolve() / "cache", manifest)  # absolute: cluster workers write there too
     cache.open(reset=opts.overwrite)
     from training.cluster import engine

@@ -217,7 +217,8 @@ def notes(record: dict) -> list[str]:
                f"{run['fits']['seconds']:.0f} s.")
     held = record["fits_held_at_lut_albedo"]
     out.append(f"Fits rendered with alpha held in the LUT's albedo range [{held['range'][0]:g}, {held['range'][1]:g}] "
-               "(the LUT holds its edge value beyond it, so the fitter cannot tell the difference): "
+               "(the LUT holds its edge value beyond it, so the fitter cannot tell the difference; a range ending "
+               "at 1 is the paper-scale table extended analytically, training/sim/lut_extend.py): "
                f"{held['count']} of {held['of']} fitted albedos moved.")
     m = run["model"]
     card = m["card"]
