@@ -44,10 +44,10 @@ import torch
 
 from exporters.constants import R_EDGES_CM, WAVELENGTHS_NM
 from training.data.sampling import PARAM_HIGH, PARAM_LOW
+from training.fit.matching import FIELDS
 from training.fit.mixture import Mixture, radial_profile
 from training.sim.lut_interp import LookupTables, bin_centres
 
-FIELDS: tuple[str, ...] = ("alpha", "g", "sigma_t", "weight")
 #: A weight jump: some component's weight changes by more than this between neighbouring wavelengths.
 JUMP_DW: float = 0.2
 #: A jump is explained when the rendered exitance changes by at least this fraction of the change that
