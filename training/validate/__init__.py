@@ -5,5 +5,6 @@ Modules: ``mixture`` (our Monte Carlo renderer of a K-media mixture, the renderi
 (Chiang 2016 / Wrenninge 2017 albedo inversion), ``metrics`` (colour and edge-image Delta E76, SAM, bands),
 ``profile_set`` (Table 3 from the validation fits), ``tables`` (tables.md / tables.json), ``figures``,
 ``paper`` (the paper's numbers), ``run`` and ``cli`` (``python -m training validate``), ``compare``
-(``python -m training mitsuba``), ``strips`` (the teaser-like sphere strips), ``bench``.
+(``python -m training mitsuba``), ``strips`` (the teaser-like sphere strips), ``bench``, ``trends``,
+``decomposition`` (§8's K = 3 decomposition and Figs. 7-9 from the shipped model).
 """

@@ -9,6 +9,8 @@
   normalised to each cell's peak) per wavelength (columns) and tone (rows).
 * ``reflectance_and_profiles``: R_d(lambda) of the tones (left) and profile heat maps
   log10 r^2 R_d(r, lambda) of a few tones with the log-ratio of the K = 1 and K = 3 fits to it (right).
+* ``sss_reconstruction``, ``component_maps``, ``sigma_t_distribution``, ``g_bimodality``: the paper's Figs. 7-9
+  (``training.validate.decomposition``).
 """
 
 from __future__ import annotations
@@ -181,4 +183,121 @@ def reflectance_and_profiles(path: Path, wavelength_nm: np.ndarray, tone_names: 
     fig.text(0.6, 0.005, "log10 r (cm)", fontsize=7)
     fig.tight_layout(rect=(0, 0.02, 1, 1))
     fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+def _map_grid(path: Path, row_labels: list[str], columns: list[dict], title: str) -> None:
+    """A grid of images: one row per subject, one column per entry of ``columns`` ({"title", "images" (S, H, W)
+    scalars or (S, H, W, 3) display RGB, and for scalars "cmap", "vmin", "vmax", "label"}); a colour bar under
+    each scalar column (one scale per column, shared by the subjects)."""
+    plt = _plt()
+    n_r, n_c = len(row_labels), len(columns)
+    fig, axes = plt.subplots(n_r, n_c, figsize=(1.25 * n_c + 0.6, 1.25 * n_r + 1.1), squeeze=False,
+                             constrained_layout=True)
+    for j, col in enumerate(columns):
+        for i in range(n_r):
+            ax = axes[i, j]
+            img = col["images"][i]
+            im = (ax.imshow(img, interpolation="nearest") if img.ndim == 3 else
+                  ax.imshow(img, cmap=col["cmap"], vmin=col["vmin"], vmax=col["vmax"], interpolation="nearest"))
+            ax.set_xticks([])
+            ax.set_yticks([])
+            if i == 0:
+                ax.set_title(col["title"], fontsize=7)
+            if j == 0:
+                ax.set_ylabel(row_labels[i], fontsize=7)
+        if col["images"].ndim == 3:
+            bar = fig.colorbar(im, ax=axes[:, j], orientation="horizontal", fraction=0.05, pad=0.02)
+            bar.ax.tick_params(labelsize=5)
+            bar.set_label(col["label"], fontsize=6)
+    fig.suptitle(title, fontsize=8)
+    fig.savefig(path, dpi=130)
+    plt.close(fig)
+
+
+def _log_column(title: str, images: np.ndarray, label: str, cmap: str = "viridis") -> dict:
+    logs = np.log10(np.maximum(images, 1e-30))
+    return {"title": title, "images": logs, "cmap": cmap, "vmin": float(logs.min()), "vmax": float(logs.max()),
+            "label": label}
+
+
+def sss_reconstruction(path: Path, subjects: list[str], maps: dict[str, np.ndarray], map_nm: float,
+                       reflectance_nm: tuple[float, ...]) -> None:
+    """Fig. 7 of the paper: per subject (rows) the input albedo and the model's colour, then per component
+    alpha and log10 sigma_t at ``map_nm`` (one scale per column over the subjects), then the model's reflectance
+    at ``reflectance_nm``.  ``maps``: ``input``, ``reconstructed`` (S, H, W, 3) linear sRGB; ``alpha``,
+    ``sigma_t`` (S, H, W, K); ``reflectance`` (S, H, W, len(reflectance_nm))."""
+    k = maps["alpha"].shape[-1]
+    cols = [{"title": "input albedo", "images": _display(maps["input"])},
+            {"title": "model colour", "images": _display(maps["reconstructed"])}]
+    cols += [{"title": f"α C{c + 1}", "images": maps["alpha"][..., c], "cmap": "viridis", "vmin": 0.0, "vmax": 1.0,
+              "label": "α"} for c in range(k)]
+    cols += [_log_column(f"σt C{c + 1}", maps["sigma_t"][..., c], "log10 σt (cm⁻¹)") for c in range(k)]
+    cols += [{"title": f"R {nm:g} nm", "images": maps["reflectance"][..., j], "cmap": "magma", "vmin": 0.0,
+              "vmax": float(maps["reflectance"][..., j].max()), "label": "R"} for j, nm in enumerate(reflectance_nm)]
+    _map_grid(path, subjects, cols, f"K = 3 decomposition of three subjects (components named by median albedo; "
+                                    f"α, σt at {map_nm:g} nm)")
+
+
+def component_maps(path: Path, subjects: list[str], maps: dict[str, np.ndarray], map_nm: float) -> None:
+    """Fig. 7's companion: per component the weight and the anisotropy g at ``map_nm`` (``maps`` as in
+    ``sss_reconstruction``, with ``weight`` and ``g`` (S, H, W, K))."""
+    k = maps["weight"].shape[-1]
+    cols = [{"title": f"w C{c + 1}", "images": maps["weight"][..., c], "cmap": "cividis", "vmin": 0.0, "vmax": 1.0,
+             "label": "weight"} for c in range(k)]
+    cols += [{"title": f"g C{c + 1}", "images": maps["g"][..., c], "cmap": "coolwarm", "vmin": -1.0, "vmax": 1.0,
+              "label": "g"} for c in range(k)]
+    _map_grid(path, subjects, cols, f"Weights and anisotropy per component at {map_nm:g} nm")
+
+
+def sigma_t_distribution(path: Path, wavelength_nm: np.ndarray, sigma_t: np.ndarray, mass: np.ndarray,
+                         threshold_cm: float, ours: dict[str, float | None], theirs: dict[str, float]) -> None:
+    """Fig. 8: the mass (``mass`` (N, W), the mixture weight) of the low-albedo component per wavelength over
+    log10 sigma_t (``sigma_t`` (N, W) cm^-1), normalised per wavelength, with the threshold; beside it the share
+    below the threshold per band, ours (``ours``) and the paper's (``theirs``)."""
+    plt = _plt()
+    logs = np.log10(np.maximum(sigma_t, 1e-30))
+    edges = np.linspace(min(logs.min(), np.log10(threshold_cm)) - 0.1, logs.max() + 0.1, 81)
+    hist = np.stack([np.histogram(logs[:, j], bins=edges, weights=mass[:, j])[0] for j in range(logs.shape[1])], 1)
+    hist = hist / np.maximum(hist.sum(0, keepdims=True), 1e-300)
+    fig, (ax, bx) = plt.subplots(1, 2, figsize=(9, 3.4), gridspec_kw={"width_ratios": [3, 1]}, constrained_layout=True)
+    from matplotlib.colors import PowerNorm
+
+    im = ax.imshow(hist, origin="lower", aspect="auto", cmap="magma", norm=PowerNorm(0.5, vmin=0.0),
+                   extent=[wavelength_nm[0], wavelength_nm[-1], edges[0], edges[-1]])
+    ax.axhline(np.log10(threshold_cm), color="cyan", ls="--", lw=1, label=f"σt = {threshold_cm:g} cm⁻¹")
+    ax.set_xlabel("wavelength (nm)")
+    ax.set_ylabel("log10 σt of C3 (cm⁻¹)")
+    ax.legend(fontsize=7, loc="upper right")
+    fig.colorbar(im, ax=ax, label="share of C3's mass per wavelength (sqrt scale)")
+    bands = list(theirs)
+    x = np.arange(len(bands))
+    bx.bar(x - 0.2, [100 * (ours[b] or 0.0) for b in bands], 0.4, label="ours")
+    bx.bar(x + 0.2, [100 * theirs[b] for b in bands], 0.4, label="paper")
+    bx.set_xticks(x, bands)
+    bx.set_ylabel(f"% of C3's mass at σt < {threshold_cm:g} cm⁻¹")
+    bx.legend(fontsize=7)
+    fig.suptitle("σt mass distribution of the low-albedo component (C3)", fontsize=8)
+    fig.savefig(path, dpi=130)
+    plt.close(fig)
+
+
+def g_bimodality(path: Path, unweighted, weighted, paper_modes: tuple[float, ...]) -> None:
+    """Fig. 9: kernel densities of the low-albedo component's g (``unweighted`` and mass-``weighted``:
+    objects with ``grid``, ``density``, ``modes``), their modes and the paper's."""
+    plt = _plt()
+    fig, ax = plt.subplots(figsize=(6, 3.2), constrained_layout=True)
+    for d, label, colour in ((unweighted, "samples", "C0"), (weighted, "mass-weighted", "C1")):
+        ax.plot(d.grid, d.density, color=colour, label=f"{label}: modes {', '.join(f'{m:.2f}' for m in d.modes)}")
+        for m in d.modes:
+            ax.axvline(m, color=colour, lw=0.8, ls=":")
+    for m in paper_modes:
+        ax.axvline(m, color="k", lw=1, ls="--")
+    ax.plot([], [], "k--", label="paper's modes")
+    ax.set_xlim(-0.2, 1.0)
+    ax.set_xlabel("g of C3")
+    ax.set_ylabel("density")
+    ax.legend(fontsize=7)
+    ax.set_title("Anisotropy of the low-albedo component (C3), all tones and wavelengths", fontsize=8)
+    fig.savefig(path, dpi=130)
     plt.close(fig)

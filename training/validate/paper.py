@@ -23,6 +23,22 @@ TABLE2_SHAPE: dict[str, tuple[float, float, float]] = {
     "NIR": (2.30, 2.28, 2.27),
 }
 TABLE2_SAM_VIS: tuple[float, float, float] = (0.69, 0.14, 0.13)
+#: §8 "K = 3 physical decomposition" and the captions of Figs. 8-9 (fig:sigma_t_distribution,
+#: fig:g_bimodality): the two high-albedo components' median alpha, the low one's median alpha and weight, the
+#: share of its mixture-weighted mass at sigma_t < 10 cm^-1 (all wavelengths; per band UV / blue / NIR), the
+#: "2.7x" concentration (= the mean of the UV and blue shares over the NIR share: (30.7 + 16.3) / 2 / 8.8 =
+#: 2.67; the text gives no formula) and the modes of its g.
+K3_HIGH_ALPHA: float = 0.96
+K3_LOW_ALPHA: float = 0.34
+K3_LOW_WEIGHT: float = 0.35
+K3_SIGMA_T_BOUNDARY_CM: float = 10.0
+K3_BOUNDARY_SHARE: float = 0.231
+K3_BOUNDARY_BANDS: dict[str, float] = {"UV": 0.307, "blue": 0.163, "NIR": 0.088}
+K3_CONCENTRATION: float = 2.7
+K3_G_MODES: tuple[float, float] = (0.0, 0.87)
+#: Fig. 7 (fig:sss_reconstruction): sigma_t colour ranges of C1, C2, C3 (cm^-1) and its reflectance wavelengths.
+FIG7_SIGMA_T_RANGES: tuple[tuple[float, float], ...] = ((80.0, 901.0), (73.0, 3555.0), (86.0, 5147.0))
+FIG7_REFLECTANCE_NM: tuple[float, float, float] = (250.0, 541.0, 940.0)
 #: §6 "Subsurface profile fidelity": mean shape error on the 5,000-tone validation set.
 PROFILE_K1: float = 0.059
 PROFILE_K2: float = 0.019
