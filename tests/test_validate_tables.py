@@ -69,6 +69,10 @@ def test_quick_writes_tables_and_figures(quick_run, monkeypatch):
     for heading in ("## Table 1", "## Table 2", "## Table 3", "## Notes", "Quick mode"):
         assert heading in md, heading
     assert "3.19" in md and "51.40" in md  # the paper's numbers beside ours
+    # the paper's method as written (Adam, absolute L_R, sum_k w_k P_k, from its shape-only K = 1 start) is a row
+    assert {"paper_k1_shape", "paper_k1", "paper_k2", "paper_k3"} <= set(ROWS)
+    assert "paper as written, shape-only start" in md
+    assert rec["run"]["paper_fits"]["method"] == "paper" and rec["run"]["paper_fits"]["relative_refl"] is False
 
 
 def test_painted_row_renders_the_painted_colour(quick_run):

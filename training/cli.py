@@ -20,6 +20,7 @@ COMMANDS: dict[str, tuple[str | None, str]] = {
     "train": ("training.train.cli", "Staged training of Enc, Dec_R, Dec_T."),
     "export": ("training.export.cli", "Export the ONNX graphs and the model card."),
     "validate": ("training.validate.cli", "Reproduce the paper's tables and figures."),
+    "ablations": ("training.ablations.cli", "The paper's ablations (§5, §8), each trained and gated alike."),
     "report": (None, "Summary report of dataset, fits and model."),
     "bench": ("training.bench", "Run the benchmark suite and write bench/results.md."),
     "swatches": ("training.skin.swatches", "Plot the colours of the representative and outlier tones."),

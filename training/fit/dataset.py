@@ -191,15 +191,19 @@ def fit_tones(
     anchor_every: int = 0,
     relative_refl: bool = True,
     steps: dict[str, int] | None = None,
+    weighting: str = "rendered",
+    isotropic: bool = False,
 ) -> dict[int, dict[str, torch.Tensor]]:
     """Fit T tones at W wavelengths: ``profile``/``stderr`` (T, W, M), ``R`` (T, W), ``g_init`` (W,).
 
-    Anchors and warm starts as in the module docstring.  Returns {K: {alpha, g, sigma_t, weight:
+    Anchors and warm starts as in the module docstring; ``weighting``, ``isotropic`` as in
+    ``optimize.fit_schedule``.  Returns {K: {alpha, g, sigma_t, weight:
     (T, K, W); shape_rmse, refl_rel_err, joint: (T, W)}}.
     """
     T, W, M = profile.shape
     anchors, rest, near = _nearest_anchor(W, anchor_every if method == "lm" else 0)
-    kw = {"ks": tuple(range(1, max(ks) + 1)), "method": method, "relative_refl": relative_refl}
+    kw = {"ks": tuple(range(1, max(ks) + 1)), "method": method, "relative_refl": relative_refl, "weighting": weighting,
+          "isotropic": isotropic}
 
     def run(cols: np.ndarray, **extra):
         return fit_schedule(lut, profile[:, cols].reshape(-1, M), R[:, cols].reshape(-1), r_edges_cm, photons,

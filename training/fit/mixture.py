@@ -96,14 +96,24 @@ def profile_weights(r_k: torch.Tensor, w: torch.Tensor) -> torch.Tensor:
     return wr / wr.sum(-1, keepdim=True)
 
 
-def mix(p_k: torch.Tensor, r_k: torch.Tensor, w: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+#: The mixture profiles ``mix`` knows: "rendered" (ours, the default) and "paper" (its §4 text, sum_k w_k P_k).
+WEIGHTINGS: tuple[str, ...] = ("rendered", "paper")
+
+
+def mix(p_k: torch.Tensor, r_k: torch.Tensor, w: torch.Tensor, weighting: str = "rendered"
+        ) -> tuple[torch.Tensor, torch.Tensor]:
     """The mixture's normalised profile P_hat = sum_k w_k R_k P_k / sum_k w_k R_k (..., M) and its
     reflectance R_hat = sum_k w_k R_k (...).
 
     P_hat is ``radial_profile`` / R_hat: the profile that a renderer picking medium k with probability w_k
     produces, and the issue's R_d^fit(r) normalised.  (The paper's §4 text writes sum_k w_k P_k, which
     differs from the rendered profile whenever the components' R_k differ; fitted that way, K = 2 and 3
-    rendered worse profiles than K = 1 - see the README, "Fitting the dataset".)"""
+    rendered worse profiles than K = 1 - see the README, "Fitting the dataset".)  ``weighting="paper"``
+    returns that sum_k w_k P_k / sum_k w_k instead (the gate's "paper as written" fits)."""
+    if weighting == "paper":
+        return (w[..., None] * p_k).sum(-2) / w.sum(-1, keepdim=True).clamp_min(1e-300), (w * r_k).sum(-1)
+    if weighting != "rendered":
+        raise ValueError(f"weighting must be one of {WEIGHTINGS}, got {weighting!r}")
     v = profile_weights(r_k, w)
     return (v[..., None] * p_k).sum(-2), (w * r_k).sum(-1)
 

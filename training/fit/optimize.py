@@ -50,6 +50,9 @@ from training.sim.lut_interp import LookupTables
 #: Adam schedule of the paper (steps per stage) and its learning rate.
 PAPER_STEPS: dict[str, int] = {"k1_shape": 1000, "k1_joint": 1000, "k2": 3000, "k3": 10000}
 PAPER_LR: float = 1e-2
+#: Width of the g interval [0, ISOTROPIC_G] of isotropic fits (``fit_schedule(isotropic=True)``): g = 0 to
+#: well below what the LUT resolves, through the same bounded map as the anisotropic fits.
+ISOTROPIC_G: float = 1e-6
 #: Levenberg-Marquardt iterations per stage (upper bounds; stops early when converged).
 LM_ITERS: dict[str, int] = {"k1_shape": 30, "k1_joint": 30, "k2": 60, "k3": 80}
 #: LM iterations per K from a warm start (``fit_schedule(warm=...)``): on 8 laptop-dataset tones x 94
@@ -101,10 +104,12 @@ class FitResult:
 class Problem:
     """A batch of B fitting problems against one LUT: evaluation, metrics and the LM Jacobian."""
 
-    def __init__(self, lut: LookupTables, target: L.Target):
+    def __init__(self, lut: LookupTables, target: L.Target, weighting: str = "rendered",
+                 g_range: tuple[float, float] | None = None):
         self.lut = lut
         self.target = target
-        self.g_lo, self.g_hi = g_bounds(lut)
+        self.weighting = weighting  # mixture.mix: "rendered" (ours) or "paper" (sum_k w_k P_k; Adam only)
+        self.g_lo, self.g_hi = g_bounds(lut) if g_range is None else g_range
         self.evals = 0
 
     def mixture(self, theta: torch.Tensor, k: int) -> Mixture:
@@ -116,7 +121,7 @@ class Problem:
         m = self.mixture(theta, k)
         self.evals += theta.shape[0]
         p_k = self.lut.profile(t.r_cm, m.alpha, m.g, m.sigma_t)
-        return mix(p_k, self.lut.reflectance(m.alpha, m.g), m.w)
+        return mix(p_k, self.lut.reflectance(m.alpha, m.g), m.w, self.weighting)
 
     def merit(self, theta: torch.Tensor, k: int, shape_only: bool, t: L.Target | None = None) -> torch.Tensor:
         t = self.target if t is None else t
@@ -205,7 +210,8 @@ def initial_k1(
     med_mc = _median_log_radius(torch.cumsum(profile * area_mc, -1), torch.log(r_edges_cm.clamp_min(1e-300)))
     area_lut = torch.pi * torch.diff(lut.r_edges_mfp**2)
     log_e_lut = torch.log(lut.r_edges_mfp.clamp_min(1e-300))
-    g_b = g_init.clamp(prob.g_lo + 1e-3, prob.g_hi - 1e-3)
+    margin = min(1e-3, (prob.g_hi - prob.g_lo) / 4)  # a fixed g (isotropic fits) has a range of ~0
+    g_b = g_init.clamp(prob.g_lo + margin, prob.g_hi - margin)
     best_theta, best = None, None
     for a in alphas:
         al = torch.full((B,), float(a), dtype=dt, device=dev)
@@ -352,6 +358,8 @@ def fit_schedule(
     stderr: torch.Tensor | None = None,
     relative_refl: bool = True,
     warm: dict[int, torch.Tensor] | None = None,
+    weighting: str = "rendered",
+    isotropic: bool = False,
 ) -> dict[int, FitResult]:
     """Fit K = 1, 2, 3 mixtures to B MC problems (``profile`` (B, M) cm^-2, ``R_mc`` (B,)).
 
@@ -362,10 +370,20 @@ def fit_schedule(
     ``warm`` {K: theta (B, 4K - 1)} (LM only): warm starts, e.g. the fits of a neighbouring wavelength;
     each K is then one LM run from its warm start instead of the schedule's search and splits, and
     K = 2 and 3 fall back to the K - 1 fit (a duplicated component) where that is better.
+    ``weighting``: the mixture profile (``mixture.mix``): "rendered" (ours) or "paper" (its §4 text, with
+    the Adam method only: the LM Jacobian is the rendered form's).  ``isotropic``: g held at 0 (within
+    ``ISOTROPIC_G``; the paper's §8 ablation after Chiang 2016; the LUT's g axis must hold 0).
     Returns {K: FitResult}; all K up to max(ks) are computed (each K starts from the previous one).
     """
     if method not in ("paper", "lm"):
         raise ValueError(f"unknown method {method!r} (paper | lm)")
+    if weighting == "paper" and method != "paper":
+        raise ValueError("the paper's mixture profile (sum_k w_k P_k) is fitted with method 'paper' only")
+    g_range = None
+    if isotropic:
+        if not lut.g_range[0] <= 0.0 <= lut.g_range[1]:
+            raise ValueError(f"isotropic fits need g = 0 on the LUT's g axis {lut.g_range}")
+        g_range = (0.0, ISOTROPIC_G)
     if any(k not in (1, 2, 3) for k in ks):
         raise ValueError(f"K must be in 1, 2, 3; got {ks}")
     dt, dev = lut.P.dtype, lut.P.device
@@ -374,7 +392,7 @@ def fit_schedule(
     if stderr is not None:
         stderr = stderr.to(dev, dt)
     target = L.make_target(profile, R_mc, r_edges_cm, photons, stderr=stderr, relative_refl=relative_refl)
-    prob = Problem(lut, target)
+    prob = Problem(lut, target, weighting, g_range)
     # the loss only sees used bins: evaluate the model on the bins some problem of the batch uses
     used = torch.nonzero(target.mask.any(0)).squeeze(1)
     if used.numel() == 0:

@@ -87,9 +87,13 @@ def param_loss(u: torch.Tensor, u_target: torch.Tensor, weighted: bool = False) 
     return (phi * per).mean()
 
 
-def lut_reflectance(model: SkinModel, lut: LookupTables, out: dict[str, torch.Tensor]) -> torch.Tensor:
-    """R_hat_LUT (N, W) = sum_k w_k R(alpha_k, g_k) (1 - exp(-C sigma_t,k c(lambda)))."""
-    r_k = lut.reflectance(out["alpha"], out["g"]) * model.slab.factor(out["sigma_t"])
+def lut_reflectance(model: SkinModel, lut: LookupTables, out: dict[str, torch.Tensor], slab: bool = True
+                    ) -> torch.Tensor:
+    """R_hat_LUT (N, W) = sum_k w_k R(alpha_k, g_k) (1 - exp(-C sigma_t,k c(lambda))); without the slab-depth
+    factor (``slab`` False, the paper's "without this correction" ablation) sum_k w_k R(alpha_k, g_k)."""
+    r_k = lut.reflectance(out["alpha"], out["g"])
+    if slab:
+        r_k = r_k * model.slab.factor(out["sigma_t"])
     return (out["weight"] * r_k).sum(1)
 
 
@@ -113,16 +117,19 @@ def stage3_losses(model: SkinModel, lut: LookupTables, p: torch.Tensor, R_mc: to
                   targets: dict[str, torch.Tensor], target_index: torch.Tensor | None = None,
                   shape_target: fit_loss.Target | None = None, shape_weight: float = 0.0,
                   shape_index: torch.Tensor | None = None, interp: torch.Tensor | None = None,
-                  weighted: bool = False, report: bool = False) -> dict[str, torch.Tensor]:
+                  weighted: bool = False, report: bool = False, lambda_r: float = LAMBDA_R, slab: bool = True,
+                  frozen_decr: bool = True) -> dict[str, torch.Tensor]:
     """All stage-3 terms for true tones ``p`` (N, 5), MC reflectance (N, W) and fit targets (N, K, Wf) at
     the wavelengths ``target_index`` (Wf,) (None: all W).  ``interp`` (Wf, W) (``spectral.interpolation_matrix``):
     L_param compares at all W with the targets interpolated; None: at ``target_index`` only.  ``weighted``:
     L_param weighted by the target weights (module docstring).  L_refl and L_smooth use all W.  With
     ``shape_target`` (leading dims (N, Ws)) L_shape is reported, at ``shape_index`` (Ws,) (None:
     ``target_index``), and added with ``shape_weight``.  "param" is the L_param optimised; with ``report``
-    both variants are returned too ("param_plain", "param_weighted")."""
-    with torch.no_grad():
-        refl = model.dec_r(p)  # frozen Dec_R
+    both variants are returned too ("param_plain", "param_weighted").  Ablations (``training.ablations``):
+    ``lambda_r`` the weight of L_refl (paper 15), ``slab`` False drops the slab-depth factor from L_refl,
+    ``frozen_decr`` False lets the gradient reach Dec_R (unfrozen in stage 3)."""
+    with torch.set_grad_enabled(torch.is_grad_enabled() and not frozen_decr):
+        refl = model.dec_r(p)  # frozen Dec_R (the paper) unless unfrozen
     out = model.dec_t(p, refl)
     u_t = model.dec_t.to_unit(targets["alpha"], targets["g"], targets["sigma_t"], targets["weight"])
     if interp is not None:
@@ -130,9 +137,9 @@ def stage3_losses(model: SkinModel, lut: LookupTables, p: torch.Tensor, R_mc: to
     else:
         u = out["u"] if target_index is None else out["u"][..., target_index]
     l_param = param_loss(u, u_t, weighted)
-    l_refl = spectral_l1(lut_reflectance(model, lut, out), R_mc)
+    l_refl = spectral_l1(lut_reflectance(model, lut, out, slab), R_mc)
     l_smooth = smooth_loss(out["u"])
-    total = l_param + LAMBDA_R * l_refl + LAMBDA_SMOOTH * l_smooth
+    total = l_param + lambda_r * l_refl + LAMBDA_SMOOTH * l_smooth
     terms = {"param": l_param, "refl": l_refl, "smooth": l_smooth}
     if report:
         terms.update(param_plain=param_loss(u, u_t), param_weighted=param_loss(u, u_t, weighted=True))

@@ -50,10 +50,20 @@ class TrainConfig:
     targets: str = "dense"
     #: stage 3: L_param's alpha, g, sigma_t terms weighted by the target weights (losses.param_loss)
     weighted_param: bool = True
+    #: Ablations of the paper's §5 (``python -m training ablations``); the defaults are the paper's method.
+    #: stage 3: weight of L_refl (paper 15; 0 = "parameter regression alone")
+    lambda_r: float = 15.0
+    #: stage 3: the slab-depth factor (1 - exp(-C sigma_t c(lambda))) in L_refl (paper eq. slab_factor)
+    slab_factor: bool = True
+    #: the earlier stages' Dec_R trains along in stages 2 and 3 (the paper: frozen)
+    unfreeze: bool = False
+    #: stages 2-3 learn from every n-th training tone only (1 = all; 20 = the paper's "20x less data")
+    data_every: int = 1
 
 
 #: What a run record made before an option existed trained with (its behaviour then).
-LEGACY_TRAIN: dict = {"exposure_prior": 0.0, "shape_weight": 0.0, "targets": "fitted", "weighted_param": False}
+LEGACY_TRAIN: dict = {"exposure_prior": 0.0, "shape_weight": 0.0, "targets": "fitted", "weighted_param": False,
+                     "lambda_r": 15.0, "slab_factor": True, "unfreeze": False, "data_every": 1}
 
 
 def _write_json(path: Path, obj: dict) -> None:
@@ -108,6 +118,8 @@ def train(rundir: Path, dataset: Path, fits: Path | None, lut_path: Path, *, wan
     profiles = need_fits and tcfg.shape_weight > 0
     if tcfg.targets not in TARGET_MODES:
         raise ValueError(f"targets must be one of {TARGET_MODES}, got {tcfg.targets!r}")
+    if tcfg.data_every < 1 or tcfg.lambda_r < 0:
+        raise ValueError(f"data_every must be >= 1 and lambda_r >= 0, got {tcfg.data_every}, {tcfg.lambda_r}")
     train_data = load_split(dataset, "train", fits if need_fits else None, mcfg.k, profiles, tcfg.targets,
                             SHAPE_BIN_STRIDE).to(dev)
     val_fits = fits if (need_fits and fits is not None and fits_files(fits, "validation")) else None
@@ -160,8 +172,9 @@ def _spec(stage: int, model: SkinModel, lut: LookupTables, train_data: SplitData
     i = stage - 1
     if stage == 1:
         return stages.stage1(model, train_data, val_data, t.epochs[i], t.batch[i], t.lr[i])
+    train_data = train_data.every(t.data_every)  # stages 2-3 (the "less data" ablation); Dec_R saw all
     if stage == 2:
         return stages.stage2(model, train_data, val_data, t.epochs[i], t.batch[i], t.lr[i], t.synthetic,
-                             t.exposure_jitter, t.seed, t.exposure_prior)
+                             t.exposure_jitter, t.seed, t.exposure_prior, t.unfreeze)
     return stages.stage3(model, lut, train_data, val_data, t.epochs[i], t.batch[i], t.lr[i], t.shape_weight,
-                         t.targets == "dense", t.weighted_param)
+                         t.targets == "dense", t.weighted_param, t.lambda_r, t.slab_factor, t.unfreeze)

@@ -47,7 +47,9 @@ def synthetic_albedos(model: SkinModel, n: int, exposure_jitter: float, seed: in
 
 
 def stage2(model: SkinModel, train: SplitData, val: SplitData, epochs: int, batch: int, lr: float,
-           synthetic: int, exposure_jitter: float, seed: int, exposure_prior: float = 0.0) -> StageSpec:
+           synthetic: int, exposure_jitter: float, seed: int, exposure_prior: float = 0.0,
+           unfreeze: bool = False) -> StageSpec:
+    """Stage 2; ``unfreeze`` (an ablation, not the paper's method) trains Dec_R along with Enc."""
     albedo = train.albedo_rgb.clamp(0.0, 1.0)
     if synthetic > 0:
         albedo = torch.cat([albedo, synthetic_albedos(model, synthetic, exposure_jitter, seed)])
@@ -59,7 +61,8 @@ def stage2(model: SkinModel, train: SplitData, val: SplitData, epochs: int, batc
     def evaluate() -> dict[str, float]:
         return {"colour_l1": float(L.colour_loss(model, val_albedo))}
 
-    return StageSpec(2, "Enc", [model.enc], albedo.shape[0], batch, epochs, lr, step, evaluate)
+    trainable = [model.enc, model.dec_r] if unfreeze else [model.enc]
+    return StageSpec(2, "Enc", trainable, albedo.shape[0], batch, epochs, lr, step, evaluate)
 
 
 def shape_batch(data: SplitData, idx: torch.Tensor) -> tuple[Target, torch.Tensor]:
@@ -78,10 +81,14 @@ EVAL_CHUNK: int = 64
 
 
 def stage3(model: SkinModel, lut: LookupTables, train: SplitData, val: SplitData, epochs: int, batch: int,
-           lr: float, shape_weight: float = 0.0, dense: bool = True, weighted: bool = True) -> StageSpec:
+           lr: float, shape_weight: float = 0.0, dense: bool = True, weighted: bool = True,
+           lambda_r: float = L.LAMBDA_R, slab: bool = True, unfreeze: bool = False) -> StageSpec:
     """Stage 3; ``shape_weight`` > 0 adds the profile-shape term (needs ``SplitData.shape_target``).
     ``dense``: L_param at every wavelength, targets interpolated (``training.train.spectral``); else at the
-    fitted wavelengths only.  ``weighted``: L_param weighted by the target weights (``losses.param_loss``)."""
+    fitted wavelengths only.  ``weighted``: L_param weighted by the target weights (``losses.param_loss``).
+    Ablations (``training.ablations``): ``lambda_r`` (paper 15), ``slab`` (the slab-depth factor in L_refl),
+    ``unfreeze`` (Dec_R trains along with Dec_T)."""
+    ablate = {"lambda_r": lambda_r, "slab": slab, "frozen_decr": not unfreeze}
     if train.targets is None:
         raise ValueError("stage 3 needs the mixture fits of the training split (--fits)")
     if shape_weight > 0 and train.shape_target is None:
@@ -94,7 +101,7 @@ def stage3(model: SkinModel, lut: LookupTables, train: SplitData, val: SplitData
         targets = {k: v[idx] for k, v in train.targets.items()}
         shape, shape_index = shape_batch(train, idx) if shape_weight > 0 else (None, None)
         return L.stage3_losses(model, lut, train.tone[rows], train.R_d[rows], targets, train.target_index,
-                               shape, shape_weight, shape_index, interp, weighted)
+                               shape, shape_weight, shape_index, interp, weighted, **ablate)
 
     def evaluate() -> dict[str, float]:
         if val.targets is not None:
@@ -107,11 +114,12 @@ def stage3(model: SkinModel, lut: LookupTables, train: SplitData, val: SplitData
                 st = None if val.shape_target is None else val.shape_target.rows(part)
                 out = L.stage3_losses(model, lut, val.tone[rows], val.R_d[rows], {k: v[part] for k, v in
                                       val.targets.items()}, val.target_index, st, shape_weight, val.shape_index,
-                                      v_interp, weighted, report=True)
+                                      v_interp, weighted, report=True, **ablate)
                 for k, v in out.items():
                     sums[k] = sums.get(k, 0.0) + float(v) * len(part) / n
             return sums
         out = model.dec_t(val.tone, model.dec_r(val.tone))
-        return {"refl": float(L.spectral_l1(L.lut_reflectance(model, lut, out), val.R_d))}
+        return {"refl": float(L.spectral_l1(L.lut_reflectance(model, lut, out, slab), val.R_d))}
 
-    return StageSpec(3, "Dec_T", [model.dec_t, model.slab], len(train.fitted), batch, epochs, lr, step, evaluate)
+    trainable = [model.dec_t] + ([model.slab] if slab else []) + ([model.dec_r] if unfreeze else [])
+    return StageSpec(3, "Dec_T", trainable, len(train.fitted), batch, epochs, lr, step, evaluate)

@@ -48,12 +48,21 @@ from training.validate import baselines as bl
 from training.validate.metrics import COLOUR_RANGE_NM, linear_srgb
 from training.validate.mixture import check_mixture, combine, render_media
 
-#: Rows of the gate: joint-optimised fits, the network (RGB input; decoder on the true p), baselines.
+#: Rows of the gate: joint-optimised fits, the paper's fits as written (``PAPER_FIT``), the network (RGB input;
+#: decoder on the true p), baselines.
 FIT_ROWS: tuple[str, ...] = ("k1", "k2", "k3")
+PAPER_ROWS: tuple[str, ...] = ("paper_k1_shape", "paper_k1", "paper_k2", "paper_k3")
 NN_ROWS: tuple[str, ...] = ("nn", "nn_painted", "nn_decoder")
-ROWS: tuple[str, ...] = FIT_ROWS + NN_ROWS + bl.METHODS
+ROWS: tuple[str, ...] = FIT_ROWS + PAPER_ROWS + NN_ROWS + bl.METHODS
+#: The paper's fitting method as its §4 writes it: Adam (lr 1e-2, cosine; 1,000 / 1,000 / 3,000 / 10,000 steps),
+#: the absolute reflectance term 5 (R_hat - R)^2, the mixture profile sum_k w_k P_k, from the shape-only K = 1
+#: start; at every render wavelength, no anchors.  Its shape-only K = 1 start is a row of its own.
+PAPER_FIT: dict = {"method": "paper", "relative_refl": False, "weighting": "paper", "anchor_every": 0}
 ROW_LABELS: dict[str, str] = {
     "k1": "K = 1 (joint-opt)", "k2": "K = 2 (joint-opt)", "k3": "K = 3 (joint-opt)",
+    "paper_k1_shape": "K = 1 paper as written, shape-only start",
+    "paper_k1": "K = 1 paper as written (Adam, abs. L_R, Σ w_k P_k)",
+    "paper_k2": "K = 2 paper as written", "paper_k3": "K = 3 paper as written",
     "nn": "K = 3 NN (skin_inversion.onnx, RGB in)",
     "nn_painted": "K = 3 NN, painted colour (RGB in; the bake's default)",
     "nn_decoder": "K = 3 NN decoder (true p in)",
@@ -236,10 +245,12 @@ def ground_truth(tones: np.ndarray, wl_idx: np.ndarray, photons: int, seed: int,
 
 # ------------------------------------------------------------------------------------------ fits
 def fit_tone(lut, profile: np.ndarray, R_d: np.ndarray, stderr: np.ndarray, wl_idx: np.ndarray, photons: int,
-             method: str, steps: dict[str, int] | None, anchor_every: int) -> dict[str, np.ndarray]:
+             method: str, steps: dict[str, int] | None, anchor_every: int, ks: tuple[int, ...] = (1, 2, 3),
+             **options) -> dict[str, np.ndarray]:
     """Joint-optimised K = 1, 2, 3 mixtures of one tone's MC profiles (W, 512) with standard errors and
     R_d (W,) at grid indices ``wl_idx``, by the dataset fitter (``training.fit.dataset.fit_tones``: the
-    full schedule at every ``anchor_every``-th wavelength, warm-started LM between; 0 = full everywhere).
+    full schedule at every ``anchor_every``-th wavelength, warm-started LM between; 0 = full everywhere;
+    ``options``: its relative_refl, weighting, isotropic).
     Returns k{K}_alpha, k{K}_g, k{K}_sigma_t, k{K}_weight (K, W), k{K}_shape_rmse, k{K}_refl_rel_err
     (W,), plus ``wl_idx`` and ``seconds``."""
     from training.fit.dataset import fit_tones
@@ -249,7 +260,7 @@ def fit_tone(lut, profile: np.ndarray, R_d: np.ndarray, stderr: np.ndarray, wl_i
     t0 = time.perf_counter()
     fits = fit_tones(lut, as_t(profile), as_t(R_d), as_t(stderr), torch.tensor(R_EDGES_CM, dtype=dt, device=dev),
                      float(photons), torch.as_tensor(anisotropy(WAVELENGTHS_NM[wl_idx]), dtype=dt, device=dev),
-                     (1, 2, 3), method=method, anchor_every=anchor_every, steps=steps)
+                     ks, method=method, anchor_every=anchor_every, steps=steps, **options)
     out: dict[str, np.ndarray] = {"wl_idx": wl_idx, "seconds": np.float64(time.perf_counter() - t0)}
     for k, f in fits.items():
         for name in ("alpha", "g", "sigma_t", "weight", "shape_rmse", "refl_rel_err"):
@@ -257,15 +268,27 @@ def fit_tone(lut, profile: np.ndarray, R_d: np.ndarray, stderr: np.ndarray, wl_i
     return out
 
 
-def fit_tone_into(path: Path, lut_path: Path, lut_sha256: str, *args) -> dict[str, np.ndarray]:
-    """``fit_tone(lut, *args)`` on a cluster worker, saved to the cache file ``path``; the LUT is loaded once
-    per worker, as ``training.validate.run`` loads it."""
+def fit_tone_into(path: Path, lut_path: Path, lut_sha256: str, fit: Callable, *args) -> dict[str, np.ndarray]:
+    """``fit(lut, *args)`` (``fit_tone`` or ``fit_tone_paper``) on a cluster worker, saved to the cache file
+    ``path``; the LUT is loaded once per worker, as ``training.validate.run`` loads it."""
     from training.cluster.engine import memo
     from training.sim.lut_interp import LookupTables
 
     lut = memo("lut", (str(lut_path), lut_sha256, "cpu"), lambda: LookupTables.load(lut_path))
-    fit = fit_tone(lut, *args)
-    Cache.save(path, **fit)
+    out = fit(lut, *args)
+    Cache.save(path, **out)
+    return out
+
+
+def fit_tone_paper(lut, profile: np.ndarray, R_d: np.ndarray, stderr: np.ndarray, wl_idx: np.ndarray, photons: int,
+                   steps: dict[str, int] | None) -> dict[str, np.ndarray]:
+    """The paper's fits as written (``PAPER_FIT``) of one tone, in ``fit_tone``'s form, plus its shape-only
+    K = 1 start as k1s_* (the same Adam schedule stopped after the shape-only stage)."""
+    fit = fit_tone(lut, profile, R_d, stderr, wl_idx, photons, steps=steps, **PAPER_FIT)
+    start = fit_tone(lut, profile, R_d, stderr, wl_idx, photons, steps={**(steps or {}), "k1_joint": 0}, ks=(1,),
+                     **PAPER_FIT)
+    fit |= {k.replace("k1_", "k1s_"): v for k, v in start.items() if k.startswith("k1_")}
+    fit["seconds"] = fit["seconds"] + start["seconds"]
     return fit
 
 
@@ -297,8 +320,9 @@ class Params:
         return Params(self.alpha[:, cols], self.sigma_t[:, cols], self.g[:, cols], self.weight[:, cols], self.extra)
 
 
-def fit_params(fit: dict[str, np.ndarray], k: int, wl_idx: np.ndarray) -> Params:
-    """The K-component fit at grid indices ``wl_idx`` (a subset of the fit's wavelengths)."""
+def fit_params(fit: dict[str, np.ndarray], k: int | str, wl_idx: np.ndarray) -> Params:
+    """The K-component fit at grid indices ``wl_idx`` (a subset of the fit's wavelengths); ``k`` "1s": the
+    shape-only K = 1 start of ``fit_tone_paper``."""
     cols = np.searchsorted(fit["wl_idx"], wl_idx)
     if np.any(cols >= fit["wl_idx"].size) or not np.array_equal(fit["wl_idx"][cols], wl_idx):
         raise ValueError("the fits do not cover the render wavelengths.")
@@ -442,10 +466,7 @@ def lut_mixture_shape_error(lut, params: Params, target, rows: np.ndarray, weigh
     a, s, g, w = (torch.as_tensor(x[:, rows].T, dtype=dt) for x in (params.alpha, params.sigma_t, params.g,
                                                                    params.weight))  # (B, K)
     p_k = lut.profile(t.r_cm, a, g, s)  # (B, K, M)
-    if weighting == "rendered":
-        p_hat = mix(p_k, lut.reflectance(a, g), w)[0]
-    else:
-        p_hat = (w[..., None] * p_k).sum(1) / w.sum(1, keepdim=True).clamp_min(1e-300)
+    p_hat = mix(p_k, lut.reflectance(a, g), w, "rendered" if weighting == "rendered" else "paper")[0]
     return L.shape_loss(p_hat, t).detach().cpu().numpy()
 
 

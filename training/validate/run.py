@@ -147,6 +147,7 @@ def _run(opts, files, lut, lut_sha, cache, models, timings, t_start, job) -> dic
     albedo = G.albedo_rgb_of(gt["R_d"], wl_val)
 
     fits = _fits(opts, lut, lut_sha, tones, gt, wl_val, wl_r, cache, timings, job)
+    paper_fits = _fits(opts, lut, lut_sha, tones, gt, wl_val, wl_r, cache, timings, job, paper=True)
     t0 = time.perf_counter()
     inv, painted, dec, dec_full = _network(opts, files, albedo, tones.values, wl_val)
     nn_val = {"nn": inv, "nn_painted": painted, "nn_decoder": dec}  # at every validation wavelength
@@ -159,6 +160,8 @@ def _run(opts, files, lut, lut_sha, cache, models, timings, t_start, job) -> dic
         rows = {}
         for k in (1, 2, 3):
             rows[f"k{k}"], held[f"{name}_k{k}"] = G.hold_lut_albedo(G.fit_params(fits[name], k, wl_r), lut)
+        for r, key in zip(G.PAPER_ROWS, ("1s", 1, 2, 3), strict=True):
+            rows[r] = G.hold_lut_albedo(G.fit_params(paper_fits[name], key, wl_r), lut)[0]
         rows |= {"nn": inv[i], "nn_painted": painted[i], "nn_decoder": dec[i]}
         rows |= {m: G.baseline_params(m, albedo[i], scales[m], wl_r) for m in bl.METHODS}
         rows_per_tone.append(rows)
@@ -206,26 +209,30 @@ def _run(opts, files, lut, lut_sha, cache, models, timings, t_start, job) -> dic
     return record
 
 
-def _fits(opts, lut, lut_sha, tones, gt, wl_val, wl_r, cache, timings, job=None) -> dict[str, dict]:
+def _fits(opts, lut, lut_sha, tones, gt, wl_val, wl_r, cache, timings, job=None, paper: bool = False
+          ) -> dict[str, dict]:
     """Joint-optimised fits per tone (cached): all validation wavelengths for the representative tones,
-    the render wavelengths for the others.  ``job``: the missing ones as its tasks."""
+    the render wavelengths for the others.  ``paper``: the paper's method as written (``G.PAPER_FIT``), at the
+    render wavelengths only.  ``job``: the missing ones as its tasks."""
     cfg = opts.config
     t0 = time.perf_counter()
     fits = {}
-    bar = _bar(opts, len(tones.names), "joint-optimised fits K=1,2,3", job)
+    bar = _bar(opts, len(tones.names), "paper-as-written fits K=1,2,3" if paper else "joint-optimised fits K=1,2,3",
+               job)
     for i, name in enumerate(tones.names):
-        idx = wl_val if tones.kinds[i] == "representative" else wl_r
+        idx = wl_val if tones.kinds[i] == "representative" and not paper else wl_r
         cols = np.searchsorted(wl_val, idx)
-        path = cache.path(f"fit_{name}.npz")
+        path = cache.path(f"fit_paper_{name}.npz" if paper else f"fit_{name}.npz")
         fit = G.Cache.load(path)
         if fit is None or not np.array_equal(fit["wl_idx"], idx):
-            args = (gt["profile"][i][cols], gt["R_d"][i][cols], gt["profile_stderr"][i][cols], idx,
-                    cfg.gt_photons, cfg.fit_method, cfg.steps(), cfg.anchor_every)
+            args = (gt["profile"][i][cols], gt["R_d"][i][cols], gt["profile_stderr"][i][cols], idx, cfg.gt_photons)
+            args, how = (args + (cfg.steps(),), G.fit_tone_paper) if paper else \
+                (args + (cfg.fit_method, cfg.steps(), cfg.anchor_every), G.fit_tone)
             if job is not None:
-                job.submit(f"fit {name}", G.fit_tone_into, path, opts.lut.resolve(), lut_sha, *args,
+                job.submit(f"fit {name}", G.fit_tone_into, path, opts.lut.resolve(), lut_sha, how, *args,
                            on_done=lambda f, name=name: fits.__setitem__(name, f))
                 continue
-            fit = G.fit_tone(lut, *args)
+            fit = how(lut, *args)
             G.Cache.save(path, **fit)
         fits[name] = fit
         bar.update(1)
@@ -233,7 +240,7 @@ def _fits(opts, lut, lut_sha, tones, gt, wl_val, wl_r, cache, timings, job=None)
         job.wait()
         fits = {name: fits[name] for name in tones.names}  # in the tones' order
     bar.close()
-    timings["fits"] = time.perf_counter() - t0
+    timings["paper_fits" if paper else "fits"] = time.perf_counter() - t0
     return fits
 
 
@@ -557,6 +564,7 @@ def _run_record(opts, cfg, lut, lut_sha, gt, fits, timings, models, renders) -> 
                          "walk_seconds": float(gt["walk_seconds"])},
         "fits": {"method": cfg.fit_method, "steps": cfg.steps(), "anchor_every": cfg.anchor_every,
                  "seconds": rep_fit_seconds},
+        "paper_fits": {**G.PAPER_FIT, "steps": cfg.steps(), "seconds": timings.get("paper_fits")},
         "compute_seconds": {"ground_truth": float(gt["seconds"]), "fits": rep_fit_seconds,
                             # rows rendered in one walk share its seconds: count each walk once
                             "renders": float(sum(sum({float(r["seconds"]) for r in t.values()}) for t in renders))},
