@@ -52,3 +52,12 @@ def test_built_commands_have_help(name):
     result = run("-m", "training", name, "--help")
     assert result.returncode == 0, result.stderr
     assert "usage:" in result.stdout
+
+
+def test_no_merge_conflict_markers_in_tracked_text():
+    """A merge resolved in one file and committed with markers in another is caught here."""
+    files = subprocess.run(["git", "ls-files", "*.py", "*.md", "*.toml", "*.txt", "*.json", "*.osl", "Makefile"],
+                           cwd=ROOT, capture_output=True, text=True, check=True).stdout.split()
+    marked = [f for f in files if any(line.startswith(("<<<<<<< ", ">>>>>>> "))
+                                      for line in (ROOT / f).read_text(errors="replace").splitlines())]
+    assert not marked, marked
