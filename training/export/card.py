@@ -48,12 +48,11 @@ def _io(names: tuple[str, ...], k: int) -> dict[str, list]:
 
 
 def _h5_attrs(path: Path) -> dict:
-    """The file's attributes as the card records them: absolute paths of the building machine made portable."""
+    """The file's attributes (their absolute paths are made portable where the card is written)."""
     if not path.is_file():
         return {}
     with h5py.File(path, "r") as f:
-        attrs = {k: (v.item() if hasattr(v, "item") else str(v)) for k, v in f.attrs.items()}
-    return {k: portable(v) if isinstance(v, str) and Path(v).is_absolute() else v for k, v in attrs.items()}
+        return {k: (v.item() if hasattr(v, "item") else str(v)) for k, v in f.attrs.items()}
 
 
 def _fits_attrs(fits_dir: Path) -> dict:
