@@ -165,7 +165,7 @@ def _repair(solve, store: _Store, anchors: np.ndarray, lost: dict[int, torch.Ten
     P = len(t_idx)
     back = {k: {"theta": torch.zeros(P, length, 4 * k - 1, dtype=store.theta[k].dtype, device=t_idx.device),
                 **{m: torch.full((P, length), float("inf"), dtype=store.theta[k].dtype, device=t_idx.device)
-                   for m in ("shape_rmse", "refl_rel_err", "joint")}} for k in kall}
+                   for m in METRICS}} for k in kall}
     warm = {k: store.theta[k][t_idx, end] for k in kall}
     for d in range(1, length + 1):  # position end - d; offset end - d - start - 1 inside the segment
         act = torch.nonzero(end - d > start).squeeze(1)
@@ -177,7 +177,7 @@ def _repair(solve, store: _Store, anchors: np.ndarray, lost: dict[int, torch.Ten
         for k in kall:
             back[k]["theta"][act, off] = res[k].theta
             warm[k][act] = res[k].theta
-            for m in ("shape_rmse", "refl_rel_err", "joint"):
+            for m in METRICS:
                 back[k][m][act, off] = getattr(res[k], m)
     pos = torch.arange(length, device=t_idx.device)
     inside = pos[None, :] < (end - start - 1)[:, None]  # (P, length)
@@ -196,7 +196,7 @@ def _repair(solve, store: _Store, anchors: np.ndarray, lost: dict[int, torch.Ten
         p_i, o_i = torch.nonzero(use_back, as_tuple=True)
         tt, cc = t_idx[p_i], cols[p_i, o_i]
         store.theta[k][tt, cc] = back[k]["theta"][p_i, o_i]
-        for m in ("shape_rmse", "refl_rel_err", "joint"):
+        for m in METRICS:
             store.metric[k][m][tt, cc] = back[k][m][p_i, o_i]
         if stats is not None:
             stats["repaired"] = stats.get("repaired", 0) + int((use_back.any(1) & rows).sum())

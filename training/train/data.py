@@ -80,7 +80,6 @@ class SplitData:
         return SplitData(self.tone.to(device), self.R_d.to(device), self.albedo_rgb.to(device), t, self.photons,
                          *opt, st, si)
 
-
     def every(self, n: int) -> SplitData:
         """Every ``n``-th tone of the split (0, n, 2n, ...) with the fits of those that have them: the
         "20x less data" ablation (``training.ablations``).  ValueError if no fitted tone is left."""

@@ -95,6 +95,8 @@ def stage3(model: SkinModel, lut: LookupTables, train: SplitData, val: SplitData
         raise ValueError("a shape weight needs the training split's profiles (load_split(..., profiles=True))")
     n_w = train.R_d.shape[1]
     interp = interpolation_matrix(train.target_index.cpu().numpy(), n_w).to(train.R_d.device) if dense else None
+    v_interp = (interpolation_matrix(val.target_index.cpu().numpy(), n_w).to(val.R_d.device)
+                if dense and val.targets is not None else None)
 
     def step(idx: torch.Tensor) -> dict[str, torch.Tensor]:  # idx: positions among the fitted rows
         rows = train.fitted[idx]
@@ -105,7 +107,6 @@ def stage3(model: SkinModel, lut: LookupTables, train: SplitData, val: SplitData
 
     def evaluate() -> dict[str, float]:
         if val.targets is not None:
-            v_interp = interpolation_matrix(val.target_index.cpu().numpy(), n_w).to(val.R_d.device) if dense else None
             sums: dict[str, float] = {}
             n = len(val.fitted)
             for s in range(0, n, EVAL_CHUNK):  # every term is a mean over tones: chunk means weighted by size
