@@ -15,6 +15,7 @@ from __future__ import annotations
 import os
 from collections.abc import Iterator
 from dataclasses import dataclass, field
+from functools import cache
 from pathlib import Path
 
 import numpy as np
@@ -25,6 +26,8 @@ from exporters.maps import sha256_file
 INPUT_NAME = "albedo_rgb"
 #: The bundled model (blender_addon/models/, SPEC §3), in the repository and in the installed extension alike.
 DEFAULT_MODEL_PATH = Path(__file__).resolve().parents[1] / "blender_addon" / "models" / "skin_inversion.onnx"
+#: The bundled decoder (SPEC §3): biophysical rows (N, 5) -> reflectance and the K mixture components.
+DEFAULT_DECODER_PATH = DEFAULT_MODEL_PATH.with_name("skin_decoder.onnx")
 #: SPEC §3 outputs of skin_inversion.onnx and their shapes after the batch axis ("K" = components).
 OUTPUT_SHAPES: dict[str, tuple] = {
     "biophysical": (5,),
@@ -251,3 +254,28 @@ class ModelFile:
         ref = cls(model.path, model.threads)
         ref._model = model
         return ref
+
+
+@cache
+def _decoder_session(path: str, mtime_ns: int, size: int):
+    """One single-threaded session per decoder file version (a file replaced on disk gets a new one)."""
+    import onnxruntime as ort
+
+    opts = ort.SessionOptions()
+    opts.intra_op_num_threads = 1
+    return ort.InferenceSession(path, sess_options=opts, providers=["CPUExecutionProvider"])
+
+
+def run_decoder(biophysical: np.ndarray, path: str | os.PathLike = DEFAULT_DECODER_PATH) -> dict[str, np.ndarray]:
+    """``skin_decoder.onnx`` at ``path`` on biophysical rows (N, 5) in SPEC order (t_epi in cm): every output
+    by name (reflectance (N, 376); alpha, sigma_t, g, weight (N, K, 376)), float64.  ValueError if the file
+    is missing; the outputs are returned as the graph gives them (callers check what they use)."""
+    p = Path(path)
+    if not p.is_file():
+        raise ValueError(f"decoder model {p} not found; pass the path of skin_decoder.onnx.")
+    stat = p.stat()
+    sess = _decoder_session(str(p.resolve()), stat.st_mtime_ns, stat.st_size)
+    names = [o.name for o in sess.get_outputs()]
+    rows = np.asarray(biophysical, dtype=np.float32).reshape(-1, 5)
+    out = sess.run(None, {"biophysical": rows})
+    return {n: np.asarray(v, dtype=np.float64) for n, v in zip(names, out, strict=True)}

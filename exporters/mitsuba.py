@@ -53,14 +53,14 @@ import math
 import os
 from dataclasses import dataclass
 from functools import cache
-from pathlib import Path
 
 import numpy as np
 
 from exporters.constants import N_TISSUE, WAVELENGTHS_NM
+from exporters.inference import DEFAULT_DECODER_PATH, run_decoder
 
 #: The decoder graph shipped with the add-on (SPEC §3).
-DEFAULT_DECODER = Path(__file__).resolve().parent.parent / "blender_addon" / "models" / "skin_decoder.onnx"
+DEFAULT_DECODER = DEFAULT_DECODER_PATH
 #: Half-size of the slab box in mean free paths (sigma_t = 1); far beyond the diffusion length
 #: 1 / sqrt(3 sigma_a sigma_t'), about 13 mfp at alpha = 0.99, g = 0.8 (note section 4).
 SLAB_HALF_SIZE_MFP: float = 1000.0
@@ -200,15 +200,6 @@ def check_wavelengths(wavelengths_nm, lo: float = WAVELENGTHS_NM[0], hi: float =
     return wl
 
 
-@cache
-def _decoder_session(path: str):
-    import onnxruntime as ort
-
-    opts = ort.SessionOptions()
-    opts.intra_op_num_threads = 1
-    return ort.InferenceSession(path, sess_options=opts, providers=["CPUExecutionProvider"])
-
-
 def decode(biophysical, model_path: str | os.PathLike = DEFAULT_DECODER) -> Mixture:
     """The network's mixture of one tone: ``biophysical`` (5,) in SPEC order through ``skin_decoder.onnx``.
 
@@ -217,13 +208,8 @@ def decode(biophysical, model_path: str | os.PathLike = DEFAULT_DECODER) -> Mixt
     p = np.asarray(biophysical, dtype=np.float64).reshape(-1)
     if p.shape != (5,) or not np.all(np.isfinite(p)):
         raise ValueError(f"biophysical must be 5 finite numbers (f_mel f_blood t_epi so2 b_mel), got {p.tolist()}.")
-    path = Path(model_path)
-    if not path.is_file():
-        raise ValueError(f"decoder model {path} not found; pass the path of skin_decoder.onnx.")
-    sess = _decoder_session(str(path.resolve()))
-    names = [o.name for o in sess.get_outputs()]
-    out = dict(zip(names, sess.run(None, {"biophysical": p[None].astype(np.float32)}), strict=True))
-    fields = {n: np.asarray(out[n][0], dtype=np.float64) for n in ("alpha", "sigma_t", "g", "weight", "reflectance")}
+    out = run_decoder(p[None], model_path)
+    fields = {n: out[n][0] for n in ("alpha", "sigma_t", "g", "weight", "reflectance")}
     for name, arr in fields.items():
         if not np.all(np.isfinite(arr)):
             raise ValueError(f"the decoder returned NaN/Inf in {name!r} for {p.tolist()}.")

@@ -35,6 +35,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 from collections.abc import Callable
 from pathlib import Path
@@ -74,29 +75,19 @@ def random_tones(n: int, seed: int = 0) -> np.ndarray:
 
 
 def decoder(model) -> DecodeFn:
-    """p (N, 5) -> {alpha, g, sigma_t, weight: (N, K, W) float64} of: an onnxruntime session of
-    ``skin_decoder.onnx`` (``training.export.graphs.session``), a ``SkinModel``, or a path to either
-    (``.onnx``, or a run's ``model.pt``)."""
+    """p (N, 5) -> {alpha, g, sigma_t, weight: (N, K, W) float64} of a ``skin_decoder.onnx`` (through
+    ``exporters.inference.run_decoder``), a run's ``model.pt``, or a ``SkinModel``."""
     if isinstance(model, str | Path):
         path = Path(model)
         if not path.is_file():
             raise ValueError(f"no such decoder: {path} (a skin_decoder.onnx or a run's model.pt)")
         if path.suffix == ".onnx":
-            from training.export.graphs import session
+            from exporters.inference import run_decoder
 
-            model = session(path.read_bytes())
-        else:
-            from training.train.run import load_model
+            return lambda p: {f: v for f, v in run_decoder(p, path).items() if f in FIELDS}
+        from training.train.run import load_model
 
-            model = load_model(path)
-    if hasattr(model, "run"):  # onnxruntime.InferenceSession
-        names = [o.name for o in model.get_outputs()]
-
-        def run_onnx(p: np.ndarray) -> Decoded:
-            out = dict(zip(names, model.run(None, {"biophysical": np.asarray(p, np.float32)}), strict=True))
-            return {f: out[f].astype(np.float64) for f in FIELDS}
-
-        return run_onnx
+        model = load_model(path)
 
     def run_torch(p: np.ndarray) -> Decoded:
         with torch.no_grad():
@@ -224,6 +215,9 @@ def figure(dec: Decoded, names: list[str], out: Path, fitted_index: np.ndarray |
 
 
 def _load_lut(path: Path | None) -> tuple[LookupTables, str]:
+    """``path``, else $SKIN_SSS_LUT, else the dipole stand-in (module docstring)."""
+    if path is None and os.environ.get("SKIN_SSS_LUT"):
+        path = Path(os.environ["SKIN_SSS_LUT"])
     if path is not None:
         if not path.is_file():
             raise ValueError(f"no such LUT: {path}")

@@ -291,18 +291,11 @@ def comparison(stats: dict) -> list[dict]:
 # ------------------------------------------------------------------------------------------- the model
 
 def _decoder_mixture(decoder: Path, tones: np.ndarray) -> dict[str, np.ndarray]:
-    """``skin_decoder.onnx`` on biophysical rows (N, 5): its outputs as float64 arrays (onnxruntime, one thread;
-    not ``training.export.graphs.session``, which would import torch for nothing)."""
-    import onnxruntime as ort
+    """``skin_decoder.onnx`` on biophysical rows (N, 5): its mixture (checked) and reflectance, float64."""
+    from exporters.inference import run_decoder
 
-    if not decoder.is_file():
-        raise ValueError(f"decoder model {decoder} not found; pass --model-dir with skin_decoder.onnx")
-    opts = ort.SessionOptions()
-    opts.intra_op_num_threads = 1
-    sess = ort.InferenceSession(str(decoder), opts, providers=["CPUExecutionProvider"])
-    names = [o.name for o in sess.get_outputs()]
-    out = dict(zip(names, sess.run(None, {"biophysical": tones.astype(np.float32)}), strict=True))
-    return check_mixture(out) | {"reflectance": out["reflectance"].astype(np.float64)}
+    out = run_decoder(tones, decoder)
+    return check_mixture(out) | {"reflectance": out["reflectance"]}
 
 
 def measured_colours() -> np.ndarray:

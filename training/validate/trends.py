@@ -94,12 +94,10 @@ def monte_carlo(tones: np.ndarray, photons: int, seed: int = 0) -> dict[str, np.
 def decoder_means(decoder: Path, tones: np.ndarray, cols: np.ndarray) -> dict[str, np.ndarray]:
     """Component-weighted alpha and sigma_t [cm^-1] of ``skin_decoder.onnx`` at wavelength columns ``cols``:
     (n, len(cols)) each."""
-    from training.export.graphs import session
+    from exporters.inference import run_decoder
 
-    sess = session(decoder.read_bytes(), threads=2)
-    names = [o.name for o in sess.get_outputs()]
-    out = dict(zip(names, sess.run(None, {"biophysical": tones.astype(np.float32)}), strict=True))
-    w = out["weight"][..., cols].astype(np.float64)
+    out = run_decoder(tones, decoder)
+    w = out["weight"][..., cols]
     return {"alpha": (w * out["alpha"][..., cols]).sum(1), "sigma_t": (w * out["sigma_t"][..., cols]).sum(1)}
 
 
