@@ -28,10 +28,9 @@ from __future__ import annotations
 import math
 
 import numpy as np
-import torch
 
 from exporters.constants import N_TISSUE
-from training.sim.physics import fresnel_unpolarised
+from exporters.mitsuba import diffuse_specular
 
 #: Rows appended above the last node: 1 - albedo halves every second row, from 0.71 x (1 - albedo_N) down to
 #: 2^-6.5 x (1 - albedo_N) (1.1e-6 for the paper-scale table: still distinct from 1 in float32), then 1.
@@ -50,15 +49,6 @@ def extension_record(path) -> str:
     with np.load(path) as data:
         last = float(data["albedo"][-1])
     return ALBEDO_EXTENSION if EXTEND_FROM <= last < 1.0 else "none (edge held)"
-
-
-def diffuse_specular(n: float = N_TISSUE, points: int = 256) -> float:
-    """Specular reflection of cosine-weighted light from air on a smooth boundary of index n:
-    int_0^1 F(mu) 2 mu dmu (Gauss-Legendre in mu)."""
-    x, w = np.polynomial.legendre.leggauss(points)
-    mu = 0.5 * (x + 1.0)
-    f = fresnel_unpolarised(torch.as_tensor(mu, dtype=torch.float64), 1.0, n).numpy()
-    return float(np.sum(0.5 * w * f * 2.0 * mu))
 
 
 def extension_albedos(albedo_last: float, rows: int = EXTRA_ROWS) -> np.ndarray:
