@@ -392,16 +392,16 @@ def lut_render(lut, params: Params) -> dict[str, np.ndarray]:
     """A mixture's slab through the lookup tables, in ``render_rows``' form: R_d (W,) = sum_k w_k R_k and
     profile (W, 512) cm^-2 = sum_k w_k R_k P_k at the bin centres of ``R_EDGES_CM``; standard errors and
     ``truncated`` 0 (module docstring step 5).  Albedos beyond the tables' range take their edge value."""
+    from training.fit.mixture import Mixture, radial_profile
     from training.sim.lut_interp import bin_centres
 
     t0 = time.perf_counter()
     dt = lut.P.dtype
     a, s, g, w = (torch.as_tensor(np.asarray(v, np.float64).T, dtype=dt)
                   for v in (params.alpha, params.sigma_t, params.g, params.weight))  # (W, K)
-    r_k = lut.reflectance(a, g)
-    p_k = lut.profile(torch.as_tensor(bin_centres(R_EDGES_CM), dtype=dt), a, g, s)  # (W, K, 512)
-    r_d = (w * r_k).sum(1).double().numpy()
-    prof = ((w * r_k)[..., None] * p_k).sum(1).numpy().astype(np.float32)
+    r_d = (w * lut.reflectance(a, g)).sum(1).double().numpy()
+    prof = radial_profile(lut, Mixture(a, g, s, w), torch.as_tensor(bin_centres(R_EDGES_CM), dtype=dt))  # (W, 512)
+    prof = prof.numpy().astype(np.float32)
     zeros = np.zeros_like(r_d)
     return {"R_d": r_d, "R_d_stderr": zeros, "profile": prof, "profile_stderr": np.zeros_like(prof),
             "seconds": np.float64(time.perf_counter() - t0), "truncated": zeros}
