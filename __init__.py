@@ -1,4 +1,4 @@
-"""Blender extension entry point of Spectral Skin SSS (SPEC §5: the manifest is at the repository root).
+"""Blender extension entry point of Spectral Skin SSS (docs/contracts.md §5: the manifest is at the repository root).
 
 Blender loads the repository root (as packaged by blender_manifest.toml: this file, blender_addon/ and
 exporters/) as the module ``bl_ext.<repo>.spectral_skin_sss``.  ``exporters`` and ``blender_addon`` use

@@ -1,4 +1,4 @@
-"""Bake an RGB skin albedo texture into spectral-skin subsurface maps (SPEC §4), headless.
+"""Bake an RGB skin albedo texture into spectral-skin subsurface maps (docs/contracts.md §4), headless.
 
     python blender_addon/bake.py --albedo IMAGE --out DIR [--target cycles,physical,spectral]
         [--colorspace auto|srgb|linear] [--unit-scale M_PER_UNIT] [--overwrite] [--model PATH] [--threads N]

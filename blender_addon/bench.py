@@ -10,7 +10,7 @@ from exporters import cycles
 
 
 def _bisection_inverse(alpha: np.ndarray, g: float, iterations: int = 60) -> np.ndarray:
-    """Anchor: the plain 60-step bisection of notes/blender_cycles.md §2d (vectorised)."""
+    """Anchor: the plain 60-step bisection of docs/research/blender_cycles.md §2d (vectorised)."""
     lo = np.zeros_like(alpha)
     hi = np.full_like(alpha, float(cycles.saturation_color(g)))
     for _ in range(iterations):

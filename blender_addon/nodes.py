@@ -1,6 +1,6 @@
-"""The node group **Spectral Skin SSS Mixture** (SPEC §5) and its wiring into a user's material.
+"""The node group **Spectral Skin SSS Mixture** (docs/contracts.md §5) and its wiring into a user's material.
 
-Inputs, for each component k = 1..K (the baked maps of SPEC §4, ``--target cycles``):
+Inputs, for each component k = 1..K (the baked maps of docs/contracts.md §4, ``--target cycles``):
 ``k{k} Color`` (Subsurface Color, RGB), ``k{k} Radius`` (RANDOM_WALK radius in Blender units, RGB),
 ``k{k} Weight`` (RGB, summing to 1 over k per channel), ``k{k} Anisotropy`` (one g in [0, 0.9]);
 then ``IOR`` (the tissue index: the specular coat's Fresnel and the closures' refractive entry, which the
@@ -81,12 +81,12 @@ from . import osl
 GROUP_NAME = "Spectral Skin SSS Mixture"
 GROUP_NAME_OSL = "Spectral Skin SSS Mixture (OSL)"
 CHANNELS = ("Red", "Green", "Blue")
-#: Map kinds of SPEC §4 (--target cycles), in socket order.
+#: Map kinds of docs/contracts.md §4 (--target cycles), in socket order.
 KINDS = ("Color", "Radius", "Weight", "Anisotropy")
 FRAME_LABEL = "Spectral Skin SSS"
 #: Custom property remembering what fed the Material Output before wiring (for the user to restore).
 PREVIOUS_SURFACE_PROP = "spectral_skin_sss_previous_surface"
-#: The tissue index (SPEC §1): the coat's Fresnel and the closures' entry bounce.
+#: The tissue index (docs/contracts.md §1): the coat's Fresnel and the closures' entry bounce.
 DEFAULT_IOR = N_TISSUE
 #: Roughness of the subsurface closures' refractive entry: smooth, as the bake's Cycles tables assume.
 ENTRY_ROUGHNESS = 0.0

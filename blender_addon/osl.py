@@ -1,7 +1,7 @@
 """OSL source and Script-node helpers for the mixture (Cycles CPU / OptiX only).
 
 The pip ``bpy`` module compiles OSL with its built-in ``_cycles.osl_compile`` but Cycles' ``osl.py`` then
-imports ``oslquery``, which the wheel ships outside ``sys.path`` (notes/blender_cycles.md §1);
+imports ``oslquery``, which the wheel ships outside ``sys.path`` (docs/research/blender_cycles.md §1);
 :func:`ensure_oslquery` adds that directory.  ``oslquery`` returns OpenImageIO ``TypeDesc`` objects, whose
 Python type is registered by Blender's *bundled* OpenImageIO (3.0.9 in bpy 5.0.1); in our venv ``import
 OpenImageIO`` finds the pip OpenImageIO instead (3.0.21, another pybind11 registry), so the bundled one is

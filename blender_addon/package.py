@@ -10,7 +10,7 @@ Steps: fetch the onnxruntime wheel of the pinned version for each platform with 
 ``blender --command extension build``, shipped in the bpy wheel) and validate the zip with it.
 
 Only onnxruntime is bundled: Blender's Python already has numpy and OpenImageIO, and onnxruntime's
-InferenceSession runs with nothing else (notes/blender_cycles.md §4).  This file is a script (it is not
+InferenceSession runs with nothing else (docs/research/blender_cycles.md §4).  This file is a script (it is not
 shipped in the zip: blender_manifest.toml excludes it) and needs neither bpy imported nor a Blender binary.
 """
 

@@ -6,7 +6,7 @@ import os
 
 import bpy
 
-#: Where `python -m training export` puts the model (SPEC §3), relative to this package.
+#: Where `python -m training export` puts the model (docs/contracts.md §3), relative to this package.
 DEFAULT_MODEL = os.path.join(os.path.dirname(os.path.abspath(__file__)), "models", "skin_inversion.onnx")
 
 #: Module name Blender registered the add-on under (set by register(); the extension id when installed).

@@ -1,7 +1,7 @@
 """Collapse the spectral K-media mixture (376 wavelengths) to the three channels Cycles renders.
 
 Input, per texel: the model's reflectance R(lambda) and its K components (alpha_k, sigma_t,k, g_k, w_k)
-(lambda) (SPEC §3).  Output, per texel, component k and linear-sRGB channel c: a medium
+(lambda) (docs/contracts.md §3).  Output, per texel, component k and linear-sRGB channel c: a medium
 (alpha_kc, sigma_t,kc, g_k) and a weight w_kc such that Cycles' RANDOM_WALK mixture (each path picks
 component k, then walks in its medium; blender_addon/nodes.py) shows what the spectral model shows.
 
@@ -40,7 +40,7 @@ What "shows" means, and the method
    up to 5 % brighter; at alpha* both agree, so the painted colour holds face-on and on average.  The share
    goes into the weight (the profile width is kept, step 6: at a fixed diffusion length the median exit
    radius changes by at most ~25 % between alpha 0.4 and 0.98), and walks get longer (~1 / (1 - alpha*)).
-5. **Anisotropy.**  One g per component (Cycles takes one per closure; SPEC §4 stores one channel):
+5. **Anisotropy.**  One g per component (Cycles takes one per closure; docs/contracts.md §4 stores one channel):
    the light-weighted mean of g_k over the visible channels, capped at 0.7 (above it Cycles 5.0's walk
    is biased high: exporters.cycles.RECOMMENDED_G_MAX).  The reflectance of step 4 is solved at this g,
    so no further similarity transform is needed.

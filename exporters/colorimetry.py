@@ -1,6 +1,6 @@
-"""Spectrum -> colour on the project's grid (SPEC §1): XYZ, linear sRGB, sRGB, CIE Lab, ΔE76.
+"""Spectrum -> colour on the project's grid (docs/contracts.md §1): XYZ, linear sRGB, sRGB, CIE Lab, ΔE76.
 
-Conventions (SPEC §1, notes/skin_optics.md §2):
+Conventions (docs/contracts.md §1, docs/research/skin_optics.md §2):
 
 * CIE 1931 2° colour-matching functions, integrated over 360-830 nm only (zero outside): 236 of the
   376 samples of ``WAVELENGTHS_NM``.  UV and NIR samples never contribute to colour.

@@ -20,7 +20,7 @@ This module writes the forward map ``f`` (re-typed from the kernel: no library e
 inverse, and the radius <-> extinction map including unit conversion.  All functions take arrays of any
 (broadcastable) shape, compute in float64 and raise ``ValueError`` on NaN/Inf input.
 
-Units: sigma_t in cm^-1 (SPEC §1); radii in Blender units; ``unit_scale_m`` is metres per Blender unit
+Units: sigma_t in cm^-1 (docs/contracts.md §1); radii in Blender units; ``unit_scale_m`` is metres per Blender unit
 (``scene.unit_settings.scale_length``; 1.0 by default).
 """
 
@@ -298,7 +298,7 @@ class SimilarMedium:
 def similar_medium(alpha, sigma_t_cm, g, g_new=None, g_max: float = G_MAX) -> SimilarMedium:
     """Similarity transform (alpha, sigma_t, g) -> (alpha', sigma_t', g') keeping mu_a and mu_s (1 - g).
 
-    Cycles clamps g to [0, 0.9]; skin reaches g > 0.9 above ~965 nm (SPEC §1 g(lambda)).  Instead of letting
+    Cycles clamps g to [0, 0.9]; skin reaches g > 0.9 above ~965 nm (g(lambda), docs/contracts.md §1).  Instead of
     Cycles clamp g silently (which changes the reduced scattering coefficient, hence the diffuse
     reflectance), g outside [0, g_max] is moved to the nearest bound (or to ``g_new`` when given, e.g. one
     common g for all channels of a closure) with the absorption mu_a = (1-alpha) sigma_t and the reduced

@@ -1,4 +1,4 @@
-"""Texel inference with onnxruntime (SPEC §3 graphs): chunked, thread-settable, memory-bounded, NaN-guarded.
+"""Texel inference with onnxruntime (docs/contracts.md §3): chunked, thread-settable, memory-bounded, NaN-guarded.
 
 The model ``skin_inversion.onnx`` maps linear-sRGB albedo rows (N, 3) to the biophysical vector, the
 exposure and, per wavelength of the 376-sample grid, the reflectance and K mixture components.  Its
@@ -24,11 +24,11 @@ from exporters.constants import N_WAVELENGTHS
 from exporters.maps import sha256_file
 
 INPUT_NAME = "albedo_rgb"
-#: The bundled model (blender_addon/models/, SPEC §3), in the repository and in the installed extension alike.
+#: The bundled model (blender_addon/models/, docs/contracts.md §3), in the repository and the installed extension alike.
 DEFAULT_MODEL_PATH = Path(__file__).resolve().parents[1] / "blender_addon" / "models" / "skin_inversion.onnx"
-#: The bundled decoder (SPEC §3): biophysical rows (N, 5) -> reflectance and the K mixture components.
+#: The bundled decoder (docs/contracts.md §3): biophysical rows (N, 5) -> reflectance and the K mixture components.
 DEFAULT_DECODER_PATH = DEFAULT_MODEL_PATH.with_name("skin_decoder.onnx")
-#: SPEC §3 outputs of skin_inversion.onnx and their shapes after the batch axis ("K" = components).
+#: docs/contracts.md §3 outputs of skin_inversion.onnx and their shapes after the batch axis ("K" = components).
 OUTPUT_SHAPES: dict[str, tuple] = {
     "biophysical": (5,),
     "exposure": (1,),
@@ -56,7 +56,7 @@ def inference_counts() -> dict[str, int]:
 
 
 class ModelError(ValueError):
-    """The model file is missing, not ONNX, or not of the SPEC §3 shape; the message says which."""
+    """The model file is missing, not ONNX, or not of the docs/contracts.md §3 shape; the message says which."""
 
 
 def _dims(shape) -> tuple:
@@ -65,7 +65,7 @@ def _dims(shape) -> tuple:
 
 @dataclass
 class SkinModel:
-    """An onnxruntime session on ``skin_inversion.onnx`` with its SPEC §3 shapes checked.
+    """An onnxruntime session on ``skin_inversion.onnx`` with its docs/contracts.md §3 shapes checked.
 
     ``k``: number of mixture components (read from the graph); ``sha256``: of the model file;
     ``threads``: intra-op threads (0 = onnxruntime's default, all cores).
@@ -142,7 +142,7 @@ def chunk_rows_for_k(k: int, memory_mb: float = DEFAULT_MEMORY_MB) -> int:
 
 
 def load_model(path: str | os.PathLike, threads: int = 0) -> SkinModel:
-    """Open ``skin_inversion.onnx`` on the CPU and check it is of the SPEC §3 shape.
+    """Open ``skin_inversion.onnx`` on the CPU and check it is of the docs/contracts.md §3 shape.
 
     ``threads``: onnxruntime intra-op threads, 0 = all cores.  Errors (:class:`ModelError`) name the file
     and what is wrong: missing, unreadable / not ONNX, wrong input, missing or mis-shaped outputs.
@@ -168,25 +168,26 @@ def load_model(path: str | os.PathLike, threads: int = 0) -> SkinModel:
     if len(inputs) != 1 or inputs[0].name != INPUT_NAME or len(inputs[0].shape) != 2 or _dims(inputs[0].shape)[1] != 3:
         got = [(i.name, list(i.shape)) for i in inputs]
         raise ModelError(f"model {path.name} has inputs {got}; expected one input '{INPUT_NAME}' of shape (N, 3) "
-                         "(SPEC §3 skin_inversion.onnx)")
+                         "(docs/contracts.md §3 skin_inversion.onnx)")
     outputs = {o.name: _dims(o.shape) for o in session.get_outputs()}
     missing = [n for n in OUTPUT_SHAPES if n not in outputs]
     if missing:
-        raise ModelError(f"model {path.name} lacks output(s) {missing}; expected {list(OUTPUT_SHAPES)} (SPEC §3)")
+        raise ModelError(f"model {path.name} lacks output(s) {missing}; expected {list(OUTPUT_SHAPES)} "
+                         "(docs/contracts.md §3)")
     k = _read_k(session, path, outputs)
     for name, tail in OUTPUT_SHAPES.items():
         want = tuple(k if d == "K" else d for d in tail)
         got = outputs[name][1:]
         if len(got) != len(want) or any(g is not None and g != w for g, w in zip(got, want, strict=True)):
             raise ModelError(f"model {path.name}: output '{name}' has shape {list(outputs[name])}, expected "
-                             f"(N, {', '.join(map(str, want))}) (SPEC §3)")
+                             f"(N, {', '.join(map(str, want))}) (docs/contracts.md §3)")
     model = SkinModel(path=path, k=k, sha256=sha256_file(path), threads=int(threads), session=session)
     probe = model.run(np.array([[0.4, 0.3, 0.25]], dtype=np.float32))  # shapes of a real evaluation
     for name, tail in OUTPUT_SHAPES.items():
         want = (1, *(k if d == "K" else d for d in tail))
         if probe[name].shape != want:
             raise ModelError(f"model {path.name}: output '{name}' evaluates to shape {probe[name].shape}, "
-                             f"expected {want} (SPEC §3)")
+                             f"expected {want} (docs/contracts.md §3)")
     return model
 
 
@@ -267,7 +268,7 @@ def _decoder_session(path: str, mtime_ns: int, size: int):
 
 
 def run_decoder(biophysical: np.ndarray, path: str | os.PathLike = DEFAULT_DECODER_PATH) -> dict[str, np.ndarray]:
-    """``skin_decoder.onnx`` at ``path`` on biophysical rows (N, 5) in SPEC order (t_epi in cm): every output
+    """``skin_decoder.onnx`` at ``path`` on rows (N, 5) of docs/contracts.md §1 (t_epi in cm): every output
     by name (reflectance (N, 376); alpha, sigma_t, g, weight (N, K, 376)), float64.  ValueError if the file
     is missing; the outputs are returned as the graph gives them (callers check what they use)."""
     p = Path(path)

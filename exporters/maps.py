@@ -1,4 +1,4 @@
-"""Image I/O for baking (SPEC §4): float EXR maps out, albedo images in, and the ``S_maps.json`` record.
+"""Image I/O for baking (docs/contracts.md §4): float EXR maps out, albedo images in, and the ``S_maps.json`` record.
 
 All file access goes through OpenImageIO.  Nothing existing is overwritten unless ``overwrite=True``
 (files are written to a temporary name in the target folder, then hard-linked into place, which fails
@@ -8,10 +8,10 @@ Conventions:
 * Maps are float32 EXR, scene-independent data (Blender must load them as Non-Color); the EXR header
   carries ``spectral_skin_sss:colorspace = "Non-Color"`` and ``spectral_skin_sss:units`` (OpenImageIO
   reports every EXR as ``lin_rec709`` on reading, whatever was written).
-* Channel names: RGB maps ``R, G, B``; one-channel maps ``Y``; the biophysical map the names of SPEC §4
+* Channel names: RGB maps ``R, G, B``; one-channel maps ``Y``; the biophysical map the names of docs/contracts.md §4
   (``f_mel, f_blood, t_epi, so2, b_mel, exposure``).
 * Albedo input: returned as linear sRGB float64 (H, W, 3) plus alpha (H, W) or None.  Colour space
-  ``auto`` follows SPEC §1: sRGB-encoded unless the file says linear / Non-Color, or it stores floats.
+  ``auto`` follows docs/contracts.md §1: sRGB-encoded unless the file says linear / Non-Color, or it stores floats.
 """
 
 from __future__ import annotations
@@ -207,7 +207,7 @@ class AlbedoImage:
 
 
 def _detect_colorspace(spec: oiio.ImageSpec) -> Literal["srgb", "linear"]:
-    """SPEC §1: sRGB-encoded unless the file says linear / Non-Color, or stores float pixels."""
+    """docs/contracts.md §1: sRGB-encoded unless the file says linear / Non-Color, or stores float pixels."""
     name = str(spec.getattribute("oiio:ColorSpace") or "").strip().lower()
     if name in _LINEAR_NAMES or name.startswith("lin"):
         return "linear"
@@ -267,7 +267,7 @@ def read_albedo(path: str | os.PathLike, colorspace: ColorSpace = "auto",
     """Read an albedo image (8/16-bit PNG or TIFF, float EXR, ...) as linear sRGB float64.
 
     * Missing file: FileNotFoundError; unreadable / not an image: :class:`ImageError`.
-    * ``colorspace``: "auto" (SPEC §1 rule, see :func:`_detect_colorspace`), "srgb" (decode with the
+    * ``colorspace``: "auto" (docs/contracts.md §1 rule, see :func:`_detect_colorspace`), "srgb" (decode with the
       IEC 61966-2-1 curve) or "linear" (use values as they are).
     * 1 channel: gray replicated to RGB; 2 channels: gray + alpha; 4 channels: RGB + alpha (unassociated:
       OpenImageIO is asked not to premultiply); more channels: the first three non-alpha ones.
@@ -418,7 +418,7 @@ def sha256_file(path: str | os.PathLike) -> str:
 def write_maps_json(path: str | os.PathLike, files: dict[str, dict], k: int, model_sha256: dict[str, str],
                     input_image: str, input_colorspace: str, timings_s: dict[str, float],
                     unit_scale_m: float | None = None, overwrite: bool = False, extra: dict | None = None) -> Path:
-    """Write ``S_maps.json`` (SPEC §4): every file written with its units/channels, K, model SHA-256s,
+    """Write ``S_maps.json`` (docs/contracts.md §4): every file written with its units/channels, K, model SHA-256s,
     the input image and colour space used, and timings in seconds.
 
     ``files`` maps file name -> {"units": str, "channels": [...], ...}; every listed file must exist next to

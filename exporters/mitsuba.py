@@ -1,6 +1,6 @@
 """Mitsuba 3 scenes of the network's K-media mixture: the independent renderer of the validation path.
 
-What is rendered (notes/mitsuba.md has the verified facts this module relies on):
+What is rendered (docs/research/mitsuba.md has the verified facts this module relies on):
 
 * **The media.**  For one tone (a biophysical vector run through ``skin_decoder.onnx``, :func:`decode`)
   the K homogeneous media with their single-scattering albedo alpha(lambda), extinction sigma_t(lambda)
@@ -12,9 +12,9 @@ What is rendered (notes/mitsuba.md has the verified facts this module relies on)
   (the paper's integrator, and ``training.validate.mixture``) has expectation ``sum_k w_k I_k``.  Images
   split their samples per component in proportion to w_k (the same cost as a per-path choice).
 * **One wavelength per render.**  The built-in ``hg`` phase function takes one float g, and a path that
-  carries wavelengths with different g would need ratio weights that blow up over many bounces (note
-  section 3), so every render is monochromatic.  In ``*_rgb`` / ``*_mono`` variants the medium is given
-  the three numbers at that wavelength; in ``*_spectral`` variants (the spectral path) alpha and sigma_t
+  carries wavelengths with different g would need ratio weights that blow up over many bounces
+  (docs/research/mitsuba.md §3), so every render is monochromatic.  In ``*_rgb`` / ``*_mono`` variants the medium is
+  given the three numbers at that wavelength; in ``*_spectral`` variants (the spectral path) alpha and sigma_t
   are ``regular`` spectra over the whole 250-1000 nm grid and a ``specfilm`` with a 1 nm wide response
   around the wavelength makes Mitsuba sample it (``hdrfilm`` samples only 360-830 nm).  Emitters use a
   ``uniform`` spectrum (an ``rgb`` emitter is zero outside the visible in spectral variants).
@@ -27,14 +27,14 @@ What is rendered (notes/mitsuba.md has the verified facts this module relies on)
   boundary) this equals the reflectance for light entering from a cosine-weighted (Lambertian) lobe,
   which is the dataset's ``illumination="diffuse"``.  That total includes the specular reflection of the
   boundary, whose value for cosine-weighted incidence is known exactly (:func:`diffuse_specular`,
-  0.07681 for n = 1.4); SPEC's R_d excludes it, so it is removed: by subtracting the exact value, or (LLVM
-  variants, ``specular="paired"``) by subtracting a twin render of a non-scattering (alpha = 0) slab with
+  0.07681 for n = 1.4); R_d excludes it (docs/contracts.md §1), so it is removed: by subtracting the exact value, or
+  (LLVM variants, ``specular="paired"``) by subtracting a twin render of a non-scattering (alpha = 0) slab with
   the same seed, whose paths make the same reflect/refract choices: the specular samples cancel one by
   one (Mitsuba's LLVM sampler has one random stream per lane), which removes their noise.
   Collimated beams are not used: delta lights seen through a smooth dielectric render black in
-  ``volpath`` (note pitfall P0); measuring from the sensor side is what makes the boundary work.
-* **Russian roulette** (note pitfall P1): volpath's roulette is very noisy while the path throughput stays
-  near 1, so it starts only once alpha^depth < 0.1 (:func:`roulette_depth`); after that the throughput is
+  ``volpath`` (docs/research/mitsuba.md §4, P0); measuring from the sensor side is what makes the boundary work.
+* **Russian roulette** (docs/research/mitsuba.md §4, P1): volpath's roulette is very noisy while the path throughput
+  stays near 1, so it starts only once alpha^depth < 0.1 (:func:`roulette_depth`); after that the throughput is
   small and roulette is efficient.  Roulette is unbiased; ``MAX_DEPTH`` only stops runaway paths.
 * **Objects** (:func:`object_scene`): a sphere (or one of Mitsuba's built-in shapes) with the same
   dielectric boundary and medium, in centimetres, lit from one side by a spherical area light (not a
@@ -59,10 +59,10 @@ import numpy as np
 from exporters.constants import N_TISSUE, WAVELENGTHS_NM
 from exporters.inference import DEFAULT_DECODER_PATH, run_decoder
 
-#: The decoder graph shipped with the add-on (SPEC §3).
+#: The decoder graph shipped with the add-on (docs/contracts.md §3).
 DEFAULT_DECODER = DEFAULT_DECODER_PATH
 #: Half-size of the slab box in mean free paths (sigma_t = 1); far beyond the diffusion length
-#: 1 / sqrt(3 sigma_a sigma_t'), about 13 mfp at alpha = 0.99, g = 0.8 (note section 4).
+#: 1 / sqrt(3 sigma_a sigma_t'), about 13 mfp at alpha = 0.99, g = 0.8 (docs/research/mitsuba.md §4).
 SLAB_HALF_SIZE_MFP: float = 1000.0
 #: Hard cap of volpath's path length (paths end by roulette or escape long before).
 MAX_DEPTH: int = 65536
@@ -201,7 +201,7 @@ def check_wavelengths(wavelengths_nm, lo: float = WAVELENGTHS_NM[0], hi: float =
 
 
 def decode(biophysical, model_path: str | os.PathLike = DEFAULT_DECODER) -> Mixture:
-    """The network's mixture of one tone: ``biophysical`` (5,) in SPEC order through ``skin_decoder.onnx``.
+    """The network's mixture of one tone: ``biophysical`` (5,) (docs/contracts.md §1) through ``skin_decoder.onnx``.
 
     Returns the Mixture on the 376-sample grid (float64).  ValueError for a bad vector or model output.
     """
@@ -264,7 +264,7 @@ def roulette_depth(alpha: float) -> int:
     """Path depth after which volpath may play Russian roulette: the first depth with alpha^d < 0.1.
 
     Before it the throughput stays near 1, where volpath's roulette (q = min(throughput eta^2, 0.95))
-    inflates the weights of long paths by (alpha / 0.95)^depth (note pitfall P1).
+    inflates the weights of long paths by (alpha / 0.95)^depth (docs/research/mitsuba.md §4, P1).
     """
     a = min(max(float(alpha), 1e-6), 1 - 1e-9)
     return int(min(max(math.ceil(math.log(ROULETTE_THROUGHPUT) / math.log(a)), 5), MAX_DEPTH // 2))
@@ -456,7 +456,7 @@ class ObjectSetup:
     the camera) and black elsewhere, with a soft edge of ``light_edge_deg``.  A wide source keeps the
     noise low (a path inside the dielectric can reach a light only by escaping towards it: there is no
     next-event estimation through a smooth boundary), and a point or spot light would render black
-    (note pitfall P0).
+    (docs/research/mitsuba.md §4, P0).
     """
 
     shape: str = "sphere"

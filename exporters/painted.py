@@ -179,7 +179,7 @@ class PaintedMixture:
 
 
 def paint_mixture(alpha, sigma_t, g, weight, albedo_rgb) -> PaintedMixture:
-    """The network's mixture (``alpha``, ``sigma_t`` cm^-1, ``g``, ``weight``: (N, K, 376), SPEC §3) with the
+    """The network's mixture (``alpha``, ``sigma_t`` cm^-1, ``g``, ``weight``: (N, K, 376), docs/contracts.md §3) with
     painted colour of ``albedo_rgb`` (N, 3) linear sRGB (module docstring, steps 1-4).  g and weight stay."""
     from exporters.collapse import channel_matrix  # collapse imports this module
 

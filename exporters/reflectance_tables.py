@@ -45,7 +45,7 @@ U_MIN: float = 1e-3
 N_U: int = 129
 G_STEP: float = 0.05
 N_G: int = 20
-#: Refractive index of the model's boundary (SPEC §1 n = 1.4).
+#: Refractive index of the model's boundary (docs/contracts.md §1 n = 1.4).
 MODEL_N: float = 1.4
 #: Quadrature cosines of the stored directional reflectance R1(mu) (16: iadpython is less accurate at 32 as
 #: alpha -> 1, e.g. URU(0.999) 0.92847 vs van de Hulst 0.92971; at 16 it is 0.9297).
@@ -162,7 +162,7 @@ def _table(boundary: str, ior: float | None) -> np.ndarray:
     return _cycles_table(round(eta, 6))
 
 
-#: Default entry IOR of the Cycles closures (the tissue index of SPEC §1; blender_addon.nodes.DEFAULT_IOR).
+#: Default entry IOR of the Cycles closures (the tissue index of docs/contracts.md §1; blender_addon.nodes.DEFAULT_IOR).
 CYCLES_IOR: float = 1.4
 
 

@@ -21,7 +21,7 @@ model's K components (arrays in a dict, float64 unless said otherwise):
 :func:`exact_records` evaluates the model (exporters.inference) and the collapse (exporters.collapse) and
 fills only the fields the targets need (``spectral`` alone needs no collapse).  The fast path
 (exporters.texel_table) interpolates records instead.  :func:`map_values` turns records into the rows of
-one SPEC §4 map.
+one docs/contracts.md §4 map.
 """
 
 from __future__ import annotations
@@ -150,7 +150,7 @@ def take_records(rec: dict[str, np.ndarray], rows) -> dict[str, np.ndarray]:
 
 
 def map_values(kind: str, k: int, rec: dict[str, np.ndarray], unit_scale_m: float) -> np.ndarray:
-    """Rows (N, channels) float32 of one SPEC §4 map: ``kind`` as in exporters.bake.UNITS, component ``k``
+    """Rows (N, channels) float32 of one docs/contracts.md §4 map: ``kind`` as in exporters.bake.UNITS, component ``k``
     (1-based; ignored for "biophysical").  Radii below Cycles' minimum (1e-8 Blender units, which would turn
     the channel into a diffuse BSDF) raise ValueError: use a larger unit scale."""
     i = k - 1

@@ -18,7 +18,7 @@ def _save(graph, path: Path) -> Path:
 
 
 def wrong_input_model(path: Path) -> Path:
-    """Input 'albedo_rgb' of shape (N, 4): not SPEC §3."""
+    """Input 'albedo_rgb' of shape (N, 4): not docs/contracts.md §3."""
     x = helper.make_tensor_value_info("albedo_rgb", TensorProto.FLOAT, ["N", 4])
     y = helper.make_tensor_value_info("reflectance", TensorProto.FLOAT, ["N", 4])
     return _save(helper.make_graph([helper.make_node("Identity", ["albedo_rgb"], ["reflectance"])], "bad", [x], [y]),

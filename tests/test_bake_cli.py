@@ -1,5 +1,5 @@
-"""blender_addon/bake.py (SPEC §4) in subprocesses: plain python, and the Blender-style ``-- args`` form with bpy
-imported; real images, the real shipped model, real EXR files."""
+"""blender_addon/bake.py (docs/contracts.md §4) in subprocesses: plain python, and the Blender-style ``-- args`` form
+with bpy imported; real images, the real shipped model, real EXR files."""
 
 from __future__ import annotations
 

@@ -1,7 +1,7 @@
 """exporters.reflectance_tables and exporters.collapse against independent references.
 
 References: van de Hulst's spherical albedo of the isotropic index-matched half-space (H-function values of
-notes/monte_carlo.md §1b), iadpython adding-doubling evaluated here at points that are not table nodes
+docs/research/monte_carlo.md §1b), iadpython adding-doubling evaluated here at points that are not table nodes
 (for Cycles' refracting entry: iadpython's directional reflectance at its own 16 cosines, a cubic spline and
 scipy's adaptive quadrature), and exporters.colorimetry for the target colour.  The render check of the
 collapse (Cycles reproduces the target) is tests/test_bake_fidelity.py.

@@ -10,7 +10,7 @@ from exporters import cycles
 
 
 def test_forward_matches_kernel_reference_points():
-    # Preimages quoted in notes/blender_cycles.md §2d, computed there independently of this module.
+    # Preimages quoted in docs/research/blender_cycles.md §2d, computed there independently of this module.
     for alpha, g, color in [(0.99, 0.0, 0.784), (0.999, 0.0, 0.895), (0.99, 0.5, 0.706), (0.99, 0.9, 0.488),
                             (0.999, 0.9, 0.671), (0.2, 0.0, 0.046), (0.2, 0.9, 0.0045)]:
         inv = cycles.rw_albedo_inverse(alpha, g)

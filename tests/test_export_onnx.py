@@ -1,4 +1,4 @@
-"""ONNX export: I/O exactly per SPEC §3, torch-vs-onnxruntime parity, the input domain in the graph,
+"""ONNX export: I/O exactly per docs/contracts.md §3, torch-vs-onnxruntime parity, the input domain in the graph,
 the float16 path, the failure paths, and the card's SHA-256 (on a tiny model trained on toy data)."""
 
 import hashlib

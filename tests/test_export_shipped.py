@@ -1,4 +1,4 @@
-"""The shipped model in blender_addon/models/: SPEC §3 I/O, card hashes, size budget, and its outputs on
+"""The shipped model in blender_addon/models/: docs/contracts.md §3 I/O, card hashes, size budget, and its outputs on
 every colour of a 33 x 33 x 33 grid of the RGB cube (black, white, non-skin colours) with onnxruntime."""
 
 import hashlib
@@ -80,7 +80,7 @@ def test_rgb_cube_outputs_are_physical_and_decoder_agrees(card):
         rgb = spectrum_to_linear_srgb(out["reflectance"].astype(np.float64), "D65") * out["exposure"]
         np.testing.assert_allclose(rgb @ SRGB_LUMINANCE, chunk.astype(np.float64) @ SRGB_LUMINANCE,
                                    rtol=5e-5, atol=1e-7)
-        # the spectral outputs depend on the texel only through biophysical (SPEC §3)
+        # the spectral outputs depend on the texel only through biophysical (docs/contracts.md §3)
         sub = slice(0, None, 37)
         d = dict(zip(DEC_OUT, dec.run(None, {"biophysical": out["biophysical"][sub]}), strict=True))
         for name in DEC_OUT:

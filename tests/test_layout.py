@@ -1,4 +1,4 @@
-"""Architecture boundaries and the command line's contract (SPEC §2)."""
+"""Architecture boundaries and the command line's contract (docs/contracts.md §2)."""
 
 import subprocess
 import sys

@@ -1,7 +1,7 @@
 """Monte Carlo transport against independent references.
 
 References: iadpython adding-doubling (Prahl), van de Hulst's slab (via the MCML paper) and the
-isotropic semi-infinite H-function values of notes/monte_carlo.md §1b.  Tolerance: 4 standard errors
+isotropic semi-infinite H-function values of docs/research/monte_carlo.md §1b.  Tolerance: 4 standard errors
 + 0.002 (the brief's), except exact bookkeeping identities.  Runs are small (eager, one thread is
 enough): several (albedo, g) cases share one run as channels of one medium.
 """
@@ -50,7 +50,8 @@ def test_van_de_hulst_slab() -> None:
 
 
 def test_isotropic_half_space_h_function() -> None:
-    """Matched boundary, g = 0: plane albedo 1 - H(1) sqrt(1 - a) and spherical albedo (note §1b)."""
+    """Matched boundary, g = 0: plane albedo 1 - H(1) sqrt(1 - a) and spherical albedo
+    (docs/research/monte_carlo.md §1b)."""
     albedo = np.array([0.5, 0.9, 0.99, 0.999])
     normal = np.array([0.11523, 0.41495, 0.75272, 0.91285])
     diffuse = np.array([0.14654, 0.47802, 0.79456, 0.92971])
@@ -73,7 +74,7 @@ def test_semi_infinite_n14_against_adding_doubling() -> None:
     m = LayeredMedium.homogeneous(sigma_t * (1 - a), sigma_t * a, g, n_medium=1.4)
     rn = simulate(m, 12_000, illumination="normal", seed=7, r_edges_cm=None)
     rd = simulate(m, 12_000, illumination="diffuse", seed=8, r_edges_cm=None)
-    # g = 0.9 needs 32 quadrature points (16 overestimates R by ~3e-4, note §4)
+    # g = 0.9 needs 32 quadrature points (16 overestimates R by ~3e-4, docs/research/monte_carlo.md §4a)
     ref = [_iad(ai, math.inf, gi, 1.4, 32 if gi > 0.8 else 16) for ai, gi in cases]
     spec_n = ((1.4 - 1) / (1.4 + 1)) ** 2
     spec_d = _iad_specular_diffuse(1.4)
@@ -106,7 +107,7 @@ def test_two_layer_against_adding_doubling() -> None:
     top = (0.9, 1.0, 0.8)  # albedo, optical thickness, g
     bottom = (0.99, 0.8)
     s = iad.Sample(n=1.4, n_above=1.0, n_below=1.0, quad_pts=16)
-    s.a = np.array([bottom[0], top[0]])  # adding-doubling lists layers BOTTOM first (note §2)
+    s.a = np.array([bottom[0], top[0]])  # adding-doubling lists layers BOTTOM first (docs/research/monte_carlo.md §2)
     s.b = np.array([math.inf, top[1]])
     s.g = np.array([bottom[1], top[2]])
     s.update_quadrature()

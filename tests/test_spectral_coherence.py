@@ -135,7 +135,7 @@ def shipped_coherence(lut) -> dict:
 
 @pytest.mark.xfail(strict=True, reason="the shipped decoder predates the coherent rebuild (issue 23)")
 def test_shipped_decoder_is_spectrally_coherent(lut):
-    """Issue 23's acceptance on the shipped decoder (300 random tones of the SPEC box; the tolerances are
+    """Issue 23's acceptance on the shipped decoder (300 random tones in the box of docs/contracts.md §1; tolerance
     ``coherence.SWITCH_TOL``, ``DSIGMA_RATIO_TOL`` and no unexplained weight jump).  The decoder trained
     before issue 23 fails it: its dominant component switches on ~25 % of the steps at a fitted
     wavelength against ~1 % elsewhere (README, "Training the model")."""

@@ -2,7 +2,7 @@
 
 Each concept owns its benchmarks in a ``bench`` module exposing ``benchmarks(quick: bool) -> list[dict]``
 with keys workload, ours, anchor, ratio, error, notes (human-readable, units included).  This module only
-collects them, prints the machine and the versions, and writes the tables (SPEC §6): one section per module,
+collects them, prints the machine and the versions, and writes the tables (docs/contracts.md §6): a section per module,
 headed by the module's name, when it ran, in which mode and under which load.  ``--only M ...`` re-runs those
 modules and replaces their sections in an existing file, keeping the others (each keeps its own stamp).
 """

@@ -1,4 +1,4 @@
-"""Command dispatcher for ``python -m training`` (SPEC §2).
+"""Command dispatcher for ``python -m training`` (docs/contracts.md §2).
 
 Each command lives in the module that owns its concept and exposes ``main(argv: list[str]) -> int``
 with its own argparse parser.  Commands whose module is ``None`` are not built yet: they say so and

@@ -1,4 +1,4 @@
-"""Bake an albedo texture into the maps of SPEC §4 (bpy-free core of bake.py and of the Blender operator).
+"""Bake an albedo texture into the maps of docs/contracts.md §4 (bpy-free core of bake.py and of the Blender operator).
 
 Pipeline.  Every value a bake writes depends on the texel's colour only, so:
 

@@ -22,7 +22,7 @@ FAST_MANTISSA_BITS = 16
 
 @dataclass
 class BakeOptions:
-    """``targets`` of SPEC §4; ``unit_scale_m`` metres per Blender unit; ``threads`` for onnxruntime, the table
+    """``targets``: docs/contracts.md §4; ``unit_scale_m`` m per Blender unit; ``threads`` for onnxruntime, the table
     lookups and OpenEXR (0 = all cores); ``memory_mb`` budget of one inference chunk; ``chunk`` caps distinct
     texels per exact step (None: from the budget); ``model_colour``: the maps render the model's own reflectance
     (the colour of the biophysical skin the network found) instead of the painted albedo (the default,

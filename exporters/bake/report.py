@@ -83,7 +83,7 @@ def clamp_warnings(stats: dict[str, int], texels: int) -> list[str]:
 
 
 def write_record(job: BakeJob, timings: dict[str, float], files: list[Path], file_states: dict) -> Path:
-    """Write ``S_maps.json`` for a finished ``job`` (SPEC §4 keys via exporters.maps.write_maps_json, plus
+    """Write ``S_maps.json`` for a finished ``job`` (docs/contracts.md §4 keys via exporters.maps.write_maps_json, plus
     what this bake did)."""
     opts, table = job.options, job.evaluator.table
     colour = opts.collapse_options().colour
@@ -125,10 +125,10 @@ def _colour_record(colour: str, targets: tuple[str, ...]) -> dict:
     rec = {"mode": colour, "target": COLOUR_TARGETS[colour]}
     if "spectral" in targets:
         rec["spectral"] = (
-            "biophysical + exposure as SPEC §4 (the skin the network found); skin_decoder.onnx gives its media. "
+            "biophysical + exposure as docs/contracts.md §4 (the skin the network found); skin_decoder.onnx: media. "
             "Painted colour: exporters.painted.paint_mixture(alpha, sigma_t, g, weight of the decoder, the albedo "
             "texel in linear sRGB) gives the media that render the painted colour (a smooth correction of the "
             f"visible within a factor {painted.C_MAX:g}; UV and NIR unchanged); the albedo is the input image "
             "(its colour space above)" if colour == "painted" else
-            "biophysical + exposure as SPEC §4; skin_decoder.onnx gives the media of the model's own colour")
+            "biophysical + exposure as docs/contracts.md §4; skin_decoder.onnx: the media of the model's own colour")
     return rec

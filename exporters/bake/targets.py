@@ -1,4 +1,4 @@
-"""What a bake writes: the SPEC §4 targets, their files (:class:`MapSpec`) and the units stored with them."""
+"""What a bake writes: the targets of docs/contracts.md §4, their files (:class:`MapSpec`) and their units."""
 
 from __future__ import annotations
 
@@ -56,7 +56,7 @@ def parse_targets(text: str | list[str] | tuple[str, ...]) -> tuple[str, ...]:
 
 def map_specs(stem: str, k_count: int, targets: tuple[str, ...],
               components: tuple[int, ...] | list[int] | None = None) -> list[MapSpec]:
-    """Every file a bake writes (SPEC §4 names), in a fixed order; the weight map is shared by the cycles
+    """Every file a bake writes (docs/contracts.md §4 names), in a fixed order; the weight map is shared by the cycles
     and physical targets (it is the same array).  ``components``: the model's components to write (1-based,
     default all ``k_count``); they are numbered k1, k2, ... in the file names."""
     rgb, one = maps.RGB_CHANNELS, maps.SINGLE_CHANNEL

@@ -1,4 +1,4 @@
-"""Past one machine: Dask as the engine of the embarrassingly parallel stages (``--scheduler``, SPEC §2).
+"""Past one machine: Dask as the engine of the embarrassingly parallel stages (``--scheduler``, docs/contracts.md §2).
 
 ``engine``: the ``--scheduler local:N | tcp://HOST:PORT | slurm[:JOBS]`` option, the Dask client it opens,
 and ``Job`` (tasks submitted with bounded retries, one progress bar, failures reported by task); ``bench``:

@@ -50,7 +50,7 @@ N_BINS = R_EDGES_CM.size - 1
 
 
 def baseline_absorption(extra_tones: np.ndarray | None = None, spec: SkinModelSpec = SKIN_MODEL) -> np.ndarray:
-    """mu_a0 (W,), cm^-1: the smallest absorption of either layer over the SPEC parameter box.
+    """mu_a0 (W,), cm^-1: the smallest absorption of either layer over the parameter box of docs/contracts.md §1.
 
     mu_a of each layer is multilinear in (f_mel, f_blood, so2, b_mel) (``training.skin.model``), so its
     minimum over the box is at one of the 2^5 corners; ``extra_tones`` (B, 5) outside the box lower it

@@ -1,4 +1,4 @@
-"""Tone sampling (SPEC §1): scrambled Halton for training, uniform random for validation.
+"""Tone sampling (docs/contracts.md §1): scrambled Halton for training, uniform random for validation.
 
 Both draw points of the unit cube (Halton's low discrepancy is the stratification: every coordinate's
 marginal is evenly covered, and so is every 2-D projection) and map them onto the biophysical ranges
@@ -29,7 +29,7 @@ from exporters.constants import PARAM_NAMES, PARAM_RANGES
 #: Quantised epidermis thicknesses, cm: 16 levels from 50 to 350 um in 20 um steps.
 T_EPI_LEVELS_CM: np.ndarray = np.round(np.linspace(0.005, 0.035, 16), 6)
 T_EPI_LEVELS_CM.setflags(write=False)
-#: Lower and upper bounds (5,) of the biophysical vector in SPEC order (the default sampling ranges).
+#: Lower and upper bounds (5,) of the biophysical vector, docs/contracts.md §1 order (its default sampling ranges).
 PARAM_LOW = np.array([PARAM_RANGES[name][0] for name in PARAM_NAMES])
 PARAM_HIGH = np.array([PARAM_RANGES[name][1] for name in PARAM_NAMES])
 #: Parameters drawn log-uniformly over their range (the others uniformly).

@@ -1,4 +1,4 @@
-"""The model card ``skin_inversion.json`` (SPEC §3): what the shipped graphs are and how they were made.
+"""The model card ``skin_inversion.json`` (docs/contracts.md §3): what the shipped graphs are and how they were made.
 
 Contents: the files with SHA-256, size and I/O; K and the spectral grid; the input domain; the
 dataset (size, photons, preset, seeds) and fits; the LUT; the exact commands that trained and exported
@@ -30,7 +30,7 @@ INPUT_DOMAIN = (
     "clamped to its range. Callers (exporters) should reject non-finite pixels with an error first."
 )
 VALIDATION_PLACEHOLDER = {
-    "status": "not run: filled by `python -m training validate` (SPEC §6)",
+    "status": "not run: filled by `python -m training validate` (docs/contracts.md §6)",
     "rendering_delta_e76": None,
     "banded_shape_error": None,
     "spectral_angle": None,

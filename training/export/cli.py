@@ -1,4 +1,4 @@
-"""``python -m training export``: ONNX graphs + model card of a trained run (SPEC §3).
+"""``python -m training export``: ONNX graphs + model card of a trained run (docs/contracts.md §3).
 
     python -m training export --run RUNDIR --out blender_addon/models/ [--weights auto|float32|float16]
         [--max-mb 25] [--parity-n 10000] [--note TEXT ...] [--overwrite]

@@ -1,4 +1,4 @@
-"""ONNX graphs of the trained chain (SPEC §3) and their check against torch with onnxruntime.
+"""ONNX graphs of the trained chain (docs/contracts.md §3) and their check against torch with onnxruntime.
 
 * ``skin_inversion.onnx``: input ``albedo_rgb`` float32 (N, 3) -> ``biophysical`` (N, 5), ``exposure``
   (N, 1), ``reflectance`` (N, 376), ``alpha``, ``sigma_t`` (cm^-1), ``g``, ``weight`` (N, K, 376).
@@ -33,7 +33,7 @@ from exporters.constants import WAVELENGTHS_NM
 from training.model.chain import DECODER_OUTPUTS, INVERSION_OUTPUTS, DecoderGraph, InversionGraph, SkinModel
 
 OPSET: int = 17
-#: Parity tolerance between torch and onnxruntime: absolute, except relative for sigma_t (SPEC-sized
+#: Parity tolerance between torch and onnxruntime: absolute, except relative for sigma_t (contract-sized
 #: values up to 1e5 cm^-1) and exposure (a ratio that can exceed 1 for non-skin colours).
 PARITY_TOL: float = 1e-4
 RELATIVE_OUTPUTS: tuple[str, ...] = ("sigma_t", "exposure")
@@ -74,7 +74,7 @@ def _export_bytes(graph: nn.Module, example: torch.Tensor, input_name: str, outp
 
 
 def output_shapes(k: int) -> dict[str, tuple]:
-    """SPEC §3 shapes of every graph output ("N" is the dynamic batch)."""
+    """docs/contracts.md §3 shapes of every graph output ("N" is the dynamic batch)."""
     w = WAVELENGTHS_NM.size
     return {"biophysical": ("N", 5), "exposure": ("N", 1), "reflectance": ("N", w), "alpha": ("N", k, w),
             "sigma_t": ("N", k, w), "g": ("N", k, w), "weight": ("N", k, w)}
@@ -87,7 +87,7 @@ def _declare_output_shapes(proto: onnx.ModelProto, k: int) -> None:
         dims = out.type.tensor_type.shape.dim
         want = shapes[out.name]
         if len(dims) != len(want):
-            raise RuntimeError(f"output {out.name} has rank {len(dims)}, SPEC says {len(want)}")
+            raise RuntimeError(f"output {out.name} has rank {len(dims)}, docs/contracts.md §3 says {len(want)}")
         for d, v in zip(dims, want, strict=True):
             if v == "N":
                 d.dim_param = "N"
@@ -125,9 +125,10 @@ def export_graphs(model: SkinModel, weights: str = "float32") -> dict[str, bytes
     dec = _export_bytes(DecoderGraph(m), p0.repeat(4, 1), "biophysical", DECODER_OUTPUTS, fold)
     return {
         "skin_inversion.onnx": _with_metadata(inv, m, "Linear-sRGB skin albedo -> biophysical tone, exposure, "
-                                              "spectral reflectance and K-media SSS mixture (SPEC §3).", weights),
+                                              "spectral reflectance and K-media SSS mixture "
+                                              "(docs/contracts.md §3).", weights),
         "skin_decoder.onnx": _with_metadata(dec, m, "Biophysical tone -> spectral reflectance and K-media SSS "
-                                            "mixture (SPEC §3).", weights),
+                                            "mixture (docs/contracts.md §3).", weights),
     }
 
 

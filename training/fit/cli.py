@@ -1,4 +1,4 @@
-"""``python -m training fit``: fit mixtures of K homogeneous media to simulated tones (SPEC §2).
+"""``python -m training fit``: fit mixtures of K homogeneous media to simulated tones (docs/contracts.md §2).
 
     python -m training fit --tone-file TONE.npz --lut LUT.npz --k 1,2,3 --json
         prints {"fits": [{"K": 1, "shape_rmse": ..., "refl_rel_err": ...}, ...]}: means over the

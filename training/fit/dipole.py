@@ -17,7 +17,7 @@ Formulas (sigma_t = 1, so mu_a = 1 - alpha, mu_s = alpha, lengths in mfp):
   et al. 2001, eq. 8).
 
 The table's P is R_d(r) at the bin centres (``bin_centres``), renormalised so that sum P * area = 1
-over the tabulated radii, as the SPEC requires of the MC table.
+over the tabulated radii, as docs/contracts.md §2 requires of the MC table.
 """
 
 from __future__ import annotations
@@ -58,10 +58,10 @@ def dipole_reflectance(alpha: np.ndarray, g: np.ndarray, n: float = N_TISSUE) ->
 def dipole_lut(
     albedo: np.ndarray | None = None, g: np.ndarray | None = None, r_edges_mfp: np.ndarray | None = None
 ) -> dict[str, np.ndarray]:
-    """A LUT dict with the SPEC §2 keys, filled from the dipole (test/reference table only).
+    """A LUT dict with the docs/contracts.md §2 keys, filled from the dipole (test/reference table only).
 
     Defaults: 41 albedos denser near 1 (0, then 1 - geomspace(1 - 0.05, 1e-4)... and 1), 12 g values in
-    [-0.9, 0.95], the SPEC radial edges (513) read in mfp.
+    [-0.9, 0.95], the radial edges of docs/contracts.md §1 (513) read in mfp.
     """
     if albedo is None:
         albedo = np.concatenate([[0.0], 1.0 - np.geomspace(0.95, 1e-4, 39), [1.0]])

@@ -27,7 +27,7 @@ from training.model.networks import Encoder, ReflectanceDecoder, SlabDepth, Tran
 #: Largest finite float32: |x| <= this is False exactly for NaN and +-Inf (exports as Abs/LessOrEqual).
 _F32_MAX = 3.4028234663852886e38
 
-#: ONNX output names (SPEC §3), in graph order.
+#: ONNX output names (docs/contracts.md §3), in graph order.
 INVERSION_OUTPUTS: tuple[str, ...] = ("biophysical", "exposure", "reflectance", "alpha", "sigma_t", "g", "weight")
 DECODER_OUTPUTS: tuple[str, ...] = ("reflectance", "alpha", "sigma_t", "g", "weight")
 
@@ -87,7 +87,7 @@ class SkinModel(nn.Module):
 
 
 class InversionGraph(nn.Module):
-    """What ``skin_inversion.onnx`` computes: albedo_rgb -> the outputs of SPEC §3, in INVERSION_OUTPUTS order."""
+    """What ``skin_inversion.onnx`` computes: albedo_rgb -> docs/contracts.md §3 outputs (INVERSION_OUTPUTS order)."""
 
     def __init__(self, model: SkinModel) -> None:
         super().__init__()
@@ -99,7 +99,7 @@ class InversionGraph(nn.Module):
 
 
 class DecoderGraph(nn.Module):
-    """What ``skin_decoder.onnx`` computes: biophysical -> the outputs of SPEC §3, in DECODER_OUTPUTS order."""
+    """What ``skin_decoder.onnx`` computes: biophysical -> docs/contracts.md §3 outputs (DECODER_OUTPUTS order)."""
 
     def __init__(self, model: SkinModel) -> None:
         super().__init__()

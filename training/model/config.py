@@ -4,7 +4,7 @@ Every constant with a physical meaning lives here, with its source:
 
 * ``SIGMA_T_RANGE_CM``: the extinction of a mixture component is predicted on a log scale between
   1e-1 and 1e5 cm^-1.  The fits of ``training.fit`` leave sigma_t unbounded (paper §4); skin's
-  extinction is 1e2-1e3 cm^-1 in the visible (notes/skin_optics.md) and the mixture components of
+  extinction is 1e2-1e3 cm^-1 in the visible (docs/research/skin_optics.md) and the mixture components of
   the fits spread a few decades around it, so the range leaves >= 2 decades of margin on each side.
 * ``G_ABS_MAX``: |g| <= 0.99, as in the fitter (``training.fit.mixture``) and the simulator; the
   anisotropy range is further narrowed to the LUT's g axis when a LUT is given (``g_range``).

@@ -1,4 +1,4 @@
-"""``python -m training realskin``: the skin model against measured human skin (SPEC §2).
+"""``python -m training realskin``: the skin model against measured human skin (docs/contracts.md §2).
 
     python -m training realskin [--data FILE] [--out DIR] [--json] [--photons 10000] [--seed 1]
                                 [--decoder blender_addon/models/skin_decoder.onnx | --no-decoder]
@@ -8,7 +8,7 @@
 Fits the biophysical parameters of every measured spectrum with the project's Monte Carlo (one walk of
 a collimated normal beam, every tone a reweighting of it; ``forward``) and, for comparison, the shipped
 decoder, exposure fixed at 1 and free, in the measurement's geometry (``geometry``).  Prints the table
-(or the JSON of SPEC §2 with ``--json``); ``--out DIR`` also writes realskin.json, realskin.md and
+(or the JSON of docs/contracts.md §2 with ``--json``); ``--out DIR`` also writes realskin.json, realskin.md and
 fig_realskin.png.  The walk is cached (``--cache``, default DIR/cache or ~/.cache/spectral_skin_sss/realskin):
 a rerun with the same skin model, photons and seed fits at once.  ``--study`` runs the cause study
 instead (``study``: each candidate modelling choice fitted the same way; DIR/study.md and study.json).

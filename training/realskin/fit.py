@@ -6,7 +6,7 @@ Each subject's spectrum y (C,) is fitted over ``FIT_BAND_NM`` by
 * exposure free:        min_{p, s}  || S + s (F(p) - S) - y ||   (s scales the subsurface part; the
   specular S is the surface's, not the tissue's)
 
-with F a forward model (``forward``) and p inside the SPEC box.  Search space: log f_mel, log f_blood
+with F a forward model (``forward``) and p inside the docs/contracts.md §1 box.  Search space: log f_mel, log f_blood
 (colour is most sensitive at small fractions), t_epi, so2, b_mel (and log s).  Starts: the best of 1,024
 scrambled-Halton tones for each subject (evaluated once for all subjects), then scipy's bounded
 trust-region least squares from the best three; its Jacobian is taken by forward differences, all six

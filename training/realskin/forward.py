@@ -26,7 +26,7 @@ from training.sim.lut_interp import bin_centres
 from training.skin.constants import SKIN_MODEL, SkinModelSpec
 from training.skin.model import absorption, scattering
 
-#: Epidermis thickness levels of the walk, cm: every 10 um over the SPEC range (0.005-0.035 cm).
+#: Epidermis thickness levels of the walk, cm: every 10 um over the range of docs/contracts.md §1 (0.005-0.035 cm).
 T_EPI_FINE_LEVELS_CM = np.round(np.arange(0.005, 0.035 + 1e-9, 0.001), 6)
 _T = PARAM_NAMES.index("t_epi")
 

@@ -29,7 +29,7 @@ def _mean(fits: list[SubjectFit], band: str) -> float:
 
 
 def summary(names, lightness, mc_fixed, mc_free, dec_fixed=None, dec_free=None, settings: dict | None = None) -> dict:
-    """The JSON report (SPEC §2 keys, plus the free-exposure fits, the decoder's and the run's settings)."""
+    """The JSON report (docs/contracts.md §2 keys, plus the free-exposure fits, the decoder's and run's settings)."""
     subjects = []
     for i, name in enumerate(names):
         f, g = mc_fixed[i], mc_free[i]

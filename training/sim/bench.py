@@ -1,8 +1,8 @@
 """Benchmarks of the Monte Carlo engine (collected by ``python -m training bench``).
 
-1. Photon histories per second on the 7-layer skin case at 600 nm (notes/monte_carlo.md §4; all layers
+1. Photon histories per second on the 7-layer skin case at 600 nm (docs/research/monte_carlo.md §4; all layers
    at n = 1.4 because the simulator has one index), normal incidence, vs MCML 1.2.2 measured on this
-   machine kind: 19,400 photons/s on one core, ~37,000 on both (anchor numbers from the note; MCML
+   machine kind: 19,400 photons/s on one core, ~37,000 on both (anchors: docs/research/monte_carlo.md §4a; MCML
    itself is not run here).  Measured with one torch thread (= one core), compiled step.
 2. LUT build: a measured batch of g nodes at two photon counts, projected to the paper-scale 800 x 800
    table with 1e6 photons per simulated g node (48 nodes, the other g columns interpolated; cost is
@@ -113,7 +113,7 @@ def benchmarks(quick: bool) -> list[dict]:
     rows.append({
         "workload": f"7-layer skin @600 nm (n = 1.4 throughout), normal incidence, {photons} photons, 1 core",
         "ours": f"{rate1:,.0f} photons/s (R_d = {rd:.4f} +- {se:.4f})",
-        "anchor": f"MCML 1.2.2 (C, gcc -O3), 1 core: {MCML_1CORE:,.0f} photons/s (note §4a)",
+        "anchor": f"MCML 1.2.2 (C, gcc -O3), 1 core: {MCML_1CORE:,.0f} photons/s (docs/research/monte_carlo.md §4a)",
         "ratio": f"{rate1 / MCML_1CORE:.2f}x",
         "error": "R_d differs from MCML's 0.5630 by design (one refractive index instead of 1.34-1.53)",
         "notes": "torch.compile'd step (compile time excluded), float32 walk, float64 tallies; shared machine",

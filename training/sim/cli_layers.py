@@ -1,4 +1,4 @@
-"""``python -m training simulate-layers``: Monte Carlo of a generic layered medium, JSON on stdout (SPEC §2).
+"""``python -m training simulate-layers``: Monte Carlo of a generic layered medium, JSON out (docs/contracts.md §2).
 
 Example (the van de Hulst / MCML slab check)::
 

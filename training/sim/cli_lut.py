@@ -1,4 +1,4 @@
-"""``python -m training lut``: the homogeneous semi-infinite lookup tables (SPEC §2, paper §4.2).
+"""``python -m training lut``: the homogeneous semi-infinite lookup tables (docs/contracts.md §2, paper §4.2).
 
 Example (small)::
 

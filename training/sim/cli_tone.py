@@ -1,9 +1,9 @@
-"""``python -m training simulate``: the two-layer skin model of one tone at all 376 wavelengths (SPEC §2).
+"""``python -m training simulate``: the two-layer skin model of one tone at all 376 wavelengths (docs/contracts.md §2).
 
 Epidermis of thickness t_epi over a semi-infinite dermis, n = 1.4, air above, diffuse illumination.
 ``--method direct`` walks the absorbing medium; ``--method reweighted`` is the dataset's estimator
 (``training.data.reweight``): a walk at the baseline absorption, each reflected photon weighted by
-exp(-(mua_epi - mua0) L_epi - (mua_derm - mua0) L_derm) (same estimand).  Both write the SPEC keys plus
+exp(-(mua_epi - mua0) L_epi - (mua_derm - mua0) L_derm) (same estimand).  Both write docs/contracts.md §2 keys plus
 ``profile_stderr``.  ``--profile cdf`` resamples the profile through its CDF (``training.sim.resample``;
 ``profile_stderr`` stays the histogram's).
 

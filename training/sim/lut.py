@@ -224,7 +224,7 @@ def build_lut(
     log=print,
     job=None,
 ) -> Path | None:
-    """Build the LUT file ``out`` (.npz, SPEC §2 keys plus R_stderr, R_trunc_bound, frac_inside, photons,
+    """Build the LUT file ``out`` (.npz, docs/contracts.md §2 keys plus R_stderr, R_trunc_bound, frac_inside, photons,
     g_nodes).
 
     ``g_nodes`` (default min(g_n, G_NODES)) g values spanning ``g_range`` are simulated with ``photons``

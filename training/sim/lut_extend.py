@@ -59,7 +59,7 @@ def extension_albedos(albedo_last: float, rows: int = EXTRA_ROWS) -> np.ndarray:
 
 def extend_albedo(albedo: np.ndarray, g: np.ndarray, r_edges_mfp: np.ndarray, R: np.ndarray, P: np.ndarray,
                   n_medium: float = N_TISSUE, rows: int = EXTRA_ROWS) -> dict[str, np.ndarray]:
-    """The table (SPEC §2 arrays: albedo (NA,), g (NG,), r_edges_mfp (NR + 1,), R (NA, NG), P (NA, NG, NR))
+    """The table (docs/contracts.md §2 arrays: albedo (NA,), g (NG,), r_edges_mfp (NR + 1,), R (NA, NG), P (NA, NG, NR))
     with ``rows`` albedo rows appended up to albedo 1 (module docstring).  Returns the same keys."""
     # the dipole lives with the fitter's reference tables; imported here to keep training.sim importable alone
     from training.fit.dipole import dipole_profile_shape

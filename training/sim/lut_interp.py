@@ -1,6 +1,6 @@
 """Differentiable interpolation of the homogeneous-medium lookup tables (paper §4, eq. separability).
 
-The tables (SPEC §2, written by ``python -m training lut``) describe a semi-infinite homogeneous
+The tables (docs/contracts.md §2, written by ``python -m training lut``) describe a semi-infinite homogeneous
 medium at sigma_t = 1:
 
 * ``albedo`` (NA,), ``g`` (NG,): the grid axes, increasing, possibly non-uniform (the albedo axis is
@@ -31,7 +31,7 @@ trilinear lookups in torch):
 
 Binned form (``profile_binned``): by default the interpolant is evaluated at the geometric centre of
 each target bin (the same centre convention as the table, so with target bins equal to the table bins
-at sigma_t = 1 it returns the table exactly).  For bins with a log width of 2.1 % (the SPEC grid) the
+at sigma_t = 1 it returns the table exactly).  For bins with a log width of 2.1 % (docs/contracts.md §1) the
 difference to the exact area average of the interpolant is second order in the bin width: measured on
 dipole tables (``tests/test_lut_interp.py``) the median is 6e-7 relative, and it reaches 4e-4 in steep
 exponential tails (|d ln P / d ln r| ~ 5); far below the Monte Carlo noise of any bin.  It is larger
@@ -60,7 +60,7 @@ def _clamp_sigma(sigma_t: torch.Tensor) -> torch.Tensor:
     lo = max(SIGMA_T_RANGE[0], 10.0 ** math.ceil(math.log10(math.sqrt(fi.tiny)) + 1))
     hi = min(SIGMA_T_RANGE[1], 10.0 ** math.floor(math.log10(math.sqrt(fi.max)) - 1))
     return sigma_t.clamp(lo, hi)
-#: Keys of the LUT .npz file (SPEC §2).
+#: Keys of the LUT .npz file (docs/contracts.md §2).
 LUT_KEYS: tuple[str, ...] = ("albedo", "g", "r_edges_mfp", "R", "P")
 
 
@@ -152,7 +152,7 @@ class LookupTables:
         cls, path: str | Path, dtype: torch.dtype = torch.float64, device: str | torch.device = "cpu",
         extend_albedo: bool = True,
     ) -> LookupTables:
-        """Load a LUT .npz written by ``python -m training lut`` (SPEC §2).
+        """Load a LUT .npz written by ``python -m training lut`` (docs/contracts.md §2).
 
         ``extend_albedo``: a table ending at albedo >= ``lut_extend.EXTEND_FROM`` gets analytic rows up to
         albedo 1 (``training.sim.lut_extend``; the file is not changed); ``self.albedo_extended`` says

@@ -35,7 +35,7 @@ import numpy as np
 #: resampling`` at 10^5 photons (a sweep of min_count 50-1600 x max_span 4-32 bins: span 8 best, min_count
 #: 800 and 1600 within 7 % of each other; docs/validation/resampling.md).
 MIN_COUNT: int = 800
-#: Widest knot interval of ``cdf_resample``, in bins (8 SPEC bins = 0.07 decades of r): bounds the bias
+#: Widest knot interval of ``cdf_resample``, in bins (8 profile bins = 0.07 decades of r): bounds the bias
 #: where the profile falls steeply and photons are sparse (without it, RMSR in the tails grows past 1).
 MAX_SPAN: int = 8
 

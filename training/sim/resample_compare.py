@@ -4,7 +4,7 @@ The paper reports its CDF-based conservative resampling at 4x lower RMSR than un
 lower than a kernel density estimate at 10^5 photons.  Here, for a few homogeneous media (sigma_t =
 100 cm^-1) and one skin tone at two wavelengths (the two-layer model, direct estimator), one walk of
 ``repeats`` x ``photons`` photons is split by photon id into ``repeats`` independent runs of
-``photons`` each.  Every run's exits give four estimates of the profile on the SPEC's 512 log bins:
+``photons`` each.  Every run's exits give four estimates of the profile on the 512 log bins of docs/contracts.md §1:
 
 * ``histogram``: the plain tally in the 512 log bins (what the simulator writes by default);
 * ``uniform``: a histogram in 512 bins uniform in r over [0, 5 cm], remapped conservatively onto the

@@ -1,4 +1,4 @@
-"""The two-layer biophysical skin model (paper §3, SPEC §1), vectorised over tones in torch.
+"""The two-layer biophysical skin model (paper §3, docs/contracts.md §1), vectorised over tones in torch.
 
 A tone is the biophysical vector p = (f_mel, f_blood, t_epi [cm], so2, b_mel).  The model gives, at the
 376 wavelengths of ``exporters.constants.WAVELENGTHS_NM``, for an epidermis of thickness t_epi over a

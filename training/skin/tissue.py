@@ -13,7 +13,7 @@ from training.skin.model import layer_optics
 
 
 def skin_medium(tone: np.ndarray | torch.Tensor | list[float], absorbing: bool = True) -> LayeredMedium:
-    """The LayeredMedium (2 layers x 376 wavelengths) of one tone (5,) in SPEC order.
+    """The LayeredMedium (2 layers x 376 wavelengths) of one tone (5,) in docs/contracts.md §1 order.
 
     ``absorbing=False`` gives the same geometry and scattering with mu_a = 0 (for absorption reweighting).
     """

@@ -14,7 +14,7 @@ TONES_FILE = Path(__file__).with_name("tones.csv")
 
 @dataclass(frozen=True)
 class ToneSet:
-    """Named tones: ``values`` (N, 5) in SPEC order, ``names`` and ``kinds`` (N,), ``descriptions``."""
+    """Named tones: ``values`` (N, 5) in docs/contracts.md §1 order, ``names`` and ``kinds`` (N,), ``descriptions``."""
 
     names: tuple[str, ...]
     kinds: tuple[str, ...]

@@ -1,4 +1,4 @@
-"""Validation of the model (paper §6, SPEC §6): the rendering gate and its tables, the Mitsuba 3 path, strips.
+"""Validation of the model (paper §6, docs/contracts.md §6): the rendering gate, its tables, the Mitsuba 3 path, strips.
 
 Modules: ``mixture`` (our Monte Carlo renderer of a K-media mixture, the rendering gate's renderer),
 ``gate`` (ground truth, joint-optimised fits, network and baseline media, renders, cache), ``baselines``

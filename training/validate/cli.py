@@ -1,4 +1,4 @@
-"""``python -m training validate``: the paper's validation (SPEC §6).
+"""``python -m training validate``: the paper's validation (docs/contracts.md §6).
 
     python -m training validate --out DIR [--quick] [--lut LUT] [--dataset DIR --fits FITS] [--photons N]
         [--gt-photons N] [--renderer lut|mc] [--model-dir blender_addon/models] [--update-card] [--threads 1]

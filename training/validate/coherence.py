@@ -3,7 +3,7 @@
     python -m training.validate.coherence [--model blender_addon/models/skin_decoder.onnx | RUN/model.pt]
         [--tones 1000] [--seed 0] [--fitted-stride 4] [--lut LUT.npz] [--json OUT.json] [--figure OUT.png]
 
-On ``n`` tones drawn uniformly in the SPEC box (``random_tones``), the decoder's mixture (alpha, g,
+On ``n`` tones drawn uniformly in the docs/contracts.md §1 box (``random_tones``), the decoder's mixture (alpha, g,
 sigma_t, w: (N, K, 376)) is compared between neighbouring 2 nm steps.  Steps are split into those that
 touch a *fitted* wavelength (one of the two ends is a wavelength the fits exist at, every
 ``fitted_stride``-th from 250 nm) and the others; a decoder supervised only where fits exist shows a
@@ -69,7 +69,7 @@ DecodeFn = Callable[[np.ndarray], Decoded]
 
 
 def random_tones(n: int, seed: int = 0) -> np.ndarray:
-    """n tones (n, 5) uniform in the SPEC box (float32, what the decoder takes)."""
+    """n tones (n, 5) uniform in the docs/contracts.md §1 box (float32, what the decoder takes)."""
     rng = np.random.default_rng(seed)
     return (PARAM_LOW + (PARAM_HIGH - PARAM_LOW) * rng.random((n, PARAM_LOW.size))).astype(np.float32)
 
@@ -233,7 +233,7 @@ def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="python -m training.validate.coherence", description=__doc__.splitlines()[0])
     p.add_argument("--model", type=Path, default=DEFAULT_MODEL_DIR / "skin_decoder.onnx",
                    help="skin_decoder.onnx or a run's model.pt (default: the shipped decoder)")
-    p.add_argument("--tones", type=int, default=1000, help="random tones (uniform in the SPEC box)")
+    p.add_argument("--tones", type=int, default=1000, help="random tones (uniform in the parameter box)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--fitted-stride", type=int, default=SHIPPED_FITTED_STRIDE,
                    help="the fits the decoder learnt from were at every n-th wavelength (default 4)")

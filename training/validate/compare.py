@@ -1,7 +1,7 @@
 """``python -m training mitsuba``: Mitsuba 3 vs our mixture renderer vs the biophysical ground truth.
 
 For one tone and a few wavelengths, three total diffuse reflectances (specular excluded, diffuse
-cosine-weighted illumination, n = 1.4; SPEC §1), each with its standard error:
+cosine-weighted illumination, n = 1.4; docs/contracts.md §1), each with its standard error:
 
 * ``mitsuba``: the network's K-media mixture (``skin_decoder.onnx``) rendered by Mitsuba 3
   (``exporters.mitsuba``: one semi-infinite slab render per component and wavelength, sum_k w_k R_k);

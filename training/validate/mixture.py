@@ -4,7 +4,7 @@ This is the renderer of the paper's rendering gate (§6, "each photon randomly s
 K-media mixture"): each component k is a homogeneous semi-infinite medium (mu_a = (1 - alpha) sigma_t,
 mu_s = alpha sigma_t, Henyey-Greenstein g) under the dataset's boundary (n = 1.4, smooth unpolarised
 Fresnel, air above) and the dataset's illumination (``"diffuse"``: a cosine-weighted lobe entering at the
-origin; ``"normal"`` selectable).  R_d never includes the specular reflection (SPEC §1).
+origin; ``"normal"`` selectable).  R_d never includes the specular reflection (docs/contracts.md §1).
 
 **How the mixture is combined.**  A photon that picks medium k with probability w_k(lambda) has expected
 reflectance ``sum_k w_k R_k``, so we walk every component with the same photons in one batched run of
@@ -33,7 +33,7 @@ WEIGHT_SUM_TOL = 1e-3
 class MixtureResult:
     """R_d (W,) of the mixture with its standard error, per-component R_k and R_k_stderr (K, W),
     photons per component and wavelength, and the wall time (s).  With radial tallies (``r_edges_cm``
-    given) also ``profile`` and ``profile_stderr`` (W, NB) in cm^-2 (SPEC §1 definition), else None."""
+    given) also ``profile`` and ``profile_stderr`` (W, NB) in cm^-2 (docs/contracts.md §1 definition), else None."""
 
     R_d: np.ndarray
     R_d_stderr: np.ndarray
