@@ -161,7 +161,7 @@ def _as_stored(rec: dict, bits: int, half: bool = True) -> dict:
     return out
 
 
-def compare_fast_exact(table: texel_table.TexelTable, model: inference.SkinModel, rgb: np.ndarray) -> dict:
+def compare_fast_exact(table: texel_table.TexelTable, model: inference.InversionSession, rgb: np.ndarray) -> dict:
     """Fast-path records (as stored: half floats and 16 mantissa bits) against exact evaluation for albedo rows
     ``rgb`` (n, 3): appearance ΔE76 (mean, max), largest parameter differences, fraction of rows inside the table."""
     fast, inside = _fast_records(table, rgb)
@@ -214,7 +214,7 @@ def _errors(c: dict) -> str:
             f"exposure rel. {c['exposure_rel']:.1e}")
 
 
-def _table_rows(quick: bool, model: inference.SkinModel, texture: np.ndarray) -> list[dict]:
+def _table_rows(quick: bool, model: inference.InversionSession, texture: np.ndarray) -> list[dict]:
     """Table build time, size, lookup speed and error against exact evaluation at several grid steps."""
     n = 3000 if quick else 12000
     sample = np.concatenate([_skin_sample(texture, n, 1), _decoder_sample(n // 2, 2)])
@@ -269,7 +269,7 @@ def _load() -> str:
         return "load average unknown"
 
 
-def _bake_4k_rows(quick: bool, model: inference.SkinModel, texture: np.ndarray) -> list[dict]:
+def _bake_4k_rows(quick: bool, model: inference.InversionSession, texture: np.ndarray) -> list[dict]:
     """A 4096^2 (2048^2 in quick mode) 8-bit sRGB PNG baked by the fast path, with the exact path side by side
     on a sample of its texels; the spectral target; a re-run."""
     side = texture.shape[0]

@@ -45,7 +45,7 @@ DEFAULT_MEMORY_MB: int = 512
 _COLLAPSE_BYTES_PER_KL = 10 * 8
 
 
-#: onnxruntime session runs and texels evaluated by every SkinModel of this process (read by tests and
+#: onnxruntime session runs and texels evaluated by every InversionSession of this process (read by tests and
 #: benchmarks to prove that a step did no inference; :func:`inference_counts`).
 _COUNTS = {"runs": 0, "texels": 0}
 
@@ -64,7 +64,7 @@ def _dims(shape) -> tuple:
 
 
 @dataclass
-class SkinModel:
+class InversionSession:
     """An onnxruntime session on ``skin_inversion.onnx`` with its docs/contracts.md §3 shapes checked.
 
     ``k``: number of mixture components (read from the graph); ``sha256``: of the model file;
@@ -129,7 +129,7 @@ def bytes_per_texel(k: int) -> int:
     return onnx_out + _COLLAPSE_BYTES_PER_KL * k * N_WAVELENGTHS
 
 
-def chunk_rows(model: SkinModel, memory_mb: float = DEFAULT_MEMORY_MB) -> int:
+def chunk_rows(model: InversionSession, memory_mb: float = DEFAULT_MEMORY_MB) -> int:
     """Texels per chunk so that one chunk stays within ``memory_mb`` MiB (at least 1)."""
     return chunk_rows_for_k(model.k, memory_mb)
 
@@ -141,7 +141,7 @@ def chunk_rows_for_k(k: int, memory_mb: float = DEFAULT_MEMORY_MB) -> int:
     return max(1, int(memory_mb * 2**20 // bytes_per_texel(k)))
 
 
-def load_model(path: str | os.PathLike, threads: int = 0) -> SkinModel:
+def load_model(path: str | os.PathLike, threads: int = 0) -> InversionSession:
     """Open ``skin_inversion.onnx`` on the CPU and check it is of the docs/contracts.md §3 shape.
 
     ``threads``: onnxruntime intra-op threads, 0 = all cores.  Errors (:class:`ModelError`) name the file
@@ -181,7 +181,7 @@ def load_model(path: str | os.PathLike, threads: int = 0) -> SkinModel:
         if len(got) != len(want) or any(g is not None and g != w for g, w in zip(got, want, strict=True)):
             raise ModelError(f"model {path.name}: output '{name}' has shape {list(outputs[name])}, expected "
                              f"(N, {', '.join(map(str, want))}) (docs/contracts.md §3)")
-    model = SkinModel(path=path, k=k, sha256=sha256_file(path), threads=int(threads), session=session)
+    model = InversionSession(path=path, k=k, sha256=sha256_file(path), threads=int(threads), session=session)
     probe = model.run(np.array([[0.4, 0.3, 0.25]], dtype=np.float32))  # shapes of a real evaluation
     for name, tail in OUTPUT_SHAPES.items():
         want = (1, *(k if d == "K" else d for d in tail))
@@ -226,7 +226,7 @@ class ModelFile:
     def __init__(self, path: str | os.PathLike, threads: int = 0) -> None:
         self.path = Path(path)
         self.threads = int(threads)
-        self._model: SkinModel | None = None
+        self._model: InversionSession | None = None
         self._sha256: str | None = None
         if not self.path.is_file():
             raise ModelError(f"model not found at {self.path}: train/export it (python -m training export) or set "
@@ -244,13 +244,13 @@ class ModelFile:
     def loaded(self) -> bool:
         return self._model is not None
 
-    def load(self) -> SkinModel:
+    def load(self) -> InversionSession:
         if self._model is None:
             self._model = load_model(self.path, threads=self.threads)
         return self._model
 
     @classmethod
-    def of(cls, model: SkinModel) -> ModelFile:
+    def of(cls, model: InversionSession) -> ModelFile:
         """Wrap an already loaded model."""
         ref = cls(model.path, model.threads)
         ref._model = model

@@ -153,9 +153,10 @@ def is_spectral(variant: str) -> bool:
 
 
 @dataclass(frozen=True)
-class Mixture:
+class MitsubaMixture:
     """K homogeneous media per wavelength: ``alpha``, ``sigma_t`` (cm^-1), ``g``, ``weight`` of shape (K, W)
-    at ``wavelength_nm`` (W,); weights sum to 1 over K.  ``reflectance`` (W,): the network's own R."""
+    at ``wavelength_nm`` (W,); weights sum to 1 over K.  ``reflectance`` (W,): the network's own R.  One tone in
+    numpy, what the Mitsuba scenes render (the fitter's batch of torch media is ``training.fit.mixture.Mixture``)."""
 
     wavelength_nm: np.ndarray
     alpha: np.ndarray
@@ -168,25 +169,25 @@ class Mixture:
     def k(self) -> int:
         return int(self.alpha.shape[0])
 
-    def painted(self, albedo_rgb) -> Mixture:
+    def painted(self, albedo_rgb) -> MitsubaMixture:
         """The mixture with the painted colour ``albedo_rgb`` (3,) linear sRGB (exporters.painted, what a bake
         renders by default): alpha and sigma_t corrected in the visible, the rest unchanged.  On the 376-sample
         grid only (decode first, then :meth:`at`)."""
         from exporters.painted import paint_mixture
 
         if self.wavelength_nm.shape != WAVELENGTHS_NM.shape or not np.allclose(self.wavelength_nm, WAVELENGTHS_NM):
-            raise ValueError("paint the mixture on the model's 376-sample grid (before Mixture.at)")
+            raise ValueError("paint the mixture on the model's 376-sample grid (before MitsubaMixture.at)")
         p = paint_mixture(self.alpha[None], self.sigma_t[None], self.g[None], self.weight[None],
                           np.asarray(albedo_rgb, np.float64).reshape(1, 3))
-        return Mixture(self.wavelength_nm, p.alpha[0], p.sigma_t[0], self.g, self.weight, self.reflectance)
+        return MitsubaMixture(self.wavelength_nm, p.alpha[0], p.sigma_t[0], self.g, self.weight, self.reflectance)
 
-    def at(self, wavelengths_nm) -> Mixture:
+    def at(self, wavelengths_nm) -> MitsubaMixture:
         """The mixture at other wavelengths (W',) inside its range: every field linearly interpolated
         (exact at the 2 nm grid points); weights renormalised to sum to 1."""
         wl = check_wavelengths(wavelengths_nm, self.wavelength_nm[0], self.wavelength_nm[-1])
         lerp = lambda a: np.stack([np.interp(wl, self.wavelength_nm, row) for row in a])  # noqa: E731
         w = lerp(self.weight)
-        return Mixture(wl, lerp(self.alpha), lerp(self.sigma_t), lerp(self.g), w / w.sum(axis=0),
+        return MitsubaMixture(wl, lerp(self.alpha), lerp(self.sigma_t), lerp(self.g), w / w.sum(axis=0),
                        np.interp(wl, self.wavelength_nm, self.reflectance))
 
 
@@ -200,10 +201,10 @@ def check_wavelengths(wavelengths_nm, lo: float = WAVELENGTHS_NM[0], hi: float =
     return wl
 
 
-def decode(biophysical, model_path: str | os.PathLike = DEFAULT_DECODER) -> Mixture:
+def decode(biophysical, model_path: str | os.PathLike = DEFAULT_DECODER) -> MitsubaMixture:
     """The network's mixture of one tone: ``biophysical`` (5,) (docs/contracts.md §1) through ``skin_decoder.onnx``.
 
-    Returns the Mixture on the 376-sample grid (float64).  ValueError for a bad vector or model output.
+    Returns the MitsubaMixture on the 376-sample grid (float64).  ValueError for a bad vector or model output.
     """
     p = np.asarray(biophysical, dtype=np.float64).reshape(-1)
     if p.shape != (5,) or not np.all(np.isfinite(p)):
@@ -213,7 +214,7 @@ def decode(biophysical, model_path: str | os.PathLike = DEFAULT_DECODER) -> Mixt
     for name, arr in fields.items():
         if not np.all(np.isfinite(arr)):
             raise ValueError(f"the decoder returned NaN/Inf in {name!r} for {p.tolist()}.")
-    return Mixture(WAVELENGTHS_NM.astype(np.float64), **fields)
+    return MitsubaMixture(WAVELENGTHS_NM.astype(np.float64), **fields)
 
 
 # ----------------------------------------------------------------------------------------------------
@@ -407,7 +408,7 @@ class MixtureEstimate:
     seconds: float
 
 
-def mixture_reflectance(mixture: Mixture, *, spp: int, variant: str = "scalar_rgb", batches: int = 8,
+def mixture_reflectance(mixture: MitsubaMixture, *, spp: int, variant: str = "scalar_rgb", batches: int = 8,
                         seed: int = 0, specular: str = "auto", progress=None) -> MixtureEstimate:
     """R_d of the mixture at each of its wavelengths: sum_k w_k R_k, one slab render per (k, lambda).
 
@@ -436,7 +437,7 @@ def mixture_reflectance(mixture: Mixture, *, spp: int, variant: str = "scalar_rg
     return MixtureEstimate(mixture.wavelength_nm, total, total_se, r, se, int(spp), variant, time.perf_counter() - t0)
 
 
-def decode_grid_alpha(mixture: Mixture) -> np.ndarray:
+def decode_grid_alpha(mixture: MitsubaMixture) -> np.ndarray:
     """alpha (K, 376) on the full grid for spectral variants' ``regular`` spectra (interpolated if the
     mixture is held at other wavelengths; exact when it was decoded on the grid)."""
     return np.stack([np.interp(WAVELENGTHS_NM, mixture.wavelength_nm, row) for row in mixture.alpha])
@@ -576,7 +577,7 @@ class ObjectRenderer:
             self.nonfinite_pixels += int(bad.sum())
         return out
 
-    def render_mixture(self, mixture: Mixture, j: int, spp: int, seed: int = 0) -> np.ndarray:
+    def render_mixture(self, mixture: MitsubaMixture, j: int, spp: int, seed: int = 0) -> np.ndarray:
         """Image of the mixture at its wavelength index ``j``: sum_k w_k I_k with spp_k ~ w_k spp rounded to
         a power of two (at least 1 per component of non-zero weight; any spp_k keeps the sum unbiased, and
         few distinct values keep the LLVM kernels cached)."""

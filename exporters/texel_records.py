@@ -88,7 +88,7 @@ def exact_records(model, rgb: np.ndarray, targets: tuple[str, ...], options: Col
                   with_luminance: bool = False) -> dict[str, np.ndarray]:
     """Records (module docstring) of albedo rows ``rgb`` (N, 3), linear sRGB, by the model and the collapse.
 
-    ``model``: an exporters.inference.SkinModel; ``targets``: which fields to fill (spectral alone skips the
+    ``model``: an exporters.inference.InversionSession; ``targets``: which fields to fill (spectral alone skips the
     collapse); ``with_luminance`` adds ``y_model`` (N,), the luminance of the model's reflectance.
     """
     out = model.run(rgb)

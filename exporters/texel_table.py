@@ -240,7 +240,7 @@ def _dequantise(q: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
     return values
 
 
-def build(model: inference.SkinModel, options: CollapseOptions | None = None, step: float = DEFAULT_STEP,
+def build(model: inference.InversionSession, options: CollapseOptions | None = None, step: float = DEFAULT_STEP,
           box: tuple[tuple[float, float], ...] = DEFAULT_BOX, chunk: int = 2048) -> TexelTable:
     """Evaluate ``model`` (and the collapse with ``options``) at every grid node inside the RGB cube.
 
@@ -255,7 +255,7 @@ def build(model: inference.SkinModel, options: CollapseOptions | None = None, st
             return done.value
 
 
-def build_steps(model: inference.SkinModel, options: CollapseOptions | None = None, step: float = DEFAULT_STEP,
+def build_steps(model: inference.InversionSession, options: CollapseOptions | None = None, step: float = DEFAULT_STEP,
                 box: tuple[tuple[float, float], ...] = DEFAULT_BOX, chunk: int = 2048):
     """:func:`build` as a generator yielding the fraction of nodes done; its return value is the table."""
     options = options or CollapseOptions()
@@ -291,7 +291,7 @@ def build_steps(model: inference.SkinModel, options: CollapseOptions | None = No
                       model_sha256=model.sha256, options=options, meta=meta)
 
 
-def _command_args(model: inference.SkinModel, options: CollapseOptions, step: float) -> list[str]:
+def _command_args(model: inference.InversionSession, options: CollapseOptions, step: float) -> list[str]:
     root = Path(__file__).resolve().parents[1]
     path = model.path.resolve()
     shown = path.relative_to(root) if path.is_relative_to(root) else path

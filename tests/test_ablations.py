@@ -22,7 +22,7 @@ from training.fit.optimize import ISOTROPIC_G, fit_schedule
 from training.model import ModelConfig
 from training.model.config import SLAB_DEPTH_INIT
 from training.sim.lut_interp import LookupTables, bin_centres
-from training.train import losses as L
+from training.train import losses as train_losses
 from training.train.cli import SIZES
 from training.train.data import load_split
 from training.train.loop import checkpoint_path, load_checkpoint
@@ -69,10 +69,10 @@ def test_trainer_ablation_options(toy, tmp_path):
 
 def test_reflectance_without_slab_factor_and_lambda_r(toy):
     data, fits, lut_path = toy
-    from training.model.chain import SkinModel
+    from training.model.chain import SkinChain
 
     torch.manual_seed(0)
-    model = SkinModel(ModelConfig(**SIZES["tiny"]))
+    model = SkinChain(ModelConfig(**SIZES["tiny"]))
     lut = LookupTables.load(lut_path, dtype=torch.float32)
     split = load_split(data, "train", fits, k=3)
     p = split.tone[split.fitted]
@@ -81,12 +81,13 @@ def test_reflectance_without_slab_factor_and_lambda_r(toy):
         # sum_k w_k R(alpha_k, g_k), computed here from the LUT row by row
         want = torch.stack([sum(out["weight"][i, k] * lut.reflectance(out["alpha"][i, k], out["g"][i, k])
                                 for k in range(3)) for i in range(len(p))])
-        torch.testing.assert_close(L.lut_reflectance(model, lut, out, slab=False), want)
+        torch.testing.assert_close(train_losses.lut_reflectance(model, lut, out, slab=False), want)
         thin = dict(out, sigma_t=torch.full_like(out["sigma_t"], 0.5))  # 0.5 / cm: a thin slab at c = 0.3 cm
-        torch.testing.assert_close(L.lut_reflectance(model, lut, thin), want * (1 - math.exp(-3.0 * 0.5 * 0.3)))
+        torch.testing.assert_close(train_losses.lut_reflectance(model, lut, thin),
+                                   want * (1 - math.exp(-3.0 * 0.5 * 0.3)))
         args = (model, lut, p, split.R_d[split.fitted], split.targets, split.target_index)
-        a, b = L.stage3_losses(*args, lambda_r=0.0), L.stage3_losses(*args, lambda_r=40.0)
-    torch.testing.assert_close(a["loss"], a["param"] + L.LAMBDA_SMOOTH * a["smooth"])
+        a, b = train_losses.stage3_losses(*args, lambda_r=0.0), train_losses.stage3_losses(*args, lambda_r=40.0)
+    torch.testing.assert_close(a["loss"], a["param"] + train_losses.LAMBDA_SMOOTH * a["smooth"])
     torch.testing.assert_close(b["loss"] - a["loss"], 40.0 * a["refl"])
 
 

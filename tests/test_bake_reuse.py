@@ -1,5 +1,5 @@
 """An up-to-date bake (same image content, model, options) is reused, not recomputed: real bakes with the real
-model, and onnxruntime session runs counted by exporters.inference (the counter every SkinModel.run
+model, and onnxruntime session runs counted by exporters.inference (the counter every InversionSession.run
 increments), in-process, through bake.py and through the Blender operator."""
 
 from __future__ import annotations

@@ -13,7 +13,7 @@ import pytest
 import torch
 
 from exporters.constants import R_EDGES_CM
-from training.fit import loss as L
+from training.fit import loss as fit_loss
 from training.fit.dipole import dipole_lut, dipole_mixture_profile
 from training.fit.mixture import Mixture, n_params, pack, unpack
 from training.fit.optimize import fit_schedule
@@ -146,21 +146,23 @@ def test_loss_definitions_against_hand_computation():
     area = torch.tensor(AREA_CM)
     p = torch.exp(-torch.tensor(CENTRES_CM) / 0.05)[None, :].double()
     p = p / (p * area).sum() * 0.4  # R_MC = 0.4
-    t = L.make_target(p, torch.tensor([0.4]), edges, photons=1e12)
+    t = fit_loss.make_target(p, torch.tensor([0.4]), edges, photons=1e12)
     used = t.mask[0] > 0
     assert used.sum() >= 300  # tail beyond ~1.5 cm underflows to 0 in float64 and is masked
     p_hat = (p / 0.4) * np.exp(0.3)  # a constant factor: log residual 0.3 in every used bin
-    np.testing.assert_allclose(L.shape_loss(p_hat, t).numpy(), [0.3], rtol=1e-4)  # floor: < 1e-3 in log
+    np.testing.assert_allclose(fit_loss.shape_loss(p_hat, t).numpy(), [0.3], rtol=1e-4)  # floor: < 1e-3 in log
     # relative reflectance term (default): 5 ((0.5 - 0.4) / 0.4)^2; the paper's absolute one: 5 (0.1)^2
-    np.testing.assert_allclose(L.joint_loss(p_hat, torch.tensor([0.5]), t).numpy(), [0.3 + 5 * 0.0625], rtol=1e-4)
-    t_abs = L.make_target(p, torch.tensor([0.4]), edges, photons=1e12, relative_refl=False)
-    np.testing.assert_allclose(L.joint_loss(p_hat, torch.tensor([0.5]), t_abs).numpy(), [0.3 + 5 * 0.01], rtol=1e-4)
+    np.testing.assert_allclose(fit_loss.joint_loss(p_hat, torch.tensor([0.5]), t).numpy(), [0.3 + 5 * 0.0625],
+                               rtol=1e-4)
+    t_abs = fit_loss.make_target(p, torch.tensor([0.4]), edges, photons=1e12, relative_refl=False)
+    np.testing.assert_allclose(fit_loss.joint_loss(p_hat, torch.tensor([0.5]), t_abs).numpy(), [0.3 + 5 * 0.01],
+                               rtol=1e-4)
     # noise floor: with few photons, bins holding < 10 photon equivalents are not used
-    t_few = L.make_target(p, torch.tensor([0.4]), edges, photons=1e4)
+    t_few = fit_loss.make_target(p, torch.tensor([0.4]), edges, photons=1e4)
     counts = (p * area * 1e4)[0]
-    assert torch.equal(t_few.mask[0] > 0, counts >= L.MIN_COUNT)
+    assert torch.equal(t_few.mask[0] > 0, counts >= fit_loss.MIN_COUNT)
     with pytest.raises(ValueError):
-        L.make_target(p * float("nan"), torch.tensor([0.4]), edges, photons=1e4)
+        fit_loss.make_target(p * float("nan"), torch.tensor([0.4]), edges, photons=1e4)
 
 
 def test_bins_chosen_by_standard_error_and_the_papers_radial_range():
@@ -173,19 +175,19 @@ def test_bins_chosen_by_standard_error_and_the_papers_radial_range():
     energy = (p * area)[0]
     se = 0.01 * p.clone()  # 1 % everywhere: a reweighted-style estimate that resolves the far tail too
     se[0, 100:110] = 0.5 * p[0, 100:110]  # ten noisy bins
-    t = L.make_target(p, torch.tensor([0.4]), edges, photons=1e5, stderr=se)
+    t = fit_loss.make_target(p, torch.tensor([0.4]), edges, photons=1e5, stderr=se)
     used = t.mask[0] > 0
     expect = (energy >= 1e-5) & (p[0] > 0)
     expect[100:110] = False
     assert torch.equal(used, expect) and 100 < int(used.sum()) < 500
     # a dark target: nothing reaches the energy threshold -> the 8 most energetic usable bins
-    t_dark = L.make_target(p * 1e-4, torch.tensor([4e-5]), edges, photons=1e5, stderr=se * 1e-4)
+    t_dark = fit_loss.make_target(p * 1e-4, torch.tensor([4e-5]), edges, photons=1e5, stderr=se * 1e-4)
     used_dark = t_dark.mask[0] > 0
-    assert int(used_dark.sum()) == L.MIN_BINS
+    assert int(used_dark.sum()) == fit_loss.MIN_BINS
     usable = se[0] <= 0.3 * p[0]
     assert float(energy[used_dark].min()) >= float(energy[~used_dark & usable].max())
     with pytest.raises(ValueError, match="stderr"):
-        L.make_target(p, torch.tensor([0.4]), edges, photons=1e5, stderr=se[:, :10])
+        fit_loss.make_target(p, torch.tensor([0.4]), edges, photons=1e5, stderr=se[:, :10])
 
 
 def test_warm_starts_from_anchor_wavelengths_match_the_full_schedule(lut):
@@ -231,7 +233,7 @@ def test_mixture_profile_is_the_rendered_one_and_the_lm_jacobian_is_its_derivati
     from training.fit.optimize import Problem
 
     profile, R = _dipole_mixture_target(**TWO_SCALE)
-    t = L.make_target(profile, R, torch.tensor(R_EDGES_CM), photons=1e9)
+    t = fit_loss.make_target(profile, R, torch.tensor(R_EDGES_CM), photons=1e9)
     prob = Problem(lut, t)
     gen = torch.Generator().manual_seed(3)
     for k in (1, 2, 3):

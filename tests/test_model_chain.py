@@ -10,10 +10,10 @@ import torch
 from exporters.colorimetry import SRGB_LUMINANCE, spectrum_to_linear_srgb
 from exporters.constants import PARAM_RANGES, WAVELENGTHS_NM
 from training.fit.dipole import dipole_lut
-from training.model import ModelConfig, SkinModel
+from training.model import ModelConfig, SkinChain
 from training.model.config import FALLBACK_ALBEDO_RGB, SLAB_C
 from training.sim.lut_interp import LookupTables
-from training.train import losses as L
+from training.train import losses as train_losses
 
 TINY = {"enc_hidden": 16, "decr_hidden": 32, "dect_hidden": 32, "dect_layers": 3}
 
@@ -21,7 +21,7 @@ TINY = {"enc_hidden": 16, "decr_hidden": 32, "dect_hidden": 32, "dect_layers": 3
 @pytest.fixture(scope="module")
 def model():
     torch.manual_seed(0)
-    return SkinModel(ModelConfig(k=3, g_range=(-0.9, 0.95), **TINY)).eval()
+    return SkinChain(ModelConfig(k=3, g_range=(-0.9, 0.95), **TINY)).eval()
 
 
 def rgb_cube(n: int = 33) -> torch.Tensor:
@@ -109,7 +109,7 @@ def test_lut_reflectance_with_slab_factor_matches_a_hand_computation(model):
     g = torch.tensor(tab["g"][ig], dtype=torch.float32)[..., None].expand(1, 3, 376)
     sigma = torch.tensor([[0.5, 2.0, 300.0]])[..., None].expand(1, 3, 376)
     w = torch.tensor([[0.2, 0.3, 0.5]])[..., None].expand(1, 3, 376)
-    got = L.lut_reflectance(model, lut, {"alpha": alpha, "g": g, "sigma_t": sigma, "weight": w})
+    got = train_losses.lut_reflectance(model, lut, {"alpha": alpha, "g": g, "sigma_t": sigma, "weight": w})
     c = 0.30  # the initial slab depth
     expect = sum(wk * tab["R"][a, b] * (1 - np.exp(-SLAB_C * s * c))
                  for wk, a, b, s in zip([0.2, 0.3, 0.5], ia[0], ig[0], [0.5, 2.0, 300.0], strict=True))
@@ -120,10 +120,10 @@ def test_param_loss_weights_alpha_twice_and_is_huber():
     u = torch.zeros(2, 4, 3, 5)
     t = torch.zeros_like(u)
     t[:, 0] = 1.0  # alpha off by 1: Huber = delta * (1 - delta / 2)
-    d = L.HUBER_DELTA
-    np.testing.assert_allclose(float(L.param_loss(u, t)), 2.0 * d * (1 - d / 2) / 4, rtol=1e-6)
+    d = train_losses.HUBER_DELTA
+    np.testing.assert_allclose(float(train_losses.param_loss(u, t)), 2.0 * d * (1 - d / 2) / 4, rtol=1e-6)
     t = torch.zeros_like(u)
     t[:, 2] = 0.01  # sigma_t off by 0.01 < delta: quadratic 0.5 * 0.01^2
-    np.testing.assert_allclose(float(L.param_loss(u, t)), 0.5 * 1e-4 / 4, rtol=1e-5)
+    np.testing.assert_allclose(float(train_losses.param_loss(u, t)), 0.5 * 1e-4 / 4, rtol=1e-5)
     lam = torch.arange(5.0).expand(2, 4, 3, 5)
-    np.testing.assert_allclose(float(L.smooth_loss(lam)), 1.0, rtol=1e-6)
+    np.testing.assert_allclose(float(train_losses.smooth_loss(lam)), 1.0, rtol=1e-6)

@@ -9,7 +9,7 @@ import pytest
 import torch
 
 from training.model import ModelConfig
-from training.model.chain import SkinModel
+from training.model.chain import SkinChain
 from training.train.cli import SIZES
 from training.train.cli import main as train_main
 from training.train.data import load_split
@@ -191,7 +191,7 @@ def test_exposure_prior_adds_the_mean_log_exposure():
     from training.train import losses as TL
 
     torch.manual_seed(0)
-    model = SkinModel(ModelConfig(**SIZES["tiny"]))
+    model = SkinChain(ModelConfig(**SIZES["tiny"]))
     albedo = torch.tensor([[0.6, 0.4, 0.3], [0.05, 0.03, 0.02], [0.2, 0.2, 0.25]])
     with torch.no_grad():
         rgb = model.colour.rgb(model.dec_r(model.enc(albedo)))

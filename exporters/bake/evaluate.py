@@ -37,7 +37,7 @@ class Evaluator:
         self.counted = {"texels_from_table": 0, "texels_evaluated_exactly": 0}
         self.max_share = np.zeros(self.model_k)
 
-    def load_model(self) -> inference.SkinModel:
+    def load_model(self) -> inference.InversionSession:
         if not self.model.loaded:
             t0 = time.perf_counter()
             self.model.load()

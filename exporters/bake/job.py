@@ -34,13 +34,13 @@ class BakeJob:
     every temporary file.
 
     ``albedo``: a dense :class:`exporters.maps.AlbedoImage` or an :class:`exporters.maps.IndexedAlbedo`;
-    ``model``: a loaded :class:`exporters.inference.SkinModel` or an :class:`exporters.inference.ModelFile`
+    ``model``: a loaded :class:`exporters.inference.InversionSession` or an :class:`exporters.inference.ModelFile`
     (loaded only if some colour must be evaluated exactly); ``image_id``: what identifies the image content
     in the bake key (default: a hash of its decoded colours).
     """
 
     def __init__(self, albedo: maps.AlbedoImage | maps.IndexedAlbedo, out_dir: str | os.PathLike, stem: str,
-                 model: inference.SkinModel | inference.ModelFile, options: BakeOptions | None = None,
+                 model: inference.InversionSession | inference.ModelFile, options: BakeOptions | None = None,
                  input_image: str = "", image_id: str | None = None) -> None:
         self.options = opts = options or BakeOptions()
         self.targets = opts.check()

@@ -30,7 +30,7 @@ import torch.nn.functional as F
 from torch import nn
 
 from exporters.constants import WAVELENGTHS_NM
-from training.model.chain import DECODER_OUTPUTS, INVERSION_OUTPUTS, DecoderGraph, InversionGraph, SkinModel
+from training.model.chain import DECODER_OUTPUTS, INVERSION_OUTPUTS, DecoderGraph, InversionGraph, SkinChain
 
 OPSET: int = 17
 #: Parity tolerance between torch and onnxruntime: absolute, except relative for sigma_t (contract-sized
@@ -51,7 +51,7 @@ class HalfLinear(nn.Module):
         return F.linear(x, self.weight.to(torch.float32), self.bias.to(torch.float32))
 
 
-def half_rounded(model: SkinModel) -> SkinModel:
+def half_rounded(model: SkinChain) -> SkinChain:
     """A copy of ``model`` with every Linear layer stored in float16 (``HalfLinear``)."""
     m = copy.deepcopy(model).cpu().eval()
     for parent in list(m.modules()):
@@ -95,7 +95,7 @@ def _declare_output_shapes(proto: onnx.ModelProto, k: int) -> None:
                 d.dim_value = v
 
 
-def _with_metadata(data: bytes, model: SkinModel, doc: str, weights: str) -> bytes:
+def _with_metadata(data: bytes, model: SkinChain, doc: str, weights: str) -> bytes:
     proto = onnx.load_from_string(data)
     _declare_output_shapes(proto, model.cfg.k)
     proto.doc_string = doc
@@ -114,7 +114,7 @@ def _with_metadata(data: bytes, model: SkinModel, doc: str, weights: str) -> byt
     return proto.SerializeToString()
 
 
-def export_graphs(model: SkinModel, weights: str = "float32") -> dict[str, bytes]:
+def export_graphs(model: SkinChain, weights: str = "float32") -> dict[str, bytes]:
     """Serialised ``skin_inversion.onnx`` and ``skin_decoder.onnx`` of ``model`` (weights float32|float16)."""
     if weights not in ("float32", "float16"):
         raise ValueError(f"weights must be float32 or float16, got {weights!r}")
@@ -139,7 +139,7 @@ def session(data: bytes, threads: int = 1) -> ort.InferenceSession:
     return ort.InferenceSession(data, sess_options=opts, providers=["CPUExecutionProvider"])
 
 
-def parity_inputs(model: SkinModel, n: int, seed: int) -> dict[str, np.ndarray]:
+def parity_inputs(model: SkinChain, n: int, seed: int) -> dict[str, np.ndarray]:
     """n random linear-sRGB colours in [0, 1]^3 and n random tones within PARAM_RANGES (float32)."""
     rng = np.random.default_rng(seed)
     lo, span = model.enc.p_lo.cpu().numpy(), model.enc.p_span.cpu().numpy()
@@ -155,7 +155,7 @@ def _max_err(ref: np.ndarray, got: np.ndarray, relative: bool) -> float:
 
 
 @torch.no_grad()
-def parity(model: SkinModel, graphs: dict[str, bytes], weights: str, n: int = 10_000, seed: int = 0,
+def parity(model: SkinChain, graphs: dict[str, bytes], weights: str, n: int = 10_000, seed: int = 0,
            batch: int = 2_500) -> dict[str, dict[str, float]]:
     """Max |torch - onnxruntime| per output of each graph over ``n`` random inputs (relative for sigma_t
     and exposure).  The torch side is the exported model itself (float16-rounded if so stored)."""
@@ -185,7 +185,7 @@ def parity_failures(errors: dict[str, dict[str, float]], tol: float | None = Non
 
 
 @torch.no_grad()
-def rounding_cost(model: SkinModel, n: int = 10_000, seed: int = 0) -> dict[str, float]:
+def rounding_cost(model: SkinChain, n: int = 10_000, seed: int = 0) -> dict[str, float]:
     """What float16 weight storage costs: max |fp32 - fp16-rounded| per inversion output (relative for
     sigma_t and exposure) and the colour difference (mean / max ΔE76) of exposure * rgb(reflectance)."""
     from exporters.colorimetry import delta_e76, linear_srgb_to_lab

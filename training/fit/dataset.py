@@ -378,7 +378,7 @@ def summarise(dataset: Path, fits: list[Path], chunk_tones: int = 64) -> dict:
     floor of L_shape (``loss.Target.noise``, recomputed from the dataset's standard errors) with
     ``shape_excess`` = sqrt(L_shape^2 - noise^2), the model error proper; the same per band.
     """
-    from training.fit import loss as L
+    from training.fit import loss as fit_loss
 
     rows, per_k = [], {}
     for path in fits:
@@ -405,13 +405,13 @@ def summarise(dataset: Path, fits: list[Path], chunk_tones: int = 64) -> dict:
             prof = torch.tensor(f["profile"][idx][:, widx], dtype=torch.float64)
             se = torch.tensor(f["profile_stderr"][idx][:, widx], dtype=torch.float64)
             R = torch.tensor(f["R_d"][idx][:, widx], dtype=torch.float64)
-            t = L.make_target(prof, R, edges, photons, stderr=se)
+            t = fit_loss.make_target(prof, R, edges, photons, stderr=se)
             noise.append(t.noise.numpy()[order])
     noise = np.concatenate(noise)
     out = {"tones": int(len(index)), "wavelengths": int(len(widx)), "noise": float(noise.mean()), "K": {}}
     for k, d in per_k.items():
         shape, refl = np.concatenate(d["shape_rmse"]), np.concatenate(d["refl_rel_err"])
-        excess = L.shape_excess(torch.tensor(shape, dtype=torch.float64), torch.tensor(noise)).numpy()
+        excess = fit_loss.shape_excess(torch.tensor(shape, dtype=torch.float64), torch.tensor(noise)).numpy()
         res = {"shape_rmse": float(shape.mean()), "refl_rel_err": float(refl.mean()),
                "shape_excess": float(excess.mean()), "bands": {}}
         for band, (lo, hi) in BANDS.items():

@@ -43,7 +43,7 @@ from dataclasses import dataclass, field
 
 import torch
 
-from training.fit import loss as L
+from training.fit import loss as fit_loss
 from training.fit.mixture import MIX_R_EPS, Mixture, g_bounds, mix, pack, profile_weights, unpack
 from training.sim.lut_interp import LookupTables
 
@@ -104,7 +104,7 @@ class FitResult:
 class Problem:
     """A batch of B fitting problems against one LUT: evaluation, metrics and the LM Jacobian."""
 
-    def __init__(self, lut: LookupTables, target: L.Target, weighting: str = "rendered",
+    def __init__(self, lut: LookupTables, target: fit_loss.Target, weighting: str = "rendered",
                  g_range: tuple[float, float] | None = None):
         self.lut = lut
         self.target = target
@@ -115,7 +115,7 @@ class Problem:
     def mixture(self, theta: torch.Tensor, k: int) -> Mixture:
         return unpack(theta, k, self.g_lo, self.g_hi)
 
-    def predict(self, theta: torch.Tensor, k: int, t: L.Target | None = None):
+    def predict(self, theta: torch.Tensor, k: int, t: fit_loss.Target | None = None):
         """(P_hat (B, M), R_hat (B,)) at the target's bin centres."""
         t = self.target if t is None else t
         m = self.mixture(theta, k)
@@ -123,21 +123,21 @@ class Problem:
         p_k = self.lut.profile(t.r_cm, m.alpha, m.g, m.sigma_t)
         return mix(p_k, self.lut.reflectance(m.alpha, m.g), m.w, self.weighting)
 
-    def merit(self, theta: torch.Tensor, k: int, shape_only: bool, t: L.Target | None = None) -> torch.Tensor:
+    def merit(self, theta: torch.Tensor, k: int, shape_only: bool, t: fit_loss.Target | None = None) -> torch.Tensor:
         t = self.target if t is None else t
         p, r = self.predict(theta, k, t)
-        s = L.shape_loss(p, t)
-        return s if shape_only else s + L.LAMBDA_R * L.refl_loss(r, t)
+        s = fit_loss.shape_loss(p, t)
+        return s if shape_only else s + fit_loss.LAMBDA_R * fit_loss.refl_loss(r, t)
 
     def metrics(self, theta: torch.Tensor, k: int) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
         """(L_shape, |dR|/R, L_joint) on all bins."""
         with torch.no_grad():
             p, r = self.predict(theta, k)
-            s = L.shape_loss(p, self.target)
-            return s, L.refl_rel_err(r, self.target), s + L.LAMBDA_R * L.refl_loss(r, self.target)
+            s = fit_loss.shape_loss(p, self.target)
+            return s, fit_loss.refl_rel_err(r, self.target), s + fit_loss.LAMBDA_R * fit_loss.refl_loss(r, self.target)
 
     # -------------------------------------------------------------- Jacobian for LM
-    def residuals_jacobian(self, theta: torch.Tensor, k: int, shape_only: bool, t: L.Target):
+    def residuals_jacobian(self, theta: torch.Tensor, k: int, shape_only: bool, t: fit_loss.Target):
         """Residual vector (B, M + 1) and its Jacobian (B, M + 1, 4K - 1) w.r.t. theta."""
         m = self.mixture(theta, k)
         p_k, pa, pg, ps = self.lut.profile_grad(t.r_cm, m.alpha, m.g, m.sigma_t)
@@ -172,7 +172,7 @@ class Problem:
             c = torch.zeros_like(r_hat)
         else:  # IRLS weight: grad of S/n + c dR^2 parallel to grad of L_joint (module docstring)
             l_s = torch.sqrt((res_s**2).sum(-1))
-            c = 2.0 * L.LAMBDA_R * l_s.clamp_min(1e-3)
+            c = 2.0 * fit_loss.LAMBDA_R * l_s.clamp_min(1e-3)
         sc = torch.sqrt(c)
         sc = sc / t.r_scale
         res = torch.cat([res_s, (sc * (r_hat - t.R))[:, None]], dim=1)
@@ -263,7 +263,7 @@ def adam(
     steps: int,
     shape_only: bool,
     lr: float = PAPER_LR,
-    t: L.Target | None = None,
+    t: fit_loss.Target | None = None,
     trace_every: int = 0,
 ) -> tuple[torch.Tensor, list]:
     """Adam with a cosine schedule to 0 over ``steps`` on the summed per-problem losses (independent)."""
@@ -300,7 +300,7 @@ def levenberg_marquardt(
     k: int,
     iters: int,
     shape_only: bool,
-    t: L.Target | None = None,
+    t: fit_loss.Target | None = None,
     rtol: float = 1e-6,
     patience: int = 3,
 ) -> torch.Tensor:
@@ -391,7 +391,7 @@ def fit_schedule(
     r_edges_cm = r_edges_cm.to(dev, dt)
     if stderr is not None:
         stderr = stderr.to(dev, dt)
-    target = L.make_target(profile, R_mc, r_edges_cm, photons, stderr=stderr, relative_refl=relative_refl)
+    target = fit_loss.make_target(profile, R_mc, r_edges_cm, photons, stderr=stderr, relative_refl=relative_refl)
     prob = Problem(lut, target, weighting, g_range)
     # the loss only sees used bins: evaluate the model on the bins some problem of the batch uses
     used = torch.nonzero(target.mask.any(0)).squeeze(1)

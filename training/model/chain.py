@@ -1,7 +1,7 @@
 """The chained model Enc -> Dec_R -> Dec_T with the analytic exposure, and its defined input domain.
 
-``SkinModel.invert(albedo_rgb)`` runs the whole chain (what ``skin_inversion.onnx`` computes) and
-``SkinModel.decode(p)`` the spectral part (what ``skin_decoder.onnx`` computes).
+``SkinChain.invert(albedo_rgb)`` runs the whole chain (what ``skin_inversion.onnx`` computes) and
+``SkinChain.decode(p)`` the spectral part (what ``skin_decoder.onnx`` computes).
 
 Input domain (the behaviour the ONNX graphs carry, documented in the model card and the README):
 
@@ -38,7 +38,7 @@ def replace_nonfinite_rows(x: torch.Tensor, fallback: torch.Tensor) -> torch.Ten
     return torch.where(ok, x, fallback)
 
 
-class SkinModel(nn.Module):
+class SkinChain(nn.Module):
     """Enc, Dec_R, Dec_T, the slab depth c(lambda) and the colour head, for one ``ModelConfig``."""
 
     def __init__(self, cfg: ModelConfig) -> None:
@@ -89,7 +89,7 @@ class SkinModel(nn.Module):
 class InversionGraph(nn.Module):
     """What ``skin_inversion.onnx`` computes: albedo_rgb -> docs/contracts.md §3 outputs (INVERSION_OUTPUTS order)."""
 
-    def __init__(self, model: SkinModel) -> None:
+    def __init__(self, model: SkinChain) -> None:
         super().__init__()
         self.model = model
 
@@ -101,7 +101,7 @@ class InversionGraph(nn.Module):
 class DecoderGraph(nn.Module):
     """What ``skin_decoder.onnx`` computes: biophysical -> docs/contracts.md §3 outputs (DECODER_OUTPUTS order)."""
 
-    def __init__(self, model: SkinModel) -> None:
+    def __init__(self, model: SkinChain) -> None:
         super().__init__()
         self.model = model
 

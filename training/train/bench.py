@@ -67,11 +67,11 @@ def bench_inference(quick: bool) -> dict:
     row["ours"] = f"{BATCH / t_ort:,.0f} texels/s (onnxruntime)"
     import json
 
-    from training.model import ModelConfig, SkinModel
+    from training.model import ModelConfig, SkinChain
 
     arch = json.loads((MODEL_DIR / "skin_inversion.json").read_text())["architecture"]
     torch.manual_seed(0)
-    model = SkinModel(ModelConfig.from_dict(arch)).eval()  # same architecture; speed does not depend on weights
+    model = SkinChain(ModelConfig.from_dict(arch)).eval()  # same architecture; speed does not depend on weights
     threads = torch.get_num_threads()
     torch.set_num_threads(2)
     xt = torch.from_numpy(x)
@@ -89,13 +89,13 @@ def bench_training_step(quick: bool) -> dict:
     from training.fit.dipole import dipole_lut
     from training.fit.loss import make_target
     from training.fit.mixture import mix
-    from training.model import ModelConfig, SkinModel
+    from training.model import ModelConfig, SkinChain
     from training.sim.lut_interp import LookupTables, bin_centres
-    from training.train import losses as L
+    from training.train import losses as train_losses
     from training.train.spectral import interpolation_matrix
 
     torch.manual_seed(0)
-    model = SkinModel(ModelConfig())
+    model = SkinChain(ModelConfig())
     lut = LookupTables.from_arrays(**dipole_lut(), dtype=torch.float32)
     n = 64
     p = model.enc.from_unit(torch.rand(n, 5))
@@ -114,10 +114,11 @@ def bench_training_step(quick: bool) -> dict:
             a, g, st, w = (tgt[k][..., cols].transpose(1, 2).double() for k in ("alpha", "g", "sigma_t", "weight"))
             prof, refl = mix(lut64.profile(bin_centres(edges), a, g, st), lut64.reflectance(a, g), w)
         shape = make_target(prof * refl[..., None], refl, edges, 1e5, stderr=0.01 * prof * refl[..., None])
-        return shape.subset(torch.arange(0, shape.r_cm.numel(), L.SHAPE_BIN_STRIDE)).to(dtype=torch.float32)
+        return shape.subset(torch.arange(0, shape.r_cm.numel(), train_losses.SHAPE_BIN_STRIDE)).to(dtype=torch.float32)
 
-    dense_cols = torch.arange(0, 376, round(376 / L.SHAPE_WAVELENGTHS_PER_STEP))  # issue 23: all 376
-    fitted_cols = fitted[torch.arange(0, fitted.numel(), round(fitted.numel() / L.SHAPE_WAVELENGTHS_PER_STEP))]
+    dense_cols = torch.arange(0, 376, round(376 / train_losses.SHAPE_WAVELENGTHS_PER_STEP))  # issue 23: all 376
+    per_step = train_losses.SHAPE_WAVELENGTHS_PER_STEP
+    fitted_cols = fitted[torch.arange(0, fitted.numel(), round(fitted.numel() / per_step))]
     shapes = {True: shape_at(dense_cols), False: shape_at(fitted_cols)}
     params = list(model.dec_t.parameters()) + list(model.slab.parameters())
     opt = torch.optim.Adam(params, lr=1e-4)
@@ -125,8 +126,8 @@ def bench_training_step(quick: bool) -> dict:
     def full_step(shape_weight: float = 1.0, dense: bool = True):
         opt.zero_grad()
         cols = dense_cols if dense else fitted_cols
-        L.stage3_losses(model, lut, p, R, targets, fitted, shapes[dense] if shape_weight else None, shape_weight,
-                        cols, interp if dense else None, weighted=dense)["loss"].backward()
+        train_losses.stage3_losses(model, lut, p, R, targets, fitted, shapes[dense] if shape_weight else None,
+                                   shape_weight, cols, interp if dense else None, weighted=dense)["loss"].backward()
         opt.step()
 
     def mse_step():

@@ -20,7 +20,7 @@ import torch
 
 from exporters.colorimetry import delta_e76, linear_srgb_to_lab, spectrum_to_lab, spectrum_to_linear_srgb
 from exporters.constants import PARAM_NAMES
-from training.model.chain import SkinModel
+from training.model.chain import SkinChain
 from training.sim.lut_interp import LookupTables
 from training.train.data import SplitData
 
@@ -35,7 +35,7 @@ def mixture_reflectance(lut: LookupTables, out: dict[str, torch.Tensor]) -> torc
 
 
 @torch.no_grad()
-def evaluate_split(model: SkinModel, data: SplitData, lut: LookupTables | None) -> dict:
+def evaluate_split(model: SkinChain, data: SplitData, lut: LookupTables | None) -> dict:
     """Metrics of ``model`` on ``data`` (see module docstring); ``lut`` None skips the mixture rows."""
     model.eval()
     A = data.albedo_rgb.double().cpu().numpy()

@@ -37,7 +37,7 @@ import torch.nn.functional as F
 
 from training.fit import loss as fit_loss
 from training.fit.mixture import mix
-from training.model.chain import SkinModel
+from training.model.chain import SkinChain
 from training.sim.lut_interp import LookupTables
 from training.train.spectral import interpolate
 
@@ -61,7 +61,7 @@ def spectral_l1(pred: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
     return (pred - target).abs().mean()
 
 
-def colour_loss(model: SkinModel, albedo_rgb: torch.Tensor, exposure_prior: float = 0.0) -> torch.Tensor:
+def colour_loss(model: SkinChain, albedo_rgb: torch.Tensor, exposure_prior: float = 0.0) -> torch.Tensor:
     """|A - gamma * rgb(Dec_R(Enc(A)))|_1 (mean) + exposure_prior * mean |ln gamma|, for albedos already in
     the model's domain.  The prior (0 = the paper) prefers, among tones of the input's chromaticity, the
     one of its brightness: without it the encoder is free to answer a light colour with a dark tone at
@@ -87,7 +87,7 @@ def param_loss(u: torch.Tensor, u_target: torch.Tensor, weighted: bool = False) 
     return (phi * per).mean()
 
 
-def lut_reflectance(model: SkinModel, lut: LookupTables, out: dict[str, torch.Tensor], slab: bool = True
+def lut_reflectance(model: SkinChain, lut: LookupTables, out: dict[str, torch.Tensor], slab: bool = True
                     ) -> torch.Tensor:
     """R_hat_LUT (N, W) = sum_k w_k R(alpha_k, g_k) (1 - exp(-C sigma_t,k c(lambda))); without the slab-depth
     factor (``slab`` False, the paper's "without this correction" ablation) sum_k w_k R(alpha_k, g_k)."""
@@ -113,7 +113,7 @@ def smooth_loss(u: torch.Tensor) -> torch.Tensor:
     return (u[..., 1:] - u[..., :-1]).abs().mean()
 
 
-def stage3_losses(model: SkinModel, lut: LookupTables, p: torch.Tensor, R_mc: torch.Tensor,
+def stage3_losses(model: SkinChain, lut: LookupTables, p: torch.Tensor, R_mc: torch.Tensor,
                   targets: dict[str, torch.Tensor], target_index: torch.Tensor | None = None,
                   shape_target: fit_loss.Target | None = None, shape_weight: float = 0.0,
                   shape_index: torch.Tensor | None = None, interp: torch.Tensor | None = None,

@@ -23,7 +23,7 @@ from pathlib import Path
 import torch
 
 from exporters.maps import sha256_file
-from training.model.chain import SkinModel
+from training.model.chain import SkinChain
 from training.model.config import ModelConfig, g_range_for_lut
 from training.sim.lut_interp import LookupTables
 from training.train import stages
@@ -89,10 +89,10 @@ def _check_or_create_record(rundir: Path, record: dict) -> dict:
     return old
 
 
-def load_model(path: Path, device: str | torch.device = "cpu") -> SkinModel:
+def load_model(path: Path, device: str | torch.device = "cpu") -> SkinChain:
     """The final model of a run (``RUNDIR/model.pt``) in eval mode with frozen parameters."""
     state = torch.load(path, map_location="cpu", weights_only=False)
-    model = SkinModel(ModelConfig.from_dict(state["config"]))
+    model = SkinChain(ModelConfig.from_dict(state["config"]))
     model.load_state_dict(state["state_dict"])
     for p in model.parameters():
         p.requires_grad_(False)
@@ -138,7 +138,7 @@ def train(rundir: Path, dataset: Path, fits: Path | None, lut_path: Path, *, wan
     }
     record = _check_or_create_record(rundir, record)
     torch.manual_seed(tcfg.seed)
-    model = SkinModel(mcfg).to(dev)
+    model = SkinChain(mcfg).to(dev)
     common = {"seed": tcfg.seed, "device": dev, "progress": progress, "checkpoint_interval_s": checkpoint_interval_s,
               "stop_after_epochs": stop_after_epochs}
     finished = True
@@ -167,7 +167,7 @@ def train(rundir: Path, dataset: Path, fits: Path | None, lut_path: Path, *, wan
     return record
 
 
-def _spec(stage: int, model: SkinModel, lut: LookupTables, train_data: SplitData, val_data: SplitData,
+def _spec(stage: int, model: SkinChain, lut: LookupTables, train_data: SplitData, val_data: SplitData,
           t: TrainConfig):
     i = stage - 1
     if stage == 1:

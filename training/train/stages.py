@@ -16,26 +16,26 @@ from __future__ import annotations
 import torch
 
 from training.fit.loss import Target
-from training.model.chain import SkinModel
+from training.model.chain import SkinChain
 from training.sim.lut_interp import LookupTables
-from training.train import losses as L
+from training.train import losses as train_losses
 from training.train.data import SplitData
 from training.train.loop import StageSpec
 from training.train.spectral import interpolation_matrix
 
 
-def stage1(model: SkinModel, train: SplitData, val: SplitData, epochs: int, batch: int, lr: float) -> StageSpec:
+def stage1(model: SkinChain, train: SplitData, val: SplitData, epochs: int, batch: int, lr: float) -> StageSpec:
     def step(idx: torch.Tensor) -> dict[str, torch.Tensor]:
-        loss = L.spectral_l1(model.dec_r(train.tone[idx]), train.R_d[idx])
+        loss = train_losses.spectral_l1(model.dec_r(train.tone[idx]), train.R_d[idx])
         return {"loss": loss}
 
     def evaluate() -> dict[str, float]:
-        return {"spectral_l1": float(L.spectral_l1(model.dec_r(val.tone), val.R_d))}
+        return {"spectral_l1": float(train_losses.spectral_l1(model.dec_r(val.tone), val.R_d))}
 
     return StageSpec(1, "Dec_R", [model.dec_r], len(train), batch, epochs, lr, step, evaluate)
 
 
-def synthetic_albedos(model: SkinModel, n: int, exposure_jitter: float, seed: int) -> torch.Tensor:
+def synthetic_albedos(model: SkinChain, n: int, exposure_jitter: float, seed: int) -> torch.Tensor:
     """n albedos (n, 3): colours of the frozen Dec_R at uniform random tones, times exp(U(-j, j)), in [0, 1]."""
     dev = model.enc.p_lo.device
     gen = torch.Generator().manual_seed(int(seed) * 7_919 + 2)
@@ -46,7 +46,7 @@ def synthetic_albedos(model: SkinModel, n: int, exposure_jitter: float, seed: in
     return (rgb * scale.to(dev)).clamp(0.0, 1.0)
 
 
-def stage2(model: SkinModel, train: SplitData, val: SplitData, epochs: int, batch: int, lr: float,
+def stage2(model: SkinChain, train: SplitData, val: SplitData, epochs: int, batch: int, lr: float,
            synthetic: int, exposure_jitter: float, seed: int, exposure_prior: float = 0.0,
            unfreeze: bool = False) -> StageSpec:
     """Stage 2; ``unfreeze`` (an ablation, not the paper's method) trains Dec_R along with Enc."""
@@ -56,10 +56,10 @@ def stage2(model: SkinModel, train: SplitData, val: SplitData, epochs: int, batc
     val_albedo = val.albedo_rgb.clamp(0.0, 1.0)
 
     def step(idx: torch.Tensor) -> dict[str, torch.Tensor]:
-        return {"loss": L.colour_loss(model, albedo[idx], exposure_prior)}
+        return {"loss": train_losses.colour_loss(model, albedo[idx], exposure_prior)}
 
     def evaluate() -> dict[str, float]:
-        return {"colour_l1": float(L.colour_loss(model, val_albedo))}
+        return {"colour_l1": float(train_losses.colour_loss(model, val_albedo))}
 
     trainable = [model.enc, model.dec_r] if unfreeze else [model.enc]
     return StageSpec(2, "Enc", trainable, albedo.shape[0], batch, epochs, lr, step, evaluate)
@@ -71,7 +71,7 @@ def shape_batch(data: SplitData, idx: torch.Tensor) -> tuple[Target, torch.Tenso
     offset set by the batch (deterministic, so a resumed run replays the same steps); the radial bins as
     loaded (every ``SHAPE_BIN_STRIDE``-th)."""
     n_w = data.shape_index.numel()
-    every = max(1, round(n_w / L.SHAPE_WAVELENGTHS_PER_STEP))
+    every = max(1, round(n_w / train_losses.SHAPE_WAVELENGTHS_PER_STEP))
     cols = torch.arange(int(idx[0]) % every, n_w, every, device=idx.device)
     return data.shape_target.rows(idx).select(1, cols), data.shape_index[cols]
 
@@ -80,9 +80,9 @@ def shape_batch(data: SplitData, idx: torch.Tensor) -> tuple[Target, torch.Tenso
 EVAL_CHUNK: int = 64
 
 
-def stage3(model: SkinModel, lut: LookupTables, train: SplitData, val: SplitData, epochs: int, batch: int,
+def stage3(model: SkinChain, lut: LookupTables, train: SplitData, val: SplitData, epochs: int, batch: int,
            lr: float, shape_weight: float = 0.0, dense: bool = True, weighted: bool = True,
-           lambda_r: float = L.LAMBDA_R, slab: bool = True, unfreeze: bool = False) -> StageSpec:
+           lambda_r: float = train_losses.LAMBDA_R, slab: bool = True, unfreeze: bool = False) -> StageSpec:
     """Stage 3; ``shape_weight`` > 0 adds the profile-shape term (needs ``SplitData.shape_target``).
     ``dense``: L_param at every wavelength, targets interpolated (``training.train.spectral``); else at the
     fitted wavelengths only.  ``weighted``: L_param weighted by the target weights (``losses.param_loss``).
@@ -102,8 +102,8 @@ def stage3(model: SkinModel, lut: LookupTables, train: SplitData, val: SplitData
         rows = train.fitted[idx]
         targets = {k: v[idx] for k, v in train.targets.items()}
         shape, shape_index = shape_batch(train, idx) if shape_weight > 0 else (None, None)
-        return L.stage3_losses(model, lut, train.tone[rows], train.R_d[rows], targets, train.target_index,
-                               shape, shape_weight, shape_index, interp, weighted, **ablate)
+        return train_losses.stage3_losses(model, lut, train.tone[rows], train.R_d[rows], targets, train.target_index,
+                                          shape, shape_weight, shape_index, interp, weighted, **ablate)
 
     def evaluate() -> dict[str, float]:
         if val.targets is not None:
@@ -113,14 +113,15 @@ def stage3(model: SkinModel, lut: LookupTables, train: SplitData, val: SplitData
                 part = torch.arange(s, min(s + EVAL_CHUNK, n), device=val.fitted.device)
                 rows = val.fitted[part]
                 st = None if val.shape_target is None else val.shape_target.rows(part)
-                out = L.stage3_losses(model, lut, val.tone[rows], val.R_d[rows], {k: v[part] for k, v in
-                                      val.targets.items()}, val.target_index, st, shape_weight, val.shape_index,
-                                      v_interp, weighted, report=True, **ablate)
+                out = train_losses.stage3_losses(model, lut, val.tone[rows], val.R_d[rows],
+                                                 {k: v[part] for k, v in val.targets.items()}, val.target_index, st,
+                                                 shape_weight, val.shape_index, v_interp, weighted, report=True,
+                                                 **ablate)
                 for k, v in out.items():
                     sums[k] = sums.get(k, 0.0) + float(v) * len(part) / n
             return sums
         out = model.dec_t(val.tone, model.dec_r(val.tone))
-        return {"refl": float(L.spectral_l1(L.lut_reflectance(model, lut, out, slab), val.R_d))}
+        return {"refl": float(train_losses.spectral_l1(train_losses.lut_reflectance(model, lut, out, slab), val.R_d))}
 
     trainable = [model.dec_t] + ([model.slab] if slab else []) + ([model.dec_r] if unfreeze else [])
     return StageSpec(3, "Dec_T", trainable, len(train.fitted), batch, epochs, lr, step, evaluate)

@@ -141,13 +141,13 @@ def published_darkening(method: str, albedo_rgb, wavelength_nm) -> float:
 
 def lut_shape_error(lut, medium: BaselineMedium, target, rows: np.ndarray) -> float:
     """Mean L_shape (training.fit.loss) of one medium per wavelength against MC targets, over ``rows``."""
-    from training.fit import loss as L
+    from training.fit import loss as fit_loss
 
     dt = lut.P.dtype
     t = target.rows(torch.as_tensor(rows))
     p = lut.profile(t.r_cm, torch.as_tensor(medium.alpha[rows], dtype=dt), torch.as_tensor(medium.g[rows], dtype=dt),
                     torch.as_tensor(medium.sigma_t[rows], dtype=dt))
-    return float(L.shape_loss(p, t).mean())
+    return float(fit_loss.shape_loss(p, t).mean())
 
 
 def calibrate_scale(method: str, lut, albedo_rgb, wavelength_nm, target,

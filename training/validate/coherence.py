@@ -76,7 +76,7 @@ def random_tones(n: int, seed: int = 0) -> np.ndarray:
 
 def decoder(model) -> DecodeFn:
     """p (N, 5) -> {alpha, g, sigma_t, weight: (N, K, W) float64} of a ``skin_decoder.onnx`` (through
-    ``exporters.inference.run_decoder``), a run's ``model.pt``, or a ``SkinModel``."""
+    ``exporters.inference.run_decoder``), a run's ``model.pt``, or a ``SkinChain``."""
     if isinstance(model, str | Path):
         path = Path(model)
         if not path.is_file():

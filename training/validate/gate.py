@@ -441,12 +441,12 @@ def params_digest(rows: dict[str, Params]) -> str:
 def mc_target(lut, profile, R_d, stderr, photons: float):
     """The fitter's targets (``training.fit.loss.make_target``, bins chosen by standard error) of MC
     profiles (W, 512), R_d (W,) and the profiles' standard errors, in the LUT's dtype."""
-    from training.fit import loss as L
+    from training.fit import loss as fit_loss
 
     dt = lut.P.dtype
     as_t = lambda x: torch.as_tensor(np.array(x, dtype=np.float64), dtype=dt)  # noqa: E731
-    return L.make_target(as_t(profile), as_t(R_d), torch.tensor(R_EDGES_CM, dtype=dt), float(photons),
-                         stderr=as_t(stderr))
+    return fit_loss.make_target(as_t(profile), as_t(R_d), torch.tensor(R_EDGES_CM, dtype=dt), float(photons),
+                                stderr=as_t(stderr))
 
 
 def lut_mixture_shape_error(lut, params: Params, target, rows: np.ndarray, weighting: str = "rendered") -> np.ndarray:
@@ -456,7 +456,7 @@ def lut_mixture_shape_error(lut, params: Params, target, rows: np.ndarray, weigh
     ``weighting="rendered"``: sum_k w_k R_k P_k / sum_k w_k R_k, what a renderer that picks medium k with
     probability w_k produces; the fitter's loss (training.fit.mixture.mix); ``"fit"``: sum_k w_k P_k, as the paper's
     §4 text writes its loss (the fitter used it before 2026-11-22)."""
-    from training.fit import loss as L
+    from training.fit import loss as fit_loss
     from training.fit.mixture import mix
 
     if weighting not in ("rendered", "fit"):
@@ -467,7 +467,7 @@ def lut_mixture_shape_error(lut, params: Params, target, rows: np.ndarray, weigh
                                                                    params.weight))  # (B, K)
     p_k = lut.profile(t.r_cm, a, g, s)  # (B, K, M)
     p_hat = mix(p_k, lut.reflectance(a, g), w, "rendered" if weighting == "rendered" else "paper")[0]
-    return L.shape_loss(p_hat, t).detach().cpu().numpy()
+    return fit_loss.shape_loss(p_hat, t).detach().cpu().numpy()
 
 
 def config_record(config: GateConfig) -> dict:

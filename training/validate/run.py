@@ -402,7 +402,7 @@ def _banded(lut, tones, gt, fits, wl_val, record, photons) -> dict:
     """Table 2: per band the fits' mean L_shape (representative tones) for K = 1, 2, 3 and the reductions,
     also of the excess over the ground truth's Monte Carlo noise (``training.fit.loss``: Target.noise,
     shape_excess); the rendered visible SAM of every configuration (representative tones)."""
-    from training.fit import loss as L
+    from training.fit import loss as fit_loss
 
     rep = [n for n, k in zip(tones.names, tones.kinds, strict=True) if k == "representative"]
     out: dict = {"tones": rep, "shape": {}, "reduction": {}, "excess": {}, "excess_reduction": {}}
@@ -412,7 +412,7 @@ def _banded(lut, tones, gt, fits, wl_val, record, photons) -> dict:
     all_cols = np.arange(wl_val.size)
     noise = np.stack([_target(lut, gt, tones.names.index(n), all_cols, photons).noise.numpy() for n in rep])
     shape = {k: np.stack([fits[n][f"k{k}_shape_rmse"] for n in rep]) for k in (1, 2, 3)}  # (T, W) on wl_val
-    excess = {k: L.shape_excess(torch.as_tensor(v), torch.as_tensor(noise)).numpy() for k, v in shape.items()}
+    excess = {k: fit_loss.shape_excess(torch.as_tensor(v), torch.as_tensor(noise)).numpy() for k, v in shape.items()}
     out["noise"] = {}
     for band in (*M.BANDS, "all"):
         mask = M.band_mask(wl, band) if band != "all" else np.ones(wl.size, bool)
