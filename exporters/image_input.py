@@ -38,19 +38,21 @@ COLORSPACES: tuple[str, ...] = ("auto", "srgb", "linear")
 # lin_srgb, srgb_rec709_scene ...).  tests/test_image_input.py checks every name the installed Blender and
 # OpenImageIO list against a hand-made table.
 #: Linear (values used as they are): data, scene-linear and linear encodings of any primaries.  Any other name
-#: starting with "lin" (Linear Rec.709, lin_ap1, lin_rec2020 ...) is linear too.
+#: starting with one of ``LINEAR_PREFIXES`` (Linear Rec.709, lin_ap1, Utility - Linear - sRGB ...) is linear too.
 LINEAR_COLORSPACES = frozenset({
-    "non-color", "raw", "none", "data", "utility - raw", "scene_linear", "xyz",
+    "non-color", "raw", "none", "data", "utility - raw", "scene_linear", "xyz", "cie-xyz-d65",
     "acescg", "aces - acescg", "aces2065-1", "aces2065_1", "aces", "aces - aces2065-1",
-    "cie-xyz-d65", "utility - linear - srgb", "utility - linear - rec.709", "utility - linear - rec.2020",
-    "utility - linear - p3-d65", "utility - linear - adobe rgb",
     "srgb-linear", "srgb_linear", "rec709_linear",
 })
+LINEAR_PREFIXES = ("lin", "utility - linear")
 #: sRGB-encoded (the IEC 61966-2-1 curve, whatever the primaries): any name starting with "srgb" that is not
-#: linear (sRGB, sRGB - Texture, srgb_rec709_scene, sRGB Encoded P3-D65 ...), and these.
+#: linear (sRGB, sRGB - Texture, srgb_rec709_scene, sRGB Encoded P3-D65 ...), and these: OCIO's texture aliases,
+#: Display P3 (sRGB curve, P3 primaries) and the display-referred view transforms that end in the sRGB curve
+#: (Filmic / AgX Base / Khronos PBR Neutral / ACES sRGB: their tone curve is not inverted, the sRGB curve is).
 SRGB_COLORSPACES = frozenset({
     "utility - srgb - texture", "input - generic - srgb - texture", "display p3", "display p3 - display",
-    "displayp3_display",
+    "displayp3_display", "filmic srgb", "agx base srgb", "khronos pbr neutral srgb", "aces 1.3 srgb",
+    "aces 2.0 srgb",
 })
 #: Log encodings (Blender's Filmic Log and AgX Log, ACEScc/ACEScct): neither sRGB nor linear, and far from
 #: both; an albedo tagged with one is refused rather than misread.
@@ -128,11 +130,11 @@ class IndexedAlbedo:
 # -- colour space ---------------------------------------------------------------------------------------------
 def colorspace_of_name(name: str, where: str = "image") -> Literal["srgb", "linear"] | None:
     """How values tagged with the colour-space ``name`` (Blender's, OCIO's or OpenImageIO's) are encoded:
-    "linear", "srgb", or None when the name says neither (display transforms such as Filmic sRGB or AgX Base
-    sRGB, gamma 2.2/2.4 encodings, empty or unknown names: the caller falls back to its own rule).  A log
+    "linear", "srgb", or None when the name says neither (gamma 1.8/2.2/2.4 encodings, HDR displays, empty or
+    unknown names: the caller falls back to its own rule).  A log
     encoding raises :class:`ImageError` (``where`` names the image in the message)."""
     key = str(name or "").strip().lower()
-    if key in LINEAR_COLORSPACES or key.startswith("lin"):
+    if key in LINEAR_COLORSPACES or key.startswith(LINEAR_PREFIXES):
         return "linear"
     if key in SRGB_COLORSPACES or key.startswith("srgb"):
         return "srgb"

@@ -302,6 +302,8 @@ class MapStream:
         arr = np.asarray(data)
         if not finite and not np.all(np.isfinite(arr)):
             raise ValueError(f"map {self.path.name}: NaN/Inf values")
+        if not finite and arr.dtype.itemsize > 4 and arr.size and np.abs(arr).max() > np.finfo(np.float32).max:
+            raise ValueError(f"map {self.path.name}: values overflow float32")
         if not (self.pixel_type == "half" and arr.dtype == np.float16):
             arr = arr.astype(np.float32, copy=False)
         if arr.ndim == 2:
@@ -310,8 +312,6 @@ class MapStream:
         if arr.shape[1:] != (self.width, len(self.channels)) or self._rows + h > self.height:
             raise ValueError(f"{self.path.name}: rows of shape {arr.shape} do not fit a "
                              f"{self.width} x {self.height} x {len(self.channels)} map at row {self._rows}")
-        if not finite and not np.all(np.isfinite(arr)):
-            raise ValueError(f"map {self.path.name}: values overflow float32")
         if self.pixel_type == "half" and arr.dtype != np.float16 and np.any(np.abs(arr) > HALF_MAX):
             raise ValueError(f"map {self.path.name}: values beyond the half-float range (|v| > {HALF_MAX:g}): "
                              "write it as float")
