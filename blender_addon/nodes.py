@@ -295,7 +295,7 @@ def build_osl_group(k_count: int = 3, name: str = GROUP_NAME_OSL) -> bpy.types.N
     if not 1 <= k_count <= 16:
         raise ValueError("k_count must be in 1..16")
     group, gin, gout = _fresh_group(name, k_count, "OSL")
-    source = osl.mixture_source(k_count, SKIN_ROUGHNESS)
+    source = osl.mixture_source(k_count, SKIN_ROUGHNESS, ENTRY_ROUGHNESS)
     script = osl.script_node(group.nodes, source, f"spectral_skin_sss_k{k_count}.osl")
     for k in range(1, k_count + 1):
         for kind in KINDS:
