@@ -67,25 +67,32 @@ def _make_importable() -> None:
 
 
 def build_parser() -> argparse.ArgumentParser:
+    """The command line; its defaults are the library's (exporters.bake.BakeOptions)."""
+    _make_importable()
+    from exporters import bake, image_input
+
+    defaults = bake.BakeOptions()
     p = argparse.ArgumentParser(prog="bake.py", description=__doc__.splitlines()[0])
     p.add_argument("--albedo", required=True, help="albedo image (PNG/TIFF 8 or 16 bit, EXR, ...)")
     p.add_argument("--out", required=True, help="output folder (created if missing)")
     p.add_argument("--target", default="cycles", help="comma-separated subset of cycles,physical,spectral "
                                                       "(default cycles)")
-    p.add_argument("--colorspace", default="auto", choices=("auto", "srgb", "linear"),
+    p.add_argument("--colorspace", default="auto", choices=image_input.COLORSPACES,
                    help="how the image is encoded; auto: sRGB unless the file says linear or stores floats")
-    p.add_argument("--unit-scale", type=float, default=1.0, metavar="M_PER_UNIT",
-                   help="metres per Blender unit for the radius maps (the scene's Unit Scale; default 1)")
+    p.add_argument("--unit-scale", type=float, default=defaults.unit_scale_m, metavar="M_PER_UNIT",
+                   help="metres per Blender unit for the radius maps (the scene's Unit Scale; default "
+                        f"{defaults.unit_scale_m:g})")
     p.add_argument("--overwrite", action="store_true", help="replace existing maps in the output folder")
     p.add_argument("--model", default=str(DEFAULT_MODEL), help="skin_inversion.onnx (default: the bundled one)")
     p.add_argument("--threads", type=int, default=0, help="onnxruntime CPU threads (0 = all cores)")
-    p.add_argument("--memory-mb", type=float, default=512.0, help="memory budget of one inference chunk (MiB)")
+    p.add_argument("--memory-mb", type=float, default=float(defaults.memory_mb),
+                   help=f"memory budget of one inference chunk (MiB, default {defaults.memory_mb:g})")
     p.add_argument("--model-colour", action="store_true",
                    help="render the model's own reflectance (the colour of the skin the network found, physically "
                         "consistent, often darker than painted) instead of the painted albedo (the default)")
     p.add_argument("--match-exposure", action="store_true", help=argparse.SUPPRESS)
-    p.add_argument("--ior", type=float, default=1.4,
-                   help="IOR of the Cycles closures (the node group's IOR input; default 1.4, tissue)")
+    p.add_argument("--ior", type=float, default=defaults.ior,
+                   help=f"IOR of the Cycles closures (the node group's IOR input; default {defaults.ior:g}, tissue)")
     p.add_argument("--exact", action="store_true",
                    help="evaluate every distinct colour with the model instead of the fast-path table")
     p.add_argument("--table", default=None, metavar="PATH",
@@ -95,8 +102,10 @@ def build_parser() -> argparse.ArgumentParser:
                    help="image of the texels the mesh's UVs cover (non-zero = covered, same size as the albedo); "
                         "others get the maps of the most common covered colour")
     p.add_argument("--prune-share", type=float, default=None, metavar="S",
-                   help="drop components below this share of the colour at every texel (default 0.002; 0 keeps all)")
-    p.add_argument("--exr-compression", default=None, help="EXR compression of the maps (default piz)")
+                   help="drop components below this share of the colour at every texel (default "
+                        f"{bake.DEFAULT_PRUNE_SHARE:g}; 0 keeps all)")
+    p.add_argument("--exr-compression", default=None,
+                   help=f"EXR compression of the maps (default {defaults.compression})")
     p.add_argument("--float-maps", action="store_true",
                    help="store every map as 32-bit float (default on the fast path: colour, weight and anisotropy "
                         "maps as half floats, step <= 2.4e-4, which halves the write)")
@@ -121,10 +130,9 @@ def main(argv: list[str] | None = None) -> int:
     except _Usage as exc:
         print(f"bake.py: error: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
-    _make_importable()
-    from exporters import bake, inference, maps
+    from exporters import bake, image_input, inference, maps
 
-    bad_input = (FileNotFoundError, FileExistsError, PermissionError, NotADirectoryError, maps.ImageError,
+    bad_input = (FileNotFoundError, FileExistsError, PermissionError, NotADirectoryError, image_input.ImageError,
                  inference.ModelError, bake.BakeError, ValueError)
     if args.match_exposure:
         print("bake.py: error: --match-exposure is gone: the maps now render the painted albedo by default (its "
@@ -133,16 +141,12 @@ def main(argv: list[str] | None = None) -> int:
     out = Path(args.out)
     created = False
     try:
-        if not out.exists():
-            if not out.parent.is_dir():
-                raise bake.BakeError(f"output folder's parent does not exist: {out.parent}")
-            out.mkdir()
-            created = True
+        created = maps.make_output_folder(out)
         options = bake.BakeOptions(targets=bake.parse_targets(args.target), unit_scale_m=args.unit_scale,
                                    threads=args.threads, memory_mb=args.memory_mb,
                                    model_colour=args.model_colour, ior=args.ior,
                                    overwrite=args.overwrite, exact=args.exact, table_path=args.table,
-                                   force=args.force, texel_mask=_read_mask(args.uv_mask, maps),
+                                   force=args.force, texel_mask=_read_mask(args.uv_mask),
                                    prune_share=(bake.DEFAULT_PRUNE_SHARE if args.prune_share is None
                                                 else args.prune_share),
                                    compression=args.exr_compression or maps.DEFAULT_COMPRESSION,
@@ -159,7 +163,7 @@ def main(argv: list[str] | None = None) -> int:
     except bad_input as exc:
         if created:
             _remove_if_empty(out)
-        print(f"bake.py: error: {_one_line(exc)}", file=sys.stderr)
+        print(f"bake.py: error: {bake.one_line(exc)}", file=sys.stderr)
         return EXIT_BAD_INPUT
     except BaseException:
         if created:
@@ -177,19 +181,14 @@ def main(argv: list[str] | None = None) -> int:
     return 0
 
 
-def _read_mask(path: str | None, maps):
+def _read_mask(path: str | None):
     """The --uv-mask image as (H, W) bool (any non-zero colour channel = covered), or None."""
     if path is None:
         return None
-    image = maps.read_albedo(path, colorspace="linear")
+    from exporters import image_input
+
+    image = image_input.read_albedo(path, colorspace="linear")
     return (image.rgb > 0).any(axis=2)
-
-
-def _one_line(exc: BaseException) -> str:
-    text = str(exc) or type(exc).__name__
-    if isinstance(exc, OSError) and exc.filename and str(exc.filename) not in text:
-        text = f"{text}: {exc.filename}"
-    return " ".join(text.split())
 
 
 def _remove_if_empty(folder: Path) -> None:

@@ -20,15 +20,16 @@ from pathlib import Path
 import bpy
 import numpy as np
 
-from exporters import bake, inference, maps, uv_coverage
+from exporters import bake, image_input, inference, maps, uv_coverage
+from exporters.image_input import AlbedoImage, IndexedAlbedo
 
 from . import nodes
 
 #: Custom properties on baked images: the bake key (exporters.bake.bake_key), component, map kind, K of the bake.
 KEY_PROP, K_PROP = "spectral_skin_sss_bake_key", "spectral_skin_sss_k"
 KIND_PROP, KCOUNT_PROP = "spectral_skin_sss_kind", "spectral_skin_sss_k_count"
-#: Colour-space names of Blender's OCIO config that mean "not sRGB-encoded" (data or linear).
-_LINEAR_SPACES = ("non-color", "linear", "raw", "acescg", "aces2065", "filmic log", "agx log", "xyz")
+#: Channel names of Blender's pixel buffers by channel count (for exporters.image_input.channel_layout).
+_BUFFER_CHANNELS = {1: ("Y",), 2: ("Y", "A"), 3: ("R", "G", "B"), 4: ("R", "G", "B", "A")}
 
 
 class BakeInputError(ValueError):
@@ -102,43 +103,35 @@ def pick_backend(scene: bpy.types.Scene, requested: str) -> str:
 
 
 def _image_colorspace(image: bpy.types.Image, requested: str) -> str:
+    """The colour space to read ``image`` in: the operator's choice, or (FROM_IMAGE) what Blender's colour-space
+    setting says (exporters.image_input.colorspace_of_name; "auto" when it says neither sRGB nor linear)."""
     if requested != "FROM_IMAGE":
         return requested
-    name = image.colorspace_settings.name.lower()
-    if name.startswith("srgb") or name == "filmic srgb":
-        return "srgb"
-    if any(name.startswith(p) for p in _LINEAR_SPACES):
-        return "linear"
-    return "auto"
+    return image_input.colorspace_of_name(image.colorspace_settings.name, f"image '{image.name}'") or "auto"
 
 
-def _albedo_from_pixels(image: bpy.types.Image, colorspace: str) -> maps.AlbedoImage:
-    """An image that has no file on disk (generated or packed): read Blender's pixel buffer."""
+def _albedo_from_pixels(image: bpy.types.Image, colorspace: str) -> AlbedoImage:
+    """An image that has no file on disk (generated or packed): read Blender's pixel buffer, with the checks of
+    a file (exporters.image_input: channel layout, NaN/Inf and negative texels)."""
     w, h = image.size
     ch = image.channels
-    if w < 1 or h < 1 or ch < 1:
+    if w < 1 or h < 1 or ch not in _BUFFER_CHANNELS:
         raise BakeInputError(f"image '{image.name}' has no pixels (is its file missing?)")
+    where = f"image '{image.name}'"
     px = np.empty(w * h * ch, dtype=np.float32)
     image.pixels.foreach_get(px)
     px = px.reshape(h, w, ch)[::-1].astype(np.float64)  # Blender stores rows bottom-up
-    bad = ~np.isfinite(px)
-    if bad.any():
-        y, x, _ = np.argwhere(bad)[0]
-        raise BakeInputError(f"image '{image.name}': {int(bad.any(axis=2).sum())} texel(s) with NaN/Inf, first at "
-                             f"(x={x}, y={y})")
-    rgb = np.repeat(px[..., :1], 3, axis=2) if ch < 3 else px[..., :3]
-    alpha = px[..., 3] if ch == 4 else (px[..., 1] if ch == 2 else None)
-    if np.any(rgb < 0):
-        raise BakeInputError(f"image '{image.name}' has negative texels; an albedo cannot be negative")
+    colour, a = image_input.channel_layout(_BUFFER_CHANNELS[ch], where=where)
+    alpha = px[..., a] if a >= 0 else None
+    rgb, _ = image_input.check_texels(px[..., colour], where, alpha=alpha)
+    if rgb.shape[2] == 1:
+        rgb = np.repeat(rgb, 3, axis=2)
     used = colorspace if colorspace in ("srgb", "linear") else ("linear" if image.is_float else "srgb")
-    if used == "srgb":
-        from exporters.colorimetry import srgb_decode
-
-        rgb = np.asarray(srgb_decode(rgb), dtype=np.float64)
+    rgb = image_input.to_linear(rgb, used)
     if alpha is not None and np.all(alpha >= 1.0):
         alpha = None  # Blender gives every buffer an alpha channel; an opaque one is no alpha at all
-    return maps.AlbedoImage(rgb=rgb, alpha=alpha, colorspace=used, source_format="float" if image.is_float else
-                            "uint8", n_clamped=0, n_channels=3 if ch >= 3 else ch)
+    return AlbedoImage(rgb=rgb, alpha=alpha, colorspace=used, source_format="float" if image.is_float else "uint8",
+                       n_clamped=0, n_channels=3 if ch >= 3 else ch)
 
 
 def mesh_uv_mask(obj, source_node, width: int, height: int) -> tuple[np.ndarray | None, str]:
@@ -210,7 +203,7 @@ class AddonBake:
         self.albedo, self.stem, self.input_name = self._read_albedo()
         self.backend = pick_backend(self.scene, settings.backend)
         self.model = inference.ModelFile(settings.model_path, threads=settings.threads)  # loaded if needed
-        height, width = (self.albedo.shape if isinstance(self.albedo, maps.IndexedAlbedo) else
+        height, width = (self.albedo.shape if isinstance(self.albedo, IndexedAlbedo) else
                          self.albedo.rgb.shape[:2])
         mask, self.uv_note = (mesh_uv_mask(obj, self.source_node, width, height) if settings.uv_coverage
                               else (None, "off"))
@@ -223,8 +216,7 @@ class AddonBake:
         try:
             self.albedo = bake.BakeJob.index(self.albedo)
             image_id = self.image_id or bake.pixels_id(self.albedo)
-            self.key = bake.bake_key(image_id, self.model.sha256, self.stem, self.options,
-                                     bake.mask_sha256(mask, self.albedo.shape))
+            self.key = bake.job_key(image_id, self.model.sha256, self.stem, self.options, self.albedo.shape)
             self.reused_images = self._packed_up_to_date() if settings.storage == "PACK" else None
             self.job = None if self.reused_images is not None else bake.BakeJob(
                 self.albedo, self.out_dir, self.stem, self.model, self.options, input_image=self.input_name,
@@ -237,12 +229,12 @@ class AddonBake:
         self.result: bake.BakeResult | None = None
 
     # -- inputs --------------------------------------------------------------------------------------------
-    def _read_file(self, path: str, colorspace: str) -> maps.IndexedAlbedo:
+    def _read_file(self, path: str, colorspace: str) -> IndexedAlbedo:
         if os.path.isfile(path):
-            self.image_id = f"file:{maps.sha256_file(path)}:{colorspace}"
-        return maps.read_albedo_indexed(path, colorspace=colorspace)
+            self.image_id = bake.file_id(path, colorspace)
+        return image_input.read_albedo_indexed(path, colorspace=colorspace)
 
-    def _read_albedo(self) -> tuple[maps.AlbedoImage | maps.IndexedAlbedo, str, str]:
+    def _read_albedo(self) -> tuple[AlbedoImage | IndexedAlbedo, str, str]:
         s = self.settings
         if s.filepath:
             path = bpy.path.abspath(s.filepath)
@@ -293,10 +285,7 @@ class AddonBake:
             folder = Path(bpy.path.abspath("//")) / f"{self.stem}_skin_maps"
         else:
             raise BakeInputError("save the .blend first (the maps go beside it) or choose an output folder")
-        if not folder.exists():
-            if not folder.parent.is_dir() or not os.access(folder.parent, os.W_OK):
-                raise BakeInputError(f"cannot create the output folder {folder}")
-            folder.mkdir()
+        if maps.make_output_folder(folder):
             return folder, folder  # a folder we made: removed again (if still empty) on cancel or error
         return folder, None
 

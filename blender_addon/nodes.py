@@ -73,8 +73,7 @@ import math
 
 import bpy
 
-from exporters import cycles
-from exporters.constants import N_TISSUE
+from exporters import cycles, reflectance_tables
 
 from . import osl
 
@@ -86,8 +85,11 @@ KINDS = ("Color", "Radius", "Weight", "Anisotropy")
 FRAME_LABEL = "Spectral Skin SSS"
 #: Custom property remembering what fed the Material Output before wiring (for the user to restore).
 PREVIOUS_SURFACE_PROP = "spectral_skin_sss_previous_surface"
-#: The tissue index (docs/contracts.md §1): the coat's Fresnel and the closures' entry bounce.
-DEFAULT_IOR = N_TISSUE
+#: The tissue index (docs/contracts.md §1): the coat's Fresnel and the closures' entry bounce (the bake's default IOR).
+DEFAULT_IOR = reflectance_tables.CYCLES_IOR
+#: Smallest IOR the group takes: 1 turns the coat off (Cycles clamps the closures' IOR to
+#: reflectance_tables.IOR_MIN; the largest is its IOR_MAX).
+GROUP_IOR_MIN = 1.0
 #: Roughness of the subsurface closures' refractive entry: smooth, as the bake's Cycles tables assume.
 ENTRY_ROUGHNESS = 0.0
 #: rms facet slope of facial skin, Beckmann m: Weyrich et al. 2006 ("Analysis of human faces using a
@@ -113,13 +115,13 @@ def _new_interface(group: bpy.types.NodeTree, k_count: int) -> None:
             stype = "NodeSocketFloat" if kind == "Anisotropy" else "NodeSocketColor"
             sock = iface.new_socket(socket_name(k, kind), in_out="INPUT", socket_type=stype)
             if kind == "Anisotropy":
-                sock.min_value, sock.max_value, sock.default_value = 0.0, 0.9, 0.0
+                sock.min_value, sock.max_value, sock.default_value = cycles.G_MIN, cycles.G_MAX, 0.0
             elif kind == "Weight":
                 sock.default_value = (1.0 / k_count,) * 3 + (1.0,)
             else:
                 sock.default_value = (0.0, 0.0, 0.0, 1.0)
     ior = iface.new_socket("IOR", in_out="INPUT", socket_type="NodeSocketFloat")
-    ior.min_value, ior.max_value, ior.default_value = 1.0, 3.8, DEFAULT_IOR
+    ior.min_value, ior.max_value, ior.default_value = GROUP_IOR_MIN, reflectance_tables.IOR_MAX, DEFAULT_IOR
     rough = iface.new_socket("Roughness", in_out="INPUT", socket_type="NodeSocketFloat")
     rough.min_value, rough.max_value, rough.default_value = 0.0, 1.0, SKIN_ROUGHNESS
     normal = iface.new_socket("Normal", in_out="INPUT", socket_type="NodeSocketVector")
@@ -293,7 +295,7 @@ def build_osl_group(k_count: int = 3, name: str = GROUP_NAME_OSL) -> bpy.types.N
     if not 1 <= k_count <= 16:
         raise ValueError("k_count must be in 1..16")
     group, gin, gout = _fresh_group(name, k_count, "OSL")
-    source = osl.mixture_source(k_count, SKIN_ROUGHNESS)
+    source = osl.mixture_source(k_count, SKIN_ROUGHNESS, ENTRY_ROUGHNESS)
     script = osl.script_node(group.nodes, source, f"spectral_skin_sss_k{k_count}.osl")
     for k in range(1, k_count + 1):
         for kind in KINDS:

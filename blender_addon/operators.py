@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import bpy
 
+from exporters.bake import one_line
+
 from . import baker, nodes, preferences
 
 _COLORSPACES = [
@@ -33,10 +35,6 @@ MODEL_COLOUR_HELP = ("Render the model's own reflectance (the colour of the biop
                      "maps reproduce per channel by default")
 #: Exceptions that mean bad input or a failed bake (reported, nothing changed).
 _EXPECTED = (OSError, ValueError, RuntimeError)
-
-
-def _one_line(exc: BaseException) -> str:
-    return " ".join((str(exc) or type(exc).__name__).split())
 
 
 class SPECTRAL_SKIN_OT_invert_albedo(bpy.types.Operator):
@@ -88,14 +86,14 @@ class SPECTRAL_SKIN_OT_invert_albedo(bpy.types.Operator):
         try:
             bake = baker.AddonBake(context, self._settings(context))
         except _EXPECTED as exc:
-            self.report({"ERROR"}, _one_line(exc))
+            self.report({"ERROR"}, one_line(exc))
             return {"CANCELLED"}
         try:
             bake.run()
             message = bake.apply(context)
         except _EXPECTED as exc:
             bake.cancel()
-            self.report({"ERROR"}, _one_line(exc))
+            self.report({"ERROR"}, one_line(exc))
             return {"CANCELLED"}
         self.report(_level(message), message)
         return {"FINISHED"}
@@ -106,7 +104,7 @@ class SPECTRAL_SKIN_OT_invert_albedo(bpy.types.Operator):
         try:
             self._bake = baker.AddonBake(context, self._settings(context))
         except _EXPECTED as exc:
-            self.report({"ERROR"}, _one_line(exc))
+            self.report({"ERROR"}, one_line(exc))
             return {"CANCELLED"}
         wm = context.window_manager
         wm.progress_begin(0, 100)
@@ -133,7 +131,7 @@ class SPECTRAL_SKIN_OT_invert_albedo(bpy.types.Operator):
         except _EXPECTED as exc:
             self._bake.cancel()
             self._stop(context)
-            self.report({"ERROR"}, _one_line(exc))
+            self.report({"ERROR"}, one_line(exc))
             return {"CANCELLED"}
         self._stop(context)
         self.report(_level(message), message)

@@ -66,7 +66,7 @@ def ensure_oslquery() -> None:
     _register_bundled_oiio_types(site_packages)
 
 
-def mixture_source(k_count: int, roughness: float) -> str:
+def mixture_source(k_count: int, roughness: float, entry_roughness: float) -> str:
     """OSL shader: the specular coat over the mixture of K random-walk media (blender_addon/nodes.py)::
 
         F * microfacet_multi_ggx_aniso(Normal, white)  +  (1 - F)/(1 - F_dr(ior)) * sum_k (w_k * A_k) * bssrdf(...)
@@ -74,8 +74,9 @@ def mixture_source(k_count: int, roughness: float) -> str:
     The factor A_k cancels the kernel's division of the throughput by the albedo, so the expected
     contribution of component k in channel c is w_kc times the walk in medium k.  F is Cycles' Fresnel node
     (``fresnel_dielectric_cos`` of node_fresnel.h, 1/IOR on back faces), F_dr the same polynomial as the SVM
-    group (exporters.cycles.DIFFUSE_FRESNEL_POLY); the closures keep a smooth entry (roughness 0).  A zero
-    ``Normal`` (an unlinked group input on some paths) falls back to N, as Cycles' closures do.
+    group (exporters.cycles.DIFFUSE_FRESNEL_POLY); the closures' entry has roughness ``entry_roughness`` (the
+    group's nodes.ENTRY_ROUGHNESS: smooth).  A zero ``Normal`` (an unlinked group input on some paths) falls back
+    to N, as Cycles' closures do.
     ``roughness``: the default of the coat's roughness parameter.
     """
     params = []
@@ -86,7 +87,7 @@ def mixture_source(k_count: int, roughness: float) -> str:
                    f"    float {g} = 0.0,"]
         terms.append(
             f"    mixture += ({w} * {c}) * bssrdf(\"random_walk\", Nn, vector({r}), {c},\n"
-            f"        \"ior\", ior, \"anisotropy\", {g}, \"roughness\", 0.0);"
+            f"        \"ior\", ior, \"anisotropy\", {g}, \"roughness\", {float(entry_roughness)!r});"
         )
     poly = " + x * (".join(repr(c) for c in DIFFUSE_FRESNEL_POLY) + ")" * (len(DIFFUSE_FRESNEL_POLY) - 1)
     return "\n".join(

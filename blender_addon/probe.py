@@ -28,6 +28,8 @@ from collections.abc import Sequence
 import bpy
 import numpy as np
 
+from exporters.reflectance_tables import IOR_MIN
+
 #: Cube half-size (BU); the camera sees the centre of the top face.
 HALF_SIZE_BU: float = 50.0
 #: Orthographic view width (BU).
@@ -109,7 +111,7 @@ def material_output(mat: bpy.types.Material) -> bpy.types.Node:
 
 
 def add_sss_node(tree: bpy.types.NodeTree, color: Sequence[float], radius: Sequence[float], g: float,
-                 ior: float = 1.01, roughness: float = 0.0) -> bpy.types.Node:
+                 ior: float = IOR_MIN, roughness: float = 0.0) -> bpy.types.Node:
     """A Subsurface Scattering node (RANDOM_WALK, Scale 1) with constant inputs.
 
     Sockets are set *before* the method is (re)assigned: in Blender 5.0 unavailable sockets are not

@@ -157,7 +157,8 @@ def _as_stored(rec: dict, bits: int, half: bool = True) -> dict:
         out[name] = maps.round_mantissa(rec[name].astype(np.float32), bits).astype(np.float64)
         if half and name in half_names:
             out[name] = rec[name].astype(np.float16).astype(np.float64)
-    out["alpha"] = cycles.rw_albedo_forward(np.clip(out["color"], 0, 1), np.clip(out["anisotropy"], 0, 0.9)[..., None])
+    g = np.clip(out["anisotropy"], 0, cycles.G_MAX)[..., None]
+    out["alpha"] = cycles.rw_albedo_forward(np.clip(out["color"], 0, 1), g)
     return out
 
 

@@ -230,7 +230,7 @@ def collapse(reflectance, alpha, sigma_t_cm, g, weight, painted_rgb=None, g_max:
 def _light(al: np.ndarray, gg: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(alpha, g clipped to the tables, E_k = w_k R_model(alpha_k, g_k)) of float32 components (N, K, L')."""
     al_c = np.minimum(al, np.float32(reflectance_tables.ALPHA_TABLE_MAX))
-    g_c = np.clip(gg, np.float32(0), np.float32(0.95))
+    g_c = np.clip(gg, np.float32(0), np.float32(reflectance_tables.G_TABLE_MAX))
     return al_c, g_c, w * reflectance_tables.reflectance("model", al_c, g_c)
 
 

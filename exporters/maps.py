@@ -1,17 +1,20 @@
-"""Image I/O for baking (docs/contracts.md §4): float EXR maps out, albedo images in, and the ``S_maps.json`` record.
+"""Image output of a bake (docs/contracts.md §4): float EXR maps written through OpenImageIO, read back, and the
+``S_maps.json`` record.  (Albedo images come in through exporters.image_input.)
 
 All file access goes through OpenImageIO.  Nothing existing is overwritten unless ``overwrite=True``
 (files are written to a temporary name in the target folder, then hard-linked into place, which fails
-atomically if the name was taken meanwhile).
+atomically if the name was taken meanwhile).  One writer, :class:`MapStream` (band by band); :func:`write_exr`
+writes a whole map through it.
 
 Conventions:
-* Maps are float32 EXR, scene-independent data (Blender must load them as Non-Color); the EXR header
+* Maps are float32 (or half) EXR, scene-independent data (Blender must load them as Non-Color); the EXR header
   carries ``spectral_skin_sss:colorspace = "Non-Color"`` and ``spectral_skin_sss:units`` (OpenImageIO
   reports every EXR as ``lin_rec709`` on reading, whatever was written).
 * Channel names: RGB maps ``R, G, B``; one-channel maps ``Y``; the biophysical map the names of docs/contracts.md §4
   (``f_mel, f_blood, t_epi, so2, b_mel, exposure``).
-* Albedo input: returned as linear sRGB float64 (H, W, 3) plus alpha (H, W) or None.  Colour space
-  ``auto`` follows docs/contracts.md §1: sRGB-encoded unless the file says linear / Non-Color, or it stores floats.
+* Output folders: :func:`check_output_folder` and :func:`make_output_folder` raise the standard ``OSError``
+  types (FileNotFoundError: missing, NotADirectoryError: not a folder, PermissionError: not writable), the
+  same for every writer, the bake, bake.py and the add-on.
 """
 
 from __future__ import annotations
@@ -21,43 +24,49 @@ import hashlib
 import json
 import os
 import tempfile
-from dataclasses import dataclass
 from pathlib import Path
-from typing import Literal
 
 import numpy as np
 import OpenImageIO as oiio
 
-from exporters import palette as _palette
-from exporters.colorimetry import srgb_decode
-
-ColorSpace = Literal["auto", "srgb", "linear"]
+from exporters.image_input import ImageError
 
 RGB_CHANNELS: tuple[str, ...] = ("R", "G", "B")
 SINGLE_CHANNEL: tuple[str, ...] = ("Y",)
 BIOPHYSICAL_CHANNELS: tuple[str, ...] = ("f_mel", "f_blood", "t_epi", "so2", "b_mel", "exposure")
-#: Colour-space names (lower case, as OpenImageIO / OCIO configs spell them) that mean "not sRGB-encoded".
-_LINEAR_NAMES = {"linear", "scene_linear", "lin_rec709", "lin_srgb", "linear rec.709", "linear rec.709 (srgb)",
-                 "srgb-linear", "lin_rec709_scene", "raw", "non-color", "data", "acescg", "aces2065-1",
-                 "linear_srgb", "srgb_linear", "rec709_linear"}
-_FLOAT_TYPES = {"half", "float", "double"}
 #: EXR compression of the maps.  PIZ (lossless wavelet + Huffman) measured on 4096^2 float maps: 1.2 CPU-s per
 #: RGB map and 85 MB, against ZIP's 2.7 CPU-s and 88 MB (OpenEXR 3.3 via OpenImageIO 3.0); it also runs on
 #: OpenEXR's threads (``set_threads``).  Blender reads every lossless EXR compression.
 DEFAULT_COMPRESSION = "piz"
 COMPRESSIONS = ("piz", "zip", "zips", "rle", "none")
-_INT_MAX = {"uint8": 255.0, "uint16": 65535.0, "uint32": 4294967295.0}
 
 
-class ImageError(ValueError):
-    """An input image that cannot be used (unreadable, non-finite, negative ...); message says why."""
-
-
-def _ensure_writable_dir(folder: Path) -> None:
+def check_output_folder(folder: str | os.PathLike, what: str = "output folder") -> Path:
+    """``folder`` as a Path if it is an existing, writable folder; else FileNotFoundError (missing),
+    NotADirectoryError (a file) or PermissionError (not writable), each naming ``what`` and the folder."""
+    folder = Path(folder)
+    if not folder.exists():
+        raise FileNotFoundError(f"{what} does not exist: {folder}")
     if not folder.is_dir():
-        raise FileNotFoundError(f"output folder does not exist: {folder}")
+        raise NotADirectoryError(f"{what} is a file, not a folder: {folder}")
     if not os.access(folder, os.W_OK | os.X_OK):
-        raise PermissionError(f"output folder is not writable: {folder}")
+        raise PermissionError(f"{what} is not writable: {folder}")
+    return folder
+
+
+def make_output_folder(folder: str | os.PathLike) -> bool:
+    """Create ``folder`` (not its parents) if it is missing; True if it was created here (callers remove it
+    again, if still empty, when they fail).  An existing folder is left to the writers to check (a read-only one
+    may hold an up-to-date bake); a file of that name is NotADirectoryError, a missing or read-only parent the
+    errors of :func:`check_output_folder`."""
+    folder = Path(folder)
+    if folder.exists():
+        if not folder.is_dir():
+            raise NotADirectoryError(f"output folder is a file, not a folder: {folder}")
+        return False
+    check_output_folder(folder.parent, f"the parent of the output folder {folder.name}")
+    folder.mkdir()
+    return True
 
 
 def _publish(tmp: Path, final: Path, overwrite: bool) -> None:
@@ -102,9 +111,14 @@ def round_mantissa(values: np.ndarray, bits: int) -> np.ndarray:
     return (mag.astype(np.uint32) | sign).view(np.float32)
 
 
+def threads_of(threads: int) -> int:
+    """Threads to use for a ``threads`` setting (0 or less: every core)."""
+    return int(threads) if threads and threads > 0 else (os.cpu_count() or 1)
+
+
 def set_threads(threads: int) -> None:
     """Threads OpenImageIO and OpenEXR may use for reading and (de)compressing images (0 = all cores)."""
-    n = int(threads) if threads and threads > 0 else (os.cpu_count() or 1)
+    n = threads_of(threads)
     oiio.attribute("threads", n)
     oiio.attribute("exr_threads", n)
 
@@ -148,262 +162,30 @@ def _temp_name(path: Path) -> Path:
 
 
 def write_exr(path: str | os.PathLike, data: np.ndarray, channels: tuple[str, ...] | list[str],
-              units: str, overwrite: bool = False) -> Path:
-    """Write ``data`` (H, W) or (H, W, C) as a float32 EXR with the given channel names; returns the path.
+              units: str, overwrite: bool = False, compression: str = DEFAULT_COMPRESSION,
+              pixel_type: str = "float") -> Path:
+    """Write ``data`` (H, W) or (H, W, C) as one EXR map with the given channel names, through
+    :class:`MapStream` and :func:`publish_maps` (the bake's writer); returns the path.
 
-    ``units`` is stored in the header (e.g. "Blender units", "cm^-1", "1").  Non-finite data raises
-    ValueError (nothing is written); an existing file raises FileExistsError unless ``overwrite``.
+    ``units`` is stored in the header (e.g. "Blender units", "cm^-1", "1").  Non-finite data (or values beyond
+    float32) raises ValueError (nothing is written); an existing file raises FileExistsError unless
+    ``overwrite``; folders as :func:`check_output_folder`.
     """
-    path = Path(path)
-    arr = np.asarray(data, dtype=np.float64)
+    arr = np.asarray(data)
     if arr.ndim == 2:
         arr = arr[..., None]
     if arr.ndim != 3 or arr.shape[0] < 1 or arr.shape[1] < 1:
         raise ValueError(f"map data must be (H, W) or (H, W, C), got shape {np.shape(data)}")
     if arr.shape[2] != len(channels):
         raise ValueError(f"{arr.shape[2]} channels of data but {len(channels)} channel names {list(channels)}")
-    if not np.all(np.isfinite(arr)):
-        raise ValueError(f"map {path.name}: {int(np.size(arr) - np.isfinite(arr).sum())} NaN/Inf values")
-    if np.any(np.abs(arr) > np.finfo(np.float32).max):
-        raise ValueError(f"map {path.name}: values overflow float32")
-    _ensure_writable_dir(path.parent)
-    _refuse_existing(path, overwrite)
-    h, w, c = arr.shape
-    spec = _exr_spec(w, h, channels, units)
-    tmp = _temp_name(path)
+    stream = MapStream(path, arr.shape[1], arr.shape[0], channels, units, overwrite=overwrite,
+                       compression=compression, pixel_type=pixel_type)
     try:
-        out = oiio.ImageOutput.create(str(tmp))
-        if out is None or not out.open(str(tmp), spec):
-            raise OSError(f"cannot write {path}: {oiio.geterror() or (out.geterror() if out else '')}")
-        ok = out.write_image(np.ascontiguousarray(arr, dtype=np.float32))
-        err = out.geterror()
-        out.close()
-        if not ok:
-            raise OSError(f"cannot write {path}: {err}")
+        stream.write_rows(arr)
     except BaseException:
-        tmp.unlink(missing_ok=True)
+        stream.discard()
         raise
-    _publish(tmp, path, overwrite)
-    return path
-
-
-@dataclass(frozen=True)
-class AlbedoImage:
-    """A decoded albedo image.
-
-    ``rgb``: (H, W, 3) float64 linear sRGB (grayscale replicated); ``alpha``: (H, W) in [0, 1] or None,
-    unassociated (colour is never divided or multiplied by it); ``colorspace``: "srgb" or "linear" as
-    used; ``source_format``: OpenImageIO pixel type of the file ("uint8", "uint16", "half", "float", ...);
-    ``n_clamped``: texels whose negative values were clamped to 0 (only with ``clamp_negative``);
-    ``n_channels``: channels in the file (1 or 2: grayscale, replicated to RGB).
-    """
-
-    rgb: np.ndarray
-    alpha: np.ndarray | None
-    colorspace: Literal["srgb", "linear"]
-    source_format: str
-    n_clamped: int
-    n_channels: int = 3
-
-
-def _detect_colorspace(spec: oiio.ImageSpec) -> Literal["srgb", "linear"]:
-    """docs/contracts.md §1: sRGB-encoded unless the file says linear / Non-Color, or stores float pixels."""
-    name = str(spec.getattribute("oiio:ColorSpace") or "").strip().lower()
-    if name in _LINEAR_NAMES or name.startswith("lin"):
-        return "linear"
-    if name in {"srgb", "srgb_texture", "srgb - texture", "srgb_rec709_scene", "srgb_tx"}:
-        return "srgb"
-    gamma = spec.getattribute("oiio:Gamma")
-    if gamma is not None and abs(float(gamma) - 1.0) < 1e-3:
-        return "linear"
-    return "linear" if str(spec.format) in _FLOAT_TYPES else "srgb"
-
-
-def _split_channels(pixels: np.ndarray, spec: oiio.ImageSpec, path: Path) -> tuple[np.ndarray, np.ndarray | None]:
-    names = [n.upper() for n in spec.channelnames]
-    c = pixels.shape[2]
-    alpha_idx = spec.alpha_channel if spec.alpha_channel >= 0 else (names.index("A") if "A" in names else -1)
-    if c == 1:
-        return np.repeat(pixels, 3, axis=2), None
-    if c == 2:  # gray + alpha
-        return np.repeat(pixels[..., :1], 3, axis=2), pixels[..., 1]
-    if c >= 3:
-        colour_idx = [i for i in range(c) if i != alpha_idx][:3]
-        if len(colour_idx) < 3:
-            raise ImageError(f"{path}: cannot find three colour channels in {spec.channelnames}")
-        alpha = pixels[..., alpha_idx] if alpha_idx >= 0 else None
-        return pixels[..., colour_idx], alpha
-    raise ImageError(f"{path}: unsupported channel layout {spec.channelnames}")
-
-
-def _read_pixels(path: Path, colorspace: str, integer_types: tuple[str, ...]) -> tuple[oiio.ImageSpec, str, object]:
-    """Open an albedo image (alpha unassociated) and read all its channels: (spec, the pixel type read, the
-    pixels).  Files whose type is in ``integer_types`` are read in that type (the callers scale them in
-    float64: OIIO's float conversion is float32), others as float.  Errors as :func:`read_albedo`."""
-    if colorspace not in ("auto", "srgb", "linear"):
-        raise ValueError(f"colorspace must be auto, srgb or linear, not {colorspace!r}")
-    if not path.is_file():
-        raise FileNotFoundError(f"albedo image not found: {path}")
-    config = oiio.ImageSpec()
-    config.attribute("oiio:UnassociatedAlpha", 1)
-    inp = oiio.ImageInput.open(str(path), config)
-    if inp is None:
-        raise ImageError(f"cannot read image {path}: {oiio.geterror()}")
-    try:
-        spec = inp.spec()
-        fmt = str(spec.format)
-        native = fmt if fmt in integer_types else "float"
-        pixels = inp.read_image(0, 0, 0, spec.nchannels, native)
-        err = inp.geterror()
-    finally:
-        inp.close()
-    if pixels is None or err:
-        raise ImageError(f"cannot read pixels of {path}: {err}")
-    return spec, native, pixels
-
-
-def read_albedo(path: str | os.PathLike, colorspace: ColorSpace = "auto",
-                clamp_negative: bool = False) -> AlbedoImage:
-    """Read an albedo image (8/16-bit PNG or TIFF, float EXR, ...) as linear sRGB float64.
-
-    * Missing file: FileNotFoundError; unreadable / not an image: :class:`ImageError`.
-    * ``colorspace``: "auto" (docs/contracts.md §1 rule, see :func:`_detect_colorspace`), "srgb" (decode with the
-      IEC 61966-2-1 curve) or "linear" (use values as they are).
-    * 1 channel: gray replicated to RGB; 2 channels: gray + alpha; 4 channels: RGB + alpha (unassociated:
-      OpenImageIO is asked not to premultiply); more channels: the first three non-alpha ones.
-    * NaN/Inf texels: ImageError with the count and the first texel.  Negative texels (float files only):
-      ImageError, or clamped to 0 and counted when ``clamp_negative``.
-    """
-    path = Path(path)
-    spec, native, pixels = _read_pixels(path, colorspace, tuple(_INT_MAX))
-    pixels = np.asarray(pixels, dtype=np.float64).reshape(spec.height, spec.width, spec.nchannels)
-    if native in _INT_MAX:
-        pixels /= _INT_MAX[native]
-    bad = ~np.isfinite(pixels)
-    if bad.any():
-        y, x, _ = np.argwhere(bad)[0]
-        raise ImageError(f"{path}: {int(bad.any(axis=2).sum())} texel(s) with NaN/Inf, first at (x={x}, y={y})")
-    rgb, alpha = _split_channels(pixels, spec, path)
-    neg = rgb < 0.0
-    n_clamped = int(neg.any(axis=2).sum())
-    if n_clamped and not clamp_negative:
-        y, x, _ = np.argwhere(neg)[0]
-        raise ImageError(f"{path}: {n_clamped} texel(s) with negative values, first at (x={x}, y={y}); "
-                         "albedo cannot be negative (use clamp_negative to clamp them to 0)")
-    rgb = np.maximum(rgb, 0.0)
-    used = _detect_colorspace(spec) if colorspace == "auto" else colorspace
-    if used == "srgb":
-        rgb = np.asarray(srgb_decode(rgb), dtype=np.float64)
-    alpha = None if alpha is None else np.clip(alpha, 0.0, 1.0)
-    return AlbedoImage(rgb=rgb, alpha=alpha, colorspace=used, source_format=str(spec.format),
-                       n_clamped=n_clamped if clamp_negative else 0, n_channels=int(spec.nchannels))
-
-
-@dataclass(frozen=True)
-class IndexedAlbedo:
-    """A decoded albedo image as its distinct colours and, per texel, which one (exporters.palette).
-
-    ``palette`` (M, 3) float64 linear sRGB (grayscale replicated); ``index`` (H, W) int32 into it;
-    ``counts`` (M,) texels per colour; ``has_alpha``: the file has an alpha channel (ignored); other fields as
-    in :class:`AlbedoImage`.  ``rgb`` (property) expands to the dense (H, W, 3) image.
-    """
-
-    palette: np.ndarray
-    index: np.ndarray
-    colorspace: Literal["srgb", "linear"]
-    source_format: str
-    n_clamped: int
-    n_channels: int = 3
-    has_alpha: bool = False
-
-    @property
-    def shape(self) -> tuple[int, int]:
-        return tuple(self.index.shape)
-
-    @property
-    def counts(self) -> np.ndarray:
-        return np.bincount(self.index.ravel(), minlength=len(self.palette))
-
-    @property
-    def rgb(self) -> np.ndarray:
-        return self.palette[self.index]
-
-    @classmethod
-    def from_dense(cls, albedo: AlbedoImage) -> IndexedAlbedo:
-        """Index a dense :class:`AlbedoImage` (colours compared as float32, as the model takes them)."""
-        rgb = np.asarray(albedo.rgb)
-        if rgb.ndim != 3 or rgb.shape[2] != 3:
-            raise ValueError(f"albedo must be an (H, W, 3) image, got shape {rgb.shape}")
-        pal, inv = _palette.unique_float_rows(rgb.reshape(-1, 3).astype(np.float32))
-        return cls(palette=pal.astype(np.float64), index=inv.reshape(rgb.shape[:2]), colorspace=albedo.colorspace,
-                   source_format=albedo.source_format, n_clamped=albedo.n_clamped, n_channels=albedo.n_channels,
-                   has_alpha=albedo.alpha is not None)
-
-
-def _colour_channels(spec: oiio.ImageSpec, path: Path) -> tuple[list[int], bool]:
-    """Indices of the colour channels (1 for gray, 3 for colour) and whether an alpha channel exists."""
-    names = [n.upper() for n in spec.channelnames]
-    c = spec.nchannels
-    alpha_idx = spec.alpha_channel if spec.alpha_channel >= 0 else (names.index("A") if "A" in names else -1)
-    if c == 1:
-        return [0], False
-    if c == 2:
-        return [0], True
-    colour = [i for i in range(c) if i != alpha_idx][:3]
-    if len(colour) < 3:
-        raise ImageError(f"{path}: cannot find three colour channels in {spec.channelnames}")
-    return colour, alpha_idx >= 0
-
-
-def _first_texel(mask_palette: np.ndarray, index: np.ndarray) -> tuple[int, int, int]:
-    """(count of texels, x, y of the first) whose palette entry is flagged."""
-    flagged = mask_palette[index]
-    y, x = np.argwhere(flagged)[0]
-    return int(flagged.sum()), int(x), int(y)
-
-
-def read_albedo_indexed(path: str | os.PathLike, colorspace: ColorSpace = "auto",
-                        clamp_negative: bool = False) -> IndexedAlbedo:
-    """:func:`read_albedo` for large textures: the same decoding and checks, but each distinct colour is
-    decoded once and the image is kept as a palette and an index (no (H, W, 3) float64 array).
-
-    8-bit files are indexed by their packed codes (exporters.palette, no sort), 16-bit ones by a sort of
-    the codes, float files by a hash of the float32 values.  Errors as :func:`read_albedo`.
-    """
-    path = Path(path)
-    spec, native, pixels = _read_pixels(path, colorspace, ("uint8", "uint16"))
-    fmt = str(spec.format)
-    colour, has_alpha = _colour_channels(spec, path)
-    pixels = np.asarray(pixels).reshape(spec.height, spec.width, spec.nchannels)
-    rows = pixels[..., colour].reshape(-1, len(colour))
-    del pixels
-    if native in ("uint8", "uint16"):
-        codes, inverse = _palette.unique_codes(np.ascontiguousarray(rows))
-        pal = codes.astype(np.float64) / _INT_MAX[native]
-    else:
-        found, inverse = _palette.unique_float_rows(rows)
-        pal = found.astype(np.float64)
-    del rows
-    index = inverse.reshape(spec.height, spec.width)
-    bad = ~np.all(np.isfinite(pal), axis=1)
-    if bad.any():
-        n, x, y = _first_texel(bad, index)
-        raise ImageError(f"{path}: {n} texel(s) with NaN/Inf, first at (x={x}, y={y})")
-    neg = np.any(pal < 0.0, axis=1)
-    n_clamped = 0
-    if neg.any():
-        n_clamped, x, y = _first_texel(neg, index)
-        if not clamp_negative:
-            raise ImageError(f"{path}: {n_clamped} texel(s) with negative values, first at (x={x}, y={y}); "
-                             "albedo cannot be negative (use clamp_negative to clamp them to 0)")
-        pal = np.maximum(pal, 0.0)
-    if pal.shape[1] == 1:
-        pal = np.repeat(pal, 3, axis=1)
-    used = _detect_colorspace(spec) if colorspace == "auto" else colorspace
-    if used == "srgb":
-        pal = np.asarray(srgb_decode(pal), dtype=np.float64)
-    return IndexedAlbedo(palette=pal, index=index, colorspace=used, source_format=fmt, n_clamped=n_clamped,
-                         n_channels=int(spec.nchannels), has_alpha=has_alpha)
+    return publish_maps([stream])[0]
 
 
 def sha256_file(path: str | os.PathLike) -> str:
@@ -433,7 +215,7 @@ def write_maps_json(path: str | os.PathLike, files: dict[str, dict], k: int, mod
             raise FileNotFoundError(f"S_maps.json lists {name}, which is not in {path.parent}")
     if not all(np.isfinite(v) for v in timings_s.values()):
         raise ValueError("timings must be finite")
-    _ensure_writable_dir(path.parent)
+    check_output_folder(path.parent)
     _refuse_existing(path, overwrite)
     record = {
         "format": "spectral_skin_sss maps v1",
@@ -501,7 +283,7 @@ class MapStream:
         self.width, self.height = int(width), int(height)
         if self.width < 1 or self.height < 1:
             raise ValueError(f"map size must be at least 1 x 1, got {width} x {height}")
-        _ensure_writable_dir(self.path.parent)
+        check_output_folder(self.path.parent)
         _refuse_existing(self.path, overwrite)
         self.overwrite = overwrite
         self.tmp = _temp_name(self.path)
@@ -518,6 +300,10 @@ class MapStream:
         unless the caller passes ``finite=True`` because it checked the values they were gathered from).  A
         half map takes float16 data as it is (no conversion: the caller rounded once per distinct value)."""
         arr = np.asarray(data)
+        if not finite and not np.all(np.isfinite(arr)):
+            raise ValueError(f"map {self.path.name}: NaN/Inf values")
+        if not finite and arr.dtype.itemsize > 4 and arr.size and np.abs(arr).max() > np.finfo(np.float32).max:
+            raise ValueError(f"map {self.path.name}: values overflow float32")
         if not (self.pixel_type == "half" and arr.dtype == np.float16):
             arr = arr.astype(np.float32, copy=False)
         if arr.ndim == 2:
@@ -526,8 +312,6 @@ class MapStream:
         if arr.shape[1:] != (self.width, len(self.channels)) or self._rows + h > self.height:
             raise ValueError(f"{self.path.name}: rows of shape {arr.shape} do not fit a "
                              f"{self.width} x {self.height} x {len(self.channels)} map at row {self._rows}")
-        if not finite and not np.all(np.isfinite(arr)):
-            raise ValueError(f"map {self.path.name}: NaN/Inf values")
         if self.pixel_type == "half" and arr.dtype != np.float16 and np.any(np.abs(arr) > HALF_MAX):
             raise ValueError(f"map {self.path.name}: values beyond the half-float range (|v| > {HALF_MAX:g}): "
                              "write it as float")

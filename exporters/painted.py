@@ -190,7 +190,7 @@ def paint_mixture(alpha, sigma_t, g, weight, albedo_rgb) -> PaintedMixture:
     target = target_colour(albedo_rgb).reshape(-1, 3)
     if len(target) != len(al):
         raise ValueError(f"{len(target)} albedo rows for {len(al)} mixtures")
-    g_c = np.clip(gg, 0.0, 0.95)
+    g_c = np.clip(gg, 0.0, reflectance_tables.G_TABLE_MAX)
     a_c = np.minimum(al, ALPHA_MAX)
     r = reflectance_tables.reflectance("model", a_c, g_c)
     r_max = brightest(g_c)

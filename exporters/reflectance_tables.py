@@ -38,6 +38,8 @@ from typing import Literal
 
 import numpy as np
 
+from exporters.constants import N_TISSUE
+
 Boundary = Literal["cycles", "model"]
 BOUNDARIES: tuple[str, ...] = ("cycles", "model")
 TABLE_PATH = Path(__file__).resolve().parent / "data" / "reflectance_tables.npz"
@@ -45,8 +47,10 @@ U_MIN: float = 1e-3
 N_U: int = 129
 G_STEP: float = 0.05
 N_G: int = 20
-#: Refractive index of the model's boundary (docs/contracts.md §1 n = 1.4).
-MODEL_N: float = 1.4
+#: Largest g of the tables' grid (0.95): larger g are clipped to it (by the lookups and their callers).
+G_TABLE_MAX: float = round((N_G - 1) * G_STEP, 12)
+#: Refractive index of the model's boundary: the tissue index (exporters.constants.N_TISSUE).
+MODEL_N: float = N_TISSUE
 #: Quadrature cosines of the stored directional reflectance R1(mu) (16: iadpython is less accurate at 32 as
 #: alpha -> 1, e.g. URU(0.999) 0.92847 vs van de Hulst 0.92971; at 16 it is 0.9297).
 N_MU: int = 16
@@ -162,13 +166,14 @@ def _table(boundary: str, ior: float | None) -> np.ndarray:
     return _cycles_table(round(eta, 6))
 
 
-#: Default entry IOR of the Cycles closures (the tissue index of docs/contracts.md §1; blender_addon.nodes.DEFAULT_IOR).
-CYCLES_IOR: float = 1.4
+#: Default entry IOR of the Cycles closures: the tissue index (exporters.constants.N_TISSUE), also the node
+#: group's default (blender_addon.nodes.DEFAULT_IOR) and bake.py's --ior.
+CYCLES_IOR: float = N_TISSUE
 
 
 def _g_index(g: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Lower g node index and fraction for bilinear interpolation (g clipped to the grid)."""
-    x = np.clip(g, 0.0, (N_G - 1) * G_STEP) * (1.0 / G_STEP)
+    x = np.clip(g, 0.0, G_TABLE_MAX) * (1.0 / G_STEP)
     i = np.minimum(x.astype(np.intp), N_G - 2)  # x >= 0: truncation is floor
     return i, x - i.astype(x.dtype)
 

@@ -15,7 +15,7 @@ import pytest
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from blender_addon import baker, nodes, preferences  # noqa: E402
-from exporters import bake, inference, maps  # noqa: E402
+from exporters import bake, image_input, inference, maps  # noqa: E402
 from tests.addon_scene import (  # noqa: E402
     image_pixels,
     render_small,
@@ -126,7 +126,7 @@ def test_generated_image_and_shared_group(addon, tmp_path):
     g1, g2 = group_node(mat1), group_node(mat2)
     assert g1.node_tree == g2.node_tree  # one shared group, the first material still has it
     model = inference.load_model(preferences.DEFAULT_MODEL, threads=1)
-    albedo = maps.AlbedoImage(rgb=rows, alpha=None, colorspace="linear", source_format="float", n_clamped=0)
+    albedo = image_input.AlbedoImage(rgb=rows, alpha=None, colorspace="linear", source_format="float", n_clamped=0)
     job = bake.BakeJob(albedo, tmp_path, "ref", model, bake.BakeOptions(threads=1))
     for _ in job.steps():
         pass

@@ -1,4 +1,4 @@
-"""exporters.maps with real files written by OpenImageIO in temporary folders."""
+"""exporters.maps and exporters.image_input with real files written by OpenImageIO in temporary folders."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ import numpy as np
 import OpenImageIO as oiio
 import pytest
 
-from exporters import maps
+from exporters import image_input, maps
 
 
 def write_image(path, pixels: np.ndarray, fmt: str, **attrs) -> str:
@@ -37,7 +37,7 @@ def srgb_to_linear(v):
 
 def test_8bit_png_is_srgb_decoded(tmp_path):
     codes = np.array([[[0, 10, 128], [200, 255, 64]]], dtype=np.uint8)  # 1 x 2, non-square
-    img = maps.read_albedo(write_image(tmp_path / "a.png", codes, "uint8"))
+    img = image_input.read_albedo(write_image(tmp_path / "a.png", codes, "uint8"))
     assert img.colorspace == "srgb" and img.source_format == "uint8" and img.alpha is None
     assert img.rgb.shape == (1, 2, 3) and img.rgb.dtype == np.float64
     np.testing.assert_allclose(img.rgb, srgb_to_linear(codes / 255.0), rtol=1e-12, atol=1e-15)
@@ -48,7 +48,7 @@ def test_16bit_png_with_alpha_unassociated(tmp_path):
     rgba[..., :3] = 40000
     rgba[..., 3] = 32768  # half transparent: colour must NOT be premultiplied
     rgba[0, 0, 3] = 0
-    img = maps.read_albedo(write_image(tmp_path / "a16.png", rgba, "uint16"))
+    img = image_input.read_albedo(write_image(tmp_path / "a16.png", rgba, "uint16"))
     assert img.source_format == "uint16" and img.rgb.shape == (3, 5, 3)
     np.testing.assert_allclose(img.rgb, srgb_to_linear(40000 / 65535), rtol=1e-4)
     np.testing.assert_allclose(img.alpha[1:], 32768 / 65535, rtol=1e-4)
@@ -58,23 +58,23 @@ def test_16bit_png_with_alpha_unassociated(tmp_path):
 def test_float_exr_is_linear_and_override(tmp_path):
     vals = np.array([[[0.2, 0.5, 0.9]]], dtype=np.float32)  # 1x1
     path = write_image(tmp_path / "a.exr", vals, "float")
-    img = maps.read_albedo(path)
+    img = image_input.read_albedo(path)
     assert img.colorspace == "linear" and img.rgb.shape == (1, 1, 3)
     np.testing.assert_allclose(img.rgb[0, 0], vals[0, 0], rtol=0)
-    forced = maps.read_albedo(path, colorspace="srgb")
+    forced = image_input.read_albedo(path, colorspace="srgb")
     np.testing.assert_allclose(forced.rgb[0, 0], srgb_to_linear(vals[0, 0]), rtol=1e-6)
 
 
 def test_png_tagged_linear_is_not_decoded(tmp_path):
     codes = np.full((2, 2, 3), 128, dtype=np.uint8)
-    img = maps.read_albedo(write_image(tmp_path / "lin.png", codes, "uint8", oiio__ColorSpace="linear"))
+    img = image_input.read_albedo(write_image(tmp_path / "lin.png", codes, "uint8", oiio__ColorSpace="linear"))
     assert img.colorspace == "linear"
     np.testing.assert_allclose(img.rgb, 128 / 255, rtol=1e-12)
 
 
 def test_grayscale_and_gray_alpha(tmp_path):
     gray = np.array([[0, 255], [128, 64]], dtype=np.uint8)
-    img = maps.read_albedo(write_image(tmp_path / "g.png", gray, "uint8"))
+    img = image_input.read_albedo(write_image(tmp_path / "g.png", gray, "uint8"))
     assert img.rgb.shape == (2, 2, 3)
     np.testing.assert_allclose(img.rgb[..., 0], img.rgb[..., 2])
     np.testing.assert_allclose(img.rgb[..., 1], srgb_to_linear(gray / 255.0))
@@ -88,7 +88,7 @@ def test_grayscale_and_gray_alpha(tmp_path):
     assert out.open(str(spec_path), spec)
     out.write_image(ga)
     out.close()
-    img2 = maps.read_albedo(spec_path)
+    img2 = image_input.read_albedo(spec_path)
     np.testing.assert_allclose(img2.rgb, img.rgb)
     np.testing.assert_allclose(img2.alpha, 1.0)
 
@@ -96,26 +96,26 @@ def test_grayscale_and_gray_alpha(tmp_path):
 def test_nan_and_negative_texels(tmp_path):
     bad = np.full((4, 3, 3), 0.5, dtype=np.float32)
     bad[2, 1, 0] = np.nan
-    with pytest.raises(maps.ImageError, match=r"1 texel\(s\) with NaN/Inf, first at \(x=1, y=2\)"):
-        maps.read_albedo(write_image(tmp_path / "nan.exr", bad, "float"))
+    with pytest.raises(image_input.ImageError, match=r"1 texel\(s\) with NaN/Inf, first at \(x=1, y=2\)"):
+        image_input.read_albedo(write_image(tmp_path / "nan.exr", bad, "float"))
     neg = np.full((4, 3, 3), 0.5, dtype=np.float32)
     neg[0, 2, 1] = -0.01
     path = write_image(tmp_path / "neg.exr", neg, "float")
-    with pytest.raises(maps.ImageError, match=r"negative values, first at \(x=2, y=0\)"):
-        maps.read_albedo(path)
-    img = maps.read_albedo(path, clamp_negative=True)
+    with pytest.raises(image_input.ImageError, match=r"negative values, first at \(x=2, y=0\)"):
+        image_input.read_albedo(path)
+    img = image_input.read_albedo(path, clamp_negative=True)
     assert img.n_clamped == 1 and img.rgb.min() == 0.0
 
 
 def test_missing_unreadable_and_bad_arguments(tmp_path):
     with pytest.raises(FileNotFoundError, match="not found"):
-        maps.read_albedo(tmp_path / "nope.png")
+        image_input.read_albedo(tmp_path / "nope.png")
     junk = tmp_path / "junk.png"
     junk.write_bytes(b"this is not a png")
-    with pytest.raises(maps.ImageError, match="cannot read"):
-        maps.read_albedo(junk)
+    with pytest.raises(image_input.ImageError, match="cannot read"):
+        image_input.read_albedo(junk)
     with pytest.raises(ValueError, match="colorspace"):
-        maps.read_albedo(junk, colorspace="rec2020")
+        image_input.read_albedo(junk, colorspace="rec2020")
 
 
 def test_exr_round_trip_channels_units_no_overwrite(tmp_path):

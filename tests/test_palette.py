@@ -1,4 +1,4 @@
-"""exporters.palette (distinct colours of an image) and maps.read_albedo_indexed against numpy's own np.unique
+"""exporters.palette (distinct colours of an image) and image_input.read_albedo_indexed against numpy's own np.unique
 and the dense reader, on real image files of every supported kind."""
 
 from __future__ import annotations
@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from exporters import maps, palette
+from exporters import image_input, palette
 from tests.addon_scene import write_image
 
 
@@ -65,8 +65,8 @@ def test_indexed_reader_matches_the_dense_reader(tmp_path, kind):
         path = write_image(tmp_path / "a.png", np.concatenate([CODES, CODES[..., :1]], axis=2), "uint8")
     else:
         path = write_image(tmp_path / "a.png", np.stack([CODES[..., 0], CODES[..., 2]], axis=2), "uint8")
-    dense = maps.read_albedo(path)
-    indexed = maps.read_albedo_indexed(path)
+    dense = image_input.read_albedo(path)
+    indexed = image_input.read_albedo_indexed(path)
     np.testing.assert_array_equal(indexed.rgb, dense.rgb)
     assert indexed.colorspace == dense.colorspace and indexed.source_format == dense.source_format
     assert indexed.has_alpha == (dense.alpha is not None) and indexed.n_channels == dense.n_channels
@@ -76,14 +76,14 @@ def test_indexed_reader_matches_the_dense_reader(tmp_path, kind):
 def test_indexed_reader_rejects_what_the_dense_one_rejects(tmp_path):
     bad = np.full((2, 3, 3), 0.4, np.float32)
     bad[1, 2, 0] = np.nan
-    with pytest.raises(maps.ImageError, match=r"NaN/Inf, first at \(x=2, y=1\)"):
-        maps.read_albedo_indexed(write_image(tmp_path / "n.exr", bad, "float"))
+    with pytest.raises(image_input.ImageError, match=r"NaN/Inf, first at \(x=2, y=1\)"):
+        image_input.read_albedo_indexed(write_image(tmp_path / "n.exr", bad, "float"))
     neg = np.full((2, 3, 3), 0.4, np.float32)
     neg[0, 1, 2] = -0.1
     path = write_image(tmp_path / "neg.exr", neg, "float")
-    with pytest.raises(maps.ImageError, match=r"negative values, first at \(x=1, y=0\)"):
-        maps.read_albedo_indexed(path)
-    clamped = maps.read_albedo_indexed(path, clamp_negative=True)
+    with pytest.raises(image_input.ImageError, match=r"negative values, first at \(x=1, y=0\)"):
+        image_input.read_albedo_indexed(path)
+    clamped = image_input.read_albedo_indexed(path, clamp_negative=True)
     assert clamped.n_clamped == 1 and clamped.palette.min() == 0.0
     with pytest.raises(FileNotFoundError):
-        maps.read_albedo_indexed(tmp_path / "none.png")
+        image_input.read_albedo_indexed(tmp_path / "none.png")

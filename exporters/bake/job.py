@@ -18,10 +18,10 @@ from pathlib import Path
 
 import numpy as np
 
-from exporters import inference, maps, texel_records
+from exporters import image_input, inference, maps, texel_records
 from exporters.bake import masking, report, reuse
 from exporters.bake.evaluate import Evaluator
-from exporters.bake.options import FAST_MANTISSA_BITS, BakeOptions, threads_of
+from exporters.bake.options import FAST_MANTISSA_BITS, BakeOptions
 from exporters.bake.report import BakeResult
 from exporters.bake.table_cache import find_table
 from exporters.bake.targets import HALF_KINDS, BakeError, MapSpec, map_specs, units_of
@@ -33,14 +33,15 @@ class BakeJob:
     fraction done; :meth:`finish` publishes the files; :meth:`cancel` (or any exception in a step) removes
     every temporary file.
 
-    ``albedo``: a dense :class:`exporters.maps.AlbedoImage` or an :class:`exporters.maps.IndexedAlbedo`;
+    ``albedo``: a dense :class:`exporters.image_input.AlbedoImage` or an
+    :class:`exporters.image_input.IndexedAlbedo`;
     ``model``: a loaded :class:`exporters.inference.InversionSession` or an :class:`exporters.inference.ModelFile`
     (loaded only if some colour must be evaluated exactly); ``image_id``: what identifies the image content
     in the bake key (default: a hash of its decoded colours).
     """
 
-    def __init__(self, albedo: maps.AlbedoImage | maps.IndexedAlbedo, out_dir: str | os.PathLike, stem: str,
-                 model: inference.InversionSession | inference.ModelFile, options: BakeOptions | None = None,
+    def __init__(self, albedo: image_input.AlbedoImage | image_input.IndexedAlbedo, out_dir: str | os.PathLike,
+                 stem: str, model: inference.InversionSession | inference.ModelFile, options: BakeOptions | None = None,
                  input_image: str = "", image_id: str | None = None) -> None:
         self.options = opts = options or BakeOptions()
         self.targets = opts.check()
@@ -53,8 +54,7 @@ class BakeJob:
         self.model = model if isinstance(model, inference.ModelFile) else inference.ModelFile.of(model)
         self.notes = report.input_notes(image)
         self.timings = {"load_model": 0.0, "evaluate": 0.0, "inference": 0.0, "table": 0.0, "write": 0.0}
-        mask_sha = reuse.mask_sha256(opts.texel_mask, image.shape)
-        self.key = reuse.bake_key(image_id or reuse.pixels_id(image), self.model.sha256, stem, opts, mask_sha)
+        self.key = reuse.job_key(image_id or reuse.pixels_id(image), self.model.sha256, stem, opts, image.shape)
         self.reused = None if opts.force else reuse.find_up_to_date(self.out_dir, stem, self.key)
         self._streams: list[maps.MapStream] | None = None
         self._done = False
@@ -63,7 +63,7 @@ class BakeJob:
             return
         self._set_up(image)
 
-    def _set_up(self, image: maps.IndexedAlbedo) -> None:
+    def _set_up(self, image: image_input.IndexedAlbedo) -> None:
         opts = self.options
         uncovered = 0
         if opts.texel_mask is not None:
@@ -79,7 +79,7 @@ class BakeJob:
         if texel_records.needs_media(self.targets):
             self.stats.update({name: 0 for name in texel_records.STAT_NAMES.values()})
         copts = opts.collapse_options()
-        self.threads = threads_of(opts.threads)
+        self.threads = maps.threads_of(opts.threads)
         table = None if opts.exact else find_table(self.model, copts, opts.table_path, self.notes, opts.cache_step)
         self._build_table = (table is None and not opts.exact and opts.cache_tables
                              and len(self.palette) >= opts.cache_min_colours)
@@ -101,15 +101,12 @@ class BakeJob:
 
     # -- set-up -----------------------------------------------------------------------------------------------
     @staticmethod
-    def index(albedo) -> maps.IndexedAlbedo:
-        """An albedo image as an :class:`exporters.maps.IndexedAlbedo`, checked (exporters.bake.masking)."""
+    def index(albedo) -> image_input.IndexedAlbedo:
+        """An albedo image as an :class:`exporters.image_input.IndexedAlbedo`, checked (exporters.bake.masking)."""
         return masking.indexed(albedo)
 
     def _check_folder(self) -> None:
-        if not self.out_dir.is_dir():
-            raise BakeError(f"output folder does not exist: {self.out_dir}")
-        if not os.access(self.out_dir, os.W_OK | os.X_OK):
-            raise BakeError(f"output folder is not writable: {self.out_dir}")
+        maps.check_output_folder(self.out_dir)
         if not self.options.overwrite:
             names = [s.name for s in self.specs] + [f"{self.stem}_maps.json"]
             taken = [n for n in names if (self.out_dir / n).exists()]
@@ -297,30 +294,30 @@ def _as_written(values: dict[str, np.ndarray], pixel_types: dict[str, str]) -> d
 
 
 def bake(albedo_path: str | os.PathLike, out_dir: str | os.PathLike, model_path: str | os.PathLike,
-         options: BakeOptions | None = None, colorspace: maps.ColorSpace = "auto",
+         options: BakeOptions | None = None, colorspace: image_input.ColorSpace = "auto",
          progress: Callable[[float], None] | None = None) -> BakeResult:
     """Read ``albedo_path``, bake its maps into ``out_dir`` (stem = the image's file stem) and return what
     was written.  An up-to-date bake in ``out_dir`` is returned as it is (``reused``) without reading the
-    image.  Errors: FileNotFoundError / maps.ImageError for the image, inference.ModelError for the model,
-    BakeError for targets / folder / existing files; nothing is written on error."""
+    image.  Errors: FileNotFoundError / image_input.ImageError for the image, inference.ModelError for the
+    model, the OSErrors of exporters.maps.check_output_folder for the folder, BakeError for targets / existing
+    files; nothing is written on error."""
     options = options or BakeOptions()
     t0 = time.perf_counter()
     options.check()
-    if colorspace not in ("auto", "srgb", "linear"):
+    if colorspace not in image_input.COLORSPACES:
         raise ValueError(f"colorspace must be auto, srgb or linear, not {colorspace!r}")
     path = Path(albedo_path)
     if not path.is_file():
         raise FileNotFoundError(f"albedo image not found: {path}")
     model = inference.ModelFile(model_path, threads=options.threads)
-    image_id = f"file:{maps.sha256_file(path)}:{colorspace}"
+    image_id = reuse.file_id(path, colorspace)
     if not options.force:
-        key = reuse.bake_key(image_id, model.sha256, path.stem, options, reuse.mask_sha256(options.texel_mask))
-        found = reuse.find_up_to_date(out_dir, path.stem, key)
+        found = reuse.find_up_to_date(out_dir, path.stem, reuse.job_key(image_id, model.sha256, path.stem, options))
         if found is not None:
             found.timings_s = {"total": time.perf_counter() - t0}
             return found
-    maps.set_threads(threads_of(options.threads))
-    albedo = maps.read_albedo_indexed(path, colorspace=colorspace)
+    maps.set_threads(options.threads)
+    albedo = image_input.read_albedo_indexed(path, colorspace=colorspace)
     t1 = time.perf_counter()
     job = BakeJob(albedo, out_dir, path.stem, model, options, input_image=str(path), image_id=image_id)
     for fraction in job.steps():

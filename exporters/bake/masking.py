@@ -5,30 +5,27 @@ from __future__ import annotations
 
 import numpy as np
 
-from exporters import maps
 from exporters.bake.targets import BakeError
+from exporters.image_input import AlbedoImage, IndexedAlbedo, check_texels
 
 
-def indexed(albedo: maps.AlbedoImage | maps.IndexedAlbedo) -> maps.IndexedAlbedo:
-    """An albedo image as an :class:`exporters.maps.IndexedAlbedo`, checked (BakeError for NaN, negative
-    texels or a bad shape)."""
-    if isinstance(albedo, maps.IndexedAlbedo):
+def indexed(albedo: AlbedoImage | IndexedAlbedo) -> IndexedAlbedo:
+    """An albedo image as an :class:`exporters.image_input.IndexedAlbedo`, checked: BakeError for a bad shape,
+    exporters.image_input.ImageError for NaN/Inf or negative texels (image_input.check_texels, as on reading)."""
+    if isinstance(albedo, IndexedAlbedo):
         image = albedo
     else:
         rgb = np.asarray(albedo.rgb)
         if rgb.ndim != 3 or rgb.shape[2] != 3 or rgb.shape[0] < 1 or rgb.shape[1] < 1:
             raise BakeError(f"albedo must be an (H, W, 3) image, got shape {rgb.shape}")
-        image = maps.IndexedAlbedo.from_dense(albedo)
+        image = IndexedAlbedo.from_dense(albedo)
     if image.index.ndim != 2 or min(image.index.shape) < 1:
         raise BakeError(f"albedo must be an (H, W, 3) image, got an index of shape {image.index.shape}")
-    if not np.all(np.isfinite(image.palette)):
-        raise BakeError("albedo has NaN/Inf texels; fix the texture")
-    if np.any(image.palette < 0):
-        raise BakeError("albedo has negative texels; an albedo cannot be negative")
+    check_texels(image.palette, "albedo", index=image.index)
     return image
 
 
-def apply_mask(image: maps.IndexedAlbedo, mask: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
+def apply_mask(image: IndexedAlbedo, mask: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
     """Palette and index with uncovered texels set to the most common covered colour; returns (palette,
     index, number of uncovered texels).  ``mask`` (H, W) bool: texels the mesh's UVs cover."""
     index = image.index

@@ -86,8 +86,3 @@ class BakeOptions:
         if self.compression not in maps.COMPRESSIONS:
             raise BakeError(f"EXR compression must be one of {', '.join(maps.COMPRESSIONS)}, not {self.compression!r}")
         return targets
-
-
-def threads_of(n: int) -> int:
-    """Threads to use for ``n`` (0 or less: every core)."""
-    return int(n) if n and n > 0 else (os.cpu_count() or 1)

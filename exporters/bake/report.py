@@ -11,6 +11,7 @@ import numpy as np
 
 from exporters import collapse, maps, painted
 from exporters.bake.targets import units_of
+from exporters.image_input import AlbedoImage, IndexedAlbedo
 from exporters.texel_records import CLAMPED_CYCLES, CLAMPED_SPECTRAL, needs_media
 
 if TYPE_CHECKING:
@@ -42,17 +43,17 @@ class BakeResult:
     components: list[int] = field(default_factory=list)
 
 
-def input_notes(albedo: maps.AlbedoImage | maps.IndexedAlbedo) -> list[str]:
+def input_notes(albedo: AlbedoImage | IndexedAlbedo) -> list[str]:
     """Remarks on valid but special inputs (shown to the user and stored in S_maps.json)."""
     notes = []
     if albedo.n_channels in (1, 2):
         notes.append("grayscale image: its gray value is used for R, G and B")
-    has_alpha = albedo.has_alpha if isinstance(albedo, maps.IndexedAlbedo) else albedo.alpha is not None
+    has_alpha = albedo.has_alpha if isinstance(albedo, IndexedAlbedo) else albedo.alpha is not None
     if has_alpha:
         notes.append("alpha channel ignored: the albedo is taken from the colour channels")
     if albedo.n_clamped:
         notes.append(f"{albedo.n_clamped} texel(s) with negative values clamped to 0")
-    if isinstance(albedo, maps.IndexedAlbedo):
+    if isinstance(albedo, IndexedAlbedo):
         above = int(albedo.counts[(albedo.palette > 1.0).any(axis=1)].sum())
         h, w = albedo.shape
     else:
@@ -63,6 +64,15 @@ def input_notes(albedo: maps.AlbedoImage | maps.IndexedAlbedo) -> list[str]:
     if h * w == 1:
         notes.append("1 x 1 image: the maps are uniform")
     return notes
+
+
+def one_line(exc: BaseException) -> str:
+    """An exception as the one-line error a user sees (bake.py's stderr, the add-on's report): its message on
+    one line (the class name if it has none), with the file name of an OSError that does not say it."""
+    text = str(exc) or type(exc).__name__
+    if isinstance(exc, OSError) and exc.filename and str(exc.filename) not in text:
+        text = f"{text}: {exc.filename}"
+    return " ".join(text.split())
 
 
 def clamp_warnings(stats: dict[str, int], texels: int) -> list[str]:

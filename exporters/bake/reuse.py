@@ -17,6 +17,7 @@ from exporters import maps
 from exporters.bake.options import BakeOptions
 from exporters.bake.report import BakeResult
 from exporters.bake.targets import BakeError, parse_targets
+from exporters.image_input import ColorSpace, IndexedAlbedo
 
 #: Version of the bake key (bump when the maps of the same inputs change).  2: the painted colour by default.
 KEY_VERSION = 2
@@ -35,6 +36,18 @@ def bake_key(image_id: str, model_sha256: str, stem: str, options: BakeOptions, 
     return hashlib.sha256(json.dumps(spec, sort_keys=True).encode()).hexdigest()
 
 
+def file_id(path: str | os.PathLike, colorspace: ColorSpace | str) -> str:
+    """What identifies an image file in the bake key: a hash of its bytes and the colour space asked for."""
+    return f"file:{maps.sha256_file(path)}:{colorspace}"
+
+
+def job_key(image_id: str, model_sha256: str, stem: str, options: BakeOptions,
+            shape: tuple[int, int] | None = None) -> str:
+    """The key of a bake (:func:`bake_key`) with its UV coverage mask (``options.texel_mask``) hashed in;
+    ``shape``: the image's (H, W), checked against the mask when known (BakeError)."""
+    return bake_key(image_id, model_sha256, stem, options, mask_sha256(options.texel_mask, shape))
+
+
 def mask_sha256(mask: np.ndarray | None, shape: tuple[int, int] | None = None) -> str:
     """Hash of a UV coverage mask for the bake key ("" without one); BakeError if it is not (H, W) = ``shape``."""
     if mask is None:
@@ -45,7 +58,7 @@ def mask_sha256(mask: np.ndarray | None, shape: tuple[int, int] | None = None) -
     return hashlib.sha256(np.packbits(m.astype(bool)).tobytes() + str(m.shape).encode()).hexdigest()
 
 
-def pixels_id(image: maps.IndexedAlbedo) -> str:
+def pixels_id(image: IndexedAlbedo) -> str:
     """What identifies an image without a file in the bake key: a hash of its decoded colours and index."""
     digest = hashlib.sha256(np.ascontiguousarray(image.palette, np.float64).tobytes())
     digest.update(np.ascontiguousarray(image.index, np.int32).tobytes())
