@@ -58,8 +58,8 @@ from pathlib import Path
 import numpy as np
 
 from exporters.constants import WAVELENGTHS_NM
+from training.paths import SHIPPED_MODEL_DIR as DEFAULT_MODEL_DIR
 from training.validate import paper
-from training.validate.cli import DEFAULT_MODEL_DIR
 from training.validate.metrics import BANDS as METRIC_BANDS
 
 #: Mixture fields of the model's outputs, each (N, K, W).

@@ -301,8 +301,8 @@ def _network(opts, files, albedo, tones, wl_idx):
     painted colour of the albedo; decoder on the true p), and the decoder's full outputs (T, K, 376) for the
     figures (the paper's Fig. spectral_params)."""
     from exporters import inference
-    from exporters.mitsuba import decode
     from exporters.painted import paint_mixture
+    from training.validate.mitsuba_scene import decode
 
     model = inference.load_model(files["skin_inversion.onnx"], threads=opts.threads)
     out = model.run(np.asarray(albedo, dtype=np.float32))
