@@ -15,7 +15,7 @@ writes ``decomposition.json``, ``decomposition.md`` and the figures ``fig_sss_re
 * ``measured``: the colours (D65, linear sRGB) of the 50 measured NIST skin spectra
   (``training.realskin.measurements``, specular reflection included) through ``skin_inversion.onnx``;
 * ``subjects``: ``SUBJECT_SAMPLES`` texels of each of the three demo albedo textures (light, medium, dark:
-  ``training.demo_render.skin_albedo_texture``) through ``skin_inversion.onnx``.
+  ``training.demo_subject.skin_albedo_texture``) through ``skin_inversion.onnx``.
 
 **Definitions** (ours where the paper gives none, marked *choice*):
 
@@ -311,7 +311,7 @@ def measured_colours() -> np.ndarray:
 def subject_textures(size: int) -> dict[str, np.ndarray]:
     """The demo's light, medium and dark albedo textures: name -> (size, size, 3) linear sRGB."""
     from exporters.colorimetry import srgb_decode
-    from training.demo_render import TONES, skin_albedo_texture
+    from training.demo_subject import TONES, skin_albedo_texture
 
     return {name: srgb_decode(skin_albedo_texture(size, seed=0, base=base) / 255.0) for name, base in TONES.items()}
 
