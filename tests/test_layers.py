@@ -170,3 +170,18 @@ def test_the_addon_never_imports_training():
     for name, path in modules().items():
         if name.startswith("blender_addon"):
             assert not {n for n in imports(name, path) if n.split(".")[0] == "training"}, name
+
+
+def test_the_shipped_model_paths_come_from_the_addon_without_bpy():
+    """training takes the shipped model's paths from blender_addon/models/__init__.py, loaded by its file."""
+    import subprocess
+    import sys
+
+    code = ("import sys; sys.modules['bpy'] = None\n"
+            "from training import paths\n"
+            "assert paths.SHIPPED_MODEL.name == 'skin_inversion.onnx' and paths.SHIPPED_MODEL.is_file()\n"
+            "assert all(p.is_file() for p in (paths.SHIPPED_DECODER, paths.SHIPPED_TABLE, paths.SHIPPED_CARD))\n"
+            "assert paths.SHIPPED_MODEL_DIR == paths.REPO_ROOT / 'blender_addon' / 'models'\n"
+            "assert not [m for m in sys.modules if m.startswith('blender_addon')]")
+    result = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=60)
+    assert result.returncode == 0, result.stderr
