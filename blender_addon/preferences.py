@@ -6,8 +6,10 @@ import os
 
 import bpy
 
-#: Where `python -m training export` puts the model (docs/contracts.md §3), relative to this package.
-DEFAULT_MODEL = os.path.join(os.path.dirname(os.path.abspath(__file__)), "models", "skin_inversion.onnx")
+from .models import INVERSION_MODEL
+
+#: The model shipped with the add-on (``models.INVERSION_MODEL``; `python -m training export` writes it), as a str.
+DEFAULT_MODEL = str(INVERSION_MODEL)
 
 #: Module name Blender registered the add-on under (set by register(); the extension id when installed).
 ADDON_NAME = __package__

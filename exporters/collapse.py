@@ -60,7 +60,6 @@ All arrays are float64; every output is finite for finite input (non-finite inpu
 
 from __future__ import annotations
 
-import sys
 from dataclasses import dataclass, replace
 from functools import cache
 from pathlib import Path
@@ -96,7 +95,7 @@ CHANNEL_MATRIX_PATH = Path(__file__).resolve().parent / "data" / "linear_srgb_d6
 
 def compute_channel_matrix() -> np.ndarray:
     """M (3, 376) from exporters.colorimetry (colour-science): XYZ-to-linear-sRGB matrix times the D65 CMF
-    weights.  ``python -m exporters.collapse`` writes it to CHANNEL_MATRIX_PATH."""
+    weights.  ``python -m training channel-matrix`` writes it to CHANNEL_MATRIX_PATH."""
     return xyz_to_linear_srgb_matrix("D65") @ xyz_weights("D65")
 
 
@@ -344,9 +343,3 @@ def to_cycles(media: ChannelMedia, unit_scale_m: float = 1.0) -> CyclesMaps:
     g3 = np.broadcast_to(media.g[..., None], media.alpha.shape)
     cin = cycles.medium_to_cycles(media.alpha, media.sigma_t_cm, g3, unit_scale_m=unit_scale_m, g_max=cycles.G_MAX)
     return CyclesMaps(color=cin.color, radius=cin.radius, weight=media.weight, anisotropy=np.array(media.g))
-
-
-if __name__ == "__main__":
-    np.save(CHANNEL_MATRIX_PATH, compute_channel_matrix())
-    print(f"wrote {CHANNEL_MATRIX_PATH}")
-    sys.exit(0)

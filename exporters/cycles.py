@@ -368,7 +368,7 @@ def medium_to_cycles(alpha, sigma_t_cm, g, unit_scale_m=1.0, g_common=None,
 
 #: Hemispherical Fresnel reflectance of a smooth dielectric (air -> n) for cosine-weighted light,
 #: F_dr(n) = 2 int_0^1 F(mu; n) mu dmu, as a polynomial in x = (n - 1)/(n + 1) with no constant term (x^1..x^5).
-#: Least-squares fit to Gauss-Legendre quadrature (exporters.mitsuba.diffuse_specular) on n in [1, 3.8], held
+#: Least-squares fit to Gauss-Legendre quadrature (training.sim.physics.diffuse_specular) on n in [1, 3.8], held
 #: exact at n = 1.4 (0.0768115): |error| <= 1.1e-3 over [1, 3.8], <= 7e-5 for n in [1.25, 1.7].  A polynomial
 #: because the node group evaluates it with Math nodes (the closed form cancels catastrophically in float32
 #: near n = 1).

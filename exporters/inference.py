@@ -24,10 +24,6 @@ from exporters.constants import N_WAVELENGTHS
 from exporters.maps import sha256_file
 
 INPUT_NAME = "albedo_rgb"
-#: The bundled model (blender_addon/models/, docs/contracts.md §3), in the repository and the installed extension alike.
-DEFAULT_MODEL_PATH = Path(__file__).resolve().parents[1] / "blender_addon" / "models" / "skin_inversion.onnx"
-#: The bundled decoder (docs/contracts.md §3): biophysical rows (N, 5) -> reflectance and the K mixture components.
-DEFAULT_DECODER_PATH = DEFAULT_MODEL_PATH.with_name("skin_decoder.onnx")
 #: docs/contracts.md §3 outputs of skin_inversion.onnx and their shapes after the batch axis ("K" = components).
 OUTPUT_SHAPES: dict[str, tuple] = {
     "biophysical": (5,),
@@ -267,9 +263,9 @@ def _decoder_session(path: str, mtime_ns: int, size: int):
     return ort.InferenceSession(path, sess_options=opts, providers=["CPUExecutionProvider"])
 
 
-def run_decoder(biophysical: np.ndarray, path: str | os.PathLike = DEFAULT_DECODER_PATH) -> dict[str, np.ndarray]:
-    """``skin_decoder.onnx`` at ``path`` on rows (N, 5) of docs/contracts.md §1 (t_epi in cm): every output
-    by name (reflectance (N, 376); alpha, sigma_t, g, weight (N, K, 376)), float64.  ValueError if the file
+def run_decoder(biophysical: np.ndarray, path: str | os.PathLike) -> dict[str, np.ndarray]:
+    """``skin_decoder.onnx`` at ``path`` on biophysical rows (N, 5) of docs/contracts.md §1 (t_epi in cm): every
+    output by name (reflectance (N, 376); alpha, sigma_t, g, weight (N, K, 376)), float64.  ValueError if the file
     is missing; the outputs are returned as the graph gives them (callers check what they use)."""
     p = Path(path)
     if not p.is_file():

@@ -23,14 +23,12 @@ Grid: u = sqrt(1 - alpha) uniform on [1e-3, 1] (129 nodes; near alpha -> 1, R ~ 
 in u, so bilinear interpolation in (u, g) is accurate to ~1e-3, see tests/test_collapse.py), and g from 0
 to 0.95 in steps of 0.05.  alpha above 1 - 1e-6 is treated as 1 - 1e-6.
 
-Regenerate with ``python -m exporters.reflectance_tables --build`` (needs iadpython, a test dependency;
-about 10 minutes on one core).
+Regenerate with ``python -m training reflectance-tables --build`` (:func:`build_tables`; needs iadpython, a
+test dependency; about 10 minutes on one core).
 """
 
 from __future__ import annotations
 
-import argparse
-import sys
 import time
 from functools import cache
 from pathlib import Path
@@ -107,7 +105,7 @@ def build_tables(path: str | Path = TABLE_PATH) -> Path:
 @cache
 def _load() -> dict[str, np.ndarray]:
     if not TABLE_PATH.is_file():
-        raise FileNotFoundError(f"reflectance tables missing: {TABLE_PATH} (python -m exporters.reflectance_tables "
+        raise FileNotFoundError(f"reflectance tables missing: {TABLE_PATH} (python -m training reflectance-tables "
                                 "--build)")
     with np.load(TABLE_PATH) as data:
         tables = {key: np.array(data[key]) for key in ("u", "g", "mu", "directional", "model")}
@@ -259,19 +257,3 @@ def albedo_for_reflectance(boundary: Boundary, reflectance_target, g, ior: float
     frac = np.clip((r0 - target) / np.where(r0 > r1, r0 - r1, 1.0), 0.0, 1.0)
     u = U_MIN + (j + frac) * (1.0 - U_MIN) / (N_U - 1)
     return (1.0 - u**2).reshape(shape)
-
-
-def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m exporters.reflectance_tables", description=__doc__.splitlines()[0])
-    parser.add_argument("--build", action="store_true", help="recompute the tables with iadpython")
-    parser.add_argument("--out", type=Path, default=TABLE_PATH)
-    args = parser.parse_args(argv)
-    if not args.build:
-        parser.print_help()
-        return 0
-    print(f"wrote {build_tables(args.out)}")
-    return 0
-
-
-if __name__ == "__main__":
-    sys.exit(main())

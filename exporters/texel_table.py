@@ -30,17 +30,18 @@ differs from the model's is refused (the bake falls back to exact evaluation wit
 
 Build (about 30 s of CPU for the shipped step 0.015 on 2 cores; the painted colour solves a 3 x 3 system per node)::
 
-    python -m exporters.texel_table --model blender_addon/models/skin_inversion.onnx \\
+    python -m training texel-table --model blender_addon/models/skin_inversion.onnx \\
         --out blender_addon/models/skin_inversion_table.npz --overwrite
+
+(the command lives in ``training.commands.texel_table``; this module holds only what a bake needs and the
+builder it calls).
 """
 
 from __future__ import annotations
 
-import argparse
 import datetime as _dt
 import json
 import os
-import sys
 import time
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
@@ -55,14 +56,12 @@ from exporters.maps import sha256_file
 from exporters.texel_records import CollapseOptions
 
 FORMAT = "spectral_skin_sss texel table v3"
-#: The shipped table, beside the model it was made from.
-DEFAULT_PATH = Path(__file__).resolve().parents[1] / "blender_addon" / "models" / "skin_inversion_table.npz"
 #: skin space = COORDS @ sRGB-encoded RGB (module docstring).
 COORDS = np.array([[1 / 3, 1 / 3, 1 / 3], [1.0, -1.0, 0.0], [0.0, 1.0, -1.0]])
 COORDS_INV = np.linalg.inv(COORDS)
 #: Box of the grid in skin space: l, c1, c2.
 DEFAULT_BOX: tuple[tuple[float, float], ...] = ((0.0, 1.0), (-0.06, 0.40), (-0.08, 0.24))
-#: Grid step in skin space (the same on every axis).  Measured against exact evaluation (exporters.bench):
+#: Grid step in skin space (the same on every axis).  Measured against exact evaluation (training.bench.runtime):
 #: 0.015 keeps the baked Cycles appearance (painted colour) within mean ΔE76 0.017, max 0.05 on skin, in a 2.7 MB file.
 DEFAULT_STEP: float = 0.015
 #: The biophysical vector is stored as the logit of its position in its range, clipped this far from 0 and 1.
@@ -285,7 +284,7 @@ def build_steps(model: inference.InversionSession, options: CollapseOptions | No
             "(exporters.texel_table)", "box": [list(map(float, b)) for b in box], "step": float(step),
             "shape": list(shape), "valid_nodes": int(ok.sum()), "build_seconds": round(seconds, 2),
             "created_utc": _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds"),
-            "command": "python -m exporters.texel_table " + " ".join(_command_args(model, options, step)),
+            "command": "python -m training texel-table " + " ".join(_command_args(model, options, step)),
             "quantisation": {"lo": lo.tolist(), "hi": hi.tolist(), "levels": _Q_MAX}}
     return TexelTable(values=_dequantise(q, lo, hi), origin=origin, step=np.full(3, float(step)), k=model.k,
                       model_sha256=model.sha256, options=options, meta=meta)
@@ -342,13 +341,13 @@ def load(path: str | os.PathLike) -> TexelTable:
     """Read a table written by :func:`save`; TableError if it is missing or not one."""
     path = Path(path)
     if not path.is_file():
-        raise TableError(f"no fast-path table at {path}: build it with python -m exporters.texel_table")
+        raise TableError(f"no fast-path table at {path}: build it with python -m training texel-table")
     try:
         with np.load(path, allow_pickle=False) as data:
             q, origin, step = data["q"], data["origin"], data["step"]
             meta = json.loads(str(data["meta"]))
     except (OSError, KeyError, ValueError) as exc:
-        raise TableError(f"{path} is not a texel table ({exc}); rebuild it with python -m exporters.texel_table"
+        raise TableError(f"{path} is not a texel table ({exc}); rebuild it with python -m training texel-table"
                          ) from None
     if meta.get("format") != FORMAT:
         raise TableError(f"{path}: format {meta.get('format')!r}, expected {FORMAT!r}; rebuild it")
@@ -358,41 +357,3 @@ def load(path: str | os.PathLike) -> TexelTable:
     return TexelTable(values=values, origin=np.asarray(origin, np.float64), step=np.asarray(step, np.float64),
                       k=int(meta["K"]), model_sha256=meta["model_sha256"], options=opts, meta=meta,
                       sha256=sha256_file(path), path=path)
-
-
-def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m exporters.texel_table", description=__doc__.splitlines()[0])
-    parser.add_argument("--model", type=Path, default=inference.DEFAULT_MODEL_PATH, help="skin_inversion.onnx")
-    parser.add_argument("--out", type=Path, default=DEFAULT_PATH, help="table file (.npz)")
-    parser.add_argument("--step", type=float, default=DEFAULT_STEP, help="grid step in skin space")
-    parser.add_argument("--model-colour", action="store_true", help="table for bakes with --model-colour")
-    parser.add_argument("--ior", type=float, default=CollapseOptions().ior, help="IOR of the Cycles closures")
-    parser.add_argument("--min-mfp-m", type=float, default=CollapseOptions().min_mfp_cm / 100,
-                        help="smallest mean free path given to Cycles, metres")
-    parser.add_argument("--threads", type=int, default=0, help="onnxruntime threads (0 = all cores)")
-    parser.add_argument("--overwrite", action="store_true")
-    parser.add_argument("--check", action="store_true", help="only check that --out was made from --model")
-    args = parser.parse_args(argv)
-    if args.check:
-        table = load(args.out)
-        sha = sha256_file(args.model)
-        same = table.model_sha256 == sha
-        print(f"{args.out}: made from model {table.model_sha256[:12]}, {args.model.name} is {sha[:12]}: "
-              f"{'matches' if same else 'DOES NOT MATCH (rebuild the table)'}")
-        return 0 if same else 1
-    if args.out.exists() and not args.overwrite:
-        print(f"error: {args.out} exists; pass --overwrite", file=sys.stderr)
-        return 2
-    model = inference.load_model(args.model, threads=args.threads)
-    options = CollapseOptions(colour="model" if args.model_colour else "painted", ior=args.ior,
-                              min_mfp_cm=args.min_mfp_m * 100)
-    table = build(model, options, args.step)
-    save(table, args.out, overwrite=args.overwrite)
-    m = table.meta
-    print(f"wrote {args.out} ({args.out.stat().st_size / 1e6:.2f} MB): {m['shape']} grid, {m['valid_nodes']} nodes "
-          f"evaluated in {m['build_seconds']:.1f} s, model {table.model_sha256[:12]}, K = {table.k}")
-    return 0
-
-
-if __name__ == "__main__":
-    sys.exit(main())

@@ -14,16 +14,15 @@ import pytest
 import torch
 
 from exporters.constants import R_EDGES_CM
-from training.ablations import cli
 from training.ablations.run import TRAINED
-from training.fit.dipole import dipole_lut
+from training.commands import ablations as cli
 from training.fit.mixture import mix
 from training.fit.optimize import ISOTROPIC_G, fit_schedule
 from training.model import ModelConfig
-from training.model.config import SLAB_DEPTH_INIT
+from training.model.config import SIZES, SLAB_DEPTH_INIT
+from training.sim.dipole import dipole_lut
 from training.sim.lut_interp import LookupTables, bin_centres
 from training.train import losses as train_losses
-from training.train.cli import SIZES
 from training.train.data import load_split
 from training.train.loop import checkpoint_path, load_checkpoint
 from training.train.run import TrainConfig, train
@@ -106,7 +105,7 @@ def test_isotropic_fit_recovers_the_similar_medium():
     """g held at 0: a single anisotropic dipole medium (alpha 0.99, g 0.8, sigma_t 200 / cm) is fitted by the
     isotropic medium of the same reduced albedo alpha (1 - g) / (1 - alpha g) and reduced extinction
     sigma_t (1 - alpha g), the similarity relation under which the dipole is exact."""
-    from training.fit.dipole import dipole_mixture_profile
+    from training.sim.dipole import dipole_mixture_profile
 
     edges = np.concatenate([[0.0], np.geomspace(1e-3, 1e4, 512)])
     albedo = np.concatenate([[0.0], 1.0 - np.geomspace(0.95, 1e-5, 60), [1.0]])

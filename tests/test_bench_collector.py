@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import sys
 
-from training import bench
+from training.bench import collect as bench
 
 
 def _module(folder, name: str, workload: str) -> None:

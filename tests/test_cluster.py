@@ -23,9 +23,9 @@ import psutil
 import pytest
 
 from training.cluster import engine
-from training.data.cli import main as dataset_main
-from training.fit.cli import main as fit_main
-from training.sim.cli_lut import main as lut_main
+from training.commands.dataset import main as dataset_main
+from training.commands.fit import main as fit_main
+from training.commands.lut import main as lut_main
 
 ROOT = Path(__file__).resolve().parents[1]
 LUT_ARGS = ["--albedo-n", "8", "--g-n", "24", "--photons", "100", "--max-steps", "500", "--no-progress"]

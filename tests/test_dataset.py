@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 
 from exporters.constants import PARAM_RANGES
+from training.commands.dataset import main as dataset_main
 from training.data import store
 from training.data.build import build_split, merge
-from training.data.cli import main as dataset_main
 from training.data.presets import PRESETS
 from training.data.reweight import TrajectoryStore
 from training.data.sampling import T_EPI_LEVELS_CM, training_tones, validation_tones

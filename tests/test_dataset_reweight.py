@@ -12,8 +12,8 @@ import pytest
 from exporters.colorimetry import xyz_weights
 from training.data.reweight import Trajectories, TrajectoryStore, baseline_absorption, reweight, walk
 from training.data.sampling import T_EPI_LEVELS_CM
+from training.sim.tissue import skin_medium
 from training.sim.transport import simulate
-from training.skin.tissue import skin_medium
 
 CHANNELS = np.arange(0, 376, 4)
 #: The store tests check bookkeeping, not physics: packets capped at 2,000 steps (the default 100,000 lets a few

@@ -12,11 +12,10 @@ import torch
 
 from exporters.colorimetry import SRGB_LUMINANCE, spectrum_to_linear_srgb
 from exporters.constants import N_WAVELENGTHS
-from training.export import cli as export_cli
+from training.commands import export as export_cli
 from training.export.graphs import export_graphs, parity, parity_failures, session
 from training.model import ModelConfig
-from training.model.config import FALLBACK_ALBEDO_RGB
-from training.train.cli import SIZES
+from training.model.config import FALLBACK_ALBEDO_RGB, SIZES
 from training.train.run import TrainConfig, load_model, train
 from training.train.toy import write_toy
 

@@ -15,10 +15,11 @@ import onnx
 import pytest
 
 from exporters import bake, cycles, inference, maps, reflectance_tables, texel_records, texel_table
-from exporters.bench import skin_texture
 from exporters.colorimetry import delta_e76, linear_srgb_to_lab
 from exporters.constants import PARAM_NAMES, PARAM_RANGES
 from tests.addon_scene import write_image
+from training.bench.runtime import skin_texture
+from training.paths import SHIPPED_TABLE
 
 ROOT = Path(__file__).resolve().parents[1]
 MODELS = ROOT / "blender_addon" / "models"
@@ -51,14 +52,17 @@ def appearance(folder: Path, stem: str, k: int) -> np.ndarray:
 
 
 def test_shipped_table_was_made_from_the_shipped_model():
-    table = texel_table.load(texel_table.DEFAULT_PATH)
-    assert texel_table.DEFAULT_PATH == bake.default_table_path(MODEL)
+    table = texel_table.load(SHIPPED_TABLE)
+    assert SHIPPED_TABLE == bake.default_table_path(MODEL) == MODELS / "skin_inversion_table.npz"
     assert table.model_sha256 == maps.sha256_file(MODEL) == CARD["files"]["skin_inversion.onnx"]["sha256"], \
-        "rebuild the table: python -m exporters.texel_table --overwrite"
+        "rebuild the table: python -m training texel-table --overwrite"
     assert table.k == CARD["K"] and table.options == texel_table.CollapseOptions()
-    assert table.meta["command"].startswith("python -m exporters.texel_table --model ")
+    # the command that built it (the shipped table predates the builder's move from `python -m exporters.texel_table`
+    # to `python -m training texel-table`; tables built since record the latter, see the round-trip test)
+    assert table.meta["command"].startswith(("python -m training texel-table --model ",
+                                             "python -m exporters.texel_table --model "))
     assert sum(p.stat().st_size for p in MODELS.iterdir()) < 25e6  # the add-on's model folder stays small
-    proc = subprocess.run([sys.executable, "-m", "exporters.texel_table", "--check"], capture_output=True, text=True,
+    proc = subprocess.run([sys.executable, "-m", "training", "texel-table", "--check"], capture_output=True, text=True,
                           cwd=ROOT, timeout=60)
     assert proc.returncode == 0 and "matches" in proc.stdout
 
@@ -76,7 +80,7 @@ def test_table_bake_matches_exact_bake(skin_png, tmp_path):
     np.testing.assert_allclose(bf[..., 5], be[..., 5], rtol=0.02)  # exposure (laptop model: 1.5 % max here)
     record = json.loads((tmp_path / "fast" / "skin_maps.json").read_text())
     assert record["evaluation"]["mode"] == "table"
-    assert record["evaluation"]["table"]["sha256"] == maps.sha256_file(texel_table.DEFAULT_PATH)
+    assert record["evaluation"]["table"]["sha256"] == maps.sha256_file(SHIPPED_TABLE)
     assert json.loads((tmp_path / "exact" / "skin_maps.json").read_text())["evaluation"]["mode"] == "exact"
 
 
@@ -139,11 +143,11 @@ def test_table_of_another_model_is_refused_with_a_warning(skin_png, tmp_path):
     onnx.save(other, str(copy))
     out = tmp_path / "maps"
     proc = subprocess.run([sys.executable, str(ROOT / "blender_addon" / "bake.py"), "--albedo", str(skin_png), "--out",
-                           str(out), "--model", str(copy), "--table", str(texel_table.DEFAULT_PATH), "--threads", "1"],
+                           str(out), "--model", str(copy), "--table", str(SHIPPED_TABLE), "--threads", "1"],
                           capture_output=True, text=True, timeout=300, cwd=ROOT)
     assert proc.returncode == 0, proc.stderr
     assert "warning: fast-path table" in proc.stderr and "refused" in proc.stderr
-    assert "python -m exporters.texel_table" in proc.stderr  # says how to rebuild
+    assert "python -m training texel-table" in proc.stderr  # says how to rebuild
     record = json.loads((out / "skin_maps.json").read_text())
     assert record["evaluation"]["mode"] == "exact" and record["stats"]["texels_evaluated_exactly"] == 48 * 48
 
@@ -156,6 +160,8 @@ def test_table_file_round_trip_and_bad_files(tmp_path):
         texel_table.save(table, path)
     back = texel_table.load(path)
     assert back.model_sha256 == model.sha256 and back.shape == table.shape and back.sha256 == maps.sha256_file(path)
+    assert back.meta["command"] == "python -m training texel-table --model blender_addon/models/skin_inversion.onnx " \
+                                   "--step 0.1"  # how to rebuild it
     span = np.asarray(back.meta["quantisation"]["hi"]) - np.asarray(back.meta["quantisation"]["lo"])
     ok = np.isfinite(table.values)
     assert np.array_equal(ok, np.isfinite(back.values))

@@ -1,7 +1,7 @@
-"""`python -m training fit` (training/fit/cli.py): JSON contract, errors, parameter output.
+"""`python -m training fit` (training/commands/fit.py): JSON contract, errors, parameter output.
 
 The tone file is a closed-form two-component dipole mixture at a few wavelengths, the LUT the
-dipole test table (training/fit/dipole.py: test/reference tables only) on a wide radial grid.
+dipole test table (training/sim/dipole.py: test/reference tables only) on a wide radial grid.
 """
 
 from __future__ import annotations
@@ -12,8 +12,8 @@ import numpy as np
 import pytest
 
 from exporters.constants import R_EDGES_CM, WAVELENGTHS_NM
-from training.fit.cli import main
-from training.fit.dipole import dipole_lut, dipole_mixture_profile
+from training.commands.fit import main
+from training.sim.dipole import dipole_lut, dipole_mixture_profile
 
 WIDE_EDGES_MFP = np.concatenate([[0.0], np.geomspace(1e-3, 1e4, 512)])
 

@@ -1,7 +1,7 @@
 """`fit --dataset` (training/fit/dataset.py): output layout, resume, shards, refusal to mix runs.
 
 The split file is written with the dataset's own store (training/data/store.py); its profiles are
-closed-form dipole media (test tables only, training/fit/dipole.py), and the fits are cut short
+closed-form dipole media (test tables only, training/sim/dipole.py), and the fits are cut short
 (a few iterations): these tests check the plumbing, test_fit_mixture.py the fitting.
 """
 
@@ -14,11 +14,11 @@ import numpy as np
 import pytest
 
 from exporters.constants import N_WAVELENGTHS, R_EDGES_CM
+from training.commands.fit import main
 from training.data import store
 from training.fit import optimize
-from training.fit.cli import main
 from training.fit.dataset import fit_split, out_path
-from training.fit.dipole import dipole_lut, dipole_mixture_profile
+from training.sim.dipole import dipole_lut, dipole_mixture_profile
 from training.sim.lut_interp import LookupTables
 
 WIDE_EDGES_MFP = np.concatenate([[0.0], np.geomspace(1e-3, 1e4, 512)])

@@ -1,6 +1,6 @@
 """Fitting mixtures of K media through a LUT (training/fit/): recovery, K progression, robustness.
 
-The LUT here is the classical diffusion dipole (a test table only, training/fit/dipole.py) on a radial
+The LUT here is the classical diffusion dipole (a test table only, training/sim/dipole.py) on a radial
 grid wide enough (1e-3 .. 1e4 mfp) to hold the whole profile of high-albedo media.  Targets are built
 from known mixtures in closed form (the dipole formulas evaluated directly, not through the code under
 test) so that the true answer is known.
@@ -14,9 +14,9 @@ import torch
 
 from exporters.constants import R_EDGES_CM
 from training.fit import loss as fit_loss
-from training.fit.dipole import dipole_lut, dipole_mixture_profile
 from training.fit.mixture import Mixture, n_params, pack, unpack
 from training.fit.optimize import fit_schedule
+from training.sim.dipole import dipole_lut, dipole_mixture_profile
 from training.sim.lut_interp import LookupTables, bin_centres
 
 WIDE_EDGES_MFP = np.concatenate([[0.0], np.geomspace(1e-3, 1e4, 512)])
@@ -266,7 +266,7 @@ def test_k_progression_on_monte_carlo_skin_tones(lut):
     wavelengths 250-1000 nm, 50k photons; how they were made is in that folder's README) fitted through
     the dipole table: K = 2 removes most of K = 1's shape error (the paper: 67 %; 68 % here, 2026-11-23),
     K = 3 is no worse than K = 2, reflectance stays within a few percent at every wavelength."""
-    from training.fit.bench import bench_problems
+    from training.fit.problems import bench_problems
 
     pr = bench_problems(quick=False)
     assert pr["names"] == ["mc_R02", "mc_R08"] and pr["profile"].shape == (32, 512)

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 
-from training.cli import COMMANDS
+from training.commands.dispatch import COMMANDS
 
 ROOT = Path(__file__).resolve().parents[1]
 SPEC_COMMANDS = [

@@ -2,7 +2,7 @@
 
 References are independent of the code under test: tables built from closed forms whose exact
 interpolant is known (trilinear functions reproduce exactly), and the diffusion dipole (a test table
-only; see training/fit/dipole.py) for physically shaped checks.
+only; see training/sim/dipole.py) for physically shaped checks.
 """
 
 from __future__ import annotations
@@ -12,7 +12,7 @@ import pytest
 import torch
 
 from exporters.constants import radial_edges
-from training.fit.dipole import dipole_lut
+from training.sim.dipole import dipole_lut
 from training.sim.lut_interp import LookupTables, bin_centres
 
 EDGES = radial_edges()

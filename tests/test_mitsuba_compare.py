@@ -3,7 +3,7 @@
 The CI-sized form of the acceptance check: three representative tones at five wavelengths from UV to
 NIR, the same decoder media in both renderers; they must agree within 2 % or 4 combined standard errors.
 At CI sample counts the standard errors are 1-10 %; the 2 % row at high sample counts is the benchmark
-``training.validate.bench`` (bench/results.md).
+``training.bench.validate`` (bench/results.md).
 """
 
 from __future__ import annotations
@@ -12,9 +12,9 @@ import json
 
 import numpy as np
 
-from exporters import mitsuba as em
 from training.skin.tones import load_tones
 from training.validate import compare
+from training.validate import mitsuba_scene as em
 from training.validate.mixture import mixture_reflectance
 
 WAVELENGTHS = [300.0, 450.0, 550.0, 650.0, 950.0]

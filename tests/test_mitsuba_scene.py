@@ -1,4 +1,4 @@
-"""Mitsuba 3 scenes of exporters.mitsuba against independent references (adding-doubling, quadrature).
+"""Mitsuba 3 scenes of training.validate.mitsuba_scene against independent references (adding-doubling, quadrature).
 
 Scalar variants at small sample counts (CI); the LLVM variant only where libLLVM 19 is installed
 (`make mitsuba`).  References: iadpython (Prahl's adding-doubling) for the slab, scipy's quad of the
@@ -12,8 +12,8 @@ import numpy as np
 import pytest
 from scipy.integrate import quad
 
-from exporters import mitsuba as em
 from exporters.constants import WAVELENGTHS_NM
+from training.validate import mitsuba_scene as em
 
 
 def _fresnel(mu: float, n: float = 1.4) -> float:

@@ -9,9 +9,9 @@ import matplotlib.image as mpimg
 import numpy as np
 import pytest
 
-from exporters import mitsuba as em
 from exporters.maps import sha256_file
 from training.skin.tones import load_tones
+from training.validate import mitsuba_scene as em
 from training.validate import strips
 
 FIGURES = Path(__file__).resolve().parent.parent / "docs" / "figures"

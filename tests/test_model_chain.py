@@ -9,9 +9,9 @@ import torch
 
 from exporters.colorimetry import SRGB_LUMINANCE, spectrum_to_linear_srgb
 from exporters.constants import PARAM_RANGES, WAVELENGTHS_NM
-from training.fit.dipole import dipole_lut
 from training.model import ModelConfig, SkinChain
 from training.model.config import FALLBACK_ALBEDO_RGB, SLAB_C
+from training.sim.dipole import dipole_lut
 from training.sim.lut_interp import LookupTables
 from training.train import losses as train_losses
 

@@ -100,7 +100,7 @@ def test_bad_input_raises(network):
 
 
 def test_mitsuba_mixture_takes_the_painted_colour():
-    from exporters.mitsuba import decode
+    from training.validate.mitsuba_scene import decode
 
     tone = decode([0.035, 0.025, 0.012, 0.75, 0.78])  # R05 of tones.csv
     rgb = np.array([0.40, 0.22, 0.15])

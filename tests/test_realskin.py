@@ -8,13 +8,13 @@ import pytest
 import torch
 
 from exporters.constants import N_TISSUE, WAVELENGTHS_NM
-from training.cli import main as training_main
+from training.commands.dispatch import main as training_main
 from training.data.reweight import baseline_absorption, walk
 from training.realskin.forward import T_EPI_FINE_LEVELS_CM, MonteCarloForward
 from training.realskin.geometry import rough_specular, smooth_specular
 from training.realskin.measurements import NIST_FILE, grid_channels, read_measurements
+from training.sim.tissue import skin_medium
 from training.sim.transport import simulate
-from training.skin.tissue import skin_medium
 
 
 def test_shipped_measurements_are_read_on_the_model_grid():

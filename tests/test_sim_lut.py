@@ -16,7 +16,7 @@ import pytest
 import torch
 
 from exporters.constants import R_EDGES_MFP
-from training.sim.cli_lut import main as lut_main
+from training.commands.lut import main as lut_main
 from training.sim.lut import CountBins, albedo_grid, simulate_columns
 from training.sim.medium import LayeredMedium
 from training.sim.transport import simulate, simulate_records

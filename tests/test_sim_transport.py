@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 import torch
 
-from training.sim.cli_layers import main as cli_main
+from training.commands.simulate_layers import main as cli_main
 from training.sim.medium import LayeredMedium
 from training.sim.transport import simulate, simulate_records
 

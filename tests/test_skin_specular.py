@@ -229,7 +229,7 @@ def test_coat_alone_reflects_exactly_fresnel(backend):
 
 
 def test_diffuse_fresnel_fit_and_coat_scale():
-    from exporters.mitsuba import diffuse_specular
+    from training.sim.physics import diffuse_specular
 
     for n in (1.05, 1.2, 1.33, 1.4, 1.5, 1.7, 2.0, 3.0, 3.8):
         assert cycles.diffuse_fresnel(n) == pytest.approx(diffuse_specular(n), abs=1.1e-3)

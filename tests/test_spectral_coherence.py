@@ -2,7 +2,7 @@
 wavelength, the coherence metric on constructed decoders, and on the shipped decoder.
 
 The constructed mixtures are smooth made-up functions of wavelength (not physics); the LUT is the
-closed-form diffusion dipole (training/fit/dipole.py), a stand-in table through which both sides of
+closed-form diffusion dipole (training/sim/dipole.py), a stand-in table through which both sides of
 the metric's "explained" comparison go.
 """
 
@@ -13,13 +13,13 @@ import pytest
 import torch
 
 from exporters.constants import WAVELENGTHS_NM
-from training.fit.bench import DIPOLE_ALBEDO, DIPOLE_EDGES_MFP
-from training.fit.dipole import dipole_lut
 from training.fit.matching import apply_order, match_along_wavelength, matched
+from training.fit.problems import DIPOLE_ALBEDO, DIPOLE_EDGES_MFP
+from training.paths import SHIPPED_DECODER
+from training.sim.dipole import dipole_lut
 from training.sim.lut_interp import LookupTables
 from training.train.spectral import interpolate, interpolation_matrix
 from training.validate import coherence as C
-from training.validate.cli import DEFAULT_MODEL_DIR
 
 FITTED = np.arange(0, 376, 4)
 
@@ -129,7 +129,7 @@ def test_a_real_change_of_weight_is_an_explained_jump(lut):
 
 
 def shipped_coherence(lut) -> dict:
-    fn = C.decoder(DEFAULT_MODEL_DIR / "skin_decoder.onnx")
+    fn = C.decoder(SHIPPED_DECODER)
     return C.coherence(C.decode(fn, C.random_tones(300, seed=0)), np.arange(0, 376, C.SHIPPED_FITTED_STRIDE), lut)
 
 
@@ -150,8 +150,8 @@ def test_sweep_fits_stay_in_one_basin_and_fit_as_well(lut):
     wavelengths, and their mean joint loss is no higher."""
     from exporters.constants import R_EDGES_CM, anisotropy
     from training.fit.dataset import fit_tones
-    from training.fit.dipole import dipole_mixture_profile
     from training.fit.sweep import fit_tones_sweep
+    from training.sim.dipole import dipole_mixture_profile
 
     widx = np.arange(0, 376, 16)
     wl, x, T = WAVELENGTHS_NM[widx], (WAVELENGTHS_NM[widx] - 250.0) / 750.0, 3

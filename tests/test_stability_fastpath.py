@@ -44,7 +44,7 @@ def model():
 
 @pytest.fixture(scope="module")
 def table():
-    return texel_table.load(texel_table.DEFAULT_PATH)
+    return texel_table.load(MODEL.with_name("skin_inversion_table.npz"))
 
 
 LO = np.array([PARAM_RANGES[p][0] for p in PARAM_NAMES])

@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 import torch
 
+from training.commands.train import main as train_main
 from training.model import ModelConfig
 from training.model.chain import SkinChain
-from training.train.cli import SIZES
-from training.train.cli import main as train_main
+from training.model.config import SIZES
 from training.train.data import load_split
 from training.train.loop import checkpoint_path, load_checkpoint
 from training.train.run import TrainConfig, train

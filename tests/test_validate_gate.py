@@ -203,9 +203,9 @@ def test_profile_fidelity_from_a_fits_file(tmp_path):
 
 def test_lut_render_is_the_tables_mixture_in_closed_form():
     """``gate.lut_render`` of a K = 2 mixture through a LUT filled from the dipole (albedo and g on the table's
-    nodes) against the dipole mixture in closed form (``training.fit.dipole``): R_d, and the profile in cm^-2
+    nodes) against the dipole mixture in closed form (``training.sim.dipole``): R_d, and the profile in cm^-2
     wherever it holds light (radial interpolation between bin centres only)."""
-    from training.fit.dipole import dipole_lut, dipole_mixture_profile
+    from training.sim.dipole import dipole_lut, dipole_mixture_profile
     from training.sim.lut_interp import LookupTables
     from training.validate.gate import Params, lut_render
 

@@ -6,7 +6,7 @@ import iadpython as iad
 import numpy as np
 import pytest
 
-from training.validate import cli as validate_cli
+from training.commands import validate as validate_cli
 from training.validate.mixture import check_mixture, mixture_reflectance, reflectance_srgb
 
 SPECULAR_NORMAL = ((1.4 - 1.0) / (1.4 + 1.0)) ** 2  # Fresnel at normal incidence, n = 1.4

@@ -15,8 +15,8 @@ from pathlib import Path
 
 import pytest
 
+from training.commands import validate as cli
 from training.export.card import VALIDATION_PLACEHOLDER, update_validation
-from training.validate import cli
 from training.validate.gate import ROWS
 from training.validate.run import OUTPUTS
 

@@ -1,12 +1,12 @@
 """training/validate/trends.py: the K = 1 medium equivalent to a profile (R, median radius) through the
-LUT, checked on closed-form dipole media binned in centimetres (training/fit/dipole.py, test tables)."""
+LUT, checked on closed-form dipole media binned in centimetres (training/sim/dipole.py, test tables)."""
 
 import numpy as np
 import pytest
 import torch
 
 from exporters.constants import R_EDGES_CM
-from training.fit.dipole import dipole_lut, dipole_mixture_profile
+from training.sim.dipole import dipole_lut, dipole_mixture_profile
 from training.sim.lut_interp import LookupTables
 from training.validate.trends import albedo_for_reflectance, equivalent_medium, median_radius
 

@@ -1,7 +1,7 @@
-"""``python -m training <command>``: see training/cli.py for the command table."""
+"""``python -m training <command>``: see training/commands/dispatch.py for the command table."""
 
 import sys
 
-from training.cli import main
+from training.commands.dispatch import main
 
 sys.exit(main(sys.argv[1:]))

@@ -16,6 +16,8 @@ import math
 
 import numpy as np
 
+from exporters.colorimetry import srgb_decode, srgb_encode
+
 #: Surface half-axis of an isolated metaball ellipsoid, per unit of radius x size, at Blender's default
 #: threshold 0.6 and stiffness 2 (measured: a radius-0.1 ball meshes to a 0.0574 m sphere).
 _METABALL_SURFACE = 0.574
@@ -122,3 +124,57 @@ def build_head(collection=None) -> list:
     head = _mesh_object(bpy, "Head", _head_mesh(bpy), collection)
     ears = [_mesh_object(bpy, f"Ear.{'L' if s < 0 else 'R'}", _ear_mesh(bpy, bmesh, s), collection) for s in (-1, 1)]
     return [head, *ears]
+
+
+# --- The subject's skin: procedural albedo textures (numpy only; the demo renders and the decomposition study
+# of training.validate use them) ------------------------------------------------------------------------------
+
+#: Base colours of the three demo textures, sRGB 8-bit codes: painted albedos of light, medium and dark skin,
+#: chosen for the demo (not measured).
+TONES: dict[str, tuple[int, int, int]] = {"light": (224, 178, 155), "medium": (176, 120, 90), "dark": (96, 62, 46)}
+#: Tint of red patches and of freckles, relative to the base colour (linear sRGB factors per channel).
+REDNESS_TINT = (1.0, 0.6, 0.65)
+FRECKLE_TINT = (0.45, 0.32, 0.25)
+
+
+def _value_noise(rng: np.random.Generator, size: int, cells: int) -> np.ndarray:
+    """Smooth noise in [0, 1], shape (size, size): a random (cells+1)^2 grid, bicubic-smoothstep interpolated."""
+    grid = rng.uniform(0.0, 1.0, (cells + 1, cells + 1))
+    t = np.linspace(0.0, cells, size, endpoint=False)
+    i = t.astype(int)
+    f = t - i
+    f = f * f * (3.0 - 2.0 * f)
+    rows = grid[i] * (1 - f)[:, None] + grid[i + 1] * f[:, None]  # (size, cells+1)
+    return rows[:, i] * (1 - f)[None, :] + rows[:, i + 1] * f[None, :]
+
+
+def _freckles(rng: np.random.Generator, size: int, count: int) -> np.ndarray:
+    """(size, size) in [0, 1]: ``count`` small Gaussian spots (radius 0.8-2.6 texels at 512: 1-3 mm on the head)."""
+    yy, xx = np.mgrid[0:size, 0:size]
+    cy = rng.uniform(0, size, count)
+    cx = rng.uniform(0, size, count)
+    radius = rng.uniform(0.8, 2.6, count) * size / 512
+    spots = np.zeros((size, size))
+    for y0, x0, r in zip(cy, cx, radius, strict=True):
+        y1, y2, x1, x2 = (int(max(0, y0 - 4 * r)), int(min(size, y0 + 4 * r + 1)), int(max(0, x0 - 4 * r)),
+                          int(min(size, x0 + 4 * r + 1)))
+        d2 = (yy[y1:y2, x1:x2] - y0) ** 2 + (xx[y1:y2, x1:x2] - x0) ** 2
+        spots[y1:y2, x1:x2] = np.maximum(spots[y1:y2, x1:x2], np.exp(-d2 / (2 * r * r)))
+    return spots
+
+
+def skin_albedo_texture(size: int = 512, seed: int = 0, base: tuple[int, int, int] = TONES["light"]) -> np.ndarray:
+    """(size, size, 3) uint8 sRGB skin albedo around ``base`` (sRGB codes): mottling (±15 % in brightness),
+    red patches (cheek-like blotches), freckles (small dark spots) and pore noise.  Rows run top to bottom
+    (v = 1 first)."""
+    rng = np.random.default_rng(seed)
+    lin = np.broadcast_to(srgb_decode(np.asarray(base, np.float64) / 255.0), (size, size, 3))
+    mottle = 0.6 * _value_noise(rng, size, 5) + 0.4 * _value_noise(rng, size, 17) - 0.5
+    lin = lin * (1.0 + 0.3 * mottle)[..., None]
+    blotch = 0.7 * _value_noise(rng, size, 4) + 0.3 * _value_noise(rng, size, 13)
+    redness = (0.6 * np.clip((blotch - 0.4) * 2.5, 0.0, 1.0) ** 1.5)[..., None]
+    lin = lin * (1.0 - redness + redness * np.asarray(REDNESS_TINT))
+    spots = (0.75 * _freckles(rng, size, size * size // 900))[..., None]
+    lin = lin * (1.0 - spots + spots * np.asarray(FRECKLE_TINT))
+    lin = lin * (1.0 + 0.03 * rng.standard_normal((size, size, 1)))
+    return np.round(np.clip(srgb_encode(np.clip(lin, 0.0, 1.0)), 0.0, 1.0) * 255).astype(np.uint8)

@@ -7,11 +7,32 @@ parts (``/scratch/me/lut_paper.npz`` -> ``me/lut_paper.npz``), enough to tell fi
 
 from __future__ import annotations
 
+import importlib.util
 import re
 from pathlib import Path
+from types import ModuleType
 
 #: The repository root (the folder holding training/ and exporters/).
 REPO_ROOT = Path(__file__).resolve().parents[1]
+
+
+def _shipped_models() -> ModuleType:
+    """The add-on's ``blender_addon/models/__init__.py`` (the paths of the shipped model files), loaded by its
+    file: importing it as ``blender_addon.models`` would run the add-on's ``__init__``, which imports bpy."""
+    path = REPO_ROOT / "blender_addon" / "models" / "__init__.py"
+    spec = importlib.util.spec_from_file_location("_spectral_skin_shipped_models", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+_SHIPPED = _shipped_models()
+#: The shipped models' folder and files, as the add-on names them (defaults of the training commands).
+SHIPPED_MODEL_DIR: Path = _SHIPPED.MODEL_DIR
+SHIPPED_MODEL: Path = _SHIPPED.INVERSION_MODEL
+SHIPPED_DECODER: Path = _SHIPPED.DECODER_MODEL
+SHIPPED_TABLE: Path = _SHIPPED.TEXEL_TABLE
+SHIPPED_CARD: Path = _SHIPPED.MODEL_CARD
 
 
 def portable(path: str | Path | None) -> str | None:

@@ -85,7 +85,7 @@ class BakeJob:
                              and len(self.palette) >= opts.cache_min_colours)
         if table is None and not opts.exact and not self._build_table:
             self.notes.append("no fast-path table for this model and these options: every distinct colour evaluated "
-                              f"exactly (python -m exporters.texel_table --model {self.model.path} builds one; "
+                              f"exactly (python -m training texel-table --model {self.model.path} builds one; "
                               f"images with {opts.cache_min_colours:,}+ colours build and cache one themselves)")
         self.evaluator = Evaluator(self.palette, self.targets, self.model, table, copts, self.threads, self.timings,
                                    chunk=opts.chunk, memory_mb=opts.memory_mb)

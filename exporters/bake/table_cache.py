@@ -54,7 +54,7 @@ def find_table(model: inference.ModelFile, options: CollapseOptions, table_path=
         if table.model_sha256 != model.sha256:
             warn(notes, f"fast-path table {path.name} was made from model {table.model_sha256[:12]}, not from "
                         f"{model.path.name} ({model.sha256[:12]}): refused, every texel is evaluated exactly; "
-                        f"rebuild it: python -m exporters.texel_table --model {model.path} --out {path} --overwrite")
+                        f"rebuild it: python -m training texel-table --model {model.path} --out {path} --overwrite")
             continue
         if table.options == options:
             return table

@@ -80,7 +80,7 @@ SWEEP_PARTLY: float = 1.1
 
 @dataclass(frozen=True)
 class Scale:
-    """What the command trains and gates.  ``size``: ``training.train.cli.SIZES``; ``epochs``/``batch``/
+    """What the command trains and gates.  ``size``: ``training.model.config.SIZES``; ``epochs``/``batch``/
     ``synthetic``: stage 1-3 settings; ``shape_weight``: stage 3's L_shape (0 = the paper's loss);
     ``tones``: gate tones; ``wavelength_step``: grid samples between gate wavelengths; ``gt_photons``: ground
     truth photons per wavelength; ``fit_steps``/``anchor_every``: the isotropic ablation's fitter."""
@@ -112,8 +112,7 @@ def _log(progress: bool, text: str) -> None:
 def train_all(out: Path, dataset: Path, fits: Path, lut: Path, scale: Scale, device: str = "cpu",
               progress: bool = True) -> dict[str, Path]:
     """Train every configuration of ``TRAINED`` into ``out/runs/<name>`` (resumed); returns {name: model.pt}."""
-    from training.model.config import ModelConfig
-    from training.train.cli import SIZES
+    from training.model.config import SIZES, ModelConfig
     from training.train.loop import checkpoint_path
     from training.train.run import TrainConfig, train
 
@@ -269,7 +268,7 @@ def markdown(record: dict) -> str:
     lines = ["# Ablations of the paper (§5, §8), trained and gated alike", "",
              f"Written by `{record['command']}`." + (" **Quick mode: plumbing only, the numbers mean nothing.**"
                                                       if record["quick"] else ""), "",
-             f"Scale: networks `{s['size']}` (training.train.cli.SIZES), epochs {s['epochs']} (stages 1-3), "
+             f"Scale: networks `{s['size']}` (training.model.config.SIZES), epochs {s['epochs']} (stages 1-3), "
              f"stage 3 L_shape weight {s['shape_weight']} (0 = the paper's loss); gate: {len(s['tones'])} tones "
              f"({', '.join(s['tones'])}), every {2 * s['wavelength_step']} nm, {s['gt_photons']:,} ground-truth "
              "photons per wavelength, rendered through the LUT (as `python -m training validate`).", "",

@@ -37,7 +37,7 @@ PRESETS: dict[str, Preset] = {
     "ci": Preset("ci", n_train=24, n_validation=8, photons=500, chunk_tones=8),
     # Laptop: >= 5,000 + 1,000 tones at noise equal to >= 1e5 direct photons per wavelength (a few hours,
     # resumable): the reweighted variance is 1.61x the direct one (mean over tones and wavelengths,
-    # training/data/bench.py), so 1.65e5 photons are walked.
+    # training/bench/data.py), so 1.65e5 photons are walked.
     "laptop": Preset("laptop", n_train=5_000, n_validation=1_000, photons=165_000, chunk_tones=16),
     # Paper: 25,000 + 5,000 tones at noise equal to 1e6 direct photons per wavelength (GPUs; see laptop).
     "paper": Preset("paper", n_train=25_000, n_validation=5_000, photons=1_650_000, chunk_tones=64),

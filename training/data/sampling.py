@@ -13,7 +13,7 @@ with ``unit_to_tones``:
   ``CORE_RANGES``, the part of the box where the model's colours are skin's (f_mel <= 0.2, L* >~ 25 in
   this model; f_blood in the physiological 0.2-7 %), the rest from the whole box (``PARAM_RANGES``),
   which stays covered.  Together: about 7 % near-black and 73 % skin colours
-  (``python -m training.data.distribution``; README "Building the dataset").
+  (``python -m training.realskin.distribution``; README "Building the dataset").
 
 The epidermis thickness is then snapped to ``T_EPI_LEVELS_CM`` so that every stored tone is simulated
 exactly at its stored thickness, and tones of one level share scattering trajectories.

@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from training.sim.tissue import skin_medium
 from training.sim.transport import simulate
 from training.sim.walker import WalkConfig
-from training.skin.tissue import skin_medium
 
 
 def simulate_direct(tones: np.ndarray, photons: int, seed: int, device: str,

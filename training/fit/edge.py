@@ -19,8 +19,8 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from training.fit.bench import bench_problems
 from training.fit.optimize import fit_schedule
+from training.fit.problems import bench_problems
 from training.sim.lut_interp import LookupTables
 
 

@@ -30,6 +30,13 @@ FALLBACK_ALBEDO_RGB: tuple[float, float, float] = (0.45, 0.30, 0.24)
 #: Smallest luminance of a predicted spectrum's colour used as a divisor in the exposure (Y of
 #: white = 1).  A sigmoid spectrum never reaches it in practice; it only keeps the division finite.
 Y_FLOOR: float = 1e-6
+#: Network sizes by name (``python -m training train --size``): paper = the paper's networks (Dec_R 512,
+#: Dec_T 4 x 768); small / tiny = narrower networks for quick experiments and tests.
+SIZES: dict[str, dict[str, int]] = {
+    "paper": {"enc_hidden": 70, "decr_hidden": 512, "dect_hidden": 768, "dect_layers": 4},
+    "small": {"enc_hidden": 70, "decr_hidden": 256, "dect_hidden": 256, "dect_layers": 4},
+    "tiny": {"enc_hidden": 16, "decr_hidden": 32, "dect_hidden": 32, "dect_layers": 3},
+}
 
 
 @dataclass

@@ -230,7 +230,7 @@ def build_lut(
     ``g_nodes`` (default min(g_n, G_NODES)) g values spanning ``g_range`` are simulated with ``photons``
     each; the g_n table columns are interpolated between them along g (monotone cubic, PCHIP: no
     overshoot, so P stays >= 0; P is renormalised).  Columns at a node are the node's simulation.  The
-    interpolated columns carry at most the nodes' noise; ``training.sim.bench`` measures the
+    interpolated columns carry at most the nodes' noise; ``training.bench.sim`` measures the
     interpolation error against direct columns.
 
     Resumable: g nodes are walked COLUMN_BATCH at a time and each is written to

@@ -1,7 +1,7 @@
 """The LUT's profile between its simulated g nodes: P(r | albedo, g) at g midpoints against direct walks.
 
 The builder (``training.sim.lut``) simulates G_NODES g values and interpolates the other g columns
-(PCHIP along g).  R between nodes is checked against adding-doubling (``training.sim.bench``); P has no
+(PCHIP along g).  R between nodes is checked against adding-doubling (``training.bench.sim``); P has no
 independent solver, so it is checked here against a direct walk of the homogeneous medium at the
 midpoint g itself (sigma_t = 1 cm^-1, so cm = mfp; same boundary and illumination as the LUT).
 

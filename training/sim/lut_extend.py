@@ -13,7 +13,7 @@ asymptotics of a semi-infinite medium near albedo 1 (s = sqrt(1 - albedo)):
   the node nearest 4 x (1 - albedo_last).  Checked against adding-doubling (``tests/test_lut_extend.py``).
 * P(r | albedo, g) = P(r | albedo_N, g) D(r; albedo, g) / D(r; albedo_N, g), renormalised to sum P area =
   1: the tabulated (transport-exact) profile at the last node carried to a higher albedo by the ratio of
-  classical diffusion-dipole profiles (``training.fit.dipole``; Farrell et al. 1992), which is 1 in the
+  classical diffusion-dipole profiles (``training.sim.dipole``; Farrell et al. 1992), which is 1 in the
   near field and lengthens the exponential tail exp(-sigma_tr r) (sigma_tr = sqrt(3 mu_a sigma_t')).
   Checked against direct walks at albedo 1 - 1e-5 (``tests/test_lut_extend.py``).
 
@@ -30,7 +30,9 @@ import math
 import numpy as np
 
 from exporters.constants import N_TISSUE
-from exporters.mitsuba import diffuse_specular
+from training.sim.dipole import dipole_profile_shape
+from training.sim.lut_interp import bin_centres
+from training.sim.physics import diffuse_specular
 
 #: Rows appended above the last node: 1 - albedo halves every second row, from 0.71 x (1 - albedo_N) down to
 #: 2^-6.5 x (1 - albedo_N) (1.1e-6 for the paper-scale table: still distinct from 1 in float32), then 1.
@@ -61,10 +63,6 @@ def extend_albedo(albedo: np.ndarray, g: np.ndarray, r_edges_mfp: np.ndarray, R:
                   n_medium: float = N_TISSUE, rows: int = EXTRA_ROWS) -> dict[str, np.ndarray]:
     """The table (docs/contracts.md §2 arrays: albedo (NA,), g (NG,), r_edges_mfp (NR + 1,), R (NA, NG), P (NA, NG, NR))
     with ``rows`` albedo rows appended up to albedo 1 (module docstring).  Returns the same keys."""
-    # the dipole lives with the fitter's reference tables; imported here to keep training.sim importable alone
-    from training.fit.dipole import dipole_profile_shape
-    from training.sim.lut_interp import bin_centres
-
     albedo, g = np.asarray(albedo, np.float64), np.asarray(g, np.float64)
     R, P = np.asarray(R, np.float64), np.asarray(P, np.float64)
     a_n = float(albedo[-1])

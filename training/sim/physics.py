@@ -7,8 +7,12 @@ Hand-written (no well-kept torch library samples these); every function is eleme
 from __future__ import annotations
 
 import math
+from functools import cache
 
+import numpy as np
 import torch
+
+from exporters.constants import N_TISSUE
 
 #: Below this |g| the HG inversion formula loses precision; sample isotropically instead (exact at
 #: g = 0, and the HG cosine mean differs by at most |g|/3 < 3e-7 from isotropic there).
@@ -37,6 +41,21 @@ def fresnel_unpolarised(cos_i: torch.Tensor, n1: float | torch.Tensor, n2: float
     r = 0.5 * (rs * rs + rp * rp)
     r = torch.where(torch.as_tensor(ratio == 1.0, device=r.device), torch.zeros_like(r), r)  # exact 0
     return torch.where(tir, torch.ones_like(r), r.clamp(0.0, 1.0))
+
+
+@cache
+def diffuse_specular(n: float = N_TISSUE, nodes: int = 256) -> float:
+    """Specular reflectance of a smooth boundary (air -> n) for cosine-weighted incidence:
+    2 * int_0^1 F(mu) mu dmu, unpolarised Fresnel F (:func:`fresnel_unpolarised`); 0.0768115 for n = 1.4.
+
+    Gauss-Legendre quadrature in float64 (the integrand is smooth; 256 nodes reach double precision).  Used by
+    the LUT's albedo extension (``training.sim.lut_extend``) and the Mitsuba slab renders
+    (``training.validate.mitsuba_scene``), which remove the boundary's specular part with it.
+    """
+    x, w = np.polynomial.legendre.leggauss(nodes)
+    mu = torch.from_numpy(0.5 * (x + 1.0))
+    f = fresnel_unpolarised(mu, 1.0, float(n)).numpy()
+    return float(np.sum(w * f * mu.numpy()))  # 2 * 0.5 w: nodes mapped from [-1, 1] onto [0, 1]
 
 
 def refract_cos(cos_i: torch.Tensor, n1: float, n2: float) -> torch.Tensor:

@@ -52,7 +52,7 @@ HOMOGENEOUS = ((0.9, 0.8), (0.99, 0.8), (0.998, 0.85))  #: (albedo, g)
 
 
 def _cases(quick: bool) -> list[dict]:
-    from training.skin.tissue import skin_medium
+    from training.sim.tissue import skin_medium
 
     media = HOMOGENEOUS[:1] if quick else HOMOGENEOUS
     cases = [{"name": f"homogeneous a={a} g={g}", "kind": "homogeneous", "albedo": a, "g": g, "sigma_t": SIGMA_T,

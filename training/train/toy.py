@@ -2,7 +2,7 @@
 
 NOT PHYSICS.  The spectra and mixture targets are smooth made-up functions of the tone, so that the
 training machinery (stages, checkpoints, resume, export) can be exercised in seconds without the
-Monte Carlo simulator.  The LUT is the analytic diffusion-dipole table of ``training.fit.dipole``.
+Monte Carlo simulator.  The LUT is the analytic diffusion-dipole table of ``training.sim.dipole``.
 Files are written with the dataset's own store (``training.data.store``) and the fits layout read by
 ``training.train.data``.
 """
@@ -19,8 +19,8 @@ from exporters.colorimetry import spectrum_to_linear_srgb
 from exporters.constants import R_EDGES_CM, WAVELENGTHS_NM
 from training.data import store
 from training.data.sampling import training_tones, validation_tones
-from training.fit.dipole import dipole_lut
 from training.fit.mixture import mix
+from training.sim.dipole import dipole_lut
 from training.sim.lut_interp import LookupTables, bin_centres
 
 

@@ -27,7 +27,7 @@ Acceptance of issue 23 (``acceptance``): switch rates of the two groups within `
 median |d ln sigma_t| within a factor ``DSIGMA_RATIO_TOL``, no unexplained weight jump.
 
 The LUT is ``--lut``, else $SKIN_SSS_LUT, else the closed-form diffusion-dipole table
-(``training.fit.bench.bench_lut``, a stand-in: both sides of the "explained" comparison go through the
+(``training.fit.problems.bench_lut``, a stand-in: both sides of the "explained" comparison go through the
 same table, so the ratio is meaningful with it, the absolute distances less so).
 """
 
@@ -222,16 +222,16 @@ def _load_lut(path: Path | None) -> tuple[LookupTables, str]:
         if not path.is_file():
             raise ValueError(f"no such LUT: {path}")
         return LookupTables.load(path), str(path.name)
-    from training.fit.bench import bench_lut
+    from training.fit.problems import bench_lut
 
     return bench_lut()
 
 
 def main(argv: list[str] | None = None) -> int:
-    from training.validate.cli import DEFAULT_MODEL_DIR
+    from training.paths import SHIPPED_DECODER
 
     p = argparse.ArgumentParser(prog="python -m training.validate.coherence", description=__doc__.splitlines()[0])
-    p.add_argument("--model", type=Path, default=DEFAULT_MODEL_DIR / "skin_decoder.onnx",
+    p.add_argument("--model", type=Path, default=SHIPPED_DECODER,
                    help="skin_decoder.onnx or a run's model.pt (default: the shipped decoder)")
     p.add_argument("--tones", type=int, default=1000, help="random tones (uniform in the parameter box)")
     p.add_argument("--seed", type=int, default=0)

@@ -4,9 +4,9 @@ For one tone and a few wavelengths, three total diffuse reflectances (specular e
 cosine-weighted illumination, n = 1.4; docs/contracts.md §1), each with its standard error:
 
 * ``mitsuba``: the network's K-media mixture (``skin_decoder.onnx``) rendered by Mitsuba 3
-  (``exporters.mitsuba``: one semi-infinite slab render per component and wavelength, sum_k w_k R_k);
+  (``training.validate.mitsuba_scene``: one semi-infinite slab render per component and wavelength, sum_k w_k R_k);
 * ``ours``: the same mixture, same parameters, by our Monte Carlo (``training.validate.mixture``);
-* ``ground_truth``: the two-layer skin model of the tone itself (``training.skin.tissue.skin_medium``),
+* ``ground_truth``: the two-layer skin model of the tone itself (``training.sim.tissue.skin_medium``),
   simulated by ``training.sim``, i.e. what the network's mixture is meant to reproduce.
 
 ``network`` is the decoder's own reflectance output.  Mitsuba vs ours checks the renderers (they must
@@ -28,11 +28,11 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from exporters import mitsuba as em
 from exporters.constants import WAVELENGTHS_NM
 from training.sim.medium import LayeredMedium
+from training.sim.tissue import skin_medium
 from training.sim.transport import simulate
-from training.skin.tissue import skin_medium
+from training.validate import mitsuba_scene as em
 from training.validate.mixture import mixture_reflectance
 
 

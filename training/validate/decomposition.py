@@ -15,7 +15,7 @@ writes ``decomposition.json``, ``decomposition.md`` and the figures ``fig_sss_re
 * ``measured``: the colours (D65, linear sRGB) of the 50 measured NIST skin spectra
   (``training.realskin.measurements``, specular reflection included) through ``skin_inversion.onnx``;
 * ``subjects``: ``SUBJECT_SAMPLES`` texels of each of the three demo albedo textures (light, medium, dark:
-  ``training.demo_render.skin_albedo_texture``) through ``skin_inversion.onnx``.
+  ``training.demo_subject.skin_albedo_texture``) through ``skin_inversion.onnx``.
 
 **Definitions** (ours where the paper gives none, marked *choice*):
 
@@ -58,8 +58,8 @@ from pathlib import Path
 import numpy as np
 
 from exporters.constants import WAVELENGTHS_NM
+from training.paths import SHIPPED_MODEL_DIR as DEFAULT_MODEL_DIR
 from training.validate import paper
-from training.validate.cli import DEFAULT_MODEL_DIR
 from training.validate.metrics import BANDS as METRIC_BANDS
 
 #: Mixture fields of the model's outputs, each (N, K, W).
@@ -311,7 +311,7 @@ def measured_colours() -> np.ndarray:
 def subject_textures(size: int) -> dict[str, np.ndarray]:
     """The demo's light, medium and dark albedo textures: name -> (size, size, 3) linear sRGB."""
     from exporters.colorimetry import srgb_decode
-    from training.demo_render import TONES, skin_albedo_texture
+    from training.demo_subject import TONES, skin_albedo_texture
 
     return {name: srgb_decode(skin_albedo_texture(size, seed=0, base=base) / 255.0) for name, base in TONES.items()}
 

@@ -85,8 +85,8 @@ def fit_profile_fidelity(fits_dir: Path, dataset: Path | None = None) -> dict:
 def network_profile_fidelity(dataset_dir: Path, lut, decoder: Path, *, max_tones: int | None = None,
                              chunk: int = 8, progress: bool = False) -> dict:
     """Mean LUT-profile shape error of the decoder's mixture on the validation split (see the docstring)."""
-    from exporters.mitsuba import decode
     from training.validate.gate import Params, lut_mixture_shape_error, mc_target
+    from training.validate.mitsuba_scene import decode
 
     path = Path(dataset_dir) / "validation.h5"
     if not path.is_file():

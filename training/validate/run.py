@@ -65,6 +65,29 @@ class Options:
     scheduler: object = None  # training.cluster.engine.Scheduler: ground-truth walk, fits and renders on Dask
 
 
+@dataclass
+class RunContext:
+    """What the steps of one validation run share, set up by ``_run`` once the ground truth is known: the
+    options, model files (``model_files``), the LUT and its SHA-256, the cache, the timings (s, by step), the
+    cluster job (a ``training.cluster.engine.Job`` or None), the gate tones with their ground truth (``gt``:
+    ``gate.ground_truth``), the validation and render wavelength indices (``wl_val``, ``wl_r``; ``col_r``:
+    the render wavelengths' columns in ``wl_val``) and the tones' albedo colours (T, 3) linear sRGB."""
+
+    opts: Options
+    files: dict[str, Path]
+    lut: object  # training.sim.lut_interp.LookupTables
+    lut_sha: str
+    cache: G.Cache
+    timings: dict[str, float]
+    job: object
+    tones: object  # training.skin.tones.ToneSet
+    gt: dict[str, np.ndarray]
+    wl_val: np.ndarray
+    wl_r: np.ndarray
+    col_r: np.ndarray
+    albedo: np.ndarray
+
+
 def _log(opts: Options, text: str) -> None:
     if opts.progress:
         print(text, file=sys.stderr, flush=True)
@@ -145,9 +168,10 @@ def _run(opts, files, lut, lut_sha, cache, models, timings, t_start, job) -> dic
     gt = G.ground_truth(tones.values, wl_val, cfg.gt_photons, cfg.seed, cache, lambda s: _log(opts, s), job)
     timings["ground_truth"] = time.perf_counter() - t0
     albedo = G.albedo_rgb_of(gt["R_d"], wl_val)
+    ctx = RunContext(opts, files, lut, lut_sha, cache, timings, job, tones, gt, wl_val, wl_r, col_r, albedo)
 
-    fits = _fits(opts, lut, lut_sha, tones, gt, wl_val, wl_r, cache, timings, job)
-    paper_fits = _fits(opts, lut, lut_sha, tones, gt, wl_val, wl_r, cache, timings, job, paper=True)
+    fits = _fits(ctx)
+    paper_fits = _fits(ctx, paper=True)
     t0 = time.perf_counter()
     inv, painted, dec, dec_full = _network(opts, files, albedo, tones.values, wl_val)
     nn_val = {"nn": inv, "nn_painted": painted, "nn_decoder": dec}  # at every validation wavelength
@@ -174,7 +198,7 @@ def _run(opts, files, lut, lut_sha, cache, models, timings, t_start, job) -> dic
     renders = tables if cfg.renderer == "lut" else mc
 
     t0 = time.perf_counter()
-    record = _gate_tables(lut, tones, gt, wl_val, wl_r, col_r, rows_per_tone, renders, fits, cfg, albedo)
+    record = _gate_tables(ctx, rows_per_tone, renders, fits)
     record["gate"]["renderer"] = cfg.renderer
     record["gate"]["mc_check"] = None if mc is None else _mc_check(tones, wl_r, tables, mc, cfg.seed)
     record["banded"] = _banded(lut, tones, gt, fits, wl_val, record, cfg.gt_photons)
@@ -196,7 +220,7 @@ def _run(opts, files, lut, lut_sha, cache, models, timings, t_start, job) -> dic
                          "biophysical_true": {n: tones.values[i].tolist() for i, n in enumerate(tones.names)}}
     t0 = time.perf_counter()
     opts.out.mkdir(parents=True, exist_ok=True)
-    _figures(opts, lut, tones, gt, wl_val, wl_r, col_r, rows_per_tone, renders, fits, dec_full, record)
+    _figures(ctx, rows_per_tone, renders, fits, dec_full, record)
     timings["figures"] = time.perf_counter() - t0
     timings["total"] = time.perf_counter() - t_start
     if {n: sha256_file(p) for n, p in files.items() if n != "card"} != models["sha256"]:
@@ -209,11 +233,12 @@ def _run(opts, files, lut, lut_sha, cache, models, timings, t_start, job) -> dic
     return record
 
 
-def _fits(opts, lut, lut_sha, tones, gt, wl_val, wl_r, cache, timings, job=None, paper: bool = False
-          ) -> dict[str, dict]:
+def _fits(ctx: RunContext, paper: bool = False) -> dict[str, dict]:
     """Joint-optimised fits per tone (cached): all validation wavelengths for the representative tones,
     the render wavelengths for the others.  ``paper``: the paper's method as written (``G.PAPER_FIT``), at the
-    render wavelengths only.  ``job``: the missing ones as its tasks."""
+    render wavelengths only.  ``ctx.job``: the missing ones as its tasks."""
+    opts, lut, lut_sha, tones, gt, cache, job = ctx.opts, ctx.lut, ctx.lut_sha, ctx.tones, ctx.gt, ctx.cache, ctx.job
+    wl_val, wl_r = ctx.wl_val, ctx.wl_r
     cfg = opts.config
     t0 = time.perf_counter()
     fits = {}
@@ -240,7 +265,7 @@ def _fits(opts, lut, lut_sha, tones, gt, wl_val, wl_r, cache, timings, job=None,
         job.wait()
         fits = {name: fits[name] for name in tones.names}  # in the tones' order
     bar.close()
-    timings["paper_fits" if paper else "fits"] = time.perf_counter() - t0
+    ctx.timings["paper_fits" if paper else "fits"] = time.perf_counter() - t0
     return fits
 
 
@@ -301,8 +326,8 @@ def _network(opts, files, albedo, tones, wl_idx):
     painted colour of the albedo; decoder on the true p), and the decoder's full outputs (T, K, 376) for the
     figures (the paper's Fig. spectral_params)."""
     from exporters import inference
-    from exporters.mitsuba import decode
     from exporters.painted import paint_mixture
+    from training.validate.mitsuba_scene import decode
 
     model = inference.load_model(files["skin_inversion.onnx"], threads=opts.threads)
     out = model.run(np.asarray(albedo, dtype=np.float32))
@@ -345,8 +370,10 @@ def _target(lut, gt, i, cols, photons):
     return G.mc_target(lut, gt["profile"][i][cols], gt["R_d"][i][cols], gt["profile_stderr"][i][cols], photons)
 
 
-def _gate_tables(lut, tones, gt, wl_val, wl_r, col_r, rows_per_tone, renders, fits, cfg, albedo) -> dict:
+def _gate_tables(ctx: RunContext, rows_per_tone, renders, fits) -> dict:
     """Table 1 (per tone and summarised): colour Delta E, edge Delta E, SAM, LUT shape error, noise floor."""
+    lut, tones, gt, albedo, cfg = ctx.lut, ctx.tones, ctx.gt, ctx.albedo, ctx.opts.config
+    wl_r, col_r = ctx.wl_r, ctx.col_r
     wl = WAVELENGTHS_NM[wl_r]
     vis = M.band_mask(wl, "Vis")
     vis_rows = np.flatnonzero(vis)
@@ -475,7 +502,10 @@ def _goals(record) -> dict:
 
 
 # ------------------------------------------------------------------------------------------ figures
-def _figures(opts, lut, tones, gt, wl_val, wl_r, col_r, rows_per_tone, renders, fits, dec_full, record) -> None:
+def _figures(ctx: RunContext, rows_per_tone, renders, fits, dec_full, record) -> None:
+    """The four figures of the run (``OUTPUTS``) into ``ctx.opts.out``."""
+    opts, lut, tones, gt = ctx.opts, ctx.lut, ctx.tones, ctx.gt
+    wl_val, wl_r, col_r = ctx.wl_val, ctx.wl_r, ctx.col_r
     wl = WAVELENGTHS_NM[wl_r]
     rep = [i for i, k in enumerate(tones.kinds) if k == "representative"] or list(range(len(tones.names)))
     x = M.edge_positions_cm()

@@ -2,7 +2,7 @@
 
 For every tone the network's mixture (``skin_decoder.onnx``) fills a sphere (radius 0.5 cm, dielectric
 boundary n = 1.4) lit from the left by a cone of light (25 degrees half-angle) from the environment,
-rendered one wavelength at a time (``exporters.mitsuba.ObjectRenderer``; the mixture is sum_k w_k I_k
+rendered one wavelength at a time (``training.validate.mitsuba_scene.ObjectRenderer``; the mixture is sum_k w_k I_k
 with samples split by w_k):
 
 * ``uv``: 250-380 nm, flat spectrum: mean over 5 equal sub-bands (midpoint wavelengths), grey;
@@ -27,12 +27,12 @@ from pathlib import Path
 
 import numpy as np
 
-from exporters import mitsuba as em
 from exporters.colorimetry import SRGB_LUMINANCE, srgb_encode, xyz_to_linear_srgb, xyz_weights
 from exporters.constants import WAVELENGTHS_NM
 from exporters.maps import sha256_file
 from training.paths import portable_strings
 from training.skin.tones import load_tones
+from training.validate import mitsuba_scene as em
 
 BANDS = ("uv", "vis_E", "vis_A", "nir")
 UV_NM = np.linspace(250.0, 380.0, 6)

@@ -26,7 +26,7 @@ import numpy as np
 import torch
 
 from exporters.constants import R_EDGES_CM, WAVELENGTHS_NM, anisotropy
-from training.validate.cli import DEFAULT_MODEL_DIR
+from training.paths import SHIPPED_MODEL_DIR as DEFAULT_MODEL_DIR
 
 #: f_blood, t_epi [cm], so2, b_mel of the sweep (a typical adult: 3 % blood, 120 um epidermis).
 SWEEP_BASE: tuple[float, float, float, float] = (0.03, 0.012, 0.75, 0.7)

@@ -13,8 +13,8 @@ import numpy as np
 import torch
 
 from exporters.constants import WAVELENGTHS_NM
+from training.sim.tissue import skin_medium
 from training.sim.transport import simulate
-from training.skin.tissue import skin_medium
 
 #: Every 25th wavelength of the 376-sample grid: 250, 300, ..., 1000 nm (16 wavelengths).
 WAVELENGTH_INDEX = np.arange(0, 376, 25)

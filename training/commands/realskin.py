@@ -24,13 +24,13 @@ import time
 from pathlib import Path
 
 from exporters.constants import WAVELENGTHS_NM
+from training.paths import SHIPPED_DECODER
 from training.realskin import report, study
 from training.realskin.fit import fit_subjects
 from training.realskin.forward import DecoderForward, MonteCarloForward, cached_walk
 from training.realskin.measurements import NIST_FILE, grid_channels, read_measurements
-from training.validate.cli import DEFAULT_MODEL_DIR
 
-DEFAULT_DECODER = DEFAULT_MODEL_DIR / "skin_decoder.onnx"
+DEFAULT_DECODER = SHIPPED_DECODER
 
 
 def _parser() -> argparse.ArgumentParser:

@@ -7,6 +7,7 @@ import time
 import numpy as np
 
 from exporters import cycles
+from training.paths import SHIPPED_MODEL
 
 
 def _bisection_inverse(alpha: np.ndarray, g: float, iterations: int = 60) -> np.ndarray:
@@ -67,7 +68,7 @@ def _mixture_render_rows(quick: bool) -> list[dict]:
     from exporters import inference, texel_records
     from exporters.colorimetry import delta_e76, linear_srgb_to_lab
 
-    model = inference.load_model(inference.DEFAULT_MODEL_PATH, threads=2)
+    model = inference.load_model(SHIPPED_MODEL, threads=2)
     rec = texel_records.exact_records(model, np.array([[0.55, 0.36, 0.27]], np.float32), ("cycles",),
                                       texel_records.CollapseOptions())
     unit = 0.005  # 5 mm per Blender unit: the probe slab is semi-infinite for every component

@@ -1,10 +1,12 @@
 """``python -m training bench``: run every benchmark of the project and write ``bench/results.md``.
 
-Each concept owns its benchmarks in a ``bench`` module exposing ``benchmarks(quick: bool) -> list[dict]``
-with keys workload, ours, anchor, ratio, error, notes (human-readable, units included).  This module only
-collects them, prints the machine and the versions, and writes the tables (docs/contracts.md §6): a section per module,
-headed by the module's name, when it ran, in which mode and under which load.  ``--only M ...`` re-runs those
-modules and replaces their sections in an existing file, keeping the others (each keeps its own stamp).
+Each concept has its benchmarks in one module of this package (``training.bench.sim``, ``.fit``, ...; the
+shipped runtime's in ``.runtime`` and the add-on's in ``.addon``, so that the extension zip holds no
+benchmark code) exposing ``benchmarks(quick: bool) -> list[dict]`` with keys workload, ours, anchor, ratio,
+error, notes (human-readable, units included).  This module only collects them, prints the machine and the
+versions, and writes the tables (docs/contracts.md §6): one section per module, headed by the module's name, when it
+ran, in which mode and under which load.  ``--only M ...`` re-runs those modules and replaces their sections
+in an existing file, keeping the others (each keeps its own stamp).
 """
 
 from __future__ import annotations
@@ -23,15 +25,15 @@ from pathlib import Path
 
 #: Benchmark modules in pipeline order; a module that does not exist yet is listed as such.
 BENCH_MODULES = [
-    "training.bench_foundation",
-    "training.sim.bench",
-    "training.data.bench",
-    "training.fit.bench",
-    "training.train.bench",
-    "blender_addon.bench",
-    "exporters.bench",
-    "training.validate.bench",
-    "training.cluster.bench",
+    "training.bench.foundation",
+    "training.bench.sim",
+    "training.bench.data",
+    "training.bench.fit",
+    "training.bench.train",
+    "training.bench.addon",
+    "training.bench.runtime",
+    "training.bench.validate",
+    "training.bench.cluster",
 ]
 COLUMNS = ["workload", "ours", "anchor", "ratio", "error", "notes"]
 PACKAGES = ["torch", "numpy", "onnxruntime", "OpenImageIO", "colour-science", "bpy", "iadpython", "mitsuba"]

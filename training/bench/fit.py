@@ -3,7 +3,8 @@
 Problems: Monte Carlo profiles of two skin tones (training/fit/data/mc_*.npz: the project's simulator,
 16 wavelengths 250-1000 nm each, 50k photons; how they were made is in training/fit/data/README.md).
 LUT: the file named by $SKIN_SSS_LUT if set (the MC tables of ``python -m training lut``), otherwise the
-diffusion-dipole table of training/fit/dipole.py on a 1e-3..1e4 mfp radial grid (a stand-in: the
+diffusion-dipole table of training/sim/dipole.py on a 1e-3..1e4 mfp radial grid (both from
+``training.fit.problems``) (a stand-in: the
 comparison of optimisers is on identical problems either way, but the absolute losses depend on it).
 
 With $SKIN_SSS_DATASET (a dataset folder) a further row times a chunk of its validation tones fitted as
@@ -28,48 +29,9 @@ import numpy as np
 import torch
 
 from exporters.constants import anisotropy
-from training.fit.dipole import dipole_lut
 from training.fit.optimize import fit_schedule
+from training.fit.problems import bench_lut, bench_problems
 from training.sim.lut_interp import LookupTables
-
-DATA = Path(__file__).parent / "data"
-#: The stand-in table's axes: albedo denser near 1, wide radial range (mfp).
-DIPOLE_ALBEDO = np.concatenate([[0.0], 1.0 - np.geomspace(0.95, 1e-5, 60), [1.0]])
-DIPOLE_EDGES_MFP = np.concatenate([[0.0], np.geomspace(1e-3, 1e4, 512)])
-
-
-def bench_lut() -> tuple[LookupTables, str]:
-    """The LUT for the benchmark and a line saying which one it is."""
-    path = os.environ.get("SKIN_SSS_LUT")
-    if path and Path(path).is_file():
-        return LookupTables.load(path), f"MC LUT {path}"
-    lut = LookupTables.from_arrays(**dipole_lut(albedo=DIPOLE_ALBEDO, r_edges_mfp=DIPOLE_EDGES_MFP))
-    return lut, "dipole stand-in LUT (no $SKIN_SSS_LUT)"
-
-
-def bench_problems(quick: bool) -> dict[str, torch.Tensor]:
-    """Stack the MC fixture problems: profile (B, 512), R (B,), edges (513,), photons, g_init (B,)."""
-    files = sorted(DATA.glob("mc_*.npz"))
-    if quick:
-        files = files[-1:]
-    prof, R, g0, wl = [], [], [], []
-    for f in files:
-        with np.load(f) as d:
-            sel = slice(None, None, 3) if quick else slice(None)
-            prof.append(d["profile"][sel])
-            R.append(d["R_d"][sel])
-            wl.append(d["wavelength_nm"][sel])
-            edges, photons = d["r_edges_cm"], float(d["photons"])
-    wl_all = np.concatenate(wl)
-    g0 = anisotropy(wl_all)
-    return {
-        "profile": torch.tensor(np.concatenate(prof)),
-        "R": torch.tensor(np.concatenate(R)),
-        "edges": torch.tensor(edges),
-        "photons": photons,
-        "g_init": torch.tensor(g0),
-        "names": [f.stem for f in files],
-    }
 
 
 def _run(lut, pr, method, ks):

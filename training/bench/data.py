@@ -20,8 +20,8 @@ from exporters.constants import WAVELENGTHS_NM
 from training.data.presets import PRESETS
 from training.data.reweight import baseline_absorption, reweight, walk
 from training.data.sampling import training_tones
+from training.sim.tissue import skin_medium
 from training.sim.transport import simulate
-from training.skin.tissue import skin_medium
 
 
 def _rows(photons: int, n_reweight: int) -> list[dict]:
@@ -139,7 +139,7 @@ if __name__ == "__main__":
     import sys
 
     torch.set_num_threads(1)
-    if len(sys.argv) > 2 and sys.argv[1] == "--colour":  # python -m training.data.bench --colour PHOTONS
+    if len(sys.argv) > 2 and sys.argv[1] == "--colour":  # python -m training.bench.data --colour PHOTONS
         print(json.dumps(colour_agreement(int(sys.argv[2]))))
     elif len(sys.argv) > 2 and sys.argv[1] == "--equivalent":  # ... --equivalent DATASET_DIR [PHOTONS]
         print(json.dumps(equivalent_photons(Path(sys.argv[2]), *map(int, sys.argv[3:4])), indent=1))

@@ -21,8 +21,8 @@ import json
 import sys
 from pathlib import Path
 
-from training.cli import parse_shard
 from training.cluster import engine
+from training.commands.options import parse_shard
 from training.data.build import SPLITS, build_split, merge
 from training.data.presets import PRESETS
 

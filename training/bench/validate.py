@@ -2,7 +2,7 @@
 
 One row per representative tone (R01 lightest, R05 medium, R10 darkest) at five wavelengths from UV to
 NIR (300, 450, 550, 650, 950 nm): total diffuse reflectance of the shipped decoder's K-media mixture
-(diffuse illumination, n = 1.4, specular excluded) by Mitsuba 3 (anchor; ``exporters.mitsuba``, one slab
+(diffuse illumination, n = 1.4, specular excluded) by Mitsuba 3 (anchor; ``training.validate.mitsuba_scene``, one slab
 render per component and wavelength) and by our Monte Carlo (``training.validate.mixture``).  The
 acceptance of the Mitsuba issue: agreement within 2 % (or 4 combined standard errors) everywhere.
 """
@@ -11,8 +11,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from exporters import mitsuba as em
 from training.skin.tones import load_tones
+from training.validate import mitsuba_scene as em
 from training.validate.mixture import mixture_reflectance
 
 WAVELENGTHS = (300.0, 450.0, 550.0, 650.0, 950.0)

@@ -20,24 +20,10 @@ import argparse
 import sys
 from pathlib import Path
 
-from training.model.config import ModelConfig
+from training.commands.options import triple
+from training.model.config import SIZES, ModelConfig
 from training.paths import portable_command
 from training.train.run import TrainConfig, train
-
-SIZES: dict[str, dict[str, int]] = {
-    "paper": {"enc_hidden": 70, "decr_hidden": 512, "dect_hidden": 768, "dect_layers": 4},
-    "small": {"enc_hidden": 70, "decr_hidden": 256, "dect_hidden": 256, "dect_layers": 4},
-    "tiny": {"enc_hidden": 16, "decr_hidden": 32, "dect_hidden": 32, "dect_layers": 3},
-}
-
-
-def _triple(text: str, kind: type) -> list:
-    vals = [kind(v) for v in text.split(",")]
-    if len(vals) == 1:
-        vals = vals * 3
-    if len(vals) != 3:
-        raise argparse.ArgumentTypeError(f"give one value or three comma-separated values, got {text!r}")
-    return vals
 
 
 def parser() -> argparse.ArgumentParser:
@@ -49,9 +35,9 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("--out", type=Path, required=True, help="run folder (created; resumed if it exists)")
     p.add_argument("--stage", choices=("1", "2", "3", "all"), default="all")
     d = TrainConfig()
-    p.add_argument("--epochs", type=lambda s: _triple(s, int), default=d.epochs, help="E or E1,E2,E3")
-    p.add_argument("--batch", type=lambda s: _triple(s, int), default=d.batch, help="B or B1,B2,B3")
-    p.add_argument("--lr", type=lambda s: _triple(s, float), default=d.lr, help="L or L1,L2,L3")
+    p.add_argument("--epochs", type=lambda s: triple(s, int), default=d.epochs, help="E or E1,E2,E3")
+    p.add_argument("--batch", type=lambda s: triple(s, int), default=d.batch, help="B or B1,B2,B3")
+    p.add_argument("--lr", type=lambda s: triple(s, float), default=d.lr, help="L or L1,L2,L3")
     p.add_argument("--synthetic", type=int, default=d.synthetic, help="stage 2: albedos rendered by Dec_R")
     p.add_argument("--exposure-jitter", type=float, default=d.exposure_jitter,
                    help="stage 2: synthetic albedos scaled by exp(U(-j, j))")

@@ -24,8 +24,9 @@ import OpenImageIO as oiio
 from exporters import bake, collapse, cycles, inference, maps, texel_records, texel_table
 from exporters.colorimetry import delta_e76, linear_srgb_to_lab, srgb_decode, srgb_encode
 from exporters.constants import PARAM_NAMES, PARAM_RANGES
+from training.paths import SHIPPED_DECODER, SHIPPED_MODEL, SHIPPED_TABLE
 
-MODEL = Path(__file__).resolve().parents[1] / "blender_addon" / "models" / "skin_inversion.onnx"
+MODEL = SHIPPED_MODEL
 
 
 def _skin_rows(n: int, seed: int = 0) -> np.ndarray:
@@ -202,7 +203,7 @@ def _decoder_sample(n: int, seed: int) -> np.ndarray:
     rng = np.random.default_rng(seed)
     lo = np.array([PARAM_RANGES[p][0] for p in PARAM_NAMES])
     hi = np.array([PARAM_RANGES[p][1] for p in PARAM_NAMES])
-    session = ort.InferenceSession(str(MODEL.with_name("skin_decoder.onnx")), providers=["CPUExecutionProvider"])
+    session = ort.InferenceSession(str(SHIPPED_DECODER), providers=["CPUExecutionProvider"])
     refl = session.run(["reflectance"], {"biophysical": (lo + (hi - lo) * rng.random((n, 5))).astype(np.float32)})[0]
     rgb = refl.astype(np.float64) @ collapse.channel_matrix().T * rng.uniform(0.7, 2.5, (n, 1))
     return np.clip(rgb, 0.0, 1.0).astype(np.float32)
@@ -225,12 +226,12 @@ def _table_rows(quick: bool, model: inference.InversionSession, texture: np.ndar
     exact_rate = len(exact_rgb) / (time.perf_counter() - t0)
     lookup_rgb = _skin_sample(texture, 200_000 if quick else 1_000_000, 3)
     rows = []
-    shipped = texel_table.load(texel_table.DEFAULT_PATH)
+    shipped = texel_table.load(SHIPPED_TABLE)
     for step in ((0.03, 0.02) if quick else (0.03, 0.02, 0.01)) + (None,):
         with tempfile.TemporaryDirectory() as tmp:
             if step is None:
                 table, build_s = shipped, shipped.meta["build_seconds"]
-                size = texel_table.DEFAULT_PATH.stat().st_size
+                size = SHIPPED_TABLE.stat().st_size
             else:
                 t0 = time.perf_counter()
                 built = texel_table.build(model, step=step)
@@ -248,7 +249,7 @@ def _table_rows(quick: bool, model: inference.InversionSession, texture: np.ndar
                      "ours": f"{rate:,.0f} texels/s (2 threads)", "anchor": f"exact {exact_rate:,.0f} texels/s "
                      "(onnxruntime 2 threads + collapse)", "ratio": f"{rate / exact_rate:,.0f}x",
                      "error": f"{_errors(c)} ({c['n']:,} texels, {100 * c['inside']:.1f} % inside the table)",
-                     "notes": f"LUT build {build_s:.1f} s (python -m exporters.texel_table); 16-bit storage"})
+                     "notes": f"LUT build {build_s:.1f} s (python -m training texel-table); 16-bit storage"})
     return rows
 
 
@@ -287,7 +288,7 @@ def _bake_4k_rows(quick: bool, model: inference.InversionSession, texture: np.nd
         size = sum(f.stat().st_size for f in result.files) / 1e6
         runs = inference.inference_counts()["runs"] - before
         sample = _skin_sample(texture, 2000 if quick else 20000, 5)
-        c = compare_fast_exact(texel_table.load(texel_table.DEFAULT_PATH), model, sample)
+        c = compare_fast_exact(texel_table.load(SHIPPED_TABLE), model, sample)
         t0 = time.perf_counter()
         texel_records.exact_records(model, sample[:4096], ("cycles",), texel_records.CollapseOptions())
         exact_rate = min(4096, len(sample)) / (time.perf_counter() - t0)

@@ -23,11 +23,11 @@ import os
 import sys
 from pathlib import Path
 
-from exporters import mitsuba as em
 from training.cluster import engine
-from training.paths import portable_command
+from training.paths import SHIPPED_MODEL_DIR, portable_command
+from training.validate import mitsuba_scene as em
 
-DEFAULT_MODEL_DIR = Path(__file__).resolve().parents[2] / "blender_addon" / "models"
+DEFAULT_MODEL_DIR = SHIPPED_MODEL_DIR
 
 
 def _parser() -> argparse.ArgumentParser:

@@ -22,8 +22,8 @@ import argparse
 import sys
 from pathlib import Path
 
-from training.cli import parse_shard
 from training.cluster import engine
+from training.commands.options import parse_shard
 from training.sim.lut import ALBEDO_MAX, ALBEDO_MIN, G_MAX, G_MIN, G_NODES, MAX_STEPS, build_lut
 
 

@@ -22,10 +22,10 @@ import numpy as np
 from exporters.colorimetry import spectrum_to_lab, spectrum_to_srgb
 from exporters.constants import WAVELENGTHS_NM
 from training import demo_render
+from training.commands.swatches import simulate_spectra
 from training.export.card import summary
-from training.skin.swatches import simulate_spectra
+from training.paths import SHIPPED_CARD
 from training.skin.tones import load_tones
-from training.validate.cli import DEFAULT_MODEL_DIR
 
 
 def main(argv: list[str]) -> int:
@@ -67,7 +67,7 @@ def main(argv: list[str]) -> int:
 
 
 def _artist_path(args) -> None:
-    card = json.loads((DEFAULT_MODEL_DIR / "skin_inversion.json").read_text())
+    card = json.loads(SHIPPED_CARD.read_text())
     print("[demo] 2/2 artist path: light, medium and dark procedural albedos on a life-sized head (Unit Scale 1 m), "
           "each rendered\n[demo] (a) albedo only, (b) Principled BSDF Random Walk (Skin) at Blender's default radius, "
           "(c) Spectral Skin SSS\n[demo] (Invert Skin Albedo, default settings) with the shipped model:\n"

@@ -26,9 +26,9 @@ What is rendered (docs/research/mitsuba.md has the verified facts this module re
   reflectance; by reciprocity (f_r(i->o) = f_r(o->i) holds for the external BSSRDF with a refracting
   boundary) this equals the reflectance for light entering from a cosine-weighted (Lambertian) lobe,
   which is the dataset's ``illumination="diffuse"``.  That total includes the specular reflection of the
-  boundary, whose value for cosine-weighted incidence is known exactly (:func:`diffuse_specular`,
-  0.07681 for n = 1.4); R_d excludes it (docs/contracts.md §1), so it is removed: by subtracting the exact value, or
-  (LLVM variants, ``specular="paired"``) by subtracting a twin render of a non-scattering (alpha = 0) slab with
+  boundary, whose value for cosine-weighted incidence is known exactly (``training.sim.physics.diffuse_specular``,
+  0.07681 for n = 1.4); R_d excludes it (docs/contracts.md §1), so it is removed: by subtracting the exact value,
+  or (LLVM variants, ``specular="paired"``) by subtracting a twin render of a non-scattering (alpha = 0) slab with
   the same seed, whose paths make the same reflect/refract choices: the specular samples cancel one by
   one (Mitsuba's LLVM sampler has one random stream per lane), which removes their noise.
   Collimated beams are not used: delta lights seen through a smooth dielectric render black in
@@ -42,8 +42,10 @@ What is rendered (docs/research/mitsuba.md has the verified facts this module re
 
 Variants: ``scalar_rgb`` / ``scalar_spectral`` need nothing but the wheel (the tests use them);
 ``llvm_ad_*`` need libLLVM 19 (``make mitsuba`` installs Debian's ``libllvm19``; LLVM 14 is refused by
-Dr.Jit and LLVM 15 aborts volpath renders), found by :func:`configure_llvm`.  This module imports
-neither training nor torch; Mitsuba itself is imported only when a function needs it.
+Dr.Jit and LLVM 15 aborts volpath renders), found by :func:`configure_llvm`.  Mitsuba itself is imported
+only when a function needs it.  The validation renderer lives in ``training.validate`` (the shipped
+``exporters`` holds only the runtime) and decodes tones with the runtime's one cached decoder session
+(``exporters.inference.run_decoder``).
 """
 
 from __future__ import annotations
@@ -52,15 +54,16 @@ import glob
 import math
 import os
 from dataclasses import dataclass
-from functools import cache
 
 import numpy as np
 
 from exporters.constants import N_TISSUE, WAVELENGTHS_NM
-from exporters.inference import DEFAULT_DECODER_PATH, run_decoder
+from exporters.inference import run_decoder
+from training.paths import SHIPPED_DECODER
+from training.sim.physics import diffuse_specular
 
 #: The decoder graph shipped with the add-on (docs/contracts.md §3).
-DEFAULT_DECODER = DEFAULT_DECODER_PATH
+DEFAULT_DECODER = SHIPPED_DECODER
 #: Half-size of the slab box in mean free paths (sigma_t = 1); far beyond the diffusion length
 #: 1 / sqrt(3 sigma_a sigma_t'), about 13 mfp at alpha = 0.99, g = 0.8 (docs/research/mitsuba.md §4).
 SLAB_HALF_SIZE_MFP: float = 1000.0
@@ -308,22 +311,6 @@ def slab_scene_dict(variant: str, alpha, g: float, wavelength_nm: float | None =
             "interior": medium_dict(variant, alpha, 1.0, g),
         },
     }
-
-
-@cache
-def diffuse_specular(n: float = N_TISSUE, nodes: int = 256) -> float:
-    """Specular reflectance of a smooth boundary (air -> n) for cosine-weighted incidence:
-    2 * int_0^1 F(mu) mu dmu, unpolarised Fresnel F; 0.0768115 for n = 1.4.
-
-    Gauss-Legendre quadrature (the integrand is smooth; 256 nodes reach double precision).  Written
-    here because exporters may not import the simulator's Fresnel (training.sim.physics).
-    """
-    x, w = np.polynomial.legendre.leggauss(nodes)
-    mu = 0.5 * (x + 1.0)
-    cos_t = np.sqrt(1.0 - (1.0 - mu * mu) / (n * n))
-    rs = ((mu - n * cos_t) / (mu + n * cos_t)) ** 2
-    rp = ((n * mu - cos_t) / (n * mu + cos_t)) ** 2
-    return float(np.sum(0.5 * w * (rs + rp) * mu))  # 0.5 w: nodes on [0, 1]; 2 * 0.5 (rs + rp) / 2
 
 
 # ----------------------------------------------------------------------------------------------------

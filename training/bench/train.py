@@ -14,12 +14,13 @@ Timings on the shared 2-core machine are taken under contention from other jobs.
 from __future__ import annotations
 
 import time
-from pathlib import Path
 
 import numpy as np
 import torch
 
-MODEL_DIR = Path(__file__).resolve().parents[2] / "blender_addon" / "models"
+from training.paths import SHIPPED_MODEL_DIR
+
+MODEL_DIR = SHIPPED_MODEL_DIR
 BATCH = 4096
 
 
@@ -86,10 +87,10 @@ def bench_inference(quick: bool) -> dict:
 
 def bench_training_step(quick: bool) -> dict:
     from exporters.constants import R_EDGES_CM
-    from training.fit.dipole import dipole_lut
     from training.fit.loss import make_target
     from training.fit.mixture import mix
     from training.model import ModelConfig, SkinChain
+    from training.sim.dipole import dipole_lut
     from training.sim.lut_interp import LookupTables, bin_centres
     from training.train import losses as train_losses
     from training.train.spectral import interpolation_matrix

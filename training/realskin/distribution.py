@@ -1,7 +1,7 @@
 """Where the dataset's tones lie in colour: the sampling of ``training.data.sampling`` against the uniform one
 it replaced and against measured skin.
 
-    python -m training.data.distribution [--out FILE.png] [--tones 2000] [--photons 4000] [--json]
+    python -m training.realskin.distribution [--out FILE.png] [--tones 2000] [--photons 4000] [--json]
 
 Each tone's albedo colour (CIE Lab, D65) comes from one small reweighted walk in the dataset's geometry
 (diffuse light, specular excluded; every 10 nm over 360-830 nm, the colour range, linearly interpolated
@@ -108,7 +108,7 @@ def figure(path: Path, colours: dict[str, tuple[np.ndarray, np.ndarray]], measur
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(prog="python -m training.data.distribution", description=__doc__.split("\n\n")[0])
+    p = argparse.ArgumentParser(prog="python -m training.realskin.distribution", description=__doc__.split("\n\n")[0])
     p.add_argument("--out", type=Path, help="figure (PNG)")
     p.add_argument("--tones", type=int, default=2000, help="tones of each sampling (default 2000)")
     p.add_argument("--photons", type=int, default=4000, help="photons per wavelength of the colour walk")

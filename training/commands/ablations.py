@@ -21,7 +21,8 @@ from training.paths import portable_command
 
 def _parser() -> argparse.ArgumentParser:
     from training.ablations.run import Scale
-    from training.train.cli import SIZES, _triple
+    from training.commands.options import triple
+    from training.model.config import SIZES
 
     d = Scale()
     p = argparse.ArgumentParser(prog="python -m training ablations", description=__doc__.splitlines()[0],
@@ -34,7 +35,7 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--fits", type=Path, default=None, help="fits folder (python -m training fit --dataset)")
     p.add_argument("--lut", type=Path, default=None, help="LUT .npz (python -m training lut)")
     p.add_argument("--size", choices=sorted(SIZES), default=None, help=f"networks (default {d.size}; quick tiny)")
-    p.add_argument("--epochs", type=lambda s: _triple(s, int), default=None,
+    p.add_argument("--epochs", type=lambda s: triple(s, int), default=None,
                    help=f"E or E1,E2,E3 (default {','.join(map(str, d.epochs))}; quick 3)")
     p.add_argument("--shape-weight", type=float, default=None,
                    help="stage 3's L_shape weight in every configuration (default 0: the paper's loss)")
@@ -48,9 +49,9 @@ def _parser() -> argparse.ArgumentParser:
 
 def _quick_inputs(cache: Path, args, progress: bool) -> tuple[Path, Path, Path]:
     """--quick without inputs: the smoke dataset preset, the validate --quick LUT and quick fits, in ``cache``."""
-    from training.data.cli import main as dataset_main
-    from training.fit.cli import main as fit_main
-    from training.validate.cli import _quick_lut
+    from training.commands.dataset import main as dataset_main
+    from training.commands.fit import main as fit_main
+    from training.commands.validate import _quick_lut
 
     dataset = args.dataset or cache / "dataset"
     if args.dataset is None and not (dataset / "validation.h5").is_file():

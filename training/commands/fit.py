@@ -28,8 +28,8 @@ import numpy as np
 import torch
 
 from exporters.constants import anisotropy
-from training.cli import parse_shard
 from training.cluster import engine
+from training.commands.options import parse_shard
 from training.fit.optimize import fit_schedule
 from training.sim.lut_interp import LookupTables
 

@@ -22,8 +22,8 @@ import numpy as np
 
 from exporters.constants import R_EDGES_CM, WAVELENGTHS_NM
 from training.sim.resample import cdf_resample_profile
+from training.sim.tissue import skin_medium
 from training.sim.transport import PROFILE_ESTIMATORS, simulate
-from training.skin.tissue import skin_medium
 
 
 def reweighted(tone: np.ndarray, photons: int, seed: int, device: str, compile_) -> dict[str, np.ndarray]:

@@ -1,0 +1,24 @@
+"""``python -m training channel-matrix [--out FILE]``: write exporters/data/linear_srgb_d65_weights.npy.
+
+M (3, 376), linear sRGB (D65) = M @ R, computed with colour-science (``exporters.collapse.compute_channel_matrix``)
+and stored so that the add-on needs no colour-science inside Blender.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+import numpy as np
+
+from exporters import collapse
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m training channel-matrix", description=__doc__.splitlines()[0])
+    parser.add_argument("--out", type=Path, default=collapse.CHANNEL_MATRIX_PATH,
+                        help="where to write the matrix (default: the one the add-on reads)")
+    args = parser.parse_args(argv)
+    np.save(args.out, collapse.compute_channel_matrix())
+    print(f"wrote {args.out}")
+    return 0

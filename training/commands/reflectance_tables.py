@@ -1,0 +1,25 @@
+"""``python -m training reflectance-tables --build [--out FILE]``: recompute exporters/data/reflectance_tables.npz.
+
+The tables and their builder are ``exporters.reflectance_tables`` (adding-doubling with iadpython, about 10
+minutes on one core); without ``--build`` the command prints its help.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from exporters import reflectance_tables
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m training reflectance-tables",
+                                     description=reflectance_tables.__doc__.splitlines()[0])
+    parser.add_argument("--build", action="store_true", help="recompute the tables with iadpython")
+    parser.add_argument("--out", type=Path, default=reflectance_tables.TABLE_PATH)
+    args = parser.parse_args(argv)
+    if not args.build:
+        parser.print_help()
+        return 0
+    print(f"wrote {reflectance_tables.build_tables(args.out)}")
+    return 0
