@@ -21,7 +21,7 @@ COMMANDS: dict[str, tuple[str | None, str]] = {
     "export": ("training.commands.export", "Export the ONNX graphs and the model card."),
     "validate": ("training.commands.validate", "Reproduce the paper's tables and figures."),
     "ablations": ("training.commands.ablations", "The paper's ablations (§5, §8), each trained and gated alike."),
-    "report": (None, "Summary report of dataset, fits and model."),
+    "report": ("training.commands.report", "Summary report of dataset, fits, model and a validation run."),
     "bench": ("training.bench.collect", "Run the benchmark suite and write bench/results.md."),
     "swatches": ("training.commands.swatches", "Plot the colours of the representative and outlier tones."),
     "mitsuba": ("training.validate.compare", "Mitsuba 3 reflectance of the network's mixture vs ours vs ground truth."),

@@ -17,6 +17,7 @@ from pathlib import Path
 import h5py
 
 from exporters.constants import WAVELENGTHS_NM
+from exporters.maps import sha256_file
 from training.export.graphs import output_shapes
 from training.model.chain import DECODER_OUTPUTS, INVERSION_OUTPUTS
 from training.model.config import FALLBACK_ALBEDO_RGB
@@ -125,6 +126,17 @@ def update_validation(path: Path, validation: dict) -> None:
     tmp = path.with_name(path.name + ".tmp")
     tmp.write_text(json.dumps(portable_strings(card), indent=2) + "\n")
     tmp.replace(path)
+
+
+def check_files(card: dict, folder: Path) -> dict[str, dict]:
+    """Each graph the card lists, checked against the file of that name in ``folder``: ``expected`` (the card's
+    SHA-256), ``actual`` (the file's, None when it is missing), ``ok``."""
+    checks = {}
+    for name, entry in card.get("files", {}).items():
+        path = Path(folder) / name
+        actual = sha256_file(path) if path.is_file() else None
+        checks[name] = {"expected": entry.get("sha256"), "actual": actual, "ok": actual == entry.get("sha256")}
+    return checks
 
 
 def summary(card: dict) -> str:

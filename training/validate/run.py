@@ -615,11 +615,11 @@ def headline(record: dict) -> dict:
         "gate": {
             "tones": record["gate"]["tones"],
             "nn_delta_e": rows["nn"]["delta_e"],
-            "nn_painted_delta_e": rows["nn_painted"]["delta_e"],
+            "nn_painted_delta_e": rows["nn_painted"]["delta_e"] if "nn_painted" in rows else None,  # older runs
             "nn_decoder_delta_e": rows["nn_decoder"]["delta_e"],
             "joint_opt_delta_e": {f"K{k}": rows[f"k{k}"]["delta_e"] for k in (1, 2, 3)},
             "baseline_delta_e": {m: rows[m]["delta_e"] for m in bl.METHODS},
-            "edge_delta_e": {r: rows[r]["delta_e_edge"] for r in G.ROWS},
+            "edge_delta_e": {r: rows[r]["delta_e_edge"] for r in G.ROWS if r in rows},  # rows added since: absent
             "nn_vs_joint_opt_k3_delta_e": record["gate"]["nn_vs_k3"]["delta_e"],
             "photons": {"ground_truth": record["run"]["ground_truth"]["photons"],
                         "render_per_component": record["run"]["config"]["photons"]},
