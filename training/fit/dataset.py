@@ -369,19 +369,17 @@ def _write_rows(path: Path, rows: np.ndarray, fits: dict[str, np.ndarray]) -> No
 
 def fitted_counts(fits: list[Path]) -> dict:
     """How far one split's fits files (shards allowed) are: ``fitted`` tones done, ``selected`` tones the files
-    hold (``max_tones`` / ``select``), ``of`` tones in the dataset's split, ``ks``, ``wavelengths`` fitted per
-    tone, ``files``.  Reads the ``done`` masks and attributes only."""
+    hold (``max_tones`` / ``select``), ``of`` tones in the dataset's split (None if unrecorded), ``ks``,
+    ``wavelengths`` fitted per tone, ``files``.  Reads the ``done`` masks and attributes only."""
     fitted = selected = 0
-    attrs: dict = {}
     for path in fits:
         with h5py.File(path, "r", locking=False) as f:
             fitted += int(f["done"][:].sum())
             selected += int(f["done"].shape[0])
-            attrs = attrs or {k: f.attrs[k] for k in ("ks", "dataset_n_total") if k in f.attrs}
-            wavelengths = int(f["k1_shape_rmse"].shape[1])
-    return {"fitted": fitted, "selected": selected,
-            "of": int(attrs["dataset_n_total"]) if "dataset_n_total" in attrs else None,
-            "ks": [int(k) for k in str(attrs.get("ks", "")).split(",") if k], "wavelengths": wavelengths,
+            ks = [int(k) for k in str(f.attrs["ks"]).split(",")]
+            of = int(f.attrs["dataset_n_total"]) if "dataset_n_total" in f.attrs else None
+            wavelengths = int(f[f"k{ks[0]}_shape_rmse"].shape[1])
+    return {"fitted": fitted, "selected": selected, "of": of, "ks": ks, "wavelengths": wavelengths,
             "files": len(fits)}
 
 
