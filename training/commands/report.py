@@ -143,9 +143,9 @@ def _n(x, digits: int = 2) -> str:
     return f"{x:,}" if isinstance(x, int) else f"{x:.{digits}f}"
 
 
-def _table(header: list[str], rows: list[list]) -> list[str]:
+def _table(header: list[str], rows: list[list], digits: int = 2) -> list[str]:
     return ["| " + " | ".join(header) + " |", "|" + "|".join("---" for _ in header) + "|",
-            *("| " + " | ".join(_n(v) for v in r) + " |" for r in rows), ""]
+            *("| " + " | ".join(_n(v, digits) for v in r) + " |" for r in rows), ""]
 
 
 def _dataset_md(part: dict) -> list[str]:
@@ -165,7 +165,7 @@ def _fits_md(part: dict) -> list[str]:
            for s, d in part["splits"].items() if "errors" in d for k, e in d["errors"]["K"].items()]
     if err:
         out += ["Mean over the fitted tones × wavelengths (`fit --summary`):", "",
-                *_table(["split", "K", "shape RMSE", "shape excess", "refl. rel. error", "MC noise"], err)]
+                *_table(["split", "K", "shape RMSE", "shape excess", "refl. rel. error", "MC noise"], err, 3)]
     return out
 
 
