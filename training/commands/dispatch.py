@@ -11,7 +11,7 @@ import importlib
 import sys
 
 #: name -> (module implementing ``main(argv)`` or None if not built yet, one-line help)
-COMMANDS: dict[str, tuple[str | None, str]] = {
+COMMANDS: dict[str, tuple[str, str]] = {
     "simulate-layers": ("training.commands.simulate_layers", "Monte Carlo of a generic layered medium; prints JSON."),
     "simulate": ("training.commands.simulate", "Monte Carlo of one skin tone at all 376 wavelengths -> .npz."),
     "lut": ("training.commands.lut", "Homogeneous semi-infinite lookup tables R(alpha, g), P(r | alpha, g)."),
@@ -39,9 +39,8 @@ COMMANDS: dict[str, tuple[str | None, str]] = {
 def _usage() -> str:
     width = max(map(len, COMMANDS))
     lines = ["usage: python -m training <command> [options]   (each command has --help)", "", "commands:"]
-    for name, (module, text) in COMMANDS.items():
-        mark = "" if module else "  [not implemented yet]"
-        lines.append(f"  {name:<{width}}  {text}{mark}")
+    for name, (_, text) in COMMANDS.items():
+        lines.append(f"  {name:<{width}}  {text}")
     return "\n".join(lines)
 
 
@@ -54,15 +53,5 @@ def main(argv: list[str]) -> int:
     if name not in COMMANDS:
         print(f"error: unknown command {name!r}.\n\n{_usage()}", file=sys.stderr)
         return 2
-    module_name, _ = COMMANDS[name]
-    if module_name is None:
-        print(f"error: `{name}` is not implemented yet (see the README's status table).", file=sys.stderr)
-        return 2
-    try:
-        module = importlib.import_module(module_name)
-    except ModuleNotFoundError as exc:
-        if exc.name and module_name.startswith(exc.name):
-            print(f"error: `{name}` is not implemented yet ({module_name} is missing).", file=sys.stderr)
-            return 2
-        raise
+    module = importlib.import_module(COMMANDS[name][0])
     return int(module.main(rest) or 0)
