@@ -18,11 +18,10 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 from pathlib import Path
 
 from training.cluster import engine
-from training.commands.options import parse_shard
+from training.commands.options import error_status, parse_shard
 from training.data.build import SPLITS, build_split, merge
 from training.data.presets import PRESETS
 
@@ -98,10 +97,6 @@ def main(argv: list[str]) -> int:
             if job is not None:
                 job.wait()
                 print("\n".join(map(str, paths)))
-    except ValueError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
-    except engine.TaskError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 1
+    except (ValueError, engine.TaskError) as exc:
+        return error_status(exc)
     return 0

@@ -29,7 +29,7 @@ import torch
 
 from exporters.constants import anisotropy
 from training.cluster import engine
-from training.commands.options import parse_shard
+from training.commands.options import error_status, parse_shard
 from training.fit.optimize import fit_schedule
 from training.sim.lut_interp import LookupTables
 
@@ -252,12 +252,8 @@ def main(argv: list[str]) -> int:
         t0 = time.perf_counter()
         rows, arrays = fit_tone_file(args.tone_file, lut, ks, args.method, args.refl_loss == "relative")
         seconds = time.perf_counter() - t0
-    except ValueError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
-    except engine.TaskError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 1
+    except (ValueError, engine.TaskError) as exc:
+        return error_status(exc)
     if args.out is not None:
         if args.out.exists():
             print(f"error: {args.out} exists; not overwriting", file=sys.stderr)

@@ -23,7 +23,7 @@ import sys
 from pathlib import Path
 
 from training.cluster import engine
-from training.commands.options import parse_shard
+from training.commands.options import error_status, parse_shard
 from training.sim.lut import ALBEDO_MAX, ALBEDO_MIN, G_MAX, G_MIN, G_NODES, MAX_STEPS, build_lut
 
 
@@ -79,10 +79,6 @@ def main(argv: list[str]) -> int:
                 g_nodes=args.g_nodes, max_steps=args.max_steps, compile=compile_, shard=args.shard,
                 progress=not args.no_progress, log=lambda s: print(s, file=sys.stderr), job=job,
             )
-    except ValueError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
-    except engine.TaskError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 1
+    except (ValueError, engine.TaskError) as exc:
+        return error_status(exc)
     return 0

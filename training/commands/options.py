@@ -3,6 +3,9 @@
 from __future__ import annotations
 
 import argparse
+import sys
+
+from training.cluster.engine import TaskError
 
 
 def parse_shard(text: str) -> tuple[int, int]:
@@ -24,3 +27,13 @@ def triple(text: str, kind: type) -> list:
     if len(vals) != 3:
         raise argparse.ArgumentTypeError(f"give one value or three comma-separated values, got {text!r}")
     return vals
+
+
+def error_status(exc: Exception) -> int:
+    """Print ``error: <exc>`` to stderr and return the command's exit status.
+
+    2 for bad input (anything but a failed task: the user can fix the command), 1 for a task that failed
+    while running (``training.cluster.engine.TaskError``).
+    """
+    print(f"error: {exc}", file=sys.stderr)
+    return 1 if isinstance(exc, TaskError) else 2

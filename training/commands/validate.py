@@ -24,6 +24,7 @@ import sys
 from pathlib import Path
 
 from training.cluster import engine
+from training.commands.options import error_status
 from training.paths import SHIPPED_MODEL_DIR, portable_command
 from training.validate import mitsuba_scene as em
 
@@ -177,12 +178,8 @@ def main(argv: list[str]) -> int:
             from training.export.card import update_validation
 
             update_validation(opts.model_dir / "skin_inversion.json", R.headline(record))
-    except (ValueError, FileExistsError) as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
-    except engine.TaskError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 1
+    except (ValueError, FileExistsError, engine.TaskError) as exc:
+        return error_status(exc)
     print(_summary(record))
     print(f"wrote {args.out / 'tables.md'}, tables.json and the figures ({record['run']['timings_s']['total']:.0f} s)")
     return 0

@@ -131,6 +131,11 @@ if __name__ == "__main__":
     ap.add_argument("--parts", required=True, help="the LUT's <out>.parts folder")
     ap.add_argument("--photons", type=int, default=100_000)
     ap.add_argument("--seed", type=int, default=11)
+    ap.add_argument("--nodes", default="5,20,36",
+                    help="comma-separated node indices j: the midpoint between simulated g nodes j and j + 1 is "
+                         "checked (nodes j - 1 .. j + 2 must be built; default 5,20,36, the midpoints 0.111, "
+                         "0.414, 0.738 of the paper-scale table; 40,43,45 gives its high g 0.819, 0.879, 0.920)")
     args = ap.parse_args()
     torch.set_num_threads(1)
-    print(json.dumps(check_parts(args.parts, photons=args.photons, seed=args.seed), indent=1))
+    nodes = tuple(int(j) for j in args.nodes.split(","))
+    print(json.dumps(check_parts(args.parts, node_index=nodes, photons=args.photons, seed=args.seed), indent=1))
