@@ -12,6 +12,8 @@ from training.commands.train import main as train_main
 from training.model import ModelConfig
 from training.model.chain import SkinChain
 from training.model.config import SIZES
+from training.sim.lut_interp import LookupTables
+from training.train import losses as train_losses
 from training.train.data import load_split
 from training.train.loop import checkpoint_path, load_checkpoint
 from training.train.run import TrainConfig, train
@@ -220,3 +222,58 @@ def test_weighted_param_loss_ignores_the_media_of_weightless_components():
     moved_w = u.clone()
     moved_w[:, 3, 2] += 0.3  # its weight still counts
     assert float(param_loss(moved_w, u_t, weighted=True)) > float(param_loss(u, u_t, weighted=True))
+
+
+def test_encoder_share_trains_dec_t_on_the_encoders_tones(toy, tmp_path):
+    """--encoder-share: a share of each stage-3 batch is fed Enc(A_RGB) of the tone's albedo (no gradient to
+    the frozen Enc) with the true tone's targets, and the validation reports the terms on that path too.
+    Whether it helps is measured on real data in the gate (README, Training the model): on this toy Dec_T's
+    output hardly depends on its input."""
+    from training.train.stages import encoder_input, stage3
+
+    data, fits, lut = toy
+    split = load_split(data, "train", fits, k=3)
+    torch.manual_seed(0)
+    model = SkinChain(ModelConfig(**SIZES["tiny"]))
+    a, p = split.albedo_rgb[:8], split.tone[:8]
+    assert encoder_input(model, a, p, 0.0) is p
+    mixed = encoder_input(model, a, p, 0.5)
+    with torch.no_grad():
+        torch.testing.assert_close(mixed[:4], model.enc(a[:4].clamp(0.0, 1.0)))
+    torch.testing.assert_close(mixed[4:], p[4:], rtol=0, atol=0)
+    assert mixed.grad_fn is None  # the frozen encoder gets no gradient
+
+    tcfg = dict(TCFG, shape_weight=0.0)
+    base = tmp_path / "base"
+    _train(base, toy, want=(1, 2), tcfg=tcfg)
+    runs = {}
+    for share in (0.0, 1.0):
+        rundir = tmp_path / f"share{share}"
+        rundir.mkdir()
+        for s in (1, 2):
+            (rundir / checkpoint_path(base, s).name).write_bytes(checkpoint_path(base, s).read_bytes())
+        runs[share] = _train(rundir, toy, want=(3,), tcfg=dict(tcfg, encoder_share=share))
+    assert runs[1.0]["train"]["encoder_share"] == 1.0 and runs[0.0]["train"]["encoder_share"] == 0.0
+    last = {s: r["losses"]["stage3"] for s, r in runs.items()}
+    assert "val_refl_rgb" in last[1.0] and "val_refl_rgb" not in last[0.0]
+    enc2 = {k: v for k, v in load_checkpoint(checkpoint_path(base, 2))["model"].items() if k.startswith("enc.")}
+    enc3 = load_checkpoint(checkpoint_path(tmp_path / "share1.0", 3))["model"]
+    for k, v in enc2.items():
+        torch.testing.assert_close(enc3[k], v, rtol=0, atol=0)
+    assert all(np.isfinite(r["metrics"]["train"]["inversion_mixture_vs_mc_delta_e76"]["mean"]) for r in runs.values())
+
+    # a stage-3 step with share 1 scores Dec_T on Enc(A_RGB), with the true tone's targets (not on the true p)
+    lut_t = LookupTables.load(lut, dtype=torch.float32)
+    val = load_split(data, "validation", None, k=3)
+    idx = torch.arange(4)
+    rows = split.fitted[idx]
+    targets = {k: v[idx] for k, v in split.targets.items()}
+    losses = {}
+    for name, q in (("rgb", model.enc(split.albedo_rgb[rows].clamp(0.0, 1.0))), ("true", split.tone[rows])):
+        with torch.no_grad():
+            losses[name] = float(train_losses.stage3_losses(model, lut_t, q, split.R_d[rows], targets,
+                                                            split.target_index, weighted=True)["loss"])
+    spec = stage3(model, lut_t, split, val, 1, 4, 1e-3, dense=False, encoder_share=1.0)
+    with torch.no_grad():
+        step = float(spec.step(idx)["loss"])
+    assert step == pytest.approx(losses["rgb"], rel=1e-6) and abs(losses["rgb"] - losses["true"]) > 1e-4, losses

@@ -3,7 +3,7 @@
     python -m training train --dataset DIR --fits DIR --lut LUT.npz --out RUNDIR
         [--stage 1|2|3|all] [--epochs E1,E2,E3] [--batch B1,B2,B3] [--lr L1,L2,L3] [--k 3]
         [--size paper|small|tiny] [--synthetic N] [--seed S] [--device cpu|cuda] [--targets dense|fitted]
-        [--uniform-param] [--lambda-r 15] [--no-slab-factor] [--unfreeze] [--data-every N]
+        [--uniform-param] [--encoder-share F] [--lambda-r 15] [--no-slab-factor] [--unfreeze] [--data-every N]
         [--checkpoint-interval SECONDS] [--no-progress]
 
 --dataset: folder with train.h5 and validation.h5 (``python -m training dataset``).
@@ -50,6 +50,9 @@ def parser() -> argparse.ArgumentParser:
                         "(default; issue 23); fitted = sorted by sigma_t, at the fitted wavelengths only (before)")
     p.add_argument("--uniform-param", action="store_true",
                    help="stage 3: L_param without weighting each component's alpha, g, sigma_t by its weight")
+    p.add_argument("--encoder-share", type=float, default=d.encoder_share,
+                   help="stage 3 (ours): share of each batch whose Dec_T input is the frozen encoder's tone for the "
+                        "tone's RGB albedo, as at inversion time, instead of the true tone (0 = the paper)")
     a = p.add_argument_group("ablations of the paper's §5 (python -m training ablations; defaults = the paper)")
     a.add_argument("--lambda-r", type=float, default=d.lambda_r, help="stage 3: weight of L_refl (paper 15)")
     a.add_argument("--no-slab-factor", action="store_true", help="stage 3: L_refl without the slab-depth factor")
@@ -79,7 +82,8 @@ def main(argv: list[str]) -> int:
                        synthetic=args.synthetic, exposure_jitter=args.exposure_jitter,
                        exposure_prior=args.exposure_prior, shape_weight=args.shape_weight, targets=args.targets,
                        weighted_param=not args.uniform_param, lambda_r=args.lambda_r,
-                       slab_factor=not args.no_slab_factor, unfreeze=args.unfreeze, data_every=args.data_every)
+                       slab_factor=not args.no_slab_factor, unfreeze=args.unfreeze, data_every=args.data_every,
+                       encoder_share=args.encoder_share)
     command = portable_command("python -m training train", argv)
     try:
         if 3 in want and args.fits is None:

@@ -9,6 +9,8 @@ On the tones of a split (float64 colour maths through ``exporters.colorimetry``)
   gamma * rgb(sum_k w_k R_LUT(alpha_k, g_k)) (no slab factor), vs A; mean, median, max.
 * ``mixture_vs_mc_delta_e76``: the same mixture spectrum without exposure for the true p
   (skin_decoder's path) vs the MC spectrum's colour; mean, median, max.
+* ``inversion_mixture_vs_mc_delta_e76``: the mixture of the inversion from A (skin_inversion's path), without
+  exposure, vs the MC spectrum's colour - the validation gate's "K = 3 NN, RGB in" on these tones.
 * ``p_abs_err``: mean |Enc(A) - p| per biophysical parameter (informative: Enc has no parameter
   supervision and the inverse is ambiguous).
 """
@@ -57,4 +59,5 @@ def evaluate_split(model: SkinChain, data: SplitData, lut: LookupTables | None) 
         mix_true = mixture_reflectance(lut, dec).double().cpu().numpy()
         lab_mc = spectrum_to_lab(data.R_d.double().cpu().numpy(), "D65")
         res["mixture_vs_mc_delta_e76"] = _stats(delta_e76(spectrum_to_lab(mix_true, "D65"), lab_mc))
+        res["inversion_mixture_vs_mc_delta_e76"] = _stats(delta_e76(spectrum_to_lab(mix, "D65"), lab_mc))
     return res

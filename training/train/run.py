@@ -59,11 +59,15 @@ class TrainConfig:
     unfreeze: bool = False
     #: stages 2-3 learn from every n-th training tone only (1 = all; 20 = the paper's "20x less data")
     data_every: int = 1
+    #: stage 3 (ours, issue 23): share of each batch whose Dec_T input is the frozen encoder's answer to the
+    #: tone's RGB albedo, p = Enc(A_RGB), instead of the true p (0 = the paper; ``stages.encoder_input``)
+    encoder_share: float = 0.0
 
 
 #: What a run record made before an option existed trained with (its behaviour then).
 LEGACY_TRAIN: dict = {"exposure_prior": 0.0, "shape_weight": 0.0, "targets": "fitted", "weighted_param": False,
-                     "lambda_r": 15.0, "slab_factor": True, "unfreeze": False, "data_every": 1}
+                     "lambda_r": 15.0, "slab_factor": True, "unfreeze": False, "data_every": 1,
+                     "encoder_share": 0.0}
 
 
 def _write_json(path: Path, obj: dict) -> None:
@@ -120,6 +124,8 @@ def train(rundir: Path, dataset: Path, fits: Path | None, lut_path: Path, *, wan
         raise ValueError(f"targets must be one of {TARGET_MODES}, got {tcfg.targets!r}")
     if tcfg.data_every < 1 or tcfg.lambda_r < 0:
         raise ValueError(f"data_every must be >= 1 and lambda_r >= 0, got {tcfg.data_every}, {tcfg.lambda_r}")
+    if not 0.0 <= tcfg.encoder_share <= 1.0:
+        raise ValueError(f"encoder_share must lie in [0, 1], got {tcfg.encoder_share}")
     train_data = load_split(dataset, "train", fits if need_fits else None, mcfg.k, profiles, tcfg.targets,
                             SHAPE_BIN_STRIDE).to(dev)
     val_fits = fits if (need_fits and fits is not None and fits_files(fits, "validation")) else None
@@ -177,4 +183,5 @@ def _spec(stage: int, model: SkinChain, lut: LookupTables, train_data: SplitData
         return stages.stage2(model, train_data, val_data, t.epochs[i], t.batch[i], t.lr[i], t.synthetic,
                              t.exposure_jitter, t.seed, t.exposure_prior, t.unfreeze)
     return stages.stage3(model, lut, train_data, val_data, t.epochs[i], t.batch[i], t.lr[i], t.shape_weight,
-                         t.targets == "dense", t.weighted_param, t.lambda_r, t.slab_factor, t.unfreeze)
+                         t.targets == "dense", t.weighted_param, t.lambda_r, t.slab_factor, t.unfreeze,
+                         t.encoder_share)

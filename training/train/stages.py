@@ -8,7 +8,11 @@
   encoder sees the whole gamut of the model and not only the few simulated tones.
 * Stage 3 trains Dec_T and the slab depth c(lambda) with the frozen Dec_R.  Dec_T is fed the dataset
   tone p and R_hat = Dec_R(p): the fit targets belong to p, and ``skin_decoder.onnx`` evaluates
-  Dec_T(p, Dec_R(p)) for any p; at inversion time p = Enc(A_RGB).
+  Dec_T(p, Dec_R(p)) for any p; at inversion time p = Enc(A_RGB).  Ours (issue 23, ``encoder_share``
+  > 0): a share of each batch is fed p = Enc(A_RGB) of the tone's own albedo instead, with the true tone's
+  targets, so that Dec_T learns to answer what the frozen encoder gives it at inversion time (the encoder
+  finds a tone of the input's colour, not the tone itself: metamers and exposure) - the network's gate
+  row from RGB scores exactly that path.
 """
 
 from __future__ import annotations
@@ -76,18 +80,34 @@ def shape_batch(data: SplitData, idx: torch.Tensor) -> tuple[Target, torch.Tenso
     return data.shape_target.rows(idx).select(1, cols), data.shape_index[cols]
 
 
+def encoder_input(model: SkinChain, albedo_rgb: torch.Tensor, p: torch.Tensor, share: float) -> torch.Tensor:
+    """The tones (N, 5) Dec_T is fed: ``p`` with its first round(share N) rows replaced by the frozen
+    encoder's Enc(A_RGB) of the same tones' albedos ``albedo_rgb`` (N, 3), clamped to [0, 1] as at
+    inversion time (no gradient reaches Enc).  The batch order is random, so the first rows are a random
+    subset.  share 0 returns ``p``."""
+    n = round(share * p.shape[0])
+    if n == 0:
+        return p
+    with torch.no_grad():
+        p_hat = model.enc(albedo_rgb[:n].clamp(0.0, 1.0))
+    return torch.cat([p_hat, p[n:]])
+
+
 #: Validation tones per evaluation chunk in stage 3 (bounds the memory of L_shape at 376 wavelengths).
 EVAL_CHUNK: int = 64
 
 
 def stage3(model: SkinChain, lut: LookupTables, train: SplitData, val: SplitData, epochs: int, batch: int,
            lr: float, shape_weight: float = 0.0, dense: bool = True, weighted: bool = True,
-           lambda_r: float = train_losses.LAMBDA_R, slab: bool = True, unfreeze: bool = False) -> StageSpec:
+           lambda_r: float = train_losses.LAMBDA_R, slab: bool = True, unfreeze: bool = False,
+           encoder_share: float = 0.0) -> StageSpec:
     """Stage 3; ``shape_weight`` > 0 adds the profile-shape term (needs ``SplitData.shape_target``).
     ``dense``: L_param at every wavelength, targets interpolated (``training.train.spectral``); else at the
     fitted wavelengths only.  ``weighted``: L_param weighted by the target weights (``losses.param_loss``).
     Ablations (``training.ablations``): ``lambda_r`` (paper 15), ``slab`` (the slab-depth factor in L_refl),
-    ``unfreeze`` (Dec_R trains along with Dec_T)."""
+    ``unfreeze`` (Dec_R trains along with Dec_T).  ``encoder_share``: the share of each batch fed the
+    encoder's tone (``encoder_input``); with it the validation also reports every term with all tones fed
+    Enc(A_RGB) (keys ending ``_rgb``)."""
     ablate = {"lambda_r": lambda_r, "slab": slab, "frozen_decr": not unfreeze}
     if train.targets is None:
         raise ValueError("stage 3 needs the mixture fits of the training split (--fits)")
@@ -102,7 +122,8 @@ def stage3(model: SkinChain, lut: LookupTables, train: SplitData, val: SplitData
         rows = train.fitted[idx]
         targets = {k: v[idx] for k, v in train.targets.items()}
         shape, shape_index = shape_batch(train, idx) if shape_weight > 0 else (None, None)
-        return train_losses.stage3_losses(model, lut, train.tone[rows], train.R_d[rows], targets, train.target_index,
+        p = encoder_input(model, train.albedo_rgb[rows], train.tone[rows], encoder_share)
+        return train_losses.stage3_losses(model, lut, p, train.R_d[rows], targets, train.target_index,
                                           shape, shape_weight, shape_index, interp, weighted, **ablate)
 
     def evaluate() -> dict[str, float]:
@@ -113,12 +134,16 @@ def stage3(model: SkinChain, lut: LookupTables, train: SplitData, val: SplitData
                 part = torch.arange(s, min(s + EVAL_CHUNK, n), device=val.fitted.device)
                 rows = val.fitted[part]
                 st = None if val.shape_target is None else val.shape_target.rows(part)
-                out = train_losses.stage3_losses(model, lut, val.tone[rows], val.R_d[rows],
-                                                 {k: v[part] for k, v in val.targets.items()}, val.target_index, st,
-                                                 shape_weight, val.shape_index, v_interp, weighted, report=True,
-                                                 **ablate)
-                for k, v in out.items():
-                    sums[k] = sums.get(k, 0.0) + float(v) * len(part) / n
+                inputs = {"": val.tone[rows]}
+                if encoder_share > 0:
+                    inputs["_rgb"] = encoder_input(model, val.albedo_rgb[rows], val.tone[rows], 1.0)
+                for suffix, p in inputs.items():
+                    out = train_losses.stage3_losses(model, lut, p, val.R_d[rows],
+                                                     {k: v[part] for k, v in val.targets.items()}, val.target_index,
+                                                     st, shape_weight, val.shape_index, v_interp, weighted,
+                                                     report=True, **ablate)
+                    for k, v in out.items():
+                        sums[k + suffix] = sums.get(k + suffix, 0.0) + float(v) * len(part) / n
             return sums
         out = model.dec_t(val.tone, model.dec_r(val.tone))
         return {"refl": float(train_losses.spectral_l1(train_losses.lut_reflectance(model, lut, out, slab), val.R_d))}
