@@ -162,7 +162,9 @@ def summary(card: dict) -> str:
         facts.append(trained)
     round_trip = card.get("metrics", {}).get("validation", {}).get("enc_delta_e76", {}).get("mean")
     if round_trip is not None:
-        facts.append(f"colour round trip ΔE76 {round_trip:.2f} mean on its validation tones")
+        exposure = card["metrics"]["validation"].get("exposure_error", {}).get("mean")
+        beside = f" (exposure error {exposure:.2f} mean)" if exposure is not None else ""
+        facts.append(f"colour round trip ΔE76 {round_trip:.2f} mean{beside} on its validation tones")
     gate = card.get("validation", {}).get("gate", {}).get("nn_delta_e", {}).get("representative")
     if gate is not None:
         facts.append(f"validation gate ΔE76 {gate:.2f} on the representative tones")

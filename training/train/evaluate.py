@@ -5,6 +5,8 @@ On the tones of a split (float64 colour maths through ``exporters.colorimetry``)
 * ``decr_spectral_l1``: mean |Dec_R(p) - R_MC| over tones and 376 wavelengths (true p).
 * ``enc_delta_e76``: the inversion's colour round trip, Lab(gamma * rgb(Dec_R(Enc(A)))) vs Lab(A),
   A the tone's MC albedo; mean, median, max over tones.
+* ``exposure_error``: |gamma - 1|, the brightness error beside the round trip (A is the colour of a tone of
+  the skin model, so the right exposure is 1); mean, median, max.
 * ``mixture_delta_e76``: colour of the predicted mixture as a semi-infinite renderer sees it,
   gamma * rgb(sum_k w_k R_LUT(alpha_k, g_k)) (no slab factor), vs A; mean, median, max.
 * ``mixture_vs_mc_delta_e76``: the same mixture spectrum without exposure for the true p
@@ -49,6 +51,7 @@ def evaluate_split(model: SkinChain, data: SplitData, lut: LookupTables | None) 
     gamma = inv["exposure"].double().cpu().numpy()
     rgb_hat = spectrum_to_linear_srgb(inv["reflectance"].double().cpu().numpy(), "D65") * gamma
     res["enc_delta_e76"] = _stats(delta_e76(linear_srgb_to_lab(rgb_hat), lab_a))
+    res["exposure_error"] = _stats(np.abs(gamma[:, 0] - 1.0))
     err = (inv["biophysical"] - data.tone).abs().mean(0).cpu().numpy()
     res["p_abs_err"] = {name: float(v) for name, v in zip(PARAM_NAMES, err, strict=True)}
     if lut is not None:
