@@ -8,9 +8,10 @@ import pytest
 import torch
 
 from exporters.colorimetry import SRGB_LUMINANCE, spectrum_to_linear_srgb
-from exporters.constants import PARAM_RANGES, WAVELENGTHS_NM
+from exporters.constants import PARAM_NAMES, PARAM_RANGES, WAVELENGTHS_NM
 from training.model import ModelConfig, SkinChain
-from training.model.config import FALLBACK_ALBEDO_RGB, SLAB_C
+from training.model.config import FALLBACK_ALBEDO_RGB, SIZES, SLAB_C
+from training.model.networks import ReflectanceDecoder
 from training.sim.dipole import dipole_lut
 from training.sim.lut_interp import LookupTables
 from training.train import losses as train_losses
@@ -127,3 +128,30 @@ def test_param_loss_weights_alpha_twice_and_is_huber():
     np.testing.assert_allclose(float(train_losses.param_loss(u, t)), 0.5 * 1e-4 / 4, rtol=1e-5)
     lam = torch.arange(5.0).expand(2, 4, 3, 5)
     np.testing.assert_allclose(float(train_losses.smooth_loss(lam)), 1.0, rtol=1e-6)
+
+
+def test_log_scaled_parameters_and_legacy_configs():
+    """f_mel and f_blood are seen on a log scale over their range (the dataset draws them log-uniformly);
+    a config written before the option (no ``log_params``) keeps the linear scale, and the state of either
+    loads into the other (the scale is derived from the config, not stored)."""
+    cfg = ModelConfig(**SIZES["tiny"])
+    assert cfg.log_params == ("f_mel", "f_blood")
+    legacy = cfg.to_dict()
+    del legacy["log_params"]
+    old = ModelConfig.from_dict(legacy)
+    assert old.log_params == () and ModelConfig.from_dict(cfg.to_dict()).log_params == cfg.log_params
+    new_net, old_net = ReflectanceDecoder(cfg), ReflectanceDecoder(old)
+    half = torch.full((1, 5), 0.5)
+    lo = torch.tensor([[PARAM_RANGES[n][0] for n in PARAM_NAMES]])
+    hi = torch.tensor([[PARAM_RANGES[n][1] for n in PARAM_NAMES]])
+    i_mel, i_t = PARAM_NAMES.index("f_mel"), PARAM_NAMES.index("t_epi")
+    assert float(new_net.from_unit(half)[0, i_mel]) == pytest.approx((0.001 * 0.65) ** 0.5, rel=1e-5)
+    assert float(old_net.from_unit(half)[0, i_mel]) == pytest.approx(0.5 * (0.001 + 0.65), rel=1e-5)
+    assert float(new_net.from_unit(half)[0, i_t]) == pytest.approx(float(old_net.from_unit(half)[0, i_t]))
+    torch.testing.assert_close(new_net.normalise(lo), -torch.ones(1, 5))
+    torch.testing.assert_close(new_net.normalise(hi), torch.ones(1, 5))
+    u = torch.rand(64, 5)
+    torch.testing.assert_close(new_net.normalise(new_net.from_unit(u)), 2 * u - 1, atol=1e-5, rtol=0)
+    old_net.load_state_dict(new_net.state_dict())  # same stored keys
+    p = new_net.from_unit(u)
+    assert not torch.allclose(new_net(p), old_net(p))  # same weights, another input scale

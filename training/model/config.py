@@ -11,6 +11,11 @@ Every constant with a physical meaning lives here, with its source:
 * ``SLAB_C`` = 3 and ``SLAB_DEPTH_INIT`` = 0.30: the slab-depth factor of paper eq. (slab_factor),
   R_k = R(alpha_k, g_k) (1 - exp(-C sigma_t,k c(lambda))), c learned per wavelength.  c is read in cm
   (sigma_t is in cm^-1); the paper gives no unit.
+* ``log_params`` (``ModelConfig``): the parameters the networks see (Dec_R, Dec_T inputs) and produce (Enc
+  outputs) on a log scale over their range: the dataset draws f_mel and f_blood log-uniformly
+  (``training.data.sampling.LOG_SCALED``, issue 23), so on a linear scale half the training tones would
+  sit in the lowest ~4 % of the input interval and the encoder's sigmoid would have to reach f_mel = 0.005
+  at u = 0.006.  Models made before (no key in their config) keep the linear scale.
 * ``FALLBACK_ALBEDO_RGB``: what the inversion graph uses in place of an input row with a NaN or Inf
   component (see ``training.model.chain``): a mid skin tone, so a corrupt texel renders as plausible
   skin instead of poisoning the render.  Linear sRGB (D65), chosen by us; not from the paper.
@@ -21,6 +26,7 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass, field
 
 from exporters.constants import N_WAVELENGTHS, PARAM_NAMES, PARAM_RANGES
+from training.data.sampling import LOG_SCALED
 
 SIGMA_T_RANGE_CM: tuple[float, float] = (1e-1, 1e5)
 G_ABS_MAX: float = 0.99
@@ -47,6 +53,7 @@ class ModelConfig:
     (BioSkin: 512-620).  dect_hidden / dect_layers: Dec_T is a ``dect_layers``-layer MLP 381 -> H ...
     -> 376 * 4K (paper: 4 layers, 768).  k: mixture components.  g_range: anisotropy interval of the
     outputs (the LUT's g axis within +-0.99).  sigma_t_range_cm: log-mapped extinction interval.
+    log_params: parameters scaled logarithmically over their range in the networks (module docstring).
     """
 
     k: int = 3
@@ -59,6 +66,7 @@ class ModelConfig:
     n_wavelengths: int = N_WAVELENGTHS
     param_names: tuple[str, ...] = PARAM_NAMES
     param_ranges: dict[str, tuple[float, float]] = field(default_factory=lambda: dict(PARAM_RANGES))
+    log_params: tuple[str, ...] = LOG_SCALED
 
     def __post_init__(self) -> None:
         if self.k < 1:
@@ -75,6 +83,10 @@ class ModelConfig:
         self.sigma_t_range_cm = (s_lo, s_hi)
         self.param_names = tuple(self.param_names)
         self.param_ranges = {k: (float(v[0]), float(v[1])) for k, v in dict(self.param_ranges).items()}
+        self.log_params = tuple(self.log_params)
+        for name in self.log_params:
+            if name not in self.param_names or self.param_ranges[name][0] <= 0:
+                raise ValueError(f"log_params: {name!r} must be a parameter with a positive range")
 
     def to_dict(self) -> dict:
         """JSON-friendly form (lists for tuples)."""
@@ -83,6 +95,7 @@ class ModelConfig:
         d["sigma_t_range_cm"] = list(self.sigma_t_range_cm)
         d["param_names"] = list(self.param_names)
         d["param_ranges"] = {k: list(v) for k, v in self.param_ranges.items()}
+        d["log_params"] = list(self.log_params)
         return d
 
     @classmethod
@@ -92,6 +105,7 @@ class ModelConfig:
         d["sigma_t_range_cm"] = tuple(d["sigma_t_range_cm"])
         d["param_names"] = tuple(d["param_names"])
         d["param_ranges"] = {k: tuple(v) for k, v in d["param_ranges"].items()}
+        d["log_params"] = tuple(d.get("log_params", ()))  # models made before the key: linear scale
         return cls(**d)
 
 

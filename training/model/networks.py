@@ -3,9 +3,10 @@
 Shapes: N texels / tones, W = 376 wavelengths, K mixture components.
 
 * ``Encoder``: linear-sRGB albedo (N, 3) -> biophysical p_hat (N, 5), BioSkin's 3 -> 70 -> 70 -> 5
-  MLP, tanh hidden, sigmoid output mapped linearly onto ``PARAM_RANGES`` (t_epi in cm).
+  MLP, tanh hidden, sigmoid output mapped onto ``PARAM_RANGES`` (t_epi in cm): linearly, or for the
+  ``ModelConfig.log_params`` (f_mel, f_blood) log-linearly.
 * ``ReflectanceDecoder`` (Dec_R): p (N, 5) -> R_hat (N, W) in (0, 1), 5 -> H -> H -> W, tanh hidden,
-  sigmoid output.  p enters normalised to [-1, 1] over ``PARAM_RANGES``.
+  sigmoid output.  p enters normalised to [-1, 1] over ``PARAM_RANGES`` (the log params on a log scale).
 * ``TranslucencyDecoder`` (Dec_T): (p, R_hat) (N, 5 + W = 381) -> the K-media mixture per wavelength,
   an L-layer MLP (paper: 4 layers, 768 hidden, tanh).  Its N x (4 K W) outputs are mapped:
   alpha = sigmoid in (0, 1); g = sigmoid onto ``g_range``; sigma_t = exp of a sigmoid onto
@@ -39,21 +40,30 @@ def mlp(sizes: list[int]) -> nn.Sequential:
 
 
 class _ParamScale(nn.Module):
-    """Holds the biophysical ranges (lo, hi) (5,) as buffers."""
+    """Holds the biophysical ranges (lo, hi) (5,) as buffers, and the scale the networks see them on:
+    linear, or logarithmic for ``cfg.log_params`` (``training.model.config``)."""
 
     def __init__(self, cfg: ModelConfig) -> None:
         super().__init__()
         ranges = [cfg.param_ranges[name] for name in cfg.param_names]
         self.register_buffer("p_lo", torch.tensor([r[0] for r in ranges], dtype=torch.float32))
         self.register_buffer("p_span", torch.tensor([r[1] - r[0] for r in ranges], dtype=torch.float32))
+        is_log = [name in cfg.log_params for name in cfg.param_names]
+        q = [(math.log(r[0]), math.log(r[1])) if lg else r for r, lg in zip(ranges, is_log, strict=True)]
+        # derived from the config, not state: checkpoints made before the log scale load unchanged
+        self.register_buffer("log_mask", torch.tensor(is_log), persistent=False)
+        self.register_buffer("q_lo", torch.tensor([a for a, _ in q], dtype=torch.float32), persistent=False)
+        self.register_buffer("q_span", torch.tensor([b - a for a, b in q], dtype=torch.float32), persistent=False)
 
     def normalise(self, p: torch.Tensor) -> torch.Tensor:
-        """p (N, 5) in physical units -> [-1, 1] over the sampling ranges."""
-        return 2.0 * (p - self.p_lo) / self.p_span - 1.0
+        """p (N, 5) in physical units -> [-1, 1] over the sampling ranges (log scale for the log params)."""
+        q = torch.where(self.log_mask, torch.log(torch.maximum(p, self.p_lo)), p)
+        return 2.0 * (q - self.q_lo) / self.q_span - 1.0
 
     def from_unit(self, u: torch.Tensor) -> torch.Tensor:
-        """u (N, 5) in [0, 1] -> physical p."""
-        return self.p_lo + self.p_span * u
+        """u (N, 5) in [0, 1] -> physical p (log params: log-uniform in u)."""
+        q = self.q_lo + self.q_span * u
+        return torch.where(self.log_mask, torch.exp(q), q)
 
 
 class Encoder(_ParamScale):
