@@ -141,6 +141,12 @@ def test_cli_refuses_inconsistent_runs(toy, tmp_path, capsys):
     assert "another train" in capsys.readouterr().err
     rec = json.loads((tmp_path / "r" / "run.json").read_text())
     assert rec["commands"][0].startswith("python -m training train --dataset")
+    assert rec["model"]["enc_hidden"] == SIZES["tiny"]["enc_hidden"]
+    assert train_main(base + ["1", "--stage", "1", "--enc-hidden", "24"]) == 2  # another model in the folder
+    assert "another model" in capsys.readouterr().err
+    wide = [a if a != str(tmp_path / "r") else str(tmp_path / "w") for a in base]
+    assert train_main(wide + ["1", "--stage", "1", "--enc-hidden", "24"]) == 0
+    assert json.loads((tmp_path / "w" / "run.json").read_text())["model"]["enc_hidden"] == 24
 
 
 def test_shape_loss_scores_the_rendered_mixture_against_the_profiles(toy):

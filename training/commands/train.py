@@ -2,8 +2,9 @@
 
     python -m training train --dataset DIR --fits DIR --lut LUT.npz --out RUNDIR
         [--stage 1|2|3|all] [--epochs E1,E2,E3] [--batch B1,B2,B3] [--lr L1,L2,L3] [--k 3]
-        [--size paper|small|tiny] [--synthetic N] [--seed S] [--device cpu|cuda] [--targets dense|fitted]
-        [--uniform-param] [--encoder-share F] [--lambda-r 15] [--no-slab-factor] [--unfreeze] [--data-every N]
+        [--size paper|small|tiny] [--enc-hidden H] [--synthetic N] [--seed S] [--device cpu|cuda]
+        [--targets dense|fitted] [--uniform-param] [--encoder-share F]
+        [--lambda-r 15] [--no-slab-factor] [--unfreeze] [--data-every N]
         [--checkpoint-interval SECONDS] [--no-progress]
 
 --dataset: folder with train.h5 and validation.h5 (``python -m training dataset``).
@@ -61,6 +62,8 @@ def parser() -> argparse.ArgumentParser:
                    help="stages 2-3: learn from every n-th training tone only (20: the paper's 20x less data)")
     p.add_argument("--k", type=int, default=3, help="mixture components (fits group K{k})")
     p.add_argument("--size", choices=sorted(SIZES), default="paper")
+    p.add_argument("--enc-hidden", type=int, default=None,
+                   help="Enc's hidden width, overriding the size's (paper and BioSkin: 70)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--device", choices=("cpu", "cuda"), default="cpu")
     p.add_argument("--checkpoint-interval", type=float, default=0.0,
@@ -77,7 +80,8 @@ def main(argv: list[str]) -> int:
     if args.threads > 0:
         torch.set_num_threads(args.threads)
     want = (1, 2, 3) if args.stage == "all" else (int(args.stage),)
-    mcfg = ModelConfig(k=args.k, **SIZES[args.size])
+    size = dict(SIZES[args.size], **({} if args.enc_hidden is None else {"enc_hidden": args.enc_hidden}))
+    mcfg = ModelConfig(k=args.k, **size)
     tcfg = TrainConfig(seed=args.seed, epochs=args.epochs, batch=args.batch, lr=args.lr,
                        synthetic=args.synthetic, exposure_jitter=args.exposure_jitter,
                        exposure_prior=args.exposure_prior, shape_weight=args.shape_weight, targets=args.targets,

@@ -71,6 +71,9 @@ class ModelConfig:
     def __post_init__(self) -> None:
         if self.k < 1:
             raise ValueError(f"k must be >= 1, got {self.k}")
+        if min(self.enc_hidden, self.decr_hidden, self.dect_hidden) < 1:
+            widths = (self.enc_hidden, self.decr_hidden, self.dect_hidden)
+            raise ValueError(f"hidden widths must be >= 1, got {widths}")
         if self.dect_layers < 2:
             raise ValueError(f"dect_layers must be >= 2, got {self.dect_layers}")
         lo, hi = (float(v) for v in self.g_range)
