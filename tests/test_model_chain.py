@@ -152,6 +152,9 @@ def test_log_scaled_parameters_and_legacy_configs():
     torch.testing.assert_close(new_net.normalise(hi), torch.ones(1, 5))
     u = torch.rand(64, 5)
     torch.testing.assert_close(new_net.normalise(new_net.from_unit(u)), 2 * u - 1, atol=1e-5, rtol=0)
+    edge = torch.tensor([[0.001, 0.25, 0.02, 0.5, 0.0]], requires_grad=True)  # b_mel (linear) at 0, f_mel at lo
+    new_net(edge).sum().backward()
+    assert torch.isfinite(edge.grad).all(), edge.grad  # the log of a linear parameter must not leak NaN
     old_net.load_state_dict(new_net.state_dict())  # same stored keys
     p = new_net.from_unit(u)
     assert not torch.allclose(new_net(p), old_net(p))  # same weights, another input scale

@@ -57,7 +57,10 @@ class _ParamScale(nn.Module):
 
     def normalise(self, p: torch.Tensor) -> torch.Tensor:
         """p (N, 5) in physical units -> [-1, 1] over the sampling ranges (log scale for the log params)."""
-        q = torch.where(self.log_mask, torch.log(torch.maximum(p, self.p_lo)), p)
+        # the log only sees the log params (1 elsewhere): log(0) of a linear one (b_mel = 0) would give a NaN
+        # gradient through torch.where even though its value is not selected
+        safe = torch.where(self.log_mask, torch.maximum(p, self.p_lo), torch.ones_like(p))
+        q = torch.where(self.log_mask, torch.log(safe), p)
         return 2.0 * (q - self.q_lo) / self.q_span - 1.0
 
     def from_unit(self, u: torch.Tensor) -> torch.Tensor:
