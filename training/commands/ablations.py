@@ -16,12 +16,12 @@ import sys
 from dataclasses import replace
 from pathlib import Path
 
+from training.commands.options import error_status, triple
 from training.paths import portable_command
 
 
 def _parser() -> argparse.ArgumentParser:
     from training.ablations.run import Scale
-    from training.commands.options import triple
     from training.model.config import SIZES
 
     d = Scale()
@@ -94,8 +94,7 @@ def main(argv: list[str]) -> int:
         record = run(args.out, dataset, fits, lut, scale, quick=args.quick, device=args.device, progress=progress,
                      command=portable_command("python -m training ablations", argv))
     except ValueError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
+        return error_status(exc)
     for c in record["claims"]:
         print(f"{c['claim']}: {c['verdict']}")
     print(f"wrote {args.out / 'ablations.md'} and ablations.json")

@@ -18,6 +18,7 @@ import os
 import sys
 from pathlib import Path
 
+from training.commands.options import error_status
 from training.export.card import build_card, write_card
 from training.export.graphs import PARITY_TOL, export_graphs, parity, parity_failures, rounding_cost
 from training.paths import portable_command
@@ -89,8 +90,7 @@ def main(argv: list[str]) -> int:
         card = export_run(args.run, args.out, weights=args.weights, max_mb=args.max_mb, parity_n=args.parity_n,
                           notes=args.note, overwrite=args.overwrite, seed=args.seed, command=command)
     except ValueError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
+        return error_status(exc)
     except RuntimeError as exc:
         print(f"export failed: {exc}", file=sys.stderr)
         return 1

@@ -24,6 +24,7 @@ import time
 from pathlib import Path
 
 from exporters.constants import WAVELENGTHS_NM
+from training.commands.options import error_status
 from training.paths import SHIPPED_DECODER
 from training.realskin import report, study
 from training.realskin.fit import fit_subjects
@@ -67,8 +68,7 @@ def main(argv: list[str]) -> int:
     try:
         meas = read_measurements(args.data)
     except ValueError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
+        return error_status(exc)
     if args.photons is None:
         args.photons = 3_000 if args.study else 10_000
     if args.photons < 100:

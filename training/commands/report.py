@@ -28,6 +28,7 @@ import json
 import sys
 from pathlib import Path
 
+from training.commands.options import error_status
 from training.data.build import SPLITS
 from training.paths import SHIPPED_MODEL_DIR, portable, portable_strings
 
@@ -261,8 +262,7 @@ def main(argv: list[str]) -> int:
             raise ValueError(f"{args.out} exists; pass --overwrite to replace it")
         report = collect(args)
     except (ValueError, OSError) as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
+        return error_status(exc)
     text = json.dumps(report, indent=1) + "\n" if args.json else markdown(report)
     if args.out is None:
         sys.stdout.write(text)

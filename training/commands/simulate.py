@@ -15,12 +15,12 @@ Example::
 from __future__ import annotations
 
 import argparse
-import sys
 from pathlib import Path
 
 import numpy as np
 
 from exporters.constants import R_EDGES_CM, WAVELENGTHS_NM
+from training.commands.options import error_status
 from training.sim.resample import cdf_resample_profile
 from training.sim.tissue import skin_medium
 from training.sim.transport import PROFILE_ESTIMATORS, simulate
@@ -72,8 +72,7 @@ def main(argv: list[str]) -> int:
             res["profile"] = cdf_resample_profile(res["profile"], res["profile_stderr"], np.array(R_EDGES_CM),
                                                   args.photons)
     except ValueError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
+        return error_status(exc)
     args.out.parent.mkdir(parents=True, exist_ok=True)
     np.savez(args.out, wavelength_nm=np.array(WAVELENGTHS_NM), r_edges_cm=np.array(R_EDGES_CM), tone=tone,
              photons=np.int64(args.photons), method=args.method, profile_estimator=args.profile, **res)

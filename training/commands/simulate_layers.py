@@ -11,10 +11,10 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import sys
 
 import torch
 
+from training.commands.options import error_status
 from training.sim.medium import LayeredMedium
 from training.sim.transport import simulate
 
@@ -69,8 +69,7 @@ def main(argv: list[str]) -> int:
             compile={"auto": "auto", "on": True, "off": False}[args.compile],
         )
     except ValueError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
+        return error_status(exc)
     out = {
         "R_d": float(res.R_d[0]),
         "R_d_stderr": float(res.R_d_stderr[0]),

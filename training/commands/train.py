@@ -21,7 +21,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from training.commands.options import triple
+from training.commands.options import error_status, triple
 from training.model.config import SIZES, ModelConfig
 from training.paths import portable_command
 from training.train.run import TrainConfig, train
@@ -99,8 +99,7 @@ def main(argv: list[str]) -> int:
                        device=args.device, progress=not args.no_progress,
                        checkpoint_interval_s=args.checkpoint_interval, command=command)
     except ValueError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
+        return error_status(exc)
     for stage, row in record.get("losses", {}).items():
         parts = ", ".join(f"{k} {v:.4g}" for k, v in row.items() if k.startswith(("train_", "val_")))
         print(f"{stage}: {parts}")

@@ -87,8 +87,7 @@ def _mitsuba(args) -> int:
     try:
         rec = render_strips(args.out, config, overwrite=args.overwrite, progress=not args.no_progress)
     except (ValueError, FileExistsError, em.MitsubaUnavailable) as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
+        return error_status(exc)
     for band, values in rec["translucency"].items():
         print(f"{band:6s} translucency " + " ".join(f"{n}={v:.4f}" for n, v in zip(rec["tones"], values, strict=True)))
     print(f"wrote {args.out} ({rec['config']['variant']}, {rec['seconds']:.0f} s)")
