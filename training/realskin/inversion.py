@@ -20,8 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from exporters.colorimetry import linear_srgb_to_lab, spectrum_to_linear_srgb
-from exporters.constants import WAVELENGTHS_NM
-from training.realskin.measurements import Measurements, read_measurements
+from training.realskin.measurements import Measurements, diffuse_on_grid, read_measurements
 
 #: The band the issue asks the exposure of measured skin to fall in.
 EXPOSURE_BAND: tuple[float, float] = (0.9, 1.1)
@@ -29,8 +28,7 @@ EXPOSURE_BAND: tuple[float, float] = (0.9, 1.1)
 
 def measured_albedo_rgb(meas: Measurements, specular: float) -> np.ndarray:
     """Linear sRGB (S, 3) under D65 of each measured spectrum without its specular part, clipped to [0, 1]."""
-    grid = np.stack([np.interp(WAVELENGTHS_NM, meas.wavelength_nm, r) for r in meas.reflectance]) - specular
-    return np.clip(spectrum_to_linear_srgb(np.clip(grid, 0.0, 1.0), "D65"), 0.0, 1.0)
+    return np.clip(spectrum_to_linear_srgb(diffuse_on_grid(meas, specular), "D65"), 0.0, 1.0)
 
 
 def inversion_exposure(model_path: Path, meas: Measurements | None = None, specular: float | None = None) -> dict:

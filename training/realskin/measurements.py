@@ -62,6 +62,14 @@ def read_measurements(path: str | Path = NIST_FILE) -> Measurements:
     return Measurements(wavelength_nm=wl, reflectance=refl, names=tuple(header[1:]))
 
 
+def diffuse_on_grid(meas: Measurements, specular: float) -> np.ndarray:
+    """The measured spectra on the full 2 nm grid (linear interpolation) without their specular part
+    ``specular`` (training.realskin.geometry.rough_specular), clipped to [0, 1]: (S, 376), what skin looks
+    like without its highlight (the colour an artist paints)."""
+    grid = np.stack([np.interp(WAVELENGTHS_NM, meas.wavelength_nm, r) for r in meas.reflectance])
+    return np.clip(grid - specular, 0.0, 1.0)
+
+
 def grid_channels(meas: Measurements) -> tuple[np.ndarray, np.ndarray]:
     """Model channels to compare at and the measurements there: (indices into WAVELENGTHS_NM (C,), (S, C)).
 

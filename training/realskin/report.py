@@ -8,15 +8,14 @@ from pathlib import Path
 import numpy as np
 
 from exporters.colorimetry import spectrum_to_lab
-from exporters.constants import PARAM_NAMES, WAVELENGTHS_NM
+from exporters.constants import PARAM_NAMES
 from training.realskin.fit import BANDS_NM, FIT_BAND_NM, SubjectFit, at_edge
-from training.realskin.measurements import Measurements
+from training.realskin.measurements import Measurements, diffuse_on_grid
 
 
 def measured_lab(meas: Measurements, specular: float) -> np.ndarray:
     """CIE Lab (D65) of each measured spectrum without its specular part (S, 3)."""
-    grid = np.stack([np.interp(WAVELENGTHS_NM, meas.wavelength_nm, r) for r in meas.reflectance]) - specular
-    return spectrum_to_lab(np.clip(grid, 0.0, 1.0))
+    return spectrum_to_lab(diffuse_on_grid(meas, specular))
 
 
 def measured_lightness(meas: Measurements, specular: float) -> np.ndarray:
