@@ -28,7 +28,7 @@ from . import nodes
 #: Custom properties on baked images: the bake key (exporters.bake.bake_key), component, map kind, K of the bake.
 KEY_PROP, K_PROP = "spectral_skin_sss_bake_key", "spectral_skin_sss_k"
 KIND_PROP, KCOUNT_PROP = "spectral_skin_sss_kind", "spectral_skin_sss_k_count"
-#: Channel names of Blender's pixel buffers by channel count (for exporters.image_input.channel_layout).
+#: Channel names of Blender's pixel buffers by channel count (for exporters.image_input.albedo_texels).
 _BUFFER_CHANNELS = {1: ("Y",), 2: ("Y", "A"), 3: ("R", "G", "B"), 4: ("R", "G", "B", "A")}
 
 
@@ -117,15 +117,10 @@ def _albedo_from_pixels(image: bpy.types.Image, colorspace: str) -> AlbedoImage:
     ch = image.channels
     if w < 1 or h < 1 or ch not in _BUFFER_CHANNELS:
         raise BakeInputError(f"image '{image.name}' has no pixels (is its file missing?)")
-    where = f"image '{image.name}'"
     px = np.empty(w * h * ch, dtype=np.float32)
     image.pixels.foreach_get(px)
     px = px.reshape(h, w, ch)[::-1].astype(np.float64)  # Blender stores rows bottom-up
-    colour, a = image_input.channel_layout(_BUFFER_CHANNELS[ch], where=where)
-    alpha = px[..., a] if a >= 0 else None
-    rgb, _ = image_input.check_texels(px[..., colour], where, alpha=alpha)
-    if rgb.shape[2] == 1:
-        rgb = np.repeat(rgb, 3, axis=2)
+    rgb, alpha, _ = image_input.albedo_texels(px, _BUFFER_CHANNELS[ch], f"image '{image.name}'")
     used = colorspace if colorspace in ("srgb", "linear") else ("linear" if image.is_float else "srgb")
     rgb = image_input.to_linear(rgb, used)
     if alpha is not None and np.all(alpha >= 1.0):

@@ -3,8 +3,9 @@ texel checks.
 
 Every way an albedo reaches a bake goes through here: a file (:func:`read_albedo`, :func:`read_albedo_indexed`,
 read with OpenImageIO) and, in the Blender add-on, an image's pixel buffer (blender_addon.baker reads the
-buffer with bpy and hands it to :func:`channel_layout` and :func:`check_texels`; the colour-space name Blender
-shows goes to :func:`colorspace_of_name`).  So one image gets the same verdict however it arrives.
+buffer with bpy and hands it to :func:`albedo_texels`, as :func:`read_albedo` does with a file's pixels; the
+colour-space name Blender shows goes to :func:`colorspace_of_name`).  So one image gets the same verdict however
+it arrives.
 
 Conventions:
 * Albedo: returned as linear sRGB float64 (H, W, 3) plus alpha (H, W) or None (or as a palette and an index,
@@ -129,6 +130,12 @@ class IndexedAlbedo:
 
 
 # -- colour space ---------------------------------------------------------------------------------------------
+def check_colorspace(colorspace: str) -> None:
+    """ValueError unless ``colorspace`` is one a reader takes (``COLORSPACES``)."""
+    if colorspace not in COLORSPACES:
+        raise ValueError(f"colorspace must be auto, srgb or linear, not {colorspace!r}")
+
+
 def colorspace_of_name(name: str, where: str = "image") -> Literal["srgb", "linear"] | None:
     """How values tagged with the colour-space ``name`` (Blender's, OCIO's or OpenImageIO's) are encoded:
     "linear", "srgb", or None when the name says neither (gamma 1.8/2.2/2.4 encodings, HDR displays, empty or
@@ -210,6 +217,20 @@ def check_texels(colour: np.ndarray, where: str, clamp_negative: bool = False, i
     return np.maximum(values, 0.0), n
 
 
+def albedo_texels(pixels: np.ndarray, channel_names: tuple[str, ...] | list[str], where: str,
+                  alpha_channel: int = -1, clamp_negative: bool = False
+                  ) -> tuple[np.ndarray, np.ndarray | None, int]:
+    """The colour and alpha of decoded pixels (H, W, C) float64 with the channels ``channel_names``, checked:
+    (colour (H, W, 3), gray replicated; alpha (H, W) as stored or None; texels clamped).  The layout is
+    :func:`channel_layout`'s, the checks :func:`check_texels`'s; the colour is still in its own colour space."""
+    colour, a = channel_layout(channel_names, alpha_channel, where)
+    alpha = pixels[..., a] if a >= 0 else None
+    rgb, n_clamped = check_texels(pixels[..., colour], where, clamp_negative, alpha=alpha)
+    if rgb.shape[2] == 1:
+        rgb = np.repeat(rgb, 3, axis=2)
+    return rgb, alpha, n_clamped
+
+
 def to_linear(rgb: np.ndarray, used: str) -> np.ndarray:
     """Linear float64 values of colour values in colour space ``used`` ("srgb": the IEC 61966-2-1 curve undone,
     "linear": as they are)."""
@@ -221,8 +242,7 @@ def _read_pixels(path: Path, colorspace: str, integer_types: tuple[str, ...]) ->
     """Open an albedo image (alpha unassociated) and read all its channels: (spec, the pixel type read, the
     pixels).  Files whose type is in ``integer_types`` are read in that type (the callers scale them in
     float64: OIIO's float conversion is float32), others as float.  Errors as :func:`read_albedo`."""
-    if colorspace not in COLORSPACES:
-        raise ValueError(f"colorspace must be auto, srgb or linear, not {colorspace!r}")
+    check_colorspace(colorspace)
     if not path.is_file():
         raise FileNotFoundError(f"albedo image not found: {path}")
     config = oiio.ImageSpec()
@@ -260,11 +280,7 @@ def read_albedo(path: str | os.PathLike, colorspace: ColorSpace = "auto",
     pixels = np.asarray(pixels, dtype=np.float64).reshape(spec.height, spec.width, spec.nchannels)
     if native in _INT_MAX:
         pixels /= _INT_MAX[native]
-    colour, a = channel_layout(spec.channelnames, spec.alpha_channel, str(path))
-    alpha = pixels[..., a] if a >= 0 else None
-    rgb, n_clamped = check_texels(pixels[..., colour], str(path), clamp_negative, alpha=alpha)
-    if rgb.shape[2] == 1:
-        rgb = np.repeat(rgb, 3, axis=2)
+    rgb, alpha, n_clamped = albedo_texels(pixels, spec.channelnames, str(path), spec.alpha_channel, clamp_negative)
     used = _detect_colorspace(spec, str(path)) if colorspace == "auto" else colorspace
     return AlbedoImage(rgb=to_linear(rgb, used), alpha=None if alpha is None else np.clip(alpha, 0.0, 1.0),
                        colorspace=used, source_format=str(spec.format), n_clamped=n_clamped,

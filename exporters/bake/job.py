@@ -304,8 +304,7 @@ def bake(albedo_path: str | os.PathLike, out_dir: str | os.PathLike, model_path:
     options = options or BakeOptions()
     t0 = time.perf_counter()
     options.check()
-    if colorspace not in image_input.COLORSPACES:
-        raise ValueError(f"colorspace must be auto, srgb or linear, not {colorspace!r}")
+    image_input.check_colorspace(colorspace)
     path = Path(albedo_path)
     if not path.is_file():
         raise FileNotFoundError(f"albedo image not found: {path}")
