@@ -138,7 +138,7 @@ def test_cli_refuses_inconsistent_runs(toy, tmp_path, capsys):
     assert "stage 1 is not finished" in capsys.readouterr().err
     assert train_main(base + ["1", "--stage", "1"]) == 0
     assert train_main(base + ["2", "--stage", "1"]) == 2  # another configuration in the same folder
-    assert "another train" in capsys.readouterr().err
+    assert "epochs[stage 1] 1 -> 2" in capsys.readouterr().err
     rec = json.loads((tmp_path / "r" / "run.json").read_text())
     assert rec["commands"][0].startswith("python -m training train --dataset")
     assert rec["model"]["enc_hidden"] == SIZES["tiny"]["enc_hidden"]
@@ -180,17 +180,43 @@ def test_shape_loss_scores_the_rendered_mixture_against_the_profiles(toy):
 
 
 def test_old_run_records_resume_with_the_behaviour_they_had(toy, tmp_path):
-    """A run folder made before --shape-weight existed trained stage 3 without it: resuming it with the
-    old value works, asking for the new default does not silently change it."""
-    rec = _train(tmp_path / "r", toy, want=(1,), tcfg={**TCFG, "shape_weight": 0.0})
+    """A run folder made before --exposure-prior existed trained stage 2 without it: resuming it with the
+    old value works, asking for another value does not silently change it."""
+    rec = _train(tmp_path / "r", toy, want=(1, 2), tcfg={**TCFG, "exposure_prior": 0.0})
     path = tmp_path / "r" / "run.json"
     old = json.loads(path.read_text())
-    del old["train"]["shape_weight"]
+    del old["train"]["exposure_prior"]
     path.write_text(json.dumps(old))
-    _train(tmp_path / "r", toy, want=(1,), tcfg={**TCFG, "shape_weight": 0.0})
-    with pytest.raises(ValueError, match="another train"):
-        _train(tmp_path / "r", toy, want=(1,), tcfg={**TCFG, "shape_weight": 1.0})
-    assert rec["train"]["shape_weight"] == 0.0
+    _train(tmp_path / "r", toy, want=(1, 2), tcfg={**TCFG, "exposure_prior": 0.0})
+    with pytest.raises(ValueError, match="exposure_prior 0.0 -> 0.01"):
+        _train(tmp_path / "r", toy, want=(1, 2), tcfg={**TCFG, "exposure_prior": 0.01})
+    assert rec["train"]["exposure_prior"] == 0.0
+
+
+def test_a_stage_not_started_may_train_another_way(toy, tmp_path):
+    """Stage 3's own options may differ from the record's while stage 3 has no checkpoint (a copy of stages
+    1-2 trains it another way); once it has one, or for an option of a started stage, the folder refuses."""
+    import shutil
+
+    from training.train.run import PER_STAGE_OPTIONS, STAGE_OPTIONS
+
+    names = [n for stage in STAGE_OPTIONS.values() for n in stage] + list(PER_STAGE_OPTIONS)
+    assert sorted(names) == sorted(TrainConfig.__dataclass_fields__)  # every option belongs to one stage
+
+    _train(tmp_path / "a", toy, want=(1, 2))
+    (tmp_path / "b").mkdir()
+    for name in ("stage1.pt", "stage2.pt", "run.json"):
+        shutil.copy(tmp_path / "a" / name, tmp_path / "b" / name)
+    other = {**TCFG, "encoder_share": 0.5, "epochs": [3, 3, 2]}
+    with pytest.raises(ValueError, match=r"exposure_jitter 0.25 -> 1.0"):
+        _train(tmp_path / "b", toy, want=(3,), tcfg={**other, "exposure_jitter": 1.0})
+    rec = _train(tmp_path / "b", toy, want=(3,), tcfg=other)
+    assert rec["train"]["encoder_share"] == 0.5 and rec["losses"]["stage3"]["epochs_done"] == 2
+    for name, t in load_checkpoint(checkpoint_path(tmp_path / "a", 2))["model"].items():
+        if name.startswith(("enc.", "dec_r.")):  # the copied stages are the ones stage 3 built on
+            torch.testing.assert_close(load_checkpoint(checkpoint_path(tmp_path / "b", 3))["model"][name], t)
+    with pytest.raises(ValueError, match=r"encoder_share 0.5 -> 0.0"):
+        _train(tmp_path / "b", toy, want=(3,), tcfg={**other, "encoder_share": 0.0})
 
 
 def test_exposure_prior_adds_the_mean_log_exposure():

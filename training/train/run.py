@@ -9,8 +9,10 @@ RUNDIR holds:
   model.pt       the final model (config + state dict), written when stage 3 finishes.
 
 Running the same command again continues where it stopped.  Asking for a later stage loads the
-earlier stages' finished checkpoints (they must exist).  A different configuration in an existing
-RUNDIR is refused (use another folder).
+earlier stages' finished checkpoints (they must exist).  A different model, LUT, or option of a stage
+that RUNDIR already holds a checkpoint of is refused (use another folder); a stage not yet started
+may take other options of its own (``STAGE_OPTIONS``): a copy of ``stage1.pt``, ``stage2.pt`` and
+``run.json`` in a new folder trains stage 3 another way on the same stages 1-2.
 """
 
 from __future__ import annotations
@@ -70,23 +72,65 @@ LEGACY_TRAIN: dict = {"exposure_prior": 0.0, "shape_weight": 0.0, "targets": "fi
                      "encoder_share": 0.0}
 
 
+#: The training options each stage adds to those of the stages before it (a stage depends on all of them);
+#: ``epochs``, ``batch``, ``lr`` have one entry per stage.  Every ``TrainConfig`` field is listed here once.
+STAGE_OPTIONS: dict[int, tuple[str, ...]] = {
+    1: ("seed",),
+    2: ("synthetic", "exposure_jitter", "exposure_prior", "unfreeze", "data_every"),
+    3: ("shape_weight", "targets", "weighted_param", "lambda_r", "slab_factor", "encoder_share"),
+}
+PER_STAGE_OPTIONS = ("epochs", "batch", "lr")
+
+
+def stage_options(train: dict, stage: int) -> dict:
+    """The options (``asdict(TrainConfig)`` values) that stages 1..``stage`` were trained with."""
+    out = {}
+    for s in range(1, stage + 1):
+        out.update({name: train[name] for name in STAGE_OPTIONS[s]})
+        out.update({f"{name}[stage {s}]": train[name][s - 1] for name in PER_STAGE_OPTIONS})
+    return out
+
+
 def _write_json(path: Path, obj: dict) -> None:
     tmp = path.with_suffix(".json.tmp")
     tmp.write_text(json.dumps(obj, indent=2))
     os.replace(tmp, path)
 
 
-def _check_or_create_record(rundir: Path, record: dict) -> dict:
+def _started_stage(rundir: Path) -> int:
+    """The last stage with a checkpoint in ``rundir`` (0: none)."""
+    return max((s for s in (1, 2, 3) if checkpoint_path(rundir, s).exists()), default=0)
+
+
+def _check_record(rundir: Path, record: dict) -> dict | None:
+    """The run record already in ``rundir`` (None if none), after checking that ``record`` may train there:
+    same model and LUT, same options for every stage that has a checkpoint (ValueError naming the difference)."""
     path = rundir / "run.json"
     if not path.exists():
-        _write_json(path, record)
-        return record
+        return None
     old = json.loads(path.read_text())
     old["train"] = {**LEGACY_TRAIN, **old.get("train", {})}  # runs made before an option existed
-    for key in ("model", "train", "lut_sha256"):
+    for key in ("model", "lut_sha256"):
         if old.get(key) != record.get(key):
             raise ValueError(f"{rundir} was trained with another {key} ({old.get(key)} != {record.get(key)}): "
                              "use another --out folder")
+    started = _started_stage(rundir)
+    before, now = stage_options(old["train"], started), stage_options(record["train"], started)
+    changed = {name: (before[name], now[name]) for name in before if before[name] != now[name]}
+    if changed:
+        what = ", ".join(f"{name} {a!r} -> {b!r}" for name, (a, b) in changed.items())
+        raise ValueError(f"{rundir} holds stages 1-{started} trained with other options ({what}): use another "
+                         "--out folder (a copy of the finished stages' checkpoints and run.json trains the next "
+                         "stage another way)")
+    return old
+
+
+def _check_or_create_record(rundir: Path, record: dict) -> dict:
+    old = _check_record(rundir, record)
+    if old is None:
+        _write_json(rundir / "run.json", record)
+        return record
+    old["train"] = record["train"]  # equal for the stages started; the stages to come train with these
     old["commands"] = old.get("commands", []) + record["commands"]
     if record.get("fits") is not None:  # stage 3 loads the fits that stages 1-2 did not: count what it learns from
         old["fits"], old["dataset_info"] = record["fits"], record["dataset_info"]
@@ -126,14 +170,16 @@ def train(rundir: Path, dataset: Path, fits: Path | None, lut_path: Path, *, wan
         raise ValueError(f"data_every must be >= 1 and lambda_r >= 0, got {tcfg.data_every}, {tcfg.lambda_r}")
     if not 0.0 <= tcfg.encoder_share <= 1.0:
         raise ValueError(f"encoder_share must lie in [0, 1], got {tcfg.encoder_share}")
+    lut_sha = sha256_file(lut_path)
+    _check_record(rundir, {"model": mcfg.to_dict(), "train": asdict(tcfg), "lut_sha256": lut_sha})
     train_data = load_split(dataset, "train", fits if need_fits else None, mcfg.k, profiles, tcfg.targets,
-                            SHAPE_BIN_STRIDE).to(dev)
+                            SHAPE_BIN_STRIDE).to(dev)  # (checked first: loading takes minutes)
     val_fits = fits if (need_fits and fits is not None and fits_files(fits, "validation")) else None
     val_data = load_split(dataset, "validation", val_fits, mcfg.k, profiles and val_fits is not None,
                           tcfg.targets, shape_every=VALIDATION_SHAPE_EVERY).to(dev)
     record = {
         "model": mcfg.to_dict(), "train": asdict(tcfg), "lut": str(Path(lut_path).resolve()),
-        "lut_sha256": sha256_file(lut_path),
+        "lut_sha256": lut_sha,
         "dataset": str(Path(dataset).resolve()),
         "fits": None if fits is None or not need_fits else str(Path(fits).resolve()),
         "dataset_info": {"n_train": len(train_data), "n_validation": len(val_data), "photons": train_data.photons,
