@@ -309,3 +309,31 @@ def test_encoder_share_trains_dec_t_on_the_encoders_tones(toy, tmp_path):
     with torch.no_grad():
         step = float(spec.step(idx)["loss"])
     assert step == pytest.approx(losses["rgb"], rel=1e-6) and abs(losses["rgb"] - losses["true"]) > 1e-4, losses
+
+
+def test_log_reflectance_loss_weighs_dark_and_light_tones_alike():
+    """--refl-loss log: mean |ln(R_hat + f) - ln(R + f)|.  Twice too bright costs ln 2 on a dark tone (R 0.01)
+    as on a light one (0.5), up to the floor f; the paper's absolute form charges the light tone 50x more."""
+    target = torch.tensor([[0.01, 0.01], [0.5, 0.5]])
+    pred = 2 * target
+    f = train_losses.LOG_REFL_FLOOR
+    log = [float(train_losses.reflectance_loss(pred[i:i + 1], target[i:i + 1], "log")) for i in (0, 1)]
+    assert log[0] == pytest.approx(np.log((0.02 + f) / (0.01 + f)), rel=1e-6)
+    assert log[1] == pytest.approx(np.log((1.0 + f) / (0.5 + f)), rel=1e-6)
+    assert abs(log[0] - log[1]) < 0.01 * np.log(2)
+    absolute = [float(train_losses.reflectance_loss(pred[i:i + 1], target[i:i + 1])) for i in (0, 1)]
+    assert absolute == pytest.approx([0.01, 0.5])
+    zero = torch.zeros(1, 2)  # a black target and prediction: finite, zero
+    assert float(train_losses.reflectance_loss(zero, zero, "log")) == 0.0
+    with pytest.raises(ValueError, match="absolute"):
+        train_losses.reflectance_loss(pred, target, "squared")
+
+
+def test_stage3_trains_with_the_log_reflectance_loss(toy, tmp_path):
+    """A run with refl_loss="log" records it, and its stage 3 lowers the log reflectance error."""
+    rec = _train(tmp_path / "r", toy, tcfg={**TCFG, "refl_loss": "log", "epochs": [3, 3, 6]})
+    assert rec["train"]["refl_loss"] == "log"
+    h = load_checkpoint(checkpoint_path(tmp_path / "r", 3))["history"]
+    assert h[-1]["train_refl"] < h[0]["train_refl"]
+    with pytest.raises(ValueError, match="refl_loss"):
+        _train(tmp_path / "bad", toy, tcfg={**TCFG, "refl_loss": "l2"})

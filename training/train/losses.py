@@ -61,6 +61,24 @@ def spectral_l1(pred: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
     return (pred - target).abs().mean()
 
 
+#: L_refl's forms: the paper's absolute L1, and ours on log reflectance (``reflectance_loss``)
+REFL_LOSSES = ("absolute", "log")
+#: floor of both sides of the log form: far below any reflectance the gate sees (a near-black tone's R_d in the
+#: visible is ~3e-3), so that a tone's UV, where R_d reaches 1e-5, does not dominate the mean
+LOG_REFL_FLOOR = 1e-4
+
+
+def reflectance_loss(pred: torch.Tensor, target: torch.Tensor, form: str = "absolute") -> torch.Tensor:
+    """L_refl over (N, W) spectra: "absolute" mean |R_hat - R| (the paper); "log" mean |ln(R_hat + f) - ln(R + f)|,
+    f = ``LOG_REFL_FLOOR``: a relative error, so a dark tone's colour counts as much as a light one's (CIE L*
+    is ~ Y^(1/3): the same absolute error is a larger Delta E the darker the tone)."""
+    if form == "absolute":
+        return spectral_l1(pred, target)
+    if form == "log":
+        return (torch.log(pred + LOG_REFL_FLOOR) - torch.log(target + LOG_REFL_FLOOR)).abs().mean()
+    raise ValueError(f"L_refl form must be one of {REFL_LOSSES}, got {form!r}")
+
+
 def colour_loss(model: SkinChain, albedo_rgb: torch.Tensor, exposure_prior: float = 0.0) -> torch.Tensor:
     """|A - gamma * rgb(Dec_R(Enc(A)))|_1 (mean) + exposure_prior * mean |ln gamma|, for albedos already in
     the model's domain.  The prior (0 = the paper) prefers, among tones of the input's chromaticity, the
@@ -118,7 +136,7 @@ def stage3_losses(model: SkinChain, lut: LookupTables, p: torch.Tensor, R_mc: to
                   shape_target: fit_loss.Target | None = None, shape_weight: float = 0.0,
                   shape_index: torch.Tensor | None = None, interp: torch.Tensor | None = None,
                   weighted: bool = False, report: bool = False, lambda_r: float = LAMBDA_R, slab: bool = True,
-                  frozen_decr: bool = True) -> dict[str, torch.Tensor]:
+                  frozen_decr: bool = True, refl_loss: str = "absolute") -> dict[str, torch.Tensor]:
     """All stage-3 terms for true tones ``p`` (N, 5), MC reflectance (N, W) and fit targets (N, K, Wf) at
     the wavelengths ``target_index`` (Wf,) (None: all W).  ``interp`` (Wf, W) (``spectral.interpolation_matrix``):
     L_param compares at all W with the targets interpolated; None: at ``target_index`` only.  ``weighted``:
@@ -127,7 +145,8 @@ def stage3_losses(model: SkinChain, lut: LookupTables, p: torch.Tensor, R_mc: to
     ``target_index``), and added with ``shape_weight``.  "param" is the L_param optimised; with ``report``
     both variants are returned too ("param_plain", "param_weighted").  Ablations (``training.ablations``):
     ``lambda_r`` the weight of L_refl (paper 15), ``slab`` False drops the slab-depth factor from L_refl,
-    ``frozen_decr`` False lets the gradient reach Dec_R (unfrozen in stage 3)."""
+    ``frozen_decr`` False lets the gradient reach Dec_R (unfrozen in stage 3); ``refl_loss`` L_refl's form
+    (``reflectance_loss``)."""
     with torch.set_grad_enabled(torch.is_grad_enabled() and not frozen_decr):
         refl = model.dec_r(p)  # frozen Dec_R (the paper) unless unfrozen
     out = model.dec_t(p, refl)
@@ -137,7 +156,7 @@ def stage3_losses(model: SkinChain, lut: LookupTables, p: torch.Tensor, R_mc: to
     else:
         u = out["u"] if target_index is None else out["u"][..., target_index]
     l_param = param_loss(u, u_t, weighted)
-    l_refl = spectral_l1(lut_reflectance(model, lut, out, slab), R_mc)
+    l_refl = reflectance_loss(lut_reflectance(model, lut, out, slab), R_mc, refl_loss)
     l_smooth = smooth_loss(out["u"])
     total = l_param + lambda_r * l_refl + LAMBDA_SMOOTH * l_smooth
     terms = {"param": l_param, "refl": l_refl, "smooth": l_smooth}

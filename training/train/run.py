@@ -28,6 +28,7 @@ from exporters.maps import sha256_file
 from training.model.chain import SkinChain
 from training.model.config import ModelConfig, g_range_for_lut
 from training.sim.lut_interp import LookupTables
+from training.train import losses as train_losses
 from training.train import stages
 from training.train.data import TARGET_MODES, SplitData, fits_files, load_split
 from training.train.evaluate import evaluate_split
@@ -64,12 +65,15 @@ class TrainConfig:
     #: stage 3 (ours, issue 23): share of each batch whose Dec_T input is the frozen encoder's answer to the
     #: tone's RGB albedo, p = Enc(A_RGB), instead of the true p (0 = the paper; ``stages.encoder_input``)
     encoder_share: float = 0.0
+    #: stage 3: L_refl as the paper's mean |R_hat - R_MC| ("absolute") or ours, mean |ln R_hat - ln R_MC|
+    #: ("log", ``losses.REFL_LOSSES``), which weighs a dark tone's colour as the eye (L*) does
+    refl_loss: str = "absolute"
 
 
 #: What a run record made before an option existed trained with (its behaviour then).
 LEGACY_TRAIN: dict = {"exposure_prior": 0.0, "shape_weight": 0.0, "targets": "fitted", "weighted_param": False,
                      "lambda_r": 15.0, "slab_factor": True, "unfreeze": False, "data_every": 1,
-                     "encoder_share": 0.0}
+                     "encoder_share": 0.0, "refl_loss": "absolute"}
 
 
 #: The training options each stage adds to those of the stages before it (a stage depends on all of them);
@@ -77,7 +81,7 @@ LEGACY_TRAIN: dict = {"exposure_prior": 0.0, "shape_weight": 0.0, "targets": "fi
 STAGE_OPTIONS: dict[int, tuple[str, ...]] = {
     1: ("seed",),
     2: ("synthetic", "exposure_jitter", "exposure_prior", "unfreeze", "data_every"),
-    3: ("shape_weight", "targets", "weighted_param", "lambda_r", "slab_factor", "encoder_share"),
+    3: ("shape_weight", "targets", "weighted_param", "lambda_r", "slab_factor", "encoder_share", "refl_loss"),
 }
 PER_STAGE_OPTIONS = ("epochs", "batch", "lr")
 
@@ -168,6 +172,8 @@ def train(rundir: Path, dataset: Path, fits: Path | None, lut_path: Path, *, wan
         raise ValueError(f"targets must be one of {TARGET_MODES}, got {tcfg.targets!r}")
     if tcfg.data_every < 1 or tcfg.lambda_r < 0:
         raise ValueError(f"data_every must be >= 1 and lambda_r >= 0, got {tcfg.data_every}, {tcfg.lambda_r}")
+    if tcfg.refl_loss not in train_losses.REFL_LOSSES:
+        raise ValueError(f"refl_loss must be one of {train_losses.REFL_LOSSES}, got {tcfg.refl_loss!r}")
     if not 0.0 <= tcfg.encoder_share <= 1.0:
         raise ValueError(f"encoder_share must lie in [0, 1], got {tcfg.encoder_share}")
     lut_sha = sha256_file(lut_path)
@@ -230,4 +236,4 @@ def _spec(stage: int, model: SkinChain, lut: LookupTables, train_data: SplitData
                              t.exposure_jitter, t.seed, t.exposure_prior, t.unfreeze)
     return stages.stage3(model, lut, train_data, val_data, t.epochs[i], t.batch[i], t.lr[i], t.shape_weight,
                          t.targets == "dense", t.weighted_param, t.lambda_r, t.slab_factor, t.unfreeze,
-                         t.encoder_share)
+                         t.encoder_share, t.refl_loss)
