@@ -28,12 +28,11 @@ from exporters.maps import sha256_file
 from training.model.chain import SkinChain
 from training.model.config import ModelConfig, g_range_for_lut
 from training.sim.lut_interp import LookupTables
-from training.train import losses as train_losses
 from training.train import stages
 from training.train.data import TARGET_MODES, SplitData, fits_files, load_split
 from training.train.evaluate import evaluate_split
 from training.train.loop import checkpoint_path, load_checkpoint, run_stage, save_atomic
-from training.train.losses import SHAPE_BIN_STRIDE, VALIDATION_SHAPE_EVERY
+from training.train.losses import REFL_LOSSES, SHAPE_BIN_STRIDE, VALIDATION_SHAPE_EVERY
 
 
 @dataclass
@@ -129,8 +128,9 @@ def _check_record(rundir: Path, record: dict) -> dict | None:
     return old
 
 
-def _check_or_create_record(rundir: Path, record: dict) -> dict:
-    old = _check_record(rundir, record)
+def _merge_record(rundir: Path, old: dict | None, record: dict) -> dict:
+    """The run record to write: ``record`` in a new folder, else the folder's ``old`` one (``_check_record``'s
+    answer) continued with ``record``'s options, command and fits."""
     if old is None:
         _write_json(rundir / "run.json", record)
         return record
@@ -172,12 +172,12 @@ def train(rundir: Path, dataset: Path, fits: Path | None, lut_path: Path, *, wan
         raise ValueError(f"targets must be one of {TARGET_MODES}, got {tcfg.targets!r}")
     if tcfg.data_every < 1 or tcfg.lambda_r < 0:
         raise ValueError(f"data_every must be >= 1 and lambda_r >= 0, got {tcfg.data_every}, {tcfg.lambda_r}")
-    if tcfg.refl_loss not in train_losses.REFL_LOSSES:
-        raise ValueError(f"refl_loss must be one of {train_losses.REFL_LOSSES}, got {tcfg.refl_loss!r}")
+    if tcfg.refl_loss not in REFL_LOSSES:
+        raise ValueError(f"refl_loss must be one of {REFL_LOSSES}, got {tcfg.refl_loss!r}")
     if not 0.0 <= tcfg.encoder_share <= 1.0:
         raise ValueError(f"encoder_share must lie in [0, 1], got {tcfg.encoder_share}")
     lut_sha = sha256_file(lut_path)
-    _check_record(rundir, {"model": mcfg.to_dict(), "train": asdict(tcfg), "lut_sha256": lut_sha})
+    old_record = _check_record(rundir, {"model": mcfg.to_dict(), "train": asdict(tcfg), "lut_sha256": lut_sha})
     train_data = load_split(dataset, "train", fits if need_fits else None, mcfg.k, profiles, tcfg.targets,
                             SHAPE_BIN_STRIDE).to(dev)  # (checked first: loading takes minutes)
     val_fits = fits if (need_fits and fits is not None and fits_files(fits, "validation")) else None
@@ -194,7 +194,7 @@ def train(rundir: Path, dataset: Path, fits: Path | None, lut_path: Path, *, wan
                          "fitted_wavelengths": 0 if train_data.target_index is None else len(train_data.target_index)},
         "commands": [command] if command else [],
     }
-    record = _check_or_create_record(rundir, record)
+    record = _merge_record(rundir, old_record, record)
     torch.manual_seed(tcfg.seed)
     model = SkinChain(mcfg).to(dev)
     common = {"seed": tcfg.seed, "device": dev, "progress": progress, "checkpoint_interval_s": checkpoint_interval_s,
