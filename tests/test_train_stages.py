@@ -337,3 +337,41 @@ def test_stage3_trains_with_the_log_reflectance_loss(toy, tmp_path):
     assert h[-1]["train_refl"] < h[0]["train_refl"]
     with pytest.raises(ValueError, match="refl_loss"):
         _train(tmp_path / "bad", toy, tcfg={**TCFG, "refl_loss": "l2"})
+
+
+def test_smooth_weight_sets_how_much_dec_t_may_change_per_wavelength_step(toy, tmp_path):
+    """--smooth-weight S: stage 3 adds S x L_smooth, the mean |u(l + 1) - u(l)| of Dec_T's normalised outputs
+    (checked against the differences taken here).  From the same stages 1-2, a stage 3 with S = 50 ends with
+    smoother outputs than one with the paper's 0.5; the weight is recorded, a folder holding a stage 3 refuses
+    another, and a negative one is refused."""
+    data, fits, lut = toy
+    tcfg = dict(TCFG, shape_weight=0.0, epochs=[3, 3, 8])
+    base = tmp_path / "base"
+    _train(base, toy, want=(1, 2), tcfg=tcfg)
+    split = load_split(data, "train", fits, k=3)
+    lut_t = LookupTables.load(lut, dtype=torch.float32)
+    model = SkinChain(ModelConfig(**SIZES["tiny"]))
+    model.load_state_dict(load_checkpoint(checkpoint_path(base, 2))["model"])
+    idx = torch.arange(4)
+    rows, targets = split.fitted[idx], {k: v[idx] for k, v in split.targets.items()}
+    with torch.no_grad():
+        u = model.dec_t(split.tone[rows], model.dec_r(split.tone[rows]))["u"]  # (N, 4, K, W)
+        by = {s: train_losses.stage3_losses(model, lut_t, split.tone[rows], split.R_d[rows], targets,
+                                            split.target_index, lambda_smooth=s) for s in (0.0, 3.0)}
+    smooth = float(np.abs(np.diff(u.numpy(), axis=-1)).mean())
+    assert float(by[3.0]["smooth"]) == pytest.approx(smooth, rel=1e-5)
+    assert float(by[3.0]["loss"] - by[0.0]["loss"]) == pytest.approx(3.0 * smooth, rel=1e-4)
+
+    runs = {}
+    for weight in (0.5, 50.0):
+        rundir = tmp_path / f"smooth{weight}"
+        rundir.mkdir()
+        for s in (1, 2):
+            (rundir / checkpoint_path(base, s).name).write_bytes(checkpoint_path(base, s).read_bytes())
+        runs[weight] = _train(rundir, toy, want=(3,), tcfg=dict(tcfg, smooth_weight=weight))
+        assert runs[weight]["train"]["smooth_weight"] == weight
+    assert runs[50.0]["losses"]["stage3"]["train_smooth"] < 0.5 * runs[0.5]["losses"]["stage3"]["train_smooth"]
+    with pytest.raises(ValueError, match="smooth_weight 50.0 -> 5.0"):
+        _train(tmp_path / "smooth50.0", toy, want=(3,), tcfg=dict(tcfg, smooth_weight=5.0))
+    with pytest.raises(ValueError, match="smooth_weight must be"):
+        _train(tmp_path / "negative", toy, tcfg=dict(tcfg, smooth_weight=-1.0))

@@ -3,7 +3,7 @@
     python -m training train --dataset DIR --fits DIR --lut LUT.npz --out RUNDIR
         [--stage 1|2|3|all] [--epochs E1,E2,E3] [--batch B1,B2,B3] [--lr L1,L2,L3] [--k 3]
         [--size paper|small|tiny] [--enc-hidden H] [--synthetic N] [--seed S] [--device cpu|cuda]
-        [--targets dense|fitted] [--uniform-param] [--encoder-share F] [--refl-loss absolute|log]
+        [--targets dense|fitted] [--uniform-param] [--encoder-share F] [--refl-loss absolute|log] [--smooth-weight S]
         [--lambda-r 15] [--no-slab-factor] [--unfreeze] [--data-every N]
         [--checkpoint-interval SECONDS] [--no-progress]
 
@@ -57,6 +57,9 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("--refl-loss", choices=("absolute", "log"), default=d.refl_loss,
                    help="stage 3: L_refl as the paper's mean |R_hat - R_MC| (absolute) or ours on log reflectance "
                         "(log: a dark tone's colour weighs as much as a light one's)")
+    p.add_argument("--smooth-weight", type=float, default=d.smooth_weight,
+                   help="stage 3: weight of L_smooth, the mean |change| of Dec_T's normalised outputs per 2 nm step "
+                        "(the paper's lambda_smooth 0.5)")
     a = p.add_argument_group("ablations of the paper's §5 (python -m training ablations; defaults = the paper)")
     a.add_argument("--lambda-r", type=float, default=d.lambda_r, help="stage 3: weight of L_refl (paper 15)")
     a.add_argument("--no-slab-factor", action="store_true", help="stage 3: L_refl without the slab-depth factor")
@@ -90,7 +93,8 @@ def main(argv: list[str]) -> int:
                        exposure_prior=args.exposure_prior, shape_weight=args.shape_weight, targets=args.targets,
                        weighted_param=not args.uniform_param, lambda_r=args.lambda_r,
                        slab_factor=not args.no_slab_factor, unfreeze=args.unfreeze, data_every=args.data_every,
-                       encoder_share=args.encoder_share, refl_loss=args.refl_loss)
+                       encoder_share=args.encoder_share, refl_loss=args.refl_loss,
+                       smooth_weight=args.smooth_weight)
     command = portable_command("python -m training train", argv)
     try:
         if 3 in want and args.fits is None:

@@ -20,7 +20,11 @@ Shapes: N tones, W wavelengths, K components; ``u`` tensors are Dec_T's normalis
     counts in full.
   - L_refl = mean |sum_k w_k R(alpha_k, g_k) (1 - exp(-C sigma_t,k c(lambda))) - R_MC| (eq. lrefl_lut
     with the slab-depth factor of eq. slab_factor), R from the LUT (bilinear).
-  - L_smooth = mean |u[..., l + 1] - u[..., l]| over all channels (finite differences over lambda).
+  - L_smooth = mean |u[..., l + 1] - u[..., l]| over all channels (finite differences over lambda).  The
+    paper writes ||grad_lambda theta||_1 with lambda_smooth = 0.5 and does not say over what it sums; as a
+    mean over steps, channels and tones, 0.5 is weak beside L_shape and L_refl: the rebuild's decoders
+    moved by 0.1 of each channel's range per 2 nm step (README, "L_smooth"); ``lambda_smooth`` (``train
+    --smooth-weight``) sets it.
   - Ours, not the paper's: + shape_weight L_shape, the fitter's profile loss (``training.fit.loss``) of
     the decoded mixture's rendered profile sum_k w_k R_k P_k / sum_k w_k R_k against the Monte Carlo
     profile, at the fitted wavelengths (``profile_shape_loss``).  Why: the fits are degenerate - very
@@ -136,7 +140,8 @@ def stage3_losses(model: SkinChain, lut: LookupTables, p: torch.Tensor, R_mc: to
                   shape_target: fit_loss.Target | None = None, shape_weight: float = 0.0,
                   shape_index: torch.Tensor | None = None, interp: torch.Tensor | None = None,
                   weighted: bool = False, report: bool = False, lambda_r: float = LAMBDA_R, slab: bool = True,
-                  frozen_decr: bool = True, refl_loss: str = "absolute") -> dict[str, torch.Tensor]:
+                  frozen_decr: bool = True, refl_loss: str = "absolute",
+                  lambda_smooth: float = LAMBDA_SMOOTH) -> dict[str, torch.Tensor]:
     """All stage-3 terms for true tones ``p`` (N, 5), MC reflectance (N, W) and fit targets (N, K, Wf) at
     the wavelengths ``target_index`` (Wf,) (None: all W).  ``interp`` (Wf, W) (``spectral.interpolation_matrix``):
     L_param compares at all W with the targets interpolated; None: at ``target_index`` only.  ``weighted``:
@@ -146,7 +151,7 @@ def stage3_losses(model: SkinChain, lut: LookupTables, p: torch.Tensor, R_mc: to
     both variants are returned too ("param_plain", "param_weighted").  Ablations (``training.ablations``):
     ``lambda_r`` the weight of L_refl (paper 15), ``slab`` False drops the slab-depth factor from L_refl,
     ``frozen_decr`` False lets the gradient reach Dec_R (unfrozen in stage 3); ``refl_loss`` L_refl's form
-    (``reflectance_loss``)."""
+    (``reflectance_loss``); ``lambda_smooth`` the weight of L_smooth (paper 0.5)."""
     with torch.set_grad_enabled(torch.is_grad_enabled() and not frozen_decr):
         refl = model.dec_r(p)  # frozen Dec_R (the paper) unless unfrozen
     out = model.dec_t(p, refl)
@@ -158,7 +163,7 @@ def stage3_losses(model: SkinChain, lut: LookupTables, p: torch.Tensor, R_mc: to
     l_param = param_loss(u, u_t, weighted)
     l_refl = reflectance_loss(lut_reflectance(model, lut, out, slab), R_mc, refl_loss)
     l_smooth = smooth_loss(out["u"])
-    total = l_param + lambda_r * l_refl + LAMBDA_SMOOTH * l_smooth
+    total = l_param + lambda_r * l_refl + lambda_smooth * l_smooth
     terms = {"param": l_param, "refl": l_refl, "smooth": l_smooth}
     if report:
         terms.update(param_plain=param_loss(u, u_t), param_weighted=param_loss(u, u_t, weighted=True))

@@ -18,6 +18,7 @@ may take other options of its own (``STAGE_OPTIONS``): a copy of ``stage1.pt``, 
 from __future__ import annotations
 
 import json
+import math
 import os
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -32,7 +33,7 @@ from training.train import stages
 from training.train.data import TARGET_MODES, SplitData, fits_files, load_split
 from training.train.evaluate import evaluate_split
 from training.train.loop import checkpoint_path, load_checkpoint, run_stage, save_atomic
-from training.train.losses import REFL_LOSSES, SHAPE_BIN_STRIDE, VALIDATION_SHAPE_EVERY
+from training.train.losses import LAMBDA_SMOOTH, REFL_LOSSES, SHAPE_BIN_STRIDE, VALIDATION_SHAPE_EVERY
 
 
 @dataclass
@@ -67,12 +68,14 @@ class TrainConfig:
     #: stage 3: L_refl as the paper's mean |R_hat - R_MC| ("absolute") or ours, mean |ln R_hat - ln R_MC|
     #: ("log", ``losses.REFL_LOSSES``), which weighs a dark tone's colour as the eye (L*) does
     refl_loss: str = "absolute"
+    #: stage 3: weight of L_smooth, mean |u(l + 1) - u(l)| (the paper's lambda_smooth = 0.5; ``losses.LAMBDA_SMOOTH``)
+    smooth_weight: float = LAMBDA_SMOOTH
 
 
 #: What a run record made before an option existed trained with (its behaviour then).
 LEGACY_TRAIN: dict = {"exposure_prior": 0.0, "shape_weight": 0.0, "targets": "fitted", "weighted_param": False,
                      "lambda_r": 15.0, "slab_factor": True, "unfreeze": False, "data_every": 1,
-                     "encoder_share": 0.0, "refl_loss": "absolute"}
+                     "encoder_share": 0.0, "refl_loss": "absolute", "smooth_weight": LAMBDA_SMOOTH}
 
 
 #: The training options each stage adds to those of the stages before it (a stage depends on all of them);
@@ -80,7 +83,8 @@ LEGACY_TRAIN: dict = {"exposure_prior": 0.0, "shape_weight": 0.0, "targets": "fi
 STAGE_OPTIONS: dict[int, tuple[str, ...]] = {
     1: ("seed",),
     2: ("synthetic", "exposure_jitter", "exposure_prior", "unfreeze", "data_every"),
-    3: ("shape_weight", "targets", "weighted_param", "lambda_r", "slab_factor", "encoder_share", "refl_loss"),
+    3: ("shape_weight", "targets", "weighted_param", "lambda_r", "slab_factor", "encoder_share", "refl_loss",
+        "smooth_weight"),
 }
 PER_STAGE_OPTIONS = ("epochs", "batch", "lr")
 
@@ -176,6 +180,8 @@ def train(rundir: Path, dataset: Path, fits: Path | None, lut_path: Path, *, wan
         raise ValueError(f"refl_loss must be one of {REFL_LOSSES}, got {tcfg.refl_loss!r}")
     if not 0.0 <= tcfg.encoder_share <= 1.0:
         raise ValueError(f"encoder_share must lie in [0, 1], got {tcfg.encoder_share}")
+    if not (tcfg.smooth_weight >= 0 and math.isfinite(tcfg.smooth_weight)):
+        raise ValueError(f"smooth_weight must be a finite number >= 0, got {tcfg.smooth_weight}")
     lut_sha = sha256_file(lut_path)
     old_record = _check_record(rundir, {"model": mcfg.to_dict(), "train": asdict(tcfg), "lut_sha256": lut_sha})
     train_data = load_split(dataset, "train", fits if need_fits else None, mcfg.k, profiles, tcfg.targets,
@@ -236,4 +242,4 @@ def _spec(stage: int, model: SkinChain, lut: LookupTables, train_data: SplitData
                              t.exposure_jitter, t.seed, t.exposure_prior, t.unfreeze)
     return stages.stage3(model, lut, train_data, val_data, t.epochs[i], t.batch[i], t.lr[i], t.shape_weight,
                          t.targets == "dense", t.weighted_param, t.lambda_r, t.slab_factor, t.unfreeze,
-                         t.encoder_share, t.refl_loss)
+                         t.encoder_share, t.refl_loss, t.smooth_weight)

@@ -100,15 +100,18 @@ EVAL_CHUNK: int = 64
 def stage3(model: SkinChain, lut: LookupTables, train: SplitData, val: SplitData, epochs: int, batch: int,
            lr: float, shape_weight: float = 0.0, dense: bool = True, weighted: bool = True,
            lambda_r: float = train_losses.LAMBDA_R, slab: bool = True, unfreeze: bool = False,
-           encoder_share: float = 0.0, refl_loss: str = "absolute") -> StageSpec:
+           encoder_share: float = 0.0, refl_loss: str = "absolute",
+           smooth_weight: float = train_losses.LAMBDA_SMOOTH) -> StageSpec:
     """Stage 3; ``shape_weight`` > 0 adds the profile-shape term (needs ``SplitData.shape_target``).
     ``dense``: L_param at every wavelength, targets interpolated (``training.train.spectral``); else at the
     fitted wavelengths only.  ``weighted``: L_param weighted by the target weights (``losses.param_loss``).
     Ablations (``training.ablations``): ``lambda_r`` (paper 15), ``slab`` (the slab-depth factor in L_refl),
     ``unfreeze`` (Dec_R trains along with Dec_T).  ``encoder_share``: the share of each batch fed the
     encoder's tone (``encoder_input``); with it the validation also reports every term with all tones fed
-    Enc(A_RGB) (keys ending ``_rgb``).  ``refl_loss``: L_refl's form (``losses.REFL_LOSSES``)."""
-    ablate = {"lambda_r": lambda_r, "slab": slab, "frozen_decr": not unfreeze, "refl_loss": refl_loss}
+    Enc(A_RGB) (keys ending ``_rgb``).  ``refl_loss``: L_refl's form (``losses.REFL_LOSSES``).
+    ``smooth_weight``: the weight of L_smooth (the paper's lambda_smooth 0.5)."""
+    ablate = {"lambda_r": lambda_r, "slab": slab, "frozen_decr": not unfreeze, "refl_loss": refl_loss,
+              "lambda_smooth": smooth_weight}
     if train.targets is None:
         raise ValueError("stage 3 needs the mixture fits of the training split (--fits)")
     if shape_weight > 0 and train.shape_target is None:
