@@ -38,6 +38,14 @@ def _train(rundir, toy, want=(1, 2, 3), stop=None, tcfg=None):
         torch.set_num_threads(threads)
 
 
+def _stage3_from(base, rundir, toy, tcfg):
+    """Stage 3 trained in ``rundir`` on copies of the finished stages 1-2 of ``base`` (the README's A/B recipe)."""
+    rundir.mkdir()
+    for s in (1, 2):
+        (rundir / checkpoint_path(base, s).name).write_bytes(checkpoint_path(base, s).read_bytes())
+    return _train(rundir, toy, want=(3,), tcfg=tcfg)
+
+
 def _states(rundir):
     return {s: load_checkpoint(checkpoint_path(rundir, s))["model"] for s in (1, 2, 3)}
 
@@ -280,11 +288,7 @@ def test_encoder_share_trains_dec_t_on_the_encoders_tones(toy, tmp_path):
     _train(base, toy, want=(1, 2), tcfg=tcfg)
     runs = {}
     for share in (0.0, 1.0):
-        rundir = tmp_path / f"share{share}"
-        rundir.mkdir()
-        for s in (1, 2):
-            (rundir / checkpoint_path(base, s).name).write_bytes(checkpoint_path(base, s).read_bytes())
-        runs[share] = _train(rundir, toy, want=(3,), tcfg=dict(tcfg, encoder_share=share))
+        runs[share] = _stage3_from(base, tmp_path / f"share{share}", toy, dict(tcfg, encoder_share=share))
     assert runs[1.0]["train"]["encoder_share"] == 1.0 and runs[0.0]["train"]["encoder_share"] == 0.0
     last = {s: r["losses"]["stage3"] for s, r in runs.items()}
     assert "val_refl_rgb" in last[1.0] and "val_refl_rgb" not in last[0.0]
@@ -364,11 +368,7 @@ def test_smooth_weight_sets_how_much_dec_t_may_change_per_wavelength_step(toy, t
 
     runs = {}
     for weight in (0.5, 50.0):
-        rundir = tmp_path / f"smooth{weight}"
-        rundir.mkdir()
-        for s in (1, 2):
-            (rundir / checkpoint_path(base, s).name).write_bytes(checkpoint_path(base, s).read_bytes())
-        runs[weight] = _train(rundir, toy, want=(3,), tcfg=dict(tcfg, smooth_weight=weight))
+        runs[weight] = _stage3_from(base, tmp_path / f"smooth{weight}", toy, dict(tcfg, smooth_weight=weight))
         assert runs[weight]["train"]["smooth_weight"] == weight
     assert runs[50.0]["losses"]["stage3"]["train_smooth"] < 0.5 * runs[0.5]["losses"]["stage3"]["train_smooth"]
     with pytest.raises(ValueError, match="smooth_weight 50.0 -> 5.0"):
