@@ -10,7 +10,15 @@ import numpy as np
 import pytest
 
 from exporters.colorimetry import xyz_weights
-from training.data.reweight import Trajectories, TrajectoryStore, baseline_absorption, reweight, walk
+from training.data.reweight import (
+    WALK_CHUNK_PHOTONS,
+    WALK_CHUNK_PHOTONS_CUDA,
+    Trajectories,
+    TrajectoryStore,
+    baseline_absorption,
+    reweight,
+    walk,
+)
 from training.data.sampling import T_EPI_LEVELS_CM
 from training.sim.tissue import skin_medium
 from training.sim.transport import simulate
@@ -105,6 +113,19 @@ def test_store_resumes_chunks_and_refuses_other_walks(tmp_path):
         np.testing.assert_array_equal(getattr(traj, key), getattr(again, key))
     with pytest.raises(ValueError, match="other photons"):
         TrajectoryStore(tmp_path / "t", photons=7, seed=3, chunk_photons=4, max_steps=CAP).trajectories()
+
+
+def test_a_gpu_walks_big_chunks_and_does_not_mix_with_a_cpu_walk(tmp_path):
+    """On CUDA a chunk is a whole laptop split (the walker's time there is its step count, not its packets);
+    a folder walked on a CPU is not continued in GPU-sized chunks (other seeds per chunk): named, refused."""
+    cpu = TrajectoryStore(tmp_path / "t", photons=6, seed=3, max_steps=CAP)
+    gpu = TrajectoryStore(tmp_path / "t", photons=6, seed=3, device="cuda", max_steps=CAP)
+    assert (cpu.chunk, gpu.chunk) == (WALK_CHUNK_PHOTONS, WALK_CHUNK_PHOTONS_CUDA) == (5_000, 165_000)
+    assert TrajectoryStore(tmp_path / "u", photons=6, seed=3, device="cuda", chunk_photons=4).chunk == 4
+    cpu.folder.mkdir()
+    cpu._check_manifest()
+    with pytest.raises(ValueError, match="other chunk_photons"):
+        gpu._check_manifest()
 
 
 def test_store_grows_by_whole_chunks_like_a_fresh_walk(tmp_path):

@@ -11,7 +11,7 @@ class Preset:
 
     chunk_tones is for the direct estimator (minutes per tone); the reweighted estimator writes
     ``reweighted_chunk_tones`` at a time (a chunk of it takes about a minute on one CPU core).  Its walk
-    is saved in chunks of ``walk_chunk_photons`` photons (None: ``reweight.WALK_CHUNK_PHOTONS``) with a walk
+    is saved in chunks of ``walk_chunk_photons`` photons (None: ``reweight.walk_chunk_photons(device)``) with a walk
     cap of ``walk_max_steps`` steps per photon (None: ``reweight.WALK_MAX_STEPS``, the walker's default).
     """
 

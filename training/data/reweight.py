@@ -41,8 +41,19 @@ from training.sim.walker import WalkConfig
 from training.skin.constants import SKIN_MODEL, SkinModelSpec
 from training.skin.model import absorption, scattering
 
-#: Photons per wavelength walked (and saved) at once: ~1.9e6 packets, a few hundred MB of records.
+#: Photons per wavelength walked (and saved) at once on a CPU: ~1.9e6 packets, a few hundred MB of records.
 WALK_CHUNK_PHOTONS = 5_000
+#: The same on a GPU, where every photon of a chunk is in flight at once (62e6 packets, ~6 GB of GPU memory).
+#: The walker's time on a GPU is set by its number of steps, which the longest walks fix, not by the packets
+#: per step: on an H200 (2026-11-26) a walk of 2,000 photons x 376 wavelengths took 48-61 s, of 20,000
+#: photons 49 s and of 165,000 photons 98 s.  Small chunks pay that tail once each (33 x ~50 s for a
+#: `laptop` split); one chunk of the whole split pays it once.
+WALK_CHUNK_PHOTONS_CUDA = 165_000
+
+
+def walk_chunk_photons(device: str | torch.device) -> int:
+    """Default photons per walk chunk on ``device`` (``WALK_CHUNK_PHOTONS`` or ``WALK_CHUNK_PHOTONS_CUDA``)."""
+    return WALK_CHUNK_PHOTONS_CUDA if torch.device(device).type == "cuda" else WALK_CHUNK_PHOTONS
 #: The walk cap per photon (steps) of the dataset's walks: the walker's default.
 WALK_MAX_STEPS = WalkConfig.max_steps
 #: Records are stored in bins of ``R_EDGES_CM`` (512 bins, index 512 = beyond 5 cm).
@@ -147,8 +158,10 @@ def walk(
     ch_idx = np.arange(np.asarray(mua0).size) if channels is None else np.asarray(channels, dtype=np.int64)
     medium = slab_medium(np.asarray(mua0)[ch_idx], levels_cm, ch_idx, spec)
     t0 = time.perf_counter()
+    # on a GPU the whole chunk is one pool (see WALK_CHUNK_PHOTONS_CUDA); on a CPU the walker's default pool
+    pool = int(photons) if torch.device(device).type == "cuda" else None
     rec = simulate_records(medium, photons, illumination=illumination, seed=seed, device=device, compile=compile,
-                           max_steps=max_steps)
+                           max_steps=max_steps, chunk_photons=pool)
     refl = rec.kind == KIND_REFLECTED
     order = np.argsort(rec.ch[refl], kind="stable")
     ch = rec.ch[refl][order]
@@ -243,10 +256,11 @@ class TrajectoryStore:
     """
 
     def __init__(self, folder: Path, photons: int, seed: int, *, device: str = "cpu",
-                 shard: tuple[int, int] = (0, 1), chunk_photons: int = WALK_CHUNK_PHOTONS,
+                 shard: tuple[int, int] = (0, 1), chunk_photons: int | None = None,
                  max_steps: int = WALK_MAX_STEPS, progress: bool = False) -> None:
         self.folder, self.photons, self.seed, self.device = Path(folder), int(photons), int(seed), device
-        self.shard, self.chunk, self.max_steps, self.progress = shard, int(chunk_photons), int(max_steps), progress
+        chunk = walk_chunk_photons(device) if chunk_photons is None else chunk_photons
+        self.shard, self.chunk, self.max_steps, self.progress = shard, int(chunk), int(max_steps), progress
         self.mua0 = baseline_absorption()
         self._traj: Trajectories | None = None
 

@@ -147,7 +147,7 @@ class Walker:
         self.gen = torch.Generator(device=self.device)
         self.gen.manual_seed(int(seed))
         # 32-bit salts of the counter-based per-step random numbers, drawn from the seeded generator
-        self.seed_mix, self.key_mix = (int(v) for v in torch.randint(0, 1 << 31, (2,), generator=self.gen))
+        self.seed_mix, self.key_mix = (int(v) for v in torch.randint(0, 1 << 31, (2,), generator=self.gen, device=self.device))
         self._step_fn = _compiled_step() if compile else step_packets
         dev, dt = self.device, dtype
         mut = medium.mua + medium.mus
