@@ -147,7 +147,9 @@ class Walker:
         self.gen = torch.Generator(device=self.device)
         self.gen.manual_seed(int(seed))
         # 32-bit salts of the counter-based per-step random numbers, drawn from the seeded generator
-        self.seed_mix, self.key_mix = (int(v) for v in torch.randint(0, 1 << 31, (2,), generator=self.gen, device=self.device))
+        # (on the generator's own device: a CUDA generator cannot fill a CPU tensor)
+        salts = torch.randint(0, 1 << 31, (2,), generator=self.gen, device=self.device)
+        self.seed_mix, self.key_mix = (int(v) for v in salts)
         self._step_fn = _compiled_step() if compile else step_packets
         dev, dt = self.device, dtype
         mut = medium.mua + medium.mus
