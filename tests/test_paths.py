@@ -23,6 +23,20 @@ def test_paths_outside_keep_only_their_last_two_parts(tmp_path):
     assert portable(None) is None
 
 
+def test_a_linked_data_folder_is_recorded_as_the_repository_names_it(tmp_path, monkeypatch):
+    """data/ as a link to a disk outside the checkout (README) is recorded as data/..., not by its target;
+    a link inside the checkout to another place inside it, and ".." in a path, still resolve into the checkout."""
+    repo, disk = tmp_path / "repo", tmp_path / "disk" / "sss"
+    (disk / "data" / "laptop").mkdir(parents=True)
+    (repo / "docs").mkdir(parents=True)
+    (repo / "data").symlink_to(disk / "data")
+    (tmp_path / "docs_link").symlink_to(repo / "docs")
+    monkeypatch.setattr("training.paths.REPO_ROOT", repo)
+    assert portable(repo / "data" / "laptop") == "data/laptop"
+    assert portable(tmp_path / "docs_link") == "docs"
+    assert portable(repo / "data" / ".." / "docs") == "docs"
+
+
 def test_relative_paths_are_taken_from_the_working_folder(monkeypatch):
     monkeypatch.chdir(REPO_ROOT)
     assert portable("data/fits_laptop") == "data/fits_laptop"

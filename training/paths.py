@@ -8,6 +8,7 @@ parts (``/scratch/me/lut_paper.npz`` -> ``me/lut_paper.npz``), enough to tell fi
 from __future__ import annotations
 
 import importlib.util
+import os
 import re
 from pathlib import Path
 from types import ModuleType
@@ -39,11 +40,14 @@ def portable(path: str | Path | None) -> str | None:
     """``path`` as a shipped file records it (module docstring); None stays None."""
     if path is None:
         return None
-    p = Path(path).expanduser().resolve()
-    try:
-        return p.relative_to(REPO_ROOT).as_posix() or "."
-    except ValueError:
-        return Path(*p.parts[-2:]).as_posix() if len(p.parts) > 2 else p.name
+    # as written first (absolute, ".." removed, links kept): data/ may be a link to a disk outside the checkout
+    # (README, "Rebuilding the shipped model"), and data/laptop is what the user typed and means
+    for p in (Path(os.path.abspath(Path(path).expanduser())), Path(path).expanduser().resolve()):
+        try:
+            return p.relative_to(REPO_ROOT).as_posix() or "."
+        except ValueError:
+            pass
+    return Path(*p.parts[-2:]).as_posix() if len(p.parts) > 2 else p.name
 
 
 def portable_command(program: str, argv: list[str]) -> str:
