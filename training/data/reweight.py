@@ -158,8 +158,8 @@ def walk(
     ch_idx = np.arange(np.asarray(mua0).size) if channels is None else np.asarray(channels, dtype=np.int64)
     medium = slab_medium(np.asarray(mua0)[ch_idx], levels_cm, ch_idx, spec)
     t0 = time.perf_counter()
-    # on a GPU the whole chunk is one pool (see WALK_CHUNK_PHOTONS_CUDA); on a CPU the walker's default pool
-    pool = int(photons) if torch.device(device).type == "cuda" else None
+    # on a GPU up to WALK_CHUNK_PHOTONS_CUDA photons per wavelength in flight at once; on a CPU the walker's pool
+    pool = min(int(photons), WALK_CHUNK_PHOTONS_CUDA) if torch.device(device).type == "cuda" else None
     rec = simulate_records(medium, photons, illumination=illumination, seed=seed, device=device, compile=compile,
                            max_steps=max_steps, chunk_photons=pool)
     refl = rec.kind == KIND_REFLECTED
