@@ -31,29 +31,29 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from exporters.constants import N_TISSUE, PARAM_NAMES, PARAM_RANGES, R_EDGES_CM
+from exporters.constants import N_TISSUE, N_WAVELENGTHS, PARAM_NAMES, PARAM_RANGES, R_EDGES_CM
 from training.cluster.engine import memo
 from training.data.sampling import T_EPI_LEVELS_CM
 from training.sim.kernel import KIND_REFLECTED, KIND_TRUNCATED
 from training.sim.medium import LayeredMedium
-from training.sim.transport import mean_stderr, simulate_records
+from training.sim.transport import POOL_PACKETS, mean_stderr, simulate_records
 from training.sim.walker import WalkConfig
 from training.skin.constants import SKIN_MODEL, SkinModelSpec
 from training.skin.model import absorption, scattering
 
 #: Photons per wavelength walked (and saved) at once on a CPU: ~1.9e6 packets, a few hundred MB of records.
 WALK_CHUNK_PHOTONS = 5_000
-#: The same on a GPU, where every photon of a chunk is in flight at once (62e6 packets, ~6 GB of GPU memory).
-#: The walker's time on a GPU is set by its number of steps, which the longest walks fix, not by the packets
-#: per step: on an H200 (2026-11-26) a walk of 2,000 photons x 376 wavelengths took 48-61 s, of 20,000
-#: photons 49 s and of 165,000 photons 98 s.  Small chunks pay that tail once each (33 x ~50 s for a
-#: `laptop` split); one chunk of the whole split pays it once.
-WALK_CHUNK_PHOTONS_CUDA = 165_000
+#: The same on a GPU: as many as its walker keeps in flight at once (``transport.POOL_PACKETS``; 165,000 at
+#: 376 wavelengths, a whole `laptop` split), since there the walk's tail, not its packets, sets the time:
+#: CPU-sized chunks would pay a tail of ~50 s each (33 per `laptop` split).
+WALK_CHUNK_PHOTONS_CUDA = POOL_PACKETS["cuda"] // N_WAVELENGTHS
 
 
 def walk_chunk_photons(device: str | torch.device) -> int:
     """Default photons per walk chunk on ``device`` (``WALK_CHUNK_PHOTONS`` or ``WALK_CHUNK_PHOTONS_CUDA``)."""
     return WALK_CHUNK_PHOTONS_CUDA if torch.device(device).type == "cuda" else WALK_CHUNK_PHOTONS
+
+
 #: The walk cap per photon (steps) of the dataset's walks: the walker's default.
 WALK_MAX_STEPS = WalkConfig.max_steps
 #: Records are stored in bins of ``R_EDGES_CM`` (512 bins, index 512 = beyond 5 cm).
@@ -158,10 +158,8 @@ def walk(
     ch_idx = np.arange(np.asarray(mua0).size) if channels is None else np.asarray(channels, dtype=np.int64)
     medium = slab_medium(np.asarray(mua0)[ch_idx], levels_cm, ch_idx, spec)
     t0 = time.perf_counter()
-    # on a GPU up to WALK_CHUNK_PHOTONS_CUDA photons per wavelength in flight at once; on a CPU the walker's pool
-    pool = min(int(photons), WALK_CHUNK_PHOTONS_CUDA) if torch.device(device).type == "cuda" else None
     rec = simulate_records(medium, photons, illumination=illumination, seed=seed, device=device, compile=compile,
-                           max_steps=max_steps, chunk_photons=pool)
+                           max_steps=max_steps)
     refl = rec.kind == KIND_REFLECTED
     order = np.argsort(rec.ch[refl], kind="stable")
     ch = rec.ch[refl][order]

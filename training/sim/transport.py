@@ -22,9 +22,12 @@ from training.sim.walker import AUTO_COMPILE_PACKETS, Source, WalkConfig, Walker
 
 #: Radial profile estimators of ``simulate`` (``training.sim.resample``); the first is the default.
 PROFILE_ESTIMATORS: tuple[str, ...] = ("histogram", "cdf")
-#: Packets walked at once by default: ~2^18 keeps the float32 working set in cache on a CPU; a GPU
-#: wants far more parallel work.
-POOL_PACKETS = {"cpu": 1 << 18, "cuda": 1 << 22}
+#: Packets walked at once by default: ~2^18 keeps the float32 working set in cache on a CPU.  On a GPU the
+#: walk's time is set by its number of steps, which the longest walks fix, not by the packets per step: on
+#: an H200 (2026-11-26) the dataset's baseline medium at 376 wavelengths took 48-61 s for 2,000 photons,
+#: 49 s for 20,000 and 98 s for 165,000 (62e6 packets, ~6 GB with path records), so a GPU keeps that many
+#: in flight and pays the tail once.
+POOL_PACKETS = {"cpu": 1 << 18, "cuda": 165_000 * 376}
 
 
 @dataclass
@@ -149,7 +152,7 @@ def simulate(
         r_edges_cm: radial bin edges (NB + 1,), cm, increasing from 0; None skips the profile.
         dtype: walk precision (float32 default; tallies are always float64).
         chunk_photons: photons per channel walked at once (pool = chunk_photons * W packets); default
-            about 2^18 packets on CPU, 2^22 on CUDA.
+            ``POOL_PACKETS`` packets (2^18 on CPU, 62e6 on CUDA).
         max_steps: walk cap per packet (see SimResult.truncated).
         progress: show a tqdm progress bar.
         compile: torch.compile the walker's step (True / False / "auto": only for runs of more than
