@@ -158,3 +158,38 @@ def test_log_scaled_parameters_and_legacy_configs():
     old_net.load_state_dict(new_net.state_dict())  # same stored keys
     p = new_net.from_unit(u)
     assert not torch.allclose(new_net(p), old_net(p))  # same weights, another input scale
+
+
+def test_smoothed_weights_cannot_jump_whatever_the_network_learns():
+    """Dec_T's weights pass through a normalised Gaussian along wavelength (6 nm): however hard the raw logits
+    switch between neighbouring wavelengths, the weights stay a valid mixture and no weight changes by more
+    than the kernel's peak (0.133 < the coherence measure's jump of 0.2) per 2 nm step.  Without the low-pass
+    the same logits jump by ~1.  A config written before the option has none, and the state of either loads
+    into the other (the kernel is derived from the config, not stored)."""
+    from training.model.networks import TranslucencyDecoder, gaussian_taps
+    from training.validate.coherence import JUMP_DW
+
+    cfg = ModelConfig(k=3, **TINY)
+    legacy = cfg.to_dict()
+    del legacy["weight_smoothing_nm"]
+    assert cfg.weight_smoothing_nm == 6.0 and ModelConfig.from_dict(legacy).weight_smoothing_nm == 0.0
+    smooth, raw = TranslucencyDecoder(cfg), TranslucencyDecoder(ModelConfig.from_dict(legacy))
+    raw.load_state_dict(smooth.state_dict())
+    # Adversarial last layer: weight logits +-30 that swap the dominant component every few wavelengths,
+    # with period and phase varying across the three components.
+    last = smooth.net[-1]
+    w = torch.arange(cfg.n_wavelengths)
+    with torch.no_grad():
+        last.weight.zero_()
+        bias = last.bias.view(4, 3, -1)
+        for k, period in enumerate((3, 7, 1)):
+            bias[3, k] = torch.where((w // period + k) % 3 == 0, 30.0, -30.0)
+        raw.load_state_dict(smooth.state_dict())
+        p, refl = torch.full((4, 5), 0.5), torch.rand(4, cfg.n_wavelengths)
+        w_smooth, w_raw = smooth(p, refl)["weight"], raw(p, refl)["weight"]
+    assert torch.isfinite(w_smooth).all() and (w_smooth >= 0).all()
+    torch.testing.assert_close(w_smooth.sum(1), torch.ones(4, cfg.n_wavelengths))
+    peak = float(gaussian_taps(3.0).max())
+    assert peak == pytest.approx(1 / math.sqrt(2 * math.pi * 9), rel=1e-3)
+    assert float(w_smooth.diff(dim=2).abs().max()) <= peak + 1e-6 < JUMP_DW
+    assert float(w_raw.diff(dim=2).abs().max()) > 0.99

@@ -102,7 +102,7 @@ def test_metric_passes_a_smooth_decoder_and_catches_a_comb(lut):
     assert res["fitted"]["switch_rate"] == res["other"]["switch_rate"] == 0.0
     assert res["fitted"]["median_dlog_sigma_t"] == pytest.approx(2.5 / 375, rel=1e-6)
     assert res["other"]["median_dlog_sigma_t"] == pytest.approx(2.5 / 375, rel=1e-6)
-    assert res["fitted"]["weight_jumps"] == res["other"]["weight_jumps"] == 0
+    assert res["fitted"]["weight_jumps"] == res["other"]["weight_jumps"] == res["window"]["weight_jumps"] == 0
     assert res["acceptance"]["all"]
     # the comb: at the fitted wavelengths media 0 and 1 trade labels (the mixture is the same)
     comb = {name: v.copy() for name, v in smooth.items()}
@@ -126,6 +126,21 @@ def test_a_real_change_of_weight_is_an_explained_jump(lut):
     assert jumps["step"].tolist() == [200] * 5 and jumps["explained"].all()
     assert (jumps["dw"] > 0.3).all()
     assert (jumps["actual"] > 0.9 * jumps["weight_only"]).all() and (jumps["weight_only"] > 0.05).all()
+    assert C.coherence(dec, FITTED, lut)["window"] == {"span_nm": 8, "weight_jumps": 5 * 4, "unexplained_jumps": 0}
+
+
+def test_a_slow_relabelling_is_no_step_jump_but_an_unexplained_window_jump(lut):
+    """Media 0 and 1 trade places, parameters and weights alike, over 6 nm (0.117 of weight per step): no step
+    passes the 0.2 of a jump, so the acceptance (per step) holds; the 8 nm windows across the whole trade do,
+    and since the mixture at their two ends is the same, they are unexplained."""
+    dec = smooth_decoder(n=3)
+    ramp = np.clip((np.arange(376) - 200) / 3, 0, 1)  # 0 up to 200, 1 from 203
+    for f in ("alpha", "g", "sigma_t", "weight"):
+        a, b = dec[f][:, 0].copy(), dec[f][:, 1].copy()
+        dec[f][:, 0], dec[f][:, 1] = a + ramp * (b - a), b + ramp * (a - b)
+    res = C.coherence(dec, FITTED, lut)
+    assert res["fitted"]["weight_jumps"] == res["other"]["weight_jumps"] == 0 and res["acceptance"]["all"]
+    assert res["window"]["unexplained_jumps"] >= 2 * 3  # windows 199 -> 203 and 200 -> 204, each tone
 
 
 def shipped_coherence(lut) -> dict:

@@ -22,7 +22,7 @@ import sys
 from pathlib import Path
 
 from training.commands.options import error_status, triple
-from training.model.config import SIZES, ModelConfig
+from training.model.config import SIZES, WEIGHT_SMOOTHING_NM, ModelConfig
 from training.paths import portable_command
 from training.train.run import TrainConfig, train
 
@@ -70,6 +70,10 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("--size", choices=sorted(SIZES), default="paper")
     p.add_argument("--enc-hidden", type=int, default=None,
                    help="Enc's hidden width, overriding the size's (paper and BioSkin: 70)")
+    p.add_argument("--weight-smoothing-nm", type=float, default=WEIGHT_SMOOTHING_NM,
+                   help="standard deviation (nm) of the fixed Gaussian low-pass of Dec_T's mixture weights along "
+                        "wavelength (0: none, the paper's decoder); it bounds a weight's change per 2 nm step by "
+                        "0.133 at 6 nm")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--device", choices=("cpu", "cuda"), default="cpu")
     p.add_argument("--checkpoint-interval", type=float, default=0.0,
@@ -87,7 +91,7 @@ def main(argv: list[str]) -> int:
         torch.set_num_threads(args.threads)
     want = (1, 2, 3) if args.stage == "all" else (int(args.stage),)
     size = dict(SIZES[args.size], **({} if args.enc_hidden is None else {"enc_hidden": args.enc_hidden}))
-    mcfg = ModelConfig(k=args.k, **size)
+    mcfg = ModelConfig(k=args.k, weight_smoothing_nm=args.weight_smoothing_nm, **size)
     tcfg = TrainConfig(seed=args.seed, epochs=args.epochs, batch=args.batch, lr=args.lr,
                        synthetic=args.synthetic, exposure_jitter=args.exposure_jitter,
                        exposure_prior=args.exposure_prior, shape_weight=args.shape_weight, targets=args.targets,

@@ -16,6 +16,15 @@ Every constant with a physical meaning lives here, with its source:
   (``training.data.sampling.LOG_SCALED``, issue 23), so on a linear scale half the training tones would
   sit in the lowest ~4 % of the input interval and the encoder's sigmoid would have to reach f_mel = 0.005
   at u = 0.006.  Models made before (no key in their config) keep the linear scale.
+* ``WEIGHT_SMOOTHING_NM`` = 6: Dec_T's mixture weights pass through a fixed Gaussian low-pass along
+  wavelength (standard deviation 6 nm = 3 grid steps, ``ModelConfig.weight_smoothing_nm``).  A normalised
+  kernel maps valid weights to valid weights, and no component's weight can then change by more than the
+  kernel's peak, 0.133, between neighbouring 2 nm steps: the "weight jump > 0.2" of issue 23's coherence
+  measure (``training.validate.coherence.JUMP_DW``) cannot happen, whatever the network learns.  The
+  prototypes without it jumped at a few fixed steps (README, "L_smooth").  6 nm is well below the width
+  of the skin chromophores' bands (haemoglobin's Q bands ~20 nm) and only the weights are smoothed;
+  alpha, g and sigma_t keep the full resolution.  Ours, not the paper's.  Models made before (no key in
+  their config) have none.
 * ``FALLBACK_ALBEDO_RGB``: what the inversion graph uses in place of an input row with a NaN or Inf
   component (see ``training.model.chain``): a mid skin tone, so a corrupt texel renders as plausible
   skin instead of poisoning the render.  Linear sRGB (D65), chosen by us; not from the paper.
@@ -33,6 +42,7 @@ G_ABS_MAX: float = 0.99
 SLAB_C: float = 3.0
 SLAB_DEPTH_INIT: float = 0.30
 FALLBACK_ALBEDO_RGB: tuple[float, float, float] = (0.45, 0.30, 0.24)
+WEIGHT_SMOOTHING_NM: float = 6.0
 #: Smallest luminance of a predicted spectrum's colour used as a divisor in the exposure (Y of
 #: white = 1).  A sigmoid spectrum never reaches it in practice; it only keeps the division finite.
 Y_FLOOR: float = 1e-6
@@ -53,6 +63,8 @@ class ModelConfig:
     (BioSkin: 512-620).  dect_hidden / dect_layers: Dec_T is a ``dect_layers``-layer MLP 381 -> H ...
     -> 376 * 4K (paper: 4 layers, 768).  k: mixture components.  g_range: anisotropy interval of the
     outputs (the LUT's g axis within +-0.99).  sigma_t_range_cm: log-mapped extinction interval.
+    weight_smoothing_nm: standard deviation (nm) of the Gaussian low-pass of Dec_T's weights along
+    wavelength (module docstring; 0: none).
     log_params: parameters scaled logarithmically over their range in the networks (module docstring).
     """
 
@@ -67,6 +79,7 @@ class ModelConfig:
     param_names: tuple[str, ...] = PARAM_NAMES
     param_ranges: dict[str, tuple[float, float]] = field(default_factory=lambda: dict(PARAM_RANGES))
     log_params: tuple[str, ...] = LOG_SCALED
+    weight_smoothing_nm: float = WEIGHT_SMOOTHING_NM
 
     def __post_init__(self) -> None:
         if self.k < 1:
@@ -87,6 +100,9 @@ class ModelConfig:
         self.param_names = tuple(self.param_names)
         self.param_ranges = {k: (float(v[0]), float(v[1])) for k, v in dict(self.param_ranges).items()}
         self.log_params = tuple(self.log_params)
+        if not self.weight_smoothing_nm >= 0:
+            raise ValueError(f"weight_smoothing_nm must be >= 0 nm, got {self.weight_smoothing_nm}")
+        self.weight_smoothing_nm = float(self.weight_smoothing_nm)
         for name in self.log_params:
             if name not in self.param_names or self.param_ranges[name][0] <= 0:
                 raise ValueError(f"log_params: {name!r} must be a parameter with a positive range")
@@ -109,6 +125,7 @@ class ModelConfig:
         d["param_names"] = tuple(d["param_names"])
         d["param_ranges"] = {k: tuple(v) for k, v in d["param_ranges"].items()}
         d["log_params"] = tuple(d.get("log_params", ()))  # models made before the key: linear scale
+        d["weight_smoothing_nm"] = float(d.get("weight_smoothing_nm", 0.0))  # models made before: none
         return cls(**d)
 
 

@@ -10,7 +10,9 @@ Shapes: N texels / tones, W = 376 wavelengths, K mixture components.
 * ``TranslucencyDecoder`` (Dec_T): (p, R_hat) (N, 5 + W = 381) -> the K-media mixture per wavelength,
   an L-layer MLP (paper: 4 layers, 768 hidden, tanh).  Its N x (4 K W) outputs are mapped:
   alpha = sigmoid in (0, 1); g = sigmoid onto ``g_range``; sigma_t = exp of a sigmoid onto
-  [ln lo, ln hi] of ``sigma_t_range_cm`` (a log range, cm^-1); weight = softmax over K of raw logits.
+  [ln lo, ln hi] of ``sigma_t_range_cm`` (a log range, cm^-1); weight = softmax over K of raw logits,
+  then low-passed along wavelength by a fixed normalised Gaussian (``ModelConfig.weight_smoothing_nm``,
+  edges extended by their last value), which keeps every weight vector a convex combination of valid ones.
   It also returns the normalised coordinates ``u`` (N, 4, K, W) in which the losses compare
   parameters: alpha, (g - lo)/(hi - lo), (ln sigma_t - ln lo)/(ln hi - ln lo), weight.
 * ``SlabDepth``: c(lambda) > 0 (W,), cm, stored as its log, initialised at 0.30 (paper eq. slab_factor).
@@ -21,8 +23,10 @@ from __future__ import annotations
 import math
 
 import torch
+import torch.nn.functional as F
 from torch import nn
 
+from exporters.constants import WAVELENGTHS_NM
 from training.model.config import SLAB_C, SLAB_DEPTH_INIT, ModelConfig
 
 #: Channel order of Dec_T's outputs along axis 1 of the raw / normalised tensors.
@@ -91,6 +95,17 @@ class ReflectanceDecoder(_ParamScale):
         return torch.sigmoid(self.net(self.normalise(p)))
 
 
+def gaussian_taps(sigma_steps: float) -> torch.Tensor:
+    """(2 h + 1,) float32 taps of a Gaussian of standard deviation ``sigma_steps`` grid steps, cut at
+    h = ceil(4 sigma) and normalised to sum 1; sigma 0: the identity (one tap)."""
+    if sigma_steps <= 0:
+        return torch.ones(1)
+    h = math.ceil(4 * sigma_steps)
+    x = torch.arange(-h, h + 1, dtype=torch.float64)
+    taps = torch.exp(-0.5 * (x / sigma_steps) ** 2)
+    return (taps / taps.sum()).float()
+
+
 class TranslucencyDecoder(_ParamScale):
     """Dec_T: (p (N, 5), R_hat (N, W)) -> alpha, g, sigma_t (cm^-1), weight, each (N, K, W), and u."""
 
@@ -104,12 +119,24 @@ class TranslucencyDecoder(_ParamScale):
         self.register_buffer("g_bounds", torch.tensor([g_lo, g_hi - g_lo], dtype=torch.float32))
         self.register_buffer("log_sigma_bounds", torch.tensor([math.log(s_lo), math.log(s_hi / s_lo)],
                                                               dtype=torch.float32))
+        step_nm = float(WAVELENGTHS_NM[1] - WAVELENGTHS_NM[0])
+        # Not persistent: fixed by the config, so checkpoints made before it load unchanged.
+        self.register_buffer("weight_kernel", gaussian_taps(cfg.weight_smoothing_nm / step_nm), persistent=False)
+
+    def smooth_weights(self, weight: torch.Tensor) -> torch.Tensor:
+        """(N, K, W) weights low-passed along W by ``weight_kernel``, the ends extended by their last value."""
+        taps = self.weight_kernel.numel()
+        if taps == 1:
+            return weight
+        n, k, w = weight.shape
+        padded = F.pad(weight.reshape(n * k, 1, w), (taps // 2, taps // 2), mode="replicate")
+        return F.conv1d(padded, self.weight_kernel.view(1, 1, taps)).reshape(n, k, w)
 
     def forward(self, p: torch.Tensor, reflectance: torch.Tensor) -> dict[str, torch.Tensor]:
         raw = self.net(torch.cat([self.normalise(p), reflectance], dim=-1))
         raw = raw.reshape(-1, 4, self.k, self.w)
         unit = torch.sigmoid(raw[:, :3])  # alpha, g, sigma_t in [0, 1]
-        weight = torch.softmax(raw[:, 3], dim=1)
+        weight = self.smooth_weights(torch.softmax(raw[:, 3], dim=1))
         alpha = unit[:, 0]
         g = self.g_bounds[0] + self.g_bounds[1] * unit[:, 1]
         sigma_t = torch.exp(self.log_sigma_bounds[0] + self.log_sigma_bounds[1] * unit[:, 2])

@@ -117,6 +117,8 @@ def _check_record(rundir: Path, record: dict) -> dict | None:
         return None
     old = json.loads(path.read_text())
     old["train"] = {**LEGACY_TRAIN, **old.get("train", {})}  # runs made before an option existed
+    if "model" in old:  # runs made before a model option existed: its default for them
+        old["model"] = ModelConfig.from_dict(old["model"]).to_dict()
     for key in ("model", "lut_sha256"):
         if old.get(key) != record.get(key):
             raise ValueError(f"{rundir} was trained with another {key} ({old.get(key)} != {record.get(key)}): "

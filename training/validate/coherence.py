@@ -14,7 +14,8 @@ comb: its parameters jump at the fitted wavelengths and interpolate between them
   (the largest change of any component; with this definition the shipped decoder gives the issue's
   0.35 / 0.14).
 
-*Weight jumps*: steps where some component's weight changes by more than ``JUMP_DW`` (0.2).  Such a
+*Weight jumps*: steps where some component's weight changes by more than ``JUMP_DW`` (0.2); reported
+also over 8 nm (``WINDOW_STEPS``), beside the acceptance.  Such a
 jump is *explained* when the mixture's rendered radial exitance E(r) = sum_k w_k R_k P_k(r) (through
 the LUT: ``training.fit.mixture.radial_profile``) changes by at least ``EXPLAINED_FRACTION`` (1/2) of what
 the weight change alone would change it by, E at (media of l, weights of l + 1) against E at l, the
@@ -54,6 +55,11 @@ JUMP_DW: float = 0.2
 #: A jump is explained when the rendered exitance changes by at least this fraction of the change that
 #: the weight change alone makes (module docstring).
 EXPLAINED_FRACTION: float = 0.5
+#: Reported beside the per-step jumps, not part of the acceptance: the same jumps between wavelengths this many
+#: grid steps apart (8 nm).  A decoder whose weights are low-passed along wavelength (``ModelConfig.
+#: weight_smoothing_nm``) cannot jump in one step; this shows whether it still moves light between media
+#: over a few steps without the rendered mixture changing.
+WINDOW_STEPS: int = 4
 #: Acceptance: |switch rate (fitted) - switch rate (other)| at most this (absolute share of steps).
 SWITCH_TOL: float = 0.01
 #: Acceptance: the two groups' median |d ln sigma_t| within this factor of each other.
@@ -134,15 +140,18 @@ def _mixture_at(dec: Decoded, tone: np.ndarray, col: np.ndarray, weight_col: np.
     return Mixture(*media, torch.as_tensor(dec["weight"][tone, :, weight_col]))
 
 
-def weight_jumps(dec: Decoded, lut: LookupTables, chunk: int = 1024) -> dict[str, np.ndarray]:
-    """The weight jumps of ``dec`` (module docstring): {tone, step (J,) int; dw (J,): the largest |dw_k|;
-    actual, weight_only (J,): the exitance distances; explained (J,) bool}."""
-    dw = np.abs(np.diff(dec["weight"], axis=2)).max(1)  # (N, W - 1)
+def weight_jumps(dec: Decoded, lut: LookupTables, chunk: int = 1024, span: int = 1) -> dict[str, np.ndarray]:
+    """The weight jumps of ``dec`` (module docstring) between wavelengths ``span`` grid steps apart: {tone,
+    step (J,) int (the first of the two wavelengths); dw (J,): the largest |dw_k|; actual, weight_only (J,):
+    the exitance distances; explained (J,) bool}."""
+    w = dec["weight"]
+    dw = np.abs(w[..., span:] - w[..., :-span]).max(1)  # (N, W - span)
     tone, step = np.nonzero(dw > JUMP_DW)
     actual, alone = np.zeros(len(tone)), np.zeros(len(tone))
     for s in range(0, len(tone), chunk):
         t, c = tone[s : s + chunk], step[s : s + chunk]
-        here, there, moved = _mixture_at(dec, t, c, c), _mixture_at(dec, t, c + 1, c + 1), _mixture_at(dec, t, c, c + 1)
+        here, there = _mixture_at(dec, t, c, c), _mixture_at(dec, t, c + span, c + span)
+        moved = _mixture_at(dec, t, c, c + span)
         actual[s : s + chunk] = _exitance_distance(lut, here, there)
         alone[s : s + chunk] = _exitance_distance(lut, here, moved)
     return {"tone": tone, "step": step, "dw": dw[tone, step], "actual": actual, "weight_only": alone,
@@ -168,6 +177,9 @@ def coherence(dec: Decoded, fitted_index: np.ndarray, lut: LookupTables) -> dict
     acc = {"switch_rate": abs(f["switch_rate"] - o["switch_rate"]) <= SWITCH_TOL,
            "dlog_sigma_t": hi / lo <= DSIGMA_RATIO_TOL,
            "no_unexplained_jumps": f["unexplained_jumps"] + o["unexplained_jumps"] == 0}
+    slow = weight_jumps(dec, lut, span=WINDOW_STEPS)
+    out["window"] = {"span_nm": 2 * WINDOW_STEPS, "weight_jumps": int(slow["tone"].size),
+                     "unexplained_jumps": int((~slow["explained"]).sum())}
     out["acceptance"] = {**acc, "all": all(acc.values()),
                          "tolerances": {"switch": SWITCH_TOL, "dlog_ratio": DSIGMA_RATIO_TOL, "jump_dw": JUMP_DW,
                                         "explained_fraction": EXPLAINED_FRACTION}}
