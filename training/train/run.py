@@ -191,11 +191,12 @@ def train(rundir: Path, dataset: Path, fits: Path | None, lut_path: Path, *, wan
     val_fits = fits if (need_fits and fits is not None and fits_files(fits, "validation")) else None
     val_data = load_split(dataset, "validation", val_fits, mcfg.k, profiles and val_fits is not None,
                           tcfg.targets, shape_every=VALIDATION_SHAPE_EVERY).to(dev)
+    # absolute as typed, links kept: data/ may link outside the checkout, and the card records data/laptop
     record = {
-        "model": mcfg.to_dict(), "train": asdict(tcfg), "lut": str(Path(lut_path).resolve()),
+        "model": mcfg.to_dict(), "train": asdict(tcfg), "lut": os.path.abspath(lut_path),
         "lut_sha256": lut_sha,
-        "dataset": str(Path(dataset).resolve()),
-        "fits": None if fits is None or not need_fits else str(Path(fits).resolve()),
+        "dataset": os.path.abspath(dataset),
+        "fits": None if fits is None or not need_fits else os.path.abspath(fits),
         "dataset_info": {"n_train": len(train_data), "n_validation": len(val_data), "photons": train_data.photons,
                          "n_train_fitted": 0 if train_data.fitted is None else len(train_data.fitted),
                          "n_validation_fitted": 0 if val_data.fitted is None else len(val_data.fitted),
