@@ -27,13 +27,14 @@ def toy(tmp_path_factory):
     return write_toy(tmp_path_factory.mktemp("toy"), n_train=24, n_validation=6)
 
 
-def _train(rundir, toy, want=(1, 2, 3), stop=None, tcfg=None):
+def _train(rundir, toy, want=(1, 2, 3), stop=None, tcfg=None, eval_every=1):
     data, fits, lut = toy
     threads = torch.get_num_threads()
     torch.set_num_threads(1)  # the same reduction order in both runs
     try:
         return train(rundir, data, fits, lut, want=want, mcfg=ModelConfig(**SIZES["tiny"]),
-                     tcfg=TrainConfig(**(tcfg or TCFG)), progress=False, stop_after_epochs=stop)
+                     tcfg=TrainConfig(**(tcfg or TCFG)), progress=False, stop_after_epochs=stop,
+                     eval_every=eval_every)
     finally:
         torch.set_num_threads(threads)
 
@@ -124,7 +125,7 @@ def test_staged_training_learns_freezes_and_resumes_exactly(toy, tmp_path):
     _train(part, toy, want=(2,))
     _train(part, toy, want=(3,), stop=1)
     assert load_checkpoint(checkpoint_path(part, 3))["epoch"] == 0
-    _train(part, toy)
+    _train(part, toy, eval_every=3)  # validation is monitoring only: skipping it changes nothing trained
     resumed = _states(part)
     for s in (1, 2, 3):
         for name, t in states[s].items():
@@ -132,6 +133,7 @@ def test_staged_training_learns_freezes_and_resumes_exactly(toy, tmp_path):
     h_full = load_checkpoint(checkpoint_path(full, 3))["history"]
     h_part = load_checkpoint(checkpoint_path(part, 3))["history"]
     assert [r["train_loss"] for r in h_full] == [r["train_loss"] for r in h_part]
+    assert "val_loss" in h_part[0] and "val_loss" not in h_part[1] and h_part[2]["val_loss"] == h_full[2]["val_loss"]
     commands = json.loads((part / "run.json").read_text())
     assert commands["losses"]["stage3"]["done"]
 

@@ -78,6 +78,9 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("--device", choices=("cpu", "cuda"), default="cpu")
     p.add_argument("--checkpoint-interval", type=float, default=0.0,
                    help="seconds between checkpoints (0: after every epoch; the last epoch is always saved)")
+    p.add_argument("--eval-every", type=int, default=1,
+                   help="validation metrics after every n-th epoch and the last (monitoring only; stage 3's "
+                        "validation on the 1,000 laptop tones costs several times a training epoch)")
     p.add_argument("--threads", type=int, default=0, help="torch CPU threads (0: torch's default)")
     p.add_argument("--no-progress", action="store_true")
     return p
@@ -108,7 +111,8 @@ def main(argv: list[str]) -> int:
                 raise ValueError(f"no such file or folder: {path}")
         record = train(args.out, args.dataset, args.fits, args.lut, want=want, mcfg=mcfg, tcfg=tcfg,
                        device=args.device, progress=not args.no_progress,
-                       checkpoint_interval_s=args.checkpoint_interval, command=command)
+                       checkpoint_interval_s=args.checkpoint_interval, command=command,
+                       eval_every=args.eval_every)
     except ValueError as exc:
         return error_status(exc)
     for stage, row in record.get("losses", {}).items():

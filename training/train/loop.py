@@ -84,13 +84,17 @@ def freeze_all_but(model: nn.Module, trainable: list[nn.Module]) -> list[nn.Para
 
 def run_stage(spec: StageSpec, model: nn.Module, rundir: Path, *, seed: int, device: torch.device,
               progress: bool = True, checkpoint_interval_s: float = 0.0,
-              stop_after_epochs: int | None = None) -> list[dict]:
+              stop_after_epochs: int | None = None, eval_every: int = 1) -> list[dict]:
     """Train one stage (resuming from its checkpoint if present); returns the per-epoch history.
 
     ``checkpoint_interval_s``: write a checkpoint after an epoch only if this many seconds passed
     since the last one (0: every epoch); the last epoch is always written.  ``stop_after_epochs``:
     return after that many epochs of this call (used by the resume test to simulate a kill).
+    ``eval_every``: run ``spec.evaluate`` (monitoring only: the model of the last epoch is the stage's result)
+    after every n-th epoch and the last one; the other epochs' rows hold the training terms only.
     """
+    if eval_every < 1:
+        raise ValueError(f"eval_every must be >= 1, got {eval_every}")
     ckpt = checkpoint_path(rundir, spec.stage)
     params = freeze_all_but(model, spec.trainable)
     opt = torch.optim.Adam(params, lr=spec.lr)
@@ -127,8 +131,9 @@ def run_stage(spec: StageSpec, model: nn.Module, rundir: Path, *, seed: int, dev
             bar.update(1)
         row = {"epoch": epoch, "lr": opt.param_groups[0]["lr"]}
         row.update({f"train_{k}": v / spec.n_items for k, v in sums.items()})
-        with torch.no_grad():
-            row.update({f"val_{k}": float(v) for k, v in spec.evaluate().items()})
+        if (epoch + 1) % eval_every == 0 or epoch == spec.epochs - 1:
+            with torch.no_grad():
+                row.update({f"val_{k}": float(v) for k, v in spec.evaluate().items()})
         history.append(row)
         bar.set_postfix({k: f"{v:.4g}" for k, v in row.items() if k not in ("epoch", "lr")})
         last = epoch == spec.epochs - 1

@@ -160,8 +160,9 @@ def load_model(path: Path, device: str | torch.device = "cpu") -> SkinChain:
 def train(rundir: Path, dataset: Path, fits: Path | None, lut_path: Path, *, want: tuple[int, ...] = (1, 2, 3),
           mcfg: ModelConfig | None = None, tcfg: TrainConfig | None = None, device: str = "cpu",
           progress: bool = True, checkpoint_interval_s: float = 0.0, command: str = "",
-          stop_after_epochs: int | None = None) -> dict:
-    """Train the requested stages into ``rundir``; returns the run record (also written to run.json)."""
+          stop_after_epochs: int | None = None, eval_every: int = 1) -> dict:
+    """Train the requested stages into ``rundir``; returns the run record (also written to run.json).
+    ``eval_every``: validation metrics after every n-th epoch and the last (``loop.run_stage``)."""
     tcfg = tcfg or TrainConfig()
     dev = torch.device(device)
     if dev.type == "cuda" and not torch.cuda.is_available():
@@ -207,7 +208,7 @@ def train(rundir: Path, dataset: Path, fits: Path | None, lut_path: Path, *, wan
     torch.manual_seed(tcfg.seed)
     model = SkinChain(mcfg).to(dev)
     common = {"seed": tcfg.seed, "device": dev, "progress": progress, "checkpoint_interval_s": checkpoint_interval_s,
-              "stop_after_epochs": stop_after_epochs}
+              "stop_after_epochs": stop_after_epochs, "eval_every": eval_every}
     finished = True
     for s in (1, 2, 3):
         ck = checkpoint_path(rundir, s)
