@@ -9,7 +9,8 @@ from __future__ import annotations
 import numpy as np
 
 #: Spectral grid: 250, 252, ..., 1000 nm (376 samples).  docs/contracts.md §1.
-WAVELENGTHS_NM: np.ndarray = np.arange(250.0, 1000.0 + 1e-9, 2.0)
+WAVELENGTH_STEP_NM: float = 2.0
+WAVELENGTHS_NM: np.ndarray = np.arange(250.0, 1000.0 + 1e-9, WAVELENGTH_STEP_NM)
 WAVELENGTHS_NM.setflags(write=False)
 N_WAVELENGTHS: int = WAVELENGTHS_NM.size  # 376
 

@@ -16,7 +16,7 @@ from pathlib import Path
 
 import h5py
 
-from exporters.constants import WAVELENGTHS_NM
+from exporters.constants import WAVELENGTH_STEP_NM, WAVELENGTHS_NM
 from exporters.maps import sha256_file
 from training.export.graphs import output_shapes
 from training.model.chain import DECODER_OUTPUTS, INVERSION_OUTPUTS
@@ -81,7 +81,7 @@ def build_card(run: dict, graphs: dict[str, bytes], weights: str, parity: dict, 
         "files": files,
         "K": k,
         "wavelength_nm": {"first": float(WAVELENGTHS_NM[0]), "last": float(WAVELENGTHS_NM[-1]),
-                          "step": float(WAVELENGTHS_NM[1] - WAVELENGTHS_NM[0]), "count": int(WAVELENGTHS_NM.size)},
+                          "step": WAVELENGTH_STEP_NM, "count": int(WAVELENGTHS_NM.size)},
         "units": {"sigma_t": "cm^-1", "biophysical": "f_mel, f_blood, t_epi [cm], so2, b_mel",
                   "albedo_rgb": "linear sRGB (D65)"},
         "input_domain": INPUT_DOMAIN,

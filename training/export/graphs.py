@@ -29,7 +29,7 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from exporters.constants import WAVELENGTHS_NM
+from exporters.constants import WAVELENGTH_STEP_NM, WAVELENGTHS_NM
 from training.model.chain import DECODER_OUTPUTS, INVERSION_OUTPUTS, DecoderGraph, InversionGraph, SkinChain
 
 OPSET: int = 17
@@ -101,7 +101,7 @@ def _with_metadata(data: bytes, model: SkinChain, doc: str, weights: str) -> byt
     proto.doc_string = doc
     meta = {
         "K": str(model.cfg.k),
-        "wavelength_nm": f"{WAVELENGTHS_NM[0]:g}:{WAVELENGTHS_NM[-1]:g}:{WAVELENGTHS_NM[1] - WAVELENGTHS_NM[0]:g}",
+        "wavelength_nm": f"{WAVELENGTHS_NM[0]:g}:{WAVELENGTHS_NM[-1]:g}:{WAVELENGTH_STEP_NM:g}",
         "n_wavelengths": str(WAVELENGTHS_NM.size),
         "biophysical": ",".join(model.cfg.param_names) + " (t_epi in cm)",
         "units": "sigma_t cm^-1; alpha, g, weight, reflectance dimensionless; albedo_rgb linear sRGB (D65)",

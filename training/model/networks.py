@@ -26,7 +26,7 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from exporters.constants import WAVELENGTHS_NM
+from exporters.constants import WAVELENGTH_STEP_NM
 from training.model.config import SLAB_C, SLAB_DEPTH_INIT, ModelConfig
 
 #: Channel order of Dec_T's outputs along axis 1 of the raw / normalised tensors.
@@ -119,9 +119,9 @@ class TranslucencyDecoder(_ParamScale):
         self.register_buffer("g_bounds", torch.tensor([g_lo, g_hi - g_lo], dtype=torch.float32))
         self.register_buffer("log_sigma_bounds", torch.tensor([math.log(s_lo), math.log(s_hi / s_lo)],
                                                               dtype=torch.float32))
-        step_nm = float(WAVELENGTHS_NM[1] - WAVELENGTHS_NM[0])
         # Not persistent: fixed by the config, so checkpoints made before it load unchanged.
-        self.register_buffer("weight_kernel", gaussian_taps(cfg.weight_smoothing_nm / step_nm), persistent=False)
+        self.register_buffer("weight_kernel", gaussian_taps(cfg.weight_smoothing_nm / WAVELENGTH_STEP_NM),
+                             persistent=False)
 
     def smooth_weights(self, weight: torch.Tensor) -> torch.Tensor:
         """(N, K, W) weights low-passed along W by ``weight_kernel``, the ends extended by their last value."""

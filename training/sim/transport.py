@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from exporters.constants import R_EDGES_CM
+from exporters.constants import N_WAVELENGTHS, R_EDGES_CM
 from training.sim.kernel import KIND_REFLECTED, KIND_TRANSMITTED, KIND_TRUNCATED, KIND_UNSCATTERED
 from training.sim.medium import LayeredMedium
 from training.sim.walker import AUTO_COMPILE_PACKETS, Source, WalkConfig, Walker
@@ -27,7 +27,7 @@ PROFILE_ESTIMATORS: tuple[str, ...] = ("histogram", "cdf")
 #: an H200 (2026-11-26) the dataset's baseline medium at 376 wavelengths took 48-61 s for 2,000 photons,
 #: 49 s for 20,000 and 98 s for 165,000 (62e6 packets, ~6 GB with path records), so a GPU keeps that many
 #: in flight and pays the tail once.
-POOL_PACKETS = {"cpu": 1 << 18, "cuda": 165_000 * 376}
+POOL_PACKETS = {"cpu": 1 << 18, "cuda": 165_000 * N_WAVELENGTHS}
 
 
 @dataclass

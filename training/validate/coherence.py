@@ -44,7 +44,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from exporters.constants import R_EDGES_CM, WAVELENGTHS_NM
+from exporters.constants import R_EDGES_CM, WAVELENGTH_STEP_NM, WAVELENGTHS_NM
 from training.data.sampling import PARAM_HIGH, PARAM_LOW
 from training.fit.matching import FIELDS
 from training.fit.mixture import Mixture, radial_profile
@@ -178,7 +178,7 @@ def coherence(dec: Decoded, fitted_index: np.ndarray, lut: LookupTables) -> dict
            "dlog_sigma_t": hi / lo <= DSIGMA_RATIO_TOL,
            "no_unexplained_jumps": f["unexplained_jumps"] + o["unexplained_jumps"] == 0}
     slow = weight_jumps(dec, lut, span=WINDOW_STEPS)
-    out["window"] = {"span_nm": 2 * WINDOW_STEPS, "weight_jumps": int(slow["tone"].size),
+    out["window"] = {"span_nm": WAVELENGTH_STEP_NM * WINDOW_STEPS, "weight_jumps": int(slow["tone"].size),
                      "unexplained_jumps": int((~slow["explained"]).sum())}
     out["acceptance"] = {**acc, "all": all(acc.values()),
                          "tolerances": {"switch": SWITCH_TOL, "dlog_ratio": DSIGMA_RATIO_TOL, "jump_dw": JUMP_DW,
