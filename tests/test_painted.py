@@ -38,14 +38,19 @@ def _iad(alpha: float, g: float) -> float:
 
 
 def test_painted_media_have_the_painted_colour(network):
-    out, p = _paint(network, SKIN)
+    """The media of the network's answer for SKIN, painted to a colour 12 % off it per channel (what the
+    correction does wherever the network's own colour misses the painted one: the model before 2026-11-26 was
+    that far off on its own; the rebuilt one is within 4 % of SKIN), take the painted colour."""
+    target = SKIN * np.array([0.88, 1.12, 0.88])
+    out = network.run(np.asarray(SKIN, np.float32))
+    p = painted.paint_mixture(out["alpha"], out["sigma_t"], out["g"], out["weight"], target)
     assert not p.clamped.any()
     g = np.clip(out["g"].astype(np.float64), 0, 0.95)
     mix = np.sum(out["weight"] * reflectance_tables.reflectance("model", p.alpha, g), axis=1)
-    np.testing.assert_allclose(spectrum_to_linear_srgb(mix), SKIN, rtol=2e-3)
+    np.testing.assert_allclose(spectrum_to_linear_srgb(mix), target, rtol=2e-3)
     before = spectrum_to_linear_srgb(np.sum(out["weight"] * reflectance_tables.reflectance(
         "model", np.minimum(out["alpha"].astype(np.float64), painted.ALPHA_MAX), g), axis=1))
-    assert np.all(np.abs(before / SKIN - 1) > 0.05)  # the network's own colour was not the painted one
+    assert np.all(np.abs(before / target - 1) > 0.05)  # the network's own colour was not the painted one
     # each medium's reflectance is the correction times the network's, by adding-doubling (texel 1, k = 1..K)
     for j in np.searchsorted(WAVELENGTHS_NM, [450.0, 550.0, 620.0]):
         for k in range(out["alpha"].shape[1]):

@@ -148,12 +148,11 @@ def shipped_coherence(lut) -> dict:
     return C.coherence(C.decode(fn, C.random_tones(300, seed=0)), np.arange(0, 376, C.SHIPPED_FITTED_STRIDE), lut)
 
 
-@pytest.mark.xfail(strict=True, reason="the shipped decoder predates the coherent rebuild (issue 23)")
 def test_shipped_decoder_is_spectrally_coherent(lut):
     """Issue 23's acceptance on the shipped decoder (300 random tones in the box of docs/contracts.md §1; tolerance
-    ``coherence.SWITCH_TOL``, ``DSIGMA_RATIO_TOL`` and no unexplained weight jump).  The decoder trained
-    before issue 23 fails it: its dominant component switches on ~25 % of the steps at a fitted
-    wavelength against ~1 % elsewhere (README, "Training the model")."""
+    ``coherence.SWITCH_TOL``, ``DSIGMA_RATIO_TOL`` and no unexplained weight jump).  The decoder shipped
+    before issue 23 failed it: its dominant component switched on ~25 % of the steps at a fitted
+    wavelength against ~1 % elsewhere (docs/validation/coherence/shipped_before_rebuild.json)."""
     res = shipped_coherence(lut)
     assert res["acceptance"]["all"], res
 

@@ -77,15 +77,18 @@ def test_quick_writes_tables_and_figures(quick_run, monkeypatch):
 
 def test_painted_row_renders_the_painted_colour(quick_run):
     """The gate's painted-colour row (the bake's default): the network's media corrected to the ground truth's
-    colour, rendered by our Monte Carlo, show that colour within the quick run's noise; the network's own media
-    do not (R01, very light: the network answers with a skin 1.9x darker)."""
+    colour, rendered by our Monte Carlo, show that colour within the quick run's noise, none clamped.  (The
+    model shipped before 2026-11-26 answered R01 with a skin 1.9x darker, and this test also asserted that its
+    own media missed the colour by 3x the painted ones; the rebuilt model's own media are within the quick
+    run's noise too, so that no longer separates them.  That the correction moves the colour where the
+    network's media miss it: tests/test_painted.py.)"""
     out, _, _, _, _ = quick_run
     rec = json.loads((out / "tables.json").read_text())
     painted, own = rec["gate"]["per_tone"]["nn_painted"], rec["gate"]["per_tone"]["nn"]
     for tone, vals in painted.items():
         assert vals["clamped"] is False, tone
         assert vals["delta_e"] <= 2 * vals["noise_floor"] + 1.0, (tone, vals["delta_e"], vals["noise_floor"])
-    assert painted["R01"]["delta_e"] < own["R01"]["delta_e"] / 3
+    assert set(painted) == set(own)
     assert _finite(rec["gate"]["rows"]["nn_painted"]["delta_e_edge"]["representative"])
     assert "painted colour" in (out / "tables.md").read_text()
 
