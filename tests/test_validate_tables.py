@@ -89,6 +89,28 @@ def test_painted_row_renders_the_painted_colour(quick_run):
         assert vals["clamped"] is False, tone
         assert vals["delta_e"] <= 2 * vals["noise_floor"] + 1.0, (tone, vals["delta_e"], vals["noise_floor"])
     assert set(painted) == set(own)
+
+
+def test_network_targets_are_checked_and_printed(quick_run):
+    """The rebuilt network's targets (issue 23) in tables.json and tables.md: each one's value is the gate's own
+    number for it, and 'met' says whether it is within the target."""
+    from training.validate.run import NETWORK_TARGETS
+
+    out, _, _, _, _ = quick_run
+    rec = json.loads((out / "tables.json").read_text())
+    targets, nn = rec["goals"]["network_targets"], rec["gate"]["rows"]["nn"]
+    assert [(t["measure"], t["where"], t["target"]) for t in targets] == [(m, w, v) for m, _, w, v in NETWORK_TARGETS]
+    by = {(t["measure"], t["where"]): t for t in targets}
+    assert by[("delta_e", "all")]["ours"] == nn["delta_e"]["all"]
+    assert by[("edge", "representative")]["ours"] == nn["delta_e_edge"]["representative"]
+    assert by[("nn_minus_k3", "all")]["ours"] == rec["gate"]["nn_vs_k3"]["difference_of_means"]["all"]
+    assert by[("shape", "Vis")]["ours"] == rec["banded"]["network_shape"]["nn"]["all"]["Vis"]
+    for t in targets:
+        assert t["met"] == (t["ours"] <= t["target"]), t
+    md = (out / "tables.md").read_text()
+    assert "The network's targets (issue 23)" in md
+    assert sum(line.startswith("| network") or line.startswith("| the gate") for line in md.splitlines()
+               if "≤" in line) == len(NETWORK_TARGETS)
     assert _finite(rec["gate"]["rows"]["nn_painted"]["delta_e_edge"]["representative"])
     assert "painted colour" in (out / "tables.md").read_text()
 

@@ -474,6 +474,36 @@ def _profile_fidelity(opts, lut, files, record) -> dict:
     return out
 
 
+#: The network's acceptance targets of issue 23 (the rebuilt model): (measure, what, group or band, target).
+#: "nn_minus_k3" is the difference of the mean ΔE76 to the ground truth, the paper's "vs. joint-opt"; "shape"
+#: the network's profile shape as rendered at every validation wavelength of the band, over all gate tones.
+NETWORK_TARGETS: tuple[tuple[str, str, str, float], ...] = (
+    ("delta_e", "network from RGB, gate ΔE76, representative tones", "representative", 1.5),
+    ("delta_e", "network from RGB, gate ΔE76, all tones", "all", 2.5),
+    ("nn_minus_k3", "network minus the joint K = 3 fits, representative tones", "representative", 0.5),
+    ("nn_minus_k3", "network minus the joint K = 3 fits, all tones", "all", 0.5),
+    ("edge", "network from RGB, edge ΔE76, representative tones", "representative", 1.0),
+    ("shape", "network from RGB, profile shape as rendered, UV", "UV", 0.3),
+    ("shape", "network from RGB, profile shape as rendered, Vis", "Vis", 0.25),
+    ("shape", "network from RGB, profile shape as rendered, NIR", "NIR", 0.3),
+    ("noise_floor", "the gate's Monte Carlo noise floor (ΔE76, representative tones)", "representative", 0.1),
+)
+
+
+def _network_targets(record) -> list[dict]:
+    """``NETWORK_TARGETS`` checked on the network's rows (``ours`` None where a row or band is missing)."""
+    nn = record["gate"]["rows"]["nn"]
+    source = {"delta_e": nn["delta_e"], "edge": nn["delta_e_edge"], "noise_floor": nn["noise_floor"],
+              "nn_minus_k3": record["gate"].get("nn_vs_k3", {}).get("difference_of_means", {}),
+              "shape": record.get("banded", {}).get("network_shape", {}).get("nn", {}).get("all", {})}
+    out = []
+    for measure, what, where, target in NETWORK_TARGETS:
+        ours = source[measure].get(where)
+        out.append({"measure": measure, "where": where, "what": what, "target": target, "ours": ours,
+                    "met": None if ours is None else bool(ours <= target)})
+    return out
+
+
 def _goals(record) -> dict:
     """The issue's goals, checked on our numbers."""
     nn = record["gate"]["rows"]["nn"]["delta_e"]["representative"]
@@ -498,6 +528,7 @@ def _goals(record) -> dict:
         if 1 in ks and 2 in ks and ks[1]["shape_excess"] > 0:
             goals["k2_profile_reduction_at_least_paper"]["excess_over_noise"] = {
                 "reduction": 1.0 - ks[2]["shape_excess"] / ks[1]["shape_excess"], "noise": summ["noise"]}
+    goals["network_targets"] = _network_targets(record)
     return goals
 
 

@@ -172,7 +172,21 @@ def goals_md(record: dict) -> list[str]:
             f"- Network rendering ΔE76 on the representative gate tones ≤ the paper's {a['paper']}: ours "
             f"{_f(a['ours'])} — {met(a['met'])}.",
             f"- K = 2 reduces the profile error by ≥ {100 * b['paper']:.1f} %: ours {_f(b['ours'], pct=True)} on the "
-            f"{b['source']} — {met(b['met'])}.{extra}", ""]
+            f"{b['source']} — {met(b['met'])}.{extra}", ""] + network_targets_md(g.get("network_targets", []))
+
+
+def network_targets_md(targets: list[dict]) -> list[str]:
+    """The rebuilt network's targets (issue 23), each with ours and, where missed, by how much."""
+    if not targets:
+        return []
+    out = ["The network's targets (issue 23):", "", "| target | ours | goal | |", "|---|---|---|---|"]
+    for t in targets:
+        if t["met"] is None:
+            verdict = "not measured"
+        else:
+            verdict = "met" if t["met"] else f"NOT met, by {_f(t['ours'] - t['target'])}"
+        out.append(f"| {t['what']} | {_f(t['ours'])} | ≤ {t['target']} | {verdict} |")
+    return out + ["", "Which tones: the `nn` and `NN vs K=3` columns of Table 1 per tone.", ""]
 
 
 def notes(record: dict) -> list[str]:
