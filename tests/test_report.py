@@ -71,6 +71,20 @@ def test_report_reads_the_validation_headline(capsys):
     assert rec["validation"]["goals"] == tables["goals"]
 
 
+def test_report_lists_the_network_targets_of_the_card(capsys):
+    """The shipped card's validation entry carries the network's targets (issue 23); the Markdown report lists
+    each with ours, the target and met / not met as the card says."""
+    from training.commands.report import main
+
+    card = json.loads((SHIPPED_MODEL_DIR / "skin_inversion.json").read_text())
+    targets = card["validation"]["goals"]["network_targets"]
+    assert main([]) == 0
+    lines = [x for x in capsys.readouterr().out.splitlines() if x.startswith("- target: ")]
+    assert len(lines) == len(targets) > 0
+    for line, t in zip(lines, targets, strict=True):
+        assert t["what"] in line and line.endswith("not met" if not t["met"] else ", met")
+
+
 def test_changed_graph_is_flagged(tmp_path, capsys):
     model = tmp_path / "model"
     shutil.copytree(SHIPPED_MODEL_DIR, model, ignore=shutil.ignore_patterns("*.py", "*.npz", "__pycache__"))
