@@ -163,9 +163,8 @@ def test_physical_trends_along_melanin_and_skin_colours():
 
     Below f_mel ~0.05 sigma_t of the decoder (and of the fits it learns from) falls as melanin rises, and
     so does that of the homogeneous medium equivalent to the Monte Carlo itself (the K = 1 medium with the
-    same R and median reflected radius: 189 -> 163 cm^-1 from f_mel 0.002 to 0.08, then up to 269 at
-    0.3, on the skin model before the real-skin calibration; ``python -m training.validate.trends``,
-    docs/validation/trends.json of 2026-11-22): melanin in a thin
+    same R and median reflected radius: 195 -> 161 cm^-1 from f_mel 0.002 to 0.08, then up to 253 at
+    0.3; ``python -m training.validate.trends``, docs/validation/trends.json): melanin in a thin
     epidermis lowers R more than it narrows the profile, and a homogeneous medium whose albedo drops
     that far narrows more, in mean free paths, so its mean free path must grow to keep the width."""
     f_mel = np.array([0.002, 0.01, 0.03, 0.05, 0.08, 0.15, 0.3, 0.45], np.float32)
