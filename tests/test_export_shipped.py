@@ -99,8 +99,8 @@ def test_non_finite_inputs_behave_as_documented():
 
 
 def _visible_means(out):
-    """Component-weighted visible (450-650 nm) albedo, sigma_t [cm^-1], sigma_a [cm^-1], mean free path
-    sum_k w_k / sigma_t_k [cm], and the translucency length [cm]: the effective attenuation length of
+    """Component-weighted visible (450-650 nm) albedo, sigma_t [cm^-1], sigma_a [cm^-1], and the
+    translucency length [cm]: the effective attenuation length of
     diffusion theory, 1 / sigma_eff with sigma_eff = sigma_t sqrt(3 (1 - alpha)(1 - alpha g)) (Jensen et al.
     2001), averaged over the components by the light each reflects, E_k = w_k R(alpha_k, g_k) (the exporter's
     reflectance table, checked against adding-doubling); (N,) each."""
@@ -113,7 +113,7 @@ def _visible_means(out):
     light = w * rt.reflectance("model", a_c, np.clip(g, 0.0, rt.G_TABLE_MAX))
     length = 1.0 / (st * np.sqrt(3.0 * (1.0 - a_c) * (1.0 - a_c * g)))
     return {"alpha": (w * a).sum(1).mean(-1), "sigma_t": (w * st).sum(1).mean(-1),
-            "sigma_a": (w * (1.0 - a) * st).sum(1).mean(-1), "mfp": (w / st).sum(1).mean(-1),
+            "sigma_a": (w * (1.0 - a) * st).sum(1).mean(-1),
             "translucency": ((light * length).sum(1) / light.sum(1)).mean(-1)}
 
 
