@@ -8,12 +8,14 @@ import numpy as np
 import pytest
 import torch
 
+from exporters.constants import PARAM_NAMES, PARAM_RANGES
 from training.commands.train import main as train_main
 from training.model import ModelConfig
 from training.model.chain import SkinChain
 from training.model.config import SIZES
 from training.sim.lut_interp import LookupTables
 from training.train import losses as train_losses
+from training.train.balance import CAP, balanced_order, sampling_probabilities
 from training.train.data import load_split
 from training.train.loop import checkpoint_path, load_checkpoint
 from training.train.run import TrainConfig, train
@@ -377,3 +379,44 @@ def test_smooth_weight_sets_how_much_dec_t_may_change_per_wavelength_step(toy, t
         _train(tmp_path / "smooth50.0", toy, want=(3,), tcfg=dict(tcfg, smooth_weight=5.0))
     with pytest.raises(ValueError, match="smooth_weight must be"):
         _train(tmp_path / "negative", toy, tcfg=dict(tcfg, smooth_weight=-1.0))
+
+
+def test_balance_draws_the_tones_of_sparse_corners_more_often():
+    """The inverse-density weights: 400 tones crowded around medium skin and 4 alone in a corner of the box.
+    With balance 1 each lone tone is drawn about CAP times as often as a crowded one (the 8th neighbour of a
+    lone tone is far, its inverse-density weight hits the cap); with balance 0 every tone alike; the draws of
+    one epoch follow the probabilities and are the same for the same seed."""
+    rng = np.random.default_rng(3)
+    lo = np.array([PARAM_RANGES[n][0] for n in PARAM_NAMES])
+    hi = np.array([PARAM_RANGES[n][1] for n in PARAM_NAMES])
+    crowd = np.array([0.03, 0.02, 0.01, 0.75, 0.75]) * (1 + 0.05 * rng.standard_normal((400, 5)))
+    lone = np.stack([lo + 0.02 * (hi - lo) * rng.random(5) for _ in range(4)])  # near the lower corner
+    tones = np.concatenate([crowd, lone])
+    uniform = sampling_probabilities(tones, 0.0)
+    assert np.allclose(uniform, 1 / len(tones))
+    p = sampling_probabilities(tones, 1.0)
+    assert p.sum() == pytest.approx(1.0)
+    assert np.allclose(p[-4:], p.max())  # every lone tone at the cap
+    assert p[-4:].mean() / np.median(p) == pytest.approx(CAP, rel=1e-6)
+    probs = torch.as_tensor(p)
+    a, b = (balanced_order(probs, 0, 3, 7, torch.device("cpu")) for _ in range(2))
+    assert torch.equal(a, b) and len(a) == len(tones)
+    draws = torch.cat([balanced_order(probs, 0, 3, e, torch.device("cpu")) for e in range(50)])
+    lone_share = float((draws >= 400).double().mean())
+    assert lone_share == pytest.approx(p[-4:].sum(), rel=0.2)
+    with pytest.raises(ValueError, match="balance"):
+        sampling_probabilities(tones, 1.5)
+
+
+def test_stage3_trains_with_balanced_tone_draws(toy, tmp_path):
+    """--balance B: stage 3 draws its tones by the balanced probabilities (recorded in the run), still learns,
+    and a folder holding a stage 3 with another balance refuses it."""
+    tcfg = dict(TCFG, shape_weight=0.0, epochs=[3, 3, 6], balance=1.0)
+    rec = _train(tmp_path / "r", toy, tcfg=tcfg)
+    assert rec["train"]["balance"] == 1.0
+    h = load_checkpoint(checkpoint_path(tmp_path / "r", 3))["history"]
+    assert h[-1]["train_loss"] < h[0]["train_loss"]
+    with pytest.raises(ValueError, match="balance 1.0 -> 0.5"):
+        _train(tmp_path / "r", toy, want=(3,), tcfg=dict(tcfg, balance=0.5))
+    with pytest.raises(ValueError, match="balance must"):
+        _train(tmp_path / "bad", toy, tcfg=dict(tcfg, balance=-0.1))

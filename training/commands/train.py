@@ -4,6 +4,7 @@
         [--stage 1|2|3|all] [--epochs E1,E2,E3] [--batch B1,B2,B3] [--lr L1,L2,L3] [--k 3]
         [--size paper|small|tiny] [--enc-hidden H] [--synthetic N] [--seed S] [--device cpu|cuda]
         [--targets dense|fitted] [--uniform-param] [--encoder-share F] [--refl-loss absolute|log] [--smooth-weight S]
+        [--balance B]
         [--lambda-r 15] [--no-slab-factor] [--unfreeze] [--data-every N]
         [--checkpoint-interval SECONDS] [--no-progress]
 
@@ -60,6 +61,10 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("--smooth-weight", type=float, default=d.smooth_weight,
                    help="stage 3: weight of L_smooth, the mean |change| of Dec_T's normalised outputs per 2 nm step "
                         "(the paper's lambda_smooth 0.5)")
+    p.add_argument("--balance", type=float, default=d.balance,
+                   help="stage 3 (ours): share of the tone draws by inverse local density in the parameter box, so "
+                        "that its sparse corners are learnt more often (0: every fitted tone once per epoch; "
+                        "training/train/balance.py)")
     a = p.add_argument_group("ablations of the paper's §5 (python -m training ablations; defaults = the paper)")
     a.add_argument("--lambda-r", type=float, default=d.lambda_r, help="stage 3: weight of L_refl (paper 15)")
     a.add_argument("--no-slab-factor", action="store_true", help="stage 3: L_refl without the slab-depth factor")
@@ -101,7 +106,7 @@ def main(argv: list[str]) -> int:
                        weighted_param=not args.uniform_param, lambda_r=args.lambda_r,
                        slab_factor=not args.no_slab_factor, unfreeze=args.unfreeze, data_every=args.data_every,
                        encoder_share=args.encoder_share, refl_loss=args.refl_loss,
-                       smooth_weight=args.smooth_weight)
+                       smooth_weight=args.smooth_weight, balance=args.balance)
     command = portable_command("python -m training train", argv)
     try:
         if 3 in want and args.fits is None:

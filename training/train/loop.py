@@ -21,6 +21,8 @@ import torch
 from torch import nn
 from tqdm import tqdm
 
+from training.train.balance import balanced_order
+
 #: Final learning rate of the cosine schedule, as a fraction of the initial one.
 LR_FLOOR: float = 0.05
 
@@ -43,6 +45,8 @@ class StageSpec:
     lr: float
     step: Callable[[torch.Tensor], dict[str, torch.Tensor]]
     evaluate: Callable[[], dict[str, float]]
+    #: (n_items,) probabilities of drawing each item (``training.train.balance``); None: a permutation per epoch
+    item_probabilities: torch.Tensor | None = None
 
 
 def checkpoint_path(rundir: Path, stage: int) -> Path:
@@ -116,7 +120,8 @@ def run_stage(spec: StageSpec, model: nn.Module, rundir: Path, *, seed: int, dev
             group["lr"] = cosine_lr(spec.lr, epoch, spec.epochs)
         for m in spec.trainable:
             m.train()
-        order = epoch_order(spec.n_items, seed, spec.stage, epoch, device)
+        order = (epoch_order(spec.n_items, seed, spec.stage, epoch, device) if spec.item_probabilities is None
+                 else balanced_order(spec.item_probabilities, seed, spec.stage, epoch, device))
         sums: dict[str, float] = {}
         for b in range(n_batches):
             idx = order[b * spec.batch_size : (b + 1) * spec.batch_size]

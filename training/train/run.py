@@ -70,12 +70,15 @@ class TrainConfig:
     refl_loss: str = "absolute"
     #: stage 3: weight of L_smooth, mean |u(l + 1) - u(l)| (the paper's lambda_smooth = 0.5; ``losses.LAMBDA_SMOOTH``)
     smooth_weight: float = LAMBDA_SMOOTH
+    #: stage 3 (ours, issue 23): share of the tone draws by inverse local density in the parameter box, so that
+    #: sparse corners are learnt more often (``training.train.balance``; 0 = every fitted tone once per epoch)
+    balance: float = 0.0
 
 
 #: What a run record made before an option existed trained with (its behaviour then).
 LEGACY_TRAIN: dict = {"exposure_prior": 0.0, "shape_weight": 0.0, "targets": "fitted", "weighted_param": False,
                      "lambda_r": 15.0, "slab_factor": True, "unfreeze": False, "data_every": 1,
-                     "encoder_share": 0.0, "refl_loss": "absolute", "smooth_weight": LAMBDA_SMOOTH}
+                     "encoder_share": 0.0, "refl_loss": "absolute", "smooth_weight": LAMBDA_SMOOTH, "balance": 0.0}
 
 
 #: The training options each stage adds to those of the stages before it (a stage depends on all of them);
@@ -84,7 +87,7 @@ STAGE_OPTIONS: dict[int, tuple[str, ...]] = {
     1: ("seed",),
     2: ("synthetic", "exposure_jitter", "exposure_prior", "unfreeze", "data_every"),
     3: ("shape_weight", "targets", "weighted_param", "lambda_r", "slab_factor", "encoder_share", "refl_loss",
-        "smooth_weight"),
+        "smooth_weight", "balance"),
 }
 PER_STAGE_OPTIONS = ("epochs", "batch", "lr")
 
@@ -185,6 +188,8 @@ def train(rundir: Path, dataset: Path, fits: Path | None, lut_path: Path, *, wan
         raise ValueError(f"encoder_share must lie in [0, 1], got {tcfg.encoder_share}")
     if not (tcfg.smooth_weight >= 0 and math.isfinite(tcfg.smooth_weight)):
         raise ValueError(f"smooth_weight must be a finite number >= 0, got {tcfg.smooth_weight}")
+    if not 0.0 <= tcfg.balance <= 1.0:
+        raise ValueError(f"balance must lie in [0, 1], got {tcfg.balance}")
     lut_sha = sha256_file(lut_path)
     old_record = _check_record(rundir, {"model": mcfg.to_dict(), "train": asdict(tcfg), "lut_sha256": lut_sha})
     train_data = load_split(dataset, "train", fits if need_fits else None, mcfg.k, profiles, tcfg.targets,
@@ -246,4 +251,4 @@ def _spec(stage: int, model: SkinChain, lut: LookupTables, train_data: SplitData
                              t.exposure_jitter, t.seed, t.exposure_prior, t.unfreeze)
     return stages.stage3(model, lut, train_data, val_data, t.epochs[i], t.batch[i], t.lr[i], t.shape_weight,
                          t.targets == "dense", t.weighted_param, t.lambda_r, t.slab_factor, t.unfreeze,
-                         t.encoder_share, t.refl_loss, t.smooth_weight)
+                         t.encoder_share, t.refl_loss, t.smooth_weight, t.balance)

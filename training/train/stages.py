@@ -23,6 +23,7 @@ from training.fit.loss import Target
 from training.model.chain import SkinChain
 from training.sim.lut_interp import LookupTables
 from training.train import losses as train_losses
+from training.train.balance import sampling_probabilities
 from training.train.data import SplitData
 from training.train.loop import StageSpec
 from training.train.spectral import interpolation_matrix
@@ -101,7 +102,7 @@ def stage3(model: SkinChain, lut: LookupTables, train: SplitData, val: SplitData
            lr: float, shape_weight: float = 0.0, dense: bool = True, weighted: bool = True,
            lambda_r: float = train_losses.LAMBDA_R, slab: bool = True, unfreeze: bool = False,
            encoder_share: float = 0.0, refl_loss: str = "absolute",
-           smooth_weight: float = train_losses.LAMBDA_SMOOTH) -> StageSpec:
+           smooth_weight: float = train_losses.LAMBDA_SMOOTH, balance: float = 0.0) -> StageSpec:
     """Stage 3; ``shape_weight`` > 0 adds the profile-shape term (needs ``SplitData.shape_target``).
     ``dense``: L_param at every wavelength, targets interpolated (``training.train.spectral``); else at the
     fitted wavelengths only.  ``weighted``: L_param weighted by the target weights (``losses.param_loss``).
@@ -109,7 +110,8 @@ def stage3(model: SkinChain, lut: LookupTables, train: SplitData, val: SplitData
     ``unfreeze`` (Dec_R trains along with Dec_T).  ``encoder_share``: the share of each batch fed the
     encoder's tone (``encoder_input``); with it the validation also reports every term with all tones fed
     Enc(A_RGB) (keys ending ``_rgb``).  ``refl_loss``: L_refl's form (``losses.REFL_LOSSES``).
-    ``smooth_weight``: the weight of L_smooth (the paper's lambda_smooth 0.5)."""
+    ``smooth_weight``: the weight of L_smooth (the paper's lambda_smooth 0.5).  ``balance``: share of the
+    tone draws by inverse local density (``training.train.balance``; 0 = every fitted tone once per epoch)."""
     ablate = {"lambda_r": lambda_r, "slab": slab, "frozen_decr": not unfreeze, "refl_loss": refl_loss,
               "lambda_smooth": smooth_weight}
     if train.targets is None:
@@ -153,4 +155,8 @@ def stage3(model: SkinChain, lut: LookupTables, train: SplitData, val: SplitData
         return {"refl": float(train_losses.reflectance_loss(r_hat, val.R_d, refl_loss))}
 
     trainable = [model.dec_t] + ([model.slab] if slab else []) + ([model.dec_r] if unfreeze else [])
-    return StageSpec(3, "Dec_T", trainable, len(train.fitted), batch, epochs, lr, step, evaluate)
+    probabilities = None
+    if balance > 0:
+        tones = train.tone[train.fitted].cpu().numpy()
+        probabilities = torch.as_tensor(sampling_probabilities(tones, balance))
+    return StageSpec(3, "Dec_T", trainable, len(train.fitted), batch, epochs, lr, step, evaluate, probabilities)
