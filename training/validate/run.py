@@ -199,6 +199,8 @@ def _run(opts, files, lut, lut_sha, cache, models, timings, t_start, job) -> dic
 
     t0 = time.perf_counter()
     record = _gate_tables(ctx, rows_per_tone, renders, fits)
+    if opts.fits is not None:
+        record["gate"]["training_neighbours"] = _training_neighbours(opts.fits, tones)
     record["gate"]["renderer"] = cfg.renderer
     record["gate"]["mc_check"] = None if mc is None else _mc_check(tones, wl_r, tables, mc, cfg.seed)
     record["banded"] = _banded(lut, tones, gt, fits, wl_val, record, cfg.gt_photons)
@@ -423,6 +425,33 @@ def _gate_tables(ctx: RunContext, rows_per_tone, renders, fits) -> dict:
                      "wavelength_nm": wl.tolist(), "rows": summary, "per_tone": per_row,
                      "nn_vs_k3": {"delta_e": nn_sum, "per_tone": nn_vs_k3, "difference_of_means": diff},
                      "ground_truth": gt_rec}}
+
+
+#: Radius (in the unit box of ``training.train.balance.unit_box``) within which the fitted training tones of a
+#: gate tone are counted: how well stage 3 saw its neighbourhood.
+NEIGHBOUR_RADIUS: float = 0.25
+
+
+def _training_neighbours(fits_dir: Path, tones) -> dict | None:
+    """Per gate tone, the fitted training tones (done rows of the train fits) within ``NEIGHBOUR_RADIUS``
+    of it in the unit box; None without training fits."""
+    import h5py
+
+    from training.train.balance import unit_box
+    from training.train.data import fits_files
+
+    paths = fits_files(fits_dir, "train")
+    if not paths:
+        return None
+    parts = []
+    for path in paths:
+        with h5py.File(path, "r") as f:
+            parts.append(np.asarray(f["tone"][:], np.float64)[np.asarray(f["done"][:], bool)])
+    train = unit_box(np.concatenate(parts))
+    gate = unit_box(np.asarray(tones.values, np.float64))
+    dist = np.sqrt(((gate[:, None, :] - train[None, :, :]) ** 2).sum(-1))
+    return {"radius": NEIGHBOUR_RADIUS, "n_fitted": len(train),
+            "count": {n: int((d < NEIGHBOUR_RADIUS).sum()) for n, d in zip(tones.names, dist, strict=True)}}
 
 
 def _banded(lut, tones, gt, fits, wl_val, record, photons) -> dict:

@@ -172,7 +172,8 @@ def goals_md(record: dict) -> list[str]:
             f"- Network rendering ΔE76 on the representative gate tones ≤ the paper's {a['paper']}: ours "
             f"{_f(a['ours'])} — {met(a['met'])}.",
             f"- K = 2 reduces the profile error by ≥ {100 * b['paper']:.1f} %: ours {_f(b['ours'], pct=True)} on the "
-            f"{b['source']} — {met(b['met'])}.{extra}", ""] + network_targets_md(g.get("network_targets", []))
+            f"{b['source']} — {met(b['met'])}.{extra}", ""] + network_targets_md(g.get("network_targets", [])) \
+        + nn_minus_k3_causes_md(record)
 
 
 def network_targets_md(targets: list[dict]) -> list[str]:
@@ -187,6 +188,39 @@ def network_targets_md(targets: list[dict]) -> list[str]:
             verdict = "met" if t["met"] else f"NOT met, by {_f(t['ours'] - t['target'])}"
         out.append(f"| {t['what']} | {_f(t['ours'])} | ≤ {t['target']} | {verdict} |")
     return out + ["", "Which tones: the `nn` and `NN vs K=3` columns of Table 1 per tone.", ""]
+
+
+def nn_minus_k3_causes_md(record: dict) -> list[str]:
+    """Where a "network minus K = 3" target is missed: the tones above it, their gap split into what the encoder
+    adds (RGB in against the true p in) and what the decoder leaves (true p in against the K = 3 fits), and how
+    many fitted training tones stage 3 saw near each (``run._training_neighbours``)."""
+    missed = [t for t in record["goals"].get("network_targets", [])
+              if t["measure"] == "nn_minus_k3" and t["met"] is False]
+    if not missed:
+        return []
+    g = record["gate"]
+    rows, groups = g["per_tone"], g["groups"]
+    limit = min(t["target"] for t in missed)
+    names = sorted({n for t in missed for n in groups[t["where"]]
+                    if rows["nn"][n]["delta_e"] - rows["k3"][n]["delta_e"] > limit},
+                   key=lambda n: rows["k3"][n]["delta_e"] - rows["nn"][n]["delta_e"])
+    near = g.get("training_neighbours")
+    head = "| tone | NN − K3 | encoder (RGB in − true p in) | decoder (true p in − K3) |"
+    sep = "|---|---|---|---|"
+    if near:
+        head += f" fitted training tones within {near['radius']} |"
+        sep += "---|"
+    out = [f"Why, measured: the tones whose network error exceeds the K = 3 fits' by more than {limit}, split into "
+           "the encoder's and the decoder's share (Table 1's `nn`, `nn_decoder` and `k3` columns)"
+           + (f", with the fitted training tones stage 3 saw within {near['radius']} of each in the unit parameter "
+              f"box (f_mel, f_blood, t_epi on a log scale; median over all gate tones "
+              f"{int(np.median(list(near['count'].values())))} of {near['n_fitted']:,})" if near else "") + ":",
+           "", head, sep]
+    for n in names:
+        nn, dec, k3 = (rows[r][n]["delta_e"] for r in ("nn", "nn_decoder", "k3"))
+        line = f"| {n} | {_f(nn - k3)} | {_f(nn - dec)} | {_f(dec - k3)} |"
+        out.append(line + (f" {near['count'][n]} |" if near else ""))
+    return out + [""]
 
 
 def notes(record: dict) -> list[str]:
