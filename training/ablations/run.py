@@ -46,12 +46,14 @@ from training.validate import metrics as M
 @dataclass(frozen=True)
 class Trained:
     """A trained configuration: ``train`` overrides of ``TrainConfig``; stages before ``first_stage`` are
-    copied from ``base``."""
+    copied from ``base``; stage 3 runs ``stage3_epoch_factor`` times the scale's epochs (``less_data``: as many
+    optimiser steps on its 1/20 of the fitted tones as ``base`` takes on all of them)."""
 
     name: str
     label: str
     train: dict = field(default_factory=dict)
     first_stage: int = 3
+    stage3_epoch_factor: int = 1
 
 
 TRAINED: tuple[Trained, ...] = (
@@ -62,7 +64,8 @@ TRAINED: tuple[Trained, ...] = (
     Trained("lambda_r_1", "λ_R = 1", {"lambda_r": 1.0}),
     Trained("lambda_r_5", "λ_R = 5", {"lambda_r": 5.0}),
     Trained("lambda_r_50", "λ_R = 50", {"lambda_r": 50.0}),
-    Trained("less_data", "stages 2-3 on every 20th training tone", {"data_every": 20}, 2),
+    Trained("less_data", "stages 2-3 on every 20th training tone (stage 3: 20x the epochs, the same steps)",
+            {"data_every": 20}, 2, 20),
 )
 #: The lambda_R sweep: configuration -> lambda_R (the paper's 15 is ``base``).
 SWEEP: dict[str, float] = {"lambda_r_1": 1.0, "lambda_r_5": 5.0, "base": 15.0, "lambda_r_50": 50.0}
@@ -124,7 +127,8 @@ def train_all(out: Path, dataset: Path, fits: Path, lut: Path, scale: Scale, dev
         for s in range(1, cfg.first_stage):  # the base run's frozen networks
             if not checkpoint_path(rundir, s).exists():
                 shutil.copy(checkpoint_path(base_dir, s), checkpoint_path(rundir, s))
-        tcfg = TrainConfig(seed=scale.seed, epochs=list(scale.epochs), batch=list(scale.batch),
+        epochs = [*scale.epochs[:2], scale.epochs[2] * cfg.stage3_epoch_factor]
+        tcfg = TrainConfig(seed=scale.seed, epochs=epochs, batch=list(scale.batch),
                            synthetic=scale.synthetic, shape_weight=scale.shape_weight, **cfg.train)
         _log(progress, f"ablation {cfg.name}: stages {cfg.first_stage}-3")
         # finished stages are skipped; a run folder trained with another configuration is refused (ValueError)
@@ -183,6 +187,7 @@ class Gate:
             params = [G.Params(*(out[k][i][:, self.wl_r].double().numpy() for k in ("alpha", "sigma_t", "g", "weight")))
                       for i in range(len(self.tones.names))]
             res[row] = self.score(params)
+        res["nn"]["exposure"] = dict(zip(self.tones.names, outs["nn"]["exposure"][:, 0].double().tolist(), strict=True))
         return res
 
     def fits(self, isotropic: bool) -> dict:
@@ -223,10 +228,26 @@ def _near_one_verdict(ours: float | None) -> str:
     return "agree" if ours <= NEAR_ONE_AGREE else "partly" if ours <= NEAR_ONE_PARTLY else "disagree"
 
 
+def _regress_verdict(ours: float | None) -> str:
+    """"Unfreezing regresses ΔE by up to 40 %": worse by at most NEAR_ONE_AGREE agrees, up to NEAR_ONE_PARTLY
+    partly; better (ratio < 1) disagrees with the claim's direction."""
+    if ours is None:
+        return "not measured"
+    if ours < 1.0:
+        return "disagree (unfreezing helps here)"
+    return _near_one_verdict(ours)
+
+
+#: The metric of the trained claims: the decoder's mixture from the tone's true p.  Every configuration but
+#: ``unfreeze`` and ``less_data`` shares ``base``'s encoder, whose answer from RGB dominates the RGB-in numbers
+#: (``markdown`` says by how much), so only the decoder path shows what a configuration changes.
+DECODER_METRIC: str = "gate ΔE76 of the decoder (true p in)"
+
+
 def claims(nets: dict[str, dict], iso: dict, aniso: dict, val: dict[str, float | None]) -> list[dict]:
     """One row per claim: the paper's pair, ours, the ratio and the verdict.  ``nets`` {config: Gate.network};
     ``val`` {config: validation-split mixture ΔE76 of the run}."""
-    gate = {n: r["nn"]["delta_e"] for n, r in nets.items()}
+    dec = {n: r["decoder"]["delta_e"] for n, r in nets.items()}
 
     def row(claim, paper_pair, paper_ratio, metric, ours_pair, verdict_of):
         ratio = None if None in ours_pair or not ours_pair[1] else ours_pair[0] / ours_pair[1]
@@ -237,22 +258,24 @@ def claims(nets: dict[str, dict], iso: dict, aniso: dict, val: dict[str, float |
         row("isotropic fit (g = 0) vs anisotropic, §8", (0.5, 0.019), 0.5 / 0.019,
             "gate ΔE76 of the K = 3 fits", (iso["K3"]["delta_e"], aniso["K3"]["delta_e"]),
             lambda r: _ratio_verdict(r, 0.5 / 0.019)),
+        row("isotropic fit vs anisotropic, translucency (ours, not in the paper)", (0.5, 0.019), 0.5 / 0.019,
+            "gate edge ΔE76 of the K = 3 fits", (iso["K3"]["delta_e_edge"], aniso["K3"]["delta_e_edge"]),
+            lambda r: _ratio_verdict(r, 0.5 / 0.019)),
         row("no reflectance loss (λ_R = 0) vs λ_R = 15, §5.3", (11.0, 0.062), 11.0 / 0.062,
             "validation-split ΔE76 of the decoded mixture vs the MC colour", (val.get("no_refl"), val.get("base")),
             lambda r: _ratio_verdict(r, 11.0 / 0.062)),
         row("no slab-depth factor vs learned c(λ), §5.3", (7.6, 3.19), 7.6 / 3.19,
-            "gate ΔE76 of the network (RGB in)", (gate["no_slab"], gate["base"]),
-            lambda r: _ratio_verdict(r, 7.6 / 3.19)),
+            DECODER_METRIC, (dec["no_slab"], dec["base"]), lambda r: _ratio_verdict(r, 7.6 / 3.19)),
         row("Dec_R unfrozen in later stages vs frozen, §5.2", ("up to +40 %", None), 1.4,
-            "gate ΔE76 of the network (RGB in)", (gate["unfreeze"], gate["base"]), _near_one_verdict),
+            DECODER_METRIC, (dec["unfreeze"], dec["base"]), _regress_verdict),
         row("stages 2-3 on 1/20 of the tones vs all (frozen Dec_R), §5.2", ("20× less data", None), 1.0,
-            "gate ΔE76 of the network (RGB in)", (gate["less_data"], gate["base"]), _near_one_verdict),
+            DECODER_METRIC, (dec["less_data"], dec["base"]), _near_one_verdict),
     ]
-    sweep = {lam: gate[n] for n, lam in SWEEP.items()}
+    sweep = {lam: dec[n] for n, lam in SWEEP.items()}
     best = min(sweep, key=sweep.get)
     verdict = "agree" if best == 15.0 else "partly" if sweep[15.0] <= SWEEP_PARTLY * sweep[best] else "disagree"
     rows.append({"claim": "λ_R sweep: 15 is optimal, §5.3", "paper": ("λ_R = 15", None), "paper_ratio": None,
-                 "metric": "gate ΔE76 of the network (RGB in)", "ours": [sweep[k] for k in sorted(sweep)],
+                 "metric": DECODER_METRIC, "ours": [sweep[k] for k in sorted(sweep)],
                  "sweep": {str(k): v for k, v in sorted(sweep.items())}, "best": best, "ratio": None,
                  "verdict": verdict})
     return rows
@@ -261,6 +284,21 @@ def claims(nets: dict[str, dict], iso: dict, aniso: dict, val: dict[str, float |
 # ------------------------------------------------------------------------------------------ tables
 def _f(x, digits: int = 3) -> str:
     return "—" if x is None else x if isinstance(x, str) else f"{x:.{digits}g}"
+
+
+def _encoder_note(record: dict) -> list[str]:
+    """Why the claims are judged on the decoder: the RGB-in error and the exposure ``base``'s encoder answers."""
+    base = record["trained"].get("base", {}).get("gate", {})
+    exposure = base.get("nn", {}).get("exposure")
+    if not exposure:
+        return []
+    return [f"Why the decoder: `base`'s encoder (the paper's stage 2: exposure free within exp(±"
+            f"{record['trained']['base']['train']['exposure_jitter']:g}), no prior) answers the gate tones' RGB "
+            f"with the exposures {', '.join(f'{n} {v:.3g}' for n, v in exposure.items())} (truth 1): darker skin is "
+            "read as lighter skin seen darker, so the mixture from RGB is a lighter tone's, and the RGB-in gate ΔE76 "
+            f"({_f(base['nn']['delta_e'])}; decoder from the true p {_f(base['decoder']['delta_e'])}) is the "
+            "encoder's, shared by every configuration that copies `base`'s stage 2. The shipped model answers "
+            "this with a wider exposure jitter and an exposure prior (README, Training the model).", ""]
 
 
 def markdown(record: dict) -> str:
@@ -286,8 +324,9 @@ def markdown(record: dict) -> str:
     lines += ["", f"Verdicts: a ratio \"without / with\" agrees when it is > 1 and within a factor {SIZE_FACTOR:g} "
               f"of the paper's (partly: > 1 only); \"costs little\" claims agree at a ratio ≤ {NEAR_ONE_AGREE:g}, "
               f"partly ≤ {NEAR_ONE_PARTLY:g}; the sweep agrees if λ_R = 15 is best, partly if within "
-              f"{100 * (SWEEP_PARTLY - 1):.0f} % of the best.", "",
-              "## Configurations", "",
+              f"{100 * (SWEEP_PARTLY - 1):.0f} % of the best; unfreezing agrees if it is worse by at most "
+              f"{NEAR_ONE_AGREE:g}× and disagrees if it is better.", "",
+              *_encoder_note(record), "## Configurations", "",
               "| configuration | gate ΔE76 NN (RGB in) | edge ΔE76 NN | gate ΔE76 decoder (true p) | "
               "validation mixture ΔE76 |", "|---|---|---|---|---|"]
     for name, r in record["trained"].items():
