@@ -1,7 +1,7 @@
 """Stage 3's tone balance: draw the training tones of sparse corners of the parameter box more often.
 
 The laptop dataset draws most tones where skin colours are (issue 23's sampling), so the corners of the
-SPEC box (the outlier tones: thinnest epidermis with the darkest melanin, maximum blood, the lower corner of
+parameter box (the outlier tones: thinnest epidermis with the darkest melanin, maximum blood, the lower corner of
 every range) hold few fitted tones, and the decoder is worst there.  With ``balance`` = b > 0 an epoch draws
 its items with replacement from
 
@@ -30,7 +30,7 @@ LOG_PARAMS: tuple[str, ...] = ("f_mel", "f_blood", "t_epi")
 
 
 def unit_box(tone: np.ndarray) -> np.ndarray:
-    """Tones (N, 5) in the SPEC box -> (N, 5) in [0, 1]^5 (``LOG_PARAMS`` on a log scale)."""
+    """Tones (N, 5) in the parameter box (``PARAM_RANGES``) -> (N, 5) in [0, 1]^5 (``LOG_PARAMS`` on a log scale)."""
     out = np.empty(tone.shape, dtype=np.float64)
     for j, name in enumerate(PARAM_NAMES):
         lo, hi = PARAM_RANGES[name]
