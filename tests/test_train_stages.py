@@ -2,6 +2,7 @@
 a killed run resumes to the uninterrupted result, and the CLI refuses inconsistent runs."""
 
 import json
+from dataclasses import asdict
 
 import h5py
 import numpy as np
@@ -420,3 +421,42 @@ def test_stage3_trains_with_balanced_tone_draws(toy, tmp_path):
         _train(tmp_path / "r", toy, want=(3,), tcfg=dict(tcfg, balance=0.5))
     with pytest.raises(ValueError, match="balance must"):
         _train(tmp_path / "bad", toy, tcfg=dict(tcfg, balance=-0.1))
+
+
+def test_a_run_killed_in_a_stage_with_new_options_resumes(toy, tmp_path):
+    """The A/B recipe (a copy of stages 1-2 and run.json) trains stage 3 with options of its own; the process is
+    killed (SIGKILL) after stage 3's first checkpoint.  Running the same command again resumes it, because the
+    folder's record named the new options before the stage started (it used to be written only at the end,
+    and the resume was refused: "balance 0.0 -> 1.0")."""
+    import shutil
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    data, fits, lut = toy
+    _train(tmp_path / "a", toy, want=(1, 2))
+    b = tmp_path / "b"
+    b.mkdir()
+    for name in ("stage1.pt", "stage2.pt", "run.json"):
+        shutil.copy(tmp_path / "a" / name, b / name)
+    args = ["--dataset", str(data), "--fits", str(fits), "--lut", str(lut), "--out", str(b), "--stage", "3",
+            "--size", "tiny", "--epochs", "3,3,100000", "--batch", "8,64,8", "--lr", "3e-3,3e-3,1e-3",
+            "--synthetic", "256", "--balance", "1", "--threads", "1", "--no-progress"]
+    proc = subprocess.Popen([sys.executable, "-m", "training", "train", *args])
+    try:
+        deadline = time.monotonic() + 300
+        while not checkpoint_path(b, 3).exists():
+            assert proc.poll() is None and time.monotonic() < deadline, "stage 3 never wrote a checkpoint"
+            time.sleep(0.2)
+    finally:
+        proc.send_signal(signal.SIGKILL)
+        proc.wait()
+    assert json.loads((b / "run.json").read_text())["train"]["balance"] == 1.0
+    same = TrainConfig(epochs=[3, 3, 100000], batch=[8, 64, 8], lr=[3e-3, 3e-3, 1e-3], synthetic=256, balance=1.0)
+    rec = train(b, data, fits, lut, want=(3,), mcfg=ModelConfig(**SIZES["tiny"]), tcfg=same, progress=False,
+                stop_after_epochs=1)
+    assert rec["losses"]["stage3"]["epochs_done"] >= 2  # the killed run's epochs, then one more: resumed
+    with pytest.raises(ValueError, match=r"balance 1.0 -> 0.5"):
+        train(b, data, fits, lut, want=(3,), mcfg=ModelConfig(**SIZES["tiny"]),
+              tcfg=TrainConfig(**{**asdict(same), "balance": 0.5}), progress=False, stop_after_epochs=1)

@@ -147,6 +147,8 @@ def _merge_record(rundir: Path, old: dict | None, record: dict) -> dict:
     old["commands"] = old.get("commands", []) + record["commands"]
     if record.get("fits") is not None:  # stage 3 loads the fits that stages 1-2 did not: count what it learns from
         old["fits"], old["dataset_info"] = record["fits"], record["dataset_info"]
+    # written before training: a run killed in a stage it started here must resume with these options
+    _write_json(rundir / "run.json", old)
     return old
 
 
