@@ -16,9 +16,9 @@ from training.model.chain import SkinChain
 from training.model.config import SIZES
 from training.sim.lut_interp import LookupTables
 from training.train import losses as train_losses
-from training.train.balance import CAP, balanced_order, sampling_probabilities
+from training.train.balance import CAP, sampling_probabilities
 from training.train.data import load_split
-from training.train.loop import checkpoint_path, load_checkpoint
+from training.train.loop import checkpoint_path, epoch_order, load_checkpoint
 from training.train.run import TrainConfig, train
 from training.train.toy import write_toy
 
@@ -400,9 +400,9 @@ def test_balance_draws_the_tones_of_sparse_corners_more_often():
     assert np.allclose(p[-4:], p.max())  # every lone tone at the cap
     assert p[-4:].mean() / np.median(p) == pytest.approx(CAP, rel=1e-6)
     probs = torch.as_tensor(p)
-    a, b = (balanced_order(probs, 0, 3, 7, torch.device("cpu")) for _ in range(2))
+    a, b = (epoch_order(len(tones), 0, 3, 7, torch.device("cpu"), probs) for _ in range(2))
     assert torch.equal(a, b) and len(a) == len(tones)
-    draws = torch.cat([balanced_order(probs, 0, 3, e, torch.device("cpu")) for e in range(50)])
+    draws = torch.cat([epoch_order(len(tones), 0, 3, e, torch.device("cpu"), probs) for e in range(50)])
     lone_share = float((draws >= 400).double().mean())
     assert lone_share == pytest.approx(p[-4:].sum(), rel=0.2)
     with pytest.raises(ValueError, match="balance"):

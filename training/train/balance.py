@@ -3,7 +3,7 @@
 The laptop dataset draws most tones where skin colours are (issue 23's sampling), so the corners of the
 parameter box (the outlier tones: thinnest epidermis with the darkest melanin, maximum blood, the lower corner of
 every range) hold few fitted tones, and the decoder is worst there.  With ``balance`` = b > 0 an epoch draws
-its items with replacement from
+its items with replacement (``loop.epoch_order``) from
 
     P(i) = (1 - b) / N + b * w_i / sum(w),   w_i = min(r_k(i) ** 5, CAP * median(r_k ** 5)),
 
@@ -17,7 +17,6 @@ covered the box uniformly; CAP bounds how often one isolated tone is drawn.  b =
 from __future__ import annotations
 
 import numpy as np
-import torch
 
 from exporters.constants import PARAM_NAMES, PARAM_RANGES
 
@@ -60,12 +59,3 @@ def sampling_probabilities(tone: np.ndarray, balance: float) -> np.ndarray:
         raise ValueError(f"balance must be in [0, 1], got {balance}")
     n = len(tone)
     return (1.0 - balance) / n + balance * inverse_density_weights(tone)
-
-
-def balanced_order(probabilities: torch.Tensor, seed: int, stage: int, epoch: int,
-                   device: torch.device) -> torch.Tensor:
-    """One epoch's items (N,): N draws with replacement from ``probabilities`` (N,), seeded like
-    ``loop.epoch_order`` by (seed, stage, epoch)."""
-    gen = torch.Generator().manual_seed(int(seed) * 1_000_003 + stage * 10_007 + epoch)
-    n = probabilities.numel()
-    return torch.multinomial(probabilities.cpu().double(), n, replacement=True, generator=gen).to(device)

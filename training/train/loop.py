@@ -21,8 +21,6 @@ import torch
 from torch import nn
 from tqdm import tqdm
 
-from training.train.balance import balanced_order
-
 #: Final learning rate of the cosine schedule, as a fraction of the initial one.
 LR_FLOOR: float = 0.05
 
@@ -70,9 +68,14 @@ def cosine_lr(lr: float, epoch: int, epochs: int) -> float:
     return lr * (LR_FLOOR + (1 - LR_FLOOR) * 0.5 * (1 + math.cos(math.pi * t)))
 
 
-def epoch_order(n: int, seed: int, stage: int, epoch: int, device: torch.device) -> torch.Tensor:
+def epoch_order(n: int, seed: int, stage: int, epoch: int, device: torch.device,
+                probabilities: torch.Tensor | None = None) -> torch.Tensor:
+    """The items (n,) of one epoch, drawn from a generator seeded by (seed, stage, epoch): a permutation, or with
+    ``probabilities`` (n,) n draws with replacement (``training.train.balance``)."""
     gen = torch.Generator().manual_seed(int(seed) * 1_000_003 + stage * 10_007 + epoch)
-    return torch.randperm(n, generator=gen).to(device)
+    if probabilities is None:
+        return torch.randperm(n, generator=gen).to(device)
+    return torch.multinomial(probabilities.cpu().double(), n, replacement=True, generator=gen).to(device)
 
 
 def freeze_all_but(model: nn.Module, trainable: list[nn.Module]) -> list[nn.Parameter]:
@@ -120,8 +123,7 @@ def run_stage(spec: StageSpec, model: nn.Module, rundir: Path, *, seed: int, dev
             group["lr"] = cosine_lr(spec.lr, epoch, spec.epochs)
         for m in spec.trainable:
             m.train()
-        order = (epoch_order(spec.n_items, seed, spec.stage, epoch, device) if spec.item_probabilities is None
-                 else balanced_order(spec.item_probabilities, seed, spec.stage, epoch, device))
+        order = epoch_order(spec.n_items, seed, spec.stage, epoch, device, spec.item_probabilities)
         sums: dict[str, float] = {}
         for b in range(n_batches):
             idx = order[b * spec.batch_size : (b + 1) * spec.batch_size]
