@@ -1,5 +1,6 @@
 """The skin model against measured human skin (NIST odd subjects): geometry, forward model, fits, CLI."""
 
+import dataclasses
 import json
 import math
 
@@ -10,6 +11,7 @@ import torch
 from exporters.constants import N_TISSUE, WAVELENGTHS_NM
 from training.commands.dispatch import main as training_main
 from training.data.reweight import baseline_absorption, walk
+from training.realskin.fit import fit_subjects
 from training.realskin.forward import T_EPI_FINE_LEVELS_CM, MonteCarloForward
 from training.realskin.geometry import rough_specular, smooth_specular
 from training.realskin.measurements import NIST_FILE, grid_channels, read_measurements
@@ -72,6 +74,39 @@ def test_forward_model_equals_a_direct_normal_incidence_run(fine_walk):
         assert abs(z.mean()) < 1.2, (tone, z.mean())
 
 
+@pytest.mark.parametrize("scale", [0.6, 1.6])
+def test_scattering_scale_equals_a_direct_run_with_scaled_scattering(fine_walk, scale):
+    """The sixth tone column k (similarity: k μs, μa, t  ~  μs, μa / k, t k) against a direct run whose
+    scattering coefficients are multiplied by k."""
+    fw = MonteCarloForward(fine_walk, specular=0.0)
+    tone = [0.03, 0.02, 0.01, 0.8, 0.5]
+    got = fw(torch.tensor([tone + [scale]], dtype=torch.float64))[0].numpy()
+    plain = fw(torch.tensor([tone], dtype=torch.float64))[0].numpy()
+    medium = skin_medium(tone).select_channels(fine_walk.channels)
+    medium = dataclasses.replace(medium, mus=medium.mus * scale)
+    d = simulate(medium, 600, illumination="normal", seed=60, r_edges_cm=None)
+    z = (got - d.R_d) / (d.R_d_stderr * math.hypot(1.0, 1.6))
+    assert np.all(np.abs(z) < 4.5) and abs(z.mean()) < 1.2, z
+    z_unscaled = (plain - d.R_d) / (d.R_d_stderr * math.hypot(1.0, 1.6))
+    assert abs(z_unscaled.mean()) > 1.5, z_unscaled  # the comparison can tell the scale (seen: +2.2, -1.8)
+    # and the scale matters: more scattering, brighter (in the visible and NIR, where skin is not opaque)
+    vis_nir = WAVELENGTHS_NM[fine_walk.channels] >= 500
+    assert np.all((got > plain)[vis_nir]) if scale > 1 else np.all((got < plain)[vis_nir])
+
+
+def test_a_fitted_scattering_scale_is_recovered(fine_walk):
+    """A spectrum made with k = 1.2 is fitted at exposure 1 with k back near 1.2 and its RMSE at the noise."""
+    fw = MonteCarloForward(fine_walk)
+    wl = WAVELENGTHS_NM[fine_walk.channels]
+    tone = [0.02, 0.015, 0.012, 0.75, 0.5]
+    y = fw(torch.tensor([tone + [1.2]], dtype=torch.float64)).numpy()
+    (fit,) = fit_subjects(fw, ["synthetic"], y, wl, fw.specular, free=False, scale_range=(0.7, 1.3))
+    assert fit.scattering_scale == pytest.approx(1.2, abs=0.05)
+    assert fit.rmse["400_1000"] < 2e-3
+    (plain,) = fit_subjects(fw, ["synthetic"], y, wl, fw.specular, free=False)
+    assert plain.scattering_scale == 1.0 and plain.rmse["400_1000"] > fit.rmse["400_1000"]
+
+
 def test_forward_model_is_continuous_and_differentiable_in_thickness(fine_walk):
     fw = MonteCarloForward(fine_walk)
     t = torch.tensor([[0.03, 0.02, 0.0101, 0.7, 0.7]], dtype=torch.float64, requires_grad=True)
@@ -87,6 +122,8 @@ def test_realskin_cli_rejects_bad_input(tmp_path, capsys):
     assert training_main(["realskin", "--data", str(tmp_path / "missing.csv")]) == 2
     assert "no such file" in capsys.readouterr().err
     assert training_main(["realskin", "--photons", "10"]) == 2
+    assert training_main(["realskin", "--scattering-scale", "1.3", "0.7"]) == 2
+    assert "--scattering-scale" in capsys.readouterr().err
 
 
 def test_measured_skin_is_reproduced_at_exposure_one(tmp_path, capsys):

@@ -2,7 +2,7 @@
 
     python -m training realskin [--data FILE] [--out DIR] [--json] [--photons 10000] [--seed 1]
                                 [--decoder blender_addon/models/skin_decoder.onnx | --no-decoder]
-                                [--subjects N] [--cache DIR]
+                                [--subjects N] [--cache DIR] [--scattering-scale LO HI]
     python -m training realskin --study [--out DIR] [--photons 3000]
 
 Fits the biophysical parameters of every measured spectrum with the project's Monte Carlo (one walk of
@@ -10,7 +10,9 @@ a collimated normal beam, every tone a reweighting of it; ``forward``) and, for 
 decoder, exposure fixed at 1 and free, in the measurement's geometry (``geometry``).  Prints the table
 (or the JSON of docs/contracts.md §2 with ``--json``); ``--out DIR`` also writes realskin.json, realskin.md and
 fig_realskin.png.  The walk is cached (``--cache``, default DIR/cache or ~/.cache/spectral_skin_sss/realskin):
-a rerun with the same skin model, photons and seed fits at once.  ``--study`` runs the cause study
+a rerun with the same skin model, photons and seed fits at once.  ``--scattering-scale LO HI`` also fits a
+per-subject factor on both layers' scattering (a diagnostic: the skin model has no such parameter; the
+decoder is not compared then).  ``--study`` runs the cause study
 instead (``study``: each candidate modelling choice fitted the same way; DIR/study.md and study.json).
 """
 
@@ -50,6 +52,8 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--wavelength-stride", type=int, default=1,
                    help="compare at every n-th shared wavelength (default 1: all 126, every 6 nm)")
     p.add_argument("--cache", type=Path, help="folder of cached walks")
+    p.add_argument("--scattering-scale", type=float, nargs=2, metavar=("LO", "HI"),
+                   help="also fit a per-subject scattering factor in [LO, HI] (a diagnostic; no decoder comparison)")
     p.add_argument("--study", action="store_true",
                    help="run the cause study (every candidate model choice; default 3000 photons)")
     return p
@@ -77,6 +81,12 @@ def main(argv: list[str]) -> int:
     if not args.no_decoder and not args.decoder.is_file():
         print(f"error: decoder {args.decoder} not found (pass --decoder PATH or --no-decoder).", file=sys.stderr)
         return 2
+    scale = args.scattering_scale
+    if scale is not None and not 0.1 <= scale[0] < scale[1] <= 10.0:
+        print(f"error: --scattering-scale needs 0.1 <= LO < HI <= 10, got {scale[0]:g} {scale[1]:g}.", file=sys.stderr)
+        return 2
+    if scale is not None:
+        args.no_decoder = True  # the decoder has no scattering parameter
     if args.wavelength_stride < 1:
         print("error: --wavelength-stride must be >= 1.", file=sys.stderr)
         return 2
@@ -94,7 +104,8 @@ def main(argv: list[str]) -> int:
     traj = cached_walk(channels, args.photons, args.seed, _cache_dir(args), args.device, progress=not args.json)
     t_walk = time.perf_counter() - t0
     mc = MonteCarloForward(traj)
-    fits = {free: fit_subjects(mc, names, measured, wl, mc.specular, free, seed=args.seed) for free in (False, True)}
+    fits = {free: fit_subjects(mc, names, measured, wl, mc.specular, free, seed=args.seed,
+                               scale_range=None if scale is None else tuple(scale)) for free in (False, True)}
     dec = {False: None, True: None}
     if not args.no_decoder:
         df = DecoderForward(args.decoder, channels, mc.specular)
@@ -103,7 +114,8 @@ def main(argv: list[str]) -> int:
     settings = {"data": args.data.name, "photons": args.photons, "seed": args.seed, "specular": round(mc.specular, 5),
                 "wavelengths": int(channels.size), "skin_model": mc.spec.name,
                 "walk_seconds": round(traj.seconds, 1), "seconds": round(time.perf_counter() - t0, 1),
-                "walk_cached": t_walk < 0.5 * traj.seconds}
+                "walk_cached": t_walk < 0.5 * traj.seconds,
+                "scattering_scale_range": None if scale is None else list(scale)}
     rep = report.summary(names, lightness, fits[False], fits[True], dec[False], dec[True], settings)
     md = report.markdown(rep)
     if args.out is not None:

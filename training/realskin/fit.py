@@ -5,10 +5,12 @@ Each subject's spectrum y (C,) is fitted over ``FIT_BAND_NM`` by
 * exposure fixed at 1:  min_p  || F(p) - y ||
 * exposure free:        min_{p, s}  || S + s (F(p) - S) - y ||   (s scales the subsurface part; the
   specular S is the surface's, not the tissue's)
+* optionally with a per-subject scattering scale k (``scale_range``): F(p, k), both layers' scattering times k
+  (``MonteCarloForward`` takes k as a sixth tone column) — a diagnostic of the model's missing degrees of freedom
 
 with F a forward model (``forward``) and p inside the docs/contracts.md §1 box.  Search space: log f_mel, log f_blood
-(colour is most sensitive at small fractions), t_epi, so2, b_mel (and log s).  Starts: the best of 1,024
-scrambled-Halton tones for each subject (evaluated once for all subjects), then scipy's bounded
+(colour is most sensitive at small fractions), t_epi, so2, b_mel (then log k, log s where fitted).  Starts:
+the best of 1,024 scrambled-Halton tones for each subject (evaluated once for all subjects), then scipy's bounded
 trust-region least squares from the best three; its Jacobian is taken by forward differences, all six
 (seven) points in one batched forward call.
 """
@@ -35,6 +37,8 @@ BANDS_NM: dict[str, tuple[float, float]] = {
 EXPOSURE_RANGE = (0.2, 5.0)
 N_CANDIDATES = 1024
 N_STARTS = 3
+#: Extra starting scattering scales of the best start when k is fitted.
+SCALE_STARTS = (0.8, 1.25)
 _LOG = (0, 1)  # f_mel and f_blood are searched in log space
 
 Forward = Callable[[torch.Tensor], torch.Tensor]
@@ -42,13 +46,15 @@ Forward = Callable[[torch.Tensor], torch.Tensor]
 
 @dataclass
 class SubjectFit:
-    """One subject's fit: tone p (5,), exposure (1 when fixed), model spectrum (C,), RMSE per band."""
+    """One subject's fit: tone p (5,), exposure (1 when fixed), model spectrum (C,), RMSE per band, scattering
+    scale k (1 when not fitted)."""
 
     name: str
     p: np.ndarray
     exposure: float
     model: np.ndarray
     rmse: dict[str, float]
+    scattering_scale: float = 1.0
 
 
 def band_rmse(model: np.ndarray, measured: np.ndarray, wavelength_nm: np.ndarray) -> dict[str, float]:
@@ -79,29 +85,36 @@ def _to_p(x: np.ndarray) -> np.ndarray:
     return p
 
 
-def _x_bounds(free: bool) -> tuple[np.ndarray, np.ndarray]:
+def _x_bounds(free: bool, scale_range: tuple[float, float] | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Search box: log f_mel, log f_blood, t_epi, so2, b_mel, [log k], [log exposure]."""
     lo, hi = PARAM_LOW.copy(), PARAM_HIGH.copy()
     lo[list(_LOG)], hi[list(_LOG)] = np.log(lo[list(_LOG)]), np.log(hi[list(_LOG)])
+    if scale_range is not None:
+        lo, hi = np.r_[lo, np.log(scale_range[0])], np.r_[hi, np.log(scale_range[1])]
     if free:
         lo, hi = np.r_[lo, np.log(EXPOSURE_RANGE[0])], np.r_[hi, np.log(EXPOSURE_RANGE[1])]
     return lo, hi
 
 
-def _evaluate(forward: Forward, x: np.ndarray, specular: float, chunk: int = 64) -> np.ndarray:
-    """Model spectra (N, C) at search points x (N, 5|6)."""
+def _evaluate(forward: Forward, x: np.ndarray, specular: float, free: bool = False, scaled: bool = False,
+              chunk: int = 64) -> np.ndarray:
+    """Model spectra (N, C) at search points x (N, 5 [+ log k if ``scaled``] [+ log exposure if ``free``])."""
     out = []
     for i in range(0, len(x), chunk):
         xi = x[i : i + chunk]
+        tones = _to_p(xi)
+        if scaled:
+            tones = np.concatenate([tones, np.exp(xi[:, 5:6])], axis=1)
         with torch.no_grad():
-            r = forward(torch.as_tensor(_to_p(xi))).numpy()
-        if xi.shape[1] == 6:
-            r = specular + np.exp(xi[:, 5:6]) * (r - specular)
+            r = forward(torch.as_tensor(tones)).numpy()
+        if free:
+            r = specular + np.exp(xi[:, -1:]) * (r - specular)
         out.append(r)
     return np.concatenate(out)
 
 
 def _starts(forward: Forward, y: np.ndarray, band: np.ndarray, specular: float, free: bool, seed: int) -> np.ndarray:
-    """The N_STARTS best Halton candidates per subject: (S, N_STARTS, 5|6)."""
+    """The N_STARTS best Halton candidates per subject (scattering scale 1): (S, N_STARTS, 5|6)."""
     lo, hi = _x_bounds(False)
     x = lo + qmc.Halton(d=5, scramble=True, seed=seed).random(N_CANDIDATES) * (hi - lo)
     r = _evaluate(forward, x, specular)[:, band]  # (N, C)
@@ -119,22 +132,38 @@ def _starts(forward: Forward, y: np.ndarray, band: np.ndarray, specular: float, 
     return starts
 
 
+def _scaled_starts(starts: np.ndarray) -> np.ndarray:
+    """Starts (S, N, 5|6) with a log k column after the tone: every start at k = 1, the best also at
+    ``SCALE_STARTS`` (S, N + len(SCALE_STARTS), 6|7)."""
+    at_one = np.insert(starts, 5, 0.0, axis=-1)
+    extra = np.stack([np.insert(starts[:, 0], 5, np.log(k), axis=-1) for k in SCALE_STARTS], axis=1)
+    return np.concatenate([at_one, extra], axis=1)
+
+
 def fit_subjects(forward: Forward, names: list[str] | tuple[str, ...], measured: np.ndarray,
-                 wavelength_nm: np.ndarray, specular: float, free: bool, seed: int = 0) -> list[SubjectFit]:
-    """Fit every subject's spectrum (S, C) at ``wavelength_nm`` (C,); exposure free or fixed at 1."""
+                 wavelength_nm: np.ndarray, specular: float, free: bool, seed: int = 0,
+                 scale_range: tuple[float, float] | None = None) -> list[SubjectFit]:
+    """Fit every subject's spectrum (S, C) at ``wavelength_nm`` (C,); exposure free or fixed at 1.
+
+    ``scale_range`` (lo, hi): also fit a per-subject scattering scale k in it (``forward`` must take a sixth
+    tone column, as ``MonteCarloForward`` does).
+    """
     band = (wavelength_nm >= FIT_BAND_NM[0]) & (wavelength_nm <= FIT_BAND_NM[1])
-    lo, hi = _x_bounds(free)
+    scaled = scale_range is not None
+    lo, hi = _x_bounds(free, scale_range)
     eps = 1e-4 * (hi - lo)
     starts = _starts(forward, measured, band, specular, free, seed)
+    if scaled:
+        starts = _scaled_starts(starts)
     fits = []
     for name, y, x0s in zip(names, measured, starts, strict=True):
         def resid(x, y=y):
-            return _evaluate(forward, x[None], specular)[0, band] - y[band]
+            return _evaluate(forward, x[None], specular, free, scaled)[0, band] - y[band]
 
         def jac(x, y=y):
             h = np.where(x + eps <= hi, eps, -eps)  # step inward at the upper bound
             pts = np.vstack([x, x + np.diag(h)])
-            r = _evaluate(forward, pts, specular)[:, band]
+            r = _evaluate(forward, pts, specular, free, scaled)[:, band]
             return ((r[1:] - r[0]) / h[:, None]).T
 
         best = None
@@ -143,7 +172,8 @@ def fit_subjects(forward: Forward, names: list[str] | tuple[str, ...], measured:
                                 x_scale=hi - lo, max_nfev=60)
             if best is None or sol.cost < best.cost:
                 best = sol
-        model = _evaluate(forward, best.x[None], specular)[0]
-        fits.append(SubjectFit(name=name, p=_to_p(best.x), exposure=float(np.exp(best.x[5])) if free else 1.0,
-                               model=model, rmse=band_rmse(model, y, wavelength_nm)))
+        model = _evaluate(forward, best.x[None], specular, free, scaled)[0]
+        fits.append(SubjectFit(name=name, p=_to_p(best.x), exposure=float(np.exp(best.x[-1])) if free else 1.0,
+                               model=model, rmse=band_rmse(model, y, wavelength_nm),
+                               scattering_scale=float(np.exp(best.x[5])) if scaled else 1.0))
     return fits

@@ -108,15 +108,28 @@ class MonteCarloForward:
         return self.cum[j - 1] * (1 - frac) + self.cum[j] * frac
 
     def __call__(self, tones: torch.Tensor) -> torch.Tensor:
-        """R_measured (B, C), float64; ``tones`` (B, 5) float64 (differentiable)."""
-        mua_epi, mua_derm = absorption(tones, spec=self.spec)
+        """R_measured (B, C), float64; ``tones`` (B, 5) float64 (differentiable).
+
+        A sixth column k scales both layers' scattering coefficient (μs, hence μs′; g unchanged).  By
+        similarity the total reflectance of a layered medium under one boundary depends on μa / μs and on the
+        thicknesses in units of 1/μs only, so scattering k μs with absorption μa and epidermis t reflects like
+        μs with μa / k and t k: the same walk, reweighted.  k > 1 can take μa / k below the walk's baseline;
+        the reweighting then raises weights (unbiased, noisier), and t k is clamped to the walk's epidermis levels
+        (50–350 µm).
+        """
+        scale = tones[:, 5:6] if tones.shape[1] == 6 else None
+        mua_epi, mua_derm = absorption(tones[:, :5], spec=self.spec)
         ch = torch.as_tensor(self.channels)
-        d_epi = (mua_epi[:, ch] - self.mua0).to(torch.float32)[:, :, None]
-        d_derm = (mua_derm[:, ch] - self.mua0).to(torch.float32)[:, :, None]
-        above = self._path_above(tones[:, _T])
+        mua_epi, mua_derm = mua_epi[:, ch], mua_derm[:, ch]
+        t_epi = tones[:, _T]
+        if scale is not None:
+            mua_epi, mua_derm, t_epi = mua_epi / scale, mua_derm / scale, t_epi * scale[:, 0]
+        d_epi = (mua_epi - self.mua0).to(torch.float32)[:, :, None]
+        d_derm = (mua_derm - self.mua0).to(torch.float32)[:, :, None]
+        above = self._path_above(t_epi)
         total = self.cum[-1][None]
         expo = self.log_w[None] - (d_epi - d_derm) * above - d_derm * total
-        r_d = torch.exp(expo.clamp_min(-87.0)).sum(-1, dtype=torch.float64) / self.photons
+        r_d = torch.exp(expo.clamp(-87.0, 87.0)).sum(-1, dtype=torch.float64) / self.photons
         return r_d + self.specular
 
 

@@ -29,6 +29,7 @@ def _mean(fits: list[SubjectFit], band: str) -> float:
 
 def summary(names, lightness, mc_fixed, mc_free, dec_fixed=None, dec_free=None, settings: dict | None = None) -> dict:
     """The JSON report (docs/contracts.md §2 keys, plus the free-exposure fits, the decoder's and run's settings)."""
+    scaled = (settings or {}).get("scattering_scale_range") is not None
     subjects = []
     for i, name in enumerate(names):
         f, g = mc_fixed[i], mc_free[i]
@@ -37,6 +38,9 @@ def summary(names, lightness, mc_fixed, mc_free, dec_fixed=None, dec_free=None, 
                "exposure_free": round(g.exposure, 4), "p": [round(float(v), 5) for v in f.p],
                "rmse_400_1000_free": round(g.rmse["400_1000"], 5), "p_free": [round(float(v), 5) for v in g.p],
                "at_edge": [n for n, e in zip(PARAM_NAMES, at_edge(f.p), strict=True) if e]}
+        if scaled:
+            row["scattering_scale"] = round(f.scattering_scale, 4)
+            row["scattering_scale_free"] = round(g.scattering_scale, 4)
         if dec_fixed is not None:
             row["decoder"] = {"rmse_400_1000": round(dec_fixed[i].rmse["400_1000"], 5),
                               "exposure_free": round(dec_free[i].exposure, 4),
@@ -51,6 +55,10 @@ def summary(names, lightness, mc_fixed, mc_free, dec_fixed=None, dec_free=None, 
            "edge_share": dict(zip(PARAM_NAMES, at_edge(np.array([f.p for f in mc_fixed])).mean(0).round(3).tolist(),
                                   strict=True)),
            "param_names": list(PARAM_NAMES), "fit_band_nm": list(FIT_BAND_NM)}
+    if scaled:
+        k = np.array([f.scattering_scale for f in mc_fixed])
+        out["scattering_scale"] = {"range": [round(float(k.min()), 4), round(float(k.max()), 4)],
+                                   "median": round(float(np.median(k)), 4)}
     if dec_fixed is not None:
         out["decoder"] = {"mean": {b: round(_mean(dec_fixed, b), 5) for b in BANDS_NM},
                           "mean_free": {b: round(_mean(dec_free, b), 5) for b in BANDS_NM},
@@ -63,15 +71,17 @@ def summary(names, lightness, mc_fixed, mc_free, dec_fixed=None, dec_free=None, 
 
 def markdown(report: dict) -> str:
     """The per-subject table and the means, as Markdown."""
-    dec = "decoder" in report
+    dec, scaled = "decoder" in report, "scattering_scale" in report
     head = ("| subject | L* | RMSE UV | Vis | NIR | 400–1000 | f_mel | f_blood | t_epi (µm) | so2 | b_mel "
-            "| exposure (free) | RMSE free |" + (" decoder RMSE | decoder exposure |" if dec else ""))
+            + ("| scattering scale " if scaled else "")
+            + "| exposure (free) | RMSE free |" + (" decoder RMSE | decoder exposure |" if dec else ""))
     lines = [head, "|" + "---|" * (head.count("|") - 1)]
     for s in report["subjects"]:
         p = s["p"]
         row = (f"| {s['name']} | {s['L_star']:.1f} | {s['rmse_uv']:.4f} | {s['rmse_vis']:.4f} | {s['rmse_nir']:.4f} "
                f"| {s['rmse_400_1000']:.4f} | {p[0]:.4f} | {p[1]:.4f} | {p[2] * 1e4:.0f} | {p[3]:.2f} | {p[4]:.2f} "
-               f"| {s['exposure_free']:.3f} | {s['rmse_400_1000_free']:.4f} |")
+               + (f"| {s['scattering_scale']:.3f} " if scaled else "")
+               + f"| {s['exposure_free']:.3f} | {s['rmse_400_1000_free']:.4f} |")
         if dec:
             row += f" {s['decoder']['rmse_400_1000']:.4f} | {s['decoder']['exposure_free']:.3f} |"
         lines.append(row)
@@ -81,6 +91,10 @@ def markdown(report: dict) -> str:
               f"{report['exposure_free_range'][0]:.3f}–{report['exposure_free_range'][1]:.3f}.",
               "Share of subjects whose fitted parameter (exposure 1) is at an edge of its range: "
               + ", ".join(f"{n} {v:.0%}" for n, v in report["edge_share"].items()) + "."]
+    if scaled:
+        k = report["scattering_scale"]
+        lines.append(f"Per-subject scattering scale (exposure 1): {k['range'][0]:.3f}–{k['range'][1]:.3f} "
+                     f"(median {k['median']:.3f}), searched in {report['settings']['scattering_scale_range']}.")
     if dec:
         d = report["decoder"]
         lines.append(f"Shipped decoder: 400–1000 nm {d['mean']['400_1000']:.4f} at exposure 1, "
