@@ -116,7 +116,9 @@ def figure(path: Path, wavelength_nm: np.ndarray, measured: np.ndarray, names, l
     fig, axes = plt.subplots(1, 3, figsize=(13, 3.8), sharey=True)
     for ax, (label, i) in zip(axes, picks, strict=True):
         ax.plot(wavelength_nm, measured[i], "k-", lw=1.6, label="measured (NIST)")
-        ax.plot(wavelength_nm, mc_fixed[i].model, "C0-", lw=1.2, label="Monte Carlo fit, exposure 1")
+        k = mc_fixed[i].scattering_scale
+        ax.plot(wavelength_nm, mc_fixed[i].model, "C0-", lw=1.2,
+                label="Monte Carlo fit, exposure 1" + (f", scattering × {k:.2f}" if k != 1.0 else ""))
         if dec_fixed is not None:
             ax.plot(wavelength_nm, dec_fixed[i].model, "C3--", lw=1.0, label="shipped decoder fit, exposure 1")
         ax.axvspan(wavelength_nm[0], FIT_BAND_NM[0], color="0.93", lw=0)
