@@ -78,15 +78,16 @@ def main(argv: list[str]) -> int:
     if args.photons < 100:
         print("error: --photons must be at least 100 per wavelength.", file=sys.stderr)
         return 2
+    scale = args.scattering_scale
+    if scale is not None:
+        if not 0.1 <= scale[0] < scale[1] <= 10.0:
+            print(f"error: --scattering-scale needs 0.1 <= LO < HI <= 10, got {scale[0]:g} {scale[1]:g}.",
+                  file=sys.stderr)
+            return 2
+        args.no_decoder = True  # the decoder has no scattering parameter
     if not args.no_decoder and not args.decoder.is_file():
         print(f"error: decoder {args.decoder} not found (pass --decoder PATH or --no-decoder).", file=sys.stderr)
         return 2
-    scale = args.scattering_scale
-    if scale is not None and not 0.1 <= scale[0] < scale[1] <= 10.0:
-        print(f"error: --scattering-scale needs 0.1 <= LO < HI <= 10, got {scale[0]:g} {scale[1]:g}.", file=sys.stderr)
-        return 2
-    if scale is not None:
-        args.no_decoder = True  # the decoder has no scattering parameter
     if args.wavelength_stride < 1:
         print("error: --wavelength-stride must be >= 1.", file=sys.stderr)
         return 2

@@ -47,14 +47,14 @@ Forward = Callable[[torch.Tensor], torch.Tensor]
 @dataclass
 class SubjectFit:
     """One subject's fit: tone p (5,), exposure (1 when fixed), model spectrum (C,), RMSE per band, scattering
-    scale k (1 when not fitted)."""
+    scale k (None when not fitted)."""
 
     name: str
     p: np.ndarray
     exposure: float
     model: np.ndarray
     rmse: dict[str, float]
-    scattering_scale: float = 1.0
+    scattering_scale: float | None = None
 
 
 def band_rmse(model: np.ndarray, measured: np.ndarray, wavelength_nm: np.ndarray) -> dict[str, float]:
@@ -175,5 +175,5 @@ def fit_subjects(forward: Forward, names: list[str] | tuple[str, ...], measured:
         model = _evaluate(forward, best.x[None], specular, free, scaled)[0]
         fits.append(SubjectFit(name=name, p=_to_p(best.x), exposure=float(np.exp(best.x[-1])) if free else 1.0,
                                model=model, rmse=band_rmse(model, y, wavelength_nm),
-                               scattering_scale=float(np.exp(best.x[5])) if scaled else 1.0))
+                               scattering_scale=float(np.exp(best.x[5])) if scaled else None))
     return fits

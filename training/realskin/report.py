@@ -29,7 +29,7 @@ def _mean(fits: list[SubjectFit], band: str) -> float:
 
 def summary(names, lightness, mc_fixed, mc_free, dec_fixed=None, dec_free=None, settings: dict | None = None) -> dict:
     """The JSON report (docs/contracts.md §2 keys, plus the free-exposure fits, the decoder's and run's settings)."""
-    scaled = (settings or {}).get("scattering_scale_range") is not None
+    scaled = mc_fixed[0].scattering_scale is not None
     subjects = []
     for i, name in enumerate(names):
         f, g = mc_fixed[i], mc_free[i]
@@ -118,7 +118,7 @@ def figure(path: Path, wavelength_nm: np.ndarray, measured: np.ndarray, names, l
         ax.plot(wavelength_nm, measured[i], "k-", lw=1.6, label="measured (NIST)")
         k = mc_fixed[i].scattering_scale
         ax.plot(wavelength_nm, mc_fixed[i].model, "C0-", lw=1.2,
-                label="Monte Carlo fit, exposure 1" + (f", scattering × {k:.2f}" if k != 1.0 else ""))
+                label="Monte Carlo fit, exposure 1" + ("" if k is None else f", scattering × {k:.2f}"))
         if dec_fixed is not None:
             ax.plot(wavelength_nm, dec_fixed[i].model, "C3--", lw=1.0, label="shipped decoder fit, exposure 1")
         ax.axvspan(wavelength_nm[0], FIT_BAND_NM[0], color="0.93", lw=0)
