@@ -15,6 +15,7 @@ from training.realskin.fit import fit_subjects
 from training.realskin.forward import T_EPI_FINE_LEVELS_CM, MonteCarloForward
 from training.realskin.geometry import rough_specular, smooth_specular
 from training.realskin.measurements import NIST_FILE, grid_channels, read_measurements
+from training.realskin.report import brightness_predictability
 from training.sim.tissue import skin_medium
 from training.sim.transport import simulate
 
@@ -144,3 +145,20 @@ def test_measured_skin_is_reproduced_at_exposure_one(tmp_path, capsys):
     for s in rep["subjects"]:
         assert len(s["p"]) == 5 and all(math.isfinite(v) for v in s["p"])
         assert math.isfinite(s["rmse_uv"]) and math.isfinite(s["rmse_nir"])
+
+
+def test_brightness_predictability_tells_explained_from_unexplained_spread():
+    """A brightness factor built from p is predicted from p (R² near 1); one drawn independently is not (R² near 0 or
+    below).  The report's evidence that the measured spread needs a degree of freedom p does not have rests on it."""
+    rng = np.random.default_rng(3)
+    n = 50
+    p = np.column_stack([np.exp(rng.uniform(np.log(0.002), np.log(0.05), n)),
+                         np.exp(rng.uniform(np.log(0.004), np.log(0.04), n)),
+                         rng.uniform(0.01, 0.035, n), rng.uniform(0.5, 1.0, n), rng.uniform(0.0, 1.0, n)])
+    from_p = np.exp(0.05 * np.log(p[:, 0] / 0.01) - 4.0 * (p[:, 2] - 0.02) + 1e-3 * rng.standard_normal(n))
+    explained = brightness_predictability(p, from_p)
+    assert explained["loo_r2_from_p"] > 0.95, explained
+    independent = brightness_predictability(p, np.exp(0.06 * rng.standard_normal(n)))
+    assert independent["loo_r2_from_p"] < 0.2, independent
+    assert abs(independent["sd_ln_exposure"] - 0.06) < 0.02
+    assert brightness_predictability(p[:9], from_p[:9]) is None

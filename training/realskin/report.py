@@ -27,6 +27,28 @@ def _mean(fits: list[SubjectFit], band: str) -> float:
     return float(np.mean([f.rmse[band] for f in fits]))
 
 
+def brightness_predictability(p: np.ndarray, exposure: np.ndarray) -> dict | None:
+    """How much of the between-subject brightness spread a function of the five parameters could carry.
+
+    ln(exposure) (S,) — the free-exposure factors — regressed linearly on the free fits' (ln f_mel, ln f_blood, t_epi,
+    so2, b_mel) (S, 5), scored leave-one-out: R² = 1 − Σ(y − ŷ₋ᵢ)² / Σ(y − ȳ)² (1: predicted; ≤ 0: not at all).
+    A low R² says no skin model whose scattering is a function of the wavelength and of p can remove the spread;
+    it needs a degree of freedom p does not have. None for fewer than 10 subjects (too few to score six coefficients).
+    """
+    if len(exposure) < 10:
+        return None
+    y = np.log(np.asarray(exposure, dtype=np.float64))
+    p = np.asarray(p, dtype=np.float64)
+    a = np.column_stack([np.ones(len(y)), np.log(p[:, 0]), np.log(p[:, 1]), p[:, 2:]])
+    predicted = np.empty_like(y)
+    for i in range(len(y)):
+        keep = np.arange(len(y)) != i
+        predicted[i] = a[i] @ np.linalg.lstsq(a[keep], y[keep], rcond=None)[0]
+    spread = float(((y - y.mean()) ** 2).sum())
+    r2 = 1.0 - float(((y - predicted) ** 2).sum()) / spread if spread > 0 else 0.0
+    return {"sd_ln_exposure": round(float(y.std()), 4), "loo_r2_from_p": round(r2, 3)}
+
+
 def summary(names, lightness, mc_fixed, mc_free, dec_fixed=None, dec_free=None, settings: dict | None = None) -> dict:
     """The JSON report (docs/contracts.md §2 keys, plus the free-exposure fits, the decoder's and run's settings)."""
     scaled = mc_fixed[0].scattering_scale is not None
@@ -55,6 +77,9 @@ def summary(names, lightness, mc_fixed, mc_free, dec_fixed=None, dec_free=None, 
            "edge_share": dict(zip(PARAM_NAMES, at_edge(np.array([f.p for f in mc_fixed])).mean(0).round(3).tolist(),
                                   strict=True)),
            "param_names": list(PARAM_NAMES), "fit_band_nm": list(FIT_BAND_NM)}
+    spread = brightness_predictability(np.array([f.p for f in mc_free]), np.array([f.exposure for f in mc_free]))
+    if spread is not None:
+        out["brightness_spread"] = spread
     if scaled:
         k = np.array([f.scattering_scale for f in mc_fixed])
         out["scattering_scale"] = {"range": [round(float(k.min()), 4), round(float(k.max()), 4)],
@@ -91,6 +116,11 @@ def markdown(report: dict) -> str:
               f"{report['exposure_free_range'][0]:.3f}–{report['exposure_free_range'][1]:.3f}.",
               "Share of subjects whose fitted parameter (exposure 1) is at an edge of its range: "
               + ", ".join(f"{n} {v:.0%}" for n, v in report["edge_share"].items()) + "."]
+    if "brightness_spread" in report:
+        b = report["brightness_spread"]
+        lines.append(f"Brightness spread between subjects: sd of ln(free factor) {b['sd_ln_exposure']:.3f}; "
+                     "the share of it that the free fits' five parameters predict (linear, leave-one-out R²): "
+                     f"{b['loo_r2_from_p']:.2f}.")
     if scaled:
         k = report["scattering_scale"]
         lines.append(f"Per-subject scattering scale (exposure 1): {k['range'][0]:.3f}–{k['range'][1]:.3f} "
