@@ -32,8 +32,10 @@ def brightness_predictability(p: np.ndarray, exposure: np.ndarray) -> dict | Non
 
     ln(exposure) (S,) — the free-exposure factors — regressed linearly on the free fits' (ln f_mel, ln f_blood, t_epi,
     so2, b_mel) (S, 5), scored leave-one-out: R² = 1 − Σ(y − ŷ₋ᵢ)² / Σ(y − ȳ)² (1: predicted; ≤ 0: not at all).
-    A low R² says no skin model whose scattering is a function of the wavelength and of p can remove the spread;
-    it needs a degree of freedom p does not have. None for fewer than 10 subjects (too few to score six coefficients).
+    A low R² says the spread is not a smooth (here: linear) function of the fitted p, so a skin model whose scattering
+    depends on the wavelength and on p cannot remove it; it needs a degree of freedom p does not have. The fitted p of a
+    model with such a law would differ somewhat: this is evidence, not proof. None for fewer than 10 subjects (too
+    few to score six coefficients).
     """
     if len(exposure) < 10:
         return None
