@@ -42,6 +42,8 @@ def brightness_predictability(p: np.ndarray, exposure: np.ndarray) -> dict | Non
     y = np.log(np.asarray(exposure, dtype=np.float64))
     p = np.asarray(p, dtype=np.float64)
     a = np.column_stack([np.ones(len(y)), np.log(p[:, 0]), np.log(p[:, 1]), p[:, 2:]])
+    # Written by hand: one small least-squares regression scored leave-one-out; scikit-learn's cross_val_predict
+    # does the same but is not a dependency of the project, and this is its only use.
     predicted = np.empty_like(y)
     for i in range(len(y)):
         keep = np.arange(len(y)) != i
