@@ -132,7 +132,7 @@ def test_physical_trends_over_skin_tones_darker_means_lower_albedo_higher_sigma_
     the two-layer Monte Carlo itself asks for no rise (``python -m training.validate.trends``; README,
     Training the model).  Over all tones the rank correlation with luminance is strong (|rho| > 0.85 for
     alpha, sigma_a and sigma_t: measured 0.88-0.99; > 0.8 for the translucency length, measured 0.84 on
-    the decoder of 2026-11-26: at equal luminance it also varies with the blood and the epidermis).
+    the shipped decoder: at equal luminance it also varies with the blood and the epidermis).
 
     Not tested: the weight-averaged mean free path sum_k w_k / sigma_t_k.  The rebuilt decoder gives dark
     tones a low-albedo component of long free path that is picked often and reflects little (its mean

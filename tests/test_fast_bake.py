@@ -76,7 +76,7 @@ def test_table_bake_matches_exact_bake(skin_png, tmp_path):
     # The biophysical map and the exposure, interpolated in the table, against the network evaluated exactly:
     # on average within 0.5 % of each parameter's range and 0.5 % in exposure, and at every texel well inside
     # what the encoder itself can tell (its mean error on its validation tones, the card's p_abs_err and
-    # exposure_error).  The model shipped on 2026-11-26 (f_blood on a log scale, a wider encoder) reaches here
+    # exposure_error).  The shipped model (f_blood on a log scale, a wider encoder) reaches here
     # max 4.5 % of the range in f_blood (0.011 against its own 0.041), 3.4 % in b_mel (0.034 against 0.30),
     # 3.2 % in exposure (against 0.014 mean); means 0.007-0.18 % and 0.20 %.  The appearance above is what
     # the table is built for.

@@ -264,7 +264,7 @@ def test_mixture_profile_is_the_rendered_one_and_the_lm_jacobian_is_its_derivati
 def test_k_progression_on_monte_carlo_skin_tones(lut):
     """The project's own two-layer MC tones (training/fit/data/mc_R02, mc_R08: light and dark skin, 16
     wavelengths 250-1000 nm, 50k photons; how they were made is in that folder's README) fitted through
-    the dipole table: K = 2 removes most of K = 1's shape error (the paper: 67 %; 68 % here, 2026-11-23),
+    the dipole table: K = 2 removes most of K = 1's shape error (the paper: 67 %; 68 % here),
     K = 3 is no worse than K = 2, reflectance stays within a few percent at every wavelength."""
     from training.fit.problems import bench_problems
 

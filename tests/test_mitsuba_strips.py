@@ -17,13 +17,13 @@ from training.validate import strips
 FIGURES = Path(__file__).resolve().parent.parent / "docs" / "figures"
 #: What the NIR strip can be held to.  Rendered the same way (32 px, 48 spp), the K = 3 fits of the Monte
 #: Carlo ground truth (`validate`'s cache) gave a far-side translucency at 898 nm of 0.081, 0.055, 0.040,
-#: 0.070, 0.076 for R01, R03, R05, R08, R10 (2026-11-22, the skin model before the real-skin calibration): in
+#: 0.070, 0.076 for R01, R03, R05, R08, R10 (the skin model without the real-skin calibration): in
 #: the NIR melanin absorbs little and the dermis sets the glow, so it does not fall from light to dark skin.
 #: The visible glow does (melanin): rendered as the strips are (64 px, 48 spp, the strips' seeds), the K = 3
-#: fits of the 500,000-photon ground truth of the calibrated skin model (`runs/validation/cache`, 2026-11-26)
+#: fits of the 500,000-photon ground truth of the calibrated skin model (`runs/validation/cache`)
 #: give vis_E 0.0029, 0.0017, 0.0010, 0.00064, 0.00011, 4e-7 for R01, R03, R05, R08, R09, R10 (vis_A within
 #: 25 % of those).
-#: The model shipped on 2026-11-26 gives 0.0028, 0.0019, 0.0009, 0.0009, 0.0015, 0.0003: right for light
+#: The shipped model gives 0.0028, 0.0019, 0.0009, 0.0009, 0.0015, 0.0003: right for light
 #: and medium skin, 14x too translucent at R09 (f_mel 0.2) and far too at R10 (f_mel 0.65).
 REGENERATE = "regenerate with `python -m training validate --mitsuba --out docs/figures --overwrite`"
 
@@ -51,8 +51,8 @@ def test_committed_strips_show_the_physics():
     assert np.all(t["nir"] > 0.01) and np.all(t["nir"] > 5 * np.maximum(t["uv"], 1e-3))
 
 
-@pytest.mark.xfail(strict=True, reason="the model shipped on 2026-11-26 lets the very dark tones glow in the "
-                   "visible: R09 0.0015 and R10 0.0003 against the fits' 0.0001 and 4e-7 (comment above; issue 23)")
+@pytest.mark.xfail(strict=True, reason="the shipped model lets the very dark tones glow in the "
+                   "visible: R09 0.0015 and R10 0.0003 against the fits' 0.0001 and 4e-7 (comment above)")
 def test_committed_strips_darkest_skin_does_not_glow_in_the_visible():
     """In the visible the glow falls with melanin: the lightest tone more than 10x the darkest, the three
     lightest more than 3x the three darkest (the fits of the ground truth: R01 ~8,000x R10; R01 and R03

@@ -39,8 +39,8 @@ def _iad(alpha: float, g: float) -> float:
 
 def test_painted_media_have_the_painted_colour(network):
     """The media of the network's answer for SKIN, painted to a colour 12 % off it per channel (what the
-    correction does wherever the network's own colour misses the painted one: the model before 2026-11-26 was
-    that far off on its own; the rebuilt one is within 4 % of SKIN), take the painted colour."""
+    correction does wherever the network's own colour misses the painted one: a network
+    can be that far off on its own; the shipped one is within 4 % of SKIN), take the painted colour."""
     target = SKIN * np.array([0.88, 1.12, 0.88])
     out = network.run(np.asarray(SKIN, np.float32))
     p = painted.paint_mixture(out["alpha"], out["sigma_t"], out["g"], out["weight"], target)

@@ -1,7 +1,7 @@
 """The inversion on measured skin colours (``training.realskin.inversion``): the exposure the shipped
 ``skin_inversion.onnx`` answers the NIST subjects' colours with, checked against Y(input) / Y(its own
-reflectance) recomputed here, and the acceptance of issue 23 (every subject within 0.9-1.1), which the
-model trained on the previous skin model failed."""
+reflectance) recomputed here, and the acceptance (every subject within 0.9-1.1), which a
+model trained on the uncalibrated skin model fails."""
 
 from __future__ import annotations
 
@@ -46,6 +46,6 @@ def test_command_prints_the_range(capsys):
 
 
 def test_measured_skin_is_answered_at_its_own_brightness(record):
-    """Issue 23's acceptance: every measured colour answered with exposure 0.9-1.1 (the model shipped before
-    the rebuild, on the uncalibrated skin model, answered 1.27-1.89 and failed it)."""
+    """Every measured colour answered with exposure 0.9-1.1 (a model trained on the uncalibrated skin model
+    answers 1.27-1.89)."""
     assert record["summary"]["inside_band"] == record["summary"]["n"], record["summary"]

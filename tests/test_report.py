@@ -72,7 +72,7 @@ def test_report_reads_the_validation_headline(capsys):
 
 
 def test_report_lists_the_network_targets_of_the_card(capsys):
-    """The shipped card's validation entry carries the network's targets (issue 23); the Markdown report lists
+    """The shipped card's validation entry carries the network's targets; the Markdown report lists
     each with ours, the target and met / not met as the card says."""
     from training.commands.report import main
 

@@ -1,4 +1,4 @@
-"""Spectral coherence (issue 23): components matched along wavelength, targets interpolated to every
+"""Spectral coherence: components matched along wavelength, targets interpolated to every
 wavelength, the coherence metric on constructed decoders, and on the shipped decoder.
 
 The constructed mixtures are smooth made-up functions of wavelength (not physics); the LUT is the
@@ -149,10 +149,10 @@ def shipped_coherence(lut) -> dict:
 
 
 def test_shipped_decoder_is_spectrally_coherent(lut):
-    """Issue 23's acceptance on the shipped decoder (300 random tones in the box of docs/contracts.md §1; tolerance
-    ``coherence.SWITCH_TOL``, ``DSIGMA_RATIO_TOL`` and no unexplained weight jump).  The decoder shipped
-    before issue 23 failed it: its dominant component switched on ~25 % of the steps at a fitted
-    wavelength against ~1 % elsewhere (docs/validation/coherence/shipped_before_rebuild.json)."""
+    """The coherence acceptance on the shipped decoder (300 random tones in the box of docs/contracts.md §1;
+    tolerance ``coherence.SWITCH_TOL``, ``DSIGMA_RATIO_TOL`` and no unexplained weight jump).  The earlier
+    decoder recorded in docs/validation/coherence/shipped_before_rebuild.json fails it: its dominant component
+    switched on ~25 % of the steps at a fitted wavelength against ~1 % elsewhere."""
     res = shipped_coherence(lut)
     assert res["acceptance"]["all"], res
 

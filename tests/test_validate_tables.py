@@ -80,9 +80,8 @@ def test_quick_writes_tables_and_figures(quick_run, monkeypatch):
 def test_painted_row_renders_the_painted_colour(quick_run):
     """The gate's painted-colour row (the bake's default): the network's media corrected to the ground truth's
     colour, rendered by our Monte Carlo, show that colour within the quick run's noise, none clamped.  (The
-    model shipped before 2026-11-26 answered R01 with a skin 1.9x darker, and this test also asserted that its
-    own media missed the colour by 3x the painted ones; the rebuilt model's own media are within the quick
-    run's noise too, so that no longer separates them.  That the correction moves the colour where the
+    shipped model's own media are within the quick run's noise too, so this row alone does not separate them
+    from the painted ones.  That the correction moves the colour where the
     network's media miss it: tests/test_painted.py.)"""
     out, _, _, _, _ = quick_run
     rec = json.loads((out / "tables.json").read_text())
@@ -94,8 +93,8 @@ def test_painted_row_renders_the_painted_colour(quick_run):
 
 
 def test_network_targets_are_checked_and_printed(quick_run):
-    """The rebuilt network's targets (issue 23) in tables.json and tables.md: each one's value is the gate's own
-    number for it, and 'met' says whether it is within the target."""
+    """The rebuilt network's targets (``NETWORK_TARGETS``) in tables.json and tables.md: each one's value is the
+    gate's own number for it, and 'met' says whether it is within the target."""
     from training.validate.run import NETWORK_TARGETS
 
     out, _, _, _, _ = quick_run

@@ -117,7 +117,7 @@ def bench_training_step(quick: bool) -> dict:
         shape = make_target(prof * refl[..., None], refl, edges, 1e5, stderr=0.01 * prof * refl[..., None])
         return shape.subset(torch.arange(0, shape.r_cm.numel(), train_losses.SHAPE_BIN_STRIDE)).to(dtype=torch.float32)
 
-    dense_cols = torch.arange(0, 376, round(376 / train_losses.SHAPE_WAVELENGTHS_PER_STEP))  # issue 23: all 376
+    dense_cols = torch.arange(0, 376, round(376 / train_losses.SHAPE_WAVELENGTHS_PER_STEP))  # every few of all 376
     per_step = train_losses.SHAPE_WAVELENGTHS_PER_STEP
     fitted_cols = fitted[torch.arange(0, fitted.numel(), round(fitted.numel() / per_step))]
     shapes = {True: shape_at(dense_cols), False: shape_at(fitted_cols)}
@@ -146,7 +146,7 @@ def bench_training_step(quick: bool) -> dict:
             "ratio": f"{t_full / t_mse:.2f}x", "error": "",
             "notes": f"default loss = L_param (weighted, targets interpolated to all 376 wavelengths from every 4th) "
                      f"+ 15 L_refl (LUT, slab factor) + 0.5 L_smooth + L_shape ({len(dense_cols)} of 376 wavelengths, "
-                     f"every 2nd bin); before issue 23 (L_param and L_shape at the fitted wavelengths only) "
+                     f"every 2nd bin); with --targets fitted (L_param and L_shape at the fitted wavelengths only) "
                      f"{t_fitted * 1e3:.0f} ms/step; the paper's loss alone {t_paper * 1e3:.0f} ms/step; dipole LUT "
                      "for timing"}
 

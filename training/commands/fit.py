@@ -69,7 +69,7 @@ def _parser() -> argparse.ArgumentParser:
                         "one elsewhere (default 0: full schedule everywhere; 12 is ~4x faster, same losses)")
     p.add_argument("--continuity", choices=("sweep", "anchors"), default=None,
                    help="--dataset: sweep = each wavelength warm-started from the previous one, components matched "
-                        "along wavelength (default with --method lm; issue 23); anchors = from the nearest anchor "
+                        "along wavelength (default with --method lm); anchors = from the nearest anchor "
                         "(the older fits; the default with --method paper)")
     p.add_argument("--max-tones", type=int, default=None, help="--dataset: fit n tones of each split (see --select)")
     p.add_argument("--select", choices=("first", "lightness"), default="first",

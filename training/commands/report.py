@@ -186,7 +186,7 @@ def _headline_md(v: dict) -> list[str]:
                 + ", ".join(f"{k} {_n(prof[k], 3)}" for k in ("K1", "K2", "K3") if k in prof)
                 + f"; K = 1 → 2 reduction {_n(prof.get('K1_to_K2_reduction'), 3)}.", ""]
     goals = dict(v.get("goals") or {})
-    targets = goals.pop("network_targets", [])  # the network's targets (issue 23): a list, each with its own goal
+    targets = goals.pop("network_targets", [])  # the network's targets: a list, each with its own goal
     out += [f"- goal `{name}`: ours {_n(g.get('ours'), 3)}, paper {_n(g.get('paper'), 3)}, "
             f"{'met' if g.get('met') else 'not met'}" for name, g in goals.items()]
     out += [f"- target: {t.get('what')}: ours {_n(t.get('ours'), 3)}, at most {_n(t.get('target'), 3)}, "

@@ -49,7 +49,7 @@ def parser() -> argparse.ArgumentParser:
                    help="stage 3: weight of the rendered profile-shape loss L_shape (0: the paper's loss)")
     p.add_argument("--targets", choices=("dense", "fitted"), default=d.targets,
                    help="stage 3: dense = fits matched along wavelength, L_param and L_shape at all 376 wavelengths "
-                        "(default; issue 23); fitted = sorted by sigma_t, at the fitted wavelengths only (before)")
+                        "(default); fitted = sorted by sigma_t, at the fitted wavelengths only")
     p.add_argument("--uniform-param", action="store_true",
                    help="stage 3: L_param without weighting each component's alpha, g, sigma_t by its weight")
     p.add_argument("--encoder-share", type=float, default=d.encoder_share,

@@ -60,7 +60,7 @@ def unit_to_tones(unit: np.ndarray, skin_weighted: bool = True) -> np.ndarray:
     """Tones (N, 5) of points ``unit`` (N, ``N_UNIT``) of the unit cube (module docstring): the last
     coordinate below ``CORE_SHARE`` picks the skin core, the first five place the tone in its ranges,
     log-uniformly for the ``LOG_SCALED`` fractions; t_epi quantised.  ``skin_weighted=False``: uniform over
-    ``PARAM_RANGES`` (the sampling before 2026-11-24; the selector is ignored)."""
+    ``PARAM_RANGES`` (the selector is ignored)."""
     u = np.asarray(unit, dtype=np.float64)
     if u.ndim != 2 or u.shape[1] != N_UNIT:
         raise ValueError(f"unit points must have shape (N, {N_UNIT}); got {u.shape}")

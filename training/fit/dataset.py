@@ -17,8 +17,8 @@ Speed (what makes a laptop run possible; measured in the README):
   (coarse search, K = 1 -> 2 -> 3 with all the starts of ``fit_schedule``); every other wavelength is
   one short warm LM run per K (``fit_schedule(warm=...)``).  ``continuity`` "sweep" (default): warm
   from the previous wavelength's kept solution, in wavelength order, the anchors checking that it is as
-  good as an independent fit, components matched along wavelength (``training.fit.sweep``, issue 23);
-  "anchors": warm from the nearest anchor (the fits before issue 23; neighbouring wavelengths can sit
+  good as an independent fit, components matched along wavelength (``training.fit.sweep``);
+  "anchors": warm from the nearest anchor (components in the fitter's order; neighbouring wavelengths can sit
   in different basins of the degenerate fit).  ``anchor_every`` = 0 makes every wavelength an anchor.
 * ``wavelength_stride`` = s: fit every s-th wavelength only (the trainer's L_param then uses those).
 * ``max_tones`` = m: fit m tones of the split only, chosen by ``select``: ``"first"``, the first m (a
@@ -61,8 +61,8 @@ SPLITS = ("train", "validation")
 FIT_KEYS = ("ks", "method", "refl_loss", "wavelength_stride", "anchor_every", "continuity", "lut_sha256",
             "lut_albedo_extension")
 #: How a tone's wavelengths are chained (``continuity``): "sweep", in wavelength order from the previous
-#: solution, components matched (training/fit/sweep.py; issue 23); "anchors", each from its nearest
-#: anchor, components in the fitter's order (the fits before issue 23).
+#: solution, components matched (training/fit/sweep.py); "anchors", each from its nearest
+#: anchor, components in the fitter's order.
 CONTINUITY = ("sweep", "anchors")
 
 

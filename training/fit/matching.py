@@ -2,7 +2,7 @@
 
 A K-media fit is defined up to the order of its components, and the fitter's order is arbitrary (it
 depends on which start won, and the K - 1 fallback appends a copy).  Sorting by sigma_t at every
-(tone, wavelength), as the trainer did until issue 23, makes the k-th output "the k-th slowest medium"
+(tone, wavelength) (the trainer's ``targets="fitted"``) makes the k-th output "the k-th slowest medium"
 at each wavelength on its own: wherever two components' sigma_t cross, their identities swap, and the
 targets jump between neighbouring wavelengths (a comb in the decoder trained on them).
 

@@ -82,7 +82,8 @@ def components(lut: LookupTables, m: Mixture, r_cm: torch.Tensor) -> tuple[torch
 
 
 #: The fitter's mixture profile, recorded where fits are cached (training.validate) so that fits made with
-#: another one are not reused: "w_k R_k" = sum_k w_k R_k P_k / sum_k w_k R_k (before 2026-11-22: "w_k").
+#: another one are not reused: "w_k R_k" = sum_k w_k R_k P_k / sum_k w_k R_k ("w_k": the
+#: paper's §4 text, sum_k w_k P_k).
 PROFILE_WEIGHTING: str = "w_k R_k"
 
 #: Added to every R_k in the profile weights v_k, so that v stays defined (and sums to 1) when all R_k

@@ -1,8 +1,8 @@
-"""Fits made consistent along wavelength: a warm-started sweep in wavelength order (issue 23).
+"""Fits made consistent along wavelength: a warm-started sweep in wavelength order.
 
 The mixture fits are degenerate: quite different (alpha, g, sigma_t, w) render the same profile, and
 which of these basins a fit lands in depends on its start.  Fitted independently, or warm-started from
-the nearest anchor (``fit --continuity anchors``, the fits before issue 23), neighbouring wavelengths
+the nearest anchor (``fit --continuity anchors``), neighbouring wavelengths
 can sit in different basins, and a decoder supervised by them learns the jumps.
 
 ``fit_tones_sweep`` fits every tone's wavelengths in order, each from the previous wavelength's solution:

@@ -13,13 +13,13 @@ Every constant with a physical meaning lives here, with its source:
   (sigma_t is in cm^-1); the paper gives no unit.
 * ``log_params`` (``ModelConfig``): the parameters the networks see (Dec_R, Dec_T inputs) and produce (Enc
   outputs) on a log scale over their range: the dataset draws f_mel and f_blood log-uniformly
-  (``training.data.sampling.LOG_SCALED``, issue 23), so on a linear scale half the training tones would
+  (``training.data.sampling.LOG_SCALED``), so on a linear scale half the training tones would
   sit in the lowest ~4 % of the input interval and the encoder's sigmoid would have to reach f_mel = 0.005
   at u = 0.006.  Models made before (no key in their config) keep the linear scale.
 * ``WEIGHT_SMOOTHING_NM`` = 6: Dec_T's mixture weights pass through a fixed Gaussian low-pass along
   wavelength (standard deviation 6 nm = 3 grid steps, ``ModelConfig.weight_smoothing_nm``).  A normalised
   kernel maps valid weights to valid weights, and no component's weight can then change by more than the
-  kernel's peak, 0.133, between neighbouring 2 nm steps: the "weight jump > 0.2" of issue 23's coherence
+  kernel's peak, 0.133, between neighbouring 2 nm steps: the "weight jump > 0.2" of the spectral coherence
   measure (``training.validate.coherence.JUMP_DW``) cannot happen, whatever the network learns.  The
   prototypes without it jumped at a few fixed steps (README, "L_smooth").  6 nm is well below the width
   of the skin chromophores' bands (haemoglobin's Q bands ~20 nm) and only the weights are smoothed;

@@ -1,4 +1,4 @@
-"""The inversion on measured skin colours: which exposure it answers them with (issue 23).
+"""The inversion on measured skin colours: which exposure it answers them with.
 
 An artist paints skin's colour. The measured NIST spectra without their specular part (the rough n = 1.4
 surface of ``training.realskin.geometry``) are such colours: D65, linear sRGB, CIE 1931 2 degrees

@@ -24,7 +24,7 @@ from training.sim.walker import AUTO_COMPILE_PACKETS, Source, WalkConfig, Walker
 PROFILE_ESTIMATORS: tuple[str, ...] = ("histogram", "cdf")
 #: Packets walked at once by default: ~2^18 keeps the float32 working set in cache on a CPU.  On a GPU the
 #: walk's time is set by its number of steps, which the longest walks fix, not by the packets per step: on
-#: an H200 (2026-11-26) the dataset's baseline medium at 376 wavelengths took 48-61 s for 2,000 photons,
+#: an H200 the dataset's baseline medium at 376 wavelengths took 48-61 s for 2,000 photons,
 #: 49 s for 20,000 and 98 s for 165,000 (62e6 packets, ~6 GB with path records), so a GPU keeps that many
 #: in flight and pays the tail once.
 POOL_PACKETS = {"cpu": 1 << 18, "cuda": 165_000 * N_WAVELENGTHS}

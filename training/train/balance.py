@@ -1,6 +1,6 @@
 """Stage 3's tone balance: draw the training tones of sparse corners of the parameter box more often.
 
-The laptop dataset draws most tones where skin colours are (issue 23's sampling), so the corners of the
+The laptop dataset draws most tones where skin colours are (``training.data.sampling``), so the corners of the
 parameter box (the outlier tones: thinnest epidermis with the darkest melanin, maximum blood, the lower corner of
 every range) hold few fitted tones, and the decoder is worst there.  With ``balance`` = b > 0 an epoch draws
 its items with replacement (``loop.epoch_order``) from

@@ -12,11 +12,11 @@ cover a subset of the tones (``fit --max-tones``, or an unfinished run): every s
 serves stages 1 and 2, and stage 3 draws its batches from the fitted ones (``SplitData.fitted``).
 
 Component order: the fitter's component order is arbitrary (it depends on which start won).  With
-``targets="dense"`` (issue 23, the default) the components are matched along wavelength on loading
+``targets="dense"`` (the default) the components are matched along wavelength on loading
 (``training.fit.matching``: sorted by sigma_t at 600 nm, then each wavelength permuted to the nearest
 of its neighbour), so the network's component k is one medium followed across the spectrum; fits of
 any version are read this way (``fit --continuity sweep`` stores them matched already, and matching is
-idempotent).  ``targets="fitted"`` is the trainer before issue 23: sorted by increasing sigma_t per
+idempotent).  ``targets="fitted"``: sorted by increasing sigma_t per
 (tone, wavelength), "the k-th slowest-decaying medium" at each wavelength on its own, whose identities
 swap wherever two sigma_t cross.
 
@@ -39,8 +39,8 @@ from training.fit.loss import Target, make_target
 from training.fit.matching import matched
 
 FIT_FIELDS: tuple[str, ...] = ("alpha", "g", "sigma_t", "weight")
-#: How stage 3 uses the fits (``TrainConfig.targets``): "dense", matched and at every wavelength (issue 23);
-#: "fitted", sorted by sigma_t and at the fitted wavelengths only (before issue 23).
+#: How stage 3 uses the fits (``TrainConfig.targets``): "dense", matched and at every wavelength;
+#: "fitted", sorted by sigma_t and at the fitted wavelengths only.
 TARGET_MODES: tuple[str, ...] = ("dense", "fitted")
 #: Least model floor of L_shape in float32 training (cm^-2; ``loss.FLOOR_REL``): 1e-3 x the smallest used MC
 #: value can be subnormal in float32 (near-black tones at few photons use bins down to 1e-37), and 1 / floor

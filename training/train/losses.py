@@ -11,9 +11,9 @@ Shapes: N tones, W wavelengths, K components; ``u`` tensors are Dec_T's normalis
     = 2, others 1.  Comparing in ``u`` puts sigma_t on a log scale (a difference of 0.05 is a factor
     exp(0.05 ln 1e6) = 2.0 in sigma_t) and g on its range.  Huber's transition HUBER_DELTA = 0.05 (our
     choice; the paper gives none): L1-like beyond it.  Where: at every wavelength, the targets
-    interpolated from the fitted ones (``training.train.spectral``; issue 23), or at the fitted
-    wavelengths only (before; ``fit --wavelength-stride`` fits every n-th), which taught Dec_T a comb.
-    Weighted (ours, issue 23; ``weighted=True``): the alpha, g and sigma_t terms of component k count
+    interpolated from the fitted ones (``training.train.spectral``), or at the fitted
+    wavelengths only (``fit --wavelength-stride`` fits every n-th), which teaches Dec_T a comb.
+    Weighted (ours; ``weighted=True``): the alpha, g and sigma_t terms of component k count
     with the target's weight w*_k (times K, so that equal weights give the unweighted mean): a component
     with w ~ 0 adds nothing to the profile, so its fitted alpha, g, sigma_t are whatever the optimiser
     left there, and pulling the decoder toward them only teaches it noise.  The weight channel itself

@@ -48,8 +48,8 @@ class TrainConfig:
     exposure_jitter: float = 0.25
     exposure_prior: float = 0.0
     shape_weight: float = 1.0
-    #: stage 3 (issue 23): "dense" = targets matched along wavelength and compared at all 376 (interpolated),
-    #: L_shape at all 376; "fitted" = sorted by sigma_t, at the fitted wavelengths only (before)
+    #: stage 3: "dense" = targets matched along wavelength and compared at all 376 (interpolated),
+    #: L_shape at all 376; "fitted" = sorted by sigma_t, at the fitted wavelengths only
     targets: str = "dense"
     #: stage 3: L_param's alpha, g, sigma_t terms weighted by the target weights (losses.param_loss)
     weighted_param: bool = True
@@ -62,7 +62,7 @@ class TrainConfig:
     unfreeze: bool = False
     #: stages 2-3 learn from every n-th training tone only (1 = all; 20 = the paper's "20x less data")
     data_every: int = 1
-    #: stage 3 (ours, issue 23): share of each batch whose Dec_T input is the frozen encoder's answer to the
+    #: stage 3 (ours): share of each batch whose Dec_T input is the frozen encoder's answer to the
     #: tone's RGB albedo, p = Enc(A_RGB), instead of the true p (0 = the paper; ``stages.encoder_input``)
     encoder_share: float = 0.0
     #: stage 3: L_refl as the paper's mean |R_hat - R_MC| ("absolute") or ours, mean |ln R_hat - ln R_MC|
@@ -70,7 +70,7 @@ class TrainConfig:
     refl_loss: str = "absolute"
     #: stage 3: weight of L_smooth, mean |u(l + 1) - u(l)| (the paper's lambda_smooth = 0.5; ``losses.LAMBDA_SMOOTH``)
     smooth_weight: float = LAMBDA_SMOOTH
-    #: stage 3 (ours, issue 23): share of the tone draws by inverse local density in the parameter box, so that
+    #: stage 3 (ours): share of the tone draws by inverse local density in the parameter box, so that
     #: sparse corners are learnt more often (``training.train.balance``; 0 = every fitted tone once per epoch)
     balance: float = 0.0
 

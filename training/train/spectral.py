@@ -1,4 +1,4 @@
-"""Fit targets at every wavelength: linear interpolation along wavelength in Dec_T's unit space (issue 23).
+"""Fit targets at every wavelength: linear interpolation along wavelength in Dec_T's unit space.
 
 The fits exist at every ``fit --wavelength-stride``-th wavelength.  Supervising Dec_T there only left
 the wavelengths between them to the reflectance and smoothness terms, and the decoder learnt a comb

@@ -8,7 +8,7 @@
   encoder sees the whole gamut of the model and not only the few simulated tones.
 * Stage 3 trains Dec_T and the slab depth c(lambda) with the frozen Dec_R.  Dec_T is fed the dataset
   tone p and R_hat = Dec_R(p): the fit targets belong to p, and ``skin_decoder.onnx`` evaluates
-  Dec_T(p, Dec_R(p)) for any p; at inversion time p = Enc(A_RGB).  Ours (issue 23, ``encoder_share``
+  Dec_T(p, Dec_R(p)) for any p; at inversion time p = Enc(A_RGB).  Ours (``encoder_share``
   > 0): a share of each batch is fed p = Enc(A_RGB) of the tone's own albedo instead, with the true tone's
   targets, so that Dec_T learns to answer what the frozen encoder gives it at inversion time (the encoder
   finds a tone of the input's colour, not the tone itself: metamers and exposure) - the network's gate

@@ -1,4 +1,4 @@
-"""Spectral coherence of a decoder's mixture along wavelength (issue 23), and its figure.
+"""Spectral coherence of a decoder's mixture along wavelength, and its figure.
 
     python -m training.validate.coherence [--model blender_addon/models/skin_decoder.onnx | RUN/model.pt]
         [--tones 1000] [--seed 0] [--fitted-stride 4] [--lut LUT.npz] [--json OUT.json] [--figure OUT.png]
@@ -24,7 +24,7 @@ the dataset's radial bins (A their areas).  An unexplained jump is the decoder m
 components while the rendered mixture stays put: a relabelling of degenerate media, which mixes media
 in anything that averages a component over wavelengths (the Cycles collapse, the physical maps).
 
-Acceptance of issue 23 (``acceptance``): switch rates of the two groups within ``SWITCH_TOL`` (absolute),
+Acceptance (``acceptance``): switch rates of the two groups within ``SWITCH_TOL`` (absolute),
 median |d ln sigma_t| within a factor ``DSIGMA_RATIO_TOL``, no unexplained weight jump.
 
 The LUT is ``--lut``, else $SKIN_SSS_LUT, else the closed-form diffusion-dipole table

@@ -455,7 +455,7 @@ def lut_mixture_shape_error(lut, params: Params, target, rows: np.ndarray, weigh
 
     ``weighting="rendered"``: sum_k w_k R_k P_k / sum_k w_k R_k, what a renderer that picks medium k with
     probability w_k produces; the fitter's loss (training.fit.mixture.mix); ``"fit"``: sum_k w_k P_k, as the paper's
-    §4 text writes its loss (the fitter used it before 2026-11-22)."""
+    §4 text writes its loss."""
     from training.fit import loss as fit_loss
     from training.fit.mixture import mix
 

@@ -503,7 +503,7 @@ def _profile_fidelity(opts, lut, files, record) -> dict:
     return out
 
 
-#: The network's acceptance targets of issue 23 (the rebuilt model): (measure, what, group or band, target).
+#: The rebuilt network's acceptance targets: (measure, what, group or band, target).
 #: "nn_minus_k3" is the difference of the mean ΔE76 to the ground truth, the paper's "vs. joint-opt"; "shape"
 #: the network's profile shape as rendered at every validation wavelength of the band, over all gate tones.
 NETWORK_TARGETS: tuple[tuple[str, str, str, float], ...] = (

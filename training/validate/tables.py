@@ -177,7 +177,7 @@ def goals_md(record: dict) -> list[str]:
 
 
 def network_targets_md(targets: list[dict]) -> list[str]:
-    """The rebuilt network's targets (issue 23), each with ours and, where missed, by how much."""
+    """The rebuilt network's targets (``run.NETWORK_TARGETS``), each with ours and, where missed, by how much."""
     if not targets:
         return []
     out = ["The network's targets (issue 23):", "", "| target | ours | goal | |", "|---|---|---|---|"]
