@@ -344,6 +344,17 @@ def levenberg_marquardt(
 
 
 # ------------------------------------------------------------------ schedules
+def no_worse_than_fewer(prob: Problem, theta: torch.Tensor, fewer: torch.Tensor, k: int,
+                        t: fit_loss.Target) -> torch.Tensor:
+    """The K = ``k`` fits ``theta`` (B, 4k - 1), each replaced by the K = k - 1 fit ``fewer`` (B, 4k - 5) with a
+    duplicated component (``split`` at ratio 1.0: the same profile) wherever that scores better on ``prob``'s
+    merit over ``t``; (B, 4k - 1).  A mixture of more components is then never a worse fit than one of fewer."""
+    with torch.no_grad():
+        dup = split(fewer, k - 1, prob, 1.0)
+        worse = prob.merit(theta, k, False, t) > prob.merit(dup, k, False, t)
+    return torch.where(worse[:, None], dup, theta)
+
+
 def fit_schedule(
     lut: LookupTables,
     profile: torch.Tensor,
@@ -435,10 +446,7 @@ def fit_schedule(
             th = levenberg_marquardt(prob, warm[k].to(dev, dt), k, n["k1_joint" if k == 1 else f"k{k}"], False,
                                      t=t_fit)
             if prev is not None:
-                with torch.no_grad():
-                    dup = split(prev, k - 1, prob, 1.0)
-                    worse = prob.merit(th, k, False, t_fit) > prob.merit(dup, k, False, t_fit)
-                th = torch.where(worse[:, None], dup, th)
+                th = no_worse_than_fewer(prob, th, prev, k, t_fit)
             record(k, th, prob.evals, time.perf_counter() - t0)
             prev = th
         return {k: v for k, v in out.items() if k in ks}
@@ -462,19 +470,13 @@ def fit_schedule(
         if method == "lm" and 1 in out:  # also from the joint K = 1 (where the shape-only start is far off in R)
             starts2.append(split(out[1].theta, 1, prob, 1.5))
         th2 = run_multi(starts2, 2, "k2")
-        if method == "lm" and 1 in out:  # keep K = 1 (as a duplicated component) where K = 2 ended worse
-            with torch.no_grad():
-                dup = split(out[1].theta, 1, prob, 1.0)
-                worse = prob.merit(th2, 2, False, t_fit) > prob.merit(dup, 2, False, t_fit)
-            th2 = torch.where(worse[:, None], dup, th2)
+        if method == "lm" and 1 in out:
+            th2 = no_worse_than_fewer(prob, th2, out[1].theta, 2, t_fit)
         record(2, th2, prob.evals, base_time + time.perf_counter() - t2)
         if kmax >= 3:
             t3 = time.perf_counter()
             th3 = run_multi([split(th2, 2, prob, f, r, a) for r, f, a in K3_SPLITS], 3, "k3")
-            if method == "lm":  # keep K = 2 (as a duplicated component) where K = 3 ended worse
-                with torch.no_grad():
-                    dup = split(th2, 2, prob, 1.0)
-                    worse = prob.merit(th3, 3, False, t_fit) > prob.merit(dup, 3, False, t_fit)
-                th3 = torch.where(worse[:, None], dup, th3)
+            if method == "lm":
+                th3 = no_worse_than_fewer(prob, th3, th2, 3, t_fit)
             record(3, th3, prob.evals, out[2].seconds + time.perf_counter() - t3)
     return {k: v for k, v in out.items() if k in ks}
