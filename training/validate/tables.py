@@ -8,8 +8,12 @@ is filled from the run's record (photons, wavelengths, LUT, model card, dataset,
 from __future__ import annotations
 
 import json
+import re
 import time
+from functools import cache
+from importlib import resources
 from pathlib import Path
+from string import Template
 
 import numpy as np
 
@@ -223,128 +227,132 @@ def nn_minus_k3_causes_md(record: dict) -> list[str]:
     return out + [""]
 
 
+#: The Notes section's prose: ``string.Template`` sections of ``templates/notes.md`` (``note_templates``).
+NOTES_TEMPLATE: str = "templates/notes.md"
+
+
+@cache
+def note_templates() -> dict[str, Template]:
+    """The sections of ``NOTES_TEMPLATE`` by name: each "## name" heading starts one, its lines joined with
+    single spaces (the leading HTML comment describes the file)."""
+    text = resources.files("training.validate").joinpath(NOTES_TEMPLATE).read_text(encoding="utf-8")
+    sections: dict[str, list[str]] = {}
+    lines: list[str] = []
+    for line in re.sub(r"<!--.*?-->", "", text, flags=re.S).splitlines():
+        if line.startswith("## "):
+            lines = sections.setdefault(line[3:].strip(), [])
+        elif line.strip():
+            lines.append(line.strip())
+    return {name: Template(" ".join(body)) for name, body in sections.items()}
+
+
+def _note(name: str, **values) -> str:
+    """Section ``name`` of the notes template with its placeholders filled (KeyError naming a missing one)."""
+    return note_templates()[name].substitute(values)
+
+
+def _names(names: list[str]) -> str:
+    return ", ".join(names) if names else "none"
+
+
 def notes(record: dict) -> list[str]:
-    """Facts of the run, and the gaps to the paper with what explains them (one string per note)."""
+    """Facts of the run, and the gaps to the paper with what explains them (one string per note): the prose of
+    ``NOTES_TEMPLATE`` filled with the numbers of ``record`` (the form of tables.json)."""
     run, g, rows = record["run"], record["gate"], record["gate"]["rows"]
     cfg, out = run["config"], []
     if run["quick"]:
-        out.append("QUICK MODE: a smoke test (few tones, wavelengths and photons, a tiny LUT, few fitter "
-                   "iterations); its numbers are not the validation.")
-    renderer = ("the lookup tables (Σ w_k R_k and Σ w_k R_k P_k of the tabulated Monte Carlo of this very slab, "
-                "noise-free at this scale; gate step 5)" if cfg.get("renderer", "lut") == "lut" else
-                "our Monte Carlo mixture renderer")
-    out.append(f"Photons: ground truth {run['ground_truth']['photons']:,} per wavelength (the dataset's reweighted "
-               f"estimator, one walk for all gate tones; the paper: {paper.GATE_PHOTONS:,}). Slabs rendered by "
-               f"{renderer}. MC noise floor of the colour ΔE76 (rep.): "
-               + ", ".join(f"{r} {_f(rows[r]['noise_floor']['representative'])}" for r in G.ROWS) + ".")
+        out.append(_note("quick"))
+    renderer = _note("renderer_lut" if cfg.get("renderer", "lut") == "lut" else "renderer_mc")
+    out.append(_note("photons", gt_photons=f"{run['ground_truth']['photons']:,}",
+                     paper_photons=f"{paper.GATE_PHOTONS:,}", renderer=renderer,
+                     noise_floors=", ".join(f"{r} {_f(rows[r]['noise_floor']['representative'])}" for r in G.ROWS)))
     mc = g.get("mc_check")
     if mc:
-        out.append(f"Check of the renders: our Monte Carlo renderer ({cfg['photons']:,} photons per component and "
-                   "wavelength, every component walks all of them; exact by linearity) against the tables' renders, "
-                   "mean ΔE76 over all tones (its own noise alone would give): "
-                   + ", ".join(f"{r} {_f(v['delta_e_mc_vs_lut'])} ({_f(v['mc_noise_floor'])})" for r, v in mc.items())
-                   + ".")
+        out.append(_note("mc_check", photons=f"{cfg['photons']:,}", mc_vs_tables=", ".join(
+            f"{r} {_f(v['delta_e_mc_vs_lut'])} ({_f(v['mc_noise_floor'])})" for r, v in mc.items())))
     tr = record["truncated_max"]
-    out.append(f"Walk cap {cfg['max_steps']:,} steps per photon: the largest weight still alive at the cap (an upper "
-               "bound on the reflectance it cut, per wavelength) is " + ", ".join(f"{r} {tr[r]:.1e}" for r in G.ROWS)
-               + ".")
+    out.append(_note("walk_cap", max_steps=f"{cfg['max_steps']:,}",
+                     truncated=", ".join(f"{r} {tr[r]:.1e}" for r in G.ROWS)))
     wl = run["wavelengths"]
-    out.append(f"Wavelengths: ground truth and fits every {wl['validation_step_nm']} nm ({wl['n_validation']} of 376; "
-               f"outlier tones fitted only where rendered); renders at the {wl['n_rendered']} of them in "
-               f"{wl['rendered_nm'][0]:.0f}–{wl['rendered_nm'][1]:.0f} nm, linearly interpolated onto the 2 nm grid "
-               "for colour (CIE 1931 2°, 360–830 nm, D65; Lab of the unclipped colour).")
+    out.append(_note("wavelengths", step_nm=wl["validation_step_nm"], n_validation=wl["n_validation"],
+                     n_rendered=wl["n_rendered"], first_nm=f"{wl['rendered_nm'][0]:.0f}",
+                     last_nm=f"{wl['rendered_nm'][1]:.0f}"))
     oog = [n for n in g["tones"] if np.any(np.array(g["ground_truth"][n]["srgb"]) > 1.0)]
     neg = [n for n in g["tones"] if any(v < 0 for v in record["gate"]["per_tone"]["k1"][n]["linear_srgb"])]
-    out.append(f"Edge image: ±{10 * EDGE_HALF_WIDTH_CM:.0f} mm at {1e4 * EDGE_STEP_CM:.0f} µm pixels. Ground-truth "
-               f"colours outside the sRGB gamut: {', '.join(oog) if oog else 'none'}; K = 1 renders with a negative "
-               f"linear-sRGB channel: {', '.join(neg) if neg else 'none'}.")
-    lut = run["lut"]
-    out.append(f"LUT: {lut['path']} ({lut['albedo_n']} albedos × {lut['g_n']} g in [{lut['g_range'][0]:.2f}, "
-               f"{lut['g_range'][1]:.2f}]), SHA-256 {lut['sha256'][:16]}…; fits: method {run['fits']['method']}"
-               f"{', iterations ' + str(run['fits']['steps']) if run['fits']['steps'] else ' (default schedule)'}, "
-               f"{run['fits']['seconds']:.0f} s.")
+    out.append(_note("edge", half_width_mm=f"{10 * EDGE_HALF_WIDTH_CM:.0f}", step_um=f"{1e4 * EDGE_STEP_CM:.0f}",
+                     out_of_gamut=_names(oog), negative_channel=_names(neg)))
+    lut, fits = run["lut"], run["fits"]
+    schedule = (_note("fit_schedule_given", method=fits["method"], steps=str(fits["steps"])) if fits["steps"]
+                else _note("fit_schedule_default", method=fits["method"]))
+    out.append(_note("lut", path=lut["path"], albedo_n=lut["albedo_n"], g_n=lut["g_n"],
+                     g_lo=f"{lut['g_range'][0]:.2f}", g_hi=f"{lut['g_range'][1]:.2f}", sha256=lut["sha256"][:16],
+                     fit_schedule=schedule, fit_seconds=f"{fits['seconds']:.0f}"))
     held = record["fits_held_at_lut_albedo"]
-    out.append(f"Fits rendered with alpha held in the LUT's albedo range [{held['range'][0]:g}, {held['range'][1]:g}] "
-               "(the LUT holds its edge value beyond it, so the fitter cannot tell the difference; a range ending "
-               "at 1 is the paper-scale table extended analytically, training/sim/lut_extend.py): "
-               f"{held['count']} of {held['of']} fitted albedos moved.")
-    m = run["model"]
-    card = m["card"]
-    same = card.get("sha256", {}).get("skin_inversion.onnx") == m["sha256"]["skin_inversion.onnx"]
-    if card.get("missing"):
-        out.append(f"Model: {m['dir']} (no model card found).")
-    else:
-        ds = card.get("dataset", {})
-        out.append(f"Model: {m['dir']}, skin_inversion.onnx SHA-256 {m['sha256']['skin_inversion.onnx'][:16]}… "
-                   f"({'matches' if same else 'does NOT match'} the card); card created {card.get('created')}, "
-                   f"trained on {ds.get('n_train')} tones at {ds.get('photons')} photons (preset "
-                   f"{card.get('preset')}), K = {card.get('K')}. Card note: "
-                   f"{(card.get('notes') or ['—'])[0][:300]}")
+    out.append(_note("held_albedo", lo=f"{held['range'][0]:g}", hi=f"{held['range'][1]:g}", count=held["count"],
+                     of=held["of"]))
+    out.append(_model_note(run["model"]))
     pf = record["profile_fidelity"]
     if pf.get("fits"):
         at = pf["fits"]["attrs"]
-        out.append(f"Table 3 data: {run['fits_dir']} ({pf['fits']['n_tones']} of {pf['fits']['n_tones_in_files']} "
-                   f"tones fitted; method {at.get('method')}; dataset preset {at.get('dataset_preset')}, "
-                   f"{at.get('dataset_photons')} photons).")
+        out.append(_note("table3", fits_dir=run["fits_dir"], n_tones=pf["fits"]["n_tones"],
+                         n_tones_in_files=pf["fits"]["n_tones_in_files"], method=at.get("method"),
+                         preset=at.get("dataset_preset"), photons=at.get("dataset_photons")))
     else:
-        out.append("Table 3: no validation fits given (--dataset DIR --fits FITS).")
-    bl = record["baselines"]
-    cal = bl["calibration"]
-    how = (f"calibrated on {cal['tone']} (the scale with the smallest visible L_shape against its ground truth, "
-           f"searched over {len(cal['scales_m'])} values {cal['scales_m'][0]:g}–{cal['scales_m'][-1]:g} m)"
-           if cal["mode"] == "calibrated" else "given (--baseline-scale)")
-    dark = {mth: float(np.mean(v)) for mth, v in bl["published_darkening"].items()}
-    out.append(f"Baselines: radius = Blender's default Subsurface Radius {tuple(bl['radius_rgb'])} × Subsurface Scale "
-               + ", ".join(f"{mth} {bl['scale_m'][mth]:.3g} m" for mth in METHODS) + f", {how}; Blender's default "
-               f"scale would be {BLENDER_DEFAULT_SCALE_M} m. Wrenninge g = {bl['wrenninge_g']}. Albedo inverted "
-               "exactly for the gate's boundary (n = 1.4 Fresnel); the published polynomials (fitted for index-matched "
-               "boundaries) would render R/A = " + ", ".join(f"{mth} {dark[mth]:.2f}" for mth in METHODS)
-               + " (mean over tones, visible band) under it. RGB → spectrum: Mallett & Yuksel 2019.")
+        out.append(_note("table3_missing"))
+    out.append(_baselines_note(record["baselines"]))
     exp = list(record["network"]["exposure"].values())
     clamped = [n for n, v in g["per_tone"]["nn_painted"].items() if v.get("clamped")]
-    out.append(f"Network exposure (Y of the input over Y of its own reflectance): {min(exp):.3f}–{max(exp):.3f} over "
-               "the gate tones (1 = the encoder found the input's brightness). The row "
-               f"'{G.ROW_LABELS['nn']}' renders the network's media as they are; '{G.ROW_LABELS['nn_painted']}' "
-               "renders them with the painted colour (exporters.painted: a smooth correction of the visible albedo "
-               "spectrum, within a factor 4, so that the mixture's colour at the model's boundary is the input's; "
-               "radii kept), what a bake renders by default: its slab ΔE76 is the painted colour through our Monte "
-               "Carlo (noise, the reflectance table and the wavelength sampling), its edge ΔE76 the translucency "
-               "the network keeps. Tones whose painted colour had to be clamped: "
-               f"{', '.join(clamped) if clamped else 'none'}.")
-    k1, k1p = rows["k1"]["delta_e"]["representative"], paper.TABLE1_DELTA_E["k1"]
-    rr = record["banded"].get("refl_rel_err", {})
+    out.append(_note("network", lo=f"{min(exp):.3f}", hi=f"{max(exp):.3f}", nn_label=G.ROW_LABELS["nn"],
+                     painted_label=G.ROW_LABELS["nn_painted"], clamped=_names(clamped)))
+    k1 = rows["k1"]["delta_e"]["representative"]
     if k1 is not None:
-        out.append(f"Gap, K = 1: ours {_f(k1)} vs the paper's {k1p} (its own figure caption says "
-                   f"{paper.FIGURE_K1_DELTA_E}). Our K = 1 is the joint fit (L_shape + 5 L_R, the fitter's relative "
-                   f"reflectance term) with a mean LUT reflectance error of {_f(rr.get('K1'), pct=True)} on the "
-                   "representative tones. A ΔE76 near 50 on skin needs reflectance errors of tens of percent; the "
-                   "paper's K = 1 row may be its shape-only initialisation (§4), which we do not report.")
-    b = record["banded"]
-    if b.get("shape"):
-        out.append("Gap, Table 2 scale: the paper's band shape errors (2.2–15) are not on the scale of its own "
-                   f"whole-set mean ({paper.PROFILE_K1} → {paper.PROFILE_K2}) nor of its training-set fits "
-                   f"({paper.TRAIN_SHAPE_K2}, {paper.TRAIN_SHAPE_K3}); the paper does not define the band metric "
-                   "further. Ours is the fitter's L_shape; compare the K = 1 → 2 reductions, not the values.")
+        out.append(_note("gap_k1", ours=_f(k1), paper=paper.TABLE1_DELTA_E["k1"], paper_figure=paper.FIGURE_K1_DELTA_E,
+                         refl_rel_err=_f(record["banded"].get("refl_rel_err", {}).get("K1"), pct=True)))
+    if record["banded"].get("shape"):
+        out.append(_note("gap_table2", paper_k1=paper.PROFILE_K1, paper_k2=paper.PROFILE_K2,
+                         paper_train_k2=paper.TRAIN_SHAPE_K2, paper_train_k3=paper.TRAIN_SHAPE_K3))
     sv = {r: (rows[r]["shape_vis_lut"]["representative"], rows[r]["shape_vis_lut_fit_weighting"]["representative"])
           for r in ("k1", "k2", "k3")}
-    out.append("Rendered vs the paper's text: the fitter's loss uses the rendered profile Σ w_k R_k P_k / Σ w_k R_k "
-               "(the paper's eq. for R_d^fit, and what a renderer that picks medium k with probability w_k produces); "
-               "the paper's §4 text weights the normalised component profiles by w_k alone (Σ w_k P_k). Visible "
-               "L_shape of the fits (rep.) as rendered / with the text's weighting: "
-               + ", ".join(f"K={r[1]} {_f(sv[r][0], 3)} / {_f(sv[r][1], 3)}" for r in sv)
-               + ". (Fitted with the text's weighting, as until 2026-11-22, K = 2 and 3 rendered 0.284 and 0.296 "
-               "against K = 1's 0.238.)")
+    out.append(_note("weighting", shapes=", ".join(f"K={r[1]} {_f(sv[r][0], 3)} / {_f(sv[r][1], 3)}" for r in sv)))
     t, c = run["timings_s"], run["compute_seconds"]
-    out.append("Compute time of the (cached) pieces: " + ", ".join(f"{k} {v:.0f} s" for k, v in c.items())
-               + "; this invocation (s): " + ", ".join(f"{k} {v:.0f}" for k, v in t.items())
-               + f"; {run['threads']} thread(s).")
+    out.append(_note("compute", pieces=", ".join(f"{k} {v:.0f} s" for k, v in c.items()),
+                     invocation=", ".join(f"{k} {v:.0f}" for k, v in t.items()), threads=run["threads"]))
     return out
 
 
-def markdown(record: dict) -> str:
+def _model_note(m: dict) -> str:
+    """The model note: the graph's SHA-256 against its card and what the card says it was trained on."""
+    card = m["card"]
+    if card.get("missing"):
+        return _note("model_without_card", dir=m["dir"])
+    same = card.get("sha256", {}).get("skin_inversion.onnx") == m["sha256"]["skin_inversion.onnx"]
+    ds = card.get("dataset", {})
+    return _note("model", dir=m["dir"], sha256=m["sha256"]["skin_inversion.onnx"][:16],
+                 card_match=_note("card_matches" if same else "card_differs"), created=card.get("created"),
+                 n_train=ds.get("n_train"), photons=ds.get("photons"), preset=card.get("preset"), k=card.get("K"),
+                 card_note=(card.get("notes") or ["—"])[0][:300])
+
+
+def _baselines_note(bl: dict) -> str:
+    """The baselines note: each method's Subsurface Scale, how it was chosen, and the published polynomials'
+    darkening under the gate's boundary."""
+    cal = bl["calibration"]
+    how = (_note("scale_calibrated", tone=cal["tone"], n_scales=len(cal["scales_m"]), lo=f"{cal['scales_m'][0]:g}",
+                 hi=f"{cal['scales_m'][-1]:g}") if cal["mode"] == "calibrated" else _note("scale_given"))
+    dark = {mth: float(np.mean(v)) for mth, v in bl["published_darkening"].items()}
+    return _note("baselines", radius_rgb=str(tuple(bl["radius_rgb"])),
+                 scales=", ".join(f"{mth} {bl['scale_m'][mth]:.3g} m" for mth in METHODS), scale_source=how,
+                 blender_scale=BLENDER_DEFAULT_SCALE_M, wrenninge_g=bl["wrenninge_g"],
+                 darkening=", ".join(f"{mth} {dark[mth]:.2f}" for mth in METHODS))
+
+
+def markdown(record: dict, stamp: str | None = None) -> str:
+    """tables.md of ``record`` (the form of tables.json); ``stamp``: the time in its header line (default: now,
+    "YYYY-MM-DD HH:MM UTC")."""
     run = record["run"]
+    stamp = time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()) if stamp is None else stamp
     head = ["# Validation tables", "",
-            f"`{run['command']}` — {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}."
+            f"`{run['command']}` — {stamp}."
             + (" **Quick mode: not the validation.**" if run["quick"] else ""), ""]
     body = table1(record) + table1_per_tone(record) + table2(record) + table3(record) + goals_md(record)
     body += ["## Notes", "", *(f"- {n}" for n in record["notes"]), ""]
