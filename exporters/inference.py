@@ -13,7 +13,7 @@ Identical texels are evaluated once (:func:`unique_rows`): 8- and 16-bit texture
 from __future__ import annotations
 
 import os
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 from functools import cache
 from pathlib import Path
@@ -137,26 +137,37 @@ def chunk_rows_for_k(k: int, memory_mb: float = DEFAULT_MEMORY_MB) -> int:
     return max(1, int(memory_mb * 2**20 // bytes_per_texel(k)))
 
 
-def load_model(path: str | os.PathLike, threads: int = 0) -> InversionSession:
-    """Open ``skin_inversion.onnx`` on the CPU and check it is of the docs/contracts.md §3 shape.
-
-    ``threads``: onnxruntime intra-op threads, 0 = all cores.  Errors (:class:`ModelError`) name the file
-    and what is wrong: missing, unreadable / not ONNX, wrong input, missing or mis-shaped outputs.
-    """
+def onnx_session(model: str | os.PathLike | bytes, threads: int = 0):
+    """An onnxruntime ``InferenceSession`` on the CPU for an ONNX file path or the graph's serialised bytes:
+    ``threads`` intra-op threads (0 = onnxruntime's default, all cores), one inter-op thread, only errors
+    logged.  Every session of the project is made here (inversion, decoder, export parity, benchmarks).
+    ValueError for ``threads`` < 0; onnxruntime's own exception for a file that is not a valid graph."""
     import onnxruntime as ort  # imported here: ~0.3 s, and only inference needs it
 
-    path = Path(path)
-    if not path.is_file():
-        raise ModelError(f"model not found at {path}: train/export it (python -m training export) or set the "
-                         "model path")
     if threads < 0:
         raise ValueError("threads must be >= 0 (0 = all cores)")
     opts = ort.SessionOptions()
     opts.intra_op_num_threads = int(threads)
     opts.inter_op_num_threads = 1
     opts.log_severity_level = 3
+    source = model if isinstance(model, bytes) else str(model)
+    return ort.InferenceSession(source, sess_options=opts, providers=["CPUExecutionProvider"])
+
+
+def load_model(path: str | os.PathLike, threads: int = 0) -> InversionSession:
+    """Open ``skin_inversion.onnx`` on the CPU and check it is of the docs/contracts.md §3 shape.
+
+    ``threads``: onnxruntime intra-op threads, 0 = all cores.  Errors (:class:`ModelError`) name the file
+    and what is wrong: missing, unreadable / not ONNX, wrong input, missing or mis-shaped outputs.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise ModelError(f"model not found at {path}: train/export it (python -m training export) or set the "
+                         "model path")
+    if threads < 0:
+        raise ValueError("threads must be >= 0 (0 = all cores)")
     try:
-        session = ort.InferenceSession(str(path), opts, providers=["CPUExecutionProvider"])
+        session = onnx_session(path, threads=threads)
     except Exception as exc:  # onnxruntime raises its own exception types for bad files
         raise ModelError(f"cannot load model {path}: not a valid ONNX file ({str(exc).splitlines()[0][:200]})"
                          ) from None
@@ -256,23 +267,21 @@ class ModelFile:
 @cache
 def _decoder_session(path: str, mtime_ns: int, size: int):
     """One single-threaded session per decoder file version (a file replaced on disk gets a new one)."""
-    import onnxruntime as ort
-
-    opts = ort.SessionOptions()
-    opts.intra_op_num_threads = 1
-    return ort.InferenceSession(path, sess_options=opts, providers=["CPUExecutionProvider"])
+    return onnx_session(path, threads=1)
 
 
-def run_decoder(biophysical: np.ndarray, path: str | os.PathLike) -> dict[str, np.ndarray]:
-    """``skin_decoder.onnx`` at ``path`` on biophysical rows (N, 5) of docs/contracts.md §1 (t_epi in cm): every
-    output by name (reflectance (N, 376); alpha, sigma_t, g, weight (N, K, 376)), float64.  ValueError if the file
-    is missing; the outputs are returned as the graph gives them (callers check what they use)."""
+def run_decoder(biophysical: np.ndarray, path: str | os.PathLike,
+                outputs: Sequence[str] | None = None) -> dict[str, np.ndarray]:
+    """``skin_decoder.onnx`` at ``path`` on biophysical rows (N, 5) of docs/contracts.md §1 (t_epi in cm): the
+    outputs named in ``outputs`` (default: every output; reflectance (N, 376); alpha, sigma_t, g, weight
+    (N, K, 376)) by name, float64.  ValueError if the file is missing; the outputs are returned as the graph
+    gives them (callers check what they use)."""
     p = Path(path)
     if not p.is_file():
         raise ValueError(f"decoder model {p} not found; pass the path of skin_decoder.onnx.")
     stat = p.stat()
     sess = _decoder_session(str(p.resolve()), stat.st_mtime_ns, stat.st_size)
-    names = [o.name for o in sess.get_outputs()]
+    names = [o.name for o in sess.get_outputs()] if outputs is None else list(outputs)
     rows = np.asarray(biophysical, dtype=np.float32).reshape(-1, 5)
-    out = sess.run(None, {"biophysical": rows})
+    out = sess.run(names, {"biophysical": rows})
     return {n: np.asarray(v, dtype=np.float64) for n, v in zip(names, out, strict=True)}

@@ -12,8 +12,9 @@ import torch
 
 from exporters.colorimetry import SRGB_LUMINANCE, spectrum_to_linear_srgb
 from exporters.constants import N_WAVELENGTHS
+from exporters.inference import onnx_session
 from training.commands import export as export_cli
-from training.export.graphs import export_graphs, parity, parity_failures, session
+from training.export.graphs import export_graphs, parity, parity_failures
 from training.model import ModelConfig
 from training.model.config import FALLBACK_ALBEDO_RGB, SIZES
 from training.train.run import TrainConfig, load_model, train
@@ -61,7 +62,7 @@ def test_graph_io_is_exactly_spec(exported):
     assert list(outs) == list(SPEC_INV_OUT)
     ins, outs = _io(out / "skin_decoder.onnx")
     assert ins == {"biophysical": ["N", 5]} and outs == SPEC_DEC_OUT
-    sess = session((out / "skin_inversion.onnx").read_bytes())
+    sess = onnx_session(out / "skin_inversion.onnx", threads=1)
     for n in (1, 7):  # dynamic N
         res = sess.run(None, {"albedo_rgb": np.full((n, 3), 0.3, np.float32)})
         assert [r.shape[0] for r in res] == [n] * 7
@@ -82,7 +83,7 @@ def test_parity_on_10000_random_inputs(run):
 
 def test_graph_input_domain_and_exposure_identity(exported):
     out, _ = exported
-    sess = session((out / "skin_inversion.onnx").read_bytes())
+    sess = onnx_session(out / "skin_inversion.onnx", threads=1)
     x = np.array([[0.5, 0.3, 0.2], [math.nan, 0.1, 0.1], [0.1, math.inf, 0.2], [-math.inf, 0.0, 0.0],
                   list(FALLBACK_ALBEDO_RGB), [1.5, -0.5, 0.4], [1.0, 0.0, 0.4], [0.0, 0.0, 0.0]], np.float32)
     res = dict(zip(["biophysical", "exposure", "reflectance", "alpha", "sigma_t", "g", "weight"],
@@ -96,7 +97,7 @@ def test_graph_input_domain_and_exposure_identity(exported):
     rgb = spectrum_to_linear_srgb(res["reflectance"].astype(np.float64), "D65") * res["exposure"]
     x_dom = np.clip(np.where(np.isfinite(x).all(1, keepdims=True), x, FALLBACK_ALBEDO_RGB), 0, 1)
     np.testing.assert_allclose(rgb @ SRGB_LUMINANCE, x_dom @ SRGB_LUMINANCE, rtol=3e-5, atol=1e-7)
-    dec = session((out / "skin_decoder.onnx").read_bytes())
+    dec = onnx_session(out / "skin_decoder.onnx", threads=1)
     r = dec.run(None, {"biophysical": np.array([[math.nan, 0.1, 0.01, 0.7, 0.5]], np.float32)})
     assert all(np.isfinite(a).all() for a in r)
 
@@ -130,6 +131,6 @@ def test_torch_and_graph_agree_on_named_tones(run, exported):
     out, _ = exported
     x = torch.tensor([[0.45, 0.30, 0.24], [0.08, 0.04, 0.03], [0.7, 0.55, 0.5]])
     ref = model.invert(x)
-    got = session((out / "skin_inversion.onnx").read_bytes()).run(["biophysical", "weight"], {"albedo_rgb": x.numpy()})
+    got = onnx_session(out / "skin_inversion.onnx", threads=1).run(["biophysical", "weight"], {"albedo_rgb": x.numpy()})
     np.testing.assert_allclose(got[0], ref["biophysical"].numpy(), atol=1e-5)
     np.testing.assert_allclose(got[1], ref["weight"].numpy(), atol=1e-5)

@@ -81,3 +81,23 @@ def test_model_errors_name_the_problem(tmp_path):
         inference.load_model(missing_outputs_model(tmp_path / "m.onnx"))
     with pytest.raises(ValueError, match="threads"):
         inference.load_model(MODEL, threads=-1)
+
+
+def test_onnx_session_reads_a_path_or_bytes_alike():
+    """``onnx_session`` from the file and from its bytes: the same graph, the same answers; threads < 0 refused."""
+    rgb = np.array([[0.4, 0.3, 0.25], [0.1, 0.08, 0.06]], dtype=np.float32)
+    by_path = inference.onnx_session(MODEL, threads=1).run(["reflectance"], {"albedo_rgb": rgb})[0]
+    by_bytes = inference.onnx_session(MODEL.read_bytes(), threads=2).run(["reflectance"], {"albedo_rgb": rgb})[0]
+    assert by_path.shape == (2, 376) and np.all(np.isfinite(by_path))
+    np.testing.assert_allclose(by_bytes, by_path, rtol=1e-6, atol=1e-7)
+    with pytest.raises(ValueError, match="threads must be >= 0"):
+        inference.onnx_session(MODEL, threads=-1)
+
+
+def test_every_onnx_session_of_the_code_is_made_in_one_place():
+    """exporters, training and the add-on open onnxruntime sessions through ``inference.onnx_session`` only."""
+    root = Path(__file__).resolve().parents[1]
+    makers = [f"{p.relative_to(root)}:{i}" for top in ("exporters", "training", "blender_addon")
+              for p in sorted((root / top).rglob("*.py"))
+              for i, line in enumerate(p.read_text().splitlines(), 1) if "InferenceSession(" in line]
+    assert len(makers) == 1 and makers[0].startswith("exporters/inference.py:"), makers

@@ -198,12 +198,10 @@ def _skin_sample(texture: np.ndarray, n: int, seed: int) -> np.ndarray:
 
 def _decoder_sample(n: int, seed: int) -> np.ndarray:
     """n colours of the model's own skin (skin_decoder.onnx over the biophysical ranges) at exposures 0.7-2.5."""
-    import onnxruntime as ort
-
     rng = np.random.default_rng(seed)
     lo = np.array([PARAM_RANGES[p][0] for p in PARAM_NAMES])
     hi = np.array([PARAM_RANGES[p][1] for p in PARAM_NAMES])
-    session = ort.InferenceSession(str(SHIPPED_DECODER), providers=["CPUExecutionProvider"])
+    session = inference.onnx_session(SHIPPED_DECODER)
     refl = session.run(["reflectance"], {"biophysical": (lo + (hi - lo) * rng.random((n, 5))).astype(np.float32)})[0]
     rgb = refl.astype(np.float64) @ collapse.channel_matrix().T * rng.uniform(0.7, 2.5, (n, 1))
     return np.clip(rgb, 0.0, 1.0).astype(np.float32)

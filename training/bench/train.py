@@ -59,10 +59,10 @@ def bench_inference(quick: bool) -> dict:
     if not path.is_file():
         row["error"] = f"{path} missing (run `python -m training export`)"
         return row
-    from training.export.graphs import session
+    from exporters.inference import onnx_session
 
     x = _skin_like(BATCH)
-    sess = session(path.read_bytes(), threads=2)
+    sess = onnx_session(path, threads=2)
     repeats = 2 if quick else 10
     t_ort = _timeit(lambda: sess.run(None, {"albedo_rgb": x}), repeats)
     row["ours"] = f"{BATCH / t_ort:,.0f} texels/s (onnxruntime)"

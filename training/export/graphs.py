@@ -24,12 +24,12 @@ import warnings
 
 import numpy as np
 import onnx
-import onnxruntime as ort
 import torch
 import torch.nn.functional as F
 from torch import nn
 
 from exporters.constants import WAVELENGTH_STEP_NM, WAVELENGTHS_NM
+from exporters.inference import onnx_session
 from training.model.chain import DECODER_OUTPUTS, INVERSION_OUTPUTS, DecoderGraph, InversionGraph, SkinChain
 
 OPSET: int = 17
@@ -132,13 +132,6 @@ def export_graphs(model: SkinChain, weights: str = "float32") -> dict[str, bytes
     }
 
 
-def session(data: bytes, threads: int = 1) -> ort.InferenceSession:
-    opts = ort.SessionOptions()
-    opts.intra_op_num_threads = threads
-    opts.inter_op_num_threads = 1
-    return ort.InferenceSession(data, sess_options=opts, providers=["CPUExecutionProvider"])
-
-
 def parity_inputs(model: SkinChain, n: int, seed: int) -> dict[str, np.ndarray]:
     """n random linear-sRGB colours in [0, 1]^3 and n random tones within PARAM_RANGES (float32)."""
     rng = np.random.default_rng(seed)
@@ -166,7 +159,7 @@ def parity(model: SkinChain, graphs: dict[str, bytes], weights: str, n: int = 10
         ("skin_inversion.onnx", InversionGraph, "albedo_rgb", INVERSION_OUTPUTS),
         ("skin_decoder.onnx", DecoderGraph, "biophysical", DECODER_OUTPUTS),
     ):
-        sess, g = session(graphs[fname], threads=2), wrapper(ref_model)
+        sess, g = onnx_session(graphs[fname], threads=2), wrapper(ref_model)
         errs = dict.fromkeys(outs, 0.0)
         for s in range(0, n, batch):
             x = inputs[in_name][s : s + batch]

@@ -19,8 +19,8 @@ import numpy as np
 import torch
 
 from exporters.constants import PARAM_NAMES, R_EDGES_CM
+from exporters.inference import run_decoder
 from training.data.reweight import Trajectories, baseline_absorption, walk
-from training.export.graphs import session
 from training.realskin.geometry import port_collection, rough_specular
 from training.sim.lut_interp import bin_centres
 from training.skin.constants import SKIN_MODEL, SkinModelSpec
@@ -137,14 +137,13 @@ class DecoderForward:
     """R_measured (B, C) of tones from ``skin_decoder.onnx``: its R_d (dataset geometry) + the specular."""
 
     def __init__(self, decoder_path: Path, channels: np.ndarray, specular: float | None = None) -> None:
-        self.session = session(Path(decoder_path).read_bytes(), threads=1)
+        self.decoder_path = Path(decoder_path)
         self.channels = np.asarray(channels)
         self.specular = rough_specular() if specular is None else float(specular)
 
     def __call__(self, tones: torch.Tensor) -> torch.Tensor:
-        x = tones.detach().cpu().numpy().astype(np.float32)
-        (refl,) = self.session.run(["reflectance"], {"biophysical": x})
-        return torch.from_numpy(refl[:, self.channels].astype(np.float64)) + self.specular
+        refl = run_decoder(tones.detach().cpu().numpy(), self.decoder_path, outputs=("reflectance",))["reflectance"]
+        return torch.from_numpy(refl[:, self.channels]) + self.specular
 
 
 def _bin_centres_cm() -> np.ndarray:
