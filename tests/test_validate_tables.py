@@ -95,7 +95,7 @@ def test_painted_row_renders_the_painted_colour(quick_run):
 def test_network_targets_are_checked_and_printed(quick_run):
     """The rebuilt network's targets (``NETWORK_TARGETS``) in tables.json and tables.md: each one's value is the
     gate's own number for it, and 'met' says whether it is within the target."""
-    from training.validate.run import NETWORK_TARGETS
+    from training.validate.assemble import NETWORK_TARGETS
 
     out, _, _, _, _ = quick_run
     rec = json.loads((out / "tables.json").read_text())
@@ -183,7 +183,8 @@ def test_a_missed_nn_minus_k3_target_is_explained(quick_run, tmp_path):
     radius along b_mel, 1 outside, 1 on R05 but not done)."""
     import h5py
 
-    from training.validate.run import NEIGHBOUR_RADIUS, _training_neighbours
+    from training.validate.assemble import NEIGHBOUR_RADIUS, training_neighbours
+    from training.validate.record import to_json
     from training.validate.tables import nn_minus_k3_causes_md
 
     out, _, _, _, _ = quick_run
@@ -196,7 +197,7 @@ def test_a_missed_nn_minus_k3_target_is_explained(quick_run, tmp_path):
     tones = np.stack([r05, r05, r05, shift(0.9 * NEIGHBOUR_RADIUS), shift(-1.1 * NEIGHBOUR_RADIUS), r05])
     with h5py.File(tmp_path / "train_fits.h5", "w") as f:
         f["tone"], f["done"] = tones, np.array([1, 1, 1, 1, 1, 0], bool)
-    near = _training_neighbours(tmp_path, G.gate_tones(tuple(rec["gate"]["tones"])))
+    near = to_json(training_neighbours(tmp_path, G.gate_tones(tuple(rec["gate"]["tones"]))))
     assert near["count"]["R05"] == 4 and near["n_fitted"] == 5
     rec["gate"]["training_neighbours"] = near
     lines = [ln for ln in nn_minus_k3_causes_md(rec) if ln.startswith("| ") and not ln.startswith("| tone")]

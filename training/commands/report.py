@@ -93,11 +93,11 @@ def model_part(folder: Path) -> tuple[dict | None, list[str]]:
 
 
 def validation_part(folder: Path) -> tuple[dict | None, list[str]]:
-    """The headline numbers (``training.validate.run.headline``) of ``folder``/tables.json."""
+    """The headline numbers (``training.validate.record.headline``) of ``folder``/tables.json."""
     path = folder / "tables.json"
     if not path.is_file():
         return None, [f"validation: no tables.json in {portable(folder)}"]
-    from training.validate.run import headline
+    from training.validate.record import headline
 
     try:
         record = headline(json.loads(path.read_text()))

@@ -172,11 +172,12 @@ def main(argv: list[str]) -> int:
 
     try:
         opts = _options(args)
-        record = R.run(opts)
+        record = R.run(opts).to_json()
         if args.update_card:
             from training.export.card import update_validation
+            from training.validate.record import headline
 
-            update_validation(opts.model_dir / "skin_inversion.json", R.headline(record))
+            update_validation(opts.model_dir / "skin_inversion.json", headline(record))
     except (ValueError, FileExistsError, engine.TaskError) as exc:
         return error_status(exc)
     print(_summary(record))

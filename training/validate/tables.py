@@ -181,7 +181,7 @@ def goals_md(record: dict) -> list[str]:
 
 
 def network_targets_md(targets: list[dict]) -> list[str]:
-    """The rebuilt network's targets (``run.NETWORK_TARGETS``), each with ours and, where missed, by how much."""
+    """The rebuilt network's targets (``assemble.NETWORK_TARGETS``), each with ours and, where missed, by how much."""
     if not targets:
         return []
     out = ["The network's targets (issue 23):", "", "| target | ours | goal | |", "|---|---|---|---|"]
@@ -197,7 +197,7 @@ def network_targets_md(targets: list[dict]) -> list[str]:
 def nn_minus_k3_causes_md(record: dict) -> list[str]:
     """Where a "network minus K = 3" target is missed: the tones above it, their gap split into what the encoder
     adds (RGB in against the true p in) and what the decoder leaves (true p in against the K = 3 fits), and how
-    many fitted training tones stage 3 saw near each (``run._training_neighbours``)."""
+    many fitted training tones stage 3 saw near each (``assemble.training_neighbours``)."""
     missed = [t for t in record["goals"].get("network_targets", [])
               if t["measure"] == "nn_minus_k3" and t["met"] is False]
     if not missed:
