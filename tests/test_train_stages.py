@@ -57,7 +57,7 @@ def _states(rundir):
 def test_fits_are_read_matched_along_wavelength(toy, tmp_path):
     """dense (default): the components are matched along wavelength; the toy's media never cross in sigma_t,
     so that is the sigma_t order.  A copy of the fits with the components shuffled per (tone, wavelength)
-    reads back identical (matching undoes it); the old mode sorts each wavelength on its own."""
+    reads back identical (matching undoes it); "fitted" sorts each wavelength on its own."""
     data, fits, _ = toy
     split = load_split(data, "train", fits, k=3)
     assert len(split) == 24 and split.targets["sigma_t"].shape == (18, 3, 188)  # toy: 18 fitted, every 2nd λ
@@ -426,8 +426,8 @@ def test_stage3_trains_with_balanced_tone_draws(toy, tmp_path):
 def test_a_run_killed_in_a_stage_with_new_options_resumes(toy, tmp_path):
     """The A/B recipe (a copy of stages 1-2 and run.json) trains stage 3 with options of its own; the process is
     killed (SIGKILL) after stage 3's first checkpoint.  Running the same command again resumes it, because the
-    folder's record named the new options before the stage started (it used to be written only at the end,
-    and the resume was refused: "balance 0.0 -> 1.0")."""
+    folder's record names the new options before the stage starts (were it written only at the end, the
+    resume would be refused: "balance 0.0 -> 1.0")."""
     import shutil
     import signal
     import subprocess
