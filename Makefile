@@ -56,8 +56,9 @@ extension: $(STAMP)
 # errors; then the linkcheck builder, offline (external URLs are listed, not fetched).  DOCS_OUT=DIR for another folder.
 DOCS_OUT ?= build/docs
 docs: $(DOCS_STAMP)
-	$(PY) -m sphinx -W --keep-going -q -b html docs $(DOCS_OUT)/html
-	$(PY) -m sphinx -W --keep-going -q -b linkcheck docs $(DOCS_OUT)/linkcheck
+	rm -rf docs/reference/_generated
+	$(PY) -m sphinx -W --keep-going -q -b html -d $(DOCS_OUT)/doctrees docs $(DOCS_OUT)/html
+	$(PY) -m sphinx -W --keep-going -q -b linkcheck -d $(DOCS_OUT)/doctrees docs $(DOCS_OUT)/linkcheck
 	@echo "documentation: $(DOCS_OUT)/html/index.html"
 
 $(DOCS_STAMP): $(STAMP)

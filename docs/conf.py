@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import importlib.util
 import os
 import re
 import sys
@@ -10,6 +11,18 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 os.environ.setdefault("MPLBACKEND", "Agg")
+
+
+def _import_script(name: str, path: Path) -> None:
+    """Import a script that lives outside the packages under ``name``, for sphinx-argparse's ``:module:``."""
+    spec = importlib.util.spec_from_file_location(name, path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    sys.modules[name] = module
+
+
+# blender_addon/bake.py is a script (its package imports bpy); the bake.py reference reads its parser.
+_import_script("bake_script", ROOT / "blender_addon" / "bake.py")
 
 project = "Spectral Skin SSS"
 author = "Spectral Skin SSS contributors"
@@ -28,6 +41,9 @@ source_suffix = {".md": "markdown", ".rst": "restructuredtext"}
 root_doc = "index"
 templates_path = ["_templates"]
 exclude_patterns = ["_build", "**/.ipynb_checkpoints"]
+# The real-skin reports (docs/validation/realskin*/) are tables written by `python -m training realskin`, with no
+# title of their own; the research guide's toctree gives them one, so Sphinx's "no title" notice is not a defect.
+suppress_warnings = ["toc.no_title"]
 
 # Markdown through MyST; headings get anchors so that `page.md#section` links resolve and are checked.
 myst_enable_extensions = ["dollarmath", "deflist"]
@@ -36,6 +52,9 @@ myst_heading_anchors = 4
 # The API reference: one page per module of `exporters` and `training`, generated at build time into
 # the _generated/ folder beside reference/api.md (ignored by git).
 autosummary_generate = True
+# `make docs` empties the folder before the html build; the linkcheck build after it reuses those pages, and
+# with them the html build's parsed environment (-d), instead of reading every module again.
+autosummary_generate_overwrite = False
 autosummary_imported_members = False
 autodoc_default_options = {"members": True, "show-inheritance": True, "ignore-module-all": True}
 autodoc_member_order = "bysource"
@@ -70,8 +89,13 @@ _TRAILING_UNDERSCORE = re.compile(r"(?<=\w)_(?![\w])")
 _LONE_ASTERISK = re.compile(r"(?<!\S)\*(?=[^\s*])(?!.*\*)")
 
 
+#: ``file:output`` is a file name and an output name, not a ``file:`` URI.
+_FILE_SCHEME = re.compile(r"\bfile:(?!//)")
+
+
 def _escape_text(text: str) -> str:
     text = _TRAILING_UNDERSCORE.sub(r"\\_", text.replace("|", "\\|"))
+    text = _FILE_SCHEME.sub(r"file\\:", text)
     return _LONE_ASTERISK.sub(r"\\*", text)
 
 
@@ -142,9 +166,9 @@ def plain_docstring_to_rst(app, what, name, obj, options, lines: list[str]) -> N
     than rewritten in every docstring:
 
     - ``|x|`` is an absolute value or a norm (``|Δw|``, ``|z| < 4``), not a substitution; a name ending in
-      ``_`` (``MALLOC_TRIM_THRESHOLD_``) is not a link; ``w *= albedo`` opens no emphasis: outside inline
-      literals, roles and literal blocks these are escaped (no docstring uses substitutions, line blocks,
-      tables or named links);
+      ``_`` (``MALLOC_TRIM_THRESHOLD_``) is not a link; ``w *= albedo`` opens no emphasis; ``file:output`` is
+      no URI: outside inline literals, roles and literal blocks these are escaped (no docstring uses
+      substitutions, line blocks, tables or named links);
     - an indented block after a paragraph (a usage line, an aligned list of options) and a paragraph with
       hanging indents (``name: text`` with its continuation lines indented, a formula under its sentence)
       are shown as written, as literal blocks;
@@ -173,6 +197,26 @@ def plain_docstring_to_rst(app, what, name, obj, options, lines: list[str]) -> N
                 out += [_escape(line) for line in block]
             previous = block
     lines[:] = out
+
+
+def _escape_help(data):
+    """The parser data sphinx-argparse renders, with the help texts escaped as plain text (``|ln exposure|``)."""
+    if isinstance(data, dict):
+        return {key: _escape_text(value) if key == "help" and isinstance(value, str) else _escape_help(value)
+                for key, value in data.items()}
+    if isinstance(data, list):
+        return [_escape_help(item) for item in data]
+    return data
+
+
+def _parse_parser_escaped(*args, **kwargs):
+    return _escape_help(_parse_parser(*args, **kwargs))
+
+
+import sphinxarg.ext  # noqa: E402  (after the helpers it is patched with)
+
+_parse_parser = sphinxarg.ext.parse_parser
+sphinxarg.ext.parse_parser = _parse_parser_escaped
 
 
 def setup(app) -> None:
