@@ -1,4 +1,4 @@
-# Spectral Skin SSS — set-up, tests, demo, benchmarks.
+# Spectral Skin SSS — set-up, tests, demo, benchmarks, documentation.
 # `make demo` and `make test` each create .venv when missing and install everything pinned.
 PYTHON ?= python3.11
 VENV := .venv
@@ -6,8 +6,9 @@ PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
 MITSUBA_STAMP := $(VENV)/.mitsuba-installed
+DOCS_STAMP := $(VENV)/.docs-installed
 
-.PHONY: install mitsuba demo extension test lint bench clean
+.PHONY: install mitsuba demo extension test lint bench docs clean
 
 install: $(STAMP)
 
@@ -51,8 +52,21 @@ PLATFORMS ?= linux-x64
 extension: $(STAMP)
 	$(PY) blender_addon/package.py --out dist --platforms $(PLATFORMS)
 
+# The documentation site (docs/dev/documentation.md): Sphinx + MyST + autodoc + sphinx-argparse, warnings as
+# errors; then the linkcheck builder, offline (external URLs are listed, not fetched).  DOCS_OUT=DIR for another folder.
+DOCS_OUT ?= build/docs
+docs: $(DOCS_STAMP)
+	rm -rf docs/reference/_generated
+	$(PY) -m sphinx -W --keep-going -q -b html -d $(DOCS_OUT)/doctrees docs $(DOCS_OUT)/html
+	$(PY) -m sphinx -W --keep-going -q -b linkcheck -d $(DOCS_OUT)/doctrees docs $(DOCS_OUT)/linkcheck
+	@echo "documentation: $(DOCS_OUT)/html/index.html"
+
+$(DOCS_STAMP): $(STAMP)
+	$(PY) -m pip install -q -e ".[docs]"
+	touch $@
+
 bench: $(STAMP)
 	$(PY) -m training bench --out bench/results.md
 
 clean:
-	rm -rf $(VENV) .pytest_cache .ruff_cache
+	rm -rf $(VENV) .pytest_cache .ruff_cache build/docs docs/reference/_generated

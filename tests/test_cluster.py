@@ -74,7 +74,7 @@ def single(tmp_path_factory) -> Path:
 
 @pytest.fixture(scope="module")
 def cluster():
-    """A LocalCluster of 2 single-threaded worker processes, started as README "Scaling out" says workers
+    """A LocalCluster of 2 single-threaded worker processes, started as docs/research/scaling_out.md says workers
     started by hand should be (engine.WORKER_ENV), reached by its tcp:// address."""
     import dask
     from distributed import LocalCluster

@@ -129,8 +129,9 @@ def test_physical_trends_over_skin_tones_darker_means_lower_albedo_higher_sigma_
     translucency length (``_visible_means``: what sets the width of the reflected profile, and what the
     Cycles collapse turns into the radius) fall at every step; sigma_t rises at every step darker than
     the lightest two deciles (Y < ~0.05), where it levels off (the lightest steps stay within 5 %): there
-    the two-layer Monte Carlo itself asks for no rise (``python -m training.validate.trends``; README,
-    Training the model).  Over all tones the rank correlation with luminance is strong (|rho| > 0.85 for
+    the two-layer Monte Carlo itself asks for no rise (``python -m training.validate.trends``;
+    docs/research/training.md, "Physical trends").  Over all tones the rank correlation with luminance is
+    strong (|rho| > 0.85 for
     alpha, sigma_a and sigma_t: measured 0.88-0.99; > 0.8 for the translucency length, measured 0.84 on
     the shipped decoder: at equal luminance it also varies with the blood and the epidermis).
 

@@ -24,7 +24,8 @@ def test_paths_outside_keep_only_their_last_two_parts(tmp_path):
 
 
 def test_a_linked_data_folder_is_recorded_as_the_repository_names_it(tmp_path, monkeypatch):
-    """data/ as a link to a disk outside the checkout (README) is recorded as data/..., not by its target;
+    """data/ as a link to a disk outside the checkout (docs/research/rebuilding.md) is recorded as data/...,
+    not by its target;
     a link inside the checkout to another place inside it, and ".." in a path, still resolve into the checkout."""
     repo, disk = tmp_path / "repo", tmp_path / "disk" / "sss"
     (disk / "data" / "laptop").mkdir(parents=True)

@@ -43,7 +43,8 @@ def _train(rundir, toy, want=(1, 2, 3), stop=None, tcfg=None, eval_every=1):
 
 
 def _stage3_from(base, rundir, toy, tcfg):
-    """Stage 3 trained in ``rundir`` on copies of the finished stages 1-2 of ``base`` (the README's A/B recipe)."""
+    """Stage 3 trained in ``rundir`` on copies of the finished stages 1-2 of ``base``
+    (the A/B recipe of docs/research/rebuilding.md)."""
     rundir.mkdir()
     for s in (1, 2):
         (rundir / checkpoint_path(base, s).name).write_bytes(checkpoint_path(base, s).read_bytes())
@@ -272,7 +273,7 @@ def test_weighted_param_loss_ignores_the_media_of_weightless_components():
 def test_encoder_share_trains_dec_t_on_the_encoders_tones(toy, tmp_path):
     """--encoder-share: a share of each stage-3 batch is fed Enc(A_RGB) of the tone's albedo (no gradient to
     the frozen Enc) with the true tone's targets, and the validation reports the terms on that path too.
-    Whether it helps is measured on real data in the gate (README, Training the model): on this toy Dec_T's
+    Whether it helps is measured on real data in the gate (docs/research/training.md): on this toy Dec_T's
     output hardly depends on its input."""
     from training.train.stages import encoder_input, stage3
 

@@ -4,4 +4,5 @@ import sys
 
 from training.commands.dispatch import main
 
-sys.exit(main(sys.argv[1:]))
+if __name__ == "__main__":  # imported (by the documentation's API pages), it runs nothing
+    sys.exit(main(sys.argv[1:]))

@@ -45,7 +45,7 @@ BACK_LIGHT = ((0.02, 0.50, 0.05), 40.0, 0.015)
 KEY_LIGHT = ((0.28, -0.62, 0.12), 20.0, 0.03)
 WORLD_GREY = 0.04
 #: Default size of each render (pixels, square) and Cycles samples per pixel (then OpenImageDenoise): the
-#: whole ``make demo`` stays within 3 minutes on 2 cores (README, Demo).
+#: whole ``make demo`` stays within 3 minutes on 2 cores (docs/user/demo.md).
 RENDER_SIZE, SAMPLES = 256, 16
 
 

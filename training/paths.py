@@ -41,7 +41,7 @@ def portable(path: str | Path | None) -> str | None:
     if path is None:
         return None
     # as written first (absolute, ".." removed, links kept): data/ may be a link to a disk outside the checkout
-    # (README, "Rebuilding the shipped model"), and data/laptop is what the user typed and means
+    # (docs/research/rebuilding.md), and data/laptop is what the user typed and means
     for p in (Path(os.path.abspath(Path(path).expanduser())), Path(path).expanduser().resolve()):
         try:
             return p.relative_to(REPO_ROOT).as_posix() or "."

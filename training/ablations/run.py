@@ -298,7 +298,7 @@ def _encoder_note(record: dict) -> list[str]:
             "read as lighter skin seen darker, so the mixture from RGB is a lighter tone's, and the RGB-in gate ΔE76 "
             f"({_f(base['nn']['delta_e'])}; decoder from the true p {_f(base['decoder']['delta_e'])}) is the "
             "encoder's, shared by every configuration that copies `base`'s stage 2. The shipped model answers "
-            "this with a wider exposure jitter and an exposure prior (README, Training the model).", ""]
+            "this with a wider exposure jitter and an exposure prior (docs/research/training.md).", ""]
 
 
 def markdown(record: dict) -> str:

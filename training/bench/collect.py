@@ -102,14 +102,19 @@ def read_sections(text: str) -> dict[str, str]:
             for i, m in enumerate(marks)}
 
 
-def main(argv: list[str]) -> int:
+def build_parser() -> argparse.ArgumentParser:
+    """The command's argument parser (the CLI reference of the documentation reads it too)."""
     parser = argparse.ArgumentParser(prog="python -m training bench", description=__doc__.splitlines()[0])
     parser.add_argument("--out", type=Path, default=Path("bench/results.md"), help="Markdown file to write")
     parser.add_argument("--quick", action="store_true", help="small sizes (about a minute per module)")
     parser.add_argument("--only", nargs="*", default=None,
                         help="module names to run (default: all); their sections replace those in --out")
     parser.add_argument("--seed", type=int, default=0, help="CLI contract only: each benchmark uses a fixed seed")
-    args = parser.parse_args(argv)
+    return parser
+
+
+def main(argv: list[str]) -> int:
+    args = build_parser().parse_args(argv)
     modules = args.only or BENCH_MODULES
     sections = read_sections(args.out.read_text()) if args.only and args.out.is_file() else {}
     for name in modules:

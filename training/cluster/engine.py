@@ -3,7 +3,7 @@
     --scheduler local:N            a LocalCluster of N single-threaded worker processes on this machine
     --scheduler tcp://HOST:PORT    a running Dask scheduler (``dask scheduler`` + ``dask worker``, dask-cuda, ...)
     --scheduler slurm[:JOBS]       a dask_jobqueue.SLURMCluster of JOBS jobs (default 4), configured by
-                                   dask's ``jobqueue.slurm`` settings (README, "Scaling out")
+                                   dask's ``jobqueue.slurm`` settings (docs/research/scaling_out.md)
 
 Without ``--scheduler`` a command runs in one process as before.  Nothing here schedules: Dask does
 (placement, a worker that dies, retries).  This module only opens the client, submits a stage's pieces
@@ -52,7 +52,7 @@ WORKER_ENV = {"MALLOC_MMAP_THRESHOLD_": "33554432", "MALLOC_TRIM_THRESHOLD_": "6
 WORKER_CONFIG = {**{f"distributed.nanny.pre-spawn-environ.{k}": v for k, v in WORKER_ENV.items()},
                  "distributed.worker.profile.enabled": False}
 SCHEDULER_HELP = ("run the work on a Dask cluster: local:N (N worker processes here), tcp://HOST:PORT (a running "
-                  "scheduler) or slurm[:JOBS] (dask-jobqueue; README 'Scaling out'); default: this process")
+                  "scheduler) or slurm[:JOBS] (dask-jobqueue; docs/research/scaling_out.md); default: this process")
 
 
 @dataclass(frozen=True)

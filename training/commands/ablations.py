@@ -20,7 +20,7 @@ from training.commands.options import error_status, triple
 from training.paths import portable_command
 
 
-def _parser() -> argparse.ArgumentParser:
+def build_parser() -> argparse.ArgumentParser:
     from training.ablations.run import Scale
     from training.model.config import SIZES
 
@@ -67,7 +67,7 @@ def _quick_inputs(cache: Path, args, progress: bool) -> tuple[Path, Path, Path]:
 
 
 def main(argv: list[str]) -> int:
-    args = _parser().parse_args(argv)
+    args = build_parser().parse_args(argv)
     import torch
 
     from training.ablations.run import QUICK, Scale, run

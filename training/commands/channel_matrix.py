@@ -14,11 +14,16 @@ import numpy as np
 from exporters import collapse
 
 
-def main(argv: list[str] | None = None) -> int:
+def build_parser() -> argparse.ArgumentParser:
+    """The command's argument parser (the CLI reference of the documentation reads it too)."""
     parser = argparse.ArgumentParser(prog="python -m training channel-matrix", description=__doc__.splitlines()[0])
     parser.add_argument("--out", type=Path, default=collapse.CHANNEL_MATRIX_PATH,
                         help="where to write the matrix (default: the one the add-on reads)")
-    args = parser.parse_args(argv)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
     np.save(args.out, collapse.compute_channel_matrix())
     print(f"wrote {args.out}")
     return 0

@@ -43,7 +43,8 @@ def _estimator(args: argparse.Namespace, preset, split: str):
     return store, preset.reweighted_chunk_tones
 
 
-def main(argv: list[str]) -> int:
+def build_parser() -> argparse.ArgumentParser:
+    """The command's argument parser (the CLI reference of the documentation reads it too)."""
     parser = argparse.ArgumentParser(prog="python -m training dataset", description=__doc__.splitlines()[0],
                                      formatter_class=argparse.RawDescriptionHelpFormatter, epilog=__doc__)
     parser.add_argument("--preset", choices=sorted(PRESETS), default="ci")
@@ -60,7 +61,11 @@ def main(argv: list[str]) -> int:
     parser.add_argument("--threads", type=int, default=1, help="torch CPU threads (the walker is fastest on 1)")
     parser.add_argument("--no-progress", action="store_true")
     engine.add_option(parser)
-    args = parser.parse_args(argv)
+    return parser
+
+
+def main(argv: list[str]) -> int:
+    args = build_parser().parse_args(argv)
     import torch
 
     torch.set_num_threads(max(1, args.threads))

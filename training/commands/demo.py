@@ -28,7 +28,8 @@ from training.paths import SHIPPED_CARD
 from training.skin.tones import load_tones
 
 
-def main(argv: list[str]) -> int:
+def build_parser() -> argparse.ArgumentParser:
+    """The command's argument parser (the CLI reference of the documentation reads it too)."""
     parser = argparse.ArgumentParser(prog="python -m training demo", description=__doc__.splitlines()[0])
     parser.add_argument("--out", type=Path, default=Path("demo/out"))
     parser.add_argument("--photons", type=int, default=300, help="photons per wavelength of the Monte Carlo tone")
@@ -42,7 +43,11 @@ def main(argv: list[str]) -> int:
     parser.add_argument("--figure", type=Path, default=None,
                         help="also write the comparison figure here (.png or .jpg; the README's is "
                              "docs/figures/demo_translucency.jpg)")
-    args = parser.parse_args(argv)
+    return parser
+
+
+def main(argv: list[str]) -> int:
+    args = build_parser().parse_args(argv)
     import torch
 
     demo_start = time.perf_counter()

@@ -1,12 +1,14 @@
 """Command dispatcher for ``python -m training`` (docs/contracts.md §2).
 
 Each command is a module of ``training.commands`` (or a study module with its own ``main``) exposing
-``main(argv: list[str]) -> int`` with its own argparse parser.  Commands whose module is ``None`` are not
+``main(argv: list[str]) -> int`` and ``build_parser() -> argparse.ArgumentParser`` (its parser, which
+the documentation's CLI reference renders).  Commands whose module is ``None`` are not
 built yet: they say so and exit 2 rather than pretend.
 """
 
 from __future__ import annotations
 
+import argparse
 import importlib
 import sys
 
@@ -42,6 +44,11 @@ def _usage() -> str:
     for name, (_, text) in COMMANDS.items():
         lines.append(f"  {name:<{width}}  {text}")
     return "\n".join(lines)
+
+
+def command_parser(name: str) -> argparse.ArgumentParser:
+    """The argument parser of command ``name``: its module's ``build_parser()`` (read by the CLI reference)."""
+    return importlib.import_module(COMMANDS[name][0]).build_parser()
 
 
 def main(argv: list[str]) -> int:

@@ -27,7 +27,7 @@ from training.train.run import load_model
 CARD_NAME = "skin_inversion.json"
 
 
-def parser() -> argparse.ArgumentParser:
+def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="python -m training export", description=__doc__.splitlines()[0],
                                 formatter_class=argparse.RawDescriptionHelpFormatter, epilog=__doc__)
     p.add_argument("--run", type=Path, required=True, help="run folder of `python -m training train`")
@@ -84,7 +84,7 @@ def export_run(run_dir: Path, out: Path, *, weights: str = "auto", max_mb: float
 
 
 def main(argv: list[str]) -> int:
-    args = parser().parse_args(argv)
+    args = build_parser().parse_args(argv)
     command = portable_command("python -m training export", argv)
     try:
         card = export_run(args.run, args.out, weights=args.weights, max_mb=args.max_mb, parity_n=args.parity_n,

@@ -36,7 +36,7 @@ from training.sim.lut_interp import LookupTables
 TONE_KEYS = ("wavelength_nm", "R_d", "r_edges_cm", "profile", "photons")
 
 
-def _parser() -> argparse.ArgumentParser:
+def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog="python -m training fit",
         description="Fit mixtures of K homogeneous media to MC profiles through the lookup tables (paper §4).",
@@ -227,7 +227,7 @@ def _summary(dataset: Path, out: Path, splits: list[str]) -> int:
 
 
 def main(argv: list[str]) -> int:
-    args = _parser().parse_args(argv)
+    args = build_parser().parse_args(argv)
     torch.manual_seed(args.seed)
     if args.device == "cpu":
         torch.set_num_threads(max(1, args.threads))

@@ -27,7 +27,7 @@ from training.commands.options import error_status, parse_shard
 from training.sim.lut import ALBEDO_MAX, ALBEDO_MIN, G_MAX, G_MIN, G_NODES, MAX_STEPS, build_lut
 
 
-def _parser() -> argparse.ArgumentParser:
+def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog="python -m training lut",
         description="R(albedo, g) and P(r | albedo, g) of a semi-infinite medium at sigma_t = 1, n = 1.4, "
@@ -57,7 +57,7 @@ def _parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str]) -> int:
     """Run the command; returns the exit status (2 for bad input)."""
-    args = _parser().parse_args(argv)
+    args = build_parser().parse_args(argv)
     import torch
 
     torch.set_num_threads(max(1, args.threads))

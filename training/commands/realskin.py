@@ -36,7 +36,7 @@ from training.realskin.measurements import NIST_FILE, grid_channels, read_measur
 DEFAULT_DECODER = SHIPPED_DECODER
 
 
-def _parser() -> argparse.ArgumentParser:
+def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="python -m training realskin", description=__doc__.split("\n\n")[2],
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--data", type=Path, default=NIST_FILE,
@@ -68,7 +68,7 @@ def _cache_dir(args) -> Path:
 
 
 def main(argv: list[str]) -> int:
-    args = _parser().parse_args(argv)
+    args = build_parser().parse_args(argv)
     try:
         meas = read_measurements(args.data)
     except ValueError as exc:

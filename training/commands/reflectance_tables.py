@@ -12,11 +12,17 @@ from pathlib import Path
 from exporters import reflectance_tables
 
 
-def main(argv: list[str] | None = None) -> int:
+def build_parser() -> argparse.ArgumentParser:
+    """The command's argument parser (the CLI reference of the documentation reads it too)."""
     parser = argparse.ArgumentParser(prog="python -m training reflectance-tables",
                                      description=reflectance_tables.__doc__.splitlines()[0])
     parser.add_argument("--build", action="store_true", help="recompute the tables with iadpython")
     parser.add_argument("--out", type=Path, default=reflectance_tables.TABLE_PATH)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
     args = parser.parse_args(argv)
     if not args.build:
         parser.print_help()

@@ -240,7 +240,7 @@ def markdown(report: dict) -> str:
     return "\n".join(out)
 
 
-def _parser() -> argparse.ArgumentParser:
+def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="python -m training report", description=__doc__.splitlines()[0],
                                 formatter_class=argparse.RawDescriptionHelpFormatter, epilog=__doc__)
     p.add_argument("--dataset", type=Path, help="dataset folder (`python -m training dataset --out`)")
@@ -255,7 +255,7 @@ def _parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str]) -> int:
-    args = _parser().parse_args(argv)
+    args = build_parser().parse_args(argv)
     try:
         for option in ("dataset", "fits", "model_dir", "validation"):
             folder = getattr(args, option)

@@ -35,7 +35,7 @@ def reweighted(tone: np.ndarray, photons: int, seed: int, device: str, compile_)
     return reweight(traj, tone[None], device)
 
 
-def _parser() -> argparse.ArgumentParser:
+def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="python -m training simulate",
                                 description="Monte Carlo of one skin tone at all 376 wavelengths -> .npz.")
     p.add_argument("--tone", nargs=5, type=float, required=True,
@@ -55,7 +55,7 @@ def _parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str]) -> int:
     """Run the command; returns the exit status (2 for bad input)."""
-    args = _parser().parse_args(argv)
+    args = build_parser().parse_args(argv)
     compile_ = {"auto": "auto", "on": True, "off": False}[args.compile]
     try:
         tone = np.asarray(args.tone, dtype=np.float64)

@@ -19,7 +19,7 @@ from training.sim.medium import LayeredMedium
 from training.sim.transport import simulate
 
 
-def _parser() -> argparse.ArgumentParser:
+def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog="python -m training simulate-layers",
         description="Monte Carlo diffuse reflectance / transmittance of a layered medium (top layer first).",
@@ -58,7 +58,7 @@ def _medium(args: argparse.Namespace) -> LayeredMedium:
 
 def main(argv: list[str]) -> int:
     """Run the command; returns the exit status (2 for bad input)."""
-    args = _parser().parse_args(argv)
+    args = build_parser().parse_args(argv)
     try:
         medium = _medium(args)
         if args.photons < 1:

@@ -44,7 +44,8 @@ def plot_swatches(tone_set: ToneSet, srgb: np.ndarray, out: Path, title: str) ->
     plt.close(fig)
 
 
-def main(argv: list[str]) -> int:
+def build_parser() -> argparse.ArgumentParser:
+    """The command's argument parser (the CLI reference of the documentation reads it too)."""
     parser = argparse.ArgumentParser(prog="python -m training swatches", description=__doc__.splitlines()[0])
     parser.add_argument("--out", type=Path, required=True, help="PNG file to write")
     parser.add_argument("--photons", type=int, default=2000, help="photons per wavelength per tone")
@@ -52,7 +53,11 @@ def main(argv: list[str]) -> int:
     parser.add_argument("--threads", type=int, default=1,
                         help="torch CPU threads (1 is fastest for the walker on a busy 2-core machine)")
     parser.add_argument("--device", default="cpu")
-    args = parser.parse_args(argv)
+    return parser
+
+
+def main(argv: list[str]) -> int:
+    args = build_parser().parse_args(argv)
     import torch
 
     torch.set_num_threads(max(1, args.threads))

@@ -21,7 +21,8 @@ from exporters.texel_records import CollapseOptions
 from training.paths import SHIPPED_MODEL, SHIPPED_TABLE
 
 
-def main(argv: list[str] | None = None) -> int:
+def build_parser() -> argparse.ArgumentParser:
+    """The command's argument parser (the CLI reference of the documentation reads it too)."""
     parser = argparse.ArgumentParser(prog="python -m training texel-table",
                                      description=texel_table.__doc__.splitlines()[0])
     parser.add_argument("--model", type=Path, default=SHIPPED_MODEL, help="skin_inversion.onnx")
@@ -34,7 +35,11 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--threads", type=int, default=0, help="onnxruntime threads (0 = all cores)")
     parser.add_argument("--overwrite", action="store_true")
     parser.add_argument("--check", action="store_true", help="only check that --out was made from --model")
-    args = parser.parse_args(argv)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
     if args.check:
         table = texel_table.load(args.out)
         sha = sha256_file(args.model)

@@ -31,7 +31,7 @@ from training.validate import mitsuba_scene as em
 DEFAULT_MODEL_DIR = SHIPPED_MODEL_DIR
 
 
-def _parser() -> argparse.ArgumentParser:
+def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="python -m training validate", description="Reproduce the paper's validation.")
     p.add_argument("--out", type=Path, help="output folder (tables.md, tables.json, fig_*.png, cache/)")
     p.add_argument("--quick", action="store_true",
@@ -159,7 +159,7 @@ def _summary(record: dict) -> str:
 
 def main(argv: list[str]) -> int:
     """Run the command; exit 2 with a one-line error for bad input."""
-    args = _parser().parse_args(argv)
+    args = build_parser().parse_args(argv)
     if args.out is None:
         print("error: give --out DIR (the folder for the tables and figures).", file=sys.stderr)
         return 2

@@ -13,7 +13,7 @@ with ``unit_to_tones``:
   ``CORE_RANGES``, the part of the box where the model's colours are skin's (f_mel <= 0.2, L* >~ 25 in
   this model; f_blood in the physiological 0.2-7 %), the rest from the whole box (``PARAM_RANGES``),
   which stays covered.  Together: about 7 % near-black and 73 % skin colours
-  (``python -m training.realskin.distribution``; README "Building the dataset").
+  (``python -m training.realskin.distribution``; docs/research/dataset.md).
 
 The epidermis thickness is then snapped to ``T_EPI_LEVELS_CM`` so that every stored tone is simulated
 exactly at its stored thickness, and tones of one level share scattering trajectories.
@@ -38,7 +38,8 @@ _LOG = np.array([name in LOG_SCALED for name in PARAM_NAMES])
 #: Share of the tones drawn from the skin core ``CORE_RANGES`` instead of the whole box.
 CORE_SHARE = 0.25
 #: The skin core: the whole box but f_mel <= 0.2 (L* >~ 25 in this model: f_mel 0.15 gives R ~ 0.044 in the
-#: visible, README "Physical trends") and f_blood 0.002-0.07 (physiological blood volume fraction, Jacques 2013
+#: visible, docs/research/training.md, "Physical trends") and f_blood 0.002-0.07 (physiological blood
+#: volume fraction, Jacques 2013
 #: PMB 58:R37 Table 3 and the skin-optics notes' 0.2-7 %).
 CORE_RANGES: dict[str, tuple[float, float]] = {**PARAM_RANGES, "f_mel": (0.001, 0.2), "f_blood": (0.002, 0.07)}
 CORE_LOW = np.array([CORE_RANGES[name][0] for name in PARAM_NAMES])

@@ -11,7 +11,7 @@ training/data/store.py), which must be complete.  Output, per split, ``OUT/<spli
     done (N,) bool; attributes: ks, method, refl_loss, wavelength_stride, anchor_every, max_tones,
     lut (path), lut_sha256, dataset attributes.
 
-Speed (what makes a laptop run possible; measured in the README):
+Speed (what makes a laptop run possible; measured in docs/research/fitting.md):
 
 * ``anchor_every`` = a > 0: per tone, every a-th fitted wavelength (an *anchor*) gets the full schedule
   (coarse search, K = 1 -> 2 -> 3 with all the starts of ``fit_schedule``); every other wavelength is

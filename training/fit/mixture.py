@@ -109,7 +109,7 @@ def mix(p_k: torch.Tensor, r_k: torch.Tensor, w: torch.Tensor, weighting: str = 
     P_hat is ``radial_profile`` / R_hat: the profile that a renderer picking medium k with probability w_k
     produces, and the issue's R_d^fit(r) normalised.  (The paper's §4 text writes sum_k w_k P_k, which
     differs from the rendered profile whenever the components' R_k differ; fitted that way, K = 2 and 3
-    rendered worse profiles than K = 1 - see the README, "Fitting the dataset".)  ``weighting="paper"``
+    rendered worse profiles than K = 1 - see docs/research/fitting.md.)  ``weighting="paper"``
     returns that sum_k w_k P_k / sum_k w_k instead (the gate's "paper as written" fits)."""
     if weighting == "paper":
         return (w[..., None] * p_k).sum(-2) / w.sum(-1, keepdim=True).clamp_min(1e-300), (w * r_k).sum(-1)

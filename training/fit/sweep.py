@@ -24,7 +24,7 @@ can sit in different basins, and a decoder supervised by them learns the jumps.
 Cost: the anchors' full schedules as before, plus one warm run per other wavelength (as the nearest-anchor
 warm starts cost), plus one per anchor and the repairs; each warm run now starts one fitted wavelength
 away instead of up to half an anchor spacing.  The sweep is sequential in wavelength, batched over the
-tones of a chunk: a larger ``--chunk-tones`` amortises the per-call overhead (measured in the README).
+tones of a chunk: a larger ``--chunk-tones`` amortises the per-call overhead (measured in docs/research/fitting.md).
 """
 
 from __future__ import annotations
@@ -41,7 +41,7 @@ from training.sim.lut_interp import LookupTables
 
 #: "Equally good" at an anchor: the continuation's joint loss at most this much above the independent
 #: fit's, relative (our choice: well inside the spread of the K = 3 fits' shape excess over tones; the
-#: README gives the measured share of anchors kept).
+#: sweep: docs/research/fitting.md).
 CONTINUITY_RTOL: float = 0.01
 #: ... or this much absolute (tones whose loss is near 0).
 CONTINUITY_ATOL: float = 1e-3

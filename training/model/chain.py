@@ -3,7 +3,7 @@
 ``SkinChain.invert(albedo_rgb)`` runs the whole chain (what ``skin_inversion.onnx`` computes) and
 ``SkinChain.decode(p)`` the spectral part (what ``skin_decoder.onnx`` computes).
 
-Input domain (the behaviour the ONNX graphs carry, documented in the model card and the README):
+Input domain (the behaviour the ONNX graphs carry, documented in the model card and docs/dev/conventions.md):
 
 * ``albedo_rgb`` (N, 3), linear sRGB.  A row with any NaN or +-Inf component is replaced, as a whole,
   by ``FALLBACK_ALBEDO_RGB`` (a mid skin tone); then every component is clamped to [0, 1] (an albedo

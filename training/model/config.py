@@ -21,7 +21,8 @@ Every constant with a physical meaning lives here, with its source:
   kernel maps valid weights to valid weights, and no component's weight can then change by more than the
   kernel's peak, 0.133, between neighbouring 2 nm steps: the "weight jump > 0.2" of the spectral coherence
   measure (``training.validate.coherence.JUMP_DW``) cannot happen, whatever the network learns.  The
-  prototypes without it jumped at a few fixed steps (README, "L_smooth").  6 nm is well below the width
+  prototypes without it jumped at a few fixed steps (docs/research/training.md, "L_smooth").  6 nm is
+  well below the width
   of the skin chromophores' bands (haemoglobin's Q bands ~20 nm) and only the weights are smoothed;
   alpha, g and sigma_t keep the full resolution.  Ours, not the paper's.  Models made before (no key in
   their config) have none.

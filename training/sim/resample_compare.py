@@ -235,7 +235,7 @@ def run(out: Path, photons: int, repeats: int, seed: int, quick: bool, log=print
     return summary
 
 
-def _parser() -> argparse.ArgumentParser:
+def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="python -m training resampling",
                                 description="Radial profile estimators (histogram, uniform bins, KDE, CDF "
                                 "resampling) against a high-photon reference at equal photons.")
@@ -251,7 +251,7 @@ def _parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str]) -> int:
     """Run the command; returns the exit status (2 for bad input)."""
-    args = _parser().parse_args(argv)
+    args = build_parser().parse_args(argv)
     photons = args.photons or (10_000 if args.quick else 100_000)
     repeats = args.repeats or (3 if args.quick else 4)
     if photons < 10 or repeats < 2:

@@ -27,7 +27,7 @@ PHEOMELANIN_EXPONENT = 4.75
 # --- Basal chromophores (fixed for every tone) -----------------------------------------------------
 BILIRUBIN_MOLAR_MASS = 584.66  # g/mol (PhotochemCAD)
 # Bilirubin is a plasma pigment: 0.05 g/L of whole blood (BioSpec basal value, Krishnaswamy &
-# Baranoski 2004), scaled by the blood fraction f_blood -- our choice, see README.
+# Baranoski 2004), scaled by the blood fraction f_blood -- our choice, see training/skin/README.md.
 BILIRUBIN_G_PER_L_BLOOD = 0.05
 BETA_CAROTENE_MOLAR_MASS = 536.87  # g/mol (PhotochemCAD)
 # beta-carotene basal concentrations (BioSpec lineage, Krishnaswamy & Baranoski 2004):

@@ -23,8 +23,8 @@ Shapes: N tones, W wavelengths, K components; ``u`` tensors are Dec_T's normalis
   - L_smooth = mean |u[..., l + 1] - u[..., l]| over all channels (finite differences over lambda).  The
     paper writes ||grad_lambda theta||_1 with lambda_smooth = 0.5 and does not say over what it sums; as a
     mean over steps, channels and tones, 0.5 is weak beside L_shape and L_refl: the rebuild's decoders
-    moved by 0.1 of each channel's range per 2 nm step (README, "L_smooth"); ``lambda_smooth`` (``train
-    --smooth-weight``) sets it.
+    moved by 0.1 of each channel's range per 2 nm step (docs/research/training.md, "L_smooth");
+    ``lambda_smooth`` (``train --smooth-weight``) sets it.
   - Ours, not the paper's: + shape_weight L_shape, the fitter's profile loss (``training.fit.loss``) of
     the decoded mixture's rendered profile sum_k w_k R_k P_k / sum_k w_k R_k against the Monte Carlo
     profile, at the fitted wavelengths (``profile_shape_loss``).  Why: the fits are degenerate - very
@@ -57,7 +57,7 @@ SHAPE_WAVELENGTHS_PER_STEP: int = 16
 SHAPE_BIN_STRIDE: int = 2
 #: The validation L_shape of each epoch, with dense targets: every 2nd of the 376 wavelengths (the fitted
 #: every 4th and the midpoints between them), all bins; at all 376 the evaluation alone cost 0.5x a laptop
-#: epoch (measured in the README).
+#: epoch (measured in docs/research/training.md).
 VALIDATION_SHAPE_EVERY: int = 2
 
 

@@ -99,7 +99,7 @@ def _wavelengths(text: str) -> list[float]:
         raise argparse.ArgumentTypeError(f"wavelengths must be comma-separated numbers in nm, got {text!r}") from exc
 
 
-def _parser() -> argparse.ArgumentParser:
+def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="python -m training mitsuba",
                                 description="Mitsuba 3 reflectance of the network's mixture vs ours vs ground truth.")
     p.add_argument("--tone", nargs=5, type=float, required=True,
@@ -136,7 +136,7 @@ def _table(rec: dict) -> str:
 
 def main(argv: list[str]) -> int:
     """Run the command; exit 2 with a one-line error for bad input or a missing Mitsuba."""
-    args = _parser().parse_args(argv)
+    args = build_parser().parse_args(argv)
     try:
         for name in ("spp", "photons", "batches"):
             if getattr(args, name) < 2:
