@@ -20,10 +20,10 @@ from pathlib import Path
 import bpy
 import numpy as np
 
-from exporters import bake, image_input, inference, maps, uv_coverage
-from exporters.image_input import AlbedoImage, IndexedAlbedo
-
 from . import nodes
+from .core import bake, image_input, inference, maps, uv_coverage
+
+AlbedoImage, IndexedAlbedo = image_input.AlbedoImage, image_input.IndexedAlbedo
 
 #: Custom properties on baked images: the bake key (exporters.bake.bake_key), component, map kind, K of the bake.
 KEY_PROP, K_PROP = "spectral_skin_sss_bake_key", "spectral_skin_sss_k"

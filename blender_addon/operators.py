@@ -10,9 +10,10 @@ from __future__ import annotations
 
 import bpy
 
-from exporters.bake import one_line
-
 from . import baker, nodes, preferences
+from .core import bake as _core_bake
+
+one_line = _core_bake.one_line
 
 _COLORSPACES = [
     ("FROM_IMAGE", "From Image", "The image's colour space setting in Blender (sRGB, Non-Color, Linear ...)"),

@@ -25,11 +25,14 @@ import json
 import os
 import tempfile
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
-import OpenImageIO as oiio
 
-from exporters.image_input import ImageError
+from .image_input import ImageError, openimageio
+
+if TYPE_CHECKING:
+    import OpenImageIO
 
 RGB_CHANNELS: tuple[str, ...] = ("R", "G", "B")
 SINGLE_CHANNEL: tuple[str, ...] = ("Y",)
@@ -119,6 +122,7 @@ def threads_of(threads: int) -> int:
 def set_threads(threads: int) -> None:
     """Threads OpenImageIO and OpenEXR may use for reading and (de)compressing images (0 = all cores)."""
     n = threads_of(threads)
+    oiio = openimageio()
     oiio.attribute("threads", n)
     oiio.attribute("exr_threads", n)
 
@@ -141,12 +145,12 @@ def fits_half(values: np.ndarray) -> bool:
 
 
 def _exr_spec(width: int, height: int, channels, units: str, compression: str = DEFAULT_COMPRESSION,
-              pixel_type: str = "float") -> oiio.ImageSpec:
+              pixel_type: str = "float") -> OpenImageIO.ImageSpec:
     if compression not in COMPRESSIONS:
         raise ValueError(f"EXR compression must be one of {COMPRESSIONS}, not {compression!r}")
     if pixel_type not in PIXEL_TYPES:
         raise ValueError(f"EXR pixel type must be one of {PIXEL_TYPES}, not {pixel_type!r}")
-    spec = oiio.ImageSpec(width, height, len(channels), pixel_type)
+    spec = openimageio().ImageSpec(width, height, len(channels), pixel_type)
     spec.channelnames = tuple(channels)
     spec.attribute("oiio:ColorSpace", "Non-Color")
     spec.attribute("spectral_skin_sss:colorspace", "Non-Color")
@@ -244,6 +248,7 @@ def read_exr(path: str | os.PathLike, channels: tuple[str, ...] | list[str] | No
     ``BIOPHYSICAL_CHANNELS`` comes back alphabetically; pass ``channels`` to get them in that order
     (KeyError naming the missing channel otherwise).
     """
+    oiio = openimageio()
     inp = oiio.ImageInput.open(str(path))
     if inp is None:
         raise ImageError(f"cannot read {path}: {oiio.geterror()}")
@@ -288,6 +293,7 @@ class MapStream:
         self.overwrite = overwrite
         self.tmp = _temp_name(self.path)
         self._rows = 0
+        oiio = openimageio()
         self._out = oiio.ImageOutput.create(str(self.tmp))
         if self._out is None or not self._out.open(str(self.tmp), _exr_spec(self.width, self.height, self.channels,
                                                                              units, compression, pixel_type)):
