@@ -20,16 +20,22 @@ Nothing in DIR is overwritten without --overwrite, and a failed bake leaves DIR 
 
 This file is a script: it imports ``exporters`` (numpy, onnxruntime, OpenImageIO) and never bpy, so it
 runs with the plain Python of the project venv (where the bpy module is also installed) as well as
-inside Blender, whose own Python finds onnxruntime in the installed extension's wheel folder.
+inside Blender, whose own Python finds onnxruntime in the installed extension's wheel folder (Blender puts
+that folder on ``sys.path`` itself).  ``exporters`` is the package beside this file, found without changing
+``sys.path``: in an installed extension the extension's own (``bl_ext.<repo>.spectral_skin_sss.exporters``),
+in the repository the checkout's top-level ``exporters`` (:func:`core_package`).
 """
 
 from __future__ import annotations
 
 import argparse
+import importlib
+import importlib.util
 import os
 import sys
 import time
 from pathlib import Path
+from types import ModuleType
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
@@ -46,30 +52,51 @@ def _script_argv(argv: list[str] | None) -> list[str]:
     return sys.argv[1:]
 
 
-def _make_importable() -> None:
-    """Put the folder holding ``exporters`` (the repository or the installed extension) on sys.path, and,
-    inside Blender, the extension's bundled-wheel folder (onnxruntime, OpenImageIO)."""
-    if str(ROOT) not in sys.path:
-        sys.path.insert(0, str(ROOT))
-    try:
-        import onnxruntime  # noqa: F401
-        return
-    except ImportError:
-        pass
-    try:
-        import bpy  # only inside Blender
-    except ImportError:
-        return
-    for base in (bpy.utils.user_resource("EXTENSIONS"), str(ROOT.parent)):
-        for site in Path(base).glob(".local/lib/python3*/site-packages"):
-            if str(site) not in sys.path:
-                sys.path.append(str(site))
+def _package_holding(folder: Path) -> str | None:
+    """Name of the imported package that ``folder`` is (its ``__init__.py``) or is a subpackage of (a package whose
+    ``__path__`` holds ``folder.parent``): ``bl_ext.user_default.spectral_skin_sss`` for an installed extension."""
+    init = folder / "__init__.py"
+    for name, module in list(sys.modules.items()):
+        file = getattr(module, "__file__", None)
+        if file and Path(file).resolve() == init and "." in name:
+            return name
+    for name, module in list(sys.modules.items()):
+        paths = getattr(module, "__path__", None) or []
+        if any(Path(p).resolve() == folder.parent for p in list(paths)) and init.is_file():
+            return f"{name}.{folder.name}"
+    return None
+
+
+def core_package() -> str:
+    """The full name of the ``exporters`` package beside this file, imported (see the module docstring)."""
+    if __package__:  # imported as a module: blender_addon.bake or <extension>.blender_addon.bake
+        home = __package__.rpartition(".")[0]
+        name = f"{home}.exporters" if home else "exporters"
+    elif (home := _package_holding(ROOT)) is not None:
+        name = f"{home}.exporters"
+    else:
+        name = "exporters"
+        if name not in sys.modules:
+            spec = importlib.util.find_spec(name)
+            mine = ROOT / name / "__init__.py"
+            if spec is None or spec.origin is None or Path(spec.origin).resolve() != mine:
+                spec = importlib.util.spec_from_file_location(name, mine,
+                                                              submodule_search_locations=[str(ROOT / name)])
+                module = importlib.util.module_from_spec(spec)
+                sys.modules[name] = module
+                spec.loader.exec_module(module)
+    importlib.import_module(name)
+    return name
+
+
+def core(module: str) -> ModuleType:
+    """``exporters.<module>`` of the package beside this file (:func:`core_package`)."""
+    return importlib.import_module(f"{core_package()}.{module}")
 
 
 def build_parser() -> argparse.ArgumentParser:
     """The command line; its defaults are the library's (exporters.bake.BakeOptions)."""
-    _make_importable()
-    from exporters import bake, image_input
+    bake, image_input = core("bake"), core("image_input")
 
     defaults = bake.BakeOptions()
     p = argparse.ArgumentParser(prog="bake.py", description=__doc__.splitlines()[0])
@@ -130,7 +157,7 @@ def main(argv: list[str] | None = None) -> int:
     except _Usage as exc:
         print(f"bake.py: error: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
-    from exporters import bake, image_input, inference, maps
+    bake, image_input, inference, maps = core("bake"), core("image_input"), core("inference"), core("maps")
 
     bad_input = (FileNotFoundError, FileExistsError, PermissionError, NotADirectoryError, image_input.ImageError,
                  inference.ModelError, bake.BakeError, ValueError)
@@ -185,9 +212,7 @@ def _read_mask(path: str | None):
     """The --uv-mask image as (H, W) bool (any non-zero colour channel = covered), or None."""
     if path is None:
         return None
-    from exporters import image_input
-
-    image = image_input.read_albedo(path, colorspace="linear")
+    image = core("image_input").read_albedo(path, colorspace="linear")
     return (image.rgb > 0).any(axis=2)
 
 

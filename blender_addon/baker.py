@@ -45,8 +45,8 @@ class BakeSettings:
     """What the operator asks for.  ``filepath`` (a file on disk) wins over ``image_name`` (an image
     datablock), which wins over the active Image Texture node of the active material.  ``storage``:
     "PACK" (images packed into the .blend) or "FILES" (EXR files in ``output_dir``, default a folder
-    beside the saved .blend).  ``backend``: "AUTO", "SVM" or "OSL".  ``model_colour``: the maps render the
-    model's own reflectance instead of the painted albedo.  ``exact``: every distinct colour through
+    beside the saved .blend).  ``backend``: "SVM" (the default) or "OSL" (only on request).  ``model_colour``:
+    the maps render the model's own reflectance instead of the painted albedo.  ``exact``: every distinct colour through
     the model instead of the fast-path table; ``uv_coverage``: evaluate only the texels the active mesh's UVs
     cover (the others take the maps of the most common covered colour); ``unit_scale_m``: metres per Blender
     unit for the radii (None: the scene's, :func:`scene_unit_scale`)."""
@@ -57,7 +57,7 @@ class BakeSettings:
     storage: str = "PACK"
     output_dir: str = ""
     colorspace: str = "FROM_IMAGE"
-    backend: str = "AUTO"
+    backend: str = "SVM"
     overwrite: bool = False
     model_colour: bool = False
     threads: int = 0
@@ -85,21 +85,28 @@ def active_image_node(material: bpy.types.Material | None) -> bpy.types.Node | N
 
 
 def pick_backend(scene: bpy.types.Scene, requested: str) -> str:
-    """SVM or OSL.  AUTO: OSL where Cycles can run it (scene device CPU, or GPU with OptiX), SVM elsewhere
-    (CUDA, HIP, Metal, oneAPI).  Asking for OSL on a device that cannot run it is an error."""
+    """SVM or OSL, as requested: SVM is the default on every device, OSL is used only when asked for.  Asking for
+    OSL on a device that cannot run it (a GPU other than OptiX) is an error."""
     device = scene.cycles.device if hasattr(scene, "cycles") else "CPU"
     compute = "NONE"
     cycles_addon = bpy.context.preferences.addons.get("cycles")
     if cycles_addon is not None:
         compute = getattr(cycles_addon.preferences, "compute_device_type", "NONE")
     osl_ok = device == "CPU" or compute == "OPTIX"
-    if requested == "AUTO":
-        return "OSL" if osl_ok else "SVM"
     if requested == "OSL" and not osl_ok:
         raise BakeInputError(f"OSL does not run on the scene's device ({compute} GPU): choose SVM")
     if requested not in ("SVM", "OSL"):
         raise BakeInputError(f"unknown shading path {requested!r}")
     return requested
+
+
+def osl_warning(scene: bpy.types.Scene, backend: str) -> str:
+    """The report's warning when an OSL group was made for a scene that has Open Shading Language off (the add-on
+    never changes the scene's shading system: that would change how every material of the scene renders)."""
+    if backend != "OSL" or not hasattr(scene, "cycles") or scene.cycles.shading_system:
+        return ""
+    return ("; warning: the OSL group renders only with Open Shading Language on (Render Properties > Render > Open "
+            "Shading Language), which this scene has off and the add-on leaves as it is; or choose Shading SVM")
 
 
 def _image_colorspace(image: bpy.types.Image, requested: str) -> str:
@@ -343,8 +350,6 @@ class AddonBake:
                 self.result = self.job.finish()
                 reused = self.result.reused
                 images, k_count = self._images(created_images), self.result.k
-            if self.backend == "OSL":
-                self.scene.cycles.shading_system = True
             if reused and self.material is not None and _wired_to(self.material, images):
                 return (f"up to date: the maps of this image, model and options are already in '{self.material.name}'"
                         "; nothing was recomputed or changed")
@@ -371,8 +376,7 @@ class AddonBake:
                 self._remove_temp_dir()
         if self.settings.storage == "FILES":
             report += f"; files in {self.out_dir}"
-        if self.backend == "OSL" and not osl_before:
-            report += "; Open Shading Language enabled for the scene"
+        report += osl_warning(self.scene, self.backend)
         notes = list(self.result.notes) if self.result is not None else []
         return report + ("; note: " + "; ".join(notes) if notes else "")
 

@@ -19,7 +19,7 @@ class SpectralSkinSettings(bpy.types.PropertyGroup):
     output_dir: bpy.props.StringProperty(name="Folder", subtype="DIR_PATH", default="",
                                          description="Output folder for saved maps (empty: beside the .blend)")
     colorspace: bpy.props.EnumProperty(name="Colour space", items=operators._COLORSPACES, default="FROM_IMAGE")
-    backend: bpy.props.EnumProperty(name="Shading", items=operators._BACKENDS, default="AUTO")
+    backend: bpy.props.EnumProperty(name="Shading", items=operators._BACKENDS, default="SVM")
     overwrite: bpy.props.BoolProperty(name="Overwrite files", default=False)
     model_colour: bpy.props.BoolProperty(name="Model's own colour", default=False,
                                          description=operators.MODEL_COLOUR_HELP)

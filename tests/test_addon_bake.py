@@ -94,22 +94,41 @@ def test_bake_osl_and_files_beside_blend(addon, albedo_png, tmp_path):
                                                                                  "anisotropy")}
     assert {p.name for p in folder.iterdir()} == expected | {"albedo_maps.json"}
     gnode = group_node(mat)
-    assert gnode.node_tree["spectral_skin_sss_backend"] == "OSL" and bpy.context.scene.cycles.shading_system
+    assert gnode.node_tree["spectral_skin_sss_backend"] == "OSL"
+    assert not bpy.context.scene.cycles.shading_system  # the scene's shading system is the user's to change
+    bpy.context.scene.cycles.shading_system = True
     image = gnode.inputs["k1 Radius"].links[0].from_node.image
     assert image.packed_file is None and Path(bpy.path.abspath(image.filepath)) == folder / "albedo_k1_radius.exr"
     px = render_small()
     assert np.all(np.isfinite(px)) and px[16, 16, :3].max() > 0.0
 
 
-def test_auto_backend_follows_the_device(addon, albedo_png):
+def test_svm_is_the_default_and_osl_only_on_request(addon, albedo_png):
+    assert bpy.ops.spectral_skin.invert_albedo.get_rna_type().properties["backend"].default == "SVM"
+    assert baker.BakeSettings(model_path="m.onnx").backend == "SVM"
     scene = bpy.context.scene
     scene.cycles.device = "CPU"
-    assert baker.pick_backend(scene, "AUTO") == "OSL"
+    assert baker.pick_backend(scene, "SVM") == "SVM" and baker.pick_backend(scene, "OSL") == "OSL"
+    assert "Open Shading Language" in baker.osl_warning(scene, "OSL") and baker.osl_warning(scene, "SVM") == ""
+    scene.cycles.shading_system = True
+    assert baker.osl_warning(scene, "OSL") == ""
     scene.cycles.device = "GPU"  # no OptiX on this machine: compute device type NONE
-    assert baker.pick_backend(scene, "AUTO") == "SVM"
     with pytest.raises(baker.BakeInputError, match="OSL does not run"):
         baker.pick_backend(scene, "OSL")
     assert baker.pick_backend(scene, "SVM") == "SVM"
+    with pytest.raises(baker.BakeInputError, match="unknown shading path"):
+        baker.pick_backend(scene, "AUTO")
+
+
+def test_osl_on_request_leaves_the_scene_shading_system_and_says_so(addon):
+    mesh = bpy.data.meshes.new("m")
+    obj = bpy.data.objects.new("o", mesh)
+    bpy.context.scene.collection.objects.link(obj)
+    mesh.materials.append(bpy.data.materials.new("Skin"))
+    bpy.context.scene.cycles.shading_system = False
+    with bpy.context.temp_override(object=obj, active_object=obj):
+        assert bpy.ops.spectral_skin.add_mixture(components=1, backend="OSL") == {"FINISHED"}
+    assert not bpy.context.scene.cycles.shading_system
 
 
 def test_generated_image_and_shared_group(addon, tmp_path):

@@ -1,0 +1,125 @@
+"""Run by tests/test_addon_versions.py with the Python of another Blender (bpy 4.2 ... 5.3): the extension zip is
+installed through Blender's own extension system, enabled, used, and left enabled at exit.
+
+    python tests/installed_addon_check.py ZIP WORKDIR
+
+BLENDER_USER_RESOURCES must point into WORKDIR (nothing is written to the user's Blender configuration).  Prints
+one line ``RESULT{json}``; the caller checks it and that the process exits by itself with status 0 (the add-on
+is still registered then: 4.2 crashed and 4.5 hung there).  Imports only the standard library, bpy and numpy
+(what Blender's own Python has), so it runs unchanged on Python 3.11 and 3.13.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import sys
+import time
+
+import bpy
+import numpy as np
+
+EXTENSION = "bl_ext.user_default.spectral_skin_sss"
+#: A light skin colour (linear Rec.709) for the tiny bake.
+SKIN_LINEAR = (0.55, 0.32, 0.25)
+
+
+def render_centre(scene) -> list[float]:
+    """Render the scene (Cycles CPU, 16 x 16, 4 samples) and return the linear RGB of the centre pixel."""
+    scene.render.engine = "CYCLES"
+    scene.cycles.device = "CPU"
+    scene.cycles.samples = 4
+    scene.cycles.use_denoising = False
+    scene.render.resolution_x = scene.render.resolution_y = 16
+    scene.render.resolution_percentage = 100
+    scene.render.image_settings.file_format = "OPEN_EXR"
+    scene.render.filepath = os.path.join(sys.argv[2], f"render_{time.monotonic_ns()}.exr")
+    bpy.ops.render.render(write_still=True)
+    image = bpy.data.images.load(scene.render.filepath)
+    px = np.empty(16 * 16 * 4, np.float32)
+    image.pixels.foreach_get(px)
+    bpy.data.images.remove(image)
+    return px.reshape(16, 16, 4)[8, 8, :3].astype(float).tolist()
+
+
+def skin_scene():
+    """The scene emptied (factory settings would also disable the extension), with a UV sphere in front of a
+    camera, lit by a white world; returns the sphere."""
+    for obj in list(bpy.data.objects):
+        bpy.data.objects.remove(obj)
+    scene = bpy.context.scene
+    world = bpy.data.worlds.new("World")
+    world.use_nodes = True
+    world.node_tree.nodes["Background"].inputs["Color"].default_value = (1.0, 1.0, 1.0, 1.0)
+    scene.world = world
+    bpy.ops.mesh.primitive_uv_sphere_add(radius=1.0)
+    obj = bpy.context.active_object
+    camera = bpy.data.objects.new("Camera", bpy.data.cameras.new("Camera"))
+    camera.location = (0.0, -4.0, 0.0)
+    camera.rotation_euler = (1.5708, 0.0, 0.0)
+    scene.collection.objects.link(camera)
+    scene.camera = camera
+    return obj
+
+
+def main() -> dict:
+    zip_path, work = sys.argv[1], sys.argv[2]
+    out: dict = {"blender": bpy.app.version_string, "python": "%d.%d" % sys.version_info[:2]}
+    t0 = time.perf_counter()
+    bpy.ops.extensions.package_install_files(filepath=zip_path, repo="user_default", enable_on_install=True)
+    out["install_s"] = round(time.perf_counter() - t0, 2)
+    out["enabled"] = EXTENSION in bpy.context.preferences.addons
+    package = sys.modules[EXTENSION]
+    folder = os.path.dirname(os.path.abspath(package.__file__))
+    out["top_level_modules"] = sorted(m for m in ("exporters", "blender_addon") if m in sys.modules)
+    out["extension_on_sys_path"] = any(os.path.abspath(p or ".") == folder for p in sys.path)
+    out["openimageio_imported_by_enabling"] = "OpenImageIO" in sys.modules
+    out["core"] = sys.modules[f"{EXTENSION}.blender_addon.core"].EXPORTERS
+
+    # The baked path: Invert Skin Albedo on an image painted in Blender (no file), SVM, maps packed.
+    obj = skin_scene()
+    bpy.context.preferences.addons[EXTENSION].preferences.threads = 1
+    image = bpy.data.images.new("painted", 4, 4, float_buffer=True)
+    image.colorspace_settings.name = "Linear Rec.709"
+    image.pixels.foreach_set([*SKIN_LINEAR, 1.0] * 16)
+    material = bpy.data.materials.new("Skin")
+    material.use_nodes = True
+    obj.data.materials.append(material)
+    tex = material.node_tree.nodes.new("ShaderNodeTexImage")
+    tex.image = image
+    material.node_tree.links.new(tex.outputs["Color"], material.node_tree.nodes["Principled BSDF"].inputs[0])
+    material.node_tree.nodes.active = tex
+    t0 = time.perf_counter()
+    with bpy.context.temp_override(object=obj, active_object=obj):
+        out["invert"] = sorted(bpy.ops.spectral_skin.invert_albedo())
+    out["invert_s"] = round(time.perf_counter() - t0, 2)
+    onnxruntime = sys.modules.get("onnxruntime")
+    out["onnxruntime"] = getattr(onnxruntime, "__file__", None)
+    out["openimageio"] = getattr(sys.modules.get("OpenImageIO"), "__file__", None)
+    groups = [n.node_tree for n in material.node_tree.nodes if n.bl_idname == "ShaderNodeGroup"]
+    out["group_backend"] = groups[0].get("spectral_skin_sss_backend") if groups else None
+    out["shading_system_after_invert"] = bool(bpy.context.scene.cycles.shading_system)
+    t0 = time.perf_counter()
+    out["svm_centre"] = render_centre(bpy.context.scene)
+    out["svm_render_s"] = round(time.perf_counter() - t0, 2)
+
+    # OSL on request: the Script node compiles (Cycles 4.2 has no oslquery) and renders once OSL is turned on.
+    obj = skin_scene()
+    material = bpy.data.materials.new("SkinOSL")
+    material.use_nodes = True
+    obj.data.materials.append(material)
+    with bpy.context.temp_override(object=obj, active_object=obj):
+        out["add_osl"] = sorted(bpy.ops.spectral_skin.add_mixture(components=1, backend="OSL"))
+    out["shading_system_after_add_osl"] = bool(bpy.context.scene.cycles.shading_system)
+    group = next(n.node_tree for n in material.node_tree.nodes if n.bl_idname == "ShaderNodeGroup")
+    script = next(n for n in group.nodes if n.bl_idname == "ShaderNodeScript")
+    out["osl_compiled"] = bool(script.bytecode) and "BSSRDF" in script.outputs
+    bpy.context.scene.cycles.shading_system = True
+    t0 = time.perf_counter()
+    out["osl_centre"] = render_centre(bpy.context.scene)
+    out["osl_render_s"] = round(time.perf_counter() - t0, 2)
+    return out
+
+
+if __name__ == "__main__":
+    print("RESULT" + json.dumps(main()), flush=True)
