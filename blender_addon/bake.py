@@ -100,7 +100,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     defaults = bake.BakeOptions()
     p = argparse.ArgumentParser(prog="bake.py", description=__doc__.splitlines()[0])
-    p.add_argument("--albedo", required=True, help="albedo image (PNG/TIFF 8 or 16 bit, EXR, ...)")
+    p.add_argument("--albedo", required=True, help="albedo image (PNG/TIFF 8 or 16 bit, EXR, ...); a UDIM image as "
+                                                   "its tiles' pattern, e.g. skin.<UDIM>.png: every tile is baked")
     p.add_argument("--out", required=True, help="output folder (created if missing)")
     p.add_argument("--target", default="cycles", help="comma-separated subset of cycles,physical,spectral "
                                                       "(default cycles)")
@@ -167,6 +168,7 @@ def main(argv: list[str] | None = None) -> int:
         return EXIT_BAD_INPUT
     out = Path(args.out)
     created = False
+    results = []
     try:
         created = maps.make_output_folder(out)
         options = bake.BakeOptions(targets=bake.parse_targets(args.target), unit_scale_m=args.unit_scale,
@@ -186,26 +188,54 @@ def main(argv: list[str] | None = None) -> int:
                 print(f"bake.py: {100 * fraction:.0f} %", flush=True)
 
         t0 = time.perf_counter()
-        result = bake.bake(args.albedo, out, args.model, options, colorspace=args.colorspace, progress=progress)
+        for albedo in _albedo_files(args.albedo, args.uv_mask, image_input):
+            if not args.quiet and albedo != args.albedo:
+                print(f"bake.py: tile {Path(albedo).name}", flush=True)
+            results.append(bake.bake(albedo, out, args.model, options, colorspace=args.colorspace, progress=progress))
+            last[0] = 0.0
     except bad_input as exc:
+        _remove_written(results)
         if created:
             _remove_if_empty(out)
         print(f"bake.py: error: {bake.one_line(exc)}", file=sys.stderr)
         return EXIT_BAD_INPUT
     except BaseException:
+        _remove_written(results)
         if created:
             _remove_if_empty(out)
         raise
+    for result in results:
+        _report(result, out, args.quiet, t0)
+    return 0
+
+
+def _albedo_files(albedo: str, uv_mask: str | None, image_input) -> list[str]:
+    """The image files to bake: ``albedo`` itself, or every tile of a UDIM pattern (exporters.image_input)."""
+    if image_input.UDIM_TOKEN not in albedo:
+        return [albedo]
+    if uv_mask is not None:
+        raise ValueError("--uv-mask takes one image: bake the tiles of a UDIM albedo one by one to give each its mask")
+    return [str(path) for _, path in image_input.udim_tiles(albedo)]
+
+
+def _remove_written(results: list) -> None:
+    """Undo the tiles already baked in this run when a later one fails (the folder is left as it was)."""
+    for result in results:
+        if not result.reused:
+            for path in [*result.files, result.json_path]:
+                Path(path).unlink(missing_ok=True)
+
+
+def _report(result, out: Path, quiet: bool, t0: float) -> None:
     for note in result.notes:
         if note.startswith("warning: "):
             print(f"bake.py: {note}", file=sys.stderr)
-        elif not args.quiet:
+        elif not quiet:
             print(f"bake.py: note: {note}")
-    if not args.quiet:
+    if not quiet:
         verb = "kept" if result.reused else "wrote"
         print(f"bake.py: {verb} {len(result.files)} maps (K={result.k}) and {result.json_path.name} in {out} "
               f"in {time.perf_counter() - t0:.1f} s")
-    return 0
 
 
 def _read_mask(path: str | None):

@@ -146,6 +146,37 @@ class IndexedAlbedo:
 
 
 # -- colour space ---------------------------------------------------------------------------------------------
+#: The tile token of a UDIM (tiled) image's file name, as Blender writes it: ``skin.<UDIM>.png``.
+UDIM_TOKEN = "<UDIM>"
+#: UDIM tile numbers: 1001 + u + 10 v for tile column u (0-9) and row v (0-99).
+UDIM_FIRST, UDIM_LAST = 1001, 1999
+
+
+def udim_tiles(pattern: str | os.PathLike) -> list[tuple[int, Path]]:
+    """The tiles of a UDIM image on disk: ``pattern`` holds :data:`UDIM_TOKEN` once (``skin.<UDIM>.png``); returns
+    (tile number, file) for every existing file whose name has a tile number in its place, by tile.
+    FileNotFoundError (one line) when none exists."""
+    pattern = Path(pattern)
+    head, token, tail = pattern.name.partition(UDIM_TOKEN)
+    if not token or UDIM_TOKEN in tail or UDIM_TOKEN in str(pattern.parent):
+        raise ValueError(f"{pattern}: a UDIM file name holds {UDIM_TOKEN} once, in the file name")
+    tiles = []
+    for path in pattern.parent.glob(f"{head}[0-9][0-9][0-9][0-9]{tail}"):
+        number = int(path.name[len(head): len(head) + 4])
+        if UDIM_FIRST <= number <= UDIM_LAST and path.is_file():
+            tiles.append((number, path))
+    if not tiles:
+        raise FileNotFoundError(f"no UDIM tile of {pattern} found (files named {head}1001{tail}, {head}1002{tail} ...)")
+    return sorted(tiles)
+
+
+def udim_tile_stem(pattern: str | os.PathLike, tile: int) -> str:
+    """The file stem of one tile of a UDIM pattern: ``skin.<UDIM>.png``, 1002 -> ``skin.1002``.  Baked per tile,
+    its maps are ``skin.1002_k1_color.exr`` ... (docs/contracts.md §4), which Blender reads back as the UDIM image
+    ``skin.<UDIM>_k1_color.exr``."""
+    return Path(Path(pattern).name.replace(UDIM_TOKEN, f"{tile:04d}")).stem
+
+
 def check_colorspace(colorspace: str) -> None:
     """ValueError unless ``colorspace`` is one a reader takes (``COLORSPACES``)."""
     if colorspace not in COLORSPACES:

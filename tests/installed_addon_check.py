@@ -25,10 +25,11 @@ SKIN_LINEAR = (0.55, 0.32, 0.25)
 
 
 def render_centre(scene) -> list[float]:
-    """Render the scene (Cycles CPU, 16 x 16, 4 samples) and return the linear RGB of the centre pixel."""
+    """Render the scene (Cycles CPU, 16 x 16, 8 samples) and return the mean linear RGB of its centre 6 x 6
+    pixels (all on the sphere)."""
     scene.render.engine = "CYCLES"
     scene.cycles.device = "CPU"
-    scene.cycles.samples = 4
+    scene.cycles.samples = 8
     scene.cycles.use_denoising = False
     scene.render.resolution_x = scene.render.resolution_y = 16
     scene.render.resolution_percentage = 100
@@ -39,7 +40,7 @@ def render_centre(scene) -> list[float]:
     px = np.empty(16 * 16 * 4, np.float32)
     image.pixels.foreach_get(px)
     bpy.data.images.remove(image)
-    return px.reshape(16, 16, 4)[8, 8, :3].astype(float).tolist()
+    return px.reshape(16, 16, 4)[5:11, 5:11, :3].mean(axis=(0, 1)).astype(float).tolist()
 
 
 def skin_scene():
@@ -63,8 +64,8 @@ def skin_scene():
 
 
 def main() -> dict:
-    zip_path, work = sys.argv[1], sys.argv[2]
-    out: dict = {"blender": bpy.app.version_string, "python": "%d.%d" % sys.version_info[:2]}
+    zip_path = sys.argv[1]
+    out: dict = {"blender": bpy.app.version_string, "python": "{}.{}".format(*sys.version_info[:2])}
     t0 = time.perf_counter()
     bpy.ops.extensions.package_install_files(filepath=zip_path, repo="user_default", enable_on_install=True)
     out["install_s"] = round(time.perf_counter() - t0, 2)
@@ -76,7 +77,8 @@ def main() -> dict:
     out["openimageio_imported_by_enabling"] = "OpenImageIO" in sys.modules
     out["core"] = sys.modules[f"{EXTENSION}.blender_addon.core"].EXPORTERS
 
-    # The baked path: Invert Skin Albedo on an image painted in Blender (no file), SVM, maps packed.
+    # The baked path: Invert Skin Albedo on an image painted in Blender (no file), every colour through the model
+    # (onnxruntime from the extension's wheels), SVM, maps packed.
     obj = skin_scene()
     bpy.context.preferences.addons[EXTENSION].preferences.threads = 1
     image = bpy.data.images.new("painted", 4, 4, float_buffer=True)
@@ -91,7 +93,7 @@ def main() -> dict:
     material.node_tree.nodes.active = tex
     t0 = time.perf_counter()
     with bpy.context.temp_override(object=obj, active_object=obj):
-        out["invert"] = sorted(bpy.ops.spectral_skin.invert_albedo())
+        out["invert"] = sorted(bpy.ops.spectral_skin.invert_albedo(exact=True))
     out["invert_s"] = round(time.perf_counter() - t0, 2)
     onnxruntime = sys.modules.get("onnxruntime")
     out["onnxruntime"] = getattr(onnxruntime, "__file__", None)
@@ -111,8 +113,11 @@ def main() -> dict:
     with bpy.context.temp_override(object=obj, active_object=obj):
         out["add_osl"] = sorted(bpy.ops.spectral_skin.add_mixture(components=1, backend="OSL"))
     out["shading_system_after_add_osl"] = bool(bpy.context.scene.cycles.shading_system)
-    group = next(n.node_tree for n in material.node_tree.nodes if n.bl_idname == "ShaderNodeGroup")
-    script = next(n for n in group.nodes if n.bl_idname == "ShaderNodeScript")
+    gnode = next(n for n in material.node_tree.nodes if n.bl_idname == "ShaderNodeGroup")
+    for socket, rgb in (("k1 Color", SKIN_LINEAR), ("k1 Radius", (0.3, 0.1, 0.05))):
+        value = gnode.inputs[socket].default_value
+        gnode.inputs[socket].default_value = (*rgb, 1.0)[: len(value)]
+    script = next(n for n in gnode.node_tree.nodes if n.bl_idname == "ShaderNodeScript")
     out["osl_compiled"] = bool(script.bytecode) and "BSSRDF" in script.outputs
     bpy.context.scene.cycles.shading_system = True
     t0 = time.perf_counter()
