@@ -176,8 +176,7 @@ def main(argv: list[str] | None = None) -> int:
                                    model_colour=args.model_colour, ior=args.ior,
                                    overwrite=args.overwrite, exact=args.exact, table_path=args.table,
                                    force=args.force, texel_mask=_read_mask(args.uv_mask),
-                                   prune_share=(bake.DEFAULT_PRUNE_SHARE if args.prune_share is None
-                                                else args.prune_share),
+                                   prune_share=_prune_share(args, bake, image_input),
                                    compression=args.exr_compression or maps.DEFAULT_COMPRESSION,
                                    half_maps=False if args.float_maps else None)
         last = [0.0]
@@ -207,6 +206,17 @@ def main(argv: list[str] | None = None) -> int:
     for result in results:
         _report(result, out, args.quiet, t0)
     return 0
+
+
+def _prune_share(args, bake, image_input) -> float:
+    """--prune-share, whose default is 0 for a UDIM albedo: each tile then keeps all K components, so every map
+    exists for every tile (a pruned component missing from one tile would leave a hole in that map's UDIM set)."""
+    if image_input.UDIM_TOKEN not in args.albedo:
+        return bake.DEFAULT_PRUNE_SHARE if args.prune_share is None else args.prune_share
+    if args.prune_share:
+        raise ValueError("--prune-share drops components tile by tile, so a UDIM albedo's maps could miss tiles: "
+                         "leave it out for UDIM albedos")
+    return 0.0
 
 
 def _albedo_files(albedo: str, uv_mask: str | None, image_input) -> list[str]:

@@ -20,7 +20,7 @@ from pathlib import Path
 import bpy
 import numpy as np
 
-from . import nodes
+from . import nodes, tiles
 from .core import bake, image_input, inference, maps, uv_coverage
 
 AlbedoImage, IndexedAlbedo = image_input.AlbedoImage, image_input.IndexedAlbedo
@@ -205,24 +205,33 @@ class AddonBake:
         self.albedo, self.stem, self.input_name = self._read_albedo()
         self.backend = pick_backend(self.scene, settings.backend)
         self.model = inference.ModelFile(settings.model_path, threads=settings.threads)  # loaded if needed
-        height, width = (self.albedo.shape if isinstance(self.albedo, IndexedAlbedo) else
-                         self.albedo.rgb.shape[:2])
-        mask, self.uv_note = (mesh_uv_mask(obj, self.source_node, width, height) if settings.uv_coverage
-                              else (None, "off"))
+        self.tiled = isinstance(self.albedo, tiles.TiledAlbedo)
+        if self.tiled:
+            mask, self.uv_note = None, "UDIM: every texel of every tile"
+        else:
+            height, width = (self.albedo.shape if isinstance(self.albedo, IndexedAlbedo) else
+                             self.albedo.rgb.shape[:2])
+            mask, self.uv_note = (mesh_uv_mask(obj, self.source_node, width, height) if settings.uv_coverage
+                                  else (None, "off"))
         self.out_dir, self._temp_dir = self._output_folder()
         scale = scene_unit_scale(self.scene) if settings.unit_scale_m is None else float(settings.unit_scale_m)
         self.options = bake.BakeOptions(targets=("cycles",), unit_scale_m=scale,
                                         threads=settings.threads, chunk=settings.chunk,
                                         model_colour=settings.model_colour, overwrite=settings.overwrite,
-                                        exact=settings.exact, texel_mask=mask)
+                                        exact=settings.exact, texel_mask=mask,
+                                        **({"prune_share": 0.0} if self.tiled else {}))
         try:
-            self.albedo = bake.BakeJob.index(self.albedo)
-            image_id = self.image_id or bake.pixels_id(self.albedo)
-            self.key = bake.job_key(image_id, self.model.sha256, self.stem, self.options, self.albedo.shape)
-            self.reused_images = self._packed_up_to_date() if settings.storage == "PACK" else None
-            self.job = None if self.reused_images is not None else bake.BakeJob(
-                self.albedo, self.out_dir, self.stem, self.model, self.options, input_image=self.input_name,
-                image_id=image_id)
+            if self.tiled:
+                self.job = tiles.TiledJob(self.albedo, self.out_dir, self.model, self.options)
+                self.key, self.reused_images = self.job.key, None
+            else:
+                self.albedo = bake.BakeJob.index(self.albedo)
+                image_id = self.image_id or bake.pixels_id(self.albedo)
+                self.key = bake.job_key(image_id, self.model.sha256, self.stem, self.options, self.albedo.shape)
+                self.reused_images = self._packed_up_to_date() if settings.storage == "PACK" else None
+                self.job = None if self.reused_images is not None else bake.BakeJob(
+                    self.albedo, self.out_dir, self.stem, self.model, self.options, input_image=self.input_name,
+                    image_id=image_id)
         except BaseException:
             self._remove_temp_dir()
             raise
@@ -253,6 +262,9 @@ class AddonBake:
                                      "material, or choose an image")
             self.source_node, image = node, node.image
         cs = _image_colorspace(image, s.colorspace)
+        if image.source == "TILED":
+            albedo = tiles.tiled_albedo(image, cs)
+            return albedo, albedo.stem, albedo.pattern
         stem = Path(image.name).stem or "albedo"
         path = _image_file(image)
         if path is not None:
@@ -387,17 +399,20 @@ class AddonBake:
         k_count = self.result.k
         for spec in self.job.specs or bake.map_specs(self.stem, k_count, ("cycles",)):
             path = str(self.out_dir / spec.name)
+            name = self._tile_pattern(spec.name)
             if self.settings.storage == "PACK":
-                image = bpy.data.images.load(path, check_existing=False)
+                image = tiles.load_tiled(path) if self.tiled else bpy.data.images.load(path, check_existing=False)
                 created.append(image)
                 image.pack()
-                image.filepath_raw = f"//{self.stem}_skin_maps/{spec.name}"
-                image.name = spec.name
+                image.filepath_raw = f"//{self.stem}_skin_maps/{name}"
+                image.name = name
             else:
                 count = len(bpy.data.images)
                 image = bpy.data.images.load(path, check_existing=True)
                 if len(bpy.data.images) > count:
                     created.append(image)
+                    if self.tiled:
+                        image.source = "TILED"
                 elif not self.result.reused:
                     image.reload()
             image.colorspace_settings.name = "Non-Color"
@@ -405,6 +420,13 @@ class AddonBake:
                 self.key, spec.k, spec.kind.capitalize(), k_count)
             images[(spec.k, spec.kind.capitalize())] = image
         return images
+
+    def _tile_pattern(self, name: str) -> str:
+        """A map's name as a UDIM pattern for a tiled bake (``skin.1001_k1_color.exr`` -> ``skin.<UDIM>_k1_...``)."""
+        if not self.tiled:
+            return name
+        first = self.albedo.tiles[0][0]
+        return name.replace(f"{first:04d}", image_input.UDIM_TOKEN, 1)
 
     def _follow_source_uv(self, gnode: bpy.types.Node) -> None:
         """New texture nodes read the same UVs as the albedo's Image Texture node (when it has a link)."""

@@ -199,3 +199,47 @@ def test_invoke_in_background_runs_synchronously(addon, albedo_png):
         assert bpy.ops.spectral_skin.invert_albedo("INVOKE_DEFAULT", backend="SVM") == {"FINISHED"}
     assert group_node(mat).node_tree["spectral_skin_sss_k"] == K
     assert not bpy.context.window_manager.spectral_skin_running
+
+
+def test_udim_albedo_bakes_every_tile_into_udim_maps(addon, tmp_path):
+    # The case: a tiled image whose Blender file path is skin.<UDIM>.png, both tiles on disk.
+    write_image(tmp_path / "skin.1001.png", skin_codes(), "uint8")
+    dark = np.full((3, 4, 3), (120, 80, 60), np.uint8)
+    write_image(tmp_path / "skin.1002.png", dark, "uint8")
+    obj, mat, tex = skin_object(tmp_path / "skin.1001.png")
+    tex.image.source = "TILED"
+    assert tex.image.filepath.endswith("skin.<UDIM>.png") and [t.number for t in tex.image.tiles] == [1001, 1002]
+    bpy.ops.wm.save_as_mainfile(filepath=str(tmp_path / "scene.blend"))
+    assert run_invert(obj, backend="SVM", storage="FILES") == {"FINISHED"}
+    folder = tmp_path / "skin_skin_maps"
+    per_tile = {f"skin.{tile}_k{k}_{kind}.exr" for tile in (1001, 1002) for k in range(1, K + 1)
+                for kind in ("color", "radius", "weight", "anisotropy")}
+    assert {p.name for p in folder.iterdir()} == per_tile | {"skin.1001_maps.json", "skin.1002_maps.json"}
+    gnode = group_node(mat)
+    image = gnode.inputs["k1 Color"].links[0].from_node.image
+    assert image.source == "TILED" and [t.number for t in image.tiles] == [1001, 1002]
+    assert Path(bpy.path.abspath(image.filepath)) == folder / "skin.<UDIM>_k1_color.exr"
+    first = maps.read_exr(folder / "skin.1001_k1_weight.exr")[0]
+    second = maps.read_exr(folder / "skin.1002_k1_weight.exr")[0]
+    assert not np.allclose(first[1, 1], second[1, 1])  # each tile from its own colours
+    px = render_small()
+    assert np.all(np.isfinite(px)) and px[16, 16, :3].max() > 0.0
+
+
+def test_udim_albedo_packed_maps_and_a_missing_tile(addon, tmp_path):
+    write_image(tmp_path / "skin.1001.png", skin_codes(), "uint8")
+    write_image(tmp_path / "skin.1002.png", skin_codes(), "uint8")
+    obj, mat, tex = skin_object(tmp_path / "skin.1001.png")
+    tex.image.source = "TILED"
+    assert run_invert(obj, backend="SVM") == {"FINISHED"}
+    image = group_node(mat).inputs["k2 Radius"].links[0].from_node.image
+    assert image.source == "TILED" and len(image.packed_files) == 2 and image.name == "skin.<UDIM>_k2_radius.exr"
+    px = render_small()
+    assert np.all(np.isfinite(px)) and px[16, 16, :3].max() > 0.0
+    obj2, mat2, tex2 = skin_object(tmp_path / "skin.1001.png", name="Other")
+    tex2.image.source = "TILED"
+    (tmp_path / "skin.1002.png").unlink()
+    before = snapshot()
+    with pytest.raises(RuntimeError, match=r"tile 1002 of UDIM image '.*' is missing: .*skin\.1002\.png"):
+        run_invert(obj2, backend="SVM")
+    assert snapshot() == before

@@ -217,7 +217,7 @@ def test_udim_albedo_bakes_every_tile_to_maps_named_per_tile(tmp_path):
     second = maps.read_exr(out / "skin.1002_k1_color.exr")[0]
     assert first.shape == second.shape == (2, 3, 3) and not np.allclose(first, second)
     alone = tmp_path / "alone"  # a tile baked on its own gives the same maps
-    assert bake("--albedo", str(tiles / "skin.1002.png"), "--out", str(alone)).returncode == 0
+    assert bake("--albedo", str(tiles / "skin.1002.png"), "--out", str(alone), "--prune-share", "0").returncode == 0
     np.testing.assert_array_equal(maps.read_exr(alone / "skin.1002_k1_color.exr")[0], second)
 
 
@@ -232,3 +232,5 @@ def test_udim_albedo_errors_leave_the_folder_as_it_was(tmp_path):
     (tmp_path / "skin.1002.png").write_bytes(b"not a png")  # the second tile fails after the first was baked
     proc = bake("--albedo", str(tmp_path / "skin.<UDIM>.png"), "--out", str(out))
     assert proc.returncode == 2 and "skin.1002.png" in proc.stderr and not out.exists()
+    proc = bake("--albedo", str(tmp_path / "skin.<UDIM>.png"), "--out", str(out), "--prune-share", "0.01")
+    assert proc.returncode == 2 and "leave it out for UDIM albedos" in proc.stderr and not out.exists()
