@@ -1,7 +1,10 @@
 """Run by tests/test_addon_versions.py with the Python of another Blender (bpy 4.2 ... 5.3): the extension zip is
 installed through Blender's own extension system, enabled, used, and left enabled at exit.
 
-    python tests/installed_addon_check.py ZIP WORKDIR
+    python tests/installed_addon_check.py ZIP WORKDIR [register-only]
+
+``register-only``: install without enabling, import the extension's package and call its ``register()`` as a
+script would, then exit without unregistering (Blender then has nothing of its own to disable).
 
 BLENDER_USER_RESOURCES must point into WORKDIR (nothing is written to the user's Blender configuration).  Prints
 one line ``RESULT{json}``; the caller checks it and that the process exits by itself with status 0 (the add-on
@@ -11,6 +14,7 @@ is still registered then: 4.2 crashed and 4.5 hung there).  Imports only the sta
 
 from __future__ import annotations
 
+import importlib
 import json
 import os
 import sys
@@ -126,5 +130,13 @@ def main() -> dict:
     return out
 
 
+def register_only() -> dict:
+    bpy.ops.extensions.package_install_files(filepath=sys.argv[1], repo="user_default", enable_on_install=False)
+    package = importlib.import_module(EXTENSION)
+    package.register()
+    return {"blender": bpy.app.version_string, "registered": hasattr(bpy.types, "SPECTRAL_SKIN_OT_invert_albedo"),
+            "enabled": EXTENSION in bpy.context.preferences.addons}
+
+
 if __name__ == "__main__":
-    print("RESULT" + json.dumps(main()), flush=True)
+    print("RESULT" + json.dumps(register_only() if sys.argv[3:] == ["register-only"] else main()), flush=True)

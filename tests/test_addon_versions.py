@@ -66,3 +66,19 @@ def test_installs_bakes_renders_and_exits_cleanly(case, python, version, py_vers
     for key in ("svm_centre", "osl_centre"):  # skin-coloured: red > green > blue > 0, nothing black
         r, g, b = out[key]
         assert r > g > b > 0.05, (key, out[key])
+
+
+@pytest.mark.parametrize("case,python,version,py_version", BLENDERS, ids=[b[0] for b in BLENDERS])
+def test_a_script_that_registers_and_never_unregisters_exits_cleanly(case, python, version, py_version, linux_zip,
+                                                                       tmp_path):
+    # Blender 4.2's bpy module crashes and 4.5's hangs at exit when classes are left registered.
+    if not python.is_file():
+        pytest.skip(f"{python.parent.parent.name} is missing: `make blender-envs` creates it (make test does)")
+    env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "PYTHONHOME")}
+    env["BLENDER_USER_RESOURCES"] = str(tmp_path / "user")
+    proc = subprocess.run([str(python), str(CHECK), str(linux_zip), str(tmp_path), "register-only"],
+                          capture_output=True, text=True, timeout=120, env=env, cwd=tmp_path)
+    lines = [ln for ln in proc.stdout.splitlines() if ln.startswith("RESULT")]
+    assert proc.returncode == 0 and lines, f"exit status {proc.returncode}\n{proc.stdout[-2000:]}{proc.stderr[-3000:]}"
+    out = json.loads(lines[-1][len("RESULT"):])
+    assert out["blender"].startswith(version) and out["registered"] and not out["enabled"]
