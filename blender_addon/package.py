@@ -5,7 +5,7 @@
 
 Steps: fetch the wheels of the pinned versions for each platform and each Python of the supported Blenders
 (BUNDLED) with pip (``pip download --only-binary=:all: --no-deps``, cached in
-``--wheel-dir``); stage the extension in ``build/extension``
+``--wheel-dir``); stage the extension in a fresh folder under ``build/``
 (``__init__.py``, ``blender_addon/``, ``exporters/`` and the repository manifest with ``platforms`` and
 ``wheels`` added); build it with Blender's own extension tool (``blender_ext.py build``, the back-end of
 ``blender --command extension build``, shipped in the bpy wheel) and validate the zip with it.
@@ -25,10 +25,12 @@ from __future__ import annotations
 import argparse
 import importlib.metadata
 import importlib.util
+import os
 import re
 import shutil
 import subprocess
 import sys
+import tempfile
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -82,10 +84,13 @@ def fetch_wheel(dist: str, platform: str, python: str, version: str, wheel_dir: 
     if not download:
         raise SystemExit(f"package.py: no {what} in {wheel_dir} (run without --no-download)")
     wheel_dir.mkdir(parents=True, exist_ok=True)
-    cmd = [sys.executable, "-m", "pip", "download", f"{dist}=={version}", "--only-binary=:all:", "--no-deps",
-           "--python-version", python, "--implementation", "cp", "--platform", PLATFORM_TAGS[platform],
-           "-d", str(wheel_dir), "--quiet"]
-    subprocess.run(cmd, check=True)
+    with tempfile.TemporaryDirectory(dir=wheel_dir, prefix=".download-") as tmp:
+        cmd = [sys.executable, "-m", "pip", "download", f"{dist}=={version}", "--only-binary=:all:", "--no-deps",
+               "--python-version", python, "--implementation", "cp", "--platform", PLATFORM_TAGS[platform],
+               "-d", tmp, "--quiet"]
+        subprocess.run(cmd, check=True)
+        for wheel in Path(tmp).glob("*.whl"):  # whole files only: another build may be reading wheel_dir
+            os.replace(wheel, wheel_dir / wheel.name)
     existing = _wheels_for(wheel_dir, dist, version, platform, python)
     if not existing:
         raise SystemExit(f"package.py: pip did not produce the {what}")
@@ -127,7 +132,13 @@ def build(out: Path, platforms: list[str], wheel_dir: Path, download: bool = Tru
             raise SystemExit(f"package.py: unknown platform {p!r}; use {', '.join(PLATFORM_TAGS)}")
     wheels = [fetch_wheel(dist, p, python, importlib.metadata.version(dist), wheel_dir, download)
               for p in platforms for dist, pythons in BUNDLED.items() for python in pythons]
-    src = stage(ROOT / "build" / "extension", wheels, platforms)
+    (ROOT / "build").mkdir(exist_ok=True)
+    with tempfile.TemporaryDirectory(dir=ROOT / "build", prefix="extension-") as staging:  # one per build
+        return _build_staged(stage(Path(staging), wheels, platforms), out, platforms)
+
+
+def _build_staged(src: Path, out: Path, platforms: list[str]) -> list[Path]:
+    """Build the staged extension ``src`` into ``out`` with Blender's tool and validate each zip."""
     out.mkdir(parents=True, exist_ok=True)
     tool = blender_ext_tool()
     before = set(out.glob("*.zip"))
