@@ -68,8 +68,8 @@ lint: $(STAMP)
 demo: $(STAMP)
 	$(PY) -m training demo
 
-# Blender extension zip (dist/) for linux-x64 (onnxruntime wheels for Python 3.11 and 3.13, OpenImageIO for 3.11:
-# one zip for Blender 4.2 to 5.3), built and validated by Blender's own extension tool from the bpy wheel;
+# Blender extension zip (dist/) for linux-x64 (onnxruntime wheels for Python 3.11 and 3.13: one zip for Blender
+# 4.2 to 5.3), built and validated by Blender's own extension tool from the bpy wheel;
 # PLATFORMS=linux-x64,windows-x64,macos-arm64 for more (one zip each).
 PLATFORMS ?= linux-x64
 extension: $(STAMP)

@@ -10,14 +10,16 @@ Steps: fetch the wheels of the pinned versions for each platform and each Python
 ``wheels`` added); build it with Blender's own extension tool (``blender_ext.py build``, the back-end of
 ``blender --command extension build``, shipped in the bpy wheel) and validate the zip with it.
 
-Blender's Python already has numpy, and onnxruntime's InferenceSession runs with nothing else
-(docs/research/blender_cycles.md §4).  Blender 4.5 and later also bundle OpenImageIO's Python module; 4.2 does
-not (the add-on imports it only to read and write image files), so the zip carries OpenImageIO for Python 3.11,
-which 4.5 and 5.0 install too but never import (Blender's own site-packages precede the extensions' on
-``sys.path``).  One zip per platform installs in every supported Blender: Blender computes the manifest's
-``python_versions`` from the wheels (3.11 and 3.13 here) and installs only the wheels of the Python it runs
-(docs/user/install.md).  This file is a script (it is not
-shipped in the zip: blender_manifest.toml excludes it) and needs neither bpy imported nor a Blender binary.
+Only onnxruntime is bundled: Blender's Python already has numpy, and onnxruntime's InferenceSession runs
+with nothing else (docs/research/blender_cycles.md §4).  OpenImageIO is *not* bundled, although Blender 4.2 has
+no Python module for it (4.5 and later do): Blender puts the extensions' site-packages *before* its own on
+``sys.path``, so a bundled OpenImageIO would replace Blender's own for every add-on and for Cycles, whose
+``oslquery`` then fails ("Unregistered type : OpenImageIO_v3_0::TypeDesc", measured on 4.5.15: no OSL Script
+node compiles).  The add-on imports OpenImageIO only to read and write image files.  One zip per platform
+installs in every supported Blender: Blender computes the manifest's ``python_versions`` from the wheels (3.11
+and 3.13 here) and installs only the wheels of the Python it runs (docs/user/install.md).  This file is a
+script (it is not shipped in the zip: blender_manifest.toml excludes it) and needs neither bpy imported nor a
+Blender binary.
 """
 
 from __future__ import annotations
@@ -46,7 +48,7 @@ WHEEL_PLATFORMS = {"linux-x64": ("manylinux", "_x86_64"), "windows-x64": ("win",
 #: The Pythons of the supported Blenders: 3.11 (4.2 LTS to 5.0), 3.13 (5.1 and later).
 PYTHON_VERSIONS = ("3.11", "3.13")
 #: Distribution (pinned in the project venv: pyproject.toml) -> the Pythons its wheels are bundled for.
-BUNDLED = {"onnxruntime": PYTHON_VERSIONS, "OpenImageIO": ("3.11",)}
+BUNDLED = {"onnxruntime": PYTHON_VERSIONS}
 SHIPPED = ("__init__.py", "blender_addon", "exporters")
 
 

@@ -47,6 +47,13 @@ def render_centre(scene) -> list[float]:
     return px.reshape(16, 16, 4)[5:11, 5:11, :3].mean(axis=(0, 1)).astype(float).tolist()
 
 
+def set_component(gnode) -> None:
+    """Give component 1 of a mixture group node a skin colour and radius (constant inputs, no maps)."""
+    for socket, rgb in (("k1 Color", SKIN_LINEAR), ("k1 Radius", (0.3, 0.1, 0.05))):
+        value = gnode.inputs[socket].default_value
+        gnode.inputs[socket].default_value = (*rgb, 1.0)[: len(value)]
+
+
 def skin_scene():
     """The scene emptied (factory settings would also disable the extension), with a UV sphere in front of a
     camera, lit by a white world; returns the sphere."""
@@ -81,8 +88,16 @@ def main() -> dict:
     out["openimageio_imported_by_enabling"] = "OpenImageIO" in sys.modules
     out["core"] = sys.modules[f"{EXTENSION}.blender_addon.core"].EXPORTERS
 
-    # The baked path: Invert Skin Albedo on an image painted in Blender (no file), every colour through the model
-    # (onnxruntime from the extension's wheels), SVM, maps packed.
+    # The network, through the extension's own exporters and the onnxruntime wheel the zip carries for this Python.
+    inference = importlib.import_module(f"{EXTENSION}.exporters.inference")
+    models = importlib.import_module(f"{EXTENSION}.blender_addon.models")
+    rows = inference.load_model(models.INVERSION_MODEL, threads=1).run(np.array([SKIN_LINEAR]))
+    out["inference_finite"] = all(bool(np.all(np.isfinite(v))) for v in rows.values())
+    out["onnxruntime"] = getattr(sys.modules.get("onnxruntime"), "__file__", None)
+
+    # The baked path: Invert Skin Albedo on an image painted in Blender (no file), every colour through the model,
+    # SVM, maps packed.  Its EXR maps need OpenImageIO's Python module, which Blender 4.2 lacks: there the operator
+    # must refuse with a one-line error and change nothing.
     obj = skin_scene()
     bpy.context.preferences.addons[EXTENSION].preferences.threads = 1
     image = bpy.data.images.new("painted", 4, 4, float_buffer=True)
@@ -96,13 +111,20 @@ def main() -> dict:
     material.node_tree.links.new(tex.outputs["Color"], material.node_tree.nodes["Principled BSDF"].inputs[0])
     material.node_tree.nodes.active = tex
     t0 = time.perf_counter()
-    with bpy.context.temp_override(object=obj, active_object=obj):
-        out["invert"] = sorted(bpy.ops.spectral_skin.invert_albedo(exact=True))
+    try:
+        with bpy.context.temp_override(object=obj, active_object=obj):
+            out["invert"] = sorted(bpy.ops.spectral_skin.invert_albedo(exact=True))
+    except RuntimeError as exc:
+        out["invert"], out["invert_error"] = ["ERROR"], str(exc)
     out["invert_s"] = round(time.perf_counter() - t0, 2)
-    onnxruntime = sys.modules.get("onnxruntime")
-    out["onnxruntime"] = getattr(onnxruntime, "__file__", None)
     out["openimageio"] = getattr(sys.modules.get("OpenImageIO"), "__file__", None)
     groups = [n.node_tree for n in material.node_tree.nodes if n.bl_idname == "ShaderNodeGroup"]
+    out["nodes_after_invert"] = len(material.node_tree.nodes)
+    if not groups:  # no baked maps (4.2): the SVM group with constant inputs
+        with bpy.context.temp_override(object=obj, active_object=obj):
+            bpy.ops.spectral_skin.add_mixture(components=1, backend="SVM")
+        set_component(next(n for n in material.node_tree.nodes if n.bl_idname == "ShaderNodeGroup"))
+        groups = [n.node_tree for n in material.node_tree.nodes if n.bl_idname == "ShaderNodeGroup"]
     out["group_backend"] = groups[0].get("spectral_skin_sss_backend") if groups else None
     out["shading_system_after_invert"] = bool(bpy.context.scene.cycles.shading_system)
     t0 = time.perf_counter()
@@ -118,9 +140,7 @@ def main() -> dict:
         out["add_osl"] = sorted(bpy.ops.spectral_skin.add_mixture(components=1, backend="OSL"))
     out["shading_system_after_add_osl"] = bool(bpy.context.scene.cycles.shading_system)
     gnode = next(n for n in material.node_tree.nodes if n.bl_idname == "ShaderNodeGroup")
-    for socket, rgb in (("k1 Color", SKIN_LINEAR), ("k1 Radius", (0.3, 0.1, 0.05))):
-        value = gnode.inputs[socket].default_value
-        gnode.inputs[socket].default_value = (*rgb, 1.0)[: len(value)]
+    set_component(gnode)
     script = next(n for n in gnode.node_tree.nodes if n.bl_idname == "ShaderNodeScript")
     out["osl_compiled"] = bool(script.bytecode) and "BSSRDF" in script.outputs
     bpy.context.scene.cycles.shading_system = True

@@ -38,9 +38,10 @@ def test_zip_contents_and_manifest(ext_zip):
     assert {n.split("/")[0] for n in names} == {"__init__.py", "blender_manifest.toml", "blender_addon", "exporters",
                                                 "wheels"}
     wheels = sorted(n for n in names if n.startswith("wheels/"))
-    # onnxruntime for both Pythons Blender ships (3.11: 4.2-5.0, 3.13: 5.1 on); OpenImageIO for 3.11 (4.2 has none)
+    # onnxruntime for both Pythons Blender ships (3.11: 4.2-5.0, 3.13: 5.1 on); never OpenImageIO, which would
+    # replace Blender's own (the extensions' site-packages come first) and break Cycles' oslquery
     assert [w.split("-")[0] + "-" + w.split("-")[2] for w in wheels] == [
-        "wheels/onnxruntime-cp311", "wheels/onnxruntime-cp313", "wheels/openimageio-cp311"]
+        "wheels/onnxruntime-cp311", "wheels/onnxruntime-cp313"]
     assert all("manylinux" in w and w.endswith("_x86_64.whl") for w in wheels), wheels
     assert 'platforms = ["linux-x64"]' in manifest and all(f'"./{w}"' in manifest for w in wheels)
     assert "blender_addon/models/skin_inversion.onnx" in names and "exporters/data/reflectance_tables.npz" in names
