@@ -25,10 +25,11 @@ _STORAGE = [
     ("PACK", "Pack into .blend", "The maps become images packed into the .blend file"),
     ("FILES", "Save as files", "EXR maps in the output folder (default: a folder beside the saved .blend)"),
 ]
+#: Shading paths, numbered as when "Auto" was item 0, so that a scene saved then keeps its choice.
 _BACKENDS = [
-    ("SVM", "SVM nodes", "3K single-channel Subsurface Scattering nodes: every Cycles device (the default)"),
+    ("SVM", "SVM nodes", "3K single-channel Subsurface Scattering nodes: every Cycles device (the default)", 1),
     ("OSL", "OSL", "One OSL Script node with K bssrdf closures: CPU and OptiX only, and only where the scene has "
-                   "Open Shading Language turned on (this operator never turns it on)"),
+                   "Open Shading Language turned on (this operator never turns it on)", 2),
 ]
 #: The model-colour option's tooltip (operator and panel).
 MODEL_COLOUR_HELP = ("Render the model's own reflectance (the colour of the biophysical skin the network found, "

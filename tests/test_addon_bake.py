@@ -120,6 +120,18 @@ def test_svm_is_the_default_and_osl_only_on_request(addon, albedo_png):
         baker.pick_backend(scene, "AUTO")
 
 
+def test_a_scene_saved_with_the_former_auto_shading_asks_for_svm(addon):
+    from blender_addon import panels
+
+    settings = bpy.context.scene.spectral_skin
+    settings.backend = "OSL"
+    assert settings["backend"] == 2 and panels.shading_of(settings) == "OSL"  # the numbers "Auto" = 0 left
+    settings.backend = "SVM"
+    assert settings["backend"] == 1 and panels.shading_of(settings) == "SVM"
+    settings["backend"] = 0  # what a scene saved with "Auto" holds
+    assert settings.backend == "" and panels.shading_of(settings) == "SVM"
+
+
 def test_osl_on_request_leaves_the_scene_shading_system_and_says_so(addon):
     mesh = bpy.data.meshes.new("m")
     obj = bpy.data.objects.new("o", mesh)
