@@ -60,9 +60,14 @@ def _package_holding(folder: Path) -> str | None:
         file = getattr(module, "__file__", None)
         if file and Path(file).resolve() == init and "." in name:
             return name
+    if not init.is_file():
+        return None
     for name, module in list(sys.modules.items()):
-        paths = getattr(module, "__path__", None) or []
-        if any(Path(p).resolve() == folder.parent for p in list(paths)) and init.is_file():
+        try:
+            paths = [Path(p).resolve() for p in list(getattr(module, "__path__", None) or [])]
+        except (TypeError, ValueError, OSError):  # a module with an unusual __path__ is not a package of files
+            continue
+        if folder.parent in paths:
             return f"{name}.{folder.name}"
     return None
 

@@ -17,6 +17,7 @@ from __future__ import annotations
 import importlib
 import json
 import os
+import runpy
 import sys
 import time
 
@@ -130,6 +131,24 @@ def main() -> dict:
     t0 = time.perf_counter()
     out["svm_centre"] = render_centre(bpy.context.scene)
     out["svm_render_s"] = round(time.perf_counter() - t0, 2)
+
+    # The headless script of the installed extension, run as Blender runs `--python <extension>/blender_addon/bake.py`
+    # (it finds the extension's own exporters, never a top-level one).
+    png = os.path.join(sys.argv[2], "albedo.png")
+    image.filepath_raw, image.file_format = png, "PNG"
+    image.save()
+    argv, sys.argv = sys.argv, ["bake.py", "--", "--albedo", png, "--out", os.path.join(sys.argv[2], "maps"),
+                                "--threads", "1", "--quiet"]
+    try:
+        runpy.run_path(os.path.join(folder, "blender_addon", "bake.py"), run_name="__main__")
+        out["bake_script_exit"] = 0
+    except SystemExit as exc:
+        out["bake_script_exit"] = exc.code
+    finally:
+        sys.argv = argv
+    maps_dir = os.path.join(sys.argv[2], "maps")
+    out["bake_script_files"] = len(os.listdir(maps_dir)) if os.path.isdir(maps_dir) else 0
+    out["top_level_modules_after_script"] = sorted(m for m in ("exporters", "blender_addon") if m in sys.modules)
 
     # OSL on request: the Script node compiles (Cycles 4.2 has no oslquery) and renders once OSL is turned on.
     obj = skin_scene()

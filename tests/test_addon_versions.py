@@ -67,6 +67,9 @@ def test_installs_bakes_renders_and_exits_cleanly(case, python, version, py_vers
         assert "needs the OpenImageIO Python module" in out["invert_error"], out["invert_error"]
     else:
         assert out["invert"] == ["FINISHED"] and out["group_backend"] == "SVM", out
+    # bake.py of the installed extension, run inside Blender: the extension's exporters, no top-level one.
+    assert out["bake_script_exit"] == (2 if case == "4.2" else 0) and out["top_level_modules_after_script"] == []
+    assert out["bake_script_files"] == (0 if case == "4.2" else 13)  # K = 3: 12 maps and the record
     # SVM by default, OSL only on request, and the scene's shading system untouched by either operator.
     assert not out["shading_system_after_invert"] and not out["shading_system_after_add_osl"]
     assert out["add_osl"] == ["FINISHED"] and out["osl_compiled"]
