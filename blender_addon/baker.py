@@ -136,6 +136,28 @@ def _albedo_from_pixels(image: bpy.types.Image, colorspace: str) -> AlbedoImage:
                        n_clamped=0, n_channels=3 if ch >= 3 else ch)
 
 
+def _has_openimageio() -> bool:
+    """Whether OpenImageIO's Python module is importable (Blender 4.5 and later bundle it, 4.2 does not)."""
+    try:
+        image_input.openimageio()
+    except image_input.ImageError:
+        return False
+    return True
+
+
+def _albedo_through_blender(path: str, colorspace: str) -> AlbedoImage:
+    """An albedo file read by Blender itself, where OpenImageIO's module is missing: its pixel buffer, as for an
+    image without a file (a float buffer is linear already; an 8-bit one is in the file's encoding)."""
+    try:
+        image = bpy.data.images.load(path, check_existing=False)
+    except RuntimeError as exc:
+        raise BakeInputError(f"cannot read image {path}: {exc}") from exc
+    try:
+        return _albedo_from_pixels(image, "linear" if image.is_float else colorspace)
+    finally:
+        bpy.data.images.remove(image)
+
+
 def mesh_uv_mask(obj, source_node, width: int, height: int) -> tuple[np.ndarray | None, str]:
     """Texels of a width x height texture that ``obj``'s UVs cover (exporters.uv_coverage), with the UV map the
     albedo's Image Texture node reads (a UV Map node, else the mesh's active render UV map); (None, why) when
@@ -240,9 +262,11 @@ class AddonBake:
         self.result: bake.BakeResult | None = None
 
     # -- inputs --------------------------------------------------------------------------------------------
-    def _read_file(self, path: str, colorspace: str) -> IndexedAlbedo:
+    def _read_file(self, path: str, colorspace: str) -> IndexedAlbedo | AlbedoImage:
         if os.path.isfile(path):
             self.image_id = bake.file_id(path, colorspace)
+            if not _has_openimageio():
+                return _albedo_through_blender(path, colorspace)
         return image_input.read_albedo_indexed(path, colorspace=colorspace)
 
     def _read_albedo(self) -> tuple[AlbedoImage | IndexedAlbedo, str, str]:

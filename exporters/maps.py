@@ -29,6 +29,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from . import exr
 from .image_input import ImageError, openimageio
 
 if TYPE_CHECKING:
@@ -120,9 +121,13 @@ def threads_of(threads: int) -> int:
 
 
 def set_threads(threads: int) -> None:
-    """Threads OpenImageIO and OpenEXR may use for reading and (de)compressing images (0 = all cores)."""
+    """Threads OpenImageIO and OpenEXR may use for reading and (de)compressing images (0 = all cores); nothing
+    where OpenImageIO's module is missing (exporters.exr writes without threads)."""
     n = threads_of(threads)
-    oiio = openimageio()
+    try:
+        oiio = openimageio()
+    except ImageError:
+        return
     oiio.attribute("threads", n)
     oiio.attribute("exr_threads", n)
 
@@ -157,6 +162,15 @@ def _exr_spec(width: int, height: int, channels, units: str, compression: str = 
     spec.attribute("compression", compression)
     spec.attribute("spectral_skin_sss:units", units)
     return spec
+
+
+def _uncompressed(path: Path, width: int, height: int, channels: tuple[str, ...], units: str, compression: str,
+                  pixel_type: str) -> exr.ExrScanlineWriter:
+    """The writer of a map where OpenImageIO's module is missing: exporters.exr, uncompressed, same header strings."""
+    if compression not in COMPRESSIONS:
+        raise ValueError(f"EXR compression must be one of {COMPRESSIONS}, not {compression!r}")
+    return exr.ExrScanlineWriter(path, width, height, channels, pixel_type, {
+        "oiio:ColorSpace": "Non-Color", "spectral_skin_sss:colorspace": "Non-Color", "spectral_skin_sss:units": units})
 
 
 def _temp_name(path: Path) -> Path:
@@ -271,7 +285,7 @@ def read_exr(path: str | os.PathLike, channels: tuple[str, ...] | list[str] | No
 
 class MapStream:
     """A float32 (or half: ``pixel_type``) EXR map written band by band (memory bounded) to a temporary file
-    beside ``path``.
+    beside ``path``, with OpenImageIO, or uncompressed by exporters.exr where its module is missing.
 
     Nothing appears under ``path`` until :func:`publish_maps`; :meth:`discard` removes the temporary file.
     Checks at creation: the folder exists and is writable, and ``path`` does not exist (unless
@@ -293,7 +307,12 @@ class MapStream:
         self.overwrite = overwrite
         self.tmp = _temp_name(self.path)
         self._rows = 0
-        oiio = openimageio()
+        try:
+            oiio = openimageio()
+        except ImageError:  # no OpenImageIO module (Blender 4.2): the same map, uncompressed
+            self._out = _uncompressed(self.tmp, self.width, self.height, self.channels, units, compression,
+                                      pixel_type)
+            return
         self._out = oiio.ImageOutput.create(str(self.tmp))
         if self._out is None or not self._out.open(str(self.tmp), _exr_spec(self.width, self.height, self.channels,
                                                                              units, compression, pixel_type)):

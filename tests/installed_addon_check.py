@@ -97,8 +97,7 @@ def main() -> dict:
     out["onnxruntime"] = getattr(sys.modules.get("onnxruntime"), "__file__", None)
 
     # The baked path: Invert Skin Albedo on an image painted in Blender (no file), every colour through the model,
-    # SVM, maps packed.  Its EXR maps need OpenImageIO's Python module, which Blender 4.2 lacks: there the operator
-    # must refuse with a one-line error and change nothing.
+    # SVM, maps packed (on 4.2, which has no OpenImageIO module, written by exporters.exr).
     obj = skin_scene()
     bpy.context.preferences.addons[EXTENSION].preferences.threads = 1
     image = bpy.data.images.new("painted", 4, 4, float_buffer=True)

@@ -5,6 +5,7 @@ and cancel like the modal operator, unregister cleanly."""
 from __future__ import annotations
 
 import importlib
+import subprocess
 import sys
 from pathlib import Path
 
@@ -255,3 +256,31 @@ def test_udim_albedo_packed_maps_and_a_missing_tile(addon, tmp_path):
     with pytest.raises(RuntimeError, match=r"tile 1002 of UDIM image '.*' is missing: .*skin\.1002\.png"):
         run_invert(obj2, backend="SVM")
     assert snapshot() == before
+
+
+def test_without_openimageio_the_file_is_read_by_blender_and_the_maps_are_the_same(addon, albedo_png,
+                                                                                    reference_maps, tmp_path):
+    # Blender 4.2's Python has no OpenImageIO module: the albedo file is read through Blender and the maps are
+    # written uncompressed (exporters.exr).  Same texels, same maps as with OpenImageIO (reference_maps).
+    out = tmp_path / "maps"
+    script = (
+        "import sys\n"
+        "sys.modules['OpenImageIO'] = None  # any import of it now fails\n"
+        f"sys.path.insert(0, {str(Path(__file__).resolve().parents[1])!r})\n"
+        "import bpy\nimport addon_utils\n"
+        "addon_utils.enable('blender_addon', default_set=True, handle_error=None)\n"
+        "bpy.context.preferences.addons['blender_addon'].preferences.threads = 1\n"
+        f"print(bpy.ops.spectral_skin.invert_albedo(filepath={str(albedo_png)!r}, storage='FILES', "
+        f"output_dir={str(out)!r}, backend='SVM', uv_coverage=False))\n"
+        "print('OpenImageIO' in sys.modules and sys.modules['OpenImageIO'] is not None)\n"
+    )
+    proc = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0 and "{'FINISHED'}" in proc.stdout, proc.stdout[-2000:] + proc.stderr[-2000:]
+    assert proc.stdout.strip().splitlines()[-1] == "False"
+    names = sorted(p.name for p in reference_maps.iterdir() if p.suffix == ".exr")
+    assert names and sorted(p.name for p in out.iterdir() if p.suffix == ".exr") == names
+    for name in names:
+        got, channels, attrs = maps.read_exr(out / name)
+        ref, ref_channels, _ = maps.read_exr(reference_maps / name)
+        assert channels == ref_channels and attrs["compression"] == "none", name
+        np.testing.assert_array_equal(got, ref, err_msg=name)
