@@ -145,6 +145,13 @@ def _has_openimageio() -> bool:
     return True
 
 
+def read_albedo_file(path: str, colorspace: str) -> AlbedoImage | IndexedAlbedo:
+    """An albedo file, read with OpenImageIO, or through Blender where its module is missing."""
+    if not _has_openimageio():
+        return _albedo_through_blender(path, colorspace)
+    return image_input.read_albedo_indexed(path, colorspace=colorspace)
+
+
 def _albedo_through_blender(path: str, colorspace: str) -> AlbedoImage:
     """An albedo file read by Blender itself, where OpenImageIO's module is missing: its pixel buffer, as for an
     image without a file (a float buffer is linear already; an 8-bit one is in the file's encoding)."""
@@ -244,7 +251,7 @@ class AddonBake:
                                         **({"prune_share": 0.0} if self.tiled else {}))
         try:
             if self.tiled:
-                self.job = tiles.TiledJob(self.albedo, self.out_dir, self.model, self.options)
+                self.job = tiles.TiledJob(self.albedo, self.out_dir, self.model, self.options, read=read_albedo_file)
                 self.key, self.reused_images = self.job.key, None
             else:
                 self.albedo = bake.BakeJob.index(self.albedo)
@@ -263,11 +270,10 @@ class AddonBake:
 
     # -- inputs --------------------------------------------------------------------------------------------
     def _read_file(self, path: str, colorspace: str) -> IndexedAlbedo | AlbedoImage:
-        if os.path.isfile(path):
-            self.image_id = bake.file_id(path, colorspace)
-            if not _has_openimageio():
-                return _albedo_through_blender(path, colorspace)
-        return image_input.read_albedo_indexed(path, colorspace=colorspace)
+        if not os.path.isfile(path):
+            raise FileNotFoundError(f"albedo image not found: {path}")
+        self.image_id = bake.file_id(path, colorspace)
+        return read_albedo_file(path, colorspace)
 
     def _read_albedo(self) -> tuple[AlbedoImage | IndexedAlbedo, str, str]:
         s = self.settings

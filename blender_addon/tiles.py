@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import hashlib
 import os
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -55,10 +55,12 @@ def tiled_albedo(image: bpy.types.Image, colorspace: str) -> TiledAlbedo:
 class TiledJob:
     """One exporters.bake.BakeJob per tile, driven as one job (the interface AddonBake uses of a BakeJob)."""
 
-    def __init__(self, albedo: TiledAlbedo, out_dir: Path, model, options) -> None:
+    def __init__(self, albedo: TiledAlbedo, out_dir: Path, model, options, read: Callable | None = None) -> None:
+        """``read(path, colorspace)``: how a tile's file is read (default exporters.image_input.read_albedo_indexed)."""
+        read = read or (lambda path, colorspace: image_input.read_albedo_indexed(path, colorspace=colorspace))
         self.jobs = []
         for number, path in albedo.tiles:
-            image = image_input.read_albedo_indexed(path, colorspace=albedo.colorspace)
+            image = read(path, albedo.colorspace)
             stem = image_input.udim_tile_stem(albedo.pattern, number)
             self.jobs.append(bake.BakeJob(image, out_dir, stem, model, options, input_image=path,
                                           image_id=bake.file_id(path, albedo.colorspace)))

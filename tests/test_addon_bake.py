@@ -261,8 +261,11 @@ def test_udim_albedo_packed_maps_and_a_missing_tile(addon, tmp_path):
 def test_without_openimageio_the_file_is_read_by_blender_and_the_maps_are_the_same(addon, albedo_png,
                                                                                     reference_maps, tmp_path):
     # Blender 4.2's Python has no OpenImageIO module: the albedo file is read through Blender and the maps are
-    # written uncompressed (exporters.exr).  Same texels, same maps as with OpenImageIO (reference_maps).
-    out = tmp_path / "maps"
+    # written uncompressed (exporters.exr).  Same texels, same maps as with OpenImageIO (reference_maps; for the
+    # UDIM tiles, exporters.bake of each tile file).
+    out, tiled_out = tmp_path / "maps", tmp_path / "tiled"
+    write_image(tmp_path / "skin.1001.png", skin_codes(), "uint8")
+    write_image(tmp_path / "skin.1002.png", np.full((2, 3, 3), (120, 80, 60), np.uint8), "uint8")
     script = (
         "import sys\n"
         "sys.modules['OpenImageIO'] = None  # any import of it now fails\n"
@@ -272,6 +275,10 @@ def test_without_openimageio_the_file_is_read_by_blender_and_the_maps_are_the_sa
         "bpy.context.preferences.addons['blender_addon'].preferences.threads = 1\n"
         f"print(bpy.ops.spectral_skin.invert_albedo(filepath={str(albedo_png)!r}, storage='FILES', "
         f"output_dir={str(out)!r}, backend='SVM', uv_coverage=False))\n"
+        f"image = bpy.data.images.load({str(tmp_path / 'skin.1001.png')!r})\n"
+        "image.source = 'TILED'\n"
+        f"print(bpy.ops.spectral_skin.invert_albedo(image_name=image.name, storage='FILES', "
+        f"output_dir={str(tiled_out)!r}, backend='SVM'))\n"
         "print('OpenImageIO' in sys.modules and sys.modules['OpenImageIO'] is not None)\n"
     )
     proc = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=300)
@@ -284,3 +291,12 @@ def test_without_openimageio_the_file_is_read_by_blender_and_the_maps_are_the_sa
         ref, ref_channels, _ = maps.read_exr(reference_maps / name)
         assert channels == ref_channels and attrs["compression"] == "none", name
         np.testing.assert_array_equal(got, ref, err_msg=name)
+    assert proc.stdout.count("{'FINISHED'}") == 2
+    for tile in (1001, 1002):
+        ref_dir = tmp_path / f"ref{tile}"
+        ref_dir.mkdir()
+        bake.bake(tmp_path / f"skin.{tile}.png", ref_dir, preferences.DEFAULT_MODEL,
+                  bake.BakeOptions(threads=1, prune_share=0.0))
+        for ref_path in ref_dir.glob("*.exr"):
+            np.testing.assert_array_equal(maps.read_exr(tiled_out / ref_path.name)[0], maps.read_exr(ref_path)[0],
+                                          err_msg=ref_path.name)
