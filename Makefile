@@ -8,7 +8,16 @@ STAMP := $(VENV)/.installed
 MITSUBA_STAMP := $(VENV)/.mitsuba-installed
 DOCS_STAMP := $(VENV)/.docs-installed
 
-.PHONY: install mitsuba demo extension test lint bench docs clean
+# The oldest and the newest supported Blender, as bpy modules in their own venvs (tests/test_addon_versions.py
+# installs the extension zip in each).  bpy 4.2 LTS runs Python 3.11, bpy 5.1 and later 3.13.  Each bpy wheel is
+# ~0.3 GB to download (~3 min here) and ~1 GB installed; numpy pinned as Blender bundles it.
+PYTHON313 ?= $(firstword $(wildcard $(HOME)/.pyenv/versions/3.13*/bin/python3.13) python3.13)
+BLENDER_OLDEST := .venv-blender42
+BLENDER_NEWEST := .venv-blender53
+BLENDER_OLDEST_STAMP := $(BLENDER_OLDEST)/.installed-bpy-4.2.23
+BLENDER_NEWEST_STAMP := $(BLENDER_NEWEST)/.installed-bpy-5.3.0
+
+.PHONY: install mitsuba blender-envs demo extension test lint bench docs clean
 
 install: $(STAMP)
 
@@ -36,8 +45,22 @@ $(MITSUBA_STAMP): $(STAMP)
 	else echo "warning: libllvm19 needs root and apt-get; Mitsuba's scalar variants still work"; fi
 	touch $@
 
+blender-envs: $(BLENDER_OLDEST_STAMP) $(BLENDER_NEWEST_STAMP)
+
+$(BLENDER_OLDEST_STAMP):
+	test -x $(BLENDER_OLDEST)/bin/python || $(PYTHON) -m venv $(BLENDER_OLDEST)
+	$(BLENDER_OLDEST)/bin/python -m pip install -q "bpy==4.2.23" "numpy==1.26.4"
+	$(BLENDER_OLDEST)/bin/python tests/blender_env.py
+	touch $@
+
+$(BLENDER_NEWEST_STAMP):
+	test -x $(BLENDER_NEWEST)/bin/python || $(PYTHON313) -m venv $(BLENDER_NEWEST)
+	$(BLENDER_NEWEST)/bin/python -m pip install -q "bpy==5.3.0" "numpy==2.5.5"
+	$(BLENDER_NEWEST)/bin/python tests/blender_env.py
+	touch $@
+
 # Two workers (pytest-xdist), one per core, each taking whole test files (module fixtures are built once).
-test: $(STAMP) $(MITSUBA_STAMP)
+test: $(STAMP) $(MITSUBA_STAMP) $(BLENDER_OLDEST_STAMP) $(BLENDER_NEWEST_STAMP)
 	$(PY) -m pytest -q -n 2 --dist loadfile tests
 
 lint: $(STAMP)
@@ -46,8 +69,9 @@ lint: $(STAMP)
 demo: $(STAMP)
 	$(PY) -m training demo
 
-# Blender extension zip (dist/) with the onnxruntime wheel for linux-x64, built and validated by Blender's own
-# extension tool from the bpy wheel; PLATFORMS=linux-x64,windows-x64,macos-arm64 for more (one zip each).
+# Blender extension zip (dist/) for linux-x64 (onnxruntime wheels for Python 3.11 and 3.13: one zip for Blender
+# 4.2 to 5.3), built and validated by Blender's own extension tool from the bpy wheel;
+# PLATFORMS=linux-x64,windows-x64,macos-arm64 for more (one zip each).
 PLATFORMS ?= linux-x64
 extension: $(STAMP)
 	$(PY) blender_addon/package.py --out dist --platforms $(PLATFORMS)
@@ -69,4 +93,4 @@ bench: $(STAMP)
 	$(PY) -m training bench --out bench/results.md
 
 clean:
-	rm -rf $(VENV) .pytest_cache .ruff_cache build/docs docs/reference/_generated
+	rm -rf $(VENV) $(BLENDER_OLDEST) $(BLENDER_NEWEST) .pytest_cache .ruff_cache build/docs docs/reference/_generated

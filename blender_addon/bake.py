@@ -20,16 +20,22 @@ Nothing in DIR is overwritten without --overwrite, and a failed bake leaves DIR 
 
 This file is a script: it imports ``exporters`` (numpy, onnxruntime, OpenImageIO) and never bpy, so it
 runs with the plain Python of the project venv (where the bpy module is also installed) as well as
-inside Blender, whose own Python finds onnxruntime in the installed extension's wheel folder.
+inside Blender, whose own Python finds onnxruntime in the installed extension's wheel folder (Blender puts
+that folder on ``sys.path`` itself).  ``exporters`` is the package beside this file, found without changing
+``sys.path``: in an installed extension the extension's own (``bl_ext.<repo>.spectral_skin_sss.exporters``),
+in the repository the checkout's top-level ``exporters`` (:func:`core_package`).
 """
 
 from __future__ import annotations
 
 import argparse
+import importlib
+import importlib.util
 import os
 import sys
 import time
 from pathlib import Path
+from types import ModuleType
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
@@ -46,34 +52,61 @@ def _script_argv(argv: list[str] | None) -> list[str]:
     return sys.argv[1:]
 
 
-def _make_importable() -> None:
-    """Put the folder holding ``exporters`` (the repository or the installed extension) on sys.path, and,
-    inside Blender, the extension's bundled-wheel folder (onnxruntime, OpenImageIO)."""
-    if str(ROOT) not in sys.path:
-        sys.path.insert(0, str(ROOT))
-    try:
-        import onnxruntime  # noqa: F401
-        return
-    except ImportError:
-        pass
-    try:
-        import bpy  # only inside Blender
-    except ImportError:
-        return
-    for base in (bpy.utils.user_resource("EXTENSIONS"), str(ROOT.parent)):
-        for site in Path(base).glob(".local/lib/python3*/site-packages"):
-            if str(site) not in sys.path:
-                sys.path.append(str(site))
+def _package_holding(folder: Path) -> str | None:
+    """Name of the imported package that ``folder`` is (its ``__init__.py``) or is a subpackage of (a package whose
+    ``__path__`` holds ``folder.parent``): ``bl_ext.user_default.spectral_skin_sss`` for an installed extension."""
+    init = folder / "__init__.py"
+    for name, module in list(sys.modules.items()):
+        file = getattr(module, "__file__", None)
+        if file and Path(file).resolve() == init and "." in name:
+            return name
+    if not init.is_file():
+        return None
+    for name, module in list(sys.modules.items()):
+        try:
+            paths = [Path(p).resolve() for p in list(getattr(module, "__path__", None) or [])]
+        except (TypeError, ValueError, OSError):  # a module with an unusual __path__ is not a package of files
+            continue
+        if folder.parent in paths:
+            return f"{name}.{folder.name}"
+    return None
+
+
+def core_package() -> str:
+    """The full name of the ``exporters`` package beside this file, imported (see the module docstring)."""
+    if __package__:  # imported as a module: blender_addon.bake or <extension>.blender_addon.bake
+        home = __package__.rpartition(".")[0]
+        name = f"{home}.exporters" if home else "exporters"
+    elif (home := _package_holding(ROOT)) is not None:
+        name = f"{home}.exporters"
+    else:
+        name = "exporters"
+        if name not in sys.modules:
+            spec = importlib.util.find_spec(name)
+            mine = ROOT / name / "__init__.py"
+            if spec is None or spec.origin is None or Path(spec.origin).resolve() != mine:
+                spec = importlib.util.spec_from_file_location(name, mine,
+                                                              submodule_search_locations=[str(ROOT / name)])
+                module = importlib.util.module_from_spec(spec)
+                sys.modules[name] = module
+                spec.loader.exec_module(module)
+    importlib.import_module(name)
+    return name
+
+
+def core(module: str) -> ModuleType:
+    """``exporters.<module>`` of the package beside this file (:func:`core_package`)."""
+    return importlib.import_module(f"{core_package()}.{module}")
 
 
 def build_parser() -> argparse.ArgumentParser:
     """The command line; its defaults are the library's (exporters.bake.BakeOptions)."""
-    _make_importable()
-    from exporters import bake, image_input
+    bake, image_input = core("bake"), core("image_input")
 
     defaults = bake.BakeOptions()
     p = argparse.ArgumentParser(prog="bake.py", description=__doc__.splitlines()[0])
-    p.add_argument("--albedo", required=True, help="albedo image (PNG/TIFF 8 or 16 bit, EXR, ...)")
+    p.add_argument("--albedo", required=True, help="albedo image (PNG/TIFF 8 or 16 bit, EXR, ...); a UDIM image as "
+                                                   "its tiles' pattern, e.g. skin.<UDIM>.png: every tile is baked")
     p.add_argument("--out", required=True, help="output folder (created if missing)")
     p.add_argument("--target", default="cycles", help="comma-separated subset of cycles,physical,spectral "
                                                       "(default cycles)")
@@ -130,7 +163,7 @@ def main(argv: list[str] | None = None) -> int:
     except _Usage as exc:
         print(f"bake.py: error: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
-    from exporters import bake, image_input, inference, maps
+    bake, image_input, inference, maps = core("bake"), core("image_input"), core("inference"), core("maps")
 
     bad_input = (FileNotFoundError, FileExistsError, PermissionError, NotADirectoryError, image_input.ImageError,
                  inference.ModelError, bake.BakeError, ValueError)
@@ -140,6 +173,7 @@ def main(argv: list[str] | None = None) -> int:
         return EXIT_BAD_INPUT
     out = Path(args.out)
     created = False
+    results = []
     try:
         created = maps.make_output_folder(out)
         options = bake.BakeOptions(targets=bake.parse_targets(args.target), unit_scale_m=args.unit_scale,
@@ -147,8 +181,7 @@ def main(argv: list[str] | None = None) -> int:
                                    model_colour=args.model_colour, ior=args.ior,
                                    overwrite=args.overwrite, exact=args.exact, table_path=args.table,
                                    force=args.force, texel_mask=_read_mask(args.uv_mask),
-                                   prune_share=(bake.DEFAULT_PRUNE_SHARE if args.prune_share is None
-                                                else args.prune_share),
+                                   prune_share=_prune_share(args, bake, image_input),
                                    compression=args.exr_compression or maps.DEFAULT_COMPRESSION,
                                    half_maps=False if args.float_maps else None)
         last = [0.0]
@@ -159,35 +192,72 @@ def main(argv: list[str] | None = None) -> int:
                 print(f"bake.py: {100 * fraction:.0f} %", flush=True)
 
         t0 = time.perf_counter()
-        result = bake.bake(args.albedo, out, args.model, options, colorspace=args.colorspace, progress=progress)
+        for albedo in _albedo_files(args.albedo, args.uv_mask, image_input):
+            if not args.quiet and albedo != args.albedo:
+                print(f"bake.py: tile {Path(albedo).name}", flush=True)
+            results.append(bake.bake(albedo, out, args.model, options, colorspace=args.colorspace, progress=progress))
+            last[0] = 0.0
     except bad_input as exc:
+        _remove_written(results)
         if created:
             _remove_if_empty(out)
         print(f"bake.py: error: {bake.one_line(exc)}", file=sys.stderr)
         return EXIT_BAD_INPUT
     except BaseException:
+        _remove_written(results)
         if created:
             _remove_if_empty(out)
         raise
+    for result in results:
+        _report(result, out, args.quiet, t0)
+    return 0
+
+
+def _prune_share(args, bake, image_input) -> float:
+    """--prune-share, whose default is 0 for a UDIM albedo: each tile then keeps all K components, so every map
+    exists for every tile (a pruned component missing from one tile would leave a hole in that map's UDIM set)."""
+    if image_input.UDIM_TOKEN not in args.albedo:
+        return bake.DEFAULT_PRUNE_SHARE if args.prune_share is None else args.prune_share
+    if args.prune_share:
+        raise ValueError("--prune-share drops components tile by tile, so a UDIM albedo's maps could miss tiles: "
+                         "leave it out for UDIM albedos")
+    return 0.0
+
+
+def _albedo_files(albedo: str, uv_mask: str | None, image_input) -> list[str]:
+    """The image files to bake: ``albedo`` itself, or every tile of a UDIM pattern (exporters.image_input)."""
+    if image_input.UDIM_TOKEN not in albedo:
+        return [albedo]
+    if uv_mask is not None:
+        raise ValueError("--uv-mask takes one image: bake the tiles of a UDIM albedo one by one to give each its mask")
+    return [str(path) for _, path in image_input.udim_tiles(albedo)]
+
+
+def _remove_written(results: list) -> None:
+    """Undo the tiles already baked in this run when a later one fails (the folder is left as it was)."""
+    for result in results:
+        if not result.reused:
+            for path in [*result.files, result.json_path]:
+                Path(path).unlink(missing_ok=True)
+
+
+def _report(result, out: Path, quiet: bool, t0: float) -> None:
     for note in result.notes:
         if note.startswith("warning: "):
             print(f"bake.py: {note}", file=sys.stderr)
-        elif not args.quiet:
+        elif not quiet:
             print(f"bake.py: note: {note}")
-    if not args.quiet:
+    if not quiet:
         verb = "kept" if result.reused else "wrote"
         print(f"bake.py: {verb} {len(result.files)} maps (K={result.k}) and {result.json_path.name} in {out} "
               f"in {time.perf_counter() - t0:.1f} s")
-    return 0
 
 
 def _read_mask(path: str | None):
     """The --uv-mask image as (H, W) bool (any non-zero colour channel = covered), or None."""
     if path is None:
         return None
-    from exporters import image_input
-
-    image = image_input.read_albedo(path, colorspace="linear")
+    image = core("image_input").read_albedo(path, colorspace="linear")
     return (image.rgb > 0).any(axis=2)
 
 

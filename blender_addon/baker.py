@@ -20,10 +20,10 @@ from pathlib import Path
 import bpy
 import numpy as np
 
-from exporters import bake, image_input, inference, maps, uv_coverage
-from exporters.image_input import AlbedoImage, IndexedAlbedo
+from . import nodes, tiles
+from .core import bake, image_input, inference, maps, uv_coverage
 
-from . import nodes
+AlbedoImage, IndexedAlbedo = image_input.AlbedoImage, image_input.IndexedAlbedo
 
 #: Custom properties on baked images: the bake key (exporters.bake.bake_key), component, map kind, K of the bake.
 KEY_PROP, K_PROP = "spectral_skin_sss_bake_key", "spectral_skin_sss_k"
@@ -45,8 +45,8 @@ class BakeSettings:
     """What the operator asks for.  ``filepath`` (a file on disk) wins over ``image_name`` (an image
     datablock), which wins over the active Image Texture node of the active material.  ``storage``:
     "PACK" (images packed into the .blend) or "FILES" (EXR files in ``output_dir``, default a folder
-    beside the saved .blend).  ``backend``: "AUTO", "SVM" or "OSL".  ``model_colour``: the maps render the
-    model's own reflectance instead of the painted albedo.  ``exact``: every distinct colour through
+    beside the saved .blend).  ``backend``: "SVM" (the default) or "OSL" (only on request).  ``model_colour``:
+    the maps render the model's own reflectance instead of the painted albedo.  ``exact``: every distinct colour through
     the model instead of the fast-path table; ``uv_coverage``: evaluate only the texels the active mesh's UVs
     cover (the others take the maps of the most common covered colour); ``unit_scale_m``: metres per Blender
     unit for the radii (None: the scene's, :func:`scene_unit_scale`)."""
@@ -57,7 +57,7 @@ class BakeSettings:
     storage: str = "PACK"
     output_dir: str = ""
     colorspace: str = "FROM_IMAGE"
-    backend: str = "AUTO"
+    backend: str = "SVM"
     overwrite: bool = False
     model_colour: bool = False
     threads: int = 0
@@ -85,21 +85,28 @@ def active_image_node(material: bpy.types.Material | None) -> bpy.types.Node | N
 
 
 def pick_backend(scene: bpy.types.Scene, requested: str) -> str:
-    """SVM or OSL.  AUTO: OSL where Cycles can run it (scene device CPU, or GPU with OptiX), SVM elsewhere
-    (CUDA, HIP, Metal, oneAPI).  Asking for OSL on a device that cannot run it is an error."""
+    """SVM or OSL, as requested: SVM is the default on every device, OSL is used only when asked for.  Asking for
+    OSL on a device that cannot run it (a GPU other than OptiX) is an error."""
     device = scene.cycles.device if hasattr(scene, "cycles") else "CPU"
     compute = "NONE"
     cycles_addon = bpy.context.preferences.addons.get("cycles")
     if cycles_addon is not None:
         compute = getattr(cycles_addon.preferences, "compute_device_type", "NONE")
     osl_ok = device == "CPU" or compute == "OPTIX"
-    if requested == "AUTO":
-        return "OSL" if osl_ok else "SVM"
     if requested == "OSL" and not osl_ok:
         raise BakeInputError(f"OSL does not run on the scene's device ({compute} GPU): choose SVM")
     if requested not in ("SVM", "OSL"):
         raise BakeInputError(f"unknown shading path {requested!r}")
     return requested
+
+
+def osl_warning(scene: bpy.types.Scene, backend: str) -> str:
+    """The report's warning when an OSL group was made for a scene that has Open Shading Language off (the add-on
+    never changes the scene's shading system: that would change how every material of the scene renders)."""
+    if backend != "OSL" or not hasattr(scene, "cycles") or scene.cycles.shading_system:
+        return ""
+    return ("; warning: the OSL group renders only with Open Shading Language on (Render Properties > Render > Open "
+            "Shading Language), which this scene has off and the add-on leaves as it is; or choose Shading SVM")
 
 
 def _image_colorspace(image: bpy.types.Image, requested: str) -> str:
@@ -127,6 +134,35 @@ def _albedo_from_pixels(image: bpy.types.Image, colorspace: str) -> AlbedoImage:
         alpha = None  # Blender gives every buffer an alpha channel; an opaque one is no alpha at all
     return AlbedoImage(rgb=rgb, alpha=alpha, colorspace=used, source_format="float" if image.is_float else "uint8",
                        n_clamped=0, n_channels=3 if ch >= 3 else ch)
+
+
+def _has_openimageio() -> bool:
+    """Whether OpenImageIO's Python module is importable (Blender 4.5 and later bundle it, 4.2 does not)."""
+    try:
+        image_input.openimageio()
+    except image_input.ImageError:
+        return False
+    return True
+
+
+def read_albedo_file(path: str, colorspace: str) -> AlbedoImage | IndexedAlbedo:
+    """An albedo file, read with OpenImageIO, or through Blender where its module is missing."""
+    if not _has_openimageio():
+        return _albedo_through_blender(path, colorspace)
+    return image_input.read_albedo_indexed(path, colorspace=colorspace)
+
+
+def _albedo_through_blender(path: str, colorspace: str) -> AlbedoImage:
+    """An albedo file read by Blender itself, where OpenImageIO's module is missing: its pixel buffer, as for an
+    image without a file (a float buffer is linear already; an 8-bit one is in the file's encoding)."""
+    try:
+        image = bpy.data.images.load(path, check_existing=False)
+    except RuntimeError as exc:
+        raise BakeInputError(f"cannot read image {path}: {exc}") from exc
+    try:
+        return _albedo_from_pixels(image, "linear" if image.is_float else colorspace)
+    finally:
+        bpy.data.images.remove(image)
 
 
 def mesh_uv_mask(obj, source_node, width: int, height: int) -> tuple[np.ndarray | None, str]:
@@ -198,24 +234,33 @@ class AddonBake:
         self.albedo, self.stem, self.input_name = self._read_albedo()
         self.backend = pick_backend(self.scene, settings.backend)
         self.model = inference.ModelFile(settings.model_path, threads=settings.threads)  # loaded if needed
-        height, width = (self.albedo.shape if isinstance(self.albedo, IndexedAlbedo) else
-                         self.albedo.rgb.shape[:2])
-        mask, self.uv_note = (mesh_uv_mask(obj, self.source_node, width, height) if settings.uv_coverage
-                              else (None, "off"))
+        self.tiled = isinstance(self.albedo, tiles.TiledAlbedo)
+        if self.tiled:
+            mask, self.uv_note = None, "UDIM: every texel of every tile"
+        else:
+            height, width = (self.albedo.shape if isinstance(self.albedo, IndexedAlbedo) else
+                             self.albedo.rgb.shape[:2])
+            mask, self.uv_note = (mesh_uv_mask(obj, self.source_node, width, height) if settings.uv_coverage
+                                  else (None, "off"))
         self.out_dir, self._temp_dir = self._output_folder()
         scale = scene_unit_scale(self.scene) if settings.unit_scale_m is None else float(settings.unit_scale_m)
         self.options = bake.BakeOptions(targets=("cycles",), unit_scale_m=scale,
                                         threads=settings.threads, chunk=settings.chunk,
                                         model_colour=settings.model_colour, overwrite=settings.overwrite,
-                                        exact=settings.exact, texel_mask=mask)
+                                        exact=settings.exact, texel_mask=mask,
+                                        **({"prune_share": 0.0} if self.tiled else {}))
         try:
-            self.albedo = bake.BakeJob.index(self.albedo)
-            image_id = self.image_id or bake.pixels_id(self.albedo)
-            self.key = bake.job_key(image_id, self.model.sha256, self.stem, self.options, self.albedo.shape)
-            self.reused_images = self._packed_up_to_date() if settings.storage == "PACK" else None
-            self.job = None if self.reused_images is not None else bake.BakeJob(
-                self.albedo, self.out_dir, self.stem, self.model, self.options, input_image=self.input_name,
-                image_id=image_id)
+            if self.tiled:
+                self.job = tiles.TiledJob(self.albedo, self.out_dir, self.model, self.options, read=read_albedo_file)
+                self.key, self.reused_images = self.job.key, None
+            else:
+                self.albedo = bake.BakeJob.index(self.albedo)
+                image_id = self.image_id or bake.pixels_id(self.albedo)
+                self.key = bake.job_key(image_id, self.model.sha256, self.stem, self.options, self.albedo.shape)
+                self.reused_images = self._packed_up_to_date() if settings.storage == "PACK" else None
+                self.job = None if self.reused_images is not None else bake.BakeJob(
+                    self.albedo, self.out_dir, self.stem, self.model, self.options, input_image=self.input_name,
+                    image_id=image_id)
         except BaseException:
             self._remove_temp_dir()
             raise
@@ -224,10 +269,11 @@ class AddonBake:
         self.result: bake.BakeResult | None = None
 
     # -- inputs --------------------------------------------------------------------------------------------
-    def _read_file(self, path: str, colorspace: str) -> IndexedAlbedo:
-        if os.path.isfile(path):
-            self.image_id = bake.file_id(path, colorspace)
-        return image_input.read_albedo_indexed(path, colorspace=colorspace)
+    def _read_file(self, path: str, colorspace: str) -> IndexedAlbedo | AlbedoImage:
+        if not os.path.isfile(path):
+            raise FileNotFoundError(f"albedo image not found: {path}")
+        self.image_id = bake.file_id(path, colorspace)
+        return read_albedo_file(path, colorspace)
 
     def _read_albedo(self) -> tuple[AlbedoImage | IndexedAlbedo, str, str]:
         s = self.settings
@@ -246,6 +292,9 @@ class AddonBake:
                                      "material, or choose an image")
             self.source_node, image = node, node.image
         cs = _image_colorspace(image, s.colorspace)
+        if image.source == "TILED":
+            albedo = tiles.tiled_albedo(image, cs)
+            return albedo, albedo.stem, albedo.pattern
         stem = Path(image.name).stem or "albedo"
         path = _image_file(image)
         if path is not None:
@@ -343,8 +392,6 @@ class AddonBake:
                 self.result = self.job.finish()
                 reused = self.result.reused
                 images, k_count = self._images(created_images), self.result.k
-            if self.backend == "OSL":
-                self.scene.cycles.shading_system = True
             if reused and self.material is not None and _wired_to(self.material, images):
                 return (f"up to date: the maps of this image, model and options are already in '{self.material.name}'"
                         "; nothing was recomputed or changed")
@@ -371,8 +418,7 @@ class AddonBake:
                 self._remove_temp_dir()
         if self.settings.storage == "FILES":
             report += f"; files in {self.out_dir}"
-        if self.backend == "OSL" and not osl_before:
-            report += "; Open Shading Language enabled for the scene"
+        report += osl_warning(self.scene, self.backend)
         notes = list(self.result.notes) if self.result is not None else []
         return report + ("; note: " + "; ".join(notes) if notes else "")
 
@@ -383,17 +429,20 @@ class AddonBake:
         k_count = self.result.k
         for spec in self.job.specs or bake.map_specs(self.stem, k_count, ("cycles",)):
             path = str(self.out_dir / spec.name)
+            name = self._tile_pattern(spec.name)
             if self.settings.storage == "PACK":
-                image = bpy.data.images.load(path, check_existing=False)
+                image = tiles.load_tiled(path) if self.tiled else bpy.data.images.load(path, check_existing=False)
                 created.append(image)
                 image.pack()
-                image.filepath_raw = f"//{self.stem}_skin_maps/{spec.name}"
-                image.name = spec.name
+                image.filepath_raw = f"//{self.stem}_skin_maps/{name}"
+                image.name = name
             else:
                 count = len(bpy.data.images)
                 image = bpy.data.images.load(path, check_existing=True)
                 if len(bpy.data.images) > count:
                     created.append(image)
+                    if self.tiled:
+                        image.source = "TILED"
                 elif not self.result.reused:
                     image.reload()
             image.colorspace_settings.name = "Non-Color"
@@ -401,6 +450,13 @@ class AddonBake:
                 self.key, spec.k, spec.kind.capitalize(), k_count)
             images[(spec.k, spec.kind.capitalize())] = image
         return images
+
+    def _tile_pattern(self, name: str) -> str:
+        """A map's name as a UDIM pattern for a tiled bake (``skin.1001_k1_color.exr`` -> ``skin.<UDIM>_k1_...``)."""
+        if not self.tiled:
+            return name
+        first = self.albedo.tiles[0][0]
+        return name.replace(f"{first:04d}", image_input.UDIM_TOKEN, 1)
 
     def _follow_source_uv(self, gnode: bpy.types.Node) -> None:
         """New texture nodes read the same UVs as the albedo's Image Texture node (when it has a link)."""

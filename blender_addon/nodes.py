@@ -73,9 +73,8 @@ import math
 
 import bpy
 
-from exporters import cycles, reflectance_tables
-
 from . import osl
+from .core import cycles, reflectance_tables
 
 GROUP_NAME = "Spectral Skin SSS Mixture"
 GROUP_NAME_OSL = "Spectral Skin SSS Mixture (OSL)"

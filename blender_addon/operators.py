@@ -10,9 +10,10 @@ from __future__ import annotations
 
 import bpy
 
-from exporters.bake import one_line
-
 from . import baker, nodes, preferences
+from .core import bake as _core_bake
+
+one_line = _core_bake.one_line
 
 _COLORSPACES = [
     ("FROM_IMAGE", "From Image", "The image's colour space setting in Blender (sRGB, Non-Color, Linear ...)"),
@@ -24,10 +25,11 @@ _STORAGE = [
     ("PACK", "Pack into .blend", "The maps become images packed into the .blend file"),
     ("FILES", "Save as files", "EXR maps in the output folder (default: a folder beside the saved .blend)"),
 ]
+#: Shading paths, numbered as when "Auto" was item 0, so that a scene saved then keeps its choice.
 _BACKENDS = [
-    ("AUTO", "Auto", "OSL where the scene's device runs it (CPU, OptiX), SVM nodes elsewhere"),
-    ("SVM", "SVM nodes", "3K single-channel Subsurface Scattering nodes: every Cycles device"),
-    ("OSL", "OSL", "One OSL Script node with K bssrdf closures: CPU and OptiX only"),
+    ("SVM", "SVM nodes", "3K single-channel Subsurface Scattering nodes: every Cycles device (the default)", 1),
+    ("OSL", "OSL", "One OSL Script node with K bssrdf closures: CPU and OptiX only, and only where the scene has "
+                   "Open Shading Language turned on (this operator never turns it on)", 2),
 ]
 #: The model-colour option's tooltip (operator and panel).
 MODEL_COLOUR_HELP = ("Render the model's own reflectance (the colour of the biophysical skin the network found, "
@@ -53,7 +55,7 @@ class SPECTRAL_SKIN_OT_invert_albedo(bpy.types.Operator):
     storage: bpy.props.EnumProperty(name="Maps", items=_STORAGE, default="PACK")
     output_dir: bpy.props.StringProperty(name="Output folder", subtype="DIR_PATH", default="")
     colorspace: bpy.props.EnumProperty(name="Colour space", items=_COLORSPACES, default="FROM_IMAGE")
-    backend: bpy.props.EnumProperty(name="Shading", items=_BACKENDS, default="AUTO")
+    backend: bpy.props.EnumProperty(name="Shading", items=_BACKENDS, default="SVM")
     overwrite: bpy.props.BoolProperty(name="Overwrite files", default=False)
     model_colour: bpy.props.BoolProperty(
         name="Model's own colour", default=False, description=MODEL_COLOUR_HELP)
@@ -190,11 +192,12 @@ class SPECTRAL_SKIN_OT_add_mixture(bpy.types.Operator):
         mat = context.object.active_material
         if self.backend == "OSL":
             group = nodes.build_osl_group(self.components)
-            context.scene.cycles.shading_system = True
         else:
             group = nodes.build_svm_group(self.components)
         nodes.wire_into_material(mat, group)
-        self.report({"INFO"}, f"added {group.name} (K={self.components}) to {mat.name}")
+        message = f"added {group.name} (K={self.components}) to {mat.name}" + baker.osl_warning(context.scene,
+                                                                                                self.backend)
+        self.report(_level(message), message)
         return {"FINISHED"}
 
 

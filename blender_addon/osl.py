@@ -1,12 +1,14 @@
 """OSL source and Script-node helpers for the mixture (Cycles CPU / OptiX only).
 
-The pip ``bpy`` module compiles OSL with its built-in ``_cycles.osl_compile`` but Cycles' ``osl.py`` then
-imports ``oslquery``, which the wheel ships outside ``sys.path`` (docs/research/blender_cycles.md §1);
-:func:`ensure_oslquery` adds that directory.  ``oslquery`` returns OpenImageIO ``TypeDesc`` objects, whose
-Python type is registered by Blender's *bundled* OpenImageIO (3.0.9 in bpy 5.0.1); in our venv ``import
-OpenImageIO`` finds the pip OpenImageIO instead (3.0.21, another pybind11 registry), so the bundled one is
-loaded under a private alias just to register the type (found by trial: without it socket creation fails
-with "Unregistered type : OpenImageIO_v3_0::TypeDesc").  A real Blender binary needs none of this.
+Cycles 4.5 and later read a compiled Script node's parameters with the ``oslquery`` module (Cycles 4.2 does
+not use it).  A Blender binary has ``oslquery`` in its bundled ``site-packages``; the pip ``bpy`` module ships
+that folder but leaves it off ``sys.path`` (docs/research/blender_cycles.md §1), so :func:`ensure_oslquery`
+loads ``oslquery`` from it by file, leaving ``sys.path`` alone.  ``oslquery`` returns OpenImageIO ``TypeDesc``
+objects, whose Python type is registered by Blender's *bundled* OpenImageIO (3.0.9 in bpy 5.0.1); where
+``import OpenImageIO`` finds a pip OpenImageIO instead (another pybind11 registry), the bundled one is loaded
+under a private alias just to register the type (found by trial: without it socket creation fails with
+"Unregistered type : OpenImageIO_v3_0::TypeDesc").  A real Blender binary needs none of this.  Whether a
+node compiled is judged by its result (:func:`script_node`), never by the presence of ``oslquery``.
 """
 
 from __future__ import annotations
@@ -18,8 +20,7 @@ import sys
 
 import bpy
 
-from exporters.constants import N_TISSUE
-from exporters.cycles import DIFFUSE_FRESNEL_POLY
+from .core import constants, cycles
 
 #: OSL parameter suffix for each map kind of nodes.KINDS.
 _PARAM_SUFFIX = {"Color": "color", "Radius": "radius", "Weight": "weight", "Anisotropy": "anisotropy"}
@@ -53,16 +54,32 @@ def _register_bundled_oiio_types(site_packages: list[str]) -> None:
             return
 
 
+def _load_package_from(folder: str, name: str) -> bool:
+    """Import the package ``folder/name`` as the top-level module ``name`` (Cycles imports it by that name)."""
+    init = os.path.join(folder, name, "__init__.py")
+    if not os.path.isfile(init):
+        return False
+    spec = importlib.util.spec_from_file_location(name, init,
+                                                  submodule_search_locations=[os.path.join(folder, name)])
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[name] = module
+    try:
+        spec.loader.exec_module(module)
+    except BaseException:
+        del sys.modules[name]
+        raise
+    return True
+
+
 def ensure_oslquery() -> None:
-    """Make Cycles' Script-node compilation work in the pip bpy module (no-op in a real Blender)."""
-    if importlib.util.find_spec("oslquery") is not None:
+    """Make Cycles' Script-node compilation work in the pip bpy module: ``oslquery`` loaded from the bundled
+    ``site-packages`` when it is not importable (no-op in a Blender binary, and where there is none: Cycles 4.2
+    compiles without it)."""
+    if importlib.util.find_spec("oslquery") is not None and "oslquery" not in sys.modules:
         return
     site_packages = _bundled_site_packages()
-    for path in site_packages:
-        if path not in sys.path:
-            sys.path.append(path)
-    if importlib.util.find_spec("oslquery") is None:
-        raise RuntimeError("OSL: module 'oslquery' not found; this Blender build cannot compile Script nodes")
+    if "oslquery" not in sys.modules and not any(_load_package_from(p, "oslquery") for p in site_packages):
+        return
     _register_bundled_oiio_types(site_packages)
 
 
@@ -89,7 +106,8 @@ def mixture_source(k_count: int, roughness: float, entry_roughness: float) -> st
             f"    mixture += ({w} * {c}) * bssrdf(\"random_walk\", Nn, vector({r}), {c},\n"
             f"        \"ior\", ior, \"anisotropy\", {g}, \"roughness\", {float(entry_roughness)!r});"
         )
-    poly = " + x * (".join(repr(c) for c in DIFFUSE_FRESNEL_POLY) + ")" * (len(DIFFUSE_FRESNEL_POLY) - 1)
+    fresnel = cycles.DIFFUSE_FRESNEL_POLY
+    poly = " + x * (".join(repr(c) for c in fresnel) + ")" * (len(fresnel) - 1)
     return "\n".join(
         [
             "// Spectral Skin SSS: specular coat over a mixture of K random-walk media with per-channel weights"
@@ -99,7 +117,7 @@ def mixture_source(k_count: int, roughness: float, entry_roughness: float) -> st
             "",
             f"shader spectral_skin_sss_k{k_count}(",
             *params,
-            f"    float ior = {N_TISSUE!r},",
+            f"    float ior = {constants.N_TISSUE!r},",
             f"    float roughness = {float(roughness)!r},",
             "    normal Normal = N,",
             "    output closure color BSSRDF = 0)",

@@ -19,7 +19,7 @@ class SpectralSkinSettings(bpy.types.PropertyGroup):
     output_dir: bpy.props.StringProperty(name="Folder", subtype="DIR_PATH", default="",
                                          description="Output folder for saved maps (empty: beside the .blend)")
     colorspace: bpy.props.EnumProperty(name="Colour space", items=operators._COLORSPACES, default="FROM_IMAGE")
-    backend: bpy.props.EnumProperty(name="Shading", items=operators._BACKENDS, default="AUTO")
+    backend: bpy.props.EnumProperty(name="Shading", items=operators._BACKENDS, default="SVM")
     overwrite: bpy.props.BoolProperty(name="Overwrite files", default=False)
     model_colour: bpy.props.BoolProperty(name="Model's own colour", default=False,
                                          description=operators.MODEL_COLOUR_HELP)
@@ -63,7 +63,7 @@ def _draw(layout, context) -> None:
     if settings is not None:
         op.image_name = settings.image.name if settings.image is not None else ""
         op.storage, op.output_dir = settings.storage, settings.output_dir
-        op.colorspace, op.backend = settings.colorspace, settings.backend
+        op.colorspace, op.backend = settings.colorspace, shading_of(settings)
         op.overwrite, op.model_colour = settings.overwrite, settings.model_colour
         op.exact, op.uv_coverage = settings.exact, settings.uv_coverage
     layout.operator("spectral_skin.add_mixture", icon="NODETREE")
@@ -98,6 +98,12 @@ class SPECTRAL_SKIN_PT_material(bpy.types.Panel):
 
 
 classes = (SpectralSkinSettings, SPECTRAL_SKIN_PT_shader_editor, SPECTRAL_SKIN_PT_material)
+
+
+def shading_of(settings: SpectralSkinSettings) -> str:
+    """The scene's shading choice for the operator: SVM where the scene was saved with the former "Auto", a value
+    no item has any more (Blender reads it as "")."""
+    return settings.backend or "SVM"
 
 
 def register_properties() -> None:

@@ -28,7 +28,9 @@ from collections.abc import Sequence
 import bpy
 import numpy as np
 
-from exporters.reflectance_tables import IOR_MIN
+from .core import reflectance_tables
+
+IOR_MIN = reflectance_tables.IOR_MIN
 
 #: Cube half-size (BU); the camera sees the centre of the top face.
 HALF_SIZE_BU: float = 50.0

@@ -7,6 +7,6 @@ validation renderer and no command (``training.bench``, ``training.validate.mits
 names its files).
 """
 
-from exporters.constants import N_WAVELENGTHS, WAVELENGTHS_NM
+from .constants import N_WAVELENGTHS, WAVELENGTHS_NM
 
 __all__ = ["N_WAVELENGTHS", "WAVELENGTHS_NM"]

@@ -66,9 +66,9 @@ from pathlib import Path
 
 import numpy as np
 
-from exporters import cycles, painted, reflectance_tables
-from exporters.colorimetry import xyz_to_linear_srgb_matrix, xyz_weights
-from exporters.constants import N_WAVELENGTHS
+from . import cycles, painted, reflectance_tables
+from .colorimetry import xyz_to_linear_srgb_matrix, xyz_weights
+from .constants import N_WAVELENGTHS
 
 #: Cycles' walk substitutes alpha < 0.2 (integrator/subsurface_random_walk.h), so we never ask for less.
 ALPHA_MIN: float = cycles.ALPHA_EXACT_MIN

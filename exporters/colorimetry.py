@@ -22,7 +22,7 @@ from typing import Literal
 
 import numpy as np
 
-from exporters.constants import WAVELENGTHS_NM
+from .constants import WAVELENGTHS_NM
 
 Illuminant = Literal["D65", "A", "E"]
 ILLUMINANTS: tuple[str, ...] = ("D65", "A", "E")

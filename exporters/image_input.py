@@ -21,13 +21,16 @@ from __future__ import annotations
 import os
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Literal
+from types import ModuleType
+from typing import TYPE_CHECKING, Literal
 
 import numpy as np
-import OpenImageIO as oiio
 
-from exporters import palette as _palette
-from exporters.colorimetry import srgb_decode
+from . import palette as _palette
+from .colorimetry import srgb_decode
+
+if TYPE_CHECKING:
+    import OpenImageIO
 
 ColorSpace = Literal["auto", "srgb", "linear"]
 COLORSPACES: tuple[str, ...] = ("auto", "srgb", "linear")
@@ -67,6 +70,19 @@ _INT_MAX = {"uint8": 255.0, "uint16": 65535.0, "uint32": 4294967295.0}
 
 class ImageError(ValueError):
     """An input image that cannot be used (unreadable, non-finite, negative ...); message says why."""
+
+
+def openimageio() -> ModuleType:
+    """The OpenImageIO module, imported on first use: Blender 4.2 bundles OpenImageIO's libraries but not its Python
+    module, so nothing that only imports ``exporters`` may need it.  ImageError (one line, what to do) when it
+    is missing."""
+    try:
+        import OpenImageIO
+    except ImportError as exc:
+        raise ImageError("reading and writing image files needs the OpenImageIO Python module, which this Python "
+                         "does not have (Blender 4.2 does not bundle it): use Blender 4.5 or later, or "
+                         "`pip install OpenImageIO` into this Python") from exc
+    return OpenImageIO
 
 
 @dataclass(frozen=True)
@@ -130,6 +146,37 @@ class IndexedAlbedo:
 
 
 # -- colour space ---------------------------------------------------------------------------------------------
+#: The tile token of a UDIM (tiled) image's file name, as Blender writes it: ``skin.<UDIM>.png``.
+UDIM_TOKEN = "<UDIM>"
+#: UDIM tile numbers: 1001 + u + 10 v for tile column u (0-9) and row v (0-99).
+UDIM_FIRST, UDIM_LAST = 1001, 1999
+
+
+def udim_tiles(pattern: str | os.PathLike) -> list[tuple[int, Path]]:
+    """The tiles of a UDIM image on disk: ``pattern`` holds :data:`UDIM_TOKEN` once (``skin.<UDIM>.png``); returns
+    (tile number, file) for every existing file whose name has a tile number in its place, by tile.
+    FileNotFoundError (one line) when none exists."""
+    pattern = Path(pattern)
+    head, token, tail = pattern.name.partition(UDIM_TOKEN)
+    if not token or UDIM_TOKEN in tail or UDIM_TOKEN in str(pattern.parent):
+        raise ValueError(f"{pattern}: a UDIM file name holds {UDIM_TOKEN} once, in the file name")
+    tiles = []
+    for path in pattern.parent.glob(f"{head}[0-9][0-9][0-9][0-9]{tail}"):
+        number = int(path.name[len(head): len(head) + 4])
+        if UDIM_FIRST <= number <= UDIM_LAST and path.is_file():
+            tiles.append((number, path))
+    if not tiles:
+        raise FileNotFoundError(f"no UDIM tile of {pattern} found (files named {head}1001{tail}, {head}1002{tail} ...)")
+    return sorted(tiles)
+
+
+def udim_tile_stem(pattern: str | os.PathLike, tile: int) -> str:
+    """The file stem of one tile of a UDIM pattern: ``skin.<UDIM>.png``, 1002 -> ``skin.1002``.  Baked per tile,
+    its maps are ``skin.1002_k1_color.exr`` ... (docs/contracts.md §4), which Blender reads back as the UDIM image
+    ``skin.<UDIM>_k1_color.exr``."""
+    return Path(Path(pattern).name.replace(UDIM_TOKEN, f"{tile:04d}")).stem
+
+
 def check_colorspace(colorspace: str) -> None:
     """ValueError unless ``colorspace`` is one a reader takes (``COLORSPACES``)."""
     if colorspace not in COLORSPACES:
@@ -152,7 +199,7 @@ def colorspace_of_name(name: str, where: str = "image") -> Literal["srgb", "line
     return None
 
 
-def _detect_colorspace(spec: oiio.ImageSpec, where: str) -> Literal["srgb", "linear"]:
+def _detect_colorspace(spec: OpenImageIO.ImageSpec, where: str) -> Literal["srgb", "linear"]:
     """docs/contracts.md §1: sRGB-encoded unless the file says linear / Non-Color, or stores float pixels."""
     named = colorspace_of_name(spec.getattribute("oiio:ColorSpace") or "", where)
     if named is not None:
@@ -238,13 +285,15 @@ def to_linear(rgb: np.ndarray, used: str) -> np.ndarray:
 
 
 # -- files ------------------------------------------------------------------------------------------------------
-def _read_pixels(path: Path, colorspace: str, integer_types: tuple[str, ...]) -> tuple[oiio.ImageSpec, str, object]:
+def _read_pixels(path: Path, colorspace: str, integer_types: tuple[str, ...]
+                 ) -> tuple[OpenImageIO.ImageSpec, str, object]:
     """Open an albedo image (alpha unassociated) and read all its channels: (spec, the pixel type read, the
     pixels).  Files whose type is in ``integer_types`` are read in that type (the callers scale them in
     float64: OIIO's float conversion is float32), others as float.  Errors as :func:`read_albedo`."""
     check_colorspace(colorspace)
     if not path.is_file():
         raise FileNotFoundError(f"albedo image not found: {path}")
+    oiio = openimageio()
     config = oiio.ImageSpec()
     config.attribute("oiio:UnassociatedAlpha", 1)
     inp = oiio.ImageInput.open(str(path), config)

@@ -20,8 +20,8 @@ from pathlib import Path
 
 import numpy as np
 
-from exporters.constants import N_WAVELENGTHS
-from exporters.maps import sha256_file
+from .constants import N_WAVELENGTHS
+from .maps import sha256_file
 
 INPUT_NAME = "albedo_rgb"
 #: docs/contracts.md §3 outputs of skin_inversion.onnx and their shapes after the batch axis ("K" = components).

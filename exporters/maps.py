@@ -25,11 +25,15 @@ import json
 import os
 import tempfile
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
-import OpenImageIO as oiio
 
-from exporters.image_input import ImageError
+from . import exr
+from .image_input import ImageError, openimageio
+
+if TYPE_CHECKING:
+    import OpenImageIO
 
 RGB_CHANNELS: tuple[str, ...] = ("R", "G", "B")
 SINGLE_CHANNEL: tuple[str, ...] = ("Y",)
@@ -117,8 +121,13 @@ def threads_of(threads: int) -> int:
 
 
 def set_threads(threads: int) -> None:
-    """Threads OpenImageIO and OpenEXR may use for reading and (de)compressing images (0 = all cores)."""
+    """Threads OpenImageIO and OpenEXR may use for reading and (de)compressing images (0 = all cores); nothing
+    where OpenImageIO's module is missing (exporters.exr writes without threads)."""
     n = threads_of(threads)
+    try:
+        oiio = openimageio()
+    except ImageError:
+        return
     oiio.attribute("threads", n)
     oiio.attribute("exr_threads", n)
 
@@ -141,18 +150,27 @@ def fits_half(values: np.ndarray) -> bool:
 
 
 def _exr_spec(width: int, height: int, channels, units: str, compression: str = DEFAULT_COMPRESSION,
-              pixel_type: str = "float") -> oiio.ImageSpec:
+              pixel_type: str = "float") -> OpenImageIO.ImageSpec:
     if compression not in COMPRESSIONS:
         raise ValueError(f"EXR compression must be one of {COMPRESSIONS}, not {compression!r}")
     if pixel_type not in PIXEL_TYPES:
         raise ValueError(f"EXR pixel type must be one of {PIXEL_TYPES}, not {pixel_type!r}")
-    spec = oiio.ImageSpec(width, height, len(channels), pixel_type)
+    spec = openimageio().ImageSpec(width, height, len(channels), pixel_type)
     spec.channelnames = tuple(channels)
     spec.attribute("oiio:ColorSpace", "Non-Color")
     spec.attribute("spectral_skin_sss:colorspace", "Non-Color")
     spec.attribute("compression", compression)
     spec.attribute("spectral_skin_sss:units", units)
     return spec
+
+
+def _uncompressed(path: Path, width: int, height: int, channels: tuple[str, ...], units: str, compression: str,
+                  pixel_type: str) -> exr.ExrScanlineWriter:
+    """The writer of a map where OpenImageIO's module is missing: exporters.exr, uncompressed, same header strings."""
+    if compression not in COMPRESSIONS:
+        raise ValueError(f"EXR compression must be one of {COMPRESSIONS}, not {compression!r}")
+    return exr.ExrScanlineWriter(path, width, height, channels, pixel_type, {
+        "oiio:ColorSpace": "Non-Color", "spectral_skin_sss:colorspace": "Non-Color", "spectral_skin_sss:units": units})
 
 
 def _temp_name(path: Path) -> Path:
@@ -244,6 +262,7 @@ def read_exr(path: str | os.PathLike, channels: tuple[str, ...] | list[str] | No
     ``BIOPHYSICAL_CHANNELS`` comes back alphabetically; pass ``channels`` to get them in that order
     (KeyError naming the missing channel otherwise).
     """
+    oiio = openimageio()
     inp = oiio.ImageInput.open(str(path))
     if inp is None:
         raise ImageError(f"cannot read {path}: {oiio.geterror()}")
@@ -266,7 +285,7 @@ def read_exr(path: str | os.PathLike, channels: tuple[str, ...] | list[str] | No
 
 class MapStream:
     """A float32 (or half: ``pixel_type``) EXR map written band by band (memory bounded) to a temporary file
-    beside ``path``.
+    beside ``path``, with OpenImageIO, or uncompressed by exporters.exr where its module is missing.
 
     Nothing appears under ``path`` until :func:`publish_maps`; :meth:`discard` removes the temporary file.
     Checks at creation: the folder exists and is writable, and ``path`` does not exist (unless
@@ -288,6 +307,12 @@ class MapStream:
         self.overwrite = overwrite
         self.tmp = _temp_name(self.path)
         self._rows = 0
+        try:
+            oiio = openimageio()
+        except ImageError:  # no OpenImageIO module (Blender 4.2): the same map, uncompressed
+            self._out = _uncompressed(self.tmp, self.width, self.height, self.channels, units, compression,
+                                      pixel_type)
+            return
         self._out = oiio.ImageOutput.create(str(self.tmp))
         if self._out is None or not self._out.open(str(self.tmp), _exr_spec(self.width, self.height, self.channels,
                                                                              units, compression, pixel_type)):

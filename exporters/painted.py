@@ -44,8 +44,8 @@ from functools import cache
 
 import numpy as np
 
-from exporters import reflectance_tables
-from exporters.constants import N_WAVELENGTHS, WAVELENGTHS_NM
+from . import reflectance_tables
+from .constants import N_WAVELENGTHS, WAVELENGTHS_NM
 
 #: The correction stays within [1 / C_MAX, C_MAX] at every wavelength.  The shipped model's skins are 1.2-2x
 #: darker than the painted skin colours they answer (its exposure), so 4 leaves room for hue and keeps the
@@ -181,7 +181,7 @@ class PaintedMixture:
 def paint_mixture(alpha, sigma_t, g, weight, albedo_rgb) -> PaintedMixture:
     """The network's mixture (``alpha``, ``sigma_t`` cm^-1, ``g``, ``weight``: (N, K, 376), docs/contracts.md §3) with
     painted colour of ``albedo_rgb`` (N, 3) linear sRGB (module docstring, steps 1-4).  g and weight stay."""
-    from exporters.collapse import channel_matrix  # collapse imports this module
+    from .collapse import channel_matrix  # collapse imports this module
 
     al, st, gg, w = (_finite(n, x) for n, x in (("alpha", alpha), ("sigma_t", sigma_t), ("g", g), ("weight", weight)))
     if al.ndim != 3 or al.shape[2] != N_WAVELENGTHS or any(x.shape != al.shape for x in (st, gg, w)):

@@ -36,7 +36,7 @@ from typing import Literal
 
 import numpy as np
 
-from exporters.constants import N_TISSUE
+from .constants import N_TISSUE
 
 Boundary = Literal["cycles", "model"]
 BOUNDARIES: tuple[str, ...] = ("cycles", "model")

@@ -30,8 +30,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from exporters import collapse, cycles, reflectance_tables
-from exporters.colorimetry import SRGB_LUMINANCE
+from . import collapse, cycles, reflectance_tables
+from .colorimetry import SRGB_LUMINANCE
 
 MEDIA_TARGETS = ("cycles", "physical")
 COUNT_FIELDS = ("n_low", "n_high", "n_unreachable", "n_capped")

@@ -49,11 +49,11 @@ from pathlib import Path
 
 import numpy as np
 
-from exporters import cycles, inference, texel_records
-from exporters.colorimetry import srgb_decode, srgb_encode
-from exporters.constants import PARAM_NAMES, PARAM_RANGES
-from exporters.maps import sha256_file
-from exporters.texel_records import CollapseOptions
+from . import cycles, inference, texel_records
+from .colorimetry import srgb_decode, srgb_encode
+from .constants import PARAM_NAMES, PARAM_RANGES
+from .maps import sha256_file
+from .texel_records import CollapseOptions
 
 FORMAT = "spectral_skin_sss texel table v3"
 #: skin space = COORDS @ sRGB-encoded RGB (module docstring).

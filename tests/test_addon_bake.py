@@ -5,6 +5,7 @@ and cancel like the modal operator, unregister cleanly."""
 from __future__ import annotations
 
 import importlib
+import subprocess
 import sys
 from pathlib import Path
 
@@ -94,22 +95,53 @@ def test_bake_osl_and_files_beside_blend(addon, albedo_png, tmp_path):
                                                                                  "anisotropy")}
     assert {p.name for p in folder.iterdir()} == expected | {"albedo_maps.json"}
     gnode = group_node(mat)
-    assert gnode.node_tree["spectral_skin_sss_backend"] == "OSL" and bpy.context.scene.cycles.shading_system
+    assert gnode.node_tree["spectral_skin_sss_backend"] == "OSL"
+    assert not bpy.context.scene.cycles.shading_system  # the scene's shading system is the user's to change
+    bpy.context.scene.cycles.shading_system = True
     image = gnode.inputs["k1 Radius"].links[0].from_node.image
     assert image.packed_file is None and Path(bpy.path.abspath(image.filepath)) == folder / "albedo_k1_radius.exr"
     px = render_small()
     assert np.all(np.isfinite(px)) and px[16, 16, :3].max() > 0.0
 
 
-def test_auto_backend_follows_the_device(addon, albedo_png):
+def test_svm_is_the_default_and_osl_only_on_request(addon, albedo_png):
+    assert bpy.ops.spectral_skin.invert_albedo.get_rna_type().properties["backend"].default == "SVM"
+    assert baker.BakeSettings(model_path="m.onnx").backend == "SVM"
     scene = bpy.context.scene
     scene.cycles.device = "CPU"
-    assert baker.pick_backend(scene, "AUTO") == "OSL"
+    assert baker.pick_backend(scene, "SVM") == "SVM" and baker.pick_backend(scene, "OSL") == "OSL"
+    assert "Open Shading Language" in baker.osl_warning(scene, "OSL") and baker.osl_warning(scene, "SVM") == ""
+    scene.cycles.shading_system = True
+    assert baker.osl_warning(scene, "OSL") == ""
     scene.cycles.device = "GPU"  # no OptiX on this machine: compute device type NONE
-    assert baker.pick_backend(scene, "AUTO") == "SVM"
     with pytest.raises(baker.BakeInputError, match="OSL does not run"):
         baker.pick_backend(scene, "OSL")
     assert baker.pick_backend(scene, "SVM") == "SVM"
+    with pytest.raises(baker.BakeInputError, match="unknown shading path"):
+        baker.pick_backend(scene, "AUTO")
+
+
+def test_a_scene_saved_with_the_former_auto_shading_asks_for_svm(addon):
+    from blender_addon import panels
+
+    settings = bpy.context.scene.spectral_skin
+    settings.backend = "OSL"
+    assert settings["backend"] == 2 and panels.shading_of(settings) == "OSL"  # the numbers "Auto" = 0 left
+    settings.backend = "SVM"
+    assert settings["backend"] == 1 and panels.shading_of(settings) == "SVM"
+    settings["backend"] = 0  # what a scene saved with "Auto" holds
+    assert settings.backend == "" and panels.shading_of(settings) == "SVM"
+
+
+def test_osl_on_request_leaves_the_scene_shading_system_and_says_so(addon):
+    mesh = bpy.data.meshes.new("m")
+    obj = bpy.data.objects.new("o", mesh)
+    bpy.context.scene.collection.objects.link(obj)
+    mesh.materials.append(bpy.data.materials.new("Skin"))
+    bpy.context.scene.cycles.shading_system = False
+    with bpy.context.temp_override(object=obj, active_object=obj):
+        assert bpy.ops.spectral_skin.add_mixture(components=1, backend="OSL") == {"FINISHED"}
+    assert not bpy.context.scene.cycles.shading_system
 
 
 def test_generated_image_and_shared_group(addon, tmp_path):
@@ -180,3 +212,91 @@ def test_invoke_in_background_runs_synchronously(addon, albedo_png):
         assert bpy.ops.spectral_skin.invert_albedo("INVOKE_DEFAULT", backend="SVM") == {"FINISHED"}
     assert group_node(mat).node_tree["spectral_skin_sss_k"] == K
     assert not bpy.context.window_manager.spectral_skin_running
+
+
+def test_udim_albedo_bakes_every_tile_into_udim_maps(addon, tmp_path):
+    # The issue's case: a tiled image whose Blender file path is skin.<UDIM>.png, both tiles on disk.
+    write_image(tmp_path / "skin.1001.png", skin_codes(), "uint8")
+    dark = np.full((3, 4, 3), (120, 80, 60), np.uint8)
+    write_image(tmp_path / "skin.1002.png", dark, "uint8")
+    obj, mat, tex = skin_object(tmp_path / "skin.1001.png")
+    tex.image.source = "TILED"
+    assert tex.image.filepath.endswith("skin.<UDIM>.png") and [t.number for t in tex.image.tiles] == [1001, 1002]
+    bpy.ops.wm.save_as_mainfile(filepath=str(tmp_path / "scene.blend"))
+    assert run_invert(obj, backend="SVM", storage="FILES") == {"FINISHED"}
+    folder = tmp_path / "skin_skin_maps"
+    per_tile = {f"skin.{tile}_k{k}_{kind}.exr" for tile in (1001, 1002) for k in range(1, K + 1)
+                for kind in ("color", "radius", "weight", "anisotropy")}
+    assert {p.name for p in folder.iterdir()} == per_tile | {"skin.1001_maps.json", "skin.1002_maps.json"}
+    gnode = group_node(mat)
+    image = gnode.inputs["k1 Color"].links[0].from_node.image
+    assert image.source == "TILED" and [t.number for t in image.tiles] == [1001, 1002]
+    assert Path(bpy.path.abspath(image.filepath)) == folder / "skin.<UDIM>_k1_color.exr"
+    first = maps.read_exr(folder / "skin.1001_k1_weight.exr")[0]
+    second = maps.read_exr(folder / "skin.1002_k1_weight.exr")[0]
+    assert not np.allclose(first[1, 1], second[1, 1])  # each tile from its own colours
+    px = render_small()
+    assert np.all(np.isfinite(px)) and px[16, 16, :3].max() > 0.0
+
+
+def test_udim_albedo_packed_maps_and_a_missing_tile(addon, tmp_path):
+    write_image(tmp_path / "skin.1001.png", skin_codes(), "uint8")
+    write_image(tmp_path / "skin.1002.png", skin_codes(), "uint8")
+    obj, mat, tex = skin_object(tmp_path / "skin.1001.png")
+    tex.image.source = "TILED"
+    assert run_invert(obj, backend="SVM") == {"FINISHED"}
+    image = group_node(mat).inputs["k2 Radius"].links[0].from_node.image
+    assert image.source == "TILED" and len(image.packed_files) == 2 and image.name == "skin.<UDIM>_k2_radius.exr"
+    px = render_small()
+    assert np.all(np.isfinite(px)) and px[16, 16, :3].max() > 0.0
+    obj2, mat2, tex2 = skin_object(tmp_path / "skin.1001.png", name="Other")
+    tex2.image.source = "TILED"
+    (tmp_path / "skin.1002.png").unlink()
+    before = snapshot()
+    with pytest.raises(RuntimeError, match=r"tile 1002 of UDIM image '.*' is missing: .*skin\.1002\.png"):
+        run_invert(obj2, backend="SVM")
+    assert snapshot() == before
+
+
+def test_without_openimageio_the_file_is_read_by_blender_and_the_maps_are_the_same(addon, albedo_png,
+                                                                                    reference_maps, tmp_path):
+    # Blender 4.2's Python has no OpenImageIO module: the albedo file is read through Blender and the maps are
+    # written uncompressed (exporters.exr).  Same texels, same maps as with OpenImageIO (reference_maps; for the
+    # UDIM tiles, exporters.bake of each tile file).
+    out, tiled_out = tmp_path / "maps", tmp_path / "tiled"
+    write_image(tmp_path / "skin.1001.png", skin_codes(), "uint8")
+    write_image(tmp_path / "skin.1002.png", np.full((2, 3, 3), (120, 80, 60), np.uint8), "uint8")
+    script = (
+        "import sys\n"
+        "sys.modules['OpenImageIO'] = None  # any import of it now fails\n"
+        f"sys.path.insert(0, {str(Path(__file__).resolve().parents[1])!r})\n"
+        "import bpy\nimport addon_utils\n"
+        "addon_utils.enable('blender_addon', default_set=True, handle_error=None)\n"
+        "bpy.context.preferences.addons['blender_addon'].preferences.threads = 1\n"
+        f"print(bpy.ops.spectral_skin.invert_albedo(filepath={str(albedo_png)!r}, storage='FILES', "
+        f"output_dir={str(out)!r}, backend='SVM', uv_coverage=False))\n"
+        f"image = bpy.data.images.load({str(tmp_path / 'skin.1001.png')!r})\n"
+        "image.source = 'TILED'\n"
+        f"print(bpy.ops.spectral_skin.invert_albedo(image_name=image.name, storage='FILES', "
+        f"output_dir={str(tiled_out)!r}, backend='SVM'))\n"
+        "print('OpenImageIO' in sys.modules and sys.modules['OpenImageIO'] is not None)\n"
+    )
+    proc = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0 and "{'FINISHED'}" in proc.stdout, proc.stdout[-2000:] + proc.stderr[-2000:]
+    assert proc.stdout.strip().splitlines()[-1] == "False"
+    names = sorted(p.name for p in reference_maps.iterdir() if p.suffix == ".exr")
+    assert names and sorted(p.name for p in out.iterdir() if p.suffix == ".exr") == names
+    for name in names:
+        got, channels, attrs = maps.read_exr(out / name)
+        ref, ref_channels, _ = maps.read_exr(reference_maps / name)
+        assert channels == ref_channels and attrs["compression"] == "none", name
+        np.testing.assert_array_equal(got, ref, err_msg=name)
+    assert proc.stdout.count("{'FINISHED'}") == 2
+    for tile in (1001, 1002):
+        ref_dir = tmp_path / f"ref{tile}"
+        ref_dir.mkdir()
+        bake.bake(tmp_path / f"skin.{tile}.png", ref_dir, preferences.DEFAULT_MODEL,
+                  bake.BakeOptions(threads=1, prune_share=0.0))
+        for ref_path in ref_dir.glob("*.exr"):
+            np.testing.assert_array_equal(maps.read_exr(tiled_out / ref_path.name)[0], maps.read_exr(ref_path)[0],
+                                          err_msg=ref_path.name)

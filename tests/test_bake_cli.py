@@ -195,3 +195,42 @@ def test_runs_without_colour_science_or_scipy(skin_png, tmp_path):
     proc = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=120)
     assert proc.returncode == 0, proc.stderr[-2000:]
     assert (out / "face_maps.json").is_file()
+
+
+def test_udim_albedo_bakes_every_tile_to_maps_named_per_tile(tmp_path):
+    # Two tiles of different colours, and a file that only looks like a tile (1000 is outside the UDIM range).
+    tiles = tmp_path / "tiles"
+    tiles.mkdir()
+    light, dark = np.full((2, 3, 3), (224, 172, 150), np.uint8), np.full((2, 3, 3), (120, 80, 60), np.uint8)
+    write_png(tiles / "skin.1001.png", light)
+    write_png(tiles / "skin.1002.png", dark)
+    write_png(tiles / "skin.1000.png", dark)
+    out = tmp_path / "maps"
+    proc = bake("--albedo", str(tiles / "skin.<UDIM>.png"), "--out", str(out), "--threads", "1")
+    assert proc.returncode == 0, proc.stderr
+    assert {p.name for p in out.iterdir()} == files_for("skin.1001", ("cycles",)) | files_for("skin.1002",
+                                                                                                 ("cycles",))
+    assert "tile skin.1001.png" in proc.stdout and "tile skin.1002.png" in proc.stdout
+    record = json.loads((out / "skin.1002_maps.json").read_text())
+    assert record["input"]["image"].endswith("skin.1002.png")
+    first = maps.read_exr(out / "skin.1001_k1_color.exr")[0]
+    second = maps.read_exr(out / "skin.1002_k1_color.exr")[0]
+    assert first.shape == second.shape == (2, 3, 3) and not np.allclose(first, second)
+    alone = tmp_path / "alone"  # a tile baked on its own gives the same maps
+    assert bake("--albedo", str(tiles / "skin.1002.png"), "--out", str(alone), "--prune-share", "0").returncode == 0
+    np.testing.assert_array_equal(maps.read_exr(alone / "skin.1002_k1_color.exr")[0], second)
+
+
+def test_udim_albedo_errors_leave_the_folder_as_it_was(tmp_path):
+    out = tmp_path / "maps"
+    proc = bake("--albedo", str(tmp_path / "skin.<UDIM>.png"), "--out", str(out))
+    assert proc.returncode == 2 and not out.exists()
+    assert proc.stderr.strip().splitlines() == [
+        f"bake.py: error: no UDIM tile of {tmp_path / 'skin.<UDIM>.png'} found (files named skin.1001.png, "
+        "skin.1002.png ...)"]
+    write_png(tmp_path / "skin.1001.png", np.full((2, 2, 3), (224, 172, 150), np.uint8))
+    (tmp_path / "skin.1002.png").write_bytes(b"not a png")  # the second tile fails after the first was baked
+    proc = bake("--albedo", str(tmp_path / "skin.<UDIM>.png"), "--out", str(out))
+    assert proc.returncode == 2 and "skin.1002.png" in proc.stderr and not out.exists()
+    proc = bake("--albedo", str(tmp_path / "skin.<UDIM>.png"), "--out", str(out), "--prune-share", "0.01")
+    assert proc.returncode == 2 and "leave it out for UDIM albedos" in proc.stderr and not out.exists()

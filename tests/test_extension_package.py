@@ -1,4 +1,4 @@
-"""make extension (blender_addon/package.py): the zip with the bundled onnxruntime wheel builds, validates
+"""make extension (blender_addon/package.py): the zip with the bundled wheels builds, validates
 with Blender's own tool, installs into a sandboxed Blender user folder, and bakes with the *bundled*
 onnxruntime (the venv's copy is hidden from the import system in that process)."""
 
@@ -37,9 +37,13 @@ def test_zip_contents_and_manifest(ext_zip):
         manifest = zf.read("blender_manifest.toml").decode()
     assert {n.split("/")[0] for n in names} == {"__init__.py", "blender_manifest.toml", "blender_addon", "exporters",
                                                 "wheels"}
-    wheels = [n for n in names if n.startswith("wheels/")]
-    assert len(wheels) == 1 and "onnxruntime-" in wheels[0] and wheels[0].endswith("manylinux_2_28_x86_64.whl")
-    assert 'platforms = ["linux-x64"]' in manifest and f'"./{wheels[0]}"' in manifest
+    wheels = sorted(n for n in names if n.startswith("wheels/"))
+    # onnxruntime for both Pythons Blender ships (3.11: 4.2-5.0, 3.13: 5.1 on); never OpenImageIO, which would
+    # replace Blender's own (the extensions' site-packages come first) and break Cycles' oslquery
+    assert [w.split("-")[0] + "-" + w.split("-")[2] for w in wheels] == [
+        "wheels/onnxruntime-cp311", "wheels/onnxruntime-cp313"]
+    assert all("manylinux" in w and w.endswith("_x86_64.whl") for w in wheels), wheels
+    assert 'platforms = ["linux-x64"]' in manifest and all(f'"./{w}"' in manifest for w in wheels)
     assert "blender_addon/models/skin_inversion.onnx" in names and "exporters/data/reflectance_tables.npz" in names
     assert "blender_addon/package.py" not in names and not any("__pycache__" in n for n in names)
 

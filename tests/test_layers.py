@@ -39,6 +39,10 @@ LAYERS: tuple[str, ...] = (
 )
 
 
+#: ``blender_addon.core.<m>`` is ``exporters.<m>`` (blender_addon/core.py resolves the core beside the add-on).
+CORE_ALIAS = ("exporters.", "blender_addon.core.")
+
+
 def module_name(path: Path) -> str:
     parts = list(path.relative_to(ROOT).with_suffix("").parts)
     return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
@@ -64,7 +68,7 @@ def imports(name: str, path: Path) -> set[str]:
                 target = node.module or ""
             found.add(target)
             found |= {f"{target}.{alias.name}" for alias in node.names}
-    return found
+    return {CORE_ALIAS[0] + n[len(CORE_ALIAS[1]):] if n.startswith(CORE_ALIAS[1]) else n for n in found}
 
 
 def graph() -> dict[str, set[str]]:
@@ -185,3 +189,19 @@ def test_the_shipped_model_paths_come_from_the_addon_without_bpy():
             "assert not [m for m in sys.modules if m.startswith('blender_addon')]")
     result = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=60)
     assert result.returncode == 0, result.stderr
+
+
+def test_the_extension_imports_itself_relatively():
+    """Installed, ``exporters`` and ``blender_addon`` are subpackages of the extension (bl_ext.<repo>.<id>):
+    an absolute ``import exporters`` or ``from blender_addon import`` in them would import a top-level module that
+    is not there (or another add-on's)."""
+    bad = []
+    for name, path in modules().items():
+        if name.split(".")[0] not in ("exporters", "blender_addon"):
+            continue
+        for node in ast.walk(ast.parse(path.read_text(), str(path))):
+            if isinstance(node, ast.Import):
+                bad += [f"{name}: import {a.name}" for a in node.names if a.name.split(".")[0] in TOPS]
+            elif isinstance(node, ast.ImportFrom) and not node.level and (node.module or "").split(".")[0] in TOPS:
+                bad.append(f"{name}: from {node.module} import ...")
+    assert bad == []

@@ -30,12 +30,12 @@ progress bar; :func:`bake` runs it to the end.  What to ask for: :class:`BakeOpt
 (:mod:`exporters.bake.options`); what is written: :mod:`exporters.bake.targets`.
 """
 
-from exporters.bake.job import BakeJob, bake
-from exporters.bake.options import DEFAULT_BAND_TEXELS, DEFAULT_PRUNE_SHARE, FAST_MANTISSA_BITS, BakeOptions
-from exporters.bake.report import BakeResult, input_notes, one_line
-from exporters.bake.reuse import KEY_VERSION, bake_key, file_id, find_up_to_date, job_key, mask_sha256, pixels_id
-from exporters.bake.table_cache import cached_table_path, default_table_path, find_table, table_cache_dir
-from exporters.bake.targets import HALF_KINDS, TARGETS, UNITS, BakeError, MapSpec, map_specs, parse_targets
+from .job import BakeJob, bake
+from .options import DEFAULT_BAND_TEXELS, DEFAULT_PRUNE_SHARE, FAST_MANTISSA_BITS, BakeOptions
+from .report import BakeResult, input_notes, one_line
+from .reuse import KEY_VERSION, bake_key, file_id, find_up_to_date, job_key, mask_sha256, pixels_id
+from .table_cache import cached_table_path, default_table_path, find_table, table_cache_dir
+from .targets import HALF_KINDS, TARGETS, UNITS, BakeError, MapSpec, map_specs, parse_targets
 
 __all__ = ["DEFAULT_BAND_TEXELS", "DEFAULT_PRUNE_SHARE", "FAST_MANTISSA_BITS", "HALF_KINDS", "KEY_VERSION", "TARGETS",
            "UNITS", "BakeError", "BakeJob", "BakeOptions", "BakeResult", "MapSpec", "bake", "bake_key",

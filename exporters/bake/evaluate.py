@@ -8,10 +8,10 @@ from collections.abc import Callable, Iterator
 
 import numpy as np
 
-from exporters import inference, maps, texel_records, texel_table
-from exporters.bake.table_cache import cached_table_path
-from exporters.bake.targets import BakeError, MapSpec
-from exporters.texel_records import CollapseOptions
+from .. import inference, maps, texel_records, texel_table
+from ..texel_records import CollapseOptions
+from .table_cache import cached_table_path
+from .targets import BakeError, MapSpec
 
 #: Distinct colours looked up in the fast-path table per step (the UI stays responsive: ~0.1 s each).
 TABLE_CHUNK = 1 << 18

@@ -18,13 +18,13 @@ from pathlib import Path
 
 import numpy as np
 
-from exporters import image_input, inference, maps, texel_records
-from exporters.bake import masking, report, reuse
-from exporters.bake.evaluate import Evaluator
-from exporters.bake.options import FAST_MANTISSA_BITS, BakeOptions
-from exporters.bake.report import BakeResult
-from exporters.bake.table_cache import find_table
-from exporters.bake.targets import HALF_KINDS, BakeError, MapSpec, map_specs, units_of
+from .. import image_input, inference, maps, texel_records
+from . import masking, report, reuse
+from .evaluate import Evaluator
+from .options import FAST_MANTISSA_BITS, BakeOptions
+from .report import BakeResult
+from .table_cache import find_table
+from .targets import HALF_KINDS, BakeError, MapSpec, map_specs, units_of
 
 
 class BakeJob:

@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from exporters.bake.targets import BakeError
-from exporters.image_input import AlbedoImage, IndexedAlbedo, check_texels
+from ..image_input import AlbedoImage, IndexedAlbedo, check_texels
+from .targets import BakeError
 
 
 def indexed(albedo: AlbedoImage | IndexedAlbedo) -> IndexedAlbedo:

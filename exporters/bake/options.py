@@ -7,9 +7,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from exporters import collapse, inference, maps, reflectance_tables, texel_table
-from exporters.bake.targets import BakeError, parse_targets
-from exporters.texel_records import CollapseOptions
+from .. import collapse, inference, maps, reflectance_tables, texel_table
+from ..texel_records import CollapseOptions
+from .targets import BakeError, parse_targets
 
 #: Default texels per band: bands bound the memory of the expanded maps (about 0.3 KB per texel).
 DEFAULT_BAND_TEXELS = 1 << 19

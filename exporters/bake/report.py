@@ -9,13 +9,13 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from exporters import collapse, maps, painted
-from exporters.bake.targets import units_of
-from exporters.image_input import AlbedoImage, IndexedAlbedo
-from exporters.texel_records import CLAMPED_CYCLES, CLAMPED_SPECTRAL, needs_media
+from .. import collapse, maps, painted
+from ..image_input import AlbedoImage, IndexedAlbedo
+from ..texel_records import CLAMPED_CYCLES, CLAMPED_SPECTRAL, needs_media
+from .targets import units_of
 
 if TYPE_CHECKING:
-    from exporters.bake.job import BakeJob
+    from .job import BakeJob
 
 #: How the maps' colour is defined, per mode (S_maps.json "colour").
 COLOUR_TARGETS = {

@@ -13,11 +13,11 @@ from pathlib import Path
 
 import numpy as np
 
-from exporters import maps
-from exporters.bake.options import BakeOptions
-from exporters.bake.report import BakeResult
-from exporters.bake.targets import BakeError, parse_targets
-from exporters.image_input import ColorSpace, IndexedAlbedo
+from .. import maps
+from ..image_input import ColorSpace, IndexedAlbedo
+from .options import BakeOptions
+from .report import BakeResult
+from .targets import BakeError, parse_targets
 
 #: Version of the bake key (bump when the maps of the same inputs change).  2: the painted colour by default.
 KEY_VERSION = 2

@@ -9,8 +9,8 @@ import os
 import warnings
 from pathlib import Path
 
-from exporters import inference, texel_table
-from exporters.texel_records import CollapseOptions
+from .. import inference, texel_table
+from ..texel_records import CollapseOptions
 
 
 def default_table_path(model_path: str | os.PathLike) -> Path:

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from exporters import maps
+from .. import maps
 
 TARGETS: tuple[str, ...] = ("cycles", "physical", "spectral")
 #: Units strings stored in each EXR header and in S_maps.json.

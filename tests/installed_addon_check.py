@@ -1,0 +1,180 @@
+"""Run by tests/test_addon_versions.py with the Python of another Blender (bpy 4.2 ... 5.3): the extension zip is
+installed through Blender's own extension system, enabled, used, and left enabled at exit.
+
+    python tests/installed_addon_check.py ZIP WORKDIR [register-only]
+
+``register-only``: install without enabling, import the extension's package and call its ``register()`` as a
+script would, then exit without unregistering (Blender then has nothing of its own to disable).
+
+BLENDER_USER_RESOURCES must point into WORKDIR (nothing is written to the user's Blender configuration).  Prints
+one line ``RESULT{json}``; the caller checks it and that the process exits by itself with status 0 (the add-on
+is still registered then: 4.2 crashed and 4.5 hung there).  Imports only the standard library, bpy and numpy
+(what Blender's own Python has), so it runs unchanged on Python 3.11 and 3.13.
+"""
+
+from __future__ import annotations
+
+import importlib
+import json
+import os
+import runpy
+import sys
+import time
+
+import bpy
+import numpy as np
+
+EXTENSION = "bl_ext.user_default.spectral_skin_sss"
+#: A light skin colour (linear Rec.709) for the tiny bake.
+SKIN_LINEAR = (0.55, 0.32, 0.25)
+
+
+def render_centre(scene) -> list[float]:
+    """Render the scene (Cycles CPU, 16 x 16, 8 samples) and return the mean linear RGB of its centre 6 x 6
+    pixels (all on the sphere)."""
+    scene.render.engine = "CYCLES"
+    scene.cycles.device = "CPU"
+    scene.cycles.samples = 8
+    scene.cycles.use_denoising = False
+    scene.render.resolution_x = scene.render.resolution_y = 16
+    scene.render.resolution_percentage = 100
+    scene.render.image_settings.file_format = "OPEN_EXR"
+    scene.render.filepath = os.path.join(sys.argv[2], f"render_{time.monotonic_ns()}.exr")
+    bpy.ops.render.render(write_still=True)
+    image = bpy.data.images.load(scene.render.filepath)
+    px = np.empty(16 * 16 * 4, np.float32)
+    image.pixels.foreach_get(px)
+    bpy.data.images.remove(image)
+    return px.reshape(16, 16, 4)[5:11, 5:11, :3].mean(axis=(0, 1)).astype(float).tolist()
+
+
+def set_component(gnode) -> None:
+    """Give component 1 of a mixture group node a skin colour and radius (constant inputs, no maps)."""
+    for socket, rgb in (("k1 Color", SKIN_LINEAR), ("k1 Radius", (0.3, 0.1, 0.05))):
+        value = gnode.inputs[socket].default_value
+        gnode.inputs[socket].default_value = (*rgb, 1.0)[: len(value)]
+
+
+def skin_scene():
+    """The scene emptied (factory settings would also disable the extension), with a UV sphere in front of a
+    camera, lit by a white world; returns the sphere."""
+    for obj in list(bpy.data.objects):
+        bpy.data.objects.remove(obj)
+    scene = bpy.context.scene
+    world = bpy.data.worlds.new("World")
+    world.use_nodes = True
+    world.node_tree.nodes["Background"].inputs["Color"].default_value = (1.0, 1.0, 1.0, 1.0)
+    scene.world = world
+    bpy.ops.mesh.primitive_uv_sphere_add(radius=1.0)
+    obj = bpy.context.active_object
+    camera = bpy.data.objects.new("Camera", bpy.data.cameras.new("Camera"))
+    camera.location = (0.0, -4.0, 0.0)
+    camera.rotation_euler = (1.5708, 0.0, 0.0)
+    scene.collection.objects.link(camera)
+    scene.camera = camera
+    return obj
+
+
+def main() -> dict:
+    zip_path = sys.argv[1]
+    out: dict = {"blender": bpy.app.version_string, "python": "{}.{}".format(*sys.version_info[:2])}
+    t0 = time.perf_counter()
+    bpy.ops.extensions.package_install_files(filepath=zip_path, repo="user_default", enable_on_install=True)
+    out["install_s"] = round(time.perf_counter() - t0, 2)
+    out["enabled"] = EXTENSION in bpy.context.preferences.addons
+    package = sys.modules[EXTENSION]
+    folder = os.path.dirname(os.path.abspath(package.__file__))
+    out["top_level_modules"] = sorted(m for m in ("exporters", "blender_addon") if m in sys.modules)
+    out["extension_on_sys_path"] = any(os.path.abspath(p or ".") == folder for p in sys.path)
+    out["openimageio_imported_by_enabling"] = "OpenImageIO" in sys.modules
+    out["core"] = sys.modules[f"{EXTENSION}.blender_addon.core"].EXPORTERS
+
+    # The network, through the extension's own exporters and the onnxruntime wheel the zip carries for this Python.
+    inference = importlib.import_module(f"{EXTENSION}.exporters.inference")
+    models = importlib.import_module(f"{EXTENSION}.blender_addon.models")
+    rows = inference.load_model(models.INVERSION_MODEL, threads=1).run(np.array([SKIN_LINEAR]))
+    out["inference_finite"] = all(bool(np.all(np.isfinite(v))) for v in rows.values())
+    out["onnxruntime"] = getattr(sys.modules.get("onnxruntime"), "__file__", None)
+
+    # The baked path: Invert Skin Albedo on an image painted in Blender (no file), every colour through the model,
+    # SVM, maps packed (on 4.2, which has no OpenImageIO module, written by exporters.exr).
+    obj = skin_scene()
+    bpy.context.preferences.addons[EXTENSION].preferences.threads = 1
+    image = bpy.data.images.new("painted", 4, 4, float_buffer=True)
+    image.colorspace_settings.name = "Linear Rec.709"
+    image.pixels.foreach_set([*SKIN_LINEAR, 1.0] * 16)
+    material = bpy.data.materials.new("Skin")
+    material.use_nodes = True
+    obj.data.materials.append(material)
+    tex = material.node_tree.nodes.new("ShaderNodeTexImage")
+    tex.image = image
+    material.node_tree.links.new(tex.outputs["Color"], material.node_tree.nodes["Principled BSDF"].inputs[0])
+    material.node_tree.nodes.active = tex
+    t0 = time.perf_counter()
+    try:
+        with bpy.context.temp_override(object=obj, active_object=obj):
+            out["invert"] = sorted(bpy.ops.spectral_skin.invert_albedo(exact=True))
+    except RuntimeError as exc:
+        out["invert"], out["invert_error"] = ["ERROR"], str(exc)
+    out["invert_s"] = round(time.perf_counter() - t0, 2)
+    out["openimageio"] = getattr(sys.modules.get("OpenImageIO"), "__file__", None)
+    groups = [n.node_tree for n in material.node_tree.nodes if n.bl_idname == "ShaderNodeGroup"]
+    out["nodes_after_invert"] = len(material.node_tree.nodes)
+    if not groups:  # no baked maps (4.2): the SVM group with constant inputs
+        with bpy.context.temp_override(object=obj, active_object=obj):
+            bpy.ops.spectral_skin.add_mixture(components=1, backend="SVM")
+        set_component(next(n for n in material.node_tree.nodes if n.bl_idname == "ShaderNodeGroup"))
+        groups = [n.node_tree for n in material.node_tree.nodes if n.bl_idname == "ShaderNodeGroup"]
+    out["group_backend"] = groups[0].get("spectral_skin_sss_backend") if groups else None
+    out["shading_system_after_invert"] = bool(bpy.context.scene.cycles.shading_system)
+    t0 = time.perf_counter()
+    out["svm_centre"] = render_centre(bpy.context.scene)
+    out["svm_render_s"] = round(time.perf_counter() - t0, 2)
+
+    # The headless script of the installed extension, run as Blender runs `--python <extension>/blender_addon/bake.py`
+    # (it finds the extension's own exporters, never a top-level one).
+    png = os.path.join(sys.argv[2], "albedo.png")
+    image.filepath_raw, image.file_format = png, "PNG"
+    image.save()
+    argv, sys.argv = sys.argv, ["bake.py", "--", "--albedo", png, "--out", os.path.join(sys.argv[2], "maps"),
+                                "--threads", "1", "--quiet"]
+    try:
+        runpy.run_path(os.path.join(folder, "blender_addon", "bake.py"), run_name="__main__")
+        out["bake_script_exit"] = 0
+    except SystemExit as exc:
+        out["bake_script_exit"] = exc.code
+    finally:
+        sys.argv = argv
+    maps_dir = os.path.join(sys.argv[2], "maps")
+    out["bake_script_files"] = len(os.listdir(maps_dir)) if os.path.isdir(maps_dir) else 0
+    out["top_level_modules_after_script"] = sorted(m for m in ("exporters", "blender_addon") if m in sys.modules)
+
+    # OSL on request: the Script node compiles (Cycles 4.2 has no oslquery) and renders once OSL is turned on.
+    obj = skin_scene()
+    material = bpy.data.materials.new("SkinOSL")
+    material.use_nodes = True
+    obj.data.materials.append(material)
+    with bpy.context.temp_override(object=obj, active_object=obj):
+        out["add_osl"] = sorted(bpy.ops.spectral_skin.add_mixture(components=1, backend="OSL"))
+    out["shading_system_after_add_osl"] = bool(bpy.context.scene.cycles.shading_system)
+    gnode = next(n for n in material.node_tree.nodes if n.bl_idname == "ShaderNodeGroup")
+    set_component(gnode)
+    script = next(n for n in gnode.node_tree.nodes if n.bl_idname == "ShaderNodeScript")
+    out["osl_compiled"] = bool(script.bytecode) and "BSSRDF" in script.outputs
+    bpy.context.scene.cycles.shading_system = True
+    t0 = time.perf_counter()
+    out["osl_centre"] = render_centre(bpy.context.scene)
+    out["osl_render_s"] = round(time.perf_counter() - t0, 2)
+    return out
+
+
+def register_only() -> dict:
+    bpy.ops.extensions.package_install_files(filepath=sys.argv[1], repo="user_default", enable_on_install=False)
+    package = importlib.import_module(EXTENSION)
+    package.register()
+    return {"blender": bpy.app.version_string, "registered": hasattr(bpy.types, "SPECTRAL_SKIN_OT_invert_albedo"),
+            "enabled": EXTENSION in bpy.context.preferences.addons}
+
+
+if __name__ == "__main__":
+    print("RESULT" + json.dumps(register_only() if sys.argv[3:] == ["register-only"] else main()), flush=True)
