@@ -350,7 +350,7 @@ def _material_output(tree: bpy.types.NodeTree) -> bpy.types.Node:
 
 def wire_into_material(material: bpy.types.Material, group: bpy.types.NodeTree,
                        images: dict[tuple[int, str], bpy.types.Image] | None = None,
-                       interpolation: str = "Closest") -> bpy.types.Node:
+                       interpolation: str = "Closest", output: str = "BSSRDF") -> bpy.types.Node:
     """Add the group (and Image Texture nodes for ``images[(k, kind)]``) to ``material``.
 
     Every existing node and link is kept except the link into the active Material Output's Surface,
@@ -360,7 +360,8 @@ def wire_into_material(material: bpy.types.Material, group: bpy.types.NodeTree,
     link, else the value) becomes the coat's; otherwise the coat gets :data:`SKIN_ROUGHNESS`.  New nodes
     sit in a frame labelled "Spectral Skin SSS".  Images are set to Non-Color.  ``interpolation`` defaults to
     Closest because the maps hold Cycles' colour A, not the albedo alpha = f(A), and f is non-linear
-    (linear filtering gives a small bias at texel edges).
+    (linear filtering gives a small bias at texel edges).  ``output``: the group's output that feeds the Surface
+    (the live group's is "Cycles").
     Undo: call from an operator with ``bl_options = {'REGISTER', 'UNDO'}``.
     """
     tree = material.node_tree
@@ -378,7 +379,7 @@ def wire_into_material(material: bpy.types.Material, group: bpy.types.NodeTree,
         previous = link.from_node
         material[PREVIOUS_SURFACE_PROP] = previous.name
         tree.links.remove(link)
-    tree.links.new(gnode.outputs["BSSRDF"], surface)
+    tree.links.new(gnode.outputs[output], surface)
     _take_surface_inputs(tree, previous, gnode)
     for i, ((k, kind), image) in enumerate(sorted((images or {}).items())):
         image.colorspace_settings.name = "Non-Color"
