@@ -379,3 +379,74 @@ def _tile_colours(image: bpy.types.Image, number: int, limit: int) -> np.ndarray
         return _pixels(tile, limit)
     finally:
         bpy.data.images.remove(tile)
+
+
+# -- the operator's live path ----------------------------------------------------------------------------------
+def apply(context: bpy.types.Context, model_path: str, unit_scale_m: float, colorspace: str = "FROM_IMAGE") -> str:
+    """Wire the live group into the active object's active material (Invert Skin Albedo's default); returns the
+    one-line report.  Bad input raises LiveInputError before anything changes; a failure while wiring removes
+    what was made (call from an operator with UNDO for Ctrl+Z)."""
+    obj = context.object
+    material = obj.active_material if obj is not None else None
+    if material is None or material.node_tree is None:
+        raise LiveInputError("no active material with nodes: select the skin object (its material's Principled "
+                             "BSDF gives the albedo)")
+    table = table_for_model(model_path)
+    _, colour, _ = colour_source(material)
+    before = _state(material)
+    try:
+        group = ensure_live_group(table)
+        gnode = wire_live(material, group, unit_scale_m)
+    except BaseException:
+        _restore(material, before)
+        raise
+    report = f"live group wired into '{material.name}' (K={table.k}; no maps baked)"
+    image_node = colour.node if colour is not None and colour.node.bl_idname == "ShaderNodeTexImage" else None
+    if image_node is not None and image_node.image is not None:
+        report += "; " + outside_report(table, image_node.image, colorspace)
+    gnode.select = True
+    return report
+
+
+def outside_report(table: texel_table.TexelTable, image: bpy.types.Image, colorspace: str) -> str:
+    """How much of ``image`` lies outside the table's domain (a warning when any does)."""
+    from .baker import _image_colorspace  # the bake's reading of Blender's colour-space setting
+
+    rgb = image_colours(image, _image_colorspace(image, colorspace))
+    if len(rgb) == 0:
+        return f"image '{image.name}' has no pixels to check"
+    share = live_table.outside_fraction(table, rgb)
+    if share == 0.0:
+        return f"every texel of '{image.name}' lies inside the table's domain"
+    return (f"warning: {100 * share:.2f} % of the texels of '{image.name}' lie outside the table's domain (not skin "
+            "colours: they render as the nearest skin colour; docs/user/live_group.md)")
+
+
+def _state(material: bpy.types.Material) -> dict:
+    tree = material.node_tree
+    return {"groups": set(bpy.data.node_groups.keys()), "images": set(bpy.data.images.keys()),
+            "nodes": {n.name for n in tree.nodes},
+            "links": [(ln.from_node.name, ln.from_socket.identifier, ln.to_node.name, ln.to_socket.identifier)
+                      for ln in tree.links],
+            "previous": material.get(nodes.PREVIOUS_SURFACE_PROP)}
+
+
+def _restore(material: bpy.types.Material, state: dict) -> None:
+    """Undo a failed wiring: new nodes, groups and images removed, the links as they were."""
+    tree = material.node_tree
+    for node in [n for n in tree.nodes if n.name not in state["nodes"]]:
+        tree.nodes.remove(node)
+    for link in list(tree.links):
+        tree.links.remove(link)
+    for from_node, from_id, to_node, to_id in state["links"]:
+        src = next(s for s in tree.nodes[from_node].outputs if s.identifier == from_id)
+        dst = next(s for s in tree.nodes[to_node].inputs if s.identifier == to_id)
+        tree.links.new(src, dst)
+    for name in set(bpy.data.node_groups.keys()) - state["groups"]:
+        bpy.data.node_groups.remove(bpy.data.node_groups[name])
+    for name in set(bpy.data.images.keys()) - state["images"]:
+        bpy.data.images.remove(bpy.data.images[name])
+    if state["previous"] is None:
+        material.pop(nodes.PREVIOUS_SURFACE_PROP, None)
+    else:
+        material[nodes.PREVIOUS_SURFACE_PROP] = state["previous"]

@@ -122,13 +122,14 @@ def grid_values(table: TexelTable) -> dict[str, np.ndarray]:
     weight and anisotropy clipped to the ranges a bake clips them to (exporters.texel_table.TexelTable.records)."""
     used = sorted({i for k in range(1, table.k + 1) for kind in IMAGE_KINDS for i in _channels(table, k, kind)
                    if i is not None})
-    filled = np.full(table.values.shape, np.nan)
-    filled[..., used] = fill_outside_cube(table.values[..., used])
+    filled = fill_outside_cube(table.values[..., used])
+    column = {c: j for j, c in enumerate(used)}
+    ones = np.ones(table.shape)
     out = {}
     for k in range(1, table.k + 1):
         for kind in IMAGE_KINDS:
-            idx = _channels(table, k, kind)
-            grid = np.stack([filled[..., i] if i is not None else np.ones(table.shape) for i in idx], axis=-1)
+            grid = np.stack([filled[..., column[i]] if i is not None else ones for i in _channels(table, k, kind)],
+                            axis=-1)
             if kind == "Color":
                 grid[..., :3] = np.clip(grid[..., :3], 0.0, 1.0)
                 grid[..., 3] = np.clip(grid[..., 3], cycles.G_MIN, cycles.RECOMMENDED_G_MAX)
@@ -139,16 +140,14 @@ def grid_values(table: TexelTable) -> dict[str, np.ndarray]:
 
 
 def atlas_of(grid: np.ndarray, layout: AtlasLayout) -> np.ndarray:
-    """The atlas (height, width, 4) float32 of one grid (n0, n1, n2, 4), rows bottom to top (Blender's order)."""
-    n0, n1, n2 = layout.shape
+    """The atlas (height, width, C) float32 of one grid (n0, n1, n2, C), rows bottom to top (Blender's order)."""
+    n0 = layout.shape[0]
     tw, th = layout.tile
-    width, height = layout.size
-    atlas = np.zeros((height, width, grid.shape[3]), np.float32)
-    for s in range(n0):
-        col, row = s % layout.columns, s // layout.columns
-        tile = np.pad(grid[s], ((BORDER, BORDER), (BORDER, BORDER), (0, 0)), mode="edge")  # (n1 + 2, n2 + 2, 4)
-        atlas[row * th:(row + 1) * th, col * tw:(col + 1) * tw] = tile.transpose(1, 0, 2)
-    return atlas
+    b = BORDER
+    tiles = np.pad(grid.astype(np.float32), ((0, layout.rows * layout.columns - n0), (b, b), (b, b), (0, 0)),
+                   mode="edge")  # (slots, tile_w, tile_h, C); slots past n0 repeat the last slice
+    tiles = tiles.reshape(layout.rows, layout.columns, tw, th, grid.shape[3])
+    return np.ascontiguousarray(tiles.transpose(0, 3, 1, 2, 4).reshape(layout.rows * th, layout.columns * tw, -1))
 
 
 def atlases(table: TexelTable) -> tuple[AtlasLayout, dict[str, np.ndarray]]:
