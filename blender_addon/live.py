@@ -29,7 +29,7 @@ from pathlib import Path
 import bpy
 import numpy as np
 
-from exporters import live_table, texel_table
+from exporters import image_input, live_table, texel_table
 from exporters.bake import table_cache
 from exporters.colorimetry import srgb_decode
 from exporters.maps import sha256_file
@@ -50,7 +50,7 @@ _SRGB_KNEE, _SRGB_SLOPE = 0.0031308, 12.92
 #: the body back at the painted colour, the convention of the Cycles output.
 EEVEE_BODY_GAIN = 1.0 / 0.957
 #: Texels read (at most) to count the share of a texture outside the table's domain.
-OUTSIDE_SAMPLE = 1 << 20
+OUTSIDE_SAMPLE = 1 << 18
 
 
 class LiveInputError(ValueError):
@@ -352,43 +352,37 @@ def _eevee_output(tree: bpy.types.NodeTree, gnode: bpy.types.Node) -> bpy.types.
 
 # -- outside the domain ----------------------------------------------------------------------------------------
 def image_colours(image: bpy.types.Image, colorspace: str, limit: int = OUTSIDE_SAMPLE) -> np.ndarray:
-    """Linear colours (N, 3) of up to ``limit`` texels of ``image`` (every tile of a UDIM image; an even stride
-    when larger), decoded as ``colorspace`` ("srgb", "linear" or "auto": sRGB for 8/16-bit, linear for float)."""
+    """Linear colours (N, 3) of about ``limit`` texels of ``image`` (every tile of a UDIM image; an even grid when
+    larger), decoded as ``colorspace`` ("srgb", "linear" or "auto": sRGB for 8/16-bit, linear for float).  Files
+    are read directly (a few rows, never the whole float buffer); packed and generated images from Blender."""
     if image.source == "TILED":
-        parts = [_tile_colours(image, tile.number, limit // max(len(image.tiles), 1)) for tile in image.tiles]
-        parts = [p for p in parts if p is not None]
-        rgb = np.concatenate(parts) if parts else np.zeros((0, 3))
+        paths = [_file_of(image, tile.number) for tile in image.tiles]
+        parts = [image_input.sample_texels(p, limit // len(paths)) for p in paths if os.path.isfile(p)]
+    elif image.source == "FILE" and image.packed_file is None and os.path.isfile(_file_of(image)):
+        parts = [image_input.sample_texels(_file_of(image), limit)]
     else:
-        rgb = _pixels(image, limit)
-    srgb = colorspace == "srgb" or (colorspace == "auto" and not image.is_float)
-    return srgb_decode(np.clip(rgb, 0.0, None)) if srgb else rgb
+        parts = [(_pixels(image, limit), image.is_float)]
+    decoded = [srgb_decode(np.clip(rgb, 0.0, None)) if colorspace == "srgb" or (colorspace == "auto" and not is_float)
+               else rgb for rgb, is_float in parts]
+    return np.concatenate(decoded) if decoded else np.zeros((0, 3))
+
+
+def _file_of(image: bpy.types.Image, tile: int | None = None) -> str:
+    path = bpy.path.abspath(image.filepath, library=image.library)
+    return path.replace("<UDIM>", str(tile)) if tile is not None else path
 
 
 def _pixels(image: bpy.types.Image, limit: int) -> np.ndarray:
+    """Up to ``limit`` texels (an even stride) of a Blender image's pixel buffer, as stored."""
     width, height = image.size
     channels = image.channels
     if width * height == 0:
         return np.zeros((0, 3))
     px = np.empty(width * height * channels, np.float32)
     image.pixels.foreach_get(px)
-    px = px.reshape(-1, channels)
-    stride = max(1, -(-len(px) // limit))
-    px = px[::stride]
+    px = px.reshape(-1, channels)[::max(1, -(-width * height // limit))]
     rgb = px[:, :3] if channels >= 3 else np.repeat(px[:, :1], 3, axis=1)
     return np.nan_to_num(rgb.astype(np.float64), nan=0.0, posinf=1.0, neginf=0.0)
-
-
-def _tile_colours(image: bpy.types.Image, number: int, limit: int) -> np.ndarray | None:
-    """Colours of one UDIM tile, read through a temporary image of its file (None when the file is missing)."""
-    path = bpy.path.abspath(image.filepath, library=image.library).replace("<UDIM>", str(number))
-    if not os.path.isfile(path):
-        return None
-    tile = bpy.data.images.load(path, check_existing=False)
-    try:
-        tile.colorspace_settings.name = image.colorspace_settings.name
-        return _pixels(tile, limit)
-    finally:
-        bpy.data.images.remove(tile)
 
 
 # -- the operator's live path ----------------------------------------------------------------------------------

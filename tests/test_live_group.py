@@ -250,6 +250,10 @@ def test_udim_albedo_feeds_the_live_group(tmp_path, addon):
     with bpy.context.temp_override(object=slab, active_object=slab):
         assert bpy.ops.spectral_skin.invert_albedo() == {"FINISHED"}
     gnode = next(n for n in tree.nodes if n.bl_idname == "ShaderNodeGroup")
+    read = live.image_colours(image, "srgb")  # what the operator's outside-domain report reads: every tile
+    assert len(read) == 2 * 16
+    np.testing.assert_allclose(np.unique(read, axis=0), [_decode(tiles[1002]), _decode(tiles[1001])],  # dark, light
+                               atol=1e-6)
     tiled = _render_row(scene)
     tree.links.remove(gnode.inputs["Color"].links[0])
     for number, half in ((1001, slice(2, 14)), (1002, slice(18, 30))):
