@@ -396,7 +396,14 @@ def apply(context: bpy.types.Context, model_path: str, unit_scale_m: float, colo
         raise LiveInputError("no active material with nodes: select the skin object (its material's Principled "
                              "BSDF gives the albedo)")
     table = table_for_model(model_path)
-    _, colour, _ = colour_source(material)
+    surface, colour, _ = colour_source(material)
+    if surface.bl_idname == "ShaderNodeGroup" and surface.node_tree.get(TABLE_PROP) == table.sha256 \
+            and surface.node_tree.get("spectral_skin_sss_version") == LIVE_VERSION:
+        surface.inputs["Unit Scale"].default_value = unit_scale_m
+        material.node_tree.links.new(surface.outputs["EEVEE"],
+                                     _eevee_output(material.node_tree, surface).inputs["Surface"])
+        return (f"up to date: '{material.name}' already renders through the live group (Unit Scale {unit_scale_m:g} m "
+                "per Blender unit)")
     before = _state(material)
     try:
         group = ensure_live_group(table)

@@ -302,6 +302,10 @@ def test_operator_default_wires_the_live_group_and_keeps_the_artists_nodes(tmp_p
     images = [i for i in bpy.data.images if i.name.startswith(live.IMAGE_PREFIX)]
     assert len(images) == 9 and all(i.packed_file is not None for i in images)
     assert sum(i.size[0] * i.size[1] * 16 for i in images) <= 16 * 2 ** 20
+    count = len(tree.nodes)
+    with bpy.context.temp_override(object=obj, active_object=obj):
+        assert bpy.ops.spectral_skin.invert_albedo() == {"FINISHED"}  # again: up to date, nothing added
+    assert len(tree.nodes) == count
     obj2, mat2, _ = skin_object(png, name="Skin 2")  # a second material shares the group and its images
     with bpy.context.temp_override(object=obj2, active_object=obj2):
         assert bpy.ops.spectral_skin.invert_albedo() == {"FINISHED"}
