@@ -29,12 +29,9 @@ from pathlib import Path
 import bpy
 import numpy as np
 
-from exporters import image_input, live_table, texel_table
-from exporters.bake import table_cache
-from exporters.colorimetry import srgb_decode
-from exporters.maps import sha256_file
-
 from . import nodes
+from .core import bake as core_bake
+from .core import colorimetry, image_input, live_table, maps, texel_table
 
 GROUP_NAME = "Spectral Skin SSS Live"
 #: Custom properties: on the group and the images, the SHA-256 of the table they were made from.
@@ -60,11 +57,11 @@ class LiveInputError(ValueError):
 def table_for_model(model_path: str) -> texel_table.TexelTable:
     """The shipped table beside ``model_path`` (exporters.bake.table_cache.default_table_path), checked to be
     made from that model and for the painted colour."""
-    path = table_cache.default_table_path(model_path)
+    path = core_bake.default_table_path(model_path)
     if not os.path.isfile(model_path):
         raise LiveInputError(f"model not found at {model_path}: train/export it or set the path in preferences")
     table = texel_table.load(path)
-    if table.model_sha256 != sha256_file(model_path):
+    if table.model_sha256 != maps.sha256_file(model_path):
         raise LiveInputError(f"the table {path.name} was made from another model than {Path(model_path).name}: "
                              f"rebuild it (python -m training texel-table --model {model_path} --out {path} "
                              "--overwrite) or choose Bake")
@@ -362,8 +359,9 @@ def image_colours(image: bpy.types.Image, colorspace: str, limit: int = OUTSIDE_
         parts = [image_input.sample_texels(_file_of(image), limit)]
     else:
         parts = [(_pixels(image, limit), image.is_float)]
-    decoded = [srgb_decode(np.clip(rgb, 0.0, None)) if colorspace == "srgb" or (colorspace == "auto" and not is_float)
-               else rgb for rgb, is_float in parts]
+    decode = [colorspace == "srgb" or (colorspace == "auto" and not is_float) for _, is_float in parts]
+    decoded = [colorimetry.srgb_decode(np.clip(rgb, 0.0, None)) if srgb else rgb
+               for (rgb, _), srgb in zip(parts, decode, strict=True)]
     return np.concatenate(decoded) if decoded else np.zeros((0, 3))
 
 

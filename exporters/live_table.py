@@ -38,9 +38,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from exporters import cycles
-from exporters.colorimetry import srgb_encode
-from exporters.texel_table import COORDS, TexelTable, channel_names
+from . import cycles
+from .colorimetry import srgb_encode
+from .texel_table import COORDS, TexelTable, channel_names
 
 #: The images of one component, in order: (name suffix, table channels for R, G, B, A or None).
 IMAGE_KINDS = ("Color", "Log Radius", "Weight")
