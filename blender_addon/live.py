@@ -8,7 +8,9 @@ mixture group (blender_addon.nodes, SVM) exactly where baked maps would go.
 Interface (docs/contracts.md §5):
 
 * inputs ``Color`` (linear, what fed the Principled BSDF's Base Color), ``Unit Scale`` (metres per Blender unit:
-  the radii are in Blender units), ``Roughness`` and ``Normal`` (the coat's, as the mixture group's);
+  the radii are in Blender units), ``Roughness``, ``Normal`` and the Principled BSDF's specular inputs
+  (blender_addon.nodes.SPECULAR_INPUTS: IOR Level, tint, coat, sheen), passed to the mixture group and to the
+  EEVEE closure;
 * outputs ``Cycles`` (the mixture with its specular coat, for a Material Output of target All or Cycles),
   ``EEVEE`` (one Principled BSDF with Subsurface Weight 1 at the colour (body at the painted colour, as in Cycles:
   :data:`EEVEE_BODY_GAIN`) and the mixture's effective radius
@@ -223,6 +225,7 @@ def _new_group(k_count: int, table_sha: str) -> tuple[bpy.types.NodeTree, bpy.ty
     rough = iface.new_socket("Roughness", in_out="INPUT", socket_type="NodeSocketFloat")
     rough.default_value, rough.min_value, rough.max_value = nodes.SKIN_ROUGHNESS, 0.0, 1.0
     iface.new_socket("Normal", in_out="INPUT", socket_type="NodeSocketVector").hide_value = True
+    nodes.add_specular_inputs(group)
     iface.new_socket("Cycles", in_out="OUTPUT", socket_type="NodeSocketShader")
     iface.new_socket("EEVEE", in_out="OUTPUT", socket_type="NodeSocketShader")
     iface.new_socket("Outside", in_out="OUTPUT", socket_type="NodeSocketFloat")
@@ -261,7 +264,7 @@ def build_live_group(table: texel_table.TexelTable, layout: live_table.AtlasLayo
             b.link(term.outputs[0], add.inputs[1])
             effective = add.outputs[0]
     mixture.inputs["IOR"].default_value = table.options.ior
-    for name in ("Roughness", "Normal"):
+    for name in ("Roughness", "Normal", *nodes.SPECULAR_INPUTS):
         b.link(gin.outputs[name], mixture.inputs[name])
     b.link(mixture.outputs["BSSRDF"], gout.inputs["Cycles"])
     b.link(_eevee_surface(b, gin, effective, table.options.ior), gout.inputs["EEVEE"])
@@ -281,7 +284,7 @@ def _eevee_surface(b: _Builder, gin: bpy.types.Node, radius, ior: float) -> bpy.
     bsdf.inputs["Subsurface Scale"].default_value = 1.0
     bsdf.inputs["IOR"].default_value = ior
     b.link(radius, bsdf.inputs["Subsurface Radius"])
-    for name in ("Roughness", "Normal"):
+    for name in ("Roughness", "Normal", *nodes.SPECULAR_INPUTS):
         b.link(gin.outputs[name], bsdf.inputs[name])
     return bsdf.outputs[0]
 
