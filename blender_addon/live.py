@@ -10,10 +10,11 @@ Interface (docs/contracts.md §5):
 * inputs ``Color`` (linear, what fed the Principled BSDF's Base Color), ``Unit Scale`` (metres per Blender unit:
   the radii are in Blender units), ``Roughness``, ``Normal`` and the Principled BSDF's specular inputs
   (blender_addon.nodes.SPECULAR_INPUTS: IOR Level, tint, coat, sheen), passed to the mixture group and to the
-  EEVEE closure;
+  EEVEE closure, and ``Principled Convention`` (0: the body renders the colour, the coat on top; 1: the body
+  renders it darkened as a Principled BSDF's base under its specular layer, :data:`PRINCIPLED_BASE_SHARE`);
 * outputs ``Cycles`` (the mixture with its specular coat, for a Material Output of target All or Cycles),
   ``EEVEE`` (one Principled BSDF with Subsurface Weight 1 at the colour (body at the painted colour, as in Cycles:
-  :data:`EEVEE_BODY_GAIN`) and the mixture's effective radius
+  :data:`PRINCIPLED_BASE_SHARE`) and the mixture's effective radius
   sum_k w_k r_k per channel, for a Material Output of target EEVEE: EEVEE and Material Preview) and
   ``Outside`` (distance of the colour from the table's box in skin space, 0 inside: where the answer is the
   projection onto the nearest skin colour).
@@ -43,11 +44,12 @@ LIVE_VERSION = 1
 IMAGE_PREFIX = "Spectral Skin SSS Table"
 #: sRGB encoding (IEC 61966-2-1): linear segment below this value, slope 12.92 there.
 _SRGB_KNEE, _SRGB_SLOPE = 0.0031308, 12.92
-#: Gain on the EEVEE output's Base Color: the Principled BSDF puts its base colour under its specular layer, which
-#: takes about 4.3 % of the light at skin's IOR 1.4 and Roughness 0.5 (EEVEE, straight above under a white world,
-#: measured on three skin colours by tests/test_live_group.py: 0.952-0.961 of the painted colour); 1 / 0.957 puts
-#: the body back at the painted colour, the convention of the Cycles output.
-EEVEE_BODY_GAIN = 1.0 / 0.957
+#: The share of the light the Principled BSDF's specular layer leaves to its base colour: about 0.957 at skin's
+#: IOR 1.4 and Roughness 0.5 (EEVEE, straight above under a white world, measured on three skin colours by
+#: tests/test_live_group.py: 0.952-0.961 of the painted colour).  The EEVEE output's Base Color is the colour
+#: divided by it (the body at the painted colour, as in Cycles); with ``Principled Convention`` 1 the colour is
+#: multiplied by it before the table (the body darker by as much as under a Principled BSDF's specular layer).
+PRINCIPLED_BASE_SHARE = 0.957
 #: Texels read (at most) to count the share of a texture outside the table's domain.
 OUTSIDE_SAMPLE = 1 << 18
 
@@ -157,7 +159,7 @@ def _srgb_encode(b: _Builder, linear: bpy.types.NodeSocket, stage: int) -> bpy.t
 def _grid_coords(b: _Builder, gin: bpy.types.Node, layout: live_table.AtlasLayout):
     """Clamped grid coordinates x0, x1, x2 of the input colour and its distance from the box (skin space)."""
     sep = b.node("ShaderNodeSeparateColor", 0)
-    b.link(gin.outputs["Color"], sep.inputs[0])
+    b.link(_convention(b, gin, 1.0, PRINCIPLED_BASE_SHARE), sep.inputs[0])
     e = [_srgb_encode(b, sep.outputs[i], 1) for i in range(3)]
     coords = [b.math("MULTIPLY", 6, b.math("ADD", 5, b.math("ADD", 5, e[0], e[1]), e[2]), 1.0 / 3.0),
               b.math("SUBTRACT", 6, e[0], e[1]), b.math("SUBTRACT", 6, e[1], e[2])]
@@ -226,6 +228,8 @@ def _new_group(k_count: int, table_sha: str) -> tuple[bpy.types.NodeTree, bpy.ty
     rough.default_value, rough.min_value, rough.max_value = nodes.SKIN_ROUGHNESS, 0.0, 1.0
     iface.new_socket("Normal", in_out="INPUT", socket_type="NodeSocketVector").hide_value = True
     nodes.add_specular_inputs(group)
+    convention = iface.new_socket("Principled Convention", in_out="INPUT", socket_type="NodeSocketFloat")
+    convention.default_value, convention.min_value, convention.max_value = 0.0, 0.0, 1.0
     iface.new_socket("Cycles", in_out="OUTPUT", socket_type="NodeSocketShader")
     iface.new_socket("EEVEE", in_out="OUTPUT", socket_type="NodeSocketShader")
     iface.new_socket("Outside", in_out="OUTPUT", socket_type="NodeSocketFloat")
@@ -272,14 +276,20 @@ def build_live_group(table: texel_table.TexelTable, layout: live_table.AtlasLayo
     return group
 
 
+def _convention(b: _Builder, gin: bpy.types.Node, painted: float, principled: float) -> bpy.types.NodeSocket:
+    """The input colour times ``painted`` (Principled Convention 0) or ``principled`` (1), mixed in between."""
+    gain = b.math("MULTIPLY_ADD", 0, gin.outputs["Principled Convention"], principled - painted, painted)
+    scale = b.node("ShaderNodeVectorMath", 0, operation="SCALE")
+    b.link(gin.outputs["Color"], scale.inputs[0])
+    b.link(gain, scale.inputs["Scale"])
+    return scale.outputs[0]
+
+
 def _eevee_surface(b: _Builder, gin: bpy.types.Node, radius, ior: float) -> bpy.types.NodeSocket:
-    """One Principled BSDF: the colour (times EEVEE_BODY_GAIN) as Base Color, Subsurface Weight 1 at the effective
-    radius."""
+    """One Principled BSDF: the colour (over PRINCIPLED_BASE_SHARE in the painted convention) as Base Color,
+    Subsurface Weight 1 at the effective radius."""
     bsdf = b.node("ShaderNodeBsdfPrincipled", 27)
-    gain = b.node("ShaderNodeVectorMath", 26, operation="SCALE")
-    b.link(gin.outputs["Color"], gain.inputs[0])
-    gain.inputs["Scale"].default_value = EEVEE_BODY_GAIN
-    b.link(gain.outputs[0], bsdf.inputs["Base Color"])
+    b.link(_convention(b, gin, 1.0 / PRINCIPLED_BASE_SHARE, 1.0), bsdf.inputs["Base Color"])
     bsdf.inputs["Subsurface Weight"].default_value = 1.0
     bsdf.inputs["Subsurface Scale"].default_value = 1.0
     bsdf.inputs["IOR"].default_value = ior
@@ -387,7 +397,8 @@ def _pixels(image: bpy.types.Image, limit: int) -> np.ndarray:
 
 
 # -- the operator's live path ----------------------------------------------------------------------------------
-def apply(context: bpy.types.Context, model_path: str, unit_scale_m: float, colorspace: str = "FROM_IMAGE") -> str:
+def apply(context: bpy.types.Context, model_path: str, unit_scale_m: float, colorspace: str = "FROM_IMAGE",
+          principled_convention: bool = False) -> str:
     """Wire the live group into the active object's active material (Invert Skin Albedo's default); returns the
     one-line report.  Bad input raises LiveInputError before anything changes; a failure while wiring removes
     what was made (call from an operator with UNDO for Ctrl+Z)."""
@@ -401,6 +412,7 @@ def apply(context: bpy.types.Context, model_path: str, unit_scale_m: float, colo
     if surface.bl_idname == "ShaderNodeGroup" and surface.node_tree.get(TABLE_PROP) == table.sha256 \
             and surface.node_tree.get("spectral_skin_sss_version") == LIVE_VERSION:
         surface.inputs["Unit Scale"].default_value = unit_scale_m
+        surface.inputs["Principled Convention"].default_value = float(principled_convention)
         material.node_tree.links.new(surface.outputs["EEVEE"],
                                      _eevee_output(material.node_tree, surface).inputs["Surface"])
         return (f"up to date: '{material.name}' already renders through the live group (Unit Scale {unit_scale_m:g} m "
@@ -409,6 +421,7 @@ def apply(context: bpy.types.Context, model_path: str, unit_scale_m: float, colo
     try:
         group = ensure_live_group(table)
         gnode = wire_live(material, group, unit_scale_m)
+        gnode.inputs["Principled Convention"].default_value = float(principled_convention)
     except BaseException:
         _restore(material, before)
         raise

@@ -45,6 +45,9 @@ _BACKENDS = [
 MODEL_COLOUR_HELP = ("Render the model's own reflectance (the colour of the biophysical skin the network found, "
                      "physically consistent, often darker than painted) instead of the painted albedo, which the "
                      "maps reproduce per channel by default")
+#: The convention option's tooltip (operator and panel).
+PRINCIPLED_CONVENTION_HELP = ("Live group: render the colour as a Principled BSDF renders its Base Color, under its "
+                              "specular layer (about 4 % darker), instead of the painted colour with the coat on top")
 #: Exceptions that mean bad input or a failed bake (reported, nothing changed).
 _EXPECTED = (OSError, ValueError, RuntimeError)
 
@@ -75,6 +78,8 @@ class SPECTRAL_SKIN_OT_invert_albedo(bpy.types.Operator):
     #: brightness): the default now renders the painted brightness and hue, so it is accepted and ignored.
     match_exposure: bpy.props.BoolProperty(default=False, options={"HIDDEN", "SKIP_SAVE"})
 
+    principled_convention: bpy.props.BoolProperty(
+        name="Principled's convention", default=False, description=PRINCIPLED_CONVENTION_HELP)
     exact: bpy.props.BoolProperty(
         name="Exact (slow)", default=False,
         description="Evaluate every distinct colour with the network instead of the fast-path table shipped with the "
@@ -107,7 +112,7 @@ class SPECTRAL_SKIN_OT_invert_albedo(bpy.types.Operator):
             return {"CANCELLED"}
         try:
             message = live.apply(context, preferences.model_path(context), baker.scene_unit_scale(context.scene),
-                                 self.colorspace)
+                                 self.colorspace, self.principled_convention)
         except _EXPECTED as exc:
             self.report({"ERROR"}, one_line(exc))
             return {"CANCELLED"}
@@ -123,6 +128,10 @@ class SPECTRAL_SKIN_OT_invert_albedo(bpy.types.Operator):
     def execute(self, context):
         if self._mode() == "LIVE":
             return self._live(context)
+        if self.principled_convention:
+            self.report({"ERROR"}, "Principled's convention is an option of the live group: bake without it, or "
+                                   "choose mode Live group")
+            return {"CANCELLED"}
         try:
             bake = baker.AddonBake(context, self._settings(context))
         except _EXPECTED as exc:

@@ -11,7 +11,8 @@ white world predicts, within 30 % of the predicted change:
 * **Specular Tint** (1, 0.2, 0.2) takes 0.8 F0 from green and blue;
 * **Coat Weight** 1 (IOR 1.5, nearly smooth) reflects F0(1.5) on top and leaves the rest 1 - F0(1.5) of the skin;
 * **Sheen Weight** 1 adds light (a Sheen BSDF over the skin);
-and a link into one of them (a Value node) is taken over as a link.
+and a link into one of them (a Value node) is taken over as a link.  The operator's *Principled's convention* darkens
+the body as a Principled BSDF's specular layer darkens its base (3-5 %).
 """
 
 from __future__ import annotations
@@ -50,7 +51,7 @@ def _level_ior(n: float, level: float) -> float:
     return float((1.0 + root) / (1.0 - root))
 
 
-def _render(tmp_path: Path, **inputs) -> tuple[np.ndarray, bpy.types.Node]:
+def _render(tmp_path: Path, convention: bool = False, **inputs) -> tuple[np.ndarray, bpy.types.Node]:
     """Mean linear RGB of the probe after the operator, the artist's Principled BSDF set to ``inputs``."""
     scene = probe.new_scene(samples=SAMPLES, resolution=16, seed=4)
     scene.unit_settings.system, scene.unit_settings.scale_length = "METRIC", 0.005
@@ -70,7 +71,7 @@ def _render(tmp_path: Path, **inputs) -> tuple[np.ndarray, bpy.types.Node]:
     blender_addon.register()
     try:
         with bpy.context.temp_override(object=slab, active_object=slab):
-            assert bpy.ops.spectral_skin.invert_albedo() == {"FINISHED"}
+            assert bpy.ops.spectral_skin.invert_albedo(principled_convention=convention) == {"FINISHED"}
         gnode = next(n for n in tree.nodes if n.bl_idname == "ShaderNodeGroup")
         mean, _, _ = probe.render_mean(scene)
     finally:
@@ -127,3 +128,18 @@ def test_sheen_and_linked_inputs(tmp_path, default):
     tree.links.new(value.outputs[0], bsdf.inputs["Coat Weight"])
     nodes._take_surface_inputs(tree, bsdf, gnode)
     assert gnode.inputs["Coat Weight"].links[0].from_node == value
+
+
+def test_principled_convention_darkens_the_body_as_principled_does(tmp_path, default):
+    mean, gnode = _render(tmp_path, convention=True)
+    assert gnode.inputs["Principled Convention"].default_value == 1.0
+    coat = _f0(nodes.DEFAULT_IOR)
+    share = (mean - coat) / (default - coat)
+    print(f"\nbody under Principled's convention / painted: {np.round(share, 4).tolist()}")
+    assert np.all((share > 0.95) & (share < 0.97)), share  # a Principled BSDF's base renders 3-5 % darker
+    blender_addon.register()
+    try:
+        with pytest.raises(RuntimeError, match="Principled's convention is an option of the live group"):
+            bpy.ops.spectral_skin.invert_albedo(mode="BAKE", principled_convention=True)
+    finally:
+        blender_addon.unregister()
