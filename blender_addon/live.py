@@ -64,7 +64,7 @@ def table_for_model(model_path: str) -> texel_table.TexelTable:
     path = core_bake.default_table_path(model_path)
     if not os.path.isfile(model_path):
         raise LiveInputError(f"model not found at {model_path}: train/export it or set the path in preferences")
-    table = texel_table.load(path)
+    table = _load_table(path)
     if table.model_sha256 != maps.sha256_file(model_path):
         raise LiveInputError(f"the table {path.name} was made from another model than {Path(model_path).name}: "
                              f"rebuild it (python -m training texel-table --model {model_path} --out {path} "
@@ -73,6 +73,20 @@ def table_for_model(model_path: str) -> texel_table.TexelTable:
         raise LiveInputError(f"the table {path.name} holds the model's own colour: the live group needs the painted "
                              "colour's table (rebuild it without --model-colour)")
     return table
+
+
+def _load_table(path: Path) -> texel_table.TexelTable:
+    """The table at ``path``, loaded once per file version (its size and modification time) for this session."""
+    stat = path.stat() if path.is_file() else None
+    key = (str(path), stat.st_size, stat.st_mtime_ns) if stat else None
+    if key is None or key not in _TABLES:
+        table = texel_table.load(path)  # TableError when missing or not a table
+        _TABLES.clear()
+        _TABLES[key] = table
+    return _TABLES[key]
+
+
+_TABLES: dict[tuple, texel_table.TexelTable] = {}
 
 
 # -- images ----------------------------------------------------------------------------------------------------
