@@ -20,7 +20,7 @@ Interface (docs/contracts.md §5):
   projection onto the nearest skin colour).
 
 The images are shared by every material of the file (one set per table, tagged with the table's SHA-256) and
-packed into the .blend (8.2 MB with the shipped table), so the file renders anywhere, render farms included.
+packed into the .blend (8.0 MB with the shipped table), so the file renders anywhere, render farms included.
 The group's math follows exporters.live_table step by step; ``exporters.live_table.lookup`` is its reference.
 """
 
