@@ -63,6 +63,15 @@ the cosine-weighted mean of F (exporters.cycles.DIFFUSE_FRESNEL_POLY).  Why this
 * The subsurface closures keep a smooth entry (roughness 0) and the group's IOR, exactly as the bake's
   Cycles reflectance tables assume (exporters.reflectance_tables); IOR 1 switches the coat off.
 
+The Principled BSDF's specular inputs (:data:`SPECULAR_INPUTS`, taken from the artist's Principled BSDF when the
+group is wired) keep their effect: **Specular IOR Level** scales the coat's F0 by 2 x level (the coat's index
+becomes (1 + sqrt F0) / (1 - sqrt F0); the closures keep the tissue's IOR, which the bake's tables assume) and
+**Specular Tint** colours the coat's lobe (SVM; the OSL script's coat keeps level 0.5 and white); over either
+path a **clear coat** (Coat Weight x F(Coat IOR) of a white Multiscatter GGX lobe of Coat Roughness, mixed over
+the skin, which keeps the rest) and a **Sheen** BSDF (colour Sheen Weight x Sheen Tint, added on top) follow the
+Principled BSDF's layering; the coat's tint and the sheen's share of the light below it are not modelled.  At
+their defaults none of them changes the render or adds a closure.
+
 Both paths are checked against each other and against single-component renders in
 tests/test_cycles_mixture.py; the coat's highlight, normal map and wiring in tests/test_skin_specular.py.
 """
@@ -102,6 +111,20 @@ SKIN_FACET_SLOPE = 0.4
 SKIN_ROUGHNESS = math.sqrt(SKIN_FACET_SLOPE)
 
 
+#: The Principled BSDF's specular inputs the mixture takes (name: socket type, Blender's default).  The defaults
+#: leave the coat exactly as without them: Specular IOR Level 0.5 keeps F0 of the IOR, white tint, no coat or sheen.
+SPECULAR_INPUTS: dict[str, tuple[str, object]] = {
+    "Specular IOR Level": ("NodeSocketFloat", 0.5),
+    "Specular Tint": ("NodeSocketColor", (1.0, 1.0, 1.0, 1.0)),
+    "Coat Weight": ("NodeSocketFloat", 0.0),
+    "Coat Roughness": ("NodeSocketFloat", 0.03),
+    "Coat IOR": ("NodeSocketFloat", 1.5),
+    "Sheen Weight": ("NodeSocketFloat", 0.0),
+    "Sheen Roughness": ("NodeSocketFloat", 0.5),
+    "Sheen Tint": ("NodeSocketColor", (1.0, 1.0, 1.0, 1.0)),
+}
+
+
 def socket_name(k: int, kind: str) -> str:
     """Group input name for component k (1-based) and map kind, e.g. ``k2 Radius``."""
     return f"k{k} {kind}"
@@ -125,7 +148,17 @@ def _new_interface(group: bpy.types.NodeTree, k_count: int) -> None:
     rough.min_value, rough.max_value, rough.default_value = 0.0, 1.0, SKIN_ROUGHNESS
     normal = iface.new_socket("Normal", in_out="INPUT", socket_type="NodeSocketVector")
     normal.hide_value = True  # like the Principled BSDF's Normal: unlinked means the shading normal
+    add_specular_inputs(group)
     iface.new_socket("BSSRDF", in_out="OUTPUT", socket_type="NodeSocketShader")
+
+
+def add_specular_inputs(group: bpy.types.NodeTree) -> None:
+    """The Principled BSDF's specular inputs (:data:`SPECULAR_INPUTS`, its names and defaults) on ``group``."""
+    for name, (stype, default) in SPECULAR_INPUTS.items():
+        sock = group.interface.new_socket(name, in_out="INPUT", socket_type=stype)
+        sock.default_value = default
+        if stype == "NodeSocketFloat":
+            sock.min_value, sock.max_value = (1.0, 4.0) if name == "Coat IOR" else (0.0, 1.0)
 
 
 def _group_io(group: bpy.types.NodeTree) -> tuple[bpy.types.Node, bpy.types.Node]:
@@ -167,7 +200,7 @@ def build_svm_group(k_count: int = 3, name: str = GROUP_NAME) -> bpy.types.NodeT
         raise ValueError("k_count must be in 1..7")
     group, gin, gout = _fresh_group(name, k_count, "SVM")
     mixture = _svm_mixture(group, gin, k_count)
-    group.links.new(_svm_coat(group, gin, mixture), gout.inputs["BSSRDF"])
+    group.links.new(_outer_layers(group, gin, _svm_coat(group, gin, mixture)), gout.inputs["BSSRDF"])
     return group
 
 
@@ -246,13 +279,14 @@ def _diffuse_fresnel(group: bpy.types.NodeTree, ior: bpy.types.NodeSocket) -> bp
 def _svm_coat(group: bpy.types.NodeTree, gin: bpy.types.Node,
               mixture: bpy.types.NodeSocket) -> bpy.types.NodeSocket:
     """F x Glossy + (1 - F)/(1 - F_dr) x mixture (module docstring); returns the shader output."""
+    coat_ior = _level_ior(group, gin.outputs["IOR"], gin.outputs["Specular IOR Level"])
     fresnel = group.nodes.new("ShaderNodeFresnel")
     fresnel.location = (-650.0, 700.0)
-    group.links.new(gin.outputs["IOR"], fresnel.inputs["IOR"])
+    group.links.new(coat_ior, fresnel.inputs["IOR"])
     group.links.new(gin.outputs["Normal"], fresnel.inputs["Normal"])
     f = fresnel.outputs["Fac"]
     scale = _math(group, "DIVIDE", _math(group, "SUBTRACT", 1.0, f, x=-450.0, y=700.0),
-                  _math(group, "SUBTRACT", 1.0, _diffuse_fresnel(group, gin.outputs["IOR"]), x=150.0, y=900.0),
+                  _math(group, "SUBTRACT", 1.0, _diffuse_fresnel(group, coat_ior), x=150.0, y=900.0),
                   x=300.0, y=800.0)
     body = None
     for i, fac in enumerate((_math(group, "MINIMUM", scale, 1.0, x=450.0, y=850.0),
@@ -266,7 +300,7 @@ def _svm_coat(group: bpy.types.NodeTree, gin: bpy.types.Node,
     glossy = group.nodes.new("ShaderNodeBsdfGlossy")
     glossy.location = (450.0, 1150.0)
     glossy.distribution = "MULTI_GGX"
-    glossy.inputs["Color"].default_value = (1.0, 1.0, 1.0, 1.0)
+    group.links.new(gin.outputs["Specular Tint"], glossy.inputs["Color"])
     group.links.new(gin.outputs["Roughness"], glossy.inputs["Roughness"])
     group.links.new(gin.outputs["Normal"], glossy.inputs["Normal"])
     coat = group.nodes.new("ShaderNodeMixShader")
@@ -285,6 +319,54 @@ def _add_shader(group: bpy.types.NodeTree, a: bpy.types.NodeSocket, b: bpy.types
     return add.outputs[0]
 
 
+def _level_ior(group: bpy.types.NodeTree, ior: bpy.types.NodeSocket,
+               level: bpy.types.NodeSocket) -> bpy.types.NodeSocket:
+    """The coat's index with the Principled BSDF's Specular IOR Level: F0 = ((n - 1) / (n + 1))^2 scaled by 2 x level
+    (0.5 keeps it, 0 switches the coat off), back to an index (1 + sqrt F0) / (1 - sqrt F0).  The closures keep
+    the tissue's IOR."""
+    n = _math(group, "MAXIMUM", ior, 1.0, x=-1250.0, y=1100.0)
+    r = _math(group, "DIVIDE", _math(group, "SUBTRACT", n, 1.0, x=-1150.0, y=1150.0),
+              _math(group, "ADD", n, 1.0, x=-1150.0, y=1050.0), x=-1050.0, y=1100.0)
+    gain = _math(group, "SQRT", _math(group, "MULTIPLY", level, 2.0, x=-1150.0, y=1250.0), x=-1050.0, y=1250.0)
+    root = _math(group, "MINIMUM", _math(group, "MULTIPLY", r, gain, x=-950.0, y=1150.0), 0.999, x=-850.0, y=1150.0)
+    return _math(group, "DIVIDE", _math(group, "ADD", 1.0, root, x=-750.0, y=1200.0),
+                 _math(group, "SUBTRACT", 1.0, root, x=-750.0, y=1100.0), x=-650.0, y=1150.0)
+
+
+def _outer_layers(group: bpy.types.NodeTree, gin: bpy.types.Node,
+                  surface: bpy.types.NodeSocket) -> bpy.types.NodeSocket:
+    """The Principled BSDF's clear coat and sheen over ``surface``: Coat Weight x F(Coat IOR) of a white
+    Multiscatter GGX lobe (Coat Roughness) mixed over it (the skin below keeps 1 - that), then a Sheen BSDF of
+    colour Sheen Weight x Sheen Tint added.  Zero weights add no closure."""
+    fresnel = group.nodes.new("ShaderNodeFresnel")
+    fresnel.location = (1150.0, 1300.0)
+    group.links.new(gin.outputs["Coat IOR"], fresnel.inputs["IOR"])
+    group.links.new(gin.outputs["Normal"], fresnel.inputs["Normal"])
+    glossy = group.nodes.new("ShaderNodeBsdfGlossy")
+    glossy.location = (1150.0, 1100.0)
+    glossy.distribution = "MULTI_GGX"
+    glossy.inputs["Color"].default_value = (1.0, 1.0, 1.0, 1.0)
+    group.links.new(gin.outputs["Coat Roughness"], glossy.inputs["Roughness"])
+    group.links.new(gin.outputs["Normal"], glossy.inputs["Normal"])
+    coat = group.nodes.new("ShaderNodeMixShader")
+    coat.location = (1350.0, 900.0)
+    group.links.new(_math(group, "MULTIPLY", gin.outputs["Coat Weight"], fresnel.outputs["Fac"], x=1250.0,
+                          y=1300.0), coat.inputs["Fac"])
+    group.links.new(surface, coat.inputs[1])
+    group.links.new(glossy.outputs[0], coat.inputs[2])
+    sheen = group.nodes.new("ShaderNodeBsdfSheen")
+    sheen.location = (1350.0, 1100.0)
+    tint = group.nodes.new("ShaderNodeVectorMath")
+    tint.operation = "SCALE"
+    tint.location = (1250.0, 1150.0)
+    group.links.new(gin.outputs["Sheen Tint"], tint.inputs[0])
+    group.links.new(gin.outputs["Sheen Weight"], tint.inputs["Scale"])
+    group.links.new(tint.outputs[0], sheen.inputs["Color"])
+    group.links.new(gin.outputs["Sheen Roughness"], sheen.inputs["Roughness"])
+    group.links.new(gin.outputs["Normal"], sheen.inputs["Normal"])
+    return _add_shader(group, coat.outputs[0], sheen.outputs[0], 1550.0, 900.0)
+
+
 def build_osl_group(k_count: int = 3, name: str = GROUP_NAME_OSL) -> bpy.types.NodeTree:
     """The same interface and shader as :func:`build_svm_group`, computed by one OSL Script node (CPU/OptiX only).
 
@@ -301,12 +383,12 @@ def build_osl_group(k_count: int = 3, name: str = GROUP_NAME_OSL) -> bpy.types.N
             group.links.new(gin.outputs[socket_name(k, kind)], script.inputs[osl.param_name(k, kind)])
     for name, param in (("IOR", "ior"), ("Roughness", "roughness"), ("Normal", "Normal")):
         group.links.new(gin.outputs[name], script.inputs[param])
-    group.links.new(script.outputs["BSSRDF"], gout.inputs["BSSRDF"])
+    group.links.new(_outer_layers(group, gin, script.outputs["BSSRDF"]), gout.inputs["BSSRDF"])
     return group
 
 
 #: Custom property marking the group layout version (bump when the generated nodes change).
-GROUP_VERSION = 2  # 2: specular coat, Normal input
+GROUP_VERSION = 3  # 2: specular coat, Normal input; 3: the Principled BSDF's specular inputs
 
 
 def ensure_group(k_count: int, backend: str) -> bpy.types.NodeTree:
@@ -349,7 +431,7 @@ def _material_output(tree: bpy.types.NodeTree) -> bpy.types.Node:
 
 def wire_into_material(material: bpy.types.Material, group: bpy.types.NodeTree,
                        images: dict[tuple[int, str], bpy.types.Image] | None = None,
-                       interpolation: str = "Closest") -> bpy.types.Node:
+                       interpolation: str = "Closest", output: str = "BSSRDF") -> bpy.types.Node:
     """Add the group (and Image Texture nodes for ``images[(k, kind)]``) to ``material``.
 
     Every existing node and link is kept except the link into the active Material Output's Surface,
@@ -359,7 +441,8 @@ def wire_into_material(material: bpy.types.Material, group: bpy.types.NodeTree,
     link, else the value) becomes the coat's; otherwise the coat gets :data:`SKIN_ROUGHNESS`.  New nodes
     sit in a frame labelled "Spectral Skin SSS".  Images are set to Non-Color.  ``interpolation`` defaults to
     Closest because the maps hold Cycles' colour A, not the albedo alpha = f(A), and f is non-linear
-    (linear filtering gives a small bias at texel edges).
+    (linear filtering gives a small bias at texel edges).  ``output``: the group's output that feeds the Surface
+    (the live group's is "Cycles").
     Undo: call from an operator with ``bl_options = {'REGISTER', 'UNDO'}``.
     """
     tree = material.node_tree
@@ -377,7 +460,7 @@ def wire_into_material(material: bpy.types.Material, group: bpy.types.NodeTree,
         previous = link.from_node
         material[PREVIOUS_SURFACE_PROP] = previous.name
         tree.links.remove(link)
-    tree.links.new(gnode.outputs["BSSRDF"], surface)
+    tree.links.new(gnode.outputs[output], surface)
     _take_surface_inputs(tree, previous, gnode)
     for i, ((k, kind), image) in enumerate(sorted((images or {}).items())):
         image.colorspace_settings.name = "Non-Color"
@@ -413,15 +496,20 @@ def _feeding_socket(socket: bpy.types.NodeSocket) -> bpy.types.NodeSocket | None
 
 def _take_surface_inputs(tree: bpy.types.NodeTree, previous: bpy.types.Node | None,
                         gnode: bpy.types.Node) -> None:
-    """Give the group node ``gnode`` the Normal and Roughness of the surface node it replaces (a Principled
-    BSDF or an earlier mixture group): the same links, or Roughness's value; :data:`SKIN_ROUGHNESS` when
-    ``previous`` is anything else.  Nothing of the user's is changed."""
+    """Give the group node ``gnode`` the Normal, Roughness and specular inputs (:data:`SPECULAR_INPUTS`) of the
+    surface node it replaces (a Principled BSDF or an earlier mixture or live group): the same links, or their
+    values; Roughness :data:`SKIN_ROUGHNESS` when ``previous`` is anything else.  Nothing of the user's is
+    changed."""
     source = _surface_source(previous)
     if source is None:
         gnode.inputs["Roughness"].default_value = SKIN_ROUGHNESS
         return
-    for name in ("Normal", "Roughness"):
-        feed = _feeding_socket(source.inputs[name])
+    for name in ("Normal", "Roughness", *SPECULAR_INPUTS):
+        theirs, ours = source.inputs.get(name), gnode.inputs.get(name)
+        if theirs is None or ours is None:  # a group wired by an older version of the add-on
+            continue
+        feed = _feeding_socket(theirs)
         if feed is not None:
-            tree.links.new(feed, gnode.inputs[name])
-    gnode.inputs["Roughness"].default_value = source.inputs["Roughness"].default_value
+            tree.links.new(feed, ours)
+        elif name != "Normal":
+            ours.default_value = theirs.default_value

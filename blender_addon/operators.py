@@ -1,6 +1,11 @@
-"""Operators: Invert Skin Albedo (bake maps, build and wire the node group) and Add Skin SSS Mixture.
+"""Operators: Invert Skin Albedo (the live group by default, or baked maps) and Add Skin SSS Mixture.
 
-Invert Skin Albedo runs synchronously when called from a script or in background mode (``execute``), and
+Invert Skin Albedo's default (``mode`` AUTO without a named albedo file or image, or LIVE) wires the live
+node group (blender_addon.live): the inversion in the shader, fed by whatever fed the Principled BSDF's Base
+Color; it computes nothing per texel and takes well under two seconds on any texture.  ``mode`` BAKE (or AUTO
+with an albedo file or image named) bakes maps (below).
+
+The bake runs synchronously when called from a script or in background mode (``execute``), and
 from the UI as a modal operator driven by a timer: one inference chunk per timer event, a progress bar
 in the panel and the cursor, the rest of the UI usable meanwhile, Esc cancels (nothing is changed).
 Both paths use blender_addon.baker.AddonBake; the whole operation is one undo step.
@@ -10,7 +15,7 @@ from __future__ import annotations
 
 import bpy
 
-from . import baker, nodes, preferences
+from . import baker, live, nodes, preferences
 from .core import bake as _core_bake
 
 one_line = _core_bake.one_line
@@ -25,6 +30,13 @@ _STORAGE = [
     ("PACK", "Pack into .blend", "The maps become images packed into the .blend file"),
     ("FILES", "Save as files", "EXR maps in the output folder (default: a folder beside the saved .blend)"),
 ]
+MODES = [
+    ("AUTO", "Auto", "The live group, unless an albedo file or image is named (Albedo file, Image): naming one asks "
+     "for its maps to be baked"),
+    ("LIVE", "Live group", "The inversion inside the shader: fed by what feeds the Principled BSDF's Base Color "
+     "(image, UDIM, painting, vertex colour, attribute, procedural); nothing is baked, paint strokes show at once"),
+    ("BAKE", "Bake maps", "Bake the K media into image maps (for other renderers, OSL, or the model's own colour)"),
+]
 #: Shading paths, numbered as when "Auto" was item 0, so that a scene saved then keeps its choice.
 _BACKENDS = [
     ("SVM", "SVM nodes", "3K single-channel Subsurface Scattering nodes: every Cycles device (the default)", 1),
@@ -35,6 +47,9 @@ _BACKENDS = [
 MODEL_COLOUR_HELP = ("Render the model's own reflectance (the colour of the biophysical skin the network found, "
                      "physically consistent, often darker than painted) instead of the painted albedo, which the "
                      "maps reproduce per channel by default")
+#: The convention option's tooltip (operator and panel).
+PRINCIPLED_CONVENTION_HELP = ("Live group: render the colour as a Principled BSDF renders its Base Color, under its "
+                              "specular layer (about 4 % darker), instead of the painted colour with the coat on top")
 #: Exceptions that mean bad input or a failed bake (reported, nothing changed).
 _EXPECTED = (OSError, ValueError, RuntimeError)
 
@@ -46,6 +61,8 @@ class SPECTRAL_SKIN_OT_invert_albedo(bpy.types.Operator):
     bl_idname = "spectral_skin.invert_albedo"
     bl_label = "Invert Skin Albedo"
     bl_options = {"REGISTER", "UNDO"}
+
+    mode: bpy.props.EnumProperty(name="Mode", items=MODES, default="AUTO")
 
     filepath: bpy.props.StringProperty(name="Albedo file", subtype="FILE_PATH", default="",
                                        description="Read this file instead of an image datablock")
@@ -63,6 +80,8 @@ class SPECTRAL_SKIN_OT_invert_albedo(bpy.types.Operator):
     #: brightness): the default now renders the painted brightness and hue, so it is accepted and ignored.
     match_exposure: bpy.props.BoolProperty(default=False, options={"HIDDEN", "SKIP_SAVE"})
 
+    principled_convention: bpy.props.BoolProperty(
+        name="Principled's convention", default=False, description=PRINCIPLED_CONVENTION_HELP)
     exact: bpy.props.BoolProperty(
         name="Exact (slow)", default=False,
         description="Evaluate every distinct colour with the network instead of the fast-path table shipped with the "
@@ -84,7 +103,37 @@ class SPECTRAL_SKIN_OT_invert_albedo(bpy.types.Operator):
                                   exact=self.exact, uv_coverage=self.uv_coverage,
                                   unit_scale_m=baker.scene_unit_scale(context.scene))
 
+    def _live(self, context):
+        """The live group (mode LIVE): options that only a bake can honour are refused, not ignored."""
+        refused = [("an albedo file", self.filepath), ("an image", self.image_name),
+                   ("the model's own colour", self.model_colour), ("OSL", self.backend == "OSL")]
+        asked = [what for what, value in refused if value]
+        if asked:
+            self.report({"ERROR"}, f"the live group reads the colour that feeds the Principled BSDF and runs as SVM "
+                                   f"nodes: {', '.join(asked)} needs mode Bake")
+            return {"CANCELLED"}
+        try:
+            message = live.apply(context, preferences.model_path(context), baker.scene_unit_scale(context.scene),
+                                 self.colorspace, self.principled_convention)
+        except _EXPECTED as exc:
+            self.report({"ERROR"}, one_line(exc))
+            return {"CANCELLED"}
+        self.report(_level(message), message)
+        return {"FINISHED"}
+
+    def _mode(self) -> str:
+        """LIVE or BAKE: AUTO bakes when an albedo file or image is named, else wires the live group."""
+        if self.mode != "AUTO":
+            return self.mode
+        return "BAKE" if self.filepath or self.image_name else "LIVE"
+
     def execute(self, context):
+        if self._mode() == "LIVE":
+            return self._live(context)
+        if self.principled_convention:
+            self.report({"ERROR"}, "Principled's convention is an option of the live group: bake without it, or "
+                                   "choose mode Live group")
+            return {"CANCELLED"}
         try:
             bake = baker.AddonBake(context, self._settings(context))
         except _EXPECTED as exc:
@@ -101,7 +150,7 @@ class SPECTRAL_SKIN_OT_invert_albedo(bpy.types.Operator):
         return {"FINISHED"}
 
     def invoke(self, context, event):
-        if bpy.app.background or context.window is None:
+        if self._mode() == "LIVE" or bpy.app.background or context.window is None:
             return self.execute(context)
         try:
             self._bake = baker.AddonBake(context, self._settings(context))

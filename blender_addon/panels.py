@@ -13,6 +13,7 @@ from . import baker, operators, preferences
 class SpectralSkinSettings(bpy.types.PropertyGroup):
     """Bake settings shown in the panels and passed to Invert Skin Albedo."""
 
+    mode: bpy.props.EnumProperty(name="Mode", items=operators.MODES[1:], default="LIVE")
     image: bpy.props.PointerProperty(name="Image", type=bpy.types.Image,
                                      description="Albedo to invert (empty: the active Image Texture node)")
     storage: bpy.props.EnumProperty(name="Maps", items=operators._STORAGE, default="PACK")
@@ -23,6 +24,8 @@ class SpectralSkinSettings(bpy.types.PropertyGroup):
     overwrite: bpy.props.BoolProperty(name="Overwrite files", default=False)
     model_colour: bpy.props.BoolProperty(name="Model's own colour", default=False,
                                          description=operators.MODEL_COLOUR_HELP)
+    principled_convention: bpy.props.BoolProperty(name="Principled's convention", default=False,
+                                                  description=operators.PRINCIPLED_CONVENTION_HELP)
     exact: bpy.props.BoolProperty(name="Exact (slow)", default=False,
                                   description="Every distinct colour through the network, not the fast-path table")
     uv_coverage: bpy.props.BoolProperty(name="Only UV-covered texels", default=True,
@@ -44,6 +47,10 @@ def _draw(layout, context) -> None:
                         text=f"Inverting {100 * wm.spectral_skin_progress:.0f} % (Esc to cancel)")
         return
     if settings is not None:
+        layout.prop(settings, "mode", expand=True)
+        if settings.mode == "LIVE":
+            layout.prop(settings, "principled_convention")
+    if settings is not None and settings.mode == "BAKE":
         col = layout.column()
         col.prop(settings, "image")
         if settings.image is None:
@@ -61,6 +68,8 @@ def _draw(layout, context) -> None:
         col.prop(settings, "uv_coverage")
     op = layout.operator("spectral_skin.invert_albedo", icon="IMAGE_DATA")
     if settings is not None:
+        op.mode, op.principled_convention = settings.mode, settings.principled_convention
+    if settings is not None and settings.mode == "BAKE":
         op.image_name = settings.image.name if settings.image is not None else ""
         op.storage, op.output_dir = settings.storage, settings.output_dir
         op.colorspace, op.backend = settings.colorspace, shading_of(settings)

@@ -366,3 +366,27 @@ def read_albedo_indexed(path: str | os.PathLike, colorspace: ColorSpace = "auto"
     used = _detect_colorspace(spec, str(path)) if colorspace == "auto" else colorspace
     return IndexedAlbedo(palette=to_linear(pal, used), index=index, colorspace=used, source_format=fmt,
                          n_clamped=n_clamped, n_channels=int(spec.nchannels), has_alpha=a >= 0)
+
+
+def sample_texels(path: str | os.PathLike, limit: int) -> tuple[np.ndarray, bool]:
+    """About ``limit`` texels of an image file, on an even grid of rows and columns, without holding the whole
+    image: (values (N, 3) float64 as stored, integers scaled to [0, 1] and not decoded; whether the file stores
+    floats).  Grey images are repeated to RGB.  For a quick statistic (the live group's outside-domain report), not
+    a bake: no checks beyond readability (ImageError)."""
+    config = oiio.ImageSpec()
+    config.attribute("oiio:UnassociatedAlpha", 1)
+    inp = oiio.ImageInput.open(str(path), config)
+    if inp is None:
+        raise ImageError(f"cannot read image {path}: {oiio.geterror()}")
+    try:
+        spec = inp.spec()
+        stride = max(1, int(np.ceil(np.sqrt(spec.width * spec.height / max(limit, 1)))))
+        rows = [inp.read_scanline(y, 0, "float") for y in range(spec.y, spec.y + spec.height, stride)]
+        is_float = str(spec.format) in ("half", "float", "double")
+    finally:
+        inp.close()
+    if any(r is None for r in rows):
+        raise ImageError(f"cannot read pixels of {path}")
+    px = np.concatenate([np.asarray(r, np.float64).reshape(spec.width, -1)[::stride] for r in rows])
+    rgb = px[:, :3] if px.shape[1] >= 3 else np.repeat(px[:, :1], 3, axis=1)
+    return np.nan_to_num(rgb, nan=0.0, posinf=1.0, neginf=0.0), is_float

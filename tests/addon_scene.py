@@ -63,7 +63,9 @@ def skin_object(albedo: Path | None = None, name: str = "Skin", with_uv_node: bo
 
 
 def run_invert(obj, **kwargs) -> set[str]:
-    """bpy.ops.spectral_skin.invert_albedo with ``obj`` active (raises RuntimeError on a reported error)."""
+    """bpy.ops.spectral_skin.invert_albedo with ``obj`` active (raises RuntimeError on a reported error); mode
+    BAKE unless ``mode`` is given (the bake tests' helper: the operator's own default is the live group)."""
+    kwargs.setdefault("mode", "BAKE")
     with bpy.context.temp_override(object=obj, active_object=obj):
         return bpy.ops.spectral_skin.invert_albedo(**kwargs)
 

@@ -73,10 +73,14 @@ def test_tiny_demo_shows_translucency(tmp_path):
     assert figure.shape[0] > 3 * 64 and figure.shape[1] > 3 * 64
     assert (tmp_path / "maps_contact_sheet.png").is_file()
     panels = {}
+    rec = json.loads(next((tmp_path / "maps" / "medium").glob("*_maps.json")).read_text())
+    assert rec["unit_scale_m_per_blender_unit"] == 1.0  # the head is modelled in metres
+    assert rec["image_size"] == [32, 32] and rec["collapse"]["colour"] == "painted"  # the contact sheet's bake
+    assert sorted(p.name for p in (tmp_path / "maps").iterdir()) == ["medium"]  # the renders bake nothing
     for tone in demo_render.TONES:
-        rec = json.loads(next((tmp_path / "maps" / tone).glob("*_maps.json")).read_text())
-        assert rec["unit_scale_m_per_blender_unit"] == 1.0  # the head is modelled in metres
-        assert rec["image_size"] == [32, 32] and rec["collapse"]["colour"] == "painted"  # the default bake
+        spectral = bpy.data.materials[f"{tone} spectral"]
+        assert any(n.bl_idname == "ShaderNodeGroup" and n.node_tree.get("spectral_skin_sss_backend") == "LIVE"
+                   for n in spectral.node_tree.nodes), tone  # the live group, the operator's default
         for method, _ in demo_render.METHODS:
             panels[method] = demo_render.read_image(tmp_path / f"render_{tone}_{method}.png")
             assert panels[method].shape == (64, 64, 3) and np.all(np.isfinite(panels[method]))

@@ -7,14 +7,16 @@ Cycles under the same lights:
 (a) **albedo only**: the texture through a Diffuse BSDF (no light travels under the surface);
 (b) **Principled BSDF, Random Walk (Skin)**: Subsurface Weight 1, the texture as Base Color and Blender's
     default Subsurface Radius and Scale (what an artist gets today by turning subsurface on);
-(c) **Spectral Skin SSS**: the add-on's Invert Skin Albedo on the texture at its default settings (maps
-    baked at the scene's Unit Scale, the node group wired into the material).
+(c) **Spectral Skin SSS**: the add-on's Invert Skin Albedo at its default settings: the live node group
+    (blender_addon.live) fed by the texture that fed the Principled BSDF's Base Color, at the scene's Unit
+    Scale; nothing is baked.
 
 The lights are set for translucency: a back light behind the head that reaches only the back of the ear
 (the ear's visible side has no direct light: whatever it shows came through it), and a key light from the
 front-right whose terminator crosses the cheek (subsurface light softens and reddens it).  A grid of the
 nine renders (demo/out/translucency.png; the README opens with it), the single renders, the ear's pixel
-mask, the bakes and a contact sheet of the medium tone's maps are written.
+mask and a contact sheet of the medium tone's maps (what the live group computes per texel, baked here with
+the operator's Bake mode on a copy of the material, which is not rendered) are written.
 
 Nothing is downloaded.  Run as ``python -m training.demo_render --out demo/out`` (``python -m training demo``
 calls it).
@@ -36,7 +38,7 @@ from training.demo_subject import TONES, skin_albedo_texture
 METHODS: tuple[tuple[str, str], ...] = (
     ("albedo", "(a) albedo only\nDiffuse BSDF"),
     ("principled", "(b) Principled BSDF, Random Walk (Skin)\nBlender's default radius"),
-    ("spectral", "(c) Spectral Skin SSS\nInvert Skin Albedo, defaults"),
+    ("spectral", "(c) Spectral Skin SSS\nInvert Skin Albedo, defaults (live group)"),
 )
 #: Camera (metres, looking at TARGET) and point lights: (location, power W, radius m).  The back light stands
 #: behind the head, which hides it from the camera: it lights the back of the ears and a rim of the head only.
@@ -285,14 +287,25 @@ def _fresh_dir(path: Path) -> Path:
     return path
 
 
-def _bake(obj, material, maps_dir: Path) -> dict:
-    """Invert Skin Albedo on ``material``'s image at the operator's default settings (maps saved as files in
-    ``maps_dir``); returns the bake's record (S_maps.json)."""
+def _invert(obj, material) -> None:
+    """Invert Skin Albedo on ``material`` at the operator's default settings: the live group."""
     import bpy
 
     obj.active_material = material
     with bpy.context.temp_override(object=obj, active_object=obj):
-        result = bpy.ops.spectral_skin.invert_albedo(storage="FILES", output_dir=str(maps_dir))
+        result = bpy.ops.spectral_skin.invert_albedo()
+    if result != {"FINISHED"}:
+        raise RuntimeError(f"Invert Skin Albedo returned {result}")
+
+
+def _bake(obj, material, maps_dir: Path) -> dict:
+    """Invert Skin Albedo's Bake mode on ``material``'s image (maps saved as files in ``maps_dir``); returns the
+    bake's record (S_maps.json)."""
+    import bpy
+
+    obj.active_material = material
+    with bpy.context.temp_override(object=obj, active_object=obj):
+        result = bpy.ops.spectral_skin.invert_albedo(mode="BAKE", storage="FILES", output_dir=str(maps_dir))
     if result != {"FINISHED"}:
         raise RuntimeError(f"Invert Skin Albedo returned {result}")
     return json.loads(next(maps_dir.glob("*_maps.json")).read_text())
@@ -300,10 +313,10 @@ def _bake(obj, material, maps_dir: Path) -> dict:
 
 def run(out: Path, texture_size: int = 512, render_size: int = RENDER_SIZE, samples: int = SAMPLES,
         tones: tuple[str, ...] = tuple(TONES), figure: Path | None = None) -> dict:
-    """Generate the textures, build the scene, bake (through the add-on's operator) and render every tone with
-    every method; write the figure (``out``/translucency.png, and ``figure`` when given).  Returns what was
-    written, the timings (s), the bake records and, per tone and method, the mean of the render (display sRGB
-    in [0, 1]) over the left ear's pixels."""
+    """Generate the textures, build the scene, invert (the add-on's operator: the live group) and render every
+    tone with every method; write the figure (``out``/translucency.png, and ``figure`` when given) and bake the
+    contact sheet's tone.  Returns what was written, the timings (s), the bake record of the sheet's tone and, per
+    tone and method, the mean of the render (display sRGB in [0, 1]) over the left ear's pixels."""
     import bpy
 
     sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
@@ -316,6 +329,7 @@ def run(out: Path, texture_size: int = 512, render_size: int = RENDER_SIZE, samp
     timings["scene"] = time.perf_counter() - t0
     ear = _ear_mask(scene, parts, out / "ear_mask.png")
     materials, records, textures = {}, {}, {}
+    sheet_tone = "medium" if "medium" in tones else tones[0]
     blender_addon.register()
     try:
         for tone in tones:
@@ -327,8 +341,13 @@ def run(out: Path, texture_size: int = 512, render_size: int = RENDER_SIZE, samp
                 materials[tone, method] = _material(f"{tone} {method}", image, shader)
             timings[f"texture_{tone}"] = time.perf_counter() - t0
             t0 = time.perf_counter()
-            records[tone] = _bake(parts[0], materials[tone, "spectral"], _fresh_dir(out / "maps" / tone))
-            timings[f"bake_{tone}"] = time.perf_counter() - t0
+            _invert(parts[0], materials[tone, "spectral"])
+            timings[f"invert_{tone}"] = time.perf_counter() - t0
+            if tone == sheet_tone:
+                t0 = time.perf_counter()
+                baked = _material(f"{tone} baked", image, "principled")
+                records[tone] = _bake(parts[0], baked, _fresh_dir(out / "maps" / tone))
+                timings[f"bake_{tone}"] = time.perf_counter() - t0
     finally:
         blender_addon.unregister()
     panels, ear_means = {}, {}
@@ -342,7 +361,6 @@ def run(out: Path, texture_size: int = 512, render_size: int = RENDER_SIZE, samp
     footer = (f"Cycles {bpy.app.version_string}, {render_size} px, {samples} spp + OpenImageDenoise; head modelled "
               f"in metres (Unit Scale 1), back light behind the ear, key light from the front right.")
     comparison_figure(panels, list(tones), [out / "translucency.png", *([figure] if figure else [])], footer)
-    sheet_tone = "medium" if "medium" in tones else tones[0]
     rec = records[sheet_tone]
     contact_sheet(out / "maps" / sheet_tone, f"skin_{sheet_tone}", rec["K"], textures[sheet_tone],
                   out / "maps_contact_sheet.png")

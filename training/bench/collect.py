@@ -31,6 +31,7 @@ BENCH_MODULES = [
     "training.bench.fit",
     "training.bench.train",
     "training.bench.addon",
+    "training.bench.live",
     "training.bench.runtime",
     "training.bench.validate",
     "training.bench.cluster",

@@ -1,0 +1,193 @@
+"""The texel table (exporters.texel_table) as small float images a shader can read: the live node group.
+
+Everything the Cycles maps hold is a function of the albedo colour, so a node group can look the K media up
+per shading point instead of reading baked maps.  This module holds the numpy side (no bpy): the image
+layout, the atlases and a reference evaluation of exactly what the nodes compute.
+
+What the nodes compute, for a linear colour ``rgb`` (any node's output):
+
+1. e = sRGB encoding of clamp(rgb, 0, 1) (IEC 61966-2-1, as exporters.texel_table.skin_coords);
+2. skin space (l, c1, c2) = COORDS @ e, then grid coordinates x_d = (coord_d - origin_d) / step;
+3. **outside the table's box** each x_d is clamped to [0, n_d - 1]: the colour is projected onto the nearest
+   point of the box in skin space (the box is axis-aligned, so the clamp is the Euclidean projection).  The
+   answer is continuous in the colour and finite for every input, NaN included (Cycles' clamp maps NaN to
+   the lower bound);
+4. trilinear interpolation of the table's channels, where nodes outside the RGB cube (NaN in the table)
+   were filled by :func:`fill_outside_cube` (means of filled neighbours, layer by layer): inside cells whose
+   corners all lie in the cube the values are exactly the fast bake's; in the few cells that straddle the
+   cube's faces (very light or saturated colours, which the fast bake evaluates exactly) they are a smooth
+   extension.  :func:`outside_fraction` counts the texels that fall outside these exact cells.
+
+Image layout ("slice atlas"): the grid is cut into its n0 slices of constant l; slice s is a tile of
+(n1 + 2) x (n2 + 2) pixels (x1 along the width, x2 along the height) with a one-pixel border repeating the
+tile's edge, so bilinear filtering at a clamped coordinate never reads the next tile.  Tiles sit in
+``columns`` columns, row 0 at the bottom (Blender's pixel order).  A pixel's centre is at
+u = (px + 0.5) / width, as Cycles' and the GPU's bilinear filters assume.  The third axis is interpolated by
+two lookups (slices s and s + 1) mixed with the fraction of x0.
+
+Images (float32 RGBA, Non-Color, alpha channel-packed), for each component k: ``k{k} Color`` (RGB the
+Subsurface Color, A the anisotropy g), ``k{k} Log Radius`` (RGB natural log of the radius in metres),
+``k{k} Weight`` (RGB the weight).  With the shipped table (67 x 31 x 22 nodes, K = 3): nine images of
+231 x 240 pixels, 8.0 MB (7.6 MiB) in all (:func:`atlas_bytes`), whatever the textures and however many materials
+share them.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from . import cycles
+from .colorimetry import srgb_encode
+from .texel_table import COORDS, TexelTable, channel_names
+
+#: The images of one component, in order: (name suffix, table channels for R, G, B, A or None).
+IMAGE_KINDS = ("Color", "Log Radius", "Weight")
+#: Tile border (pixels) repeating each slice's edge.
+BORDER = 1
+
+
+@dataclass(frozen=True)
+class AtlasLayout:
+    """Where grid node (i0, i1, i2) lies in the atlas: tile i0 at (column, row) = (i0 % columns, i0 // columns),
+    pixel (column * tile_w + BORDER + i1, row * tile_h + BORDER + i2)."""
+
+    shape: tuple[int, int, int]
+    origin: tuple[float, float, float]
+    step: float
+    columns: int
+
+    @property
+    def rows(self) -> int:
+        return -(-self.shape[0] // self.columns)
+
+    @property
+    def tile(self) -> tuple[int, int]:
+        return self.shape[1] + 2 * BORDER, self.shape[2] + 2 * BORDER
+
+    @property
+    def size(self) -> tuple[int, int]:
+        """(width, height) in pixels."""
+        return self.columns * self.tile[0], self.rows * self.tile[1]
+
+
+def layout_of(table: TexelTable) -> AtlasLayout:
+    """The atlas layout of ``table``: about square images."""
+    n0, n1, n2 = table.shape
+    best = min(range(1, n0 + 1), key=lambda c: abs(c * (n1 + 2) - (-(-n0 // c)) * (n2 + 2)))
+    if not np.allclose(table.step, table.step[0]):
+        raise ValueError("the live table needs the same step on every axis")
+    return AtlasLayout(shape=(n0, n1, n2), origin=tuple(float(o) for o in table.origin), step=float(table.step[0]),
+                       columns=best)
+
+
+def fill_outside_cube(values: np.ndarray) -> np.ndarray:
+    """``values`` (n0, n1, n2, C) with every NaN node replaced by the mean of its already filled 6-neighbours,
+    one layer at a time outward from the valid nodes (a smooth, bounded extension).  Returns a new array."""
+    shape = values.shape[:3]
+    flat = np.array(values, np.float64).reshape(-1, values.shape[3])
+    filled = np.all(np.isfinite(flat), axis=1)
+    if not filled.any():
+        raise ValueError("the table has no valid node")
+    index = np.indices(shape).reshape(3, -1).T
+    strides = np.array([shape[1] * shape[2], shape[2], 1])
+    while not filled.all():
+        todo = np.flatnonzero(~filled)
+        total = np.zeros((len(todo), flat.shape[1]))
+        count = np.zeros(len(todo))
+        for axis in range(3):
+            for shift in (1, -1):
+                pos = index[todo, axis] + shift
+                inside = (pos >= 0) & (pos < shape[axis])
+                nb = np.where(inside, todo + shift * strides[axis], 0)
+                use = inside & filled[nb]
+                total[use] += flat[nb[use]]
+                count += use
+        grow = count > 0
+        flat[todo[grow]] = total[grow] / count[grow, None]
+        filled[todo[grow]] = True
+    return flat.reshape(values.shape)
+
+
+def _channels(table: TexelTable, k: int, kind: str) -> list[int | None]:
+    names = channel_names(table.k)
+    base = {"Color": "color", "Log Radius": "log_radius_m", "Weight": "weight"}[kind]
+    rgb = [names.index(f"{base}_k{k}_{c}") for c in "rgb"]
+    return rgb + [names.index(f"anisotropy_k{k}") if kind == "Color" else None]
+
+
+def grid_values(table: TexelTable) -> dict[str, np.ndarray]:
+    """The filled grid (n0, n1, n2, 4) float64 of each image name ``k{k} {kind}``, alpha 1 where unused; colour,
+    weight and anisotropy clipped to the ranges a bake clips them to (exporters.texel_table.TexelTable.records)."""
+    used = sorted({i for k in range(1, table.k + 1) for kind in IMAGE_KINDS for i in _channels(table, k, kind)
+                   if i is not None})
+    filled = fill_outside_cube(table.values[..., used])
+    column = {c: j for j, c in enumerate(used)}
+    ones = np.ones(table.shape)
+    out = {}
+    for k in range(1, table.k + 1):
+        for kind in IMAGE_KINDS:
+            grid = np.stack([filled[..., column[i]] if i is not None else ones for i in _channels(table, k, kind)],
+                            axis=-1)
+            if kind == "Color":
+                grid[..., :3] = np.clip(grid[..., :3], 0.0, 1.0)
+                grid[..., 3] = np.clip(grid[..., 3], cycles.G_MIN, cycles.RECOMMENDED_G_MAX)
+            elif kind == "Weight":
+                grid[..., :3] = np.maximum(grid[..., :3], 0.0)
+            out[f"k{k} {kind}"] = grid
+    return out
+
+
+def atlas_of(grid: np.ndarray, layout: AtlasLayout) -> np.ndarray:
+    """The atlas (height, width, C) float32 of one grid (n0, n1, n2, C), rows bottom to top (Blender's order)."""
+    n0 = layout.shape[0]
+    tw, th = layout.tile
+    b = BORDER
+    tiles = np.pad(grid.astype(np.float32), ((0, layout.rows * layout.columns - n0), (b, b), (b, b), (0, 0)),
+                   mode="edge")  # (slots, tile_w, tile_h, C); slots past n0 repeat the last slice
+    tiles = tiles.reshape(layout.rows, layout.columns, tw, th, grid.shape[3])
+    return np.ascontiguousarray(tiles.transpose(0, 3, 1, 2, 4).reshape(layout.rows * th, layout.columns * tw, -1))
+
+
+def atlases(table: TexelTable) -> tuple[AtlasLayout, dict[str, np.ndarray]]:
+    """The layout and every image (height, width, 4) float32 of ``table``."""
+    layout = layout_of(table)
+    return layout, {name: atlas_of(grid, layout) for name, grid in grid_values(table).items()}
+
+
+def atlas_bytes(layout: AtlasLayout, image_count: int) -> int:
+    """Memory of ``image_count`` float RGBA atlases (bytes)."""
+    width, height = layout.size
+    return image_count * width * height * 4 * 4
+
+
+def grid_coords(rgb: np.ndarray, layout: AtlasLayout) -> np.ndarray:
+    """Clamped grid coordinates (N, 3) of linear colours (N, 3), as the nodes compute them (NaN -> 0)."""
+    x = np.nan_to_num(np.asarray(rgb, np.float64), nan=0.0)
+    e = srgb_encode(np.clip(x, 0.0, 1.0))
+    g = (e @ COORDS.T - np.array(layout.origin)) / layout.step
+    return np.clip(g, 0.0, np.array(layout.shape) - 1.0)
+
+
+def lookup(grid: np.ndarray, layout: AtlasLayout, rgb: np.ndarray) -> np.ndarray:
+    """Reference of the nodes: trilinear values (N, 4) of one filled grid (n0, n1, n2, 4) at colours (N, 3)."""
+    x = grid_coords(rgb, layout)
+    i = np.minimum(np.floor(x).astype(np.int64), np.array(layout.shape) - 2)
+    f = x - i
+    out = np.zeros((len(x), grid.shape[3]))
+    for corner in range(8):
+        bits = [(corner >> d) & 1 for d in range(3)]
+        w = np.prod([f[:, d] if b else 1.0 - f[:, d] for d, b in enumerate(bits)], axis=0)
+        out += w[:, None] * grid[i[:, 0] + bits[0], i[:, 1] + bits[1], i[:, 2] + bits[2]]
+    return out
+
+
+def outside_fraction(table: TexelTable, rgb: np.ndarray) -> float:
+    """Fraction of colours (N, 3) outside the table's exact domain (outside its box, or in a cell with a corner
+    outside the RGB cube): where the live group answers with the projected/extended value."""
+    rgb = np.asarray(rgb, np.float64).reshape(-1, 3)
+    if len(rgb) == 0:
+        return 0.0
+    inside, _, _ = table.locate(np.nan_to_num(rgb, nan=0.0, posinf=1.0, neginf=0.0))
+    return float(1.0 - inside.mean())
