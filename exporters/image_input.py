@@ -373,6 +373,7 @@ def sample_texels(path: str | os.PathLike, limit: int) -> tuple[np.ndarray, bool
     image: (values (N, 3) float64 as stored, integers scaled to [0, 1] and not decoded; whether the file stores
     floats).  Grey images are repeated to RGB.  For a quick statistic (the live group's outside-domain report), not
     a bake: no checks beyond readability (ImageError)."""
+    oiio = openimageio()
     config = oiio.ImageSpec()
     config.attribute("oiio:UnassociatedAlpha", 1)
     inp = oiio.ImageInput.open(str(path), config)
