@@ -11,7 +11,6 @@ in an existing file, keeping the others (each keeps its own stamp).
 
 from __future__ import annotations
 
-import argparse
 import datetime as dt
 import importlib
 import os
@@ -22,6 +21,8 @@ import time
 import traceback
 from importlib import metadata
 from pathlib import Path
+
+from exporters.cli_io import OneLineParser
 
 #: Benchmark modules in pipeline order; a module that does not exist yet is listed as such.
 BENCH_MODULES = [
@@ -103,7 +104,7 @@ def read_sections(text: str) -> dict[str, str]:
 
 
 def main(argv: list[str]) -> int:
-    parser = argparse.ArgumentParser(prog="python -m training bench", description=__doc__.splitlines()[0])
+    parser = OneLineParser(prog="python -m training bench", description=__doc__.splitlines()[0])
     parser.add_argument("--out", type=Path, default=Path("bench/results.md"), help="Markdown file to write")
     parser.add_argument("--quick", action="store_true", help="small sizes (about a minute per module)")
     parser.add_argument("--only", nargs="*", default=None,

@@ -16,6 +16,7 @@ import sys
 from dataclasses import replace
 from pathlib import Path
 
+from exporters.cli_io import OneLineParser
 from training.commands.options import error_status, triple
 from training.paths import portable_command
 
@@ -25,7 +26,7 @@ def _parser() -> argparse.ArgumentParser:
     from training.model.config import SIZES
 
     d = Scale()
-    p = argparse.ArgumentParser(prog="python -m training ablations", description=__doc__.splitlines()[0],
+    p = OneLineParser(prog="python -m training ablations", description=__doc__.splitlines()[0],
                                 formatter_class=argparse.RawDescriptionHelpFormatter, epilog=__doc__)
     p.add_argument("--out", type=Path, required=True, help="output folder (resumed if it exists)")
     p.add_argument("--quick", action="store_true",

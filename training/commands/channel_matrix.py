@@ -6,16 +6,16 @@ and stored so that the add-on needs no colour-science inside Blender.
 
 from __future__ import annotations
 
-import argparse
 from pathlib import Path
 
 import numpy as np
 
 from exporters import collapse
+from exporters.cli_io import OneLineParser
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m training channel-matrix", description=__doc__.splitlines()[0])
+    parser = OneLineParser(prog="python -m training channel-matrix", description=__doc__.splitlines()[0])
     parser.add_argument("--out", type=Path, default=collapse.CHANNEL_MATRIX_PATH,
                         help="where to write the matrix (default: the one the add-on reads)")
     args = parser.parse_args(argv)

@@ -20,6 +20,7 @@ import argparse
 import json
 from pathlib import Path
 
+from exporters.cli_io import OneLineParser
 from training.cluster import engine
 from training.commands.options import error_status, parse_shard
 from training.data.build import SPLITS, build_split, merge
@@ -44,7 +45,7 @@ def _estimator(args: argparse.Namespace, preset, split: str):
 
 
 def main(argv: list[str]) -> int:
-    parser = argparse.ArgumentParser(prog="python -m training dataset", description=__doc__.splitlines()[0],
+    parser = OneLineParser(prog="python -m training dataset", description=__doc__.splitlines()[0],
                                      formatter_class=argparse.RawDescriptionHelpFormatter, epilog=__doc__)
     parser.add_argument("--preset", choices=sorted(PRESETS), default="ci")
     parser.add_argument("--out", type=Path, required=True, help="dataset folder")

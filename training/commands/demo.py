@@ -12,13 +12,13 @@
 
 from __future__ import annotations
 
-import argparse
 import json
 import time
 from pathlib import Path
 
 import numpy as np
 
+from exporters.cli_io import OneLineParser
 from exporters.colorimetry import spectrum_to_lab, spectrum_to_srgb
 from exporters.constants import WAVELENGTHS_NM
 from training import demo_render
@@ -29,7 +29,7 @@ from training.skin.tones import load_tones
 
 
 def main(argv: list[str]) -> int:
-    parser = argparse.ArgumentParser(prog="python -m training demo", description=__doc__.splitlines()[0])
+    parser = OneLineParser(prog="python -m training demo", description=__doc__.splitlines()[0])
     parser.add_argument("--out", type=Path, default=Path("demo/out"))
     parser.add_argument("--photons", type=int, default=300, help="photons per wavelength of the Monte Carlo tone")
     parser.add_argument("--seed", type=int, default=0)

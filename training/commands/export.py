@@ -18,6 +18,7 @@ import os
 import sys
 from pathlib import Path
 
+from exporters.cli_io import OneLineParser
 from training.commands.options import error_status
 from training.export.card import build_card, write_card
 from training.export.graphs import PARITY_TOL, export_graphs, parity, parity_failures, rounding_cost
@@ -28,7 +29,7 @@ CARD_NAME = "skin_inversion.json"
 
 
 def parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="python -m training export", description=__doc__.splitlines()[0],
+    p = OneLineParser(prog="python -m training export", description=__doc__.splitlines()[0],
                                 formatter_class=argparse.RawDescriptionHelpFormatter, epilog=__doc__)
     p.add_argument("--run", type=Path, required=True, help="run folder of `python -m training train`")
     p.add_argument("--out", type=Path, required=True, help="folder for the .onnx files and the card")

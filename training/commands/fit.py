@@ -27,6 +27,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from exporters.cli_io import OneLineParser
 from exporters.constants import anisotropy
 from training.cluster import engine
 from training.commands.options import error_status, parse_shard
@@ -37,7 +38,7 @@ TONE_KEYS = ("wavelength_nm", "R_d", "r_edges_cm", "profile", "photons")
 
 
 def _parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(
+    p = OneLineParser(
         prog="python -m training fit",
         description="Fit mixtures of K homogeneous media to MC profiles through the lookup tables (paper §4).",
     )

@@ -22,13 +22,14 @@ import argparse
 import sys
 from pathlib import Path
 
+from exporters.cli_io import OneLineParser
 from training.cluster import engine
 from training.commands.options import error_status, parse_shard
 from training.sim.lut import ALBEDO_MAX, ALBEDO_MIN, G_MAX, G_MIN, G_NODES, MAX_STEPS, build_lut
 
 
 def _parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(
+    p = OneLineParser(
         prog="python -m training lut",
         description="R(albedo, g) and P(r | albedo, g) of a semi-infinite medium at sigma_t = 1, n = 1.4, "
         "diffuse illumination, by absorption reweighting of one non-absorbing run per simulated g.",

@@ -25,6 +25,7 @@ import sys
 import time
 from pathlib import Path
 
+from exporters.cli_io import OneLineParser
 from exporters.constants import WAVELENGTHS_NM
 from training.commands.options import error_status
 from training.paths import SHIPPED_DECODER
@@ -37,7 +38,7 @@ DEFAULT_DECODER = SHIPPED_DECODER
 
 
 def _parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="python -m training realskin", description=__doc__.split("\n\n")[2],
+    p = OneLineParser(prog="python -m training realskin", description=__doc__.split("\n\n")[2],
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--data", type=Path, default=NIST_FILE,
                    help="measured spectra (NIST layout); default: the shipped file")

@@ -6,14 +6,14 @@ minutes on one core); without ``--build`` the command prints its help.
 
 from __future__ import annotations
 
-import argparse
 from pathlib import Path
 
 from exporters import reflectance_tables
+from exporters.cli_io import OneLineParser
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m training reflectance-tables",
+    parser = OneLineParser(prog="python -m training reflectance-tables",
                                      description=reflectance_tables.__doc__.splitlines()[0])
     parser.add_argument("--build", action="store_true", help="recompute the tables with iadpython")
     parser.add_argument("--out", type=Path, default=reflectance_tables.TABLE_PATH)

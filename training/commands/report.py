@@ -28,6 +28,7 @@ import json
 import sys
 from pathlib import Path
 
+from exporters.cli_io import OneLineParser
 from training.commands.options import error_status
 from training.data.build import SPLITS
 from training.paths import SHIPPED_MODEL_DIR, portable, portable_strings
@@ -241,7 +242,7 @@ def markdown(report: dict) -> str:
 
 
 def _parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="python -m training report", description=__doc__.splitlines()[0],
+    p = OneLineParser(prog="python -m training report", description=__doc__.splitlines()[0],
                                 formatter_class=argparse.RawDescriptionHelpFormatter, epilog=__doc__)
     p.add_argument("--dataset", type=Path, help="dataset folder (`python -m training dataset --out`)")
     p.add_argument("--fits", type=Path, help="fits folder (`python -m training fit --dataset ... --out`)")

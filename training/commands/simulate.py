@@ -19,6 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
+from exporters.cli_io import OneLineParser
 from exporters.constants import R_EDGES_CM, WAVELENGTHS_NM
 from training.commands.options import error_status
 from training.sim.resample import cdf_resample_profile
@@ -36,7 +37,7 @@ def reweighted(tone: np.ndarray, photons: int, seed: int, device: str, compile_)
 
 
 def _parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="python -m training simulate",
+    p = OneLineParser(prog="python -m training simulate",
                                 description="Monte Carlo of one skin tone at all 376 wavelengths -> .npz.")
     p.add_argument("--tone", nargs=5, type=float, required=True,
                    metavar=("F_MEL", "F_BLOOD", "T_EPI", "SO2", "B_MEL"), help="biophysical vector (t_epi in cm)")

@@ -14,13 +14,14 @@ import math
 
 import torch
 
+from exporters.cli_io import OneLineParser
 from training.commands.options import error_status
 from training.sim.medium import LayeredMedium
 from training.sim.transport import simulate
 
 
 def _parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(
+    p = OneLineParser(
         prog="python -m training simulate-layers",
         description="Monte Carlo diffuse reflectance / transmittance of a layered medium (top layer first).",
     )

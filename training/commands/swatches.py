@@ -2,11 +2,11 @@
 
 from __future__ import annotations
 
-import argparse
 from pathlib import Path
 
 import numpy as np
 
+from exporters.cli_io import OneLineParser
 from exporters.colorimetry import spectrum_to_srgb
 from training.skin.tones import ToneSet, load_tones
 
@@ -45,7 +45,7 @@ def plot_swatches(tone_set: ToneSet, srgb: np.ndarray, out: Path, title: str) ->
 
 
 def main(argv: list[str]) -> int:
-    parser = argparse.ArgumentParser(prog="python -m training swatches", description=__doc__.splitlines()[0])
+    parser = OneLineParser(prog="python -m training swatches", description=__doc__.splitlines()[0])
     parser.add_argument("--out", type=Path, required=True, help="PNG file to write")
     parser.add_argument("--photons", type=int, default=2000, help="photons per wavelength per tone")
     parser.add_argument("--seed", type=int, default=0)

@@ -11,18 +11,18 @@ the options.  Defaults: the model and table shipped with the add-on (``training.
 
 from __future__ import annotations
 
-import argparse
 import sys
 from pathlib import Path
 
 from exporters import inference, texel_table
+from exporters.cli_io import OneLineParser
 from exporters.maps import sha256_file
 from exporters.texel_records import CollapseOptions
 from training.paths import SHIPPED_MODEL, SHIPPED_TABLE
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m training texel-table",
+    parser = OneLineParser(prog="python -m training texel-table",
                                      description=texel_table.__doc__.splitlines()[0])
     parser.add_argument("--model", type=Path, default=SHIPPED_MODEL, help="skin_inversion.onnx")
     parser.add_argument("--out", type=Path, default=SHIPPED_TABLE, help="table file (.npz)")

@@ -22,6 +22,7 @@ import argparse
 import sys
 from pathlib import Path
 
+from exporters.cli_io import OneLineParser
 from training.commands.options import error_status, triple
 from training.model.config import SIZES, WEIGHT_SMOOTHING_NM, ModelConfig
 from training.paths import portable_command
@@ -29,7 +30,7 @@ from training.train.run import TrainConfig, train
 
 
 def parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="python -m training train", description=__doc__.splitlines()[0],
+    p = OneLineParser(prog="python -m training train", description=__doc__.splitlines()[0],
                                 formatter_class=argparse.RawDescriptionHelpFormatter, epilog=__doc__)
     p.add_argument("--dataset", type=Path, required=True)
     p.add_argument("--fits", type=Path, default=None)

@@ -23,6 +23,7 @@ import os
 import sys
 from pathlib import Path
 
+from exporters.cli_io import OneLineParser
 from training.cluster import engine
 from training.commands.options import error_status
 from training.paths import SHIPPED_MODEL_DIR, portable_command
@@ -32,7 +33,7 @@ DEFAULT_MODEL_DIR = SHIPPED_MODEL_DIR
 
 
 def _parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="python -m training validate", description="Reproduce the paper's validation.")
+    p = OneLineParser(prog="python -m training validate", description="Reproduce the paper's validation.")
     p.add_argument("--out", type=Path, help="output folder (tables.md, tables.json, fig_*.png, cache/)")
     p.add_argument("--quick", action="store_true",
                    help="smoke test: 4 tones, every 20 nm, few photons, few fitter iterations (a test runs it)")

@@ -33,6 +33,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from exporters.cli_io import OneLineParser
 from exporters.constants import R_EDGES_CM, WAVELENGTHS_NM
 from training.sim.medium import LayeredMedium
 from training.sim.resample import MAX_SPAN, MIN_COUNT, cdf_resample, histogram_profile, kde_profile
@@ -236,7 +237,7 @@ def run(out: Path, photons: int, repeats: int, seed: int, quick: bool, log=print
 
 
 def _parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="python -m training resampling",
+    p = OneLineParser(prog="python -m training resampling",
                                 description="Radial profile estimators (histogram, uniform bins, KDE, CDF "
                                 "resampling) against a high-photon reference at equal photons.")
     p.add_argument("--out", type=Path, required=True, help="folder for resampling.json/.md, fig_resampling.png")

@@ -28,6 +28,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from exporters.cli_io import OneLineParser
 from exporters.constants import WAVELENGTHS_NM
 from training.sim.medium import LayeredMedium
 from training.sim.tissue import skin_medium
@@ -100,7 +101,7 @@ def _wavelengths(text: str) -> list[float]:
 
 
 def _parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="python -m training mitsuba",
+    p = OneLineParser(prog="python -m training mitsuba",
                                 description="Mitsuba 3 reflectance of the network's mixture vs ours vs ground truth.")
     p.add_argument("--tone", nargs=5, type=float, required=True,
                    metavar=("F_MEL", "F_BLOOD", "T_EPI", "SO2", "B_MEL"), help="biophysical vector (t_epi in cm)")
