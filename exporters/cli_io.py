@@ -24,6 +24,7 @@ import argparse
 import contextlib
 import errno
 import fcntl
+import functools
 import math
 import os
 import sys
@@ -122,6 +123,16 @@ def require(ok: bool, message: str) -> None:
     """:class:`InputError` with ``message`` unless ``ok`` (option checks that involve several options)."""
     if not ok:
         raise InputError(message)
+
+
+def check_biophysical(values, what: str) -> None:
+    """:class:`InputError` unless ``values`` is a physical biophysical vector (docs/contracts.md §1 order):
+    fractions in [0, 1], the epidermis thickness > 0 cm."""
+    from exporters.constants import PARAM_NAMES
+
+    for name, value in zip(PARAM_NAMES, values, strict=True):
+        ok = math.isfinite(value) and (value > 0 if name == "t_epi" else 0.0 <= value <= 1.0)
+        require(ok, f"{what} {name} = {value:g} is outside its range ({'> 0 cm' if name == 't_epi' else '[0, 1]'})")
 
 
 # -- input files ----------------------------------------------------------------------------------------------
@@ -250,6 +261,11 @@ def _refuse_inputs(path: Path, what: str, inputs) -> None:
             raise InputError(f"{what} {path} lies inside {name} {source}; write somewhere else")
 
 
+def inside(path: str | os.PathLike, folder: str | os.PathLike) -> bool:
+    """Whether ``path`` lies in ``folder`` (or is it), links resolved."""
+    return _inside(Path(path), folder)
+
+
 def _inside(path: Path, folder) -> bool:
     try:
         Path(path).resolve().relative_to(Path(folder).resolve())
@@ -269,12 +285,13 @@ def _writable_folder(folder: Path, what: str, path: Path) -> None:
 
 def check_output_file(path: str | os.PathLike, what: str, *, suffixes: tuple[str, ...] = (),
                       inputs: tuple[tuple[str, str | os.PathLike | None], ...] = (),
-                      overwrite: bool = True) -> Path:
+                      overwrite: bool = True, overwrite_option: str | None = "--overwrite") -> Path:
     """``path`` as a Path if a file can be written there, else :class:`InputError` naming ``what`` ("--out").
 
     The parent folder exists and is writable; ``path`` is not a folder; its suffix is one of ``suffixes`` (the
     writer would append its own otherwise, e.g. np.savez's .npz) when given; it is none of ``inputs``
-    ((option, path) pairs); it does not exist unless ``overwrite``."""
+    ((option, path) pairs); it does not exist unless ``overwrite`` (the message names ``overwrite_option``, the
+    command's way to allow it, or says that the command never overwrites when None)."""
     path = Path(path)
     if path.is_dir():
         example = path / ("out" + (suffixes or ("",))[0])
@@ -285,21 +302,23 @@ def check_output_file(path: str | os.PathLike, what: str, *, suffixes: tuple[str
     _writable_folder(path.parent if str(path.parent) else Path("."), what, path)
     _refuse_inputs(path, what, inputs)
     if path.exists() and not overwrite:
-        raise InputError(f"{what} {path} exists; pass --overwrite to replace it or choose another name")
+        how = f"pass {overwrite_option} to replace it or " if overwrite_option else "not overwriting it: "
+        raise InputError(f"{what} {path} exists; {how}choose another name")
     if path.exists() and not os.access(path, os.W_OK):
         raise InputError(f"{what} {path} exists and is read-only; choose another name")
     return path
 
 
 def check_output_folder(path: str | os.PathLike, what: str,
-                        inputs: tuple[tuple[str, str | os.PathLike | None], ...] = ()) -> Path:
+                        inputs: tuple[tuple[str, str | os.PathLike | None], ...] = (), writable: bool = True) -> Path:
     """``path`` as a Path if it is a writable folder or can be created (with its missing parents), else
-    :class:`InputError`; never one of ``inputs`` ((option, path) pairs).  Nothing is created here."""
+    :class:`InputError`; never one of ``inputs`` ((option, path) pairs).  ``writable=False`` lets an existing
+    read-only folder through (a command that may find its work done there).  Nothing is created here."""
     path = Path(path)
     if path.exists():
         if not path.is_dir():
             raise InputError(f"{what} {path} is a file, not a folder; give a folder")
-        if not os.access(path, os.W_OK | os.X_OK):
+        if writable and not os.access(path, os.W_OK | os.X_OK):
             raise InputError(f"{what} {path}: folder not writable; choose another folder")
     else:
         base = path.parent
@@ -380,6 +399,38 @@ def output_lock(output: str | os.PathLike, what: str, part: str = "") -> Iterato
         with contextlib.suppress(OSError):
             path.unlink()
         os.close(fd)
+
+
+#: What Ctrl-C keeps when a command writes its outputs atomically and keeps no finished pieces.
+NOTHING_KEPT = "nothing was written (outputs appear only when complete); run the same command again"
+#: What Ctrl-C keeps for a resumable command.
+RESUME_KEPT = "the finished pieces in the output are kept; run the same command again to resume"
+#: Errors a command may raise for input the user can fix (exit 2, one line).
+BAD_INPUT = (InputError, ValueError, FileNotFoundError, FileExistsError, PermissionError, IsADirectoryError,
+             NotADirectoryError, zipfile.BadZipFile)
+
+
+def guarded(prog: str, kept: str = NOTHING_KEPT, failed: tuple[type[BaseException], ...] = ()):
+    """Decorator of a command's ``main(argv) -> int``: bad input (``BAD_INPUT``) -> one line, exit 2; a failed
+    task (``failed``) -> one line, exit 1; Ctrl-C -> one line saying what was ``kept``, exit 130."""
+    def wrap(main):
+        @functools.wraps(main)
+        def run(argv):
+            try:
+                return int(main(argv) or 0)
+            except KeyboardInterrupt:
+                print(f"\n{prog}: interrupted: {kept}", file=sys.stderr)
+                return EXIT_INTERRUPTED
+            except failed as exc:
+                print(f"error: {one_line(exc)}", file=sys.stderr)
+                return EXIT_FAILED
+            except BAD_INPUT as exc:
+                print(f"error: {one_line(exc)}", file=sys.stderr)
+                return EXIT_BAD_INPUT
+
+        return run
+
+    return wrap
 
 
 def one_line(exc: BaseException) -> str:

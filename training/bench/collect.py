@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import datetime as dt
 import importlib
+import importlib.util
 import os
 import platform
 import re
@@ -22,7 +23,15 @@ import traceback
 from importlib import metadata
 from pathlib import Path
 
-from exporters.cli_io import OneLineParser
+from exporters.cli_io import (
+    RESUME_KEPT,
+    InputError,
+    OneLineParser,
+    atomic_file,
+    check_output_file,
+    check_output_folder,
+    guarded,
+)
 
 #: Benchmark modules in pipeline order; a module that does not exist yet is listed as such.
 BENCH_MODULES = [
@@ -103,6 +112,17 @@ def read_sections(text: str) -> dict[str, str]:
             for i, m in enumerate(marks)}
 
 
+def _importable(name: str) -> bool:
+    """Whether ``name`` is a module that can be imported (without importing it)."""
+    if name in sys.modules:
+        return True
+    try:
+        return importlib.util.find_spec(name) is not None
+    except (ImportError, ValueError):
+        return False
+
+
+@guarded("python -m training bench", RESUME_KEPT)
 def main(argv: list[str]) -> int:
     parser = OneLineParser(prog="python -m training bench", description=__doc__.splitlines()[0])
     parser.add_argument("--out", type=Path, default=Path("bench/results.md"), help="Markdown file to write")
@@ -111,6 +131,12 @@ def main(argv: list[str]) -> int:
                         help="module names to run (default: all); their sections replace those in --out")
     parser.add_argument("--seed", type=int, default=0, help="CLI contract only: each benchmark uses a fixed seed")
     args = parser.parse_args(argv)
+    unknown = [m for m in args.only or () if not _importable(m)]
+    if unknown:
+        raise InputError(f"--only: no benchmark module {unknown[0]}; known: {', '.join(BENCH_MODULES)}")
+    check_output_folder(args.out.parent, "--out")
+    if args.out.parent.is_dir():
+        check_output_file(args.out, "--out", suffixes=(".md",))
     modules = args.only or BENCH_MODULES
     sections = read_sections(args.out.read_text()) if args.only and args.out.is_file() else {}
     for name in modules:
@@ -123,6 +149,7 @@ def main(argv: list[str]) -> int:
                       "when, how and under which load it was measured.", "", *machine_lines(), "",
                       *(sections[m] for m in order)])
     args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(text)
+    with atomic_file(args.out, "w") as f:
+        f.write(text)
     print(text)
     return 0

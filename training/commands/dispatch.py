@@ -2,19 +2,17 @@
 
 Each command is a module of ``training.commands`` (or a study module with its own ``main``) exposing
 ``main(argv: list[str]) -> int`` with its own parser (``exporters.cli_io.OneLineParser``), which checks its
-options, inputs and outputs before computing (``exporters.cli_io``).  Whatever a command lets through, the
-dispatcher answers in one line on stderr: bad input (``InputError``, a file or permission error) exits 2, a
-task that failed exits 1 (``training.cluster.engine.TaskError``), Ctrl-C exits 130 saying what was kept and how
-to resume (``RESUME``); docs/contracts.md §2.
+options, inputs and outputs before computing (``exporters.cli_io``), and whose ``main`` is wrapped by
+``training.commands.options.command``: whatever it lets through is answered in one line on stderr: bad input
+(``InputError``, a file or permission error) exits 2, a task that failed exits 1
+(``training.cluster.engine.TaskError``), Ctrl-C exits 130 saying what was kept and how to resume;
+docs/contracts.md §2.
 """
 
 from __future__ import annotations
 
 import importlib
 import sys
-import zipfile
-
-from exporters.cli_io import EXIT_BAD_INPUT, EXIT_FAILED, EXIT_INTERRUPTED, InputError, one_line
 
 #: name -> (module implementing ``main(argv)`` or None if not built yet, one-line help)
 COMMANDS: dict[str, tuple[str, str]] = {
@@ -41,17 +39,6 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "channel-matrix": ("training.commands.channel_matrix", "Write the linear-sRGB channel matrix the bake reads."),
 }
 
-#: What Ctrl-C keeps, per command (default ``NOTHING_KEPT``): every output is written atomically, so an
-#: interrupted command leaves the files it had finished and no partial one.
-NOTHING_KEPT = "nothing was written (outputs appear only when complete); run the same command again"
-RESUME_KEPT = "the finished pieces in the output are kept; run the same command again to resume"
-RESUME: dict[str, str] = {name: RESUME_KEPT for name in ("lut", "dataset", "fit", "train", "validate", "ablations",
-                                                           "realskin", "bench", "demo")}
-#: Errors a command may raise for input the user can fix (exit 2, one line).
-BAD_INPUT = (InputError, ValueError, FileNotFoundError, FileExistsError, PermissionError, IsADirectoryError,
-             NotADirectoryError, zipfile.BadZipFile)
-
-
 def _usage() -> str:
     width = max(map(len, COMMANDS))
     lines = ["usage: python -m training <command> [options]   (each command has --help)", "", "commands:"]
@@ -70,21 +57,4 @@ def main(argv: list[str]) -> int:
         print(f"error: unknown command {name!r}.\n\n{_usage()}", file=sys.stderr)
         return 2
     module = importlib.import_module(COMMANDS[name][0])
-    return run_command(name, module.main, rest)
-
-
-def run_command(name: str, command_main, argv: list[str]) -> int:
-    """``command_main(argv)``'s exit status, with the one-line answers of the module docstring."""
-    from training.cluster.engine import TaskError
-
-    try:
-        return int(command_main(argv) or 0)
-    except KeyboardInterrupt:
-        print(f"\n{name}: interrupted: {RESUME.get(name, NOTHING_KEPT)}", file=sys.stderr)
-        return EXIT_INTERRUPTED
-    except TaskError as exc:
-        print(f"error: {one_line(exc)}", file=sys.stderr)
-        return EXIT_FAILED
-    except BAD_INPUT as exc:
-        print(f"error: {one_line(exc)}", file=sys.stderr)
-        return EXIT_BAD_INPUT
+    return int(module.main(rest) or 0)

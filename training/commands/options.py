@@ -8,16 +8,20 @@ import sys
 
 from exporters.cli_io import (  # noqa: F401 - the commands' shared front
     EXIT_BAD_INPUT,
+    NOTHING_KEPT,
+    RESUME_KEPT,
     InputError,
     OneLineParser,
     atomic_file,
     atomic_path,
+    check_biophysical,
     check_input,
     check_output_file,
     check_output_folder,
     count,
     finite_float,
     fraction,
+    guarded,
     in_range,
     non_negative_float,
     non_negative_int,
@@ -50,6 +54,16 @@ def triple(text: str, kind: type) -> list:
     if len(vals) != 3:
         raise argparse.ArgumentTypeError(f"give one value or three comma-separated values, got {text!r}")
     return vals
+
+
+#: Commands whose interrupted runs keep finished pieces (rerun to resume); the others write atomically.
+RESUMABLE = frozenset({"lut", "dataset", "fit", "train", "validate", "ablations", "realskin", "demo"})
+
+
+def command(name: str):
+    """Decorator of a command's ``main``: the one-line answers of ``exporters.cli_io.guarded`` (bad input exit 2,
+    a failed ``TaskError`` exit 1, Ctrl-C exit 130 saying what was kept)."""
+    return guarded(f"python -m training {name}", RESUME_KEPT if name in RESUMABLE else NOTHING_KEPT, (TaskError,))
 
 
 def shard_part(shard: tuple[int, int]) -> str:

@@ -9,9 +9,11 @@ from __future__ import annotations
 from pathlib import Path
 
 from exporters import reflectance_tables
-from exporters.cli_io import OneLineParser
+from exporters.cli_io import OneLineParser, atomic_path, check_output_file
+from training.commands.options import command
 
 
+@command("reflectance-tables")
 def main(argv: list[str] | None = None) -> int:
     parser = OneLineParser(prog="python -m training reflectance-tables",
                                      description=reflectance_tables.__doc__.splitlines()[0])
@@ -21,5 +23,8 @@ def main(argv: list[str] | None = None) -> int:
     if not args.build:
         parser.print_help()
         return 0
-    print(f"wrote {reflectance_tables.build_tables(args.out)}")
+    check_output_file(args.out, "--out", suffixes=(".npz",))
+    with atomic_path(args.out) as tmp:
+        reflectance_tables.build_tables(tmp)
+    print(f"wrote {args.out}")
     return 0

@@ -29,7 +29,7 @@ import sys
 from pathlib import Path
 
 from exporters.cli_io import OneLineParser
-from training.commands.options import error_status
+from training.commands.options import atomic_file, check_input, check_output_file, command, error_status
 from training.data.build import SPLITS
 from training.paths import SHIPPED_MODEL_DIR, portable, portable_strings
 
@@ -255,15 +255,21 @@ def _parser() -> argparse.ArgumentParser:
     return p
 
 
+@command("report")
 def main(argv: list[str]) -> int:
     args = _parser().parse_args(argv)
+    inputs = []
+    for option in ("dataset", "fits", "model_dir", "validation"):
+        folder = getattr(args, option)
+        if folder is not None:
+            name = f"--{option.replace('_', '-')}"
+            check_input(folder, name, "folder")
+            inputs.append((name, folder))
+            for h5 in sorted(folder.glob("*.h5")):
+                check_input(h5, "HDF5 file", "h5")
+    if args.out is not None:
+        check_output_file(args.out, "--out", overwrite=args.overwrite, inputs=tuple(inputs))
     try:
-        for option in ("dataset", "fits", "model_dir", "validation"):
-            folder = getattr(args, option)
-            if folder is not None and not folder.is_dir():
-                raise ValueError(f"--{option.replace('_', '-')} {folder}: no such folder")
-        if args.out is not None and args.out.exists() and not args.overwrite:
-            raise ValueError(f"{args.out} exists; pass --overwrite to replace it")
         report = collect(args)
     except (ValueError, OSError) as exc:
         return error_status(exc)
@@ -271,6 +277,7 @@ def main(argv: list[str]) -> int:
     if args.out is None:
         sys.stdout.write(text)
     else:
-        args.out.write_text(text)
+        with atomic_file(args.out, "w") as f:
+            f.write(text)
         print(f"wrote {portable(args.out)}")
     return 0
