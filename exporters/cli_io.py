@@ -209,7 +209,7 @@ def _h5_problem(path: Path) -> str | None:
         with h5py.File(path, "r", locking=False) as h5:
             h5.keys()
     except OSError as exc:
-        if "lock" in str(exc).lower() or getattr(exc, "errno", None) in (errno.EAGAIN, errno.EWOULDBLOCK):
+        if "unable to lock" in str(exc).lower() or getattr(exc, "errno", None) in (errno.EAGAIN, errno.EWOULDBLOCK):
             return None  # in use by a writer: its owner's lock answers that (output_lock)
         return f"HDF5 file unreadable or truncated ({' '.join(str(exc).split())[:120]}); rebuild it"
     return None

@@ -29,7 +29,6 @@ from exporters.cli_io import (
     OneLineParser,
     atomic_file,
     check_output_file,
-    check_output_folder,
     guarded,
 )
 
@@ -134,9 +133,7 @@ def main(argv: list[str]) -> int:
     unknown = [m for m in args.only or () if not _importable(m)]
     if unknown:
         raise InputError(f"--only: no benchmark module {unknown[0]}; known: {', '.join(BENCH_MODULES)}")
-    check_output_folder(args.out.parent, "--out")
-    if args.out.parent.is_dir():
-        check_output_file(args.out, "--out", suffixes=(".md",))
+    check_output_file(args.out, "--out", suffixes=(".md",))
     modules = args.only or BENCH_MODULES
     sections = read_sections(args.out.read_text()) if args.only and args.out.is_file() else {}
     for name in modules:
