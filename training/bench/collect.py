@@ -40,6 +40,7 @@ BENCH_MODULES = [
     "training.bench.fit",
     "training.bench.train",
     "training.bench.addon",
+    "training.bench.memory",
     "training.bench.runtime",
     "training.bench.validate",
     "training.bench.cluster",
