@@ -121,13 +121,12 @@ def check_paths(args: argparse.Namespace) -> None:
     """cli_io.InputError for a missing, truncated or disguised input and an --out that cannot be the folder."""
     from exporters import cli_io
 
-    cli_io.check_input(args.albedo, "--albedo", "image")
-    cli_io.check_input(args.model, "--model", "onnx")
-    inputs = [("--albedo", args.albedo), ("--model", args.model)]
-    for option, value, kind in (("--table", args.table, "npz"), ("--uv-mask", args.uv_mask, "image")):
-        if value is not None:
-            cli_io.check_input(value, option, kind)
-            inputs.append((option, value))
+    inputs = []
+    for option, value, kind in (("--albedo", args.albedo, "image"), ("--model", args.model, "onnx"),
+                                ("--table", args.table, "npz"), ("--uv-mask", args.uv_mask, "image")):
+        if value is not None and (option not in ("--albedo", "--model") or Path(value).exists()):
+            cli_io.check_input(value, option, kind)  # a missing image or model: the library's own message
+        inputs.append((option, value))
     cli_io.check_output_folder(args.out, "--out", inputs=tuple(inputs), writable=False)  # may hold a finished bake
 
 

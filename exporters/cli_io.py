@@ -360,21 +360,22 @@ def atomic_file(path: str | os.PathLike, mode: str = "wb") -> Iterator[IO]:
 
 
 # -- one process per output -------------------------------------------------------------------------------------
-def lock_path(output: str | os.PathLike, part: str = "") -> Path:
-    """The lock file of ``output`` (a folder: inside it; a file: beside it); ``part`` (e.g. a shard) lets
-    processes that write disjoint parts of one output run together."""
+def lock_path(output: str | os.PathLike, part: str = "", inside: bool | None = None) -> Path:
+    """The lock file of ``output``: inside it (``inside``, by default when it is a folder) or beside it;
+    ``part`` (e.g. a shard) lets processes that write disjoint parts of one output run together."""
     output = Path(output)
     tag = f".{part}" if part else ""
-    if output.is_dir():
+    if output.is_dir() if inside is None else inside:
         return output / f".lock{tag}"
     return output.parent / f".{output.name}{tag}.lock"
 
 
 @contextlib.contextmanager
-def output_lock(output: str | os.PathLike, what: str, part: str = "") -> Iterator[Path]:
-    """Hold the lock of ``output`` while the block runs; :class:`InputError` naming the holder's PID when
-    another process holds it.  The lock file is removed on exit (``output`` must exist for a folder)."""
-    path = lock_path(output, part)
+def output_lock(output: str | os.PathLike, what: str, part: str = "", inside: bool | None = None) -> Iterator[Path]:
+    """Hold the lock of ``output`` (:func:`lock_path`) while the block runs; :class:`InputError` naming the
+    holder's PID when another process holds it.  The lock file is removed on exit; the folder that holds it
+    must exist."""
+    path = lock_path(output, part, inside)
     while True:
         fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
         try:
@@ -418,6 +419,8 @@ def guarded(prog: str, kept: str = NOTHING_KEPT, failed: tuple[type[BaseExceptio
         def run(argv):
             try:
                 return int(main(argv) or 0)
+            except SystemExit as exc:  # argparse: --help (0) or a one-line usage error (2), already printed
+                return exc.code if isinstance(exc.code, int) else EXIT_BAD_INPUT
             except KeyboardInterrupt:
                 print(f"\n{prog}: interrupted: {kept}", file=sys.stderr)
                 return EXIT_INTERRUPTED

@@ -139,10 +139,10 @@ def _cases() -> list[tuple[str, str, list[str], str]]:
         add(f"input {kind}", ["mitsuba", *TONE, "--decoder", path], "--decoder")
         add(f"input {kind}", ["realskin", "--data", "{csv}", "--decoder", path], "--decoder")
         add(f"input {kind}", ["validate", "--mitsuba", "--out", "{base}/m", "--decoder", path], "--decoder")
-        add(f"input {kind}", ["bake.py", "--albedo", "{png}", "--out", "{base}/b", "--model", path], "--model")
+        add(f"input {kind}", ["bake.py", "--albedo", "{png}", "--out", "{base}/b", "--model", path], "model")
     for kind, path in (("missing", "{base}/nope.png"), ("empty", "{empty}"), ("truncated", "{trunc_png}"),
                        ("disguised", "{disguised_png}")):
-        add(f"input {kind}", ["bake.py", "--albedo", path, "--out", "{base}/b", "--model", "{onnx}"], "--albedo")
+        add(f"input {kind}", ["bake.py", "--albedo", path, "--out", "{base}/b", "--model", "{onnx}"], "albedo")
         add(f"input {kind}", ["bake.py", "--albedo", "{png}", "--uv-mask", path, "--out", "{base}/b", "--model",
                               "{onnx}"], "--uv-mask")
     for kind, path in (("missing", "{base}/nope"), ("disguised", "{a_file}")):

@@ -100,8 +100,8 @@ def main(argv: list[str]) -> int:
     check_output_folder(args.out, "--out", inputs=(("--run", args.run),))
     command = portable_command("python -m training export", argv)
     try:
-        args.out.mkdir(parents=True, exist_ok=True)
-        with output_lock(args.out, "--out"):
+        args.out.parent.mkdir(parents=True, exist_ok=True)
+        with output_lock(args.out, "--out", inside=False):  # the folder appears only when the export succeeds
             card = export_run(args.run, args.out, weights=args.weights, max_mb=args.max_mb, parity_n=args.parity_n,
                               notes=args.note, overwrite=args.overwrite, seed=args.seed, command=command)
     except ValueError as exc:
