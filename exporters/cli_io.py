@@ -145,7 +145,8 @@ def check_input(path: str | os.PathLike, what: str, kind: str = "file") -> Path:
     """
     path = Path(path)
     if not path.exists():
-        raise InputError(f"{what} {path}: no such {'folder' if kind == 'folder' else 'file'}; check the path")
+        noun = "folder" if kind == "folder" else "file"
+        raise InputError(f"{what} {path}: not found (no such {noun}); check the path")
     if kind == "folder":
         if not path.is_dir():
             raise InputError(f"{what} {path}: a file, not a folder; give the folder")
