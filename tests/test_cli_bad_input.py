@@ -317,7 +317,9 @@ def test_a_held_output_names_its_process(world, capsys):
              (["train", "--dataset", "{dir}", "--fits", "{dir}", "--lut", "{npz}", "--out", "{out_dir}"], "{out_dir}"),
              (["lut", "--albedo-n", "4", "--g-n", "4", "--photons", "10", "--out", "{base}/held.npz"],
               "{base}/held.npz"),
-             (["bake.py", "--albedo", "{png}", "--model", "{onnx}", "--out", "{out_dir}"], "{out_dir}")]
+             (["bake.py", "--albedo", "{png}", "--model", "{onnx}", "--out", "{out_dir}"], "{out_dir}"),
+             (["realskin", "--data", "{csv}", "--no-decoder", "--out", "{out_dir}"], "{out_dir}"),
+             (["validate", "--lut", "{npz}", "--out", "{out_dir}", "--tones", "R01"], "{out_dir}")]
     for argv, output in cases:
         with output_lock(_argv([output], world)[0], "test"):
             before = snapshot(world["base"])

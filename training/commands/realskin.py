@@ -27,7 +27,15 @@ from pathlib import Path
 
 from exporters.cli_io import OneLineParser
 from exporters.constants import WAVELENGTHS_NM
-from training.commands.options import check_input, check_output_folder, command, count, error_status, finite_float
+from training.commands.options import (
+    check_input,
+    check_output_folder,
+    command,
+    count,
+    error_status,
+    finite_float,
+    output_lock,
+)
 from training.paths import SHIPPED_DECODER
 from training.realskin import report, study
 from training.realskin.fit import fit_subjects
@@ -108,6 +116,16 @@ def main(argv: list[str]) -> int:
         return 2
     if args.subjects is not None:
         names, measured = names[: args.subjects], measured[: args.subjects]
+    if args.out is None:
+        return _run(args, meas, channels, measured, names)
+    args.out.mkdir(parents=True, exist_ok=True)
+    with output_lock(args.out, "--out"):
+        return _run(args, meas, channels, measured, names)
+
+
+def _run(args, meas, channels, measured, names: list[str]) -> int:
+    """The study or the fits and their report (after every check has passed)."""
+    scale = args.scattering_scale
     if args.study:
         print(study.run_study(names, measured, channels, args.photons, args.seed, _cache_dir(args), args.out,
                               args.device))
