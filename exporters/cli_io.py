@@ -23,7 +23,6 @@ from __future__ import annotations
 import argparse
 import contextlib
 import errno
-import fcntl
 import functools
 import math
 import os
@@ -371,6 +370,35 @@ def lock_path(output: str | os.PathLike, part: str = "", inside: bool | None = N
     return output.parent / f".{output.name}{tag}.lock"
 
 
+def _try_lock(fd: int) -> bool:
+    """Take an exclusive, non-blocking lock on the open file ``fd``; False when another process holds it
+    (flock on POSIX, msvcrt on Windows, where Blender may run the add-on)."""
+    try:
+        import fcntl
+    except ImportError:
+        import msvcrt
+
+        try:
+            msvcrt.locking(fd, msvcrt.LK_NBLCK, 1)
+        except OSError:
+            return False
+        return True
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except OSError:
+        return False
+    return True
+
+
+def _read_holder(fd: int) -> str:
+    """The PID the lock file ``fd`` holds ("unknown" when unreadable: Windows locks are mandatory)."""
+    try:
+        os.lseek(fd, 0, os.SEEK_SET)
+        return os.read(fd, 64).decode(errors="replace").strip() or "unknown"
+    except OSError:
+        return "unknown"
+
+
 @contextlib.contextmanager
 def output_lock(output: str | os.PathLike, what: str, part: str = "", inside: bool | None = None) -> Iterator[Path]:
     """Hold the lock of ``output`` (:func:`lock_path`) while the block runs; :class:`InputError` naming the
@@ -379,10 +407,8 @@ def output_lock(output: str | os.PathLike, what: str, part: str = "", inside: bo
     path = lock_path(output, part, inside)
     while True:
         fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
-        try:
-            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except OSError:
-            holder = os.pread(fd, 64, 0).decode(errors="replace").strip() or "unknown"
+        if not _try_lock(fd):
+            holder = _read_holder(fd)
             os.close(fd)
             raise InputError(f"{what} {output} is in use by process {holder} (lock {path}); wait for it to finish "
                              "or choose another output") from None
@@ -395,7 +421,8 @@ def output_lock(output: str | os.PathLike, what: str, part: str = "", inside: bo
         os.close(fd)  # the holder removed the file as we opened it: take the new one
     try:
         os.ftruncate(fd, 0)
-        os.pwrite(fd, f"{os.getpid()}\n".encode(), 0)
+        os.lseek(fd, 0, os.SEEK_SET)
+        os.write(fd, f"{os.getpid()}\n".encode())
         yield path
     finally:
         with contextlib.suppress(OSError):
