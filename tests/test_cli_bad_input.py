@@ -411,3 +411,18 @@ def test_scheduler_that_cannot_start(tmp_path, scheduler):
     assert time.monotonic() - start < 30
     assert_one_line(proc.returncode, proc.stderr, "--scheduler")
     assert list(tmp_path.iterdir()) == []
+
+
+def test_a_truncated_part_file_on_resume(tmp_path, capsys):
+    """lut resumes from its part files: one cut short is named, with what to do, before any walking."""
+    argv = ["lut", "--albedo-n", "4", "--g-n", "2", "--photons", "20", "--max-steps", "50", "--out",
+            str(tmp_path / "lut.npz"), "--no-progress", "--compile", "off"]
+    code, err = run_in_process(argv, capsys)
+    assert code == 0, err
+    part = tmp_path / "lut.npz.parts" / "g_0001.npz"
+    _truncate(part, part)
+    before = snapshot(tmp_path)
+    code, err = run_in_process(argv, capsys)
+    assert_one_line(code, err, "g_0001.npz")
+    assert "run the same command again" in err
+    assert snapshot(tmp_path) == before

@@ -258,8 +258,8 @@ def build_lut(
     mpath = parts / "manifest.json"
     if mpath.exists() and json.loads(mpath.read_text()) != manifest:
         raise ValueError(f"{parts} holds columns of a different LUT build; remove it or change --out")
-    mpath.write_text(json.dumps(manifest))
     _check_parts(parts)
+    mpath.write_text(json.dumps(manifest))
     t0 = time.perf_counter()
     if job is None:
         _walk_nodes(parts, nodes, albedo, photons, seed, device, max_steps, compile, shard, progress)
