@@ -37,7 +37,7 @@ def _parser() -> argparse.ArgumentParser:
 
     d = Scale()
     p = OneLineParser(prog="python -m training ablations", description=__doc__.splitlines()[0],
-                                formatter_class=argparse.RawDescriptionHelpFormatter, epilog=__doc__)
+                      formatter_class=argparse.RawDescriptionHelpFormatter, epilog=__doc__)
     p.add_argument("--out", type=Path, required=True, help="output folder (resumed if it exists)")
     p.add_argument("--quick", action="store_true",
                    help="smoke test (~1-2 min): the smoke dataset preset, a tiny LUT and quick fits built in "

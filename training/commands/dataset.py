@@ -67,7 +67,7 @@ def _check_paths(args: argparse.Namespace) -> None:
 @command("dataset")
 def main(argv: list[str]) -> int:
     parser = OneLineParser(prog="python -m training dataset", description=__doc__.splitlines()[0],
-                                     formatter_class=argparse.RawDescriptionHelpFormatter, epilog=__doc__)
+                           formatter_class=argparse.RawDescriptionHelpFormatter, epilog=__doc__)
     parser.add_argument("--preset", choices=sorted(PRESETS), default="ci")
     parser.add_argument("--out", type=Path, required=True, help="dataset folder")
     parser.add_argument("--shard", type=parse_shard, default=(0, 1), help="I/N: this process's share")

@@ -38,7 +38,7 @@ CARD_NAME = "skin_inversion.json"
 
 def parser() -> argparse.ArgumentParser:
     p = OneLineParser(prog="python -m training export", description=__doc__.splitlines()[0],
-                                formatter_class=argparse.RawDescriptionHelpFormatter, epilog=__doc__)
+                      formatter_class=argparse.RawDescriptionHelpFormatter, epilog=__doc__)
     p.add_argument("--run", type=Path, required=True, help="run folder of `python -m training train`")
     p.add_argument("--out", type=Path, required=True, help="folder for the .onnx files and the card")
     p.add_argument("--weights", choices=("auto", "float32", "float16"), default="auto")

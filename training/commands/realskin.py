@@ -47,7 +47,7 @@ DEFAULT_DECODER = SHIPPED_DECODER
 
 def _parser() -> argparse.ArgumentParser:
     p = OneLineParser(prog="python -m training realskin", description=__doc__.split("\n\n")[2],
-                                formatter_class=argparse.RawDescriptionHelpFormatter)
+                      formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--data", type=Path, default=NIST_FILE,
                    help="measured spectra (NIST layout); default: the shipped file")
     p.add_argument("--out", type=Path, help="write realskin.json, realskin.md and fig_realskin.png here")

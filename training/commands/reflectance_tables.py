@@ -16,7 +16,7 @@ from training.commands.options import command
 @command("reflectance-tables")
 def main(argv: list[str] | None = None) -> int:
     parser = OneLineParser(prog="python -m training reflectance-tables",
-                                     description=reflectance_tables.__doc__.splitlines()[0])
+                           description=reflectance_tables.__doc__.splitlines()[0])
     parser.add_argument("--build", action="store_true", help="recompute the tables with iadpython")
     parser.add_argument("--out", type=Path, default=reflectance_tables.TABLE_PATH)
     args = parser.parse_args(argv)

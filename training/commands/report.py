@@ -243,7 +243,7 @@ def markdown(report: dict) -> str:
 
 def _parser() -> argparse.ArgumentParser:
     p = OneLineParser(prog="python -m training report", description=__doc__.splitlines()[0],
-                                formatter_class=argparse.RawDescriptionHelpFormatter, epilog=__doc__)
+                      formatter_class=argparse.RawDescriptionHelpFormatter, epilog=__doc__)
     p.add_argument("--dataset", type=Path, help="dataset folder (`python -m training dataset --out`)")
     p.add_argument("--fits", type=Path, help="fits folder (`python -m training fit --dataset ... --out`)")
     p.add_argument("--model-dir", type=Path, default=SHIPPED_MODEL_DIR,

@@ -47,7 +47,7 @@ def reweighted(tone: np.ndarray, photons: int, seed: int, device: str, compile_)
 
 def _parser() -> argparse.ArgumentParser:
     p = OneLineParser(prog="python -m training simulate",
-                                description="Monte Carlo of one skin tone at all 376 wavelengths -> .npz.")
+                      description="Monte Carlo of one skin tone at all 376 wavelengths -> .npz.")
     p.add_argument("--tone", nargs=5, type=finite_float, required=True,
                    metavar=("F_MEL", "F_BLOOD", "T_EPI", "SO2", "B_MEL"), help="biophysical vector (t_epi in cm)")
     p.add_argument("--photons", type=count, required=True, help="photons per wavelength (>= 2)")

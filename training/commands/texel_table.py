@@ -32,7 +32,7 @@ from training.paths import SHIPPED_MODEL, SHIPPED_TABLE
 @command("texel-table")
 def main(argv: list[str] | None = None) -> int:
     parser = OneLineParser(prog="python -m training texel-table",
-                                     description=texel_table.__doc__.splitlines()[0])
+                           description=texel_table.__doc__.splitlines()[0])
     parser.add_argument("--model", type=Path, default=SHIPPED_MODEL, help="skin_inversion.onnx")
     parser.add_argument("--out", type=Path, default=SHIPPED_TABLE, help="table file (.npz)")
     parser.add_argument("--step", type=in_range(1e-3, 0.5), default=texel_table.DEFAULT_STEP,

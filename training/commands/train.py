@@ -45,7 +45,7 @@ from training.train.run import TrainConfig, train
 
 def parser() -> argparse.ArgumentParser:
     p = OneLineParser(prog="python -m training train", description=__doc__.splitlines()[0],
-                                formatter_class=argparse.RawDescriptionHelpFormatter, epilog=__doc__)
+                      formatter_class=argparse.RawDescriptionHelpFormatter, epilog=__doc__)
     p.add_argument("--dataset", type=Path, required=True)
     p.add_argument("--fits", type=Path, default=None)
     p.add_argument("--lut", type=Path, required=True)

@@ -238,8 +238,8 @@ def run(out: Path, photons: int, repeats: int, seed: int, quick: bool, log=print
 
 def _parser() -> argparse.ArgumentParser:
     p = OneLineParser(prog="python -m training resampling",
-                                description="Radial profile estimators (histogram, uniform bins, KDE, CDF "
-                                "resampling) against a high-photon reference at equal photons.")
+                      description="Radial profile estimators (histogram, uniform bins, KDE, CDF "
+                      "resampling) against a high-photon reference at equal photons.")
     p.add_argument("--out", type=Path, required=True, help="folder for resampling.json/.md, fig_resampling.png")
     p.add_argument("--photons", type=count, default=None, help="photons per run (default 100000; --quick 10000)")
     p.add_argument("--repeats", type=count, default=None, help="independent runs per case (default 4; --quick 3)")

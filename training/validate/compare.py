@@ -105,7 +105,7 @@ def _wavelengths(text: str) -> list[float]:
 
 def _parser() -> argparse.ArgumentParser:
     p = OneLineParser(prog="python -m training mitsuba",
-                                description="Mitsuba 3 reflectance of the network's mixture vs ours vs ground truth.")
+                      description="Mitsuba 3 reflectance of the network's mixture vs ours vs ground truth.")
     p.add_argument("--tone", nargs=5, type=finite_float, required=True,
                    metavar=("F_MEL", "F_BLOOD", "T_EPI", "SO2", "B_MEL"), help="biophysical vector (t_epi in cm)")
     p.add_argument("--wavelengths", type=_wavelengths, default=[300.0, 450.0, 550.0, 650.0, 950.0],
