@@ -65,8 +65,10 @@ _FLOAT_TYPES = {"half", "float", "double"}
 #: Bytes per texel that decoding and indexing take beyond the file's own channels: the packed colour key
 #: and the index into the distinct colours (:func:`read_albedo_indexed`).
 INDEX_BYTES_PER_TEXEL = 16
-#: Bytes of the 24-bit colour bitmap that indexes 8-bit files (a flag and an int32 position per code).
+#: Bytes of the 24-bit colour bitmap that indexes 8-bit files (a flag and an int32 position per code); its
+#: pages are zero until touched, so a texture touches at most two pages (flag, position) per texel.
 BITMAP_BYTES = 5 << 24
+PAGE_BYTES = 4096
 _INT_MAX = {"uint8": 255.0, "uint16": 65535.0, "uint32": 4294967295.0}
 
 
@@ -247,7 +249,7 @@ def decode_bytes(spec: oiio.ImageSpec) -> int:
     """Bytes that decoding and indexing the image of ``spec`` take (its header's size, channels and type): the
     pixels, the key and index per texel, and for 8-bit files the 24-bit colour bitmap of exporters.palette."""
     texels = int(spec.width) * int(spec.height) * max(int(spec.depth), 1)
-    bitmap = BITMAP_BYTES if int(spec.format.size()) == 1 else 0
+    bitmap = min(BITMAP_BYTES, texels * 2 * PAGE_BYTES) if int(spec.format.size()) == 1 else 0
     return texels * (int(spec.nchannels) * int(spec.format.size()) + INDEX_BYTES_PER_TEXEL) + bitmap
 
 

@@ -98,3 +98,10 @@ def test_an_image_larger_than_the_budget_is_refused_before_decoding(tmp_path, te
     assert "--memory-mb" in proc.stderr and f"{size} x {size}" in proc.stderr
     assert peak < 1024, f"{peak:.0f} MiB: the image was decoded"
     assert not (tmp_path / "maps").exists()
+
+
+def test_a_small_image_bakes_under_a_small_budget(textures, tmp_path):
+    """The budget counts what an image touches: 8 x 8 texels decode in far less than the 8-bit colour bitmap."""
+    _, proc = peak_rss_mb("--albedo", str(textures["tiny"]), "--out", str(tmp_path / "maps"), "--memory-mb", "16",
+                          "--quiet")
+    assert proc.returncode == 0, proc.stderr
