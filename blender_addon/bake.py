@@ -29,6 +29,7 @@ in the repository the checkout's top-level ``exporters`` (:func:`core_package`).
 from __future__ import annotations
 
 import argparse
+import contextlib
 import importlib
 import importlib.util
 import os
@@ -101,10 +102,11 @@ def core(module: str) -> ModuleType:
 
 def build_parser() -> argparse.ArgumentParser:
     """The command line; its defaults are the library's (exporters.bake.BakeOptions)."""
-    bake, image_input = core("bake"), core("image_input")
+    bake, cli_io, image_input = core("bake"), core("cli_io"), core("image_input")
+    reflectance_tables = core("reflectance_tables")
 
     defaults = bake.BakeOptions()
-    p = argparse.ArgumentParser(prog="bake.py", description=__doc__.splitlines()[0])
+    p = cli_io.OneLineParser(prog="bake.py", description=__doc__.splitlines()[0])
     p.add_argument("--albedo", required=True, help="albedo image (PNG/TIFF 8 or 16 bit, EXR, ...); a UDIM image as "
                                                    "its tiles' pattern, e.g. skin.<UDIM>.png: every tile is baked")
     p.add_argument("--out", required=True, help="output folder (created if missing)")
@@ -117,14 +119,17 @@ def build_parser() -> argparse.ArgumentParser:
                         f"{defaults.unit_scale_m:g})")
     p.add_argument("--overwrite", action="store_true", help="replace existing maps in the output folder")
     p.add_argument("--model", default=str(DEFAULT_MODEL), help="skin_inversion.onnx (default: the bundled one)")
-    p.add_argument("--threads", type=int, default=0, help="onnxruntime CPU threads (0 = all cores)")
-    p.add_argument("--memory-mb", type=float, default=float(defaults.memory_mb),
-                   help=f"memory budget of one inference chunk (MiB, default {defaults.memory_mb:g})")
+    p.add_argument("--threads", type=cli_io.non_negative_int, default=0, help="onnxruntime CPU threads (0 = all cores)")
+    p.add_argument("--memory-mb", type=cli_io.positive_float, default=float(defaults.memory_mb),
+                   help="memory budget of the bake's working arrays: the decoded image, one band of maps, one "
+                        f"table step, one inference chunk (MiB, default {defaults.memory_mb:g}); an image whose "
+                        "header claims more texels than it can decode is refused before decoding")
     p.add_argument("--model-colour", action="store_true",
                    help="render the model's own reflectance (the colour of the skin the network found, physically "
                         "consistent, often darker than painted) instead of the painted albedo (the default)")
     p.add_argument("--match-exposure", action="store_true", help=argparse.SUPPRESS)
-    p.add_argument("--ior", type=float, default=defaults.ior,
+    p.add_argument("--ior", type=cli_io.in_range(reflectance_tables.IOR_MIN, reflectance_tables.IOR_MAX),
+                   default=defaults.ior,
                    help=f"IOR of the Cycles closures (the node group's IOR input; default {defaults.ior:g}, tissue)")
     p.add_argument("--exact", action="store_true",
                    help="evaluate every distinct colour with the model instead of the fast-path table")
@@ -134,7 +139,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--uv-mask", default=None, metavar="IMAGE",
                    help="image of the texels the mesh's UVs cover (non-zero = covered, same size as the albedo); "
                         "others get the maps of the most common covered colour")
-    p.add_argument("--prune-share", type=float, default=None, metavar="S",
+    p.add_argument("--prune-share", type=cli_io.fraction, default=None, metavar="S",
                    help="drop components below this share of the colour at every texel (default "
                         f"{bake.DEFAULT_PRUNE_SHARE:g}; 0 keeps all)")
     p.add_argument("--exr-compression", default=None,
@@ -146,24 +151,27 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
-class _Usage(Exception):
-    pass
+def check_paths(args: argparse.Namespace) -> None:
+    """cli_io.InputError for a missing, truncated or disguised input and an --out that cannot be the folder."""
+    cli_io = core("cli_io")
 
-
-class _Parser(argparse.ArgumentParser):
-    def error(self, message):  # one line, exit 2 (argparse's own status), no usage dump
-        raise _Usage(message)
+    inputs = []
+    for option, value, kind in (("--albedo", args.albedo, "image"), ("--model", args.model, "onnx"),
+                                ("--table", args.table, "npz"), ("--uv-mask", args.uv_mask, "image")):
+        if value is not None and (option not in ("--albedo", "--model") or Path(value).exists()):
+            cli_io.check_input(value, option, kind)  # a missing image or model: the library's own message
+        inputs.append((option, value))
+    cli_io.check_output_folder(args.out, "--out", inputs=tuple(inputs), writable=False)  # may hold a finished bake
 
 
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
-    parser.__class__ = _Parser
     try:
         args = parser.parse_args(_script_argv(argv))
-    except _Usage as exc:
-        print(f"bake.py: error: {exc}", file=sys.stderr)
-        return EXIT_BAD_INPUT
-    bake, image_input, inference, maps = core("bake"), core("image_input"), core("inference"), core("maps")
+    except SystemExit as exc:  # --help (0) or a one-line usage error (2)
+        return int(exc.code or 0)
+    bake, cli_io, image_input = core("bake"), core("cli_io"), core("image_input")
+    inference, maps = core("inference"), core("maps")
 
     bad_input = (FileNotFoundError, FileExistsError, PermissionError, NotADirectoryError, image_input.ImageError,
                  inference.ModelError, bake.BakeError, ValueError)
@@ -175,12 +183,13 @@ def main(argv: list[str] | None = None) -> int:
     created = False
     results = []
     try:
+        check_paths(args)
         created = maps.make_output_folder(out)
         options = bake.BakeOptions(targets=bake.parse_targets(args.target), unit_scale_m=args.unit_scale,
                                    threads=args.threads, memory_mb=args.memory_mb,
                                    model_colour=args.model_colour, ior=args.ior,
                                    overwrite=args.overwrite, exact=args.exact, table_path=args.table,
-                                   force=args.force, texel_mask=_read_mask(args.uv_mask),
+                                   force=args.force, texel_mask=_read_mask(args.uv_mask, args.memory_mb),
                                    prune_share=_prune_share(args, bake, image_input),
                                    compression=args.exr_compression or maps.DEFAULT_COMPRESSION,
                                    half_maps=False if args.float_maps else None)
@@ -192,17 +201,28 @@ def main(argv: list[str] | None = None) -> int:
                 print(f"bake.py: {100 * fraction:.0f} %", flush=True)
 
         t0 = time.perf_counter()
-        for albedo in _albedo_files(args.albedo, args.uv_mask, image_input):
-            if not args.quiet and albedo != args.albedo:
-                print(f"bake.py: tile {Path(albedo).name}", flush=True)
-            results.append(bake.bake(albedo, out, args.model, options, colorspace=args.colorspace, progress=progress))
-            last[0] = 0.0
+        # one bake per folder; a read-only folder can only hold a finished bake (reused) or fail its checks
+        lock = cli_io.output_lock(out, "--out") if os.access(out, os.W_OK) else contextlib.nullcontext()
+        with lock:
+            for albedo in _albedo_files(args.albedo, args.uv_mask, image_input):
+                if not args.quiet and albedo != args.albedo:
+                    print(f"bake.py: tile {Path(albedo).name}", flush=True)
+                results.append(bake.bake(albedo, out, args.model, options, colorspace=args.colorspace,
+                                         progress=progress))
+                last[0] = 0.0
     except bad_input as exc:
         _remove_written(results)
         if created:
             _remove_if_empty(out)
         print(f"bake.py: error: {bake.one_line(exc)}", file=sys.stderr)
         return EXIT_BAD_INPUT
+    except KeyboardInterrupt:
+        _remove_written(results)
+        if created:
+            _remove_if_empty(out)
+        print(f"\nbake.py: interrupted: nothing in {out} was changed (maps are published only when all are "
+              "written); run the same command again", file=sys.stderr)
+        return cli_io.EXIT_INTERRUPTED
     except BaseException:
         _remove_written(results)
         if created:
@@ -253,11 +273,11 @@ def _report(result, out: Path, quiet: bool, t0: float) -> None:
               f"in {time.perf_counter() - t0:.1f} s")
 
 
-def _read_mask(path: str | None):
+def _read_mask(path: str | None, memory_mb: float | None = None):
     """The --uv-mask image as (H, W) bool (any non-zero colour channel = covered), or None."""
     if path is None:
         return None
-    image = core("image_input").read_albedo(path, colorspace="linear")
+    image = core("image_input").read_albedo(path, colorspace="linear", memory_mb=memory_mb)
     return (image.rgb > 0).any(axis=2)
 
 

@@ -65,6 +65,13 @@ LOG_COLORSPACES = frozenset({
     "filmic log", "agx log", "acescc", "acescct", "aces - acescc", "aces - acescct", "acescc_ap1", "acescct_ap1",
 })
 _FLOAT_TYPES = {"half", "float", "double"}
+#: Bytes per texel that decoding and indexing take beyond the file's own channels: the packed colour key
+#: and the index into the distinct colours (:func:`read_albedo_indexed`).
+INDEX_BYTES_PER_TEXEL = 16
+#: Bytes of the 24-bit colour bitmap that indexes 8-bit files (a flag and an int32 position per code); its
+#: pages are zero until touched, so a texture touches at most two pages (flag, position) per texel.
+BITMAP_BYTES = 5 << 24
+PAGE_BYTES = 4096
 _INT_MAX = {"uint8": 255.0, "uint16": 65535.0, "uint32": 4294967295.0}
 
 
@@ -285,11 +292,32 @@ def to_linear(rgb: np.ndarray, used: str) -> np.ndarray:
 
 
 # -- files ------------------------------------------------------------------------------------------------------
-def _read_pixels(path: Path, colorspace: str, integer_types: tuple[str, ...]
-                 ) -> tuple[OpenImageIO.ImageSpec, str, object]:
+def decode_bytes(spec: OpenImageIO.ImageSpec) -> int:
+    """Bytes that decoding and indexing the image of ``spec`` take (its header's size, channels and type): the
+    pixels, the key and index per texel, and for 8-bit files the 24-bit colour bitmap of exporters.palette."""
+    texels = int(spec.width) * int(spec.height) * max(int(spec.depth), 1)
+    bitmap = min(BITMAP_BYTES, texels * 2 * PAGE_BYTES) if int(spec.format.size()) == 1 else 0
+    return texels * (int(spec.nchannels) * int(spec.format.size()) + INDEX_BYTES_PER_TEXEL) + bitmap
+
+
+def check_decode_budget(spec: OpenImageIO.ImageSpec, where: str, memory_mb: float | None) -> None:
+    """:class:`ImageError` when decoding the image of ``spec`` would take more than ``memory_mb`` MiB (None: no
+    limit); read from the header only, before any pixel is decoded."""
+    if memory_mb is None:
+        return
+    need = decode_bytes(spec) / 2**20
+    if need > memory_mb:
+        raise ImageError(f"{where}: {spec.width} x {spec.height} texels need about {need:,.0f} MiB to decode, more "
+                         f"than the memory budget of {memory_mb:g} MiB; use a smaller image or raise the budget "
+                         f"(--memory-mb {int(need) + 1})")
+
+
+def _read_pixels(path: Path, colorspace: str, integer_types: tuple[str, ...],
+                 memory_mb: float | None = None) -> tuple[OpenImageIO.ImageSpec, str, object]:
     """Open an albedo image (alpha unassociated) and read all its channels: (spec, the pixel type read, the
     pixels).  Files whose type is in ``integer_types`` are read in that type (the callers scale them in
-    float64: OIIO's float conversion is float32), others as float.  Errors as :func:`read_albedo`."""
+    float64: OIIO's float conversion is float32), others as float.  The header is checked against
+    ``memory_mb`` (:func:`check_decode_budget`) before decoding.  Errors as :func:`read_albedo`."""
     check_colorspace(colorspace)
     if not path.is_file():
         raise FileNotFoundError(f"albedo image not found: {path}")
@@ -301,6 +329,7 @@ def _read_pixels(path: Path, colorspace: str, integer_types: tuple[str, ...]
         raise ImageError(f"cannot read image {path}: {oiio.geterror()}")
     try:
         spec = inp.spec()
+        check_decode_budget(spec, str(path), memory_mb)
         fmt = str(spec.format)
         native = fmt if fmt in integer_types else "float"
         pixels = inp.read_image(0, 0, 0, spec.nchannels, native)
@@ -313,7 +342,7 @@ def _read_pixels(path: Path, colorspace: str, integer_types: tuple[str, ...]
 
 
 def read_albedo(path: str | os.PathLike, colorspace: ColorSpace = "auto",
-                clamp_negative: bool = False) -> AlbedoImage:
+                clamp_negative: bool = False, memory_mb: float | None = None) -> AlbedoImage:
     """Read an albedo image (8/16-bit PNG or TIFF, float EXR, ...) as linear sRGB float64.
 
     * Missing file: FileNotFoundError; unreadable / not an image: :class:`ImageError`.
@@ -321,11 +350,13 @@ def read_albedo(path: str | os.PathLike, colorspace: ColorSpace = "auto",
       IEC 61966-2-1 curve) or "linear" (use values as they are).
     * 1 channel: gray replicated to RGB; 2 channels: gray + alpha; 4 channels: RGB + alpha (unassociated:
       OpenImageIO is asked not to premultiply); more channels: the first three non-alpha ones.
+    * ``memory_mb``: refuse (:class:`ImageError`) an image whose header claims more texels than that many MiB
+      can decode (:func:`check_decode_budget`); None: no limit.
     * Texels checked by :func:`check_texels` (NaN/Inf: ImageError; negative colour: ImageError, or clamped to
       0 and counted when ``clamp_negative``).
     """
     path = Path(path)
-    spec, native, pixels = _read_pixels(path, colorspace, tuple(_INT_MAX))
+    spec, native, pixels = _read_pixels(path, colorspace, tuple(_INT_MAX), memory_mb)
     pixels = np.asarray(pixels, dtype=np.float64).reshape(spec.height, spec.width, spec.nchannels)
     if native in _INT_MAX:
         pixels /= _INT_MAX[native]
@@ -337,7 +368,7 @@ def read_albedo(path: str | os.PathLike, colorspace: ColorSpace = "auto",
 
 
 def read_albedo_indexed(path: str | os.PathLike, colorspace: ColorSpace = "auto",
-                        clamp_negative: bool = False) -> IndexedAlbedo:
+                        clamp_negative: bool = False, memory_mb: float | None = None) -> IndexedAlbedo:
     """:func:`read_albedo` for large textures: the same decoding and checks, but each distinct colour is
     decoded once and the image is kept as a palette and an index (no (H, W, 3) float64 array).
 
@@ -345,7 +376,7 @@ def read_albedo_indexed(path: str | os.PathLike, colorspace: ColorSpace = "auto"
     the codes, float files by a hash of the float32 values.  Errors as :func:`read_albedo`.
     """
     path = Path(path)
-    spec, native, pixels = _read_pixels(path, colorspace, ("uint8", "uint16"))
+    spec, native, pixels = _read_pixels(path, colorspace, ("uint8", "uint16"), memory_mb)
     fmt = str(spec.format)
     colour, a = channel_layout(spec.channelnames, spec.alpha_channel, str(path))
     pixels = np.asarray(pixels).reshape(spec.height, spec.width, spec.nchannels)

@@ -145,9 +145,10 @@ def _cycles_table(ior: float) -> np.ndarray:
     t = _load()
     mu0 = np.sqrt(1.0 - 1.0 / ior**2)
     x = np.linspace(mu0, 1.0, 2049)
-    r1 = _natural_spline(t["mu"], t["directional"], x)  # (G, U, X)
-    y = 2.0 * x * r1
-    table = ior**2 * np.sum(0.5 * (y[..., 1:] + y[..., :-1]) * np.diff(x), axis=-1)  # trapezoid rule
+    table = np.empty(t["directional"].shape[:2])
+    for gi, directional in enumerate(t["directional"]):  # one g row at a time: (U, X) work arrays, not (G, U, X)
+        y = 2.0 * x * _natural_spline(t["mu"], directional, x)
+        table[gi] = ior**2 * np.sum(0.5 * (y[..., 1:] + y[..., :-1]) * np.diff(x), axis=-1)  # trapezoid rule
     table.setflags(write=False)
     return table
 

@@ -50,6 +50,7 @@ from pathlib import Path
 import numpy as np
 
 from . import cycles, inference, texel_records
+from .cli_io import atomic_file
 from .colorimetry import srgb_decode, srgb_encode
 from .constants import PARAM_NAMES, PARAM_RANGES
 from .maps import sha256_file
@@ -331,9 +332,8 @@ def save(table: TexelTable, path: str | os.PathLike, overwrite: bool = False) ->
         raise FileExistsError(f"{path} exists; pass --overwrite to replace it")
     q, lo, hi = _quantise(table.values.astype(np.float64))
     meta = dict(table.meta, quantisation={"lo": lo.tolist(), "hi": hi.tolist(), "levels": _Q_MAX})
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp.npz")  # two processes may save the same table
-    np.savez_compressed(tmp, q=q, origin=table.origin, step=table.step, meta=np.array(json.dumps(meta)))
-    os.replace(tmp, path)
+    with atomic_file(path) as f:  # a unique temporary file: two processes may save the same table
+        np.savez_compressed(f, q=q, origin=table.origin, step=table.step, meta=np.array(json.dumps(meta)))
     return path
 
 

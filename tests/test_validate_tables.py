@@ -168,7 +168,7 @@ def test_bad_input_exits_2(tmp_path, monkeypatch, capsys, argv, message):
     monkeypatch.delenv("SKIN_SSS_LUT", raising=False)
     monkeypatch.chdir(tmp_path)
     lut = tmp_path / "lut.npz"
-    lut.write_bytes(b"")  # never read: the errors come first
+    np.savez(lut, albedo=np.zeros(1))  # a whole .npz, never read as a LUT: the errors come first
     argv = [a.replace("OUT", str(tmp_path / "o")) for a in argv]
     if "--quick" in argv:
         argv += ["--lut", str(lut)]

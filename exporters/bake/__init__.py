@@ -22,8 +22,13 @@ A bake that is already up to date (:mod:`exporters.bake.reuse`) — ``S_maps.jso
 same key (image content, model SHA-256, options) and every map it lists is unchanged — is reused: nothing is
 read, loaded, evaluated or written (``force=True`` re-bakes).
 
-When the distinct colours are too many to hold their values in memory (more than about
-``4 x memory_mb`` MiB, e.g. a noisy float image), step 2 runs per band instead and step 3 is skipped.
+Memory: ``memory_mb`` bounds the bake's working arrays whatever the texture.  It is split in equal shares
+(:data:`exporters.bake.job.WORK_SHARES`): the map rows held (every distinct colour's, or one band's), one table step
+(:func:`exporters.bake.evaluate.table_rows_for`), one inference chunk (the colours outside the table are evaluated
+that many at a time) and the decoded image, whose header is checked against the whole budget before decoding
+(:func:`exporters.image_input.check_decode_budget`).  When the distinct colours' map rows exceed their share
+(e.g. a noisy image), step 2 runs per band instead and step 3 is skipped.  Fixed costs (the libraries, the model
+session, the fast-path table) and OpenEXR's per-thread write buffers are not counted.
 
 :class:`BakeJob` runs step by step (one chunk per step) so that Blender can drive it from a timer with a
 progress bar; :func:`bake` runs it to the end.  What to ask for: :class:`BakeOptions`

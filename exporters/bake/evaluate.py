@@ -13,8 +13,17 @@ from ..texel_records import CollapseOptions
 from .table_cache import cached_table_path
 from .targets import BakeError, MapSpec
 
-#: Distinct colours looked up in the fast-path table per step (the UI stays responsive: ~0.1 s each).
+#: Most distinct colours looked up in the fast-path table per step (the UI stays responsive: ~0.1 s each).
 TABLE_CHUNK = 1 << 18
+#: Bytes per distinct colour of one table step: the interpolated values (184 B for K = 3), their records
+#: (376 B), the exact records of the colours outside the table (520 B) and the map rows (120 B), measured
+#: for K = 3 and rounded up; a step holds no more rows than the memory budget pays for at this rate.
+TABLE_ROW_BYTES = 2048
+
+
+def table_rows_for(memory_mb: float) -> int:
+    """Distinct colours per table step within ``memory_mb`` MiB (at most ``TABLE_CHUNK``, at least 1)."""
+    return int(max(1, min(TABLE_CHUNK, memory_mb * 2**20 // TABLE_ROW_BYTES)))
 
 
 class Evaluator:
@@ -33,6 +42,7 @@ class Evaluator:
         self.options, self.threads, self.timings = options, threads, timings
         self.model_k = table.k if table is not None else self.load_model().k
         self.chunk = chunk or inference.chunk_rows_for_k(self.model_k, memory_mb)
+        self.table_step = table_rows_for(memory_mb)
         self.stats: dict[str, int] = {}
         self.counted = {"texels_from_table": 0, "texels_evaluated_exactly": 0}
         self.max_share = np.zeros(self.model_k)
@@ -60,10 +70,7 @@ class Evaluator:
             rec = parts if parts is not None else texel_records.empty_records(self.model_k, self.targets,
                                                                              self.options.painted)
             return rec, inside
-        model = self.load_model()
-        t0 = time.perf_counter()
-        exact = texel_records.exact_records(model, rgb[~inside], self.targets, self.options)
-        self.timings["inference"] += time.perf_counter() - t0
+        exact = self.exact_records(rgb[~inside])
         if parts is None:
             return exact, inside
         rec = {}
@@ -72,6 +79,20 @@ class Evaluator:
             full[inside], full[~inside] = value, exact[key]
             rec[key] = full
         return rec, inside
+
+    def exact_records(self, rgb: np.ndarray) -> dict[str, np.ndarray]:
+        """Records of rows ``rgb`` (n, 3) float32 by the model, ``chunk`` rows per inference (the memory budget
+        holds however many colours fall outside the table)."""
+        if len(rgb) == 0:
+            return texel_records.empty_records(self.model_k, self.targets, self.options.painted)
+        model = self.load_model()
+        t0 = time.perf_counter()
+        pieces = [texel_records.exact_records(model, rgb[s:s + self.chunk], self.targets, self.options)
+                  for s in range(0, len(rgb), self.chunk)]
+        self.timings["inference"] += time.perf_counter() - t0
+        if len(pieces) == 1:
+            return pieces[0]
+        return {key: np.concatenate([p[key] for p in pieces]) for key in pieces[0]}
 
     def values(self, rec: dict[str, np.ndarray], specs: list[MapSpec], unit_scale_m: float,
                mantissa_bits: int) -> dict[str, np.ndarray]:
@@ -91,7 +112,7 @@ class Evaluator:
                  unit_scale_m: float, mantissa_bits: int, progress: Callable[[float], float]) -> Iterator[float]:
         """Values of palette entries ``ids`` for ``specs`` into ``into`` (rows in ``ids`` order), in chunks;
         ``counts``: texels per entry (for the statistics).  Yields ``progress(fraction of ids done)``."""
-        step = TABLE_CHUNK if self.table is not None else self.chunk
+        step = self.table_step if self.table is not None else self.chunk
         for spec in specs:
             into[spec.name] = np.empty((len(ids), len(spec.channels)), np.float32)
         for start in range(0, len(ids), step):

@@ -26,6 +26,13 @@ from .report import BakeResult
 from .table_cache import find_table
 from .targets import HALF_KINDS, BakeError, MapSpec, map_specs, units_of
 
+#: Bytes per texel of one band of rows: its palette ids and their distinct set (24 B), the map rows of its
+#: distinct colours (4 B per channel, 120 B for K = 3 cycles maps) and each map's gathered rows, rounded up.
+BAND_TEXEL_BYTES = 512
+#: ``memory_mb`` is split in this many equal shares: the map rows held (a band's, or every colour's), one table
+#: step, one inference chunk, and the decoded image's index with the rest.
+WORK_SHARES = 4
+
 
 class BakeJob:
     """A bake in steps.  Construction checks everything that can be checked cheaply (targets, folder,
@@ -87,15 +94,20 @@ class BakeJob:
             self.notes.append("no fast-path table for this model and these options: every distinct colour evaluated "
                               f"exactly (python -m training texel-table --model {self.model.path} builds one; "
                               f"images with {opts.cache_min_colours:,}+ colours build and cache one themselves)")
+        # the budget is shared by what lives at once: the map rows of a band or of every colour, one table
+        # step's records, one inference chunk (and the decoded image's index, counted when it was read)
+        share_mb = opts.memory_mb / WORK_SHARES
         self.evaluator = Evaluator(self.palette, self.targets, self.model, table, copts, self.threads, self.timings,
-                                   chunk=opts.chunk, memory_mb=opts.memory_mb)
+                                   chunk=opts.chunk, memory_mb=share_mb)
         self.model_k = self.evaluator.model_k
         self.components = list(range(1, self.model_k + 1))
         self.specs = map_specs(self.stem, self.model_k, self.targets)
         self._check_folder()
-        self.band_rows = max(1, min(self.height, max(opts.band_texels, 1) // self.width or 1))
+        share = share_mb * 2**20
+        band_texels = int(max(1, min(opts.band_texels, share // BAND_TEXEL_BYTES)))
+        self.band_rows = max(1, min(self.height, band_texels // self.width or 1))
         channels = sum(len(s.channels) for s in self.specs)
-        self.global_values = len(self.palette) * channels * 4 <= 4 * opts.memory_mb * 2**20
+        self.global_values = len(self.palette) * channels * 4 <= share
         self.values: dict[str, np.ndarray] = {}
         self.pixel_types: dict[str, str] = {}
 
@@ -316,7 +328,7 @@ def bake(albedo_path: str | os.PathLike, out_dir: str | os.PathLike, model_path:
             found.timings_s = {"total": time.perf_counter() - t0}
             return found
     maps.set_threads(options.threads)
-    albedo = image_input.read_albedo_indexed(path, colorspace=colorspace)
+    albedo = image_input.read_albedo_indexed(path, colorspace=colorspace, memory_mb=options.memory_mb)
     t1 = time.perf_counter()
     job = BakeJob(albedo, out_dir, path.stem, model, options, input_image=str(path), image_id=image_id)
     for fraction in job.steps():

@@ -23,7 +23,9 @@ FAST_MANTISSA_BITS = 16
 @dataclass
 class BakeOptions:
     """``targets``: docs/contracts.md §4; ``unit_scale_m`` m per Blender unit; ``threads`` for onnxruntime, the table
-    lookups and OpenEXR (0 = all cores); ``memory_mb`` budget of one inference chunk; ``chunk`` caps distinct
+    lookups and OpenEXR (0 = all cores); ``memory_mb`` budget (MiB) of the bake's working
+    arrays, shared by the map rows held, one table step, one inference chunk and the decoded image
+    (exporters.bake.job.WORK_SHARES); ``chunk`` caps distinct
     texels per exact step (None: from the budget); ``model_colour``: the maps render the model's own reflectance
     (the colour of the biophysical skin the network found) instead of the painted albedo (the default,
     exporters.painted); ``ior``: the IOR the node group's closures use (its IOR input; it sets how view rays
@@ -72,6 +74,8 @@ class BakeOptions:
     def check(self) -> tuple[str, ...]:
         """BakeError for a bad option (naming it and its range); returns the parsed targets."""
         targets = parse_targets(self.targets)
+        if not (np.isfinite(self.memory_mb) and self.memory_mb > 0):
+            raise BakeError(f"memory budget must be a positive number of MiB, got {self.memory_mb}")
         if not (np.isfinite(self.unit_scale_m) and self.unit_scale_m > 0):
             raise BakeError(f"unit scale must be a positive number of metres per Blender unit, got {self.unit_scale_m}")
         if not reflectance_tables.IOR_MIN <= self.ior <= reflectance_tables.IOR_MAX:

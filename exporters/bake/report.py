@@ -10,6 +10,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from .. import collapse, maps, painted
+from ..cli_io import one_line  # noqa: F401 - re-exported (exporters.bake.one_line)
 from ..image_input import AlbedoImage, IndexedAlbedo
 from ..texel_records import CLAMPED_CYCLES, CLAMPED_SPECTRAL, needs_media
 from .targets import units_of
@@ -64,15 +65,6 @@ def input_notes(albedo: AlbedoImage | IndexedAlbedo) -> list[str]:
     if h * w == 1:
         notes.append("1 x 1 image: the maps are uniform")
     return notes
-
-
-def one_line(exc: BaseException) -> str:
-    """An exception as the one-line error a user sees (bake.py's stderr, the add-on's report): its message on
-    one line (the class name if it has none), with the file name of an OSError that does not say it."""
-    text = str(exc) or type(exc).__name__
-    if isinstance(exc, OSError) and exc.filename and str(exc.filename) not in text:
-        text = f"{text}: {exc.filename}"
-    return " ".join(text.split())
 
 
 def clamp_warnings(stats: dict[str, int], texels: int) -> list[str]:

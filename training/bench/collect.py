@@ -14,6 +14,7 @@ from __future__ import annotations
 import argparse
 import datetime as dt
 import importlib
+import importlib.util
 import os
 import platform
 import re
@@ -22,6 +23,15 @@ import time
 import traceback
 from importlib import metadata
 from pathlib import Path
+
+from exporters.cli_io import (
+    RESUME_KEPT,
+    InputError,
+    OneLineParser,
+    atomic_file,
+    check_output_file,
+    guarded,
+)
 
 #: Benchmark modules in pipeline order; a module that does not exist yet is listed as such.
 BENCH_MODULES = [
@@ -32,6 +42,7 @@ BENCH_MODULES = [
     "training.bench.train",
     "training.bench.addon",
     "training.bench.live",
+    "training.bench.memory",
     "training.bench.runtime",
     "training.bench.validate",
     "training.bench.cluster",
@@ -103,9 +114,19 @@ def read_sections(text: str) -> dict[str, str]:
             for i, m in enumerate(marks)}
 
 
+def _importable(name: str) -> bool:
+    """Whether ``name`` is a module that can be imported (without importing it)."""
+    if name in sys.modules:
+        return True
+    try:
+        return importlib.util.find_spec(name) is not None
+    except (ImportError, ValueError):
+        return False
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The command's argument parser (the CLI reference of the documentation reads it too)."""
-    parser = argparse.ArgumentParser(prog="python -m training bench", description=__doc__.splitlines()[0])
+    parser = OneLineParser(prog="python -m training bench", description=__doc__.splitlines()[0])
     parser.add_argument("--out", type=Path, default=Path("bench/results.md"), help="Markdown file to write")
     parser.add_argument("--quick", action="store_true", help="small sizes (about a minute per module)")
     parser.add_argument("--only", nargs="*", default=None,
@@ -114,8 +135,13 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+@guarded("python -m training bench", RESUME_KEPT)
 def main(argv: list[str]) -> int:
     args = build_parser().parse_args(argv)
+    unknown = [m for m in args.only or () if not _importable(m)]
+    if unknown:
+        raise InputError(f"--only: no benchmark module {unknown[0]}; known: {', '.join(BENCH_MODULES)}")
+    check_output_file(args.out, "--out", suffixes=(".md",))
     modules = args.only or BENCH_MODULES
     sections = read_sections(args.out.read_text()) if args.only and args.out.is_file() else {}
     for name in modules:
@@ -128,6 +154,7 @@ def main(argv: list[str]) -> int:
                       "when, how and under which load it was measured.", "", *machine_lines(), "",
                       *(sections[m] for m in order)])
     args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(text)
+    with atomic_file(args.out, "w") as f:
+        f.write(text)
     print(text)
     return 0

@@ -23,6 +23,8 @@ import argparse
 import logging
 import os
 import re
+import shutil
+import socket
 import sys
 import threading
 import uuid
@@ -51,6 +53,9 @@ WORKER_ENV = {"MALLOC_MMAP_THRESHOLD_": "33554432", "MALLOC_TRIM_THRESHOLD_": "6
 #: stack every 10 ms for the dashboard: ~9 % of a walk's CPU here).
 WORKER_CONFIG = {**{f"distributed.nanny.pre-spawn-environ.{k}": v for k, v in WORKER_ENV.items()},
                  "distributed.worker.profile.enabled": False}
+#: Seconds to wait for a tcp:// scheduler's port to answer before giving up (the client's own timeout then
+#: bounds the handshake).
+CONNECT_TIMEOUT_S = 10
 SCHEDULER_HELP = ("run the work on a Dask cluster: local:N (N worker processes here), tcp://HOST:PORT (a running "
                   "scheduler) or slurm[:JOBS] (dask-jobqueue; docs/research/scaling_out.md); default: this process")
 
@@ -106,6 +111,21 @@ def slurm_cluster(**overrides):
     return SLURMCluster(**{**kwargs, **overrides})
 
 
+def check_reachable(spec: Scheduler) -> None:
+    """ValueError (one line, within ``CONNECT_TIMEOUT_S``) when the scheduler of ``spec`` cannot start: no
+    ``sbatch`` on PATH for slurm, nothing listening at a tcp:// address."""
+    if spec.kind == "slurm" and shutil.which("sbatch") is None:
+        raise ValueError("--scheduler slurm: no `sbatch` on PATH (SLURM is not installed here); run on a SLURM login "
+                         "node, or use --scheduler local:N or tcp://HOST:PORT")
+    if spec.kind == "tcp":
+        host, _, port = spec.address.removeprefix("tcp://").rpartition(":")
+        try:
+            socket.create_connection((host.strip("[]"), int(port)), timeout=CONNECT_TIMEOUT_S).close()
+        except OSError as exc:
+            raise ValueError(f"--scheduler {spec}: cannot reach the scheduler ({exc.strerror or exc}); start it "
+                             "(dask scheduler) or check the address") from None
+
+
 @contextmanager
 def client(spec: Scheduler) -> Iterator[Any]:
     """A ``distributed.Client`` on the cluster ``spec`` names (closed, and a cluster we started shut down, on exit)."""
@@ -116,6 +136,7 @@ def client(spec: Scheduler) -> Iterator[Any]:
                          "(or the project's [cluster] extra)") from None
     import dask
 
+    check_reachable(spec)
     cluster = None
     with dask.config.set(WORKER_CONFIG):  # read by the nannies when they start (and restart) workers
         if spec.kind == "local":

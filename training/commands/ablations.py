@@ -16,7 +16,18 @@ import sys
 from dataclasses import replace
 from pathlib import Path
 
-from training.commands.options import error_status, triple
+from exporters.cli_io import OneLineParser
+from training.commands.options import (
+    check_input,
+    check_output_folder,
+    command,
+    count,
+    error_status,
+    non_negative_float,
+    output_lock,
+    require,
+    triple,
+)
 from training.paths import portable_command
 
 
@@ -25,8 +36,8 @@ def build_parser() -> argparse.ArgumentParser:
     from training.model.config import SIZES
 
     d = Scale()
-    p = argparse.ArgumentParser(prog="python -m training ablations", description=__doc__.splitlines()[0],
-                                formatter_class=argparse.RawDescriptionHelpFormatter, epilog=__doc__)
+    p = OneLineParser(prog="python -m training ablations", description=__doc__.splitlines()[0],
+                      formatter_class=argparse.RawDescriptionHelpFormatter, epilog=__doc__)
     p.add_argument("--out", type=Path, required=True, help="output folder (resumed if it exists)")
     p.add_argument("--quick", action="store_true",
                    help="smoke test (~1-2 min): the smoke dataset preset, a tiny LUT and quick fits built in "
@@ -35,14 +46,14 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--fits", type=Path, default=None, help="fits folder (python -m training fit --dataset)")
     p.add_argument("--lut", type=Path, default=None, help="LUT .npz (python -m training lut)")
     p.add_argument("--size", choices=sorted(SIZES), default=None, help=f"networks (default {d.size}; quick tiny)")
-    p.add_argument("--epochs", type=lambda s: triple(s, int), default=None,
+    p.add_argument("--epochs", type=lambda s: triple(s, count), default=None,
                    help=f"E or E1,E2,E3 (default {','.join(map(str, d.epochs))}; quick 3)")
-    p.add_argument("--shape-weight", type=float, default=None,
+    p.add_argument("--shape-weight", type=non_negative_float, default=None,
                    help="stage 3's L_shape weight in every configuration (default 0: the paper's loss)")
-    p.add_argument("--gt-photons", type=int, default=None,
+    p.add_argument("--gt-photons", type=count, default=None,
                    help=f"gate ground-truth photons per wavelength (default {d.gt_photons}; quick 400)")
     p.add_argument("--device", choices=("cpu", "cuda"), default="cpu", help="training device (the gate: CPU)")
-    p.add_argument("--threads", type=int, default=1, help="torch CPU threads")
+    p.add_argument("--threads", type=count, default=1, help="torch CPU threads")
     p.add_argument("--no-progress", action="store_true")
     return p
 
@@ -66,8 +77,25 @@ def _quick_inputs(cache: Path, args, progress: bool) -> tuple[Path, Path, Path]:
     return dataset, fits, lut
 
 
+def _check_paths(args: argparse.Namespace) -> None:
+    """InputError for missing, truncated or disguised inputs and an --out that cannot be the output folder."""
+    require(args.quick or all(getattr(args, n) is not None for n in ("dataset", "fits", "lut")),
+            "give --dataset, --fits and --lut (or --quick for the smoke test)")
+    inputs = []
+    for name, kind in (("dataset", "folder"), ("fits", "folder"), ("lut", "npz")):
+        path = getattr(args, name)
+        if path is not None:
+            check_input(path, f"--{name}", kind)
+            inputs.append((f"--{name}", path))
+            for h5 in sorted(path.glob("*.h5")) if kind == "folder" else ():
+                check_input(h5, "HDF5 file", "h5")
+    check_output_folder(args.out, "--out", inputs=tuple(inputs))
+
+
+@command("ablations")
 def main(argv: list[str]) -> int:
     args = build_parser().parse_args(argv)
+    _check_paths(args)
     import torch
 
     from training.ablations.run import QUICK, Scale, run
@@ -81,18 +109,14 @@ def main(argv: list[str]) -> int:
     if args.epochs is not None:
         scale = replace(scale, epochs=tuple(args.epochs))
     try:
-        if args.quick:
-            dataset, fits, lut = _quick_inputs(args.out / "cache", args, progress)
-        else:
-            missing = [f"--{n}" for n in ("dataset", "fits", "lut") if getattr(args, n) is None]
-            if missing:
-                raise ValueError(f"give {', '.join(missing)} (or --quick for the smoke test)")
-            dataset, fits, lut = args.dataset, args.fits, args.lut
-        for path in (dataset, fits, lut):
-            if not path.exists():
-                raise ValueError(f"no such file or folder: {path}")
-        record = run(args.out, dataset, fits, lut, scale, quick=args.quick, device=args.device, progress=progress,
-                     command=portable_command("python -m training ablations", argv))
+        args.out.mkdir(parents=True, exist_ok=True)
+        with output_lock(args.out, "--out"):
+            if args.quick:
+                dataset, fits, lut = _quick_inputs(args.out / "cache", args, progress)
+            else:
+                dataset, fits, lut = args.dataset, args.fits, args.lut
+            record = run(args.out, dataset, fits, lut, scale, quick=args.quick, device=args.device,
+                         progress=progress, command=portable_command("python -m training ablations", argv))
     except ValueError as exc:
         return error_status(exc)
     for c in record["claims"]:

@@ -20,8 +20,18 @@ import argparse
 import json
 from pathlib import Path
 
+from exporters.cli_io import OneLineParser
 from training.cluster import engine
-from training.commands.options import error_status, parse_shard
+from training.commands.options import (
+    check_input,
+    check_output_folder,
+    command,
+    count,
+    error_status,
+    output_lock,
+    parse_shard,
+    shard_part,
+)
 from training.data.build import SPLITS, build_split, merge
 from training.data.presets import PRESETS
 
@@ -43,10 +53,21 @@ def _estimator(args: argparse.Namespace, preset, split: str):
     return store, preset.reweighted_chunk_tones
 
 
+def _check_paths(args: argparse.Namespace) -> None:
+    """InputError for an --out that cannot be the dataset folder or holds a truncated HDF5 file."""
+    if args.summary or args.merge:
+        check_input(args.out, "--out", "folder")
+    else:
+        check_output_folder(args.out, "--out")
+    if args.out.is_dir():
+        for path in sorted(args.out.glob("*.h5")):
+            check_input(path, "dataset file", "h5")
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The command's argument parser (the CLI reference of the documentation reads it too)."""
-    parser = argparse.ArgumentParser(prog="python -m training dataset", description=__doc__.splitlines()[0],
-                                     formatter_class=argparse.RawDescriptionHelpFormatter, epilog=__doc__)
+    parser = OneLineParser(prog="python -m training dataset", description=__doc__.splitlines()[0],
+                           formatter_class=argparse.RawDescriptionHelpFormatter, epilog=__doc__)
     parser.add_argument("--preset", choices=sorted(PRESETS), default="ci")
     parser.add_argument("--out", type=Path, required=True, help="dataset folder")
     parser.add_argument("--shard", type=parse_shard, default=(0, 1), help="I/N: this process's share")
@@ -58,14 +79,17 @@ def build_parser() -> argparse.ArgumentParser:
                         help="write --out/summary.json and summary.png for a built dataset")
     parser.add_argument("--seed", type=int, default=None, help="override the preset's sampling seeds")
     parser.add_argument("--device", default="cpu", help="cpu or cuda")
-    parser.add_argument("--threads", type=int, default=1, help="torch CPU threads (the walker is fastest on 1)")
+    parser.add_argument("--threads", type=count, default=1, help="torch CPU threads (the walker is fastest on 1)")
     parser.add_argument("--no-progress", action="store_true")
     engine.add_option(parser)
     return parser
 
 
+@command("dataset")
 def main(argv: list[str]) -> int:
-    args = build_parser().parse_args(argv)
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    _check_paths(args)
     import torch
 
     torch.set_num_threads(max(1, args.threads))
@@ -89,8 +113,10 @@ def main(argv: list[str]) -> int:
             if args.shard != (0, 1):
                 raise ValueError("--shard and --scheduler exclude each other: the cluster takes every chunk")
             args.out = args.out.resolve()  # the workers write the walk chunks there
-        with engine.job(args.scheduler, f"dataset {args.preset}", shared=[args.out], threads=max(1, args.threads),
-                        progress=not args.no_progress) as job:
+        args.out.mkdir(parents=True, exist_ok=True)
+        with output_lock(args.out, "--out", shard_part(args.shard)), \
+                engine.job(args.scheduler, f"dataset {args.preset}", shared=[args.out], threads=max(1, args.threads),
+                           progress=not args.no_progress) as job:
             paths = []
             for split in splits:
                 simulate, chunk = _estimator(args, preset, split)

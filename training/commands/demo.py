@@ -19,9 +19,19 @@ from pathlib import Path
 
 import numpy as np
 
+from exporters.cli_io import OneLineParser, inside
 from exporters.colorimetry import spectrum_to_lab, spectrum_to_srgb
 from exporters.constants import WAVELENGTHS_NM
 from training import demo_render
+from training.commands.options import (
+    check_output_file,
+    check_output_folder,
+    command,
+    count,
+    in_range,
+    output_lock,
+    require,
+)
 from training.commands.swatches import simulate_spectra
 from training.export.card import summary
 from training.paths import SHIPPED_CARD
@@ -30,15 +40,15 @@ from training.skin.tones import load_tones
 
 def build_parser() -> argparse.ArgumentParser:
     """The command's argument parser (the CLI reference of the documentation reads it too)."""
-    parser = argparse.ArgumentParser(prog="python -m training demo", description=__doc__.splitlines()[0])
+    parser = OneLineParser(prog="python -m training demo", description=__doc__.splitlines()[0])
     parser.add_argument("--out", type=Path, default=Path("demo/out"))
-    parser.add_argument("--photons", type=int, default=300, help="photons per wavelength of the Monte Carlo tone")
+    parser.add_argument("--photons", type=count, default=300, help="photons per wavelength of the Monte Carlo tone")
     parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--threads", type=int, default=1,
+    parser.add_argument("--threads", type=count, default=1,
                         help="torch CPU threads (1 is fastest for the walker on a busy 2-core machine)")
-    parser.add_argument("--render-size", type=int, default=demo_render.RENDER_SIZE,
+    parser.add_argument("--render-size", type=in_range(16, 8192, integer=True), default=demo_render.RENDER_SIZE,
                         help="size of each render in pixels")
-    parser.add_argument("--samples", type=int, default=demo_render.SAMPLES,
+    parser.add_argument("--samples", type=count, default=demo_render.SAMPLES,
                         help="Cycles samples per pixel of each render (then OpenImageDenoise)")
     parser.add_argument("--figure", type=Path, default=None,
                         help="also write the comparison figure here (.png or .jpg; the README's is "
@@ -46,8 +56,14 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+@command("demo")
 def main(argv: list[str]) -> int:
-    args = build_parser().parse_args(argv)
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    check_output_folder(args.out, "--out")
+    if args.figure is not None:
+        check_output_file(args.figure, "--figure", suffixes=(".png", ".jpg", ".jpeg"))
+        require(not inside(args.figure, args.out), f"--figure {args.figure}: not inside --out (emptied on each run)")
     import torch
 
     demo_start = time.perf_counter()
@@ -66,7 +82,9 @@ def main(argv: list[str]) -> int:
     lab = spectrum_to_lab(spectrum, "D65")
     print(f"[demo] colour under D65: sRGB {np.round(np.clip(srgb, 0, 1) * 255).astype(int).tolist()}, "
           f"Lab {np.round(lab, 2).tolist()}  ({seconds:.1f} s of simulation)")
-    _artist_path(args)
+    args.out.mkdir(parents=True, exist_ok=True)
+    with output_lock(args.out, "--out"):
+        _artist_path(args)
     print(f"[demo] done in {time.perf_counter() - demo_start:.0f} s.")
     return 0
 

@@ -1,9 +1,12 @@
 """Command dispatcher for ``python -m training`` (docs/contracts.md §2).
 
 Each command is a module of ``training.commands`` (or a study module with its own ``main``) exposing
-``main(argv: list[str]) -> int`` and ``build_parser() -> argparse.ArgumentParser`` (its parser, which
-the documentation's CLI reference renders).  Commands whose module is ``None`` are not
-built yet: they say so and exit 2 rather than pretend.
+``main(argv: list[str]) -> int`` and ``build_parser()`` (its parser, an ``exporters.cli_io.OneLineParser``,
+which the documentation's CLI reference renders); ``main`` checks its options, inputs and outputs before
+computing (``exporters.cli_io``) and is wrapped by ``training.commands.options.command``: whatever it lets
+through is answered in one line on stderr: bad input (``InputError``, a file or permission error) exits 2, a task
+that failed exits 1 (``training.cluster.engine.TaskError``), Ctrl-C exits 130 saying what was kept and how to
+resume; docs/contracts.md §2.
 """
 
 from __future__ import annotations
@@ -36,7 +39,6 @@ COMMANDS: dict[str, tuple[str, str]] = {
                            "Recompute the adding-doubling reflectance tables the bake reads (iadpython)."),
     "channel-matrix": ("training.commands.channel_matrix", "Write the linear-sRGB channel matrix the bake reads."),
 }
-
 
 def _usage() -> str:
     width = max(map(len, COMMANDS))

@@ -14,11 +14,20 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import sys
 from pathlib import Path
 
-from training.commands.options import error_status
+from exporters.cli_io import OneLineParser
+from training.commands.options import (
+    atomic_file,
+    check_input,
+    check_output_folder,
+    command,
+    count,
+    error_status,
+    output_lock,
+    positive_float,
+)
 from training.export.card import build_card, write_card
 from training.export.graphs import PARITY_TOL, export_graphs, parity, parity_failures, rounding_cost
 from training.paths import portable_command
@@ -28,13 +37,14 @@ CARD_NAME = "skin_inversion.json"
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="python -m training export", description=__doc__.splitlines()[0],
-                                formatter_class=argparse.RawDescriptionHelpFormatter, epilog=__doc__)
+    p = OneLineParser(prog="python -m training export", description=__doc__.splitlines()[0],
+                      formatter_class=argparse.RawDescriptionHelpFormatter, epilog=__doc__)
     p.add_argument("--run", type=Path, required=True, help="run folder of `python -m training train`")
     p.add_argument("--out", type=Path, required=True, help="folder for the .onnx files and the card")
     p.add_argument("--weights", choices=("auto", "float32", "float16"), default="auto")
-    p.add_argument("--max-mb", type=float, default=25.0, help="size budget of the two .onnx files together (MB)")
-    p.add_argument("--parity-n", type=int, default=10_000)
+    p.add_argument("--max-mb", type=positive_float, default=25.0,
+                   help="size budget of the two .onnx files together (MB)")
+    p.add_argument("--parity-n", type=count, default=10_000, help="random inputs of the parity check (>= 1)")
     p.add_argument("--note", action="append", default=[], help="free-text note for the card (repeatable)")
     p.add_argument("--overwrite", action="store_true", help="replace existing files in --out")
     p.add_argument("--seed", type=int, default=0, help="seed of the parity inputs")
@@ -43,9 +53,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _write_atomic(path: Path, data: bytes) -> None:
-    tmp = path.with_suffix(path.suffix + ".tmp")
-    tmp.write_bytes(data)
-    os.replace(tmp, path)
+    with atomic_file(path) as f:
+        f.write(data)
 
 
 def export_run(run_dir: Path, out: Path, *, weights: str = "auto", max_mb: float = 25.0, parity_n: int = 10_000,
@@ -83,12 +92,18 @@ def export_run(run_dir: Path, out: Path, *, weights: str = "auto", max_mb: float
     return card
 
 
+@command("export")
 def main(argv: list[str]) -> int:
     args = build_parser().parse_args(argv)
+    check_input(args.run, "--run", "folder")
+    check_input(args.run / "model.pt", "--run", "file")
+    check_output_folder(args.out, "--out", inputs=(("--run", args.run),))
     command = portable_command("python -m training export", argv)
     try:
-        card = export_run(args.run, args.out, weights=args.weights, max_mb=args.max_mb, parity_n=args.parity_n,
-                          notes=args.note, overwrite=args.overwrite, seed=args.seed, command=command)
+        args.out.parent.mkdir(parents=True, exist_ok=True)
+        with output_lock(args.out, "--out", inside=False):  # the folder appears only when the export succeeds
+            card = export_run(args.run, args.out, weights=args.weights, max_mb=args.max_mb, parity_n=args.parity_n,
+                              notes=args.note, overwrite=args.overwrite, seed=args.seed, command=command)
     except ValueError as exc:
         return error_status(exc)
     except RuntimeError as exc:

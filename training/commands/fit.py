@@ -27,9 +27,22 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from exporters.cli_io import OneLineParser
 from exporters.constants import anisotropy
 from training.cluster import engine
-from training.commands.options import error_status, parse_shard
+from training.commands.options import (
+    atomic_file,
+    check_input,
+    check_output_file,
+    check_output_folder,
+    command,
+    count,
+    error_status,
+    non_negative_int,
+    output_lock,
+    parse_shard,
+    shard_part,
+)
 from training.fit.optimize import fit_schedule
 from training.sim.lut_interp import LookupTables
 
@@ -37,7 +50,7 @@ TONE_KEYS = ("wavelength_nm", "R_d", "r_edges_cm", "profile", "photons")
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(
+    p = OneLineParser(
         prog="python -m training fit",
         description="Fit mixtures of K homogeneous media to MC profiles through the lookup tables (paper §4).",
     )
@@ -61,17 +74,17 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--split", default="train,validation", help="--dataset: splits to fit (default both)")
     p.add_argument("--shard", type=parse_shard, default=(0, 1), help="--dataset: fit tones i, i+n, i+2n, ... (I/N)")
-    p.add_argument("--chunk-tones", type=int, default=16, help="--dataset: tones fitted per batch")
-    p.add_argument("--wavelength-stride", type=int, default=1,
+    p.add_argument("--chunk-tones", type=count, default=16, help="--dataset: tones fitted per batch")
+    p.add_argument("--wavelength-stride", type=count, default=1,
                    help="--dataset: fit every n-th wavelength (default 1: all 376)")
-    p.add_argument("--anchor-every", type=int, default=0,
+    p.add_argument("--anchor-every", type=non_negative_int, default=0,
                    help="--dataset: full schedule at every n-th fitted wavelength, warm starts from the nearest "
                         "one elsewhere (default 0: full schedule everywhere; 12 is ~4x faster, same losses)")
     p.add_argument("--continuity", choices=("sweep", "anchors"), default=None,
                    help="--dataset: sweep = each wavelength warm-started from the previous one, components matched "
                         "along wavelength (default with --method lm); anchors = from the nearest anchor "
                         "(the older fits; the default with --method paper)")
-    p.add_argument("--max-tones", type=int, default=None, help="--dataset: fit n tones of each split (see --select)")
+    p.add_argument("--max-tones", type=count, default=None, help="--dataset: fit n tones of each split (see --select)")
     p.add_argument("--select", choices=("first", "lightness"), default="first",
                    help="--dataset with --max-tones: the first n tones (default), or an equal share of each "
                         "5-unit band of the albedo's L* (more light skin than the split holds)")
@@ -89,7 +102,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=int, default=0, help="torch seed (the fit itself is deterministic)")
     p.add_argument(
         "--threads",
-        type=int,
+        type=count,
         default=1,
         help="torch CPU threads (default 1: the problems are small; more threads mostly contend)",
     )
@@ -178,8 +191,10 @@ def _fit_dataset(args: argparse.Namespace, ks: tuple[int, ...], lut_path: Path) 
     # on a cluster the workers load the LUT
     lut = None if args.scheduler else LookupTables.load(lut_path, dtype=torch.float64, device=args.device)
     shared = [args.dataset.resolve(), lut_path.resolve()]  # what the workers read
-    with engine.job(args.scheduler, "fit", shared=shared, threads=max(1, args.threads),
-                    progress=not args.no_progress) as job:
+    args.out.mkdir(parents=True, exist_ok=True)
+    with output_lock(args.out, "--out", shard_part(shard)), \
+            engine.job(args.scheduler, "fit", shared=shared, threads=max(1, args.threads),
+                       progress=not args.no_progress) as job:
         paths = {}
         for split in splits:
             paths[split] = fit_split(
@@ -226,8 +241,35 @@ def _summary(dataset: Path, out: Path, splits: list[str]) -> int:
     return 0
 
 
+def _check_paths(args: argparse.Namespace) -> None:
+    """InputError for a missing, truncated or disguised input and an output that cannot be written."""
+    lut = args.lut or (Path(os.environ["SKIN_SSS_LUT"]) if os.environ.get("SKIN_SSS_LUT") else None)
+    if lut is not None and not (args.dataset is not None and args.summary):
+        check_input(lut, "--lut" if args.lut else "$SKIN_SSS_LUT", "npz")
+    if args.tone_file is not None:
+        check_input(args.tone_file, "--tone-file", "npz")
+        if args.out is not None:
+            check_output_file(args.out, "--out", suffixes=(".npz",), overwrite=False, overwrite_option=None,
+                              inputs=(("--tone-file", args.tone_file), ("--lut", lut)))
+        return
+    check_input(args.dataset, "--dataset", "folder")
+    if args.reuse is not None:
+        check_input(args.reuse, "--reuse", "folder")
+    if args.out is None:
+        return
+    if args.summary:
+        check_input(args.out, "--out", "folder")
+    else:
+        check_output_folder(args.out, "--out", inputs=(("--dataset", args.dataset),))
+    for folder in {args.dataset, args.out} | ({args.reuse} if args.reuse else set()):
+        for path in sorted(Path(folder).glob("*.h5")) if Path(folder).is_dir() else ():
+            check_input(path, "HDF5 file", "h5")
+
+
+@command("fit")
 def main(argv: list[str]) -> int:
     args = build_parser().parse_args(argv)
+    _check_paths(args)
     torch.manual_seed(args.seed)
     if args.device == "cpu":
         torch.set_num_threads(max(1, args.threads))
@@ -255,10 +297,8 @@ def main(argv: list[str]) -> int:
     except (ValueError, engine.TaskError) as exc:
         return error_status(exc)
     if args.out is not None:
-        if args.out.exists():
-            print(f"error: {args.out} exists; not overwriting", file=sys.stderr)
-            return 2
-        np.savez(args.out, **arrays)
+        with atomic_file(args.out) as f:
+            np.savez(f, **arrays)
     if args.json:
         print(json.dumps({"fits": rows, "method": args.method, "seconds": round(seconds, 3)}))
     else:

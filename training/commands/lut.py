@@ -22,42 +22,59 @@ import argparse
 import sys
 from pathlib import Path
 
+from exporters.cli_io import OneLineParser
 from training.cluster import engine
-from training.commands.options import error_status, parse_shard
+from training.commands.options import (
+    check_output_file,
+    command,
+    count,
+    error_status,
+    fraction,
+    in_range,
+    output_lock,
+    parse_shard,
+    require,
+    shard_part,
+)
 from training.sim.lut import ALBEDO_MAX, ALBEDO_MIN, G_MAX, G_MIN, G_NODES, MAX_STEPS, build_lut
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(
+    p = OneLineParser(
         prog="python -m training lut",
         description="R(albedo, g) and P(r | albedo, g) of a semi-infinite medium at sigma_t = 1, n = 1.4, "
         "diffuse illumination, by absorption reweighting of one non-absorbing run per simulated g.",
     )
-    p.add_argument("--albedo-n", type=int, required=True, help="albedo samples (1 - albedo log-spaced)")
-    p.add_argument("--g-n", type=int, required=True, help="anisotropy samples (linear)")
-    p.add_argument("--photons", type=int, required=True, help="photons per simulated g node")
-    p.add_argument("--g-nodes", type=int, default=None,
+    p.add_argument("--albedo-n", type=count, required=True, help="albedo samples (1 - albedo log-spaced)")
+    p.add_argument("--g-n", type=count, required=True, help="anisotropy samples (linear)")
+    p.add_argument("--photons", type=count, required=True, help="photons per simulated g node")
+    p.add_argument("--g-nodes", type=count, default=None,
                    help=f"simulated g values (default min(g-n, {G_NODES})); the rest is interpolated along g")
     p.add_argument("--shard", type=parse_shard, default=(0, 1), help="I/N: this process's share of the g nodes")
     p.add_argument("--out", required=True, help="output .npz")
-    p.add_argument("--albedo-min", type=float, default=ALBEDO_MIN)
-    p.add_argument("--albedo-max", type=float, default=ALBEDO_MAX)
-    p.add_argument("--g-min", type=float, default=G_MIN)
-    p.add_argument("--g-max", type=float, default=G_MAX)
-    p.add_argument("--max-steps", type=int, default=MAX_STEPS, help="walk cap per photon")
+    p.add_argument("--albedo-min", type=fraction, default=ALBEDO_MIN)
+    p.add_argument("--albedo-max", type=fraction, default=ALBEDO_MAX)
+    p.add_argument("--g-min", type=in_range(-0.99, 0.99), default=G_MIN)
+    p.add_argument("--g-max", type=in_range(-0.99, 0.99), default=G_MAX)
+    p.add_argument("--max-steps", type=count, default=MAX_STEPS, help="walk cap per photon")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--device", choices=("cpu", "cuda"), default="cpu")
     p.add_argument("--compile", choices=("auto", "on", "off"), default="auto",
                    help="torch.compile the walker step (auto: when photons x g-n > 4M)")
-    p.add_argument("--threads", type=int, default=1, help="torch CPU threads (the walker is fastest on 1)")
+    p.add_argument("--threads", type=count, default=1, help="torch CPU threads (the walker is fastest on 1)")
     p.add_argument("--no-progress", action="store_true")
     engine.add_option(p)
     return p
 
 
+@command("lut")
 def main(argv: list[str]) -> int:
     """Run the command; returns the exit status (2 for bad input)."""
     args = build_parser().parse_args(argv)
+    require(args.albedo_min < args.albedo_max, "--albedo-min must be below --albedo-max")
+    require(args.g_min < args.g_max, "--g-min must be below --g-max")
+    require(args.g_nodes is None or args.g_nodes <= args.g_n, "--g-nodes must be <= --g-n")
+    check_output_file(args.out, "--out", suffixes=(".npz",))
     import torch
 
     torch.set_num_threads(max(1, args.threads))
@@ -71,7 +88,8 @@ def main(argv: list[str]) -> int:
         if args.scheduler is not None and args.shard != (0, 1):
             raise ValueError("--shard and --scheduler exclude each other: the cluster takes every g node")
         out = Path(args.out).resolve() if args.scheduler is not None else args.out  # workers need its full path
-        with engine.job(args.scheduler, "lut", shared=[Path(out).parent], threads=max(1, args.threads),
+        with output_lock(args.out, "--out", shard_part(args.shard)), \
+                engine.job(args.scheduler, "lut", shared=[Path(out).parent], threads=max(1, args.threads),
                         progress=not args.no_progress) as job:
             build_lut(
                 out, args.albedo_n, args.g_n, args.photons, seed=args.seed, device=args.device,

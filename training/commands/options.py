@@ -1,10 +1,34 @@
-"""argparse types shared by the commands of ``python -m training``."""
+"""argparse types shared by the commands of ``python -m training``; the checks of options, inputs and outputs
+they share with ``blender_addon/bake.py`` are ``exporters.cli_io`` (re-exported here)."""
 
 from __future__ import annotations
 
 import argparse
 import sys
 
+from exporters.cli_io import (  # noqa: F401 - the commands' shared front
+    EXIT_BAD_INPUT,
+    NOTHING_KEPT,
+    RESUME_KEPT,
+    InputError,
+    OneLineParser,
+    atomic_file,
+    atomic_path,
+    check_biophysical,
+    check_input,
+    check_output_file,
+    check_output_folder,
+    count,
+    finite_float,
+    fraction,
+    guarded,
+    in_range,
+    non_negative_float,
+    non_negative_int,
+    output_lock,
+    positive_float,
+    require,
+)
 from training.cluster.engine import TaskError
 
 
@@ -21,12 +45,30 @@ def parse_shard(text: str) -> tuple[int, int]:
 
 def triple(text: str, kind: type) -> list:
     """argparse type of an option taking one value for all three training stages or three comma-separated ones."""
-    vals = [kind(v) for v in text.split(",")]
+    try:
+        vals = [kind(v) for v in text.split(",")]
+    except (ValueError, argparse.ArgumentTypeError) as exc:
+        raise argparse.ArgumentTypeError(f"{exc} in {text!r}") from None
     if len(vals) == 1:
         vals = vals * 3
     if len(vals) != 3:
         raise argparse.ArgumentTypeError(f"give one value or three comma-separated values, got {text!r}")
     return vals
+
+
+#: Commands whose interrupted runs keep finished pieces (rerun to resume); the others write atomically.
+RESUMABLE = frozenset({"lut", "dataset", "fit", "train", "validate", "ablations", "realskin", "demo"})
+
+
+def command(name: str):
+    """Decorator of a command's ``main``: the one-line answers of ``exporters.cli_io.guarded`` (bad input exit 2,
+    a failed ``TaskError`` exit 1, Ctrl-C exit 130 saying what was kept)."""
+    return guarded(f"python -m training {name}", RESUME_KEPT if name in RESUMABLE else NOTHING_KEPT, (TaskError,))
+
+
+def shard_part(shard: tuple[int, int]) -> str:
+    """The lock part of ``--shard I/N`` (exporters.cli_io.output_lock): shards of one output run together."""
+    return "" if shard == (0, 1) else f"shard{shard[0]}of{shard[1]}"
 
 
 def error_status(exc: Exception) -> int:
@@ -35,5 +77,5 @@ def error_status(exc: Exception) -> int:
     2 for bad input (anything but a failed task: the user can fix the command), 1 for a task that failed
     while running (``training.cluster.engine.TaskError``).
     """
-    print(f"error: {exc}", file=sys.stderr)
+    print(f"error: {' '.join(str(exc).split())}", file=sys.stderr)
     return 1 if isinstance(exc, TaskError) else 2

@@ -25,8 +25,17 @@ import sys
 import time
 from pathlib import Path
 
+from exporters.cli_io import OneLineParser
 from exporters.constants import WAVELENGTHS_NM
-from training.commands.options import error_status
+from training.commands.options import (
+    check_input,
+    check_output_folder,
+    command,
+    count,
+    error_status,
+    finite_float,
+    output_lock,
+)
 from training.paths import SHIPPED_DECODER
 from training.realskin import report, study
 from training.realskin.fit import fit_subjects
@@ -37,22 +46,22 @@ DEFAULT_DECODER = SHIPPED_DECODER
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="python -m training realskin", description=__doc__.split("\n\n")[2],
-                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = OneLineParser(prog="python -m training realskin", description=__doc__.split("\n\n")[2],
+                      formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--data", type=Path, default=NIST_FILE,
                    help="measured spectra (NIST layout); default: the shipped file")
     p.add_argument("--out", type=Path, help="write realskin.json, realskin.md and fig_realskin.png here")
     p.add_argument("--json", action="store_true", help="print the JSON report instead of the table")
-    p.add_argument("--photons", type=int, help="photons per wavelength of the walk (default 10000; study 3000)")
+    p.add_argument("--photons", type=count, help="photons per wavelength of the walk (default 10000; study 3000)")
     p.add_argument("--seed", type=int, default=1)
     p.add_argument("--device", choices=("cpu", "cuda"), default="cpu")
     p.add_argument("--decoder", type=Path, default=DEFAULT_DECODER, help="skin_decoder.onnx to compare with")
     p.add_argument("--no-decoder", action="store_true", help="fit the Monte Carlo only")
-    p.add_argument("--subjects", type=int, help="fit only the first N subjects")
-    p.add_argument("--wavelength-stride", type=int, default=1,
+    p.add_argument("--subjects", type=count, help="fit only the first N subjects")
+    p.add_argument("--wavelength-stride", type=count, default=1,
                    help="compare at every n-th shared wavelength (default 1: all 126, every 6 nm)")
     p.add_argument("--cache", type=Path, help="folder of cached walks")
-    p.add_argument("--scattering-scale", type=float, nargs=2, metavar=("LO", "HI"),
+    p.add_argument("--scattering-scale", type=finite_float, nargs=2, metavar=("LO", "HI"),
                    help="also fit a per-subject scattering factor in [LO, HI] (a diagnostic; no decoder comparison)")
     p.add_argument("--study", action="store_true",
                    help="run the cause study (every candidate model choice; default 3000 photons)")
@@ -67,8 +76,16 @@ def _cache_dir(args) -> Path:
     return Path(os.environ.get("SPECTRAL_SKIN_SSS_CACHE", Path.home() / ".cache" / "spectral_skin_sss")) / "realskin"
 
 
+@command("realskin")
 def main(argv: list[str]) -> int:
     args = build_parser().parse_args(argv)
+    check_input(args.data, "--data", "file")
+    if not args.no_decoder and args.scattering_scale is None:
+        check_input(args.decoder, "--decoder", "onnx")
+    if args.out is not None:
+        check_output_folder(args.out, "--out", inputs=(("--data", args.data), ("--decoder", args.decoder)))
+    if args.cache is not None:
+        check_output_folder(args.cache, "--cache", inputs=(("--data", args.data),))
     try:
         meas = read_measurements(args.data)
     except ValueError as exc:
@@ -94,8 +111,21 @@ def main(argv: list[str]) -> int:
     channels, measured = grid_channels(meas)
     channels, measured = channels[:: args.wavelength_stride], measured[:, :: args.wavelength_stride]
     names = list(meas.names)
+    if args.subjects is not None and args.subjects > len(names):
+        print(f"error: --subjects {args.subjects}: {args.data} has {len(names)} subjects.", file=sys.stderr)
+        return 2
     if args.subjects is not None:
         names, measured = names[: args.subjects], measured[: args.subjects]
+    if args.out is None:
+        return _run(args, meas, channels, measured, names)
+    args.out.mkdir(parents=True, exist_ok=True)
+    with output_lock(args.out, "--out"):
+        return _run(args, meas, channels, measured, names)
+
+
+def _run(args, meas, channels, measured, names: list[str]) -> int:
+    """The study or the fits and their report (after every check has passed)."""
+    scale = args.scattering_scale
     if args.study:
         print(study.run_study(names, measured, channels, args.photons, args.seed, _cache_dir(args), args.out,
                               args.device))

@@ -28,7 +28,8 @@ import json
 import sys
 from pathlib import Path
 
-from training.commands.options import error_status
+from exporters.cli_io import OneLineParser
+from training.commands.options import atomic_file, check_input, check_output_file, command, error_status
 from training.data.build import SPLITS
 from training.paths import SHIPPED_MODEL_DIR, portable, portable_strings
 
@@ -241,8 +242,8 @@ def markdown(report: dict) -> str:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="python -m training report", description=__doc__.splitlines()[0],
-                                formatter_class=argparse.RawDescriptionHelpFormatter, epilog=__doc__)
+    p = OneLineParser(prog="python -m training report", description=__doc__.splitlines()[0],
+                      formatter_class=argparse.RawDescriptionHelpFormatter, epilog=__doc__)
     p.add_argument("--dataset", type=Path, help="dataset folder (`python -m training dataset --out`)")
     p.add_argument("--fits", type=Path, help="fits folder (`python -m training fit --dataset ... --out`)")
     p.add_argument("--model-dir", type=Path, default=SHIPPED_MODEL_DIR,
@@ -254,15 +255,21 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+@command("report")
 def main(argv: list[str]) -> int:
     args = build_parser().parse_args(argv)
+    inputs = []
+    for option in ("dataset", "fits", "model_dir", "validation"):
+        folder = getattr(args, option)
+        if folder is not None:
+            name = f"--{option.replace('_', '-')}"
+            check_input(folder, name, "folder")
+            inputs.append((name, folder))
+            for h5 in sorted(folder.glob("*.h5")):
+                check_input(h5, "HDF5 file", "h5")
+    if args.out is not None:
+        check_output_file(args.out, "--out", overwrite=args.overwrite, inputs=tuple(inputs))
     try:
-        for option in ("dataset", "fits", "model_dir", "validation"):
-            folder = getattr(args, option)
-            if folder is not None and not folder.is_dir():
-                raise ValueError(f"--{option.replace('_', '-')} {folder}: no such folder")
-        if args.out is not None and args.out.exists() and not args.overwrite:
-            raise ValueError(f"{args.out} exists; pass --overwrite to replace it")
         report = collect(args)
     except (ValueError, OSError) as exc:
         return error_status(exc)
@@ -270,6 +277,7 @@ def main(argv: list[str]) -> int:
     if args.out is None:
         sys.stdout.write(text)
     else:
-        args.out.write_text(text)
+        with atomic_file(args.out, "w") as f:
+            f.write(text)
         print(f"wrote {portable(args.out)}")
     return 0

@@ -19,8 +19,18 @@ from pathlib import Path
 
 import numpy as np
 
+from exporters.cli_io import OneLineParser
 from exporters.constants import R_EDGES_CM, WAVELENGTHS_NM
-from training.commands.options import error_status
+from training.commands.options import (
+    atomic_file,
+    check_biophysical,
+    check_output_file,
+    command,
+    count,
+    error_status,
+    finite_float,
+    require,
+)
 from training.sim.resample import cdf_resample_profile
 from training.sim.tissue import skin_medium
 from training.sim.transport import PROFILE_ESTIMATORS, simulate
@@ -36,12 +46,12 @@ def reweighted(tone: np.ndarray, photons: int, seed: int, device: str, compile_)
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="python -m training simulate",
-                                description="Monte Carlo of one skin tone at all 376 wavelengths -> .npz.")
-    p.add_argument("--tone", nargs=5, type=float, required=True,
+    p = OneLineParser(prog="python -m training simulate",
+                      description="Monte Carlo of one skin tone at all 376 wavelengths -> .npz.")
+    p.add_argument("--tone", nargs=5, type=finite_float, required=True,
                    metavar=("F_MEL", "F_BLOOD", "T_EPI", "SO2", "B_MEL"), help="biophysical vector (t_epi in cm)")
-    p.add_argument("--photons", type=int, required=True, help="photons per wavelength")
-    p.add_argument("--out", type=Path, required=True)
+    p.add_argument("--photons", type=count, required=True, help="photons per wavelength (>= 2)")
+    p.add_argument("--out", type=Path, required=True, help="output file (.npz; replaced if it exists)")
     p.add_argument("--method", choices=("direct", "reweighted"), default="direct")
     p.add_argument("--profile", choices=PROFILE_ESTIMATORS, default=PROFILE_ESTIMATORS[0],
                    help="radial profile estimator: the plain histogram or CDF-based conservative resampling of "
@@ -53,14 +63,16 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+@command("simulate")
 def main(argv: list[str]) -> int:
     """Run the command; returns the exit status (2 for bad input)."""
     args = build_parser().parse_args(argv)
+    check_biophysical(args.tone, "--tone")
+    require(args.photons >= 2, "--photons must be >= 2 (the standard errors need two photons)")
+    check_output_file(args.out, "--out", suffixes=(".npz",))
     compile_ = {"auto": "auto", "on": True, "off": False}[args.compile]
     try:
         tone = np.asarray(args.tone, dtype=np.float64)
-        if args.photons < 2:
-            raise ValueError("--photons must be >= 2")
         if args.method == "direct":
             r = simulate(skin_medium(tone), args.photons, seed=args.seed, device=args.device,
                          progress=not args.no_progress, compile=compile_)
@@ -73,7 +85,7 @@ def main(argv: list[str]) -> int:
                                                   args.photons)
     except ValueError as exc:
         return error_status(exc)
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    np.savez(args.out, wavelength_nm=np.array(WAVELENGTHS_NM), r_edges_cm=np.array(R_EDGES_CM), tone=tone,
-             photons=np.int64(args.photons), method=args.method, profile_estimator=args.profile, **res)
+    with atomic_file(args.out) as f:
+        np.savez(f, wavelength_nm=np.array(WAVELENGTHS_NM), r_edges_cm=np.array(R_EDGES_CM), tone=tone,
+                 photons=np.int64(args.photons), method=args.method, profile_estimator=args.profile, **res)
     return 0

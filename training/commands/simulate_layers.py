@@ -14,23 +14,25 @@ import math
 
 import torch
 
-from training.commands.options import error_status
+from exporters.cli_io import OneLineParser
+from training.commands.options import command, count, error_status, in_range
 from training.sim.medium import LayeredMedium
 from training.sim.transport import simulate
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(
+    p = OneLineParser(
         prog="python -m training simulate-layers",
         description="Monte Carlo diffuse reflectance / transmittance of a layered medium (top layer first).",
     )
     p.add_argument("--layer", nargs=4, action="append", required=True,
                    metavar=("MUA", "MUS", "G", "THICKNESS"),
                    help="one layer: mua, mus (cm^-1), HG g, thickness (cm; the last may be 'inf')")
-    p.add_argument("--n-medium", type=float, default=1.4, help="refractive index of all layers (air above)")
-    p.add_argument("--n-below", type=float, default=1.0, help="index below a finite stack (default air)")
+    p.add_argument("--n-medium", type=in_range(1.0, 3.0), default=1.4,
+                   help="refractive index of all layers (air above), in [1, 3]")
+    p.add_argument("--n-below", type=in_range(1.0, 3.0), default=1.0, help="index below a finite stack (default air)")
     p.add_argument("--illumination", choices=("normal", "diffuse"), default="diffuse")
-    p.add_argument("--photons", type=int, required=True)
+    p.add_argument("--photons", type=count, required=True)
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--device", choices=("cpu", "cuda"), default="cpu")
     p.add_argument("--compile", choices=("auto", "on", "off"), default="auto",
@@ -50,12 +52,17 @@ def _medium(args: argparse.Namespace) -> LayeredMedium:
     t = torch.tensor(rows, dtype=torch.float64)
     if torch.isnan(t).any() or torch.isinf(t[:, :3]).any():
         raise ValueError("--layer MUA MUS G must be finite numbers")
+    if (t[:, :2] < 0).any() or (t[:, 2].abs() >= 1).any() or (t[:, 3] <= 0).any():
+        raise ValueError("--layer needs MUA >= 0, MUS >= 0, -1 < G < 1 and THICKNESS > 0 (cm)")
+    if torch.isinf(t[:-1, 3]).any():
+        raise ValueError("--layer: only the last layer may be infinitely thick")
     return LayeredMedium(
         mua=t[:, 0:1], mus=t[:, 1:2], g=t[:, 2:3], thickness=t[:, 3],
         n_medium=args.n_medium, n_below=args.n_below,
     )
 
 
+@command("simulate-layers")
 def main(argv: list[str]) -> int:
     """Run the command; returns the exit status (2 for bad input)."""
     args = build_parser().parse_args(argv)

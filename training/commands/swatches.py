@@ -7,7 +7,9 @@ from pathlib import Path
 
 import numpy as np
 
+from exporters.cli_io import OneLineParser
 from exporters.colorimetry import spectrum_to_srgb
+from training.commands.options import atomic_file, check_output_file, command, count
 from training.skin.tones import ToneSet, load_tones
 
 
@@ -39,25 +41,28 @@ def plot_swatches(tone_set: ToneSet, srgb: np.ndarray, out: Path, title: str) ->
             ax.set_title(f"{tone_set.names[i]}\nmel {f_mel:.3g}\nblood {f_blood:.3g}", fontsize=7)
     fig.suptitle(title, fontsize=9)
     fig.tight_layout()
-    out.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(out, dpi=120)
+    with atomic_file(out) as f:
+        fig.savefig(f, dpi=120, format=out.suffix.lstrip(".").lower())
     plt.close(fig)
 
 
 def build_parser() -> argparse.ArgumentParser:
     """The command's argument parser (the CLI reference of the documentation reads it too)."""
-    parser = argparse.ArgumentParser(prog="python -m training swatches", description=__doc__.splitlines()[0])
+    parser = OneLineParser(prog="python -m training swatches", description=__doc__.splitlines()[0])
     parser.add_argument("--out", type=Path, required=True, help="PNG file to write")
-    parser.add_argument("--photons", type=int, default=2000, help="photons per wavelength per tone")
+    parser.add_argument("--photons", type=count, default=2000, help="photons per wavelength per tone")
     parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--threads", type=int, default=1,
+    parser.add_argument("--threads", type=count, default=1,
                         help="torch CPU threads (1 is fastest for the walker on a busy 2-core machine)")
-    parser.add_argument("--device", default="cpu")
+    parser.add_argument("--device", choices=("cpu", "cuda"), default="cpu")
     return parser
 
 
+@command("swatches")
 def main(argv: list[str]) -> int:
-    args = build_parser().parse_args(argv)
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    check_output_file(args.out, "--out", suffixes=(".png",))
     import torch
 
     torch.set_num_threads(max(1, args.threads))

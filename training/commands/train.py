@@ -22,77 +22,108 @@ import argparse
 import sys
 from pathlib import Path
 
-from training.commands.options import error_status, triple
+from exporters.cli_io import OneLineParser
+from training.commands.options import (
+    check_input,
+    check_output_folder,
+    command,
+    count,
+    error_status,
+    fraction,
+    in_range,
+    non_negative_float,
+    non_negative_int,
+    output_lock,
+    positive_float,
+    require,
+    triple,
+)
 from training.model.config import SIZES, WEIGHT_SMOOTHING_NM, ModelConfig
 from training.paths import portable_command
 from training.train.run import TrainConfig, train
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="python -m training train", description=__doc__.splitlines()[0],
-                                formatter_class=argparse.RawDescriptionHelpFormatter, epilog=__doc__)
+    p = OneLineParser(prog="python -m training train", description=__doc__.splitlines()[0],
+                      formatter_class=argparse.RawDescriptionHelpFormatter, epilog=__doc__)
     p.add_argument("--dataset", type=Path, required=True)
     p.add_argument("--fits", type=Path, default=None)
     p.add_argument("--lut", type=Path, required=True)
     p.add_argument("--out", type=Path, required=True, help="run folder (created; resumed if it exists)")
     p.add_argument("--stage", choices=("1", "2", "3", "all"), default="all")
     d = TrainConfig()
-    p.add_argument("--epochs", type=lambda s: triple(s, int), default=d.epochs, help="E or E1,E2,E3")
-    p.add_argument("--batch", type=lambda s: triple(s, int), default=d.batch, help="B or B1,B2,B3")
-    p.add_argument("--lr", type=lambda s: triple(s, float), default=d.lr, help="L or L1,L2,L3")
-    p.add_argument("--synthetic", type=int, default=d.synthetic, help="stage 2: albedos rendered by Dec_R")
-    p.add_argument("--exposure-jitter", type=float, default=d.exposure_jitter,
+    p.add_argument("--epochs", type=lambda s: triple(s, count), default=d.epochs, help="E or E1,E2,E3")
+    p.add_argument("--batch", type=lambda s: triple(s, count), default=d.batch, help="B or B1,B2,B3")
+    p.add_argument("--lr", type=lambda s: triple(s, positive_float), default=d.lr, help="L or L1,L2,L3")
+    p.add_argument("--synthetic", type=non_negative_int, default=d.synthetic,
+                   help="stage 2: albedos rendered by Dec_R")
+    p.add_argument("--exposure-jitter", type=non_negative_float, default=d.exposure_jitter,
                    help="stage 2: synthetic albedos scaled by exp(U(-j, j))")
-    p.add_argument("--exposure-prior", type=float, default=d.exposure_prior,
+    p.add_argument("--exposure-prior", type=non_negative_float, default=d.exposure_prior,
                    help="stage 2: weight of mean |ln exposure| in the colour loss (0: the paper's loss)")
-    p.add_argument("--shape-weight", type=float, default=d.shape_weight,
+    p.add_argument("--shape-weight", type=non_negative_float, default=d.shape_weight,
                    help="stage 3: weight of the rendered profile-shape loss L_shape (0: the paper's loss)")
     p.add_argument("--targets", choices=("dense", "fitted"), default=d.targets,
                    help="stage 3: dense = fits matched along wavelength, L_param and L_shape at all 376 wavelengths "
                         "(default); fitted = sorted by sigma_t, at the fitted wavelengths only")
     p.add_argument("--uniform-param", action="store_true",
                    help="stage 3: L_param without weighting each component's alpha, g, sigma_t by its weight")
-    p.add_argument("--encoder-share", type=float, default=d.encoder_share,
+    p.add_argument("--encoder-share", type=fraction, default=d.encoder_share,
                    help="stage 3 (ours): share of each batch whose Dec_T input is the frozen encoder's tone for the "
                         "tone's RGB albedo, as at inversion time, instead of the true tone (0 = the paper)")
     p.add_argument("--refl-loss", choices=("absolute", "log"), default=d.refl_loss,
                    help="stage 3: L_refl as the paper's mean |R_hat - R_MC| (absolute) or ours on log reflectance "
                         "(log: a dark tone's colour weighs as much as a light one's)")
-    p.add_argument("--smooth-weight", type=float, default=d.smooth_weight,
+    p.add_argument("--smooth-weight", type=non_negative_float, default=d.smooth_weight,
                    help="stage 3: weight of L_smooth, the mean |change| of Dec_T's normalised outputs per 2 nm step "
                         "(the paper's lambda_smooth 0.5)")
-    p.add_argument("--balance", type=float, default=d.balance,
+    p.add_argument("--balance", type=fraction, default=d.balance,
                    help="stage 3 (ours): share of the tone draws by inverse local density in the parameter box, so "
                         "that its sparse corners are learnt more often (0: every fitted tone once per epoch; "
                         "training/train/balance.py)")
     a = p.add_argument_group("ablations of the paper's §5 (python -m training ablations; defaults = the paper)")
-    a.add_argument("--lambda-r", type=float, default=d.lambda_r, help="stage 3: weight of L_refl (paper 15)")
+    a.add_argument("--lambda-r", type=non_negative_float, default=d.lambda_r,
+                   help="stage 3: weight of L_refl (paper 15)")
     a.add_argument("--no-slab-factor", action="store_true", help="stage 3: L_refl without the slab-depth factor")
     a.add_argument("--unfreeze", action="store_true", help="stages 2-3: Dec_R trains along (paper: frozen)")
-    a.add_argument("--data-every", type=int, default=d.data_every,
+    a.add_argument("--data-every", type=count, default=d.data_every,
                    help="stages 2-3: learn from every n-th training tone only (20: the paper's 20x less data)")
-    p.add_argument("--k", type=int, default=3, help="mixture components (fits group K{k})")
+    p.add_argument("--k", type=in_range(1, 3, integer=True), default=3, help="mixture components (fits group K{k})")
     p.add_argument("--size", choices=sorted(SIZES), default="paper")
-    p.add_argument("--enc-hidden", type=int, default=None,
+    p.add_argument("--enc-hidden", type=count, default=None,
                    help="Enc's hidden width, overriding the size's (paper and BioSkin: 70)")
-    p.add_argument("--weight-smoothing-nm", type=float, default=WEIGHT_SMOOTHING_NM,
+    p.add_argument("--weight-smoothing-nm", type=non_negative_float, default=WEIGHT_SMOOTHING_NM,
                    help="standard deviation (nm) of the fixed Gaussian low-pass of Dec_T's mixture weights along "
                         "wavelength (0: none, the paper's decoder); it bounds a weight's change per 2 nm step by "
                         "0.133 at 6 nm")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--device", choices=("cpu", "cuda"), default="cpu")
-    p.add_argument("--checkpoint-interval", type=float, default=0.0,
+    p.add_argument("--checkpoint-interval", type=non_negative_float, default=0.0,
                    help="seconds between checkpoints (0: after every epoch; the last epoch is always saved)")
-    p.add_argument("--eval-every", type=int, default=1,
+    p.add_argument("--eval-every", type=count, default=1,
                    help="validation metrics after every n-th epoch and the last (monitoring only; stage 3's "
                         "validation on the 1,000 laptop tones costs several times a training epoch)")
-    p.add_argument("--threads", type=int, default=0, help="torch CPU threads (0: torch's default)")
+    p.add_argument("--threads", type=non_negative_int, default=0, help="torch CPU threads (0: torch's default)")
     p.add_argument("--no-progress", action="store_true")
     return p
 
 
+@command("train")
 def main(argv: list[str]) -> int:
     args = build_parser().parse_args(argv)
+    want = (1, 2, 3) if args.stage == "all" else (int(args.stage),)
+    require(3 not in want or args.fits is not None,
+            "stage 3 needs --fits DIR (train_fits.h5 of `python -m training fit --dataset`)")
+    check_input(args.dataset, "--dataset", "folder")
+    check_input(args.lut, "--lut", "npz")
+    inputs = [("--dataset", args.dataset), ("--lut", args.lut)]
+    if args.fits is not None:
+        check_input(args.fits, "--fits", "folder")
+        inputs.append(("--fits", args.fits))
+    for folder in (args.dataset, args.fits):
+        for path in sorted(folder.glob("*.h5")) if folder is not None else ():
+            check_input(path, "HDF5 file", "h5")
+    check_output_folder(args.out, "--out", inputs=tuple(inputs))
     import torch
 
     if args.threads > 0:
@@ -114,10 +145,12 @@ def main(argv: list[str]) -> int:
         for path in (args.dataset, args.lut) + ((args.fits,) if args.fits else ()):
             if not path.exists():
                 raise ValueError(f"no such file or folder: {path}")
-        record = train(args.out, args.dataset, args.fits, args.lut, want=want, mcfg=mcfg, tcfg=tcfg,
-                       device=args.device, progress=not args.no_progress,
-                       checkpoint_interval_s=args.checkpoint_interval, command=command,
-                       eval_every=args.eval_every)
+        args.out.mkdir(parents=True, exist_ok=True)
+        with output_lock(args.out, "--out"):
+            record = train(args.out, args.dataset, args.fits, args.lut, want=want, mcfg=mcfg, tcfg=tcfg,
+                           device=args.device, progress=not args.no_progress,
+                           checkpoint_interval_s=args.checkpoint_interval, command=command,
+                           eval_every=args.eval_every)
     except ValueError as exc:
         return error_status(exc)
     for stage, row in record.get("losses", {}).items():

@@ -23,8 +23,18 @@ import os
 import sys
 from pathlib import Path
 
+from exporters.cli_io import OneLineParser
 from training.cluster import engine
-from training.commands.options import error_status
+from training.commands.options import (
+    check_input,
+    check_output_folder,
+    command,
+    count,
+    error_status,
+    non_negative_int,
+    output_lock,
+    positive_float,
+)
 from training.paths import SHIPPED_MODEL_DIR, portable_command
 from training.validate import mitsuba_scene as em
 
@@ -32,7 +42,7 @@ DEFAULT_MODEL_DIR = SHIPPED_MODEL_DIR
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="python -m training validate", description="Reproduce the paper's validation.")
+    p = OneLineParser(prog="python -m training validate", description="Reproduce the paper's validation.")
     p.add_argument("--out", type=Path, help="output folder (tables.md, tables.json, fig_*.png, cache/)")
     p.add_argument("--quick", action="store_true",
                    help="smoke test: 4 tones, every 20 nm, few photons, few fitter iterations (a test runs it)")
@@ -42,25 +52,25 @@ def build_parser() -> argparse.ArgumentParser:
                    help="fits folder of `python -m training fit --dataset` (Table 3: validation_fits.h5)")
     p.add_argument("--model-dir", type=Path, default=DEFAULT_MODEL_DIR,
                    help="folder with skin_inversion.onnx, skin_decoder.onnx and the card skin_inversion.json")
-    p.add_argument("--photons", type=int, default=None,
+    p.add_argument("--photons", type=non_negative_int, default=None,
                    help="Monte Carlo render photons per component and wavelength, the check of the tables' renders "
                         "(default 2000; quick 150; 0 skips them)")
-    p.add_argument("--gt-photons", type=int, default=None,
+    p.add_argument("--gt-photons", type=count, default=None,
                    help="ground-truth photons per wavelength (default 500000, the paper's; quick 400)")
     p.add_argument("--renderer", choices=("lut", "mc"), default="lut",
                    help="what renders the gate's slabs: the lookup tables (default, noise-free) or our Monte Carlo")
-    p.add_argument("--wavelength-step-nm", type=int, default=None,
+    p.add_argument("--wavelength-step-nm", type=count, default=None,
                    help="validation wavelengths every N nm, a multiple of 2 (default 4; quick 20)")
     p.add_argument("--tones", default=None, help="comma-separated tone names of tones.csv (default: all 20)")
     p.add_argument("--fit-method", choices=("lm", "paper"), default="lm", help="the fitter's method")
-    p.add_argument("--anchor-every", type=int, default=4,
+    p.add_argument("--anchor-every", type=non_negative_int, default=4,
                    help="fitter anchors (full schedule) every n-th wavelength, warm starts between (0 = all full)")
-    p.add_argument("--baseline-scale", type=float, default=None,
+    p.add_argument("--baseline-scale", type=positive_float, default=None,
                    help="Subsurface Scale (m) of the albedo-inversion baselines (default: calibrated on R05)")
-    p.add_argument("--nn-profile-tones", type=int, default=None,
+    p.add_argument("--nn-profile-tones", type=count, default=None,
                    help="with --dataset: validation tones for the network's profile row (default all)")
     p.add_argument("--update-card", action="store_true", help="write the headline numbers into the model card")
-    p.add_argument("--threads", type=int, default=1, help="torch / onnxruntime threads")
+    p.add_argument("--threads", type=count, default=1, help="torch / onnxruntime threads")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--device", choices=("cpu",), default="cpu", help="the gate runs on the CPU")
     p.add_argument("--overwrite", action="store_true", help="replace existing outputs in --out")
@@ -68,8 +78,8 @@ def build_parser() -> argparse.ArgumentParser:
     engine.add_option(p)
     m = p.add_argument_group("--mitsuba strips")
     m.add_argument("--mitsuba", action="store_true", help="render the teaser-like Mitsuba 3 strips (PNG) into --out")
-    m.add_argument("--size", type=int, default=64, help="pixels per tone (square)")
-    m.add_argument("--spp", type=int, default=48, help="samples per pixel per wavelength (split over components)")
+    m.add_argument("--size", type=count, default=64, help="pixels per tone (square)")
+    m.add_argument("--spp", type=count, default=48, help="samples per pixel per wavelength (split over components)")
     m.add_argument("--variant", default="auto",
                    help="Mitsuba variant (auto: llvm_ad_rgb if libLLVM 19 is installed, else scalar_rgb)")
     m.add_argument("--decoder", type=Path, default=em.DEFAULT_DECODER, help="skin_decoder.onnx (--mitsuba)")
@@ -157,6 +167,25 @@ def _summary(record: dict) -> str:
     return "\n".join(lines)
 
 
+def _check_paths(args: argparse.Namespace) -> None:
+    """InputError for missing, truncated or disguised inputs and an --out that cannot be the output folder."""
+    inputs = []
+    lut = args.lut or (Path(os.environ["SKIN_SSS_LUT"]) if os.environ.get("SKIN_SSS_LUT") else None)
+    if lut is not None:
+        check_input(lut, "--lut" if args.lut else "$SKIN_SSS_LUT", "npz")
+        inputs.append(("--lut", lut))
+    for name in ("dataset", "fits", "model_dir"):
+        folder = getattr(args, name)
+        if folder is not None:
+            option = f"--{name.replace('_', '-')}"
+            check_input(folder, option, "folder")
+            inputs.append((option, folder))
+            for path in sorted(folder.glob("*.h5")) + sorted(folder.glob("*.onnx")):
+                check_input(path, f"{option} file", "file")
+    check_output_folder(args.out, "--out", inputs=tuple(inputs))
+
+
+@command("validate")
 def main(argv: list[str]) -> int:
     """Run the command; exit 2 with a one-line error for bad input."""
     args = build_parser().parse_args(argv)
@@ -167,12 +196,17 @@ def main(argv: list[str]) -> int:
         if args.scheduler is not None:
             print("error: --scheduler runs the gate on a cluster; the --mitsuba strips render here.", file=sys.stderr)
             return 2
+        check_input(args.decoder, "--decoder", "onnx")
+        check_output_folder(args.out, "--out", inputs=(("--decoder", args.decoder),))
         return _mitsuba(args)
+    _check_paths(args)
     from training.validate import run as R
 
     try:
         opts = _options(args)
-        record = R.run(opts).to_json()
+        args.out.mkdir(parents=True, exist_ok=True)
+        with output_lock(args.out, "--out"):
+            record = R.run(opts)
         if args.update_card:
             from training.export.card import update_validation
             from training.validate.record import headline

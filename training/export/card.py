@@ -16,6 +16,7 @@ from pathlib import Path
 
 import h5py
 
+from exporters.cli_io import atomic_file
 from exporters.constants import WAVELENGTH_STEP_NM, WAVELENGTHS_NM
 from exporters.maps import sha256_file
 from training.export.graphs import output_shapes
@@ -103,7 +104,9 @@ def build_card(run: dict, graphs: dict[str, bytes], weights: str, parity: dict, 
 
 
 def write_card(path: Path, card: dict) -> None:
-    path.write_text(json.dumps(portable_strings(card), indent=2) + "\n")
+    """Write the card as JSON (atomically: a temporary file in the same folder, then renamed)."""
+    with atomic_file(path, "w") as f:
+        f.write(json.dumps(portable_strings(card), indent=2) + "\n")
 
 
 def update_validation(path: Path, validation: dict) -> None:

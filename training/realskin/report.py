@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
+from exporters.cli_io import atomic_file
 from exporters.colorimetry import spectrum_to_lab
 from exporters.constants import PARAM_NAMES
 from training.realskin.fit import BANDS_NM, FIT_BAND_NM, SubjectFit, at_edge
@@ -161,12 +162,14 @@ def figure(path: Path, wavelength_nm: np.ndarray, measured: np.ndarray, names, l
     axes[0].set_ylabel("reflectance (specular included)")
     axes[0].legend(fontsize=8, loc="upper left")
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    with atomic_file(path) as f:
+        fig.savefig(f, dpi=110, format=path.suffix.lstrip(".") or "png")
     plt.close(fig)
 
 
 def write(out: Path, report: dict, md: str) -> None:
     """realskin.json and realskin.md in ``out``."""
     out.mkdir(parents=True, exist_ok=True)
-    (out / "realskin.json").write_text(json.dumps(report, indent=1) + "\n")
-    (out / "realskin.md").write_text(md)
+    for name, text in (("realskin.json", json.dumps(report, indent=1) + "\n"), ("realskin.md", md)):
+        with atomic_file(out / name, "w") as f:
+            f.write(text)

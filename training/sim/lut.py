@@ -37,6 +37,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from exporters.cli_io import InputError, atomic_file, check_input
 from exporters.constants import N_TISSUE, R_EDGES_MFP
 from training.sim.kernel import KIND_REFLECTED, KIND_TRUNCATED, fmix32_int
 from training.sim.medium import LayeredMedium
@@ -257,6 +258,7 @@ def build_lut(
     mpath = parts / "manifest.json"
     if mpath.exists() and json.loads(mpath.read_text()) != manifest:
         raise ValueError(f"{parts} holds columns of a different LUT build; remove it or change --out")
+    _check_parts(parts)
     mpath.write_text(json.dumps(manifest))
     t0 = time.perf_counter()
     if job is None:
@@ -273,13 +275,22 @@ def build_lut(
         return None
     node_cols = [dict(np.load(parts / f"g_{j:04d}.npz")) for j in range(n_nodes)]
     table = _columns_at(node_cols, nodes, gs, R_EDGES_MFP)
-    tmp = out.with_name(out.name + ".tmp.npz")
-    np.savez(tmp, albedo=albedo, g=gs, r_edges_mfp=np.array(R_EDGES_MFP), **table,
-             photons=np.int64(photons), n_medium=np.float64(N_TISSUE), g_nodes=nodes)
-    tmp.replace(out)
+    with atomic_file(out) as f:
+        np.savez(f, albedo=albedo, g=gs, r_edges_mfp=np.array(R_EDGES_MFP), **table,
+                 photons=np.int64(photons), n_medium=np.float64(N_TISSUE), g_nodes=nodes)
     log(f"LUT {albedo_n}x{g_n} ({n_nodes} simulated g nodes), {photons} photons per node -> {out} "
         f"({time.perf_counter() - t0:.1f} s)")
     return out
+
+
+def _check_parts(parts: Path) -> None:
+    """ValueError naming the first node file in ``parts`` that is not a whole .npz (a copy cut short, a full
+    disk), so that a resume does not stop halfway with a zip error."""
+    for path in sorted(parts.glob("g_*.npz")):
+        try:
+            check_input(path, "LUT part file", "npz")
+        except InputError as exc:
+            raise ValueError(f"{exc}; delete it and run the same command again to recompute it") from None
 
 
 def _batches(n_nodes: int, shard: tuple[int, int]) -> list[list[int]]:
@@ -300,9 +311,8 @@ def walk_batch(parts: Path, nodes: np.ndarray, batch: list[int], albedo: np.ndar
     cols = simulate_columns(nodes[batch], albedo, photons, seed=column_seed(seed, batch[0]), device=device,
                             max_steps=max_steps, compile=compile, progress=progress)
     for j, col in zip(batch, cols, strict=True):
-        tmp = parts / f"g_{j:04d}.tmp.npz"
-        np.savez(tmp, **col)
-        tmp.replace(parts / f"g_{j:04d}.npz")
+        with atomic_file(parts / f"g_{j:04d}.npz") as f:
+            np.savez(f, **col)
     return [str(parts / f"g_{j:04d}.npz") for j in batch]
 
 

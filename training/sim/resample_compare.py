@@ -33,6 +33,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from exporters.cli_io import NOTHING_KEPT, OneLineParser, check_output_folder, count, guarded
 from exporters.constants import R_EDGES_CM, WAVELENGTHS_NM
 from training.sim.medium import LayeredMedium
 from training.sim.resample import MAX_SPAN, MIN_COUNT, cdf_resample, histogram_profile, kde_profile
@@ -236,22 +237,24 @@ def run(out: Path, photons: int, repeats: int, seed: int, quick: bool, log=print
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="python -m training resampling",
-                                description="Radial profile estimators (histogram, uniform bins, KDE, CDF "
-                                "resampling) against a high-photon reference at equal photons.")
+    p = OneLineParser(prog="python -m training resampling",
+                      description="Radial profile estimators (histogram, uniform bins, KDE, CDF "
+                      "resampling) against a high-photon reference at equal photons.")
     p.add_argument("--out", type=Path, required=True, help="folder for resampling.json/.md, fig_resampling.png")
-    p.add_argument("--photons", type=int, default=None, help="photons per run (default 100000; --quick 10000)")
-    p.add_argument("--repeats", type=int, default=None, help="independent runs per case (default 4; --quick 3)")
+    p.add_argument("--photons", type=count, default=None, help="photons per run (default 100000; --quick 10000)")
+    p.add_argument("--repeats", type=count, default=None, help="independent runs per case (default 4; --quick 3)")
     p.add_argument("--quick", action="store_true", help="one medium, one skin wavelength, few photons (seconds)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--device", choices=("cpu",), default="cpu", help="the comparison runs on the CPU")
-    p.add_argument("--threads", type=int, default=1)
+    p.add_argument("--threads", type=count, default=1)
     return p
 
 
+@guarded("python -m training resampling", NOTHING_KEPT)
 def main(argv: list[str]) -> int:
     """Run the command; returns the exit status (2 for bad input)."""
     args = build_parser().parse_args(argv)
+    check_output_folder(args.out, "--out")
     photons = args.photons or (10_000 if args.quick else 100_000)
     repeats = args.repeats or (3 if args.quick else 4)
     if photons < 10 or repeats < 2:

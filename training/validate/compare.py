@@ -28,6 +28,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from exporters.cli_io import NOTHING_KEPT, OneLineParser, check_biophysical, check_input, count, finite_float, guarded
 from exporters.constants import WAVELENGTHS_NM
 from training.sim.medium import LayeredMedium
 from training.sim.tissue import skin_medium
@@ -94,29 +95,32 @@ def compare(tone, wavelengths_nm, *, spp: int, photons: int, gt_photons: int | N
 
 def _wavelengths(text: str) -> list[float]:
     try:
-        return [float(x) for x in text.split(",") if x.strip()]
+        values = [float(x) for x in text.split(",") if x.strip()]
     except ValueError as exc:
         raise argparse.ArgumentTypeError(f"wavelengths must be comma-separated numbers in nm, got {text!r}") from exc
+    if not values or not all(250.0 <= v <= 1000.0 for v in values):
+        raise argparse.ArgumentTypeError(f"wavelengths must lie in 250-1000 nm, got {text!r}")
+    return values
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="python -m training mitsuba",
-                                description="Mitsuba 3 reflectance of the network's mixture vs ours vs ground truth.")
-    p.add_argument("--tone", nargs=5, type=float, required=True,
+    p = OneLineParser(prog="python -m training mitsuba",
+                      description="Mitsuba 3 reflectance of the network's mixture vs ours vs ground truth.")
+    p.add_argument("--tone", nargs=5, type=finite_float, required=True,
                    metavar=("F_MEL", "F_BLOOD", "T_EPI", "SO2", "B_MEL"), help="biophysical vector (t_epi in cm)")
     p.add_argument("--wavelengths", type=_wavelengths, default=[300.0, 450.0, 550.0, 650.0, 950.0],
                    help="comma-separated, nm, within 250-1000 (default 300,450,550,650,950)")
-    p.add_argument("--spp", type=int, default=65536, help="Mitsuba paths per component and wavelength")
-    p.add_argument("--batches", type=int, default=8, help="independent Mitsuba renders for the standard error")
-    p.add_argument("--photons", type=int, default=100_000, help="our photons per component and wavelength")
-    p.add_argument("--gt-photons", type=int, default=None,
+    p.add_argument("--spp", type=count, default=65536, help="Mitsuba paths per component and wavelength")
+    p.add_argument("--batches", type=count, default=8, help="independent Mitsuba renders for the standard error")
+    p.add_argument("--photons", type=count, default=100_000, help="our photons per component and wavelength")
+    p.add_argument("--gt-photons", type=count, default=None,
                    help="ground-truth photons per wavelength (default --photons)")
     p.add_argument("--variant", default="auto",
                    help="Mitsuba variant (auto: llvm_ad_rgb if libLLVM 19 is installed, else scalar_rgb)")
     p.add_argument("--decoder", type=Path, default=em.DEFAULT_DECODER, help="skin_decoder.onnx")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--device", choices=("cpu", "cuda"), default="cpu")
-    p.add_argument("--threads", type=int, default=1, help="torch threads (1 is fastest on a busy 2-core machine)")
+    p.add_argument("--threads", type=count, default=1, help="torch threads (1 is fastest on a busy 2-core machine)")
     p.add_argument("--json", action="store_true", help="print the JSON record (otherwise a table)")
     p.add_argument("--no-progress", action="store_true")
     return p
@@ -134,9 +138,12 @@ def _table(rec: dict) -> str:
     return "\n".join(lines)
 
 
+@guarded("python -m training mitsuba", NOTHING_KEPT)
 def main(argv: list[str]) -> int:
     """Run the command; exit 2 with a one-line error for bad input or a missing Mitsuba."""
     args = build_parser().parse_args(argv)
+    check_biophysical(args.tone, "--tone")
+    check_input(args.decoder, "--decoder", "onnx")
     try:
         for name in ("spp", "photons", "batches"):
             if getattr(args, name) < 2:

@@ -1,0 +1,107 @@
+"""``bake.py --memory-mb`` bounds a bake's memory whatever the texture (exporters.bake.job, .evaluate,
+exporters.image_input): peak RSS measured in subprocesses (``RUSAGE_CHILDREN``), and images whose header claims
+more texels than the budget decodes refused before decoding."""
+
+from __future__ import annotations
+
+import struct
+import subprocess
+import sys
+import zlib
+from pathlib import Path
+
+import numpy as np
+import OpenImageIO as oiio
+import pytest
+
+from exporters import texel_table
+from exporters.colorimetry import srgb_decode
+
+ROOT = Path(__file__).resolve().parents[1]
+BAKE = ROOT / "blender_addon" / "bake.py"
+TABLE = ROOT / "blender_addon" / "models" / "skin_inversion_table.npz"
+BUDGET_MB = 160
+OUTSIDE_COLOURS = 2000
+
+
+def write_png(path: Path, codes: np.ndarray) -> Path:
+    h, w, c = codes.shape
+    out = oiio.ImageOutput.create(str(path))
+    assert out.open(str(path), oiio.ImageSpec(w, h, c, "uint8"))
+    assert out.write_image(np.ascontiguousarray(codes))
+    out.close()
+    return path
+
+
+def random_texture(size: int, outside: int, seed: int = 0) -> np.ndarray:
+    """(size, size, 3) uint8 sRGB codes drawn at random: ``outside`` distinct colours outside the fast-path table
+    (evaluated exactly, by the model; distinct with near certainty) and the rest drawn from the colours
+    inside it (about 300,000 distinct colours)."""
+    rng = np.random.default_rng(seed)
+    codes = rng.integers(0, 256, (3 * size * size, 3), dtype=np.uint8)
+    inside = texel_table.load(TABLE).locate(srgb_decode(codes / 255.0).astype(np.float32))[0]
+    draws = rng.integers(0, inside.sum(), size * size - outside)
+    picked = np.concatenate([codes[~inside][:outside], codes[inside][draws]])
+    rng.shuffle(picked)
+    return picked.reshape(size, size, 3)
+
+
+def peak_rss_mb(*args: str) -> tuple[float, subprocess.CompletedProcess]:
+    """Peak resident memory (MiB) of ``bake.py args`` run alone in a child process (``ru_maxrss`` of a child
+    that runs it and reports its own children's peak, so earlier children of this process do not count)."""
+    probe = ("import resource, subprocess, sys; p = subprocess.run(sys.argv[1:]); "
+             "print(resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss); sys.exit(p.returncode)")
+    proc = subprocess.run([sys.executable, "-c", probe, sys.executable, str(BAKE), *args], capture_output=True,
+                          text=True, timeout=600, cwd=str(ROOT))
+    return int(proc.stdout.strip().splitlines()[-1]) / 1024.0, proc
+
+
+@pytest.fixture(scope="module")
+def textures(tmp_path_factory) -> dict[str, Path]:
+    folder = tmp_path_factory.mktemp("textures")
+    rng = np.random.default_rng(1)
+    return {"big": write_png(folder / "random1k.png", random_texture(1024, OUTSIDE_COLOURS)),
+            "tiny": write_png(folder / "tiny.png", rng.integers(0, 256, (8, 8, 3), dtype=np.uint8))}
+
+
+def test_peak_memory_of_a_random_colour_texture_stays_within_the_budget(textures, tmp_path):
+    """1024^2 texels of random colours (~300,000 distinct, 2,000 outside the table): the peak RSS above a bake of
+    8 x 8 texels with the same options (the libraries, the model session, the table) stays within --memory-mb."""
+    options = ("--memory-mb", str(BUDGET_MB), "--threads", "1", "--quiet")
+    base, proc = peak_rss_mb("--albedo", str(textures["tiny"]), "--out", str(tmp_path / "tiny"), *options)
+    assert proc.returncode == 0, proc.stderr
+    peak, proc = peak_rss_mb("--albedo", str(textures["big"]), "--out", str(tmp_path / "big"), *options)
+    assert proc.returncode == 0, proc.stderr
+    record = next((tmp_path / "big").glob("*_maps.json")).read_text()
+    assert '"texels_evaluated_exactly": 0' not in record and '"texels_from_table": 0' not in record
+    assert peak - base <= BUDGET_MB, f"peak {peak:.0f} MiB, fixed {base:.0f} MiB, budget {BUDGET_MB} MiB"
+
+
+def _png_header_only(path: Path, width: int, height: int) -> Path:
+    """A PNG whose header claims width x height RGB texels (its pixel data is a few bytes: never decoded here)."""
+    def chunk(kind: bytes, data: bytes) -> bytes:
+        return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data) & 0xFFFFFFFF)
+
+    header = struct.pack(">IIBBBBB", width, height, 8, 2, 0, 0, 0)
+    path.write_bytes(b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", header) + chunk(b"IDAT", zlib.compress(b"\0" * 64))
+                     + chunk(b"IEND", b""))
+    return path
+
+
+@pytest.mark.parametrize(("size", "budget"), [(65535, None), (1024, 64)])
+def test_an_image_larger_than_the_budget_is_refused_before_decoding(tmp_path, textures, size, budget):
+    image = _png_header_only(tmp_path / "huge.png", size, size) if budget is None else textures["big"]
+    args = ["--albedo", str(image), "--out", str(tmp_path / "maps")] + (["--memory-mb", str(budget)] if budget else [])
+    peak, proc = peak_rss_mb(*args)
+    assert proc.returncode == 2, proc.stderr
+    assert proc.stderr.count("\n") == 1 and "Traceback" not in proc.stderr
+    assert "--memory-mb" in proc.stderr and f"{size} x {size}" in proc.stderr
+    assert peak < 1024, f"{peak:.0f} MiB: the image was decoded"
+    assert not (tmp_path / "maps").exists()
+
+
+def test_a_small_image_bakes_under_a_small_budget(textures, tmp_path):
+    """The budget counts what an image touches: 8 x 8 texels decode in far less than the 8-bit colour bitmap."""
+    _, proc = peak_rss_mb("--albedo", str(textures["tiny"]), "--out", str(tmp_path / "maps"), "--memory-mb", "16",
+                          "--quiet")
+    assert proc.returncode == 0, proc.stderr
