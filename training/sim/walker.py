@@ -353,8 +353,8 @@ class Walker:
                            cfg.record_paths, out["kind"], out["w"], out["x"], out["y"], out["ncoll"],
                            out["absorbed"], out["path"], out["specular"], out["roulette"], out["steps"])
                 chn = ch.numpy()
-                spec += np.bincount(chn, weights=out["specular"], minlength=n_ch)
-                roul += np.bincount(chn, weights=out["roulette"], minlength=n_ch)
+                np.add.at(spec, chn, out["specular"])  # packet by packet: sums do not depend on the batch size
+                np.add.at(roul, chn, out["roulette"])
                 self.totals.packet_steps += int(out["steps"].sum())
                 self.totals.steps = max(self.totals.steps, int(out["steps"].max()))
                 rec = {"ch": ch, "pid": pid, **{k: torch.from_numpy(out[k]) for k in
