@@ -27,6 +27,7 @@ from pathlib import Path
 BENCH_MODULES = [
     "training.bench.foundation",
     "training.bench.sim",
+    "training.bench.walker",
     "training.bench.data",
     "training.bench.fit",
     "training.bench.train",

@@ -386,24 +386,24 @@ def resolve_engine(engine: str, device: torch.device) -> str:
 
 
 def default_threads() -> int:
-    """Threads of the numba engine: every CPU this process may run on (its affinity mask, e.g. ``taskset``),
-    at most NUMBA_NUM_THREADS (which an environment variable of that name lowers)."""
-    import os
-
+    """Threads of the numba engine when none are asked for: numba's current setting, which is every CPU this
+    process may run on (its affinity mask, e.g. ``taskset``) unless NUMBA_NUM_THREADS or
+    ``numba.set_num_threads`` lowered it."""
     import numba
 
-    cpus = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
-    return max(1, min(cpus, numba.config.NUMBA_NUM_THREADS))
+    return int(numba.get_num_threads())
 
 
 @contextmanager
 def compiled_threads(threads: int | None):
-    """Run numba parallel loops on ``threads`` threads (None: ``default_threads()``) inside the block."""
+    """Run numba parallel loops on ``threads`` threads (None: ``default_threads()``) inside the block, handing
+    blocks of packets to threads one at a time (walk lengths vary by orders of magnitude)."""
     import numba
 
     want = default_threads() if threads is None else int(threads)
     if not 1 <= want <= numba.config.NUMBA_NUM_THREADS:
-        raise ValueError(f"threads must be in 1..{numba.config.NUMBA_NUM_THREADS} (NUMBA_NUM_THREADS), got {want}")
+        raise ValueError(f"threads must be in 1..{numba.config.NUMBA_NUM_THREADS} (the CPUs this process may use, "
+                         f"or NUMBA_NUM_THREADS), got {want}")
     before = numba.get_num_threads()
     numba.set_num_threads(want)
     try:
