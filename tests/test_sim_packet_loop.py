@@ -1,5 +1,6 @@
-"""The compiled per-packet walk (numba engine): reproducible whatever the threads, the same physics as the
-vectorised torch step, and the engine / thread choices refused clearly when wrong.
+"""The compiled per-packet walk (numba engines): reproducible whatever the threads, the same physics as the
+vectorised torch step, the same records from its GPU path (in numba's CUDA simulator), and the engine / thread
+choices refused clearly when wrong.
 
 The physics against independent solvers (adding-doubling, van de Hulst, H-function tables) is tested in
 tests/test_sim_transport.py and tests/test_sim_lut.py, which run on the numba engine (the CPU default).
@@ -9,17 +10,23 @@ from __future__ import annotations
 
 import json
 import math
+import os
+import subprocess
+import sys
+from pathlib import Path
 
 import numba
 import numpy as np
 import pytest
 import torch
+from numba import cuda
 
 from training.commands.simulate_layers import main as cli_main
 from training.sim.medium import LayeredMedium
 from training.sim.transport import simulate, simulate_records
 from training.sim.walker import default_threads, resolve_engine
 
+ROOT = Path(__file__).resolve().parents[1]
 #: A finite two-layer stack with absorption, a semi-infinite case would hide the bottom boundary.
 STACK = LayeredMedium(
     mua=torch.tensor([[3.0, 0.2], [0.5, 0.05]]), mus=torch.tensor([[150.0, 40.0], [90.0, 60.0]]),
@@ -97,3 +104,28 @@ def test_cli_engines_and_threads(capsys: pytest.CaptureFixture[str]) -> None:
     assert abs(outs[0]["R_d"] - outs[2]["R_d"]) < 4 * math.hypot(outs[0]["R_d_stderr"], outs[2]["R_d_stderr"])
     assert cli_main(args + ["--threads", "0"]) == 2
     assert cli_main(args + ["--threads", str(MAX_THREADS + 1)]) == 2
+
+
+def test_the_gpu_path_walks_the_same_packets_in_cudas_simulator(tmp_path) -> None:
+    """engine "numba-cuda" (one CUDA thread per packet, the CPU kernel's own source) under numba's CUDA simulator
+    gives the compiled CPU engine's records bit for bit."""
+    out = tmp_path / "gpu.npz"
+    code = (
+        "import numpy as np, torch, warnings; warnings.simplefilter('ignore')\n"
+        "from tests.test_sim_packet_loop import STACK\n"
+        "from training.sim.transport import simulate_records\n"
+        "r = simulate_records(STACK, 40, seed=5, engine='numba-cuda', path_roulette_n0=8)\n"
+        f"np.savez({str(out)!r}, **{{k: getattr(r, k) for k in ('ch', 'pid', 'kind', 'w', 'r_cm', 'ncoll', "
+        "'path_cm', 'specular', 'roulette_balance')})\n"
+    )
+    env = {**os.environ, "NUMBA_ENABLE_CUDASIM": "1", "NUMBA_DISABLE_JIT": "1",
+           "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])}
+    subprocess.run([sys.executable, "-c", code], check=True, env=env, cwd=ROOT, timeout=600)
+    cpu = simulate_records(STACK, 40, seed=5, engine="numba", path_roulette_n0=8)
+    with np.load(out) as gpu:
+        assert gpu["kind"].size > 0
+        for key in gpu.files:
+            np.testing.assert_array_equal(gpu[key], getattr(cpu, key), err_msg=key)
+    if not cuda.is_available():  # no GPU and no simulator in this process
+        with pytest.raises(ValueError, match="CUDA GPU"):
+            simulate(STACK, 10, engine="numba-cuda")

@@ -302,7 +302,7 @@ class Walker:
         """Walk all packets of ``source``; returns the walker's per-channel totals."""
         if source.n_channels != self.n_ch:
             raise ValueError(f"source has {source.n_channels} channels, medium {self.n_ch}")
-        if self.engine == "numba":
+        if self.engine in ("numba", "numba-cuda"):
             return self._run_compiled(source, sink, progress)
         pool, q, total = self.cfg.pool_packets, 0, source.total
         done_before = 0
@@ -326,10 +326,13 @@ class Walker:
                 done_before = max(done, done_before)
         return self.totals
 
-
     def _run_compiled(self, source: Source, sink: Sink, progress: Callable[[int], None] | None) -> WalkTotals:
-        """The numba engine: batches of ``pool_packets`` packets, each walked to its end by ``walk_batch``."""
+        """The numba engines: batches of ``pool_packets`` packets, each walked to its end by ``walk_batch`` (CPU
+        threads) or ``walk_batch_cuda`` (one GPU thread per packet)."""
         from training.sim.packet_loop import run_key, walk_batch
+
+        if self.engine == "numba-cuda":
+            from training.sim.packet_loop_cuda import walk_batch_cuda as walk_batch
 
         cfg, n_lay, n_ch = self.cfg, self.n_layers, self.n_ch
         f64 = lambda t: t.detach().cpu().to(torch.float64).numpy()  # noqa: E731
@@ -369,9 +372,10 @@ class Walker:
         return self.totals
 
 
-#: Walk engines: "numba" (the compiled per-packet loop, CPU only, parallel over packets) and "torch"
-#: (the vectorised step, CPU or CUDA, optionally torch.compile'd); "auto" picks numba on a CPU.
-ENGINES = ("auto", "numba", "torch")
+#: Walk engines: "numba" (the compiled per-packet loop on CPU threads), "numba-cuda" (the same loop, one CUDA
+#: thread per packet: ``training.sim.packet_loop_cuda``) and "torch" (the vectorised step, CPU or CUDA,
+#: optionally torch.compile'd); "auto" picks numba on a CPU and torch on CUDA.
+ENGINES = ("auto", "numba", "numba-cuda", "torch")
 
 
 def resolve_engine(engine: str, device: torch.device) -> str:
@@ -381,7 +385,13 @@ def resolve_engine(engine: str, device: torch.device) -> str:
     if engine == "auto":
         return "numba" if device.type == "cpu" else "torch"
     if engine == "numba" and device.type != "cpu":
-        raise ValueError(f"the numba engine walks on the CPU only, not on {device}: use engine 'torch'")
+        raise ValueError(f"the numba engine walks on the CPU only, not on {device}: use engine 'torch' or 'numba-cuda'")
+    if engine == "numba-cuda":
+        from numba import cuda
+
+        if not cuda.is_available():
+            raise ValueError("engine 'numba-cuda' needs a CUDA GPU visible to numba (or its simulator: "
+                             "NUMBA_ENABLE_CUDASIM=1 NUMBA_DISABLE_JIT=1)")
     return engine
 
 
