@@ -3,7 +3,7 @@
 Epidermis of thickness t_epi over a semi-infinite dermis, n = 1.4, air above, diffuse illumination.
 ``--method direct`` walks the absorbing medium; ``--method reweighted`` is the dataset's estimator
 (``training.data.reweight``): a walk at a baseline absorption mua0 (here the smaller of the tone's two layers'
-absorptions at each wavelength), each reflected photon weighted by
+absorptions at each wavelength; the walk itself runs at the tone's absorption), each reflected photon weighted by
 exp(-(mua_epi - mua0) L_epi - (mua_derm - mua0) L_derm) (same estimand).  Both write docs/contracts.md §2 keys plus
 ``profile_stderr``.  ``--profile cdf`` resamples the profile through its CDF (``training.sim.resample``;
 ``profile_stderr`` stays the histogram's).
@@ -31,16 +31,18 @@ def reweighted(tone: np.ndarray, photons: int, seed: int, device: str, compile_)
     """The dataset's estimator for one tone: a baseline walk cut at the tone's t_epi, reweighted.
 
     The baseline is the tone's own smaller absorption of its two layers at each wavelength (the dataset
-    takes the smallest over the whole parameter box, since its walk serves every tone): the estimator is
-    the same, and the walk is no longer than a direct walk of the tone but for the paths in the
-    epidermis, which the tone's own absorption shortens.
+    takes the smallest over the whole parameter box, since its walk serves every tone), and the walk runs
+    at the tone's own absorption of each layer, its weights recorded at the baseline
+    (``training.data.reweight.walk``'s ``walk_mua``): the estimator is the same, and the walk costs what a
+    direct walk of the tone costs.
     """
     from training.data.reweight import reweight, walk
     from training.skin.model import absorption
 
-    mua_epi, mua_derm = absorption(tone[None])
-    mua0 = np.minimum(mua_epi.numpy(), mua_derm.numpy())[0]
-    traj = walk(photons, seed=seed, mua0=mua0, levels_cm=tone[2:3], device=device, compile=compile_)
+    mua_epi, mua_derm = (m.numpy()[0] for m in absorption(tone[None]))
+    mua0 = np.minimum(mua_epi, mua_derm)
+    traj = walk(photons, seed=seed, mua0=mua0, levels_cm=tone[2:3], device=device, compile=compile_,
+                walk_mua=np.stack([mua_epi, mua_derm]))
     return reweight(traj, tone[None], device)
 
 
