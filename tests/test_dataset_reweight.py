@@ -16,6 +16,7 @@ from training.data.reweight import (
     Trajectories,
     TrajectoryStore,
     baseline_absorption,
+    one_tone,
     reweight,
     walk,
 )
@@ -145,10 +146,8 @@ def test_a_walk_at_the_tones_own_absorption_reweights_to_its_direct_walk():
     """``walk_mua``: walked at the tone's own absorption of each layer, records kept at the baseline: the same
     seed gives the direct walk's photons, so reweighted and direct agree to float32 rounding (the
     ``simulate --method reweighted`` path); walk_mua below the baseline is refused."""
-    from training.commands.simulate import reweighted
-
     tone = TONES[1]
-    rew = reweighted(tone, 60, 7, "cpu", "auto")
+    rew = one_tone(tone, 60, seed=7)
     direct = simulate(skin_medium(tone), 60, seed=7)
     np.testing.assert_allclose(rew["R_d"][0], direct.R_d, rtol=1e-5, atol=1e-9)
     np.testing.assert_allclose(rew["R_d_stderr"][0], direct.R_d_stderr, rtol=1e-4, atol=1e-9)

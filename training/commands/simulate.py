@@ -22,28 +22,10 @@ import numpy as np
 
 from exporters.constants import R_EDGES_CM, WAVELENGTHS_NM
 from training.commands.options import error_status
+from training.data.reweight import one_tone
 from training.sim.resample import cdf_resample_profile
 from training.sim.tissue import skin_medium
 from training.sim.transport import PROFILE_ESTIMATORS, simulate
-
-
-def reweighted(tone: np.ndarray, photons: int, seed: int, device: str, compile_) -> dict[str, np.ndarray]:
-    """The dataset's estimator for one tone: a baseline walk cut at the tone's t_epi, reweighted.
-
-    The baseline is the tone's own smaller absorption of its two layers at each wavelength (the dataset
-    takes the smallest over the whole parameter box, since its walk serves every tone), and the walk runs
-    at the tone's own absorption of each layer, its weights recorded at the baseline
-    (``training.data.reweight.walk``'s ``walk_mua``): the estimator is the same, and the walk costs what a
-    direct walk of the tone costs.
-    """
-    from training.data.reweight import reweight, walk
-    from training.skin.model import absorption
-
-    mua_epi, mua_derm = (m.numpy()[0] for m in absorption(tone[None]))
-    mua0 = np.minimum(mua_epi, mua_derm)
-    traj = walk(photons, seed=seed, mua0=mua0, levels_cm=tone[2:3], device=device, compile=compile_,
-                walk_mua=np.stack([mua_epi, mua_derm]))
-    return reweight(traj, tone[None], device)
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -78,7 +60,8 @@ def main(argv: list[str]) -> int:
             res = {"R_d": r.R_d, "R_d_stderr": r.R_d_stderr, "profile": r.profile,
                    "profile_stderr": r.profile_stderr}
         else:
-            res = {k: v[0] for k, v in reweighted(tone, args.photons, args.seed, args.device, compile_).items()}
+            res = {k: v[0] for k, v in one_tone(tone, args.photons, seed=args.seed, device=args.device,
+                                                compile=compile_).items()}
         if args.profile == "cdf":
             res["profile"] = cdf_resample_profile(res["profile"], res["profile_stderr"], np.array(R_EDGES_CM),
                                                   args.photons)

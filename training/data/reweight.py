@@ -241,6 +241,23 @@ def reweight(traj: Trajectories, tones: np.ndarray, device: str = "cpu") -> dict
     return {"R_d": mean, "R_d_stderr": se, "profile": (pm / area).numpy(), "profile_stderr": (pse / area).numpy()}
 
 
+def one_tone(tone: np.ndarray, photons: int, *, seed: int, device: str = "cpu",
+             compile: bool | str = "auto") -> dict[str, np.ndarray]:
+    """The reweighted estimator for one tone (5,) at all 376 wavelengths (``simulate --method reweighted``).
+
+    A walk cut at the tone's t_epi, reweighted as the dataset's (``reweight``; keys and shapes as there, B = 1).
+    The baseline is the tone's own smaller absorption of its two layers at each wavelength (the dataset takes the
+    smallest over the whole parameter box, since its walk serves every tone), and the walk runs at the tone's
+    own absorption of each layer, its weights recorded at the baseline (``walk``'s ``walk_mua``): the same
+    estimand, the cost of a direct walk of the tone, and for the same seed the direct walk's photons.
+    """
+    tone = np.asarray(tone, dtype=np.float64)
+    mua_epi, mua_derm = (m.numpy()[0] for m in absorption(tone[None]))
+    traj = walk(photons, seed=seed, mua0=np.minimum(mua_epi, mua_derm), levels_cm=tone[2:3], device=device,
+                compile=compile, walk_mua=np.stack([mua_epi, mua_derm]))
+    return reweight(traj, tone[None], device)
+
+
 def _reweight_channels(traj: Trajectories, x: torch.Tensor, p1: np.ndarray, p2: np.ndarray) -> None:
     """Fill p1, p2 (B, C, 513): per tone, channel and radial bin, sums of photon weights and of their squares."""
     dev = x.device
