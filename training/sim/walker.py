@@ -1,4 +1,6 @@
-"""The one vectorised photon-packet walker (MCML-style hop / drop / spin), on CPU or CUDA.
+"""The photon-packet walker (MCML-style hop / drop / spin): the vectorised torch step (CPU or CUDA) and, by
+default on a CPU, the compiled per-packet loop (``training.sim.packet_loop``, numba, every CPU core; the
+same loop on CUDA is ``training.sim.packet_loop_cuda``), behind one interface (``Walker``, sources, sinks).
 
 Hand-written: no maintained library offers a batched, differentiable-free, multi-wavelength layered
 Monte Carlo in torch.  The physics follows MCML (Wang, Jacques & Zheng 1995, Comput. Methods Programs
@@ -8,13 +10,14 @@ Biomed. 47:131): packets of weight w take exponential optical-depth steps, are c
 top (and at the bottom of a finite stack), where they are reflected or escape all-or-none, and are
 Russian-rouletted when w < ``roulette_threshold`` (survive 1/m with weight x m).
 
-Layout: one packet = one photon at one channel (a wavelength, or a g column of the LUT); all packets
-of all channels live in flat tensors of a fixed-size pool.  Every ``check_every`` steps finished
+Layout of the torch engine: one packet = one photon at one channel (a wavelength, or a g column of the
+LUT); all packets of all channels live in flat tensors of a fixed-size pool.  Every ``check_every`` steps finished
 packets are handed to a *sink* as per-packet records and the pool is compacted and refilled from the
 source, so the pool stays full until the source runs dry (no per-chunk tail).  The sink decides what
 to keep: ``transport`` reduces records to tallies, the LUT builder to (radius, collision count)
 histograms, a record sink keeps them all (exit radius, path length per layer, collisions) for
-absorption reweighting.
+absorption reweighting.  The numba engines walk batches of ``pool_packets`` packets each to its end and hand
+the batch's records to the same sinks.
 
 Energy bookkeeping per channel, exact up to floating-point rounding:
     specular + sum over finished packets (exit weight + absorbed) = launched + roulette_balance,
