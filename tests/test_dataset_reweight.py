@@ -16,6 +16,7 @@ from training.data.reweight import (
     Trajectories,
     TrajectoryStore,
     baseline_absorption,
+    one_tone,
     reweight,
     walk,
 )
@@ -139,3 +140,18 @@ def test_store_grows_by_whole_chunks_like_a_fresh_walk(tmp_path):
         np.testing.assert_array_equal(getattr(grown, key), getattr(fresh, key))
         np.testing.assert_array_equal(getattr(prefix, key), getattr(small, key))
     assert json.loads((tmp_path / "t" / "manifest.json").read_text())["photons"] == 12
+
+
+def test_a_walk_at_the_tones_own_absorption_reweights_to_its_direct_walk():
+    """``walk_mua``: walked at the tone's own absorption of each layer, records kept at the baseline: the same
+    seed gives the direct walk's photons, so reweighted and direct agree to float32 rounding (the
+    ``simulate --method reweighted`` path); walk_mua below the baseline is refused."""
+    tone = TONES[1]
+    rew = one_tone(tone, 60, seed=7)
+    direct = simulate(skin_medium(tone), 60, seed=7)
+    np.testing.assert_allclose(rew["R_d"][0], direct.R_d, rtol=1e-5, atol=1e-9)
+    np.testing.assert_allclose(rew["R_d_stderr"][0], direct.R_d_stderr, rtol=1e-4, atol=1e-9)
+    np.testing.assert_allclose(rew["profile"][0], direct.profile, rtol=1e-4, atol=1e-6)
+    mua0 = baseline_absorption()
+    with pytest.raises(ValueError, match="walk_mua"):
+        walk(2, seed=1, mua0=mua0, levels_cm=tone[2:3], walk_mua=np.stack([mua0, mua0 - 1.0]))

@@ -152,7 +152,10 @@ def test_profile_at_g_midpoints_matches_direct_walk(tmp_path) -> None:
     direct = direct_profiles(a, g, photons, seed=6, max_steps=20_000, compile=False)
     p_mid = np.stack([d["P"][i, j] for i in range(d["albedo"].size) for j in mids])
     res = compare(p_mid, photons, direct)
-    assert np.all(np.abs(res["z"]) < 4.0), np.round(res["z"], 1)
+    # bands holding < 0.1 % of the energy are left out: there the direct walk has a handful of photons, so its
+    # standard error (and the LUT's, taken equal) is itself mostly noise
+    held = res["f_dir"] > 1e-3
+    assert np.all(np.abs(res["z"][held]) < 4.0), np.round(np.where(held, res["z"], 0.0), 1)
     # the control: at albedo >= 0.9 the node 0.1 below each midpoint (0.3, 0.5) differs from the walk at
     # the midpoint (at albedo 0.5 the profile hardly depends on g at this noise)
     p_node = np.stack([d["P"][i, j - 1] for i in range(d["albedo"].size) for j in mids])

@@ -85,7 +85,9 @@ def test_edge_image_of_a_medium_differs_when_translucency_differs(medium_renders
     alpha = mus / (mua + mus)
     short = mixture_reflectance(alpha, 10 * (mua + mus), g, np.ones_like(alpha), photons=4000, seed=5,
                                 r_edges_cm=R_EDGES_CM)
-    assert M.delta_e(short.R_d, ours.R_d, wl) < 1.0  # scale invariance of a semi-infinite slab's R_d
+    # scale invariance of a semi-infinite slab's R_d, per wavelength within the two runs' noise (their colour
+    # difference from noise alone is dE76 0.5-1.1 at these photon counts)
+    assert np.all(np.abs(short.R_d - ours.R_d) < 4 * np.hypot(short.R_d_stderr, ours.R_d_stderr) + 1e-3)
     assert M.edge_delta_e(short.profile, short.R_d, ours.profile, ours.R_d, wl) > 2.0
 
 

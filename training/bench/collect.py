@@ -37,6 +37,7 @@ from exporters.cli_io import (
 BENCH_MODULES = [
     "training.bench.foundation",
     "training.bench.sim",
+    "training.bench.walker",
     "training.bench.data",
     "training.bench.fit",
     "training.bench.train",

@@ -3,7 +3,8 @@
 1. Photon histories per second on the 7-layer skin case at 600 nm (docs/research/monte_carlo.md §4; all layers
    at n = 1.4 because the simulator has one index), normal incidence, vs MCML 1.2.2 measured on this
    machine kind: 19,400 photons/s on one core, ~37,000 on both (anchors: docs/research/monte_carlo.md §4a; MCML
-   itself is not run here).  Measured with one torch thread (= one core), compiled step.
+   itself is not run here; ``training.bench.walker`` runs it side by side when it is at hand).  Measured on
+   one thread (= one core) of the numba engine, the CPU default.
 2. LUT build: a measured batch of g nodes at two photon counts, projected to the paper-scale 800 x 800
    table with 1e6 photons per simulated g node (48 nodes, the other g columns interpolated; cost is
    linear in photons and in nodes; the albedo count only affects the final matrix product), and the
@@ -45,8 +46,8 @@ def _throughput(photons: int, threads: int) -> tuple[float, float, float]:
     torch.set_num_threads(threads)
     try:
         m = seven_layer_medium()
-        simulate(m, 2000, illumination="normal", seed=0, compile=True, r_edges_cm=None)  # compile + warm
-        r = simulate(m, photons, illumination="normal", seed=1, compile=True)
+        simulate(m, 2000, illumination="normal", seed=0, threads=1, r_edges_cm=None)  # compile + warm
+        r = simulate(m, photons, illumination="normal", seed=1, threads=threads)
     finally:
         torch.set_num_threads(before)
     return photons / r.seconds, float(r.R_d[0]), float(r.R_d_stderr[0])
@@ -57,18 +58,18 @@ def _lut_build(photons: int) -> tuple[float, float, float]:
 
     Four nodes of the default 48-node grid (g = 0, 0.32, 0.65, 0.95: the cost grows ~1/(1-g)) walked
     together as one batch, at ``photons`` and 4 x ``photons`` (1 thread, compiled); the difference gives
-    the marginal cost per photon, the rest is the tail of the batch's longest walks.
+    the marginal cost per photon, the rest is the tail of the batch's longest walks.  Numba engine, 1 thread.
     """
     before = torch.get_num_threads()
     torch.set_num_threads(1)
     try:
         gs = g_grid(G_NODES)[[0, 16, 32, 47]]
         albedo = albedo_grid(800)
-        simulate_columns(gs, albedo, 500, compile=True)  # compile + warm
+        simulate_columns(gs, albedo, 500, threads=1)  # compile + warm
         times = []
         for p in (photons, 4 * photons):
             t0 = time.perf_counter()
-            simulate_columns(gs, albedo, p, compile=True)
+            simulate_columns(gs, albedo, p, threads=1)
             times.append(time.perf_counter() - t0)
     finally:
         torch.set_num_threads(before)
@@ -116,7 +117,7 @@ def benchmarks(quick: bool) -> list[dict]:
         "anchor": f"MCML 1.2.2 (C, gcc -O3), 1 core: {MCML_1CORE:,.0f} photons/s (docs/research/monte_carlo.md §4a)",
         "ratio": f"{rate1 / MCML_1CORE:.2f}x",
         "error": "R_d differs from MCML's 0.5630 by design (one refractive index instead of 1.34-1.53)",
-        "notes": "torch.compile'd step (compile time excluded), float32 walk, float64 tallies; shared machine",
+        "notes": "numba engine, 1 thread (compile time excluded), float64 walk and tallies; shared machine",
     })
     lut_photons = 25_000 if quick else 100_000  # the pool must fill (2^18 packets) for a clean slope
     fixed, per_1e6, dt = _lut_build(lut_photons)
@@ -136,7 +137,7 @@ def benchmarks(quick: bool) -> list[dict]:
         f"{err_abs:.1e} ({100 * err_rel:.2f} % rel.); albedo reweighting exact, count binning <= 3e-5",
         "notes": f"{per_1e6:.0f} s per 1e6 photons per node (mean of g = 0, 0.32, 0.65, 0.95) + {fixed:.0f} s "
         f"tail per batch of {COLUMN_BATCH}; measured at {lut_photons} and {4 * lut_photons} photons x 4 nodes "
-        f"({dt:.0f} s, 1 thread, compiled, shared machine)",
+        f"({dt:.0f} s, 1 thread, numba engine, shared machine)",
     })
     return rows
 

@@ -193,10 +193,13 @@ class TaskError(RuntimeError):
 
 
 def _call(threads: int, fn: Callable, *args):
-    """What a worker runs: ``fn(*args)`` with ``threads`` torch threads (as the commands' ``--threads``)."""
+    """What a worker runs: ``fn(*args)`` with ``threads`` torch threads (as the commands' ``--threads``) and as
+    many threads for the walker's numba kernel (workers share a machine: one walk per worker, not per CPU)."""
+    import numba
     import torch
 
     torch.set_num_threads(threads)
+    numba.set_num_threads(max(1, min(threads, numba.config.NUMBA_NUM_THREADS)))
     return fn(*args)
 
 

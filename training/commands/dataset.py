@@ -79,7 +79,9 @@ def build_parser() -> argparse.ArgumentParser:
                         help="write --out/summary.json and summary.png for a built dataset")
     parser.add_argument("--seed", type=int, default=None, help="override the preset's sampling seeds")
     parser.add_argument("--device", default="cpu", help="cpu or cuda")
-    parser.add_argument("--threads", type=count, default=1, help="torch CPU threads (the walker is fastest on 1)")
+    parser.add_argument("--threads", type=count, default=1,
+                        help="torch CPU threads (reweighting); the walk's compiled kernel runs on every CPU the "
+                        "process may use (taskset or NUMBA_NUM_THREADS limit it; cluster workers walk on --threads)")
     parser.add_argument("--no-progress", action="store_true")
     engine.add_option(parser)
     return parser

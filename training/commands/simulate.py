@@ -2,7 +2,8 @@
 
 Epidermis of thickness t_epi over a semi-infinite dermis, n = 1.4, air above, diffuse illumination.
 ``--method direct`` walks the absorbing medium; ``--method reweighted`` is the dataset's estimator
-(``training.data.reweight``): a walk at the baseline absorption, each reflected photon weighted by
+(``training.data.reweight``): a walk at a baseline absorption mua0 (here the smaller of the tone's two layers'
+absorptions at each wavelength; the walk itself runs at the tone's absorption), each reflected photon weighted by
 exp(-(mua_epi - mua0) L_epi - (mua_derm - mua0) L_derm) (same estimand).  Both write docs/contracts.md §2 keys plus
 ``profile_stderr``.  ``--profile cdf`` resamples the profile through its CDF (``training.sim.resample``;
 ``profile_stderr`` stays the histogram's).
@@ -31,18 +32,10 @@ from training.commands.options import (
     finite_float,
     require,
 )
+from training.data.reweight import one_tone
 from training.sim.resample import cdf_resample_profile
 from training.sim.tissue import skin_medium
 from training.sim.transport import PROFILE_ESTIMATORS, simulate
-
-
-def reweighted(tone: np.ndarray, photons: int, seed: int, device: str, compile_) -> dict[str, np.ndarray]:
-    """The dataset's estimator for one tone: a baseline walk cut at the tone's t_epi, reweighted."""
-    from training.data.reweight import baseline_absorption, reweight, walk
-
-    mua0 = baseline_absorption(tone[None])
-    traj = walk(photons, seed=seed, mua0=mua0, levels_cm=tone[2:3], device=device, compile=compile_)
-    return reweight(traj, tone[None], device)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -79,7 +72,8 @@ def main(argv: list[str]) -> int:
             res = {"R_d": r.R_d, "R_d_stderr": r.R_d_stderr, "profile": r.profile,
                    "profile_stderr": r.profile_stderr}
         else:
-            res = {k: v[0] for k, v in reweighted(tone, args.photons, args.seed, args.device, compile_).items()}
+            res = {k: v[0] for k, v in one_tone(tone, args.photons, seed=args.seed, device=args.device,
+                                                compile=compile_).items()}
         if args.profile == "cdf":
             res["profile"] = cdf_resample_profile(res["profile"], res["profile_stderr"], np.array(R_EDGES_CM),
                                                   args.photons)

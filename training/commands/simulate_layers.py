@@ -18,6 +18,7 @@ from exporters.cli_io import OneLineParser
 from training.commands.options import command, count, error_status, in_range
 from training.sim.medium import LayeredMedium
 from training.sim.transport import simulate
+from training.sim.walker import ENGINES
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -35,8 +36,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--photons", type=count, required=True)
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--device", choices=("cpu", "cuda"), default="cpu")
+    p.add_argument("--engine", choices=ENGINES, default="auto",
+                   help="walk engine: numba (compiled per-packet loop, all CPU cores), torch (vectorised step, "
+                   "CPU or CUDA); auto: numba on the CPU, torch on CUDA")
+    p.add_argument("--threads", type=count, default=None,
+                   help="threads of the numba engine (default: every CPU this process may run on)")
     p.add_argument("--compile", choices=("auto", "on", "off"), default="auto",
-                   help="torch.compile the walker step (auto: only for large runs)")
+                   help="torch.compile the torch engine's step (auto: only for large runs)")
     p.add_argument("--json", action="store_true", help="print one JSON object (the only output format)")
     p.add_argument("--progress", action="store_true", help="show a progress bar on stderr")
     return p
@@ -74,6 +80,7 @@ def main(argv: list[str]) -> int:
             medium, args.photons, illumination=args.illumination, seed=args.seed, device=args.device,
             r_edges_cm=None, progress=args.progress,
             compile={"auto": "auto", "on": True, "off": False}[args.compile],
+            engine=args.engine, threads=args.threads,
         )
     except ValueError as exc:
         return error_status(exc)

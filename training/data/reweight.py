@@ -75,7 +75,10 @@ def baseline_absorption(extra_tones: np.ndarray | None = None, spec: SkinModelSp
 
 def slab_medium(mua0: np.ndarray, levels_cm: np.ndarray, channels: np.ndarray | None = None,
                 spec: SkinModelSpec = SKIN_MODEL) -> LayeredMedium:
-    """The baseline medium: slabs with boundaries at ``levels_cm`` over a semi-infinite rest, (W,) channels."""
+    """The baseline medium: slabs with boundaries at ``levels_cm`` over a semi-infinite rest, (W,) channels.
+
+    ``mua0``: (W,) cm^-1 in every slab, or (S, W) per slab (S = len(levels_cm) + 1); W = the channels given.
+    """
     mus, g = scattering(spec=spec)
     mua0_t = torch.as_tensor(mua0, dtype=torch.float64)
     if channels is not None:
@@ -86,7 +89,8 @@ def slab_medium(mua0: np.ndarray, levels_cm: np.ndarray, channels: np.ndarray | 
     n_slabs = levels.size + 1
     thickness = torch.tensor([*np.diff(np.r_[0.0, levels]).tolist(), math.inf], dtype=torch.float64)
     full = lambda v: v.reshape(1, -1).expand(n_slabs, -1).clone()  # noqa: E731
-    return LayeredMedium(mua=full(mua0_t), mus=full(mus), g=full(g), thickness=thickness, n_medium=N_TISSUE)
+    mua = mua0_t.clone() if mua0_t.ndim == 2 else full(mua0_t)
+    return LayeredMedium(mua=mua, mus=full(mus), g=full(g), thickness=thickness, n_medium=N_TISSUE)
 
 
 @dataclass
@@ -148,18 +152,31 @@ def walk(
     photons: int, *, seed: int, mua0: np.ndarray, levels_cm: np.ndarray = T_EPI_LEVELS_CM,
     channels: np.ndarray | None = None, device: str = "cpu", compile: bool | str = "auto",
     illumination: str = "diffuse", spec: SkinModelSpec = SKIN_MODEL, max_steps: int = WALK_MAX_STEPS,
+    walk_mua: np.ndarray | None = None,
 ) -> Trajectories:
     """One baseline walk: ``photons`` per channel.
 
     ``illumination``: "diffuse" (the dataset's cosine-weighted lobe) or "normal" (a collimated beam, the
     geometry of reflectance spectrophotometers; ``training.realskin``).  ``max_steps``: the walk cap per
-    photon (the weight still alive there is ``truncated``).
+    photon (the weight still alive there is ``truncated``).  ``walk_mua``: (S, W) cm^-1, the absorption of each
+    of the S = len(levels_cm) + 1 slabs that the walk runs with, >= ``mua0`` (default ``mua0`` in every slab);
+    the recorded weights are those of the baseline ``mua0``, w exp(sum_k (walk_mua_k - mua0) L_k) (exact: a
+    walk's trajectories do not depend on absorption), so a walk at one tone's own absorption is as short as a
+    direct walk of it and reweights to that tone with factors of 1.
     """
-    ch_idx = np.arange(np.asarray(mua0).size) if channels is None else np.asarray(channels, dtype=np.int64)
-    medium = slab_medium(np.asarray(mua0)[ch_idx], levels_cm, ch_idx, spec)
+    mua0 = np.asarray(mua0, dtype=np.float64)
+    ch_idx = np.arange(mua0.size) if channels is None else np.asarray(channels, dtype=np.int64)
+    extra = None
+    if walk_mua is not None:
+        extra = np.asarray(walk_mua, dtype=np.float64)[:, ch_idx] - mua0[ch_idx]  # (S, C)
+        if extra.shape[0] != np.size(levels_cm) + 1 or extra.min() < 0:
+            raise ValueError(f"walk_mua must be (len(levels_cm) + 1, W) = ({np.size(levels_cm) + 1}, W) and >= mua0")
+    medium = slab_medium(mua0[ch_idx] if extra is None else extra + mua0[ch_idx], levels_cm, ch_idx, spec)
     t0 = time.perf_counter()
     rec = simulate_records(medium, photons, illumination=illumination, seed=seed, device=device, compile=compile,
                            max_steps=max_steps)
+    if extra is not None:
+        rec.w = rec.w * np.exp(np.einsum("ns,sn->n", rec.path_cm, extra[:, rec.ch]))
     refl = rec.kind == KIND_REFLECTED
     order = np.argsort(rec.ch[refl], kind="stable")
     ch = rec.ch[refl][order]
@@ -222,6 +239,23 @@ def reweight(traj: Trajectories, tones: np.ndarray, device: str = "cpu") -> dict
             torch.set_flush_denormal(False)
     area = torch.from_numpy(math.pi * np.diff(R_EDGES_CM**2)).float()
     return {"R_d": mean, "R_d_stderr": se, "profile": (pm / area).numpy(), "profile_stderr": (pse / area).numpy()}
+
+
+def one_tone(tone: np.ndarray, photons: int, *, seed: int, device: str = "cpu",
+             compile: bool | str = "auto") -> dict[str, np.ndarray]:
+    """The reweighted estimator for one tone (5,) at all 376 wavelengths (``simulate --method reweighted``).
+
+    A walk cut at the tone's t_epi, reweighted as the dataset's (``reweight``; keys and shapes as there, B = 1).
+    The baseline is the tone's own smaller absorption of its two layers at each wavelength (the dataset takes the
+    smallest over the whole parameter box, since its walk serves every tone), and the walk runs at the tone's
+    own absorption of each layer, its weights recorded at the baseline (``walk``'s ``walk_mua``): the same
+    estimand, the cost of a direct walk of the tone, and for the same seed the direct walk's photons.
+    """
+    tone = np.asarray(tone, dtype=np.float64)
+    mua_epi, mua_derm = (m.numpy()[0] for m in absorption(tone[None]))
+    traj = walk(photons, seed=seed, mua0=np.minimum(mua_epi, mua_derm), levels_cm=tone[2:3], device=device,
+                compile=compile, walk_mua=np.stack([mua_epi, mua_derm]))
+    return reweight(traj, tone[None], device)
 
 
 def _reweight_channels(traj: Trajectories, x: torch.Tensor, p1: np.ndarray, p2: np.ndarray) -> None:

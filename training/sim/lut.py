@@ -176,8 +176,12 @@ def simulate_columns(
     compile: bool = False,
     pool_packets: int | None = None,
     progress=None,
+    engine: str = "auto",
+    threads: int | None = None,
 ) -> list[dict[str, np.ndarray]]:
-    """One non-absorbing run over the g columns ``g_values`` (as channels); tables for each column."""
+    """One non-absorbing run over the g columns ``g_values`` (as channels); tables for each column.
+
+    ``engine``, ``threads``: the walker's (``training.sim.transport.simulate``)."""
     dev = torch.device(device)
     g_values = np.asarray(g_values, dtype=np.float64)
     ng = g_values.size
@@ -188,7 +192,8 @@ def simulate_columns(
     n0 = None if path_c is None else [path_c / (1.0 - g) for g in g_values]
     pool = pool_packets or (1 << 18 if dev.type == "cpu" else 1 << 22)
     cfg = WalkConfig(illumination="diffuse", pool_packets=pool, max_steps=max_steps, path_roulette_n0=n0)
-    walker = Walker(medium, cfg, seed=seed, device=dev, dtype=dtype, compile=compile)
+    walker = Walker(medium, cfg, seed=seed, device=dev, dtype=dtype, compile=compile, engine=engine,
+                    threads=threads)
     bins = CountBins(max_steps + 1)
     edges = np.asarray(r_edges_mfp, dtype=np.float64)
     hist = _Histograms(ng, torch.tensor(edges, device=dev), bins, dev)

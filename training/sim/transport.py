@@ -140,6 +140,8 @@ def simulate(
     progress: bool = False,
     compile: bool | str = "auto",
     profile_estimator: str = "histogram",
+    engine: str = "auto",
+    threads: int | None = None,
 ) -> SimResult:
     """Monte Carlo of ``medium`` at all its channels (wavelengths) at once.
 
@@ -150,13 +152,17 @@ def simulate(
         seed: seed of the torch.Generator; results are deterministic for fixed arguments.
         device: "cpu" or "cuda" (same code).
         r_edges_cm: radial bin edges (NB + 1,), cm, increasing from 0; None skips the profile.
-        dtype: walk precision (float32 default; tallies are always float64).
+        dtype: precision of the torch engine's walk (float32 default; the numba engine walks in float64;
+            tallies are always float64).
         chunk_photons: photons per channel walked at once (pool = chunk_photons * W packets); default
             ``POOL_PACKETS`` packets (2^18 on CPU, 62e6 on CUDA).
         max_steps: walk cap per packet (see SimResult.truncated).
         progress: show a tqdm progress bar.
-        compile: torch.compile the walker's step (True / False / "auto": only for runs of more than
+        compile: torch.compile the torch engine's step (True / False / "auto": only for runs of more than
             AUTO_COMPILE_PACKETS packets, where the one-off compile time, ~10-30 s, pays off).
+        engine: "auto" (numba on a CPU, torch on CUDA), "numba" (the compiled per-packet loop,
+            ``training.sim.packet_loop``) or "torch" (the vectorised step); ``training.sim.walker.ENGINES``.
+        threads: threads of the numba engine (None: every CPU the process may run on).
         profile_estimator: "histogram" (the plain tally per bin, default) or "cdf" (CDF-based conservative
             resampling of the same tallies, ``training.sim.resample``: same shape, same energy inside the
             last edge, less noise where bins are sparse; ``profile_stderr`` stays the histogram's).
@@ -180,7 +186,7 @@ def simulate(
         edges_t = torch.tensor(edges, device=dev)
     cfg = WalkConfig(illumination=illumination, pool_packets=pool, max_steps=int(max_steps))
     walker = Walker(medium, cfg, seed=seed, device=dev, dtype=dtype,
-                    compile=_want_compile(compile, photons * n_ch))
+                    compile=_want_compile(compile, photons * n_ch), engine=engine, threads=threads)
     tallies = _Tallies(n_ch, edges_t, dev)
     t0 = time.perf_counter()
     bar = _progress_bar(photons * n_ch, progress)
@@ -273,11 +279,14 @@ def simulate_records(
     max_steps: int = 100_000,
     path_roulette_n0: int | None = None,
     compile: bool | str = "auto",
+    engine: str = "auto",
+    threads: int | None = None,
 ) -> ExitRecords:
     """Like ``simulate`` but returns every exiting packet's record (for absorption reweighting).
 
     Packets killed by roulette or absorbed carry no light and are dropped; with mua = 0 nothing is
     absorbed and only the walk cap (kind KIND_TRUNCATED) and the optional path roulette lose packets.
+    ``engine``, ``threads``: as for ``simulate``.
     """
     dev = _check_common(photons, device)
     n_ch = medium.n_channels
@@ -287,7 +296,7 @@ def simulate_records(
         path_roulette_n0=path_roulette_n0,
     )
     walker = Walker(medium, cfg, seed=seed, device=dev, dtype=dtype,
-                    compile=_want_compile(compile, photons * n_ch))
+                    compile=_want_compile(compile, photons * n_ch), engine=engine, threads=threads)
     keep: list[dict[str, np.ndarray]] = []
 
     def sink(rec: dict[str, torch.Tensor]) -> None:

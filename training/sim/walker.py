@@ -1,4 +1,6 @@
-"""The one vectorised photon-packet walker (MCML-style hop / drop / spin), on CPU or CUDA.
+"""The photon-packet walker (MCML-style hop / drop / spin): the vectorised torch step (CPU or CUDA) and, by
+default on a CPU, the compiled per-packet loop (``training.sim.packet_loop``, numba, every CPU core; the
+same loop on CUDA is ``training.sim.packet_loop_cuda``), behind one interface (``Walker``, sources, sinks).
 
 Hand-written: no maintained library offers a batched, differentiable-free, multi-wavelength layered
 Monte Carlo in torch.  The physics follows MCML (Wang, Jacques & Zheng 1995, Comput. Methods Programs
@@ -8,13 +10,14 @@ Biomed. 47:131): packets of weight w take exponential optical-depth steps, are c
 top (and at the bottom of a finite stack), where they are reflected or escape all-or-none, and are
 Russian-rouletted when w < ``roulette_threshold`` (survive 1/m with weight x m).
 
-Layout: one packet = one photon at one channel (a wavelength, or a g column of the LUT); all packets
-of all channels live in flat tensors of a fixed-size pool.  Every ``check_every`` steps finished
+Layout of the torch engine: one packet = one photon at one channel (a wavelength, or a g column of the
+LUT); all packets of all channels live in flat tensors of a fixed-size pool.  Every ``check_every`` steps finished
 packets are handed to a *sink* as per-packet records and the pool is compacted and refilled from the
 source, so the pool stays full until the source runs dry (no per-chunk tail).  The sink decides what
 to keep: ``transport`` reduces records to tallies, the LUT builder to (radius, collision count)
 histograms, a record sink keeps them all (exit radius, path length per layer, collisions) for
-absorption reweighting.
+absorption reweighting.  The numba engines walk batches of ``pool_packets`` packets each to its end and hand
+the batch's records to the same sinks.
 
 Energy bookkeeping per channel, exact up to floating-point rounding:
     specular + sum over finished packets (exit weight + absorbed) = launched + roulette_balance,
@@ -25,8 +28,10 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 
+import numpy as np
 import torch
 
 from training.sim.kernel import (
@@ -139,11 +144,16 @@ class Walker:
         device: str | torch.device = "cpu",
         dtype: torch.dtype = torch.float32,
         compile: bool = False,
+        engine: str = "auto",
+        threads: int | None = None,
     ) -> None:
         if dtype not in (torch.float32, torch.float64):
             raise ValueError("dtype must be torch.float32 or torch.float64")
         self.medium, self.cfg, self.dtype = medium, cfg, dtype
         self.device = torch.device(device)
+        self.engine = resolve_engine(engine, self.device)
+        self.threads = threads
+        self.seed = int(seed)
         self.gen = torch.Generator(device=self.device)
         self.gen.manual_seed(int(seed))
         # 32-bit salts of the counter-based per-step random numbers, drawn from the seeded generator
@@ -295,6 +305,8 @@ class Walker:
         """Walk all packets of ``source``; returns the walker's per-channel totals."""
         if source.n_channels != self.n_ch:
             raise ValueError(f"source has {source.n_channels} channels, medium {self.n_ch}")
+        if self.engine in ("numba", "numba-cuda"):
+            return self._run_compiled(source, sink, progress)
         pool, q, total = self.cfg.pool_packets, 0, source.total
         done_before = 0
         q = self._flush(sink, min(pool, total), source, 0) if total else 0
@@ -316,6 +328,102 @@ class Walker:
                 progress(max(done - done_before, 0))
                 done_before = max(done, done_before)
         return self.totals
+
+    def _run_compiled(self, source: Source, sink: Sink, progress: Callable[[int], None] | None) -> WalkTotals:
+        """The numba engines: batches of ``pool_packets`` packets, each walked to its end by ``walk_batch`` (CPU
+        threads) or ``walk_batch_cuda`` (one GPU thread per packet)."""
+        from training.sim.packet_loop import run_key, walk_batch
+
+        if self.engine == "numba-cuda":
+            from training.sim.packet_loop_cuda import walk_batch_cuda as walk_batch
+
+        cfg, n_lay, n_ch = self.cfg, self.n_layers, self.n_ch
+        f64 = lambda t: t.detach().cpu().to(torch.float64).numpy()  # noqa: E731
+        tables = (f64(self.t_mut), f64(self.t_alb), f64(self.t_g), f64(self.t_ztop), f64(self.t_zbot))
+        n0 = np.full(n_ch, np.inf) if cfg.path_roulette_n0 is None or cfg.path_roulette_keep >= 1.0 else \
+            np.broadcast_to(np.asarray(cfg.path_roulette_n0, dtype=np.float64), (n_ch,)).copy()
+        key = np.uint64(run_key(self.seed))
+        spec = np.zeros(n_ch)
+        roul = np.zeros(n_ch)
+        with compiled_threads(self.threads):
+            for q0 in range(0, source.total, cfg.pool_packets):
+                m = min(cfg.pool_packets, source.total - q0)
+                ch, pid = source.packets(q0, m, torch.device("cpu"))
+                out = {"kind": np.empty(m, np.int8), "w": np.empty(m), "x": np.empty(m), "y": np.empty(m),
+                       "ncoll": np.empty(m, np.int32), "absorbed": np.empty(m),
+                       "path": np.empty((m, n_lay) if cfg.record_paths else (1, n_lay)),
+                       "specular": np.empty(m), "roulette": np.empty(m), "steps": np.empty(m, np.int64)}
+                walk_batch(ch.numpy(), np.arange(q0, q0 + m, dtype=np.int64), key, *tables, self.n,
+                           self.n_below, n_lay, n_ch, cfg.illumination == "diffuse", cfg.max_steps,
+                           cfg.roulette_threshold, 1.0 / cfg.roulette_boost, n0, cfg.path_roulette_keep,
+                           cfg.record_paths, out["kind"], out["w"], out["x"], out["y"], out["ncoll"],
+                           out["absorbed"], out["path"], out["specular"], out["roulette"], out["steps"])
+                chn = ch.numpy()
+                np.add.at(spec, chn, out["specular"])  # packet by packet: sums do not depend on the batch size
+                np.add.at(roul, chn, out["roulette"])
+                self.totals.packet_steps += int(out["steps"].sum())
+                self.totals.steps = max(self.totals.steps, int(out["steps"].max()))
+                rec = {"ch": ch, "pid": pid, **{k: torch.from_numpy(out[k]) for k in
+                                                ("kind", "w", "x", "y", "ncoll", "absorbed")}}
+                if cfg.record_paths:
+                    rec["path"] = torch.from_numpy(out["path"])
+                sink({k: v.to(self.device) for k, v in rec.items()})
+                if progress is not None:
+                    progress(m)
+        self.totals.specular += torch.from_numpy(spec).to(self.device)
+        self.totals.roulette_balance += torch.from_numpy(roul).to(self.device)
+        return self.totals
+
+
+#: Walk engines: "numba" (the compiled per-packet loop on CPU threads), "numba-cuda" (the same loop, one CUDA
+#: thread per packet: ``training.sim.packet_loop_cuda``) and "torch" (the vectorised step, CPU or CUDA,
+#: optionally torch.compile'd); "auto" picks numba on a CPU and torch on CUDA.
+ENGINES = ("auto", "numba", "numba-cuda", "torch")
+
+
+def resolve_engine(engine: str, device: torch.device) -> str:
+    """The engine that runs on ``device``: "auto" is "numba" on a CPU and "torch" elsewhere."""
+    if engine not in ENGINES:
+        raise ValueError(f"engine must be one of {ENGINES}, got {engine!r}")
+    if engine == "auto":
+        return "numba" if device.type == "cpu" else "torch"
+    if engine == "numba" and device.type != "cpu":
+        raise ValueError(f"the numba engine walks on the CPU only, not on {device}: use engine 'torch' or 'numba-cuda'")
+    if engine == "numba-cuda":
+        from numba import cuda
+
+        if not cuda.is_available():
+            raise ValueError("engine 'numba-cuda' needs a CUDA GPU visible to numba (or its simulator: "
+                             "NUMBA_ENABLE_CUDASIM=1 NUMBA_DISABLE_JIT=1)")
+    return engine
+
+
+def default_threads() -> int:
+    """Threads of the numba engine when none are asked for: numba's current setting, which is every CPU this
+    process may run on (its affinity mask, e.g. ``taskset``) unless NUMBA_NUM_THREADS or
+    ``numba.set_num_threads`` lowered it."""
+    import numba
+
+    return int(numba.get_num_threads())
+
+
+@contextmanager
+def compiled_threads(threads: int | None):
+    """Run numba parallel loops on ``threads`` threads (None: ``default_threads()``) inside the block, handing
+    blocks of packets to threads one at a time (walk lengths vary by orders of magnitude)."""
+    import numba
+
+    want = default_threads() if threads is None else int(threads)
+    if not 1 <= want <= numba.config.NUMBA_NUM_THREADS:
+        raise ValueError(f"threads must be in 1..{numba.config.NUMBA_NUM_THREADS} (the CPUs this process may use, "
+                         f"or NUMBA_NUM_THREADS), got {want}")
+    before = numba.get_num_threads()
+    numba.set_num_threads(want)
+    try:
+        with numba.parallel_chunksize(1):
+            yield
+    finally:
+        numba.set_num_threads(before)
 
 
 _COMPILED = None
