@@ -378,7 +378,13 @@ def _eevee_output(tree: bpy.types.NodeTree, gnode: bpy.types.Node) -> bpy.types.
 def image_colours(image: bpy.types.Image, colorspace: str, limit: int = OUTSIDE_SAMPLE) -> np.ndarray:
     """Linear colours (N, 3) of about ``limit`` texels of ``image`` (every tile of a UDIM image; an even grid when
     larger), decoded as ``colorspace`` ("srgb", "linear" or "auto": sRGB for 8/16-bit, linear for float).  Files
-    are read directly (a few rows, never the whole float buffer); packed and generated images from Blender."""
+    are read directly (a few rows, never the whole float buffer) where OpenImageIO's Python module is there;
+    packed and generated images, and every image in a Blender without that module (4.2), from Blender's own
+    pixel buffer (a tiled image's first tile only)."""
+    try:
+        image_input.openimageio()
+    except image_input.ImageError:
+        return _decoded([(_pixels(image, limit), image.is_float)], colorspace)
     if image.source == "TILED":
         paths = [_file_of(image, tile.number) for tile in image.tiles]
         parts = [image_input.sample_texels(p, limit // len(paths)) for p in paths if os.path.isfile(p)]
@@ -386,6 +392,11 @@ def image_colours(image: bpy.types.Image, colorspace: str, limit: int = OUTSIDE_
         parts = [image_input.sample_texels(_file_of(image), limit)]
     else:
         parts = [(_pixels(image, limit), image.is_float)]
+    return _decoded(parts, colorspace)
+
+
+def _decoded(parts: list[tuple[np.ndarray, bool]], colorspace: str) -> np.ndarray:
+    """Linear colours (N, 3) of sampled texels ((values as stored, whether the image stores floats) per part)."""
     decode = [colorspace == "srgb" or (colorspace == "auto" and not is_float) for _, is_float in parts]
     decoded = [colorimetry.srgb_decode(np.clip(rgb, 0.0, None)) if srgb else rgb
                for (rgb, _), srgb in zip(parts, decode, strict=True)]

@@ -113,7 +113,7 @@ def main() -> dict:
     t0 = time.perf_counter()
     try:
         with bpy.context.temp_override(object=obj, active_object=obj):
-            out["invert"] = sorted(bpy.ops.spectral_skin.invert_albedo(exact=True))
+            out["invert"] = sorted(bpy.ops.spectral_skin.invert_albedo(mode="BAKE", exact=True))
     except RuntimeError as exc:
         out["invert"], out["invert_error"] = ["ERROR"], str(exc)
     out["invert_s"] = round(time.perf_counter() - t0, 2)
@@ -148,6 +148,24 @@ def main() -> dict:
     maps_dir = os.path.join(sys.argv[2], "maps")
     out["bake_script_files"] = len(os.listdir(maps_dir)) if os.path.isdir(maps_dir) else 0
     out["top_level_modules_after_script"] = sorted(m for m in ("exporters", "blender_addon") if m in sys.modules)
+
+    # The default of Invert Skin Albedo: the live group, fed by the Image Texture that feeds Base Color.
+    obj = skin_scene()
+    material = bpy.data.materials.new("SkinLive")
+    material.use_nodes = True
+    obj.data.materials.append(material)
+    tex = material.node_tree.nodes.new("ShaderNodeTexImage")
+    tex.image = image
+    material.node_tree.links.new(tex.outputs["Color"], material.node_tree.nodes["Principled BSDF"].inputs[0])
+    t0 = time.perf_counter()
+    try:
+        with bpy.context.temp_override(object=obj, active_object=obj):
+            out["live_invert"] = sorted(bpy.ops.spectral_skin.invert_albedo())
+    except RuntimeError as exc:
+        out["live_invert"], out["live_invert_error"] = ["ERROR"], str(exc)
+    out["live_invert_s"] = round(time.perf_counter() - t0, 2)
+    out["live_group"] = sorted(n.node_tree.name for n in material.node_tree.nodes if n.bl_idname == "ShaderNodeGroup")
+    out["live_centre"] = render_centre(bpy.context.scene)
 
     # OSL on request: the Script node compiles (Cycles 4.2 has no oslquery) and renders once OSL is turned on.
     obj = skin_scene()

@@ -71,6 +71,7 @@ def render_tone(tmp_path: Path, tone: str, backend: str, own_colour: bool):
         probe.slab_material()
         slab = bpy.data.objects["ProbeSlab"]
         assert run_invert(slab, filepath=str(albedo), backend=backend, model_colour=own_colour) == {"FINISHED"}
+        scene.cycles.shading_system = backend == "OSL"  # the artist's step: the add-on never turns OSL on
         return probe.render_hemispherical(scene, 4)
     finally:
         blender_addon.unregister()

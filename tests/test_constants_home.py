@@ -14,10 +14,10 @@ HOMES: dict[float, set[tuple[str, str]]] = {
     1.01: {("exporters/reflectance_tables.py", "IOR_MIN")},  # Cycles' IOR clamp (closure/bssrdf.h)
     3.8: {("exporters/reflectance_tables.py", "IOR_MAX")},
     0.9: {("exporters/cycles.py", "G_MAX")},  # Cycles' anisotropy clamp (closure/bssrdf.h)
-    # the inference memory budget (MiB); N_RADIAL_BINS is another 512 (docs/contracts.md §1 profile bins), and the bake
-    # benchmark's image side yet another
+    # the inference memory budget (MiB); N_RADIAL_BINS is another 512 (docs/contracts.md §1 profile bins), the bake
+    # benchmark's image side yet another, and the bytes a bake band holds per texel another
     512: {("exporters/inference.py", "DEFAULT_MEMORY_MB"), ("exporters/constants.py", "N_RADIAL_BINS"),
-          ("exporters/bench.py", "side")},
+          ("exporters/bench.py", "side"), ("exporters/bake/job.py", "BAND_TEXEL_BYTES")},
 }
 
 

@@ -206,7 +206,7 @@ def main(argv: list[str]) -> int:
         opts = _options(args)
         args.out.mkdir(parents=True, exist_ok=True)
         with output_lock(args.out, "--out"):
-            record = R.run(opts)
+            record = R.run(opts).to_json()
         if args.update_card:
             from training.export.card import update_validation
             from training.validate.record import headline
