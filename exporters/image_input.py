@@ -321,12 +321,7 @@ def _read_pixels(path: Path, colorspace: str, integer_types: tuple[str, ...],
     check_colorspace(colorspace)
     if not path.is_file():
         raise FileNotFoundError(f"albedo image not found: {path}")
-    oiio = openimageio()
-    config = oiio.ImageSpec()
-    config.attribute("oiio:UnassociatedAlpha", 1)
-    inp = oiio.ImageInput.open(str(path), config)
-    if inp is None:
-        raise ImageError(f"cannot read image {path}: {oiio.geterror()}")
+    inp = _open_image(path)
     try:
         spec = inp.spec()
         check_decode_budget(spec, str(path), memory_mb)
@@ -399,17 +394,23 @@ def read_albedo_indexed(path: str | os.PathLike, colorspace: ColorSpace = "auto"
                          n_clamped=n_clamped, n_channels=int(spec.nchannels), has_alpha=a >= 0)
 
 
-def sample_texels(path: str | os.PathLike, limit: int) -> tuple[np.ndarray, bool]:
-    """About ``limit`` texels of an image file, on an even grid of rows and columns, without holding the whole
-    image: (values (N, 3) float64 as stored, integers scaled to [0, 1] and not decoded; whether the file stores
-    floats).  Grey images are repeated to RGB.  For a quick statistic (the live group's outside-domain report), not
-    a bake: no checks beyond readability (ImageError)."""
+def _open_image(path: str | os.PathLike):
+    """An OpenImageIO ImageInput of ``path`` with alpha unassociated (close it); ImageError when unreadable."""
     oiio = openimageio()
     config = oiio.ImageSpec()
     config.attribute("oiio:UnassociatedAlpha", 1)
     inp = oiio.ImageInput.open(str(path), config)
     if inp is None:
         raise ImageError(f"cannot read image {path}: {oiio.geterror()}")
+    return inp
+
+
+def sample_texels(path: str | os.PathLike, limit: int) -> tuple[np.ndarray, bool]:
+    """About ``limit`` texels of an image file, on an even grid of rows and columns, without holding the whole
+    image: (values (N, 3) float64 as stored, integers scaled to [0, 1] and not decoded; whether the file stores
+    floats).  Grey images are repeated to RGB.  For a quick statistic (the live group's outside-domain report), not
+    a bake: no checks beyond readability (ImageError)."""
+    inp = _open_image(path)
     try:
         spec = inp.spec()
         stride = max(1, int(np.ceil(np.sqrt(spec.width * spec.height / max(limit, 1)))))
