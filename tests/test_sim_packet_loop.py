@@ -22,6 +22,7 @@ import torch
 from numba import cuda
 
 from training.commands.simulate_layers import main as cli_main
+from training.sim.compiled_transport import simulate_compiled
 from training.sim.medium import LayeredMedium
 from training.sim.transport import simulate, simulate_records
 from training.sim.walker import default_threads, resolve_engine
@@ -104,6 +105,35 @@ def test_cli_engines_and_threads(capsys: pytest.CaptureFixture[str]) -> None:
     assert abs(outs[0]["R_d"] - outs[2]["R_d"]) < 4 * math.hypot(outs[0]["R_d_stderr"], outs[2]["R_d_stderr"])
     assert cli_main(args + ["--threads", "0"]) == 2
     assert cli_main(args + ["--threads", str(MAX_THREADS + 1)]) == 2
+
+
+@pytest.mark.parametrize("illumination", ["normal", "diffuse"])
+def test_the_torch_free_walk_gives_simulates_numbers(illumination: str) -> None:
+    """The command line's torch-free walk and ``simulate`` on the numba engine: the same numbers, bit for bit."""
+    below = LayeredMedium(STACK.mua, STACK.mus, STACK.g, STACK.thickness, n_medium=1.4, n_below=1.33)
+    ref = simulate(below, 3000, illumination=illumination, seed=11, engine="numba", r_edges_cm=None)
+    got = simulate_compiled(*(t.numpy() for t in (below.mua, below.mus, below.g, below.thickness)), 3000,
+                            n_medium=1.4, n_below=1.33, illumination=illumination, seed=11)
+    assert got["photons"] == 3000 and np.all(got["T_d"] > 0.01)
+    for key in ("R_d", "R_d_stderr", "T_d", "T_d_stderr"):
+        np.testing.assert_array_equal(got[key], getattr(ref, key), err_msg=key)
+
+
+def test_the_cli_numba_run_loads_no_torch() -> None:
+    """``simulate-layers`` on the CPU's numba engine never imports torch (seconds of a fresh process's start-up)."""
+    code = (
+        "import json, sys\n"
+        "from training.commands.dispatch import main\n"
+        "rc = main(['simulate-layers', '--layer', '1', '99', '0.9', 'inf', '--photons', '500', '--json'])\n"
+        "assert rc == 0, rc\n"
+        "print(json.dumps(sorted(m for m in sys.modules if m == 'torch' or m.startswith('torch.'))))\n"
+    )
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])}
+    done = subprocess.run([sys.executable, "-c", code], check=True, env=env, cwd=ROOT, timeout=300,
+                          capture_output=True, text=True)
+    lines = done.stdout.strip().splitlines()
+    assert json.loads(lines[0])["photons"] == 500
+    assert json.loads(lines[-1]) == []
 
 
 def test_the_gpu_path_walks_the_same_packets_in_cudas_simulator(tmp_path) -> None:

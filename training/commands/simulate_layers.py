@@ -12,13 +12,12 @@ import argparse
 import json
 import math
 
-import torch
+import numpy as np
 
 from exporters.cli_io import OneLineParser
 from training.commands.options import command, count, error_status, in_range
-from training.sim.medium import LayeredMedium
-from training.sim.transport import simulate
-from training.sim.walker import ENGINES
+from training.sim.medium_check import check_layer_values
+from training.sim.walk_constants import ENGINES
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -48,24 +47,50 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
-def _medium(args: argparse.Namespace) -> LayeredMedium:
+def _layers(args: argparse.Namespace) -> tuple[np.ndarray, ...]:
+    """mua, mus, g (L, 1) and thickness (L,) float64 from the --layer options, checked."""
     rows = []
     for layer in args.layer:
         try:
             rows.append([float(v) for v in layer])
         except ValueError as exc:
             raise ValueError(f"--layer values must be numbers: {' '.join(layer)}") from exc
-    t = torch.tensor(rows, dtype=torch.float64)
-    if torch.isnan(t).any() or torch.isinf(t[:, :3]).any():
+    t = np.array(rows, dtype=np.float64)
+    if np.isnan(t).any() or np.isinf(t[:, :3]).any():
         raise ValueError("--layer MUA MUS G must be finite numbers")
-    if (t[:, :2] < 0).any() or (t[:, 2].abs() >= 1).any() or (t[:, 3] <= 0).any():
+    if (t[:, :2] < 0).any() or (np.abs(t[:, 2]) >= 1).any() or (t[:, 3] <= 0).any():
         raise ValueError("--layer needs MUA >= 0, MUS >= 0, -1 < G < 1 and THICKNESS > 0 (cm)")
-    if torch.isinf(t[:-1, 3]).any():
+    if np.isinf(t[:-1, 3]).any():
         raise ValueError("--layer: only the last layer may be infinitely thick")
-    return LayeredMedium(
-        mua=t[:, 0:1], mus=t[:, 1:2], g=t[:, 2:3], thickness=t[:, 3],
-        n_medium=args.n_medium, n_below=args.n_below,
+    mua, mus, g, thickness = t[:, 0:1].copy(), t[:, 1:2].copy(), t[:, 2:3].copy(), t[:, 3].copy()
+    check_layer_values(mua, mus, g, thickness, args.n_medium, args.n_below)
+    return mua, mus, g, thickness
+
+
+def _walk(args: argparse.Namespace, layers: tuple[np.ndarray, ...]) -> dict:
+    """R_d, R_d_stderr, T_d (arrays over the one channel), photons and seconds of the asked engine and device.
+
+    The numba engine on the CPU runs torch-free (``training.sim.compiled_transport``); the torch engine, CUDA and
+    numba-cuda go through ``training.sim.transport.simulate``, which gives the numba engine the same numbers.
+    """
+    if args.device == "cpu" and args.engine in ("auto", "numba"):
+        from training.sim.compiled_transport import simulate_compiled
+
+        mua, mus, g, thickness = layers
+        return simulate_compiled(mua, mus, g, thickness, args.photons, n_medium=args.n_medium,
+                                 n_below=args.n_below, illumination=args.illumination, seed=args.seed,
+                                 threads=args.threads, progress=args.progress)
+    from training.sim.medium import LayeredMedium
+    from training.sim.transport import simulate
+
+    medium = LayeredMedium(*layers, n_medium=args.n_medium, n_below=args.n_below)
+    res = simulate(
+        medium, args.photons, illumination=args.illumination, seed=args.seed, device=args.device,
+        r_edges_cm=None, progress=args.progress, compile={"auto": "auto", "on": True, "off": False}[args.compile],
+        engine=args.engine, threads=args.threads,
     )
+    return {"R_d": res.R_d, "R_d_stderr": res.R_d_stderr, "T_d": res.T_d, "photons": res.photons,
+            "seconds": res.seconds}
 
 
 @command("simulate-layers")
@@ -73,23 +98,18 @@ def main(argv: list[str]) -> int:
     """Run the command; returns the exit status (2 for bad input)."""
     args = build_parser().parse_args(argv)
     try:
-        medium = _medium(args)
+        layers = _layers(args)
         if args.photons < 1:
             raise ValueError("--photons must be >= 1")
-        res = simulate(
-            medium, args.photons, illumination=args.illumination, seed=args.seed, device=args.device,
-            r_edges_cm=None, progress=args.progress,
-            compile={"auto": "auto", "on": True, "off": False}[args.compile],
-            engine=args.engine, threads=args.threads,
-        )
+        res = _walk(args, layers)
     except ValueError as exc:
         return error_status(exc)
     out = {
-        "R_d": float(res.R_d[0]),
-        "R_d_stderr": float(res.R_d_stderr[0]),
-        "T_d": 0.0 if math.isinf(float(medium.thickness[-1])) else float(res.T_d[0]),
-        "photons": int(res.photons),
-        "seconds": round(float(res.seconds), 4),
+        "R_d": float(res["R_d"][0]),
+        "R_d_stderr": float(res["R_d_stderr"][0]),
+        "T_d": 0.0 if math.isinf(float(layers[3][-1])) else float(res["T_d"][0]),
+        "photons": int(res["photons"]),
+        "seconds": round(float(res["seconds"]), 4),
     }
     print(json.dumps(out))
     return 0

@@ -17,17 +17,14 @@ from __future__ import annotations
 import torch
 
 from training.sim.physics import fresnel_unpolarised, hg_cos, rotate
-
-#: Longest single hop, cm: bounds pathological hops (transparent layer at grazing incidence); a
-#: physical hop is <= 17.3 / sigma_t <= 1730 cm for sigma_t >= 1e-2 cm^-1 (uniforms >= 2^-25).
-MAX_HOP_CM = 1e6
-
-# Packet fates (``kind`` of a finished record).
-KIND_ABSORBED = 0  #: killed by roulette or weight exhausted: all its weight is in ``absorbed``
-KIND_REFLECTED = 1  #: escaped through the top surface
-KIND_TRANSMITTED = 2  #: escaped through the bottom of a finite stack after >= 1 scattering
-KIND_UNSCATTERED = 3  #: escaped through the bottom without any scattering (ballistic)
-KIND_TRUNCATED = 4  #: still alive at the walk cap; its weight w is reported as truncated
+from training.sim.walk_constants import (  # noqa: F401 - the fates, re-exported for the engines' users
+    KIND_ABSORBED,
+    KIND_REFLECTED,
+    KIND_TRANSMITTED,
+    KIND_TRUNCATED,
+    KIND_UNSCATTERED,
+    MAX_HOP_CM,
+)
 
 _M1 = 0x85EBCA6B - (1 << 32)  # MurmurHash3 fmix32 constants as signed int32
 _M2 = 0xC2B2AE35 - (1 << 32)

@@ -13,6 +13,8 @@ from dataclasses import dataclass
 
 import torch
 
+from training.sim.medium_check import check_layer_values
+
 
 @dataclass
 class LayeredMedium:
@@ -55,24 +57,9 @@ class LayeredMedium:
             raise ValueError("the medium needs at least one layer and one channel")
         if self.thickness.shape != (n_layers,):
             raise ValueError(f"thickness must have shape ({n_layers},), got {tuple(self.thickness.shape)}")
-        for name in ("mua", "mus", "g"):
-            if not torch.isfinite(getattr(self, name)).all():
-                raise ValueError(f"{name} contains NaN or Inf")
-        if (self.mua < 0).any() or (self.mus < 0).any():
-            raise ValueError("mua and mus must be >= 0 (cm^-1)")
-        if (self.g.abs() > 0.99 + 1e-6).any():
-            raise ValueError("g must lie in [-0.99, 0.99]")
-        th = self.thickness
-        if torch.isnan(th).any() or (th <= 0).any():
-            raise ValueError("layer thicknesses must be > 0 cm")
-        if torch.isinf(th[:-1]).any():
-            raise ValueError("only the last layer may be semi-infinite (thickness inf)")
-        if self.semi_infinite and (self.mua[-1] + self.mus[-1] <= 0).any():
-            raise ValueError("a semi-infinite last layer needs mua + mus > 0 in every channel")
-        for name in ("n_medium", "n_below"):
-            v = float(getattr(self, name))
-            if not (math.isfinite(v) and 1.0 <= v <= 3.0):
-                raise ValueError(f"{name} must be a refractive index in [1, 3], got {v}")
+        host = lambda t: t.detach().cpu().numpy()  # noqa: E731
+        check_layer_values(host(self.mua), host(self.mus), host(self.g), host(self.thickness),
+                           self.n_medium, self.n_below)
 
     @property
     def n_layers(self) -> int:

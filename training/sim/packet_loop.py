@@ -21,11 +21,14 @@ only the uniforms it uses.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
+from contextlib import contextmanager
 
 import numba
 import numpy as np
 
-from training.sim.kernel import (
+from training.sim.walk_constants import (
+    G_ISOTROPIC_EPS,
     KIND_ABSORBED,
     KIND_REFLECTED,
     KIND_TRANSMITTED,
@@ -33,7 +36,6 @@ from training.sim.kernel import (
     KIND_UNSCATTERED,
     MAX_HOP_CM,
 )
-from training.sim.physics import G_ISOTROPIC_EPS
 
 #: Packets per block of the parallel loop: blocks are handed to threads dynamically (walk lengths vary
 #: by orders of magnitude), and a block is long enough that scheduling costs nothing.
@@ -266,3 +268,77 @@ def walk_batch(ch, serial, key, t_mut, t_alb, t_g, t_ztop, t_zbot, n, n_below, n
                       diffuse, max_steps, roulette_threshold, roulette_keep, path_n0, path_keep, record_paths,
                       out_kind, out_w, out_x, out_y, out_ncoll, out_absorbed, out_path, out_specular,
                       out_roulette, out_steps)
+
+
+def default_threads() -> int:
+    """Threads of the numba engine when none are asked for: numba's current setting, which is every CPU this
+    process may run on (its affinity mask, e.g. ``taskset``) unless NUMBA_NUM_THREADS or
+    ``numba.set_num_threads`` lowered it."""
+    return int(numba.get_num_threads())
+
+
+@contextmanager
+def compiled_threads(threads: int | None):
+    """Run numba parallel loops on ``threads`` threads (None: ``default_threads()``) inside the block, handing
+    blocks of packets to threads one at a time (walk lengths vary by orders of magnitude)."""
+    want = default_threads() if threads is None else int(threads)
+    if not 1 <= want <= numba.config.NUMBA_NUM_THREADS:
+        raise ValueError(f"threads must be in 1..{numba.config.NUMBA_NUM_THREADS} (the CPUs this process may use, "
+                         f"or NUMBA_NUM_THREADS), got {want}")
+    before = numba.get_num_threads()
+    numba.set_num_threads(want)
+    try:
+        with numba.parallel_chunksize(1):
+            yield
+    finally:
+        numba.set_num_threads(before)
+
+
+def source_packets(q0: int, count: int, photons: int, n_channels: int, order: str) -> tuple[np.ndarray, np.ndarray]:
+    """Channel and photon index (int64, (count,)) of packets q0 .. q0 + count - 1 of a run of ``photons`` per
+    channel; ``order`` as ``training.sim.walker.Source``: "interleaved" or "channel_major"."""
+    q = np.arange(q0, q0 + count, dtype=np.int64)
+    if order == "interleaved":
+        return q % n_channels, q // n_channels
+    return q // photons, q % photons
+
+
+#: Receives one walked batch: channel (m,), photon index (m,) and the outputs of ``walk_batch`` by name.
+BatchSink = Callable[[np.ndarray, np.ndarray, dict[str, np.ndarray]], None]
+
+
+def walk_compiled(tables: tuple[np.ndarray, ...], n: float, n_below: float, n_layers: int, n_ch: int, *,
+                  photons: int, order: str, seed: int, diffuse: bool, pool_packets: int, max_steps: int,
+                  roulette_threshold: float, roulette_boost: float, path_n0: np.ndarray, path_keep: float,
+                  record_paths: bool, threads: int | None, sink: BatchSink,
+                  walk: Callable = walk_batch) -> tuple[np.ndarray, np.ndarray, int, int]:
+    """Walk every packet of a run in batches of ``pool_packets`` (each batch to its end), handing each batch to
+    ``sink``.
+
+    tables: (t_mut, t_alb, t_g, t_ztop, t_zbot) float64 as ``walk_batch`` takes them; path_n0 (n_ch,) path
+    roulette thresholds (inf: none); walk: ``walk_batch`` or ``packet_loop_cuda.walk_batch_cuda``.
+    Returns the per-channel specular and roulette balance sums (n_ch,) float64 (added packet by packet, so they
+    do not depend on the batch size), the total packet steps and the longest walk in steps.
+    """
+    key = np.uint64(run_key(seed))
+    spec, roul = np.zeros(n_ch), np.zeros(n_ch)
+    packet_steps = longest = 0
+    total = photons * n_ch
+    with compiled_threads(threads):
+        for q0 in range(0, total, pool_packets):
+            m = min(pool_packets, total - q0)
+            ch, pid = source_packets(q0, m, photons, n_ch, order)
+            out = {"kind": np.empty(m, np.int8), "w": np.empty(m), "x": np.empty(m), "y": np.empty(m),
+                   "ncoll": np.empty(m, np.int32), "absorbed": np.empty(m),
+                   "path": np.empty((m, n_layers) if record_paths else (1, n_layers)),
+                   "specular": np.empty(m), "roulette": np.empty(m), "steps": np.empty(m, np.int64)}
+            walk(ch, np.arange(q0, q0 + m, dtype=np.int64), key, *tables, n, n_below, n_layers, n_ch, diffuse,
+                 max_steps, roulette_threshold, 1.0 / roulette_boost, path_n0, path_keep, record_paths,
+                 out["kind"], out["w"], out["x"], out["y"], out["ncoll"], out["absorbed"], out["path"],
+                 out["specular"], out["roulette"], out["steps"])
+            np.add.at(spec, ch, out["specular"])
+            np.add.at(roul, ch, out["roulette"])
+            packet_steps += int(out["steps"].sum())
+            longest = max(longest, int(out["steps"].max()))
+            sink(ch, pid, out)
+    return spec, roul, packet_steps, longest

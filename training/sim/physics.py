@@ -13,10 +13,7 @@ import numpy as np
 import torch
 
 from exporters.constants import N_TISSUE
-
-#: Below this |g| the HG inversion formula loses precision; sample isotropically instead (exact at
-#: g = 0, and the HG cosine mean differs by at most |g|/3 < 3e-7 from isotropic there).
-G_ISOTROPIC_EPS = 1e-6
+from training.sim.walk_constants import G_ISOTROPIC_EPS
 
 
 def fresnel_unpolarised(cos_i: torch.Tensor, n1: float | torch.Tensor, n2: float | torch.Tensor) -> torch.Tensor:

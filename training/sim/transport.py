@@ -16,18 +16,20 @@ import numpy as np
 import torch
 
 from exporters.constants import N_WAVELENGTHS, R_EDGES_CM
+from training.sim.compiled_transport import mean_stderr, progress_bar  # noqa: F401 - mean_stderr: public here too
 from training.sim.kernel import KIND_REFLECTED, KIND_TRANSMITTED, KIND_TRUNCATED, KIND_UNSCATTERED
 from training.sim.medium import LayeredMedium
+from training.sim.walk_constants import POOL_PACKETS_CPU
 from training.sim.walker import AUTO_COMPILE_PACKETS, Source, WalkConfig, Walker
 
 #: Radial profile estimators of ``simulate`` (``training.sim.resample``); the first is the default.
 PROFILE_ESTIMATORS: tuple[str, ...] = ("histogram", "cdf")
-#: Packets walked at once by default: ~2^18 keeps the float32 working set in cache on a CPU.  On a GPU the
+#: Packets walked at once by default: ``POOL_PACKETS_CPU`` on a CPU.  On a GPU the
 #: walk's time is set by its number of steps, which the longest walks fix, not by the packets per step: on
 #: an H200 the dataset's baseline medium at 376 wavelengths took 48-61 s for 2,000 photons,
 #: 49 s for 20,000 and 98 s for 165,000 (62e6 packets, ~6 GB with path records), so a GPU keeps that many
 #: in flight and pays the tail once.
-POOL_PACKETS = {"cpu": 1 << 18, "cuda": 165_000 * N_WAVELENGTHS}
+POOL_PACKETS = {"cpu": POOL_PACKETS_CPU, "cuda": 165_000 * N_WAVELENGTHS}
 
 
 @dataclass
@@ -107,16 +109,6 @@ class _Tallies:
             self.p2.index_add_(0, flat, wr * wr)
 
 
-def mean_stderr(s1, s2, n: int):
-    """Mean and standard error of the mean of n per-photon values from their sum and sum of squares.
-
-    Works on numpy arrays and torch tensors alike (same type out as in).
-    """
-    mean = s1 / n
-    var = (s2 / n - mean * mean).clip(0.0, None) * (n / max(n - 1, 1))
-    return mean, (var / n) ** 0.5
-
-
 def _check_common(photons: int, device: str | torch.device) -> torch.device:
     if int(photons) < 1:
         raise ValueError(f"photons must be >= 1, got {photons}")
@@ -189,7 +181,7 @@ def simulate(
                     compile=_want_compile(compile, photons * n_ch), engine=engine, threads=threads)
     tallies = _Tallies(n_ch, edges_t, dev)
     t0 = time.perf_counter()
-    bar = _progress_bar(photons * n_ch, progress)
+    bar = progress_bar(photons * n_ch, progress)
     totals = walker.run(Source(int(photons), n_ch), tallies, progress=bar.update if bar else None)
     if bar:
         bar.close()
@@ -210,14 +202,6 @@ def _want_compile(compile: bool | str, packets: int) -> bool:
     if not isinstance(compile, bool):
         raise ValueError(f"compile must be True, False or 'auto', got {compile!r}")
     return compile
-
-
-def _progress_bar(total: int, enabled: bool):
-    if not enabled:
-        return None
-    from tqdm import tqdm
-
-    return tqdm(total=total, unit="packet", unit_scale=True, smoothing=0.1)
 
 
 def _result(tal: _Tallies, totals, n: int, edges_t: torch.Tensor | None, seconds: float) -> SimResult:

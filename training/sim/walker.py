@@ -28,7 +28,6 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from contextlib import contextmanager
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -44,6 +43,7 @@ from training.sim.kernel import (
 )
 from training.sim.medium import LayeredMedium
 from training.sim.physics import fresnel_unpolarised, refract_cos
+from training.sim.walk_constants import ENGINES, ROULETTE_BOOST, ROULETTE_THRESHOLD
 
 __all__ = ["KIND_ABSORBED", "KIND_TRUNCATED", "Source", "WalkConfig", "WalkTotals", "Walker"]
 
@@ -74,8 +74,8 @@ class WalkConfig:
     illumination: str = "diffuse"
     pool_packets: int = 1 << 18
     max_steps: int = 100_000
-    roulette_threshold: float = 1e-4
-    roulette_boost: float = 10.0
+    roulette_threshold: float = ROULETTE_THRESHOLD
+    roulette_boost: float = ROULETTE_BOOST
     path_roulette_n0: float | list[float] | None = None
     path_roulette_keep: float = 0.5**0.5
     record_paths: bool = False
@@ -332,53 +332,37 @@ class Walker:
     def _run_compiled(self, source: Source, sink: Sink, progress: Callable[[int], None] | None) -> WalkTotals:
         """The numba engines: batches of ``pool_packets`` packets, each walked to its end by ``walk_batch`` (CPU
         threads) or ``walk_batch_cuda`` (one GPU thread per packet)."""
-        from training.sim.packet_loop import run_key, walk_batch
+        from training.sim.packet_loop import walk_batch, walk_compiled
 
         if self.engine == "numba-cuda":
             from training.sim.packet_loop_cuda import walk_batch_cuda as walk_batch
 
-        cfg, n_lay, n_ch = self.cfg, self.n_layers, self.n_ch
+        cfg, n_ch = self.cfg, self.n_ch
         f64 = lambda t: t.detach().cpu().to(torch.float64).numpy()  # noqa: E731
         tables = (f64(self.t_mut), f64(self.t_alb), f64(self.t_g), f64(self.t_ztop), f64(self.t_zbot))
         n0 = np.full(n_ch, np.inf) if cfg.path_roulette_n0 is None or cfg.path_roulette_keep >= 1.0 else \
             np.broadcast_to(np.asarray(cfg.path_roulette_n0, dtype=np.float64), (n_ch,)).copy()
-        key = np.uint64(run_key(self.seed))
-        spec = np.zeros(n_ch)
-        roul = np.zeros(n_ch)
-        with compiled_threads(self.threads):
-            for q0 in range(0, source.total, cfg.pool_packets):
-                m = min(cfg.pool_packets, source.total - q0)
-                ch, pid = source.packets(q0, m, torch.device("cpu"))
-                out = {"kind": np.empty(m, np.int8), "w": np.empty(m), "x": np.empty(m), "y": np.empty(m),
-                       "ncoll": np.empty(m, np.int32), "absorbed": np.empty(m),
-                       "path": np.empty((m, n_lay) if cfg.record_paths else (1, n_lay)),
-                       "specular": np.empty(m), "roulette": np.empty(m), "steps": np.empty(m, np.int64)}
-                walk_batch(ch.numpy(), np.arange(q0, q0 + m, dtype=np.int64), key, *tables, self.n,
-                           self.n_below, n_lay, n_ch, cfg.illumination == "diffuse", cfg.max_steps,
-                           cfg.roulette_threshold, 1.0 / cfg.roulette_boost, n0, cfg.path_roulette_keep,
-                           cfg.record_paths, out["kind"], out["w"], out["x"], out["y"], out["ncoll"],
-                           out["absorbed"], out["path"], out["specular"], out["roulette"], out["steps"])
-                chn = ch.numpy()
-                np.add.at(spec, chn, out["specular"])  # packet by packet: sums do not depend on the batch size
-                np.add.at(roul, chn, out["roulette"])
-                self.totals.packet_steps += int(out["steps"].sum())
-                self.totals.steps = max(self.totals.steps, int(out["steps"].max()))
-                rec = {"ch": ch, "pid": pid, **{k: torch.from_numpy(out[k]) for k in
-                                                ("kind", "w", "x", "y", "ncoll", "absorbed")}}
-                if cfg.record_paths:
-                    rec["path"] = torch.from_numpy(out["path"])
-                sink({k: v.to(self.device) for k, v in rec.items()})
-                if progress is not None:
-                    progress(m)
+
+        def batch_sink(ch: np.ndarray, pid: np.ndarray, out: dict[str, np.ndarray]) -> None:
+            rec = {"ch": torch.from_numpy(ch), "pid": torch.from_numpy(pid),
+                   **{k: torch.from_numpy(out[k]) for k in ("kind", "w", "x", "y", "ncoll", "absorbed")}}
+            if cfg.record_paths:
+                rec["path"] = torch.from_numpy(out["path"])
+            sink({k: v.to(self.device) for k, v in rec.items()})
+            if progress is not None:
+                progress(ch.shape[0])
+
+        spec, roul, packet_steps, longest = walk_compiled(
+            tables, self.n, self.n_below, self.n_layers, n_ch, photons=source.photons, order=source.order,
+            seed=self.seed, diffuse=cfg.illumination == "diffuse", pool_packets=cfg.pool_packets,
+            max_steps=cfg.max_steps, roulette_threshold=cfg.roulette_threshold, roulette_boost=cfg.roulette_boost,
+            path_n0=n0, path_keep=cfg.path_roulette_keep, record_paths=cfg.record_paths, threads=self.threads,
+            sink=batch_sink, walk=walk_batch)
+        self.totals.packet_steps += packet_steps
+        self.totals.steps = max(self.totals.steps, longest)
         self.totals.specular += torch.from_numpy(spec).to(self.device)
         self.totals.roulette_balance += torch.from_numpy(roul).to(self.device)
         return self.totals
-
-
-#: Walk engines: "numba" (the compiled per-packet loop on CPU threads), "numba-cuda" (the same loop, one CUDA
-#: thread per packet: ``training.sim.packet_loop_cuda``) and "torch" (the vectorised step, CPU or CUDA,
-#: optionally torch.compile'd); "auto" picks numba on a CPU and torch on CUDA.
-ENGINES = ("auto", "numba", "numba-cuda", "torch")
 
 
 def resolve_engine(engine: str, device: torch.device) -> str:
@@ -399,31 +383,10 @@ def resolve_engine(engine: str, device: torch.device) -> str:
 
 
 def default_threads() -> int:
-    """Threads of the numba engine when none are asked for: numba's current setting, which is every CPU this
-    process may run on (its affinity mask, e.g. ``taskset``) unless NUMBA_NUM_THREADS or
-    ``numba.set_num_threads`` lowered it."""
-    import numba
+    """Threads of the numba engine when none are asked for (``training.sim.packet_loop.default_threads``)."""
+    from training.sim.packet_loop import default_threads as numba_threads
 
-    return int(numba.get_num_threads())
-
-
-@contextmanager
-def compiled_threads(threads: int | None):
-    """Run numba parallel loops on ``threads`` threads (None: ``default_threads()``) inside the block, handing
-    blocks of packets to threads one at a time (walk lengths vary by orders of magnitude)."""
-    import numba
-
-    want = default_threads() if threads is None else int(threads)
-    if not 1 <= want <= numba.config.NUMBA_NUM_THREADS:
-        raise ValueError(f"threads must be in 1..{numba.config.NUMBA_NUM_THREADS} (the CPUs this process may use, "
-                         f"or NUMBA_NUM_THREADS), got {want}")
-    before = numba.get_num_threads()
-    numba.set_num_threads(want)
-    try:
-        with numba.parallel_chunksize(1):
-            yield
-    finally:
-        numba.set_num_threads(before)
+    return numba_threads()
 
 
 _COMPILED = None
