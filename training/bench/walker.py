@@ -1,7 +1,7 @@
 """Benchmarks of the CPU walker (collected by ``python -m training bench``): cores used, MCML side by side.
 
-1. ``simulate-layers`` end to end (a fresh process: start-up, the compiled kernel loaded from numba's cache,
-   the walk, JSON out) on MCML's semi-infinite test medium (mua 1, mus 99 cm^-1: albedo 0.99, g 0.9,
+1. ``simulate-layers`` end to end (a fresh process: start-up without torch, the compiled kernel loaded from
+   numba's cache, the walk, JSON out) on MCML's semi-infinite test medium (mua 1, mus 99 cm^-1: albedo 0.99, g 0.9,
    n 1.4, normal incidence) on 1 thread and on every CPU the process is given; the scaling ratio is
    rate(all) / rate(1), whose goal is >= 0.8 x the CPU count.  Wall-clock rates and CPU-time rates (photons
    per CPU-second of the process: what a core delivers when it is not shared) are both given, with the
@@ -110,8 +110,8 @@ def _semi_rows(photons: int) -> list[dict]:
          "ours": f"{r1:,.0f} photons/s wall, {cpu1:,.0f} per CPU-s (R_d {best[1][2]:.4f})", "anchor": anchor,
          "ratio": f"{r1 / m_rate:.2f}x wall, {cpu1 / m_cpu_rate:.2f}x per CPU-s",
          "error": "R_d: MCML 0.25065 +- 0.00016 (10^6 photons, note §4a)",
-         "notes": f"numba engine, float64, compile excluded (cache); start-up (python, torch, numba, the cached "
-         f"kernel) {startup_cpu:.1f} CPU-s of a 1,000-photon run; best of 2 interleaved; {load}"},
+         "notes": f"numba engine, float64, compile excluded (cache); start-up (python, numba, the cached kernel; "
+         f"no torch) {startup_cpu:.1f} CPU-s of a 1,000-photon run; best of 2 interleaved; {load}"},
         {"workload": f"the same, {all_threads} threads (every CPU given)",
          "ours": f"{rn:,.0f} photons/s wall ({util:.2f} CPUs busy on average), {cpun:,.0f} per CPU-s; idle machine "
          f"(projected from the CPU time): {idle_rate:,.0f} photons/s",
