@@ -43,6 +43,7 @@ BENCH_MODULES = [
     "training.bench.train",
     "training.bench.addon",
     "training.bench.live",
+    "training.bench.render_cost",
     "training.bench.memory",
     "training.bench.runtime",
     "training.bench.validate",

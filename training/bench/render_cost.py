@@ -1,0 +1,247 @@
+"""Benchmark of render cost: time to equal noise of the live group against Principled BSDF Random Walk (Skin).
+
+Scene: the demo head (training.demo_render: procedural head with ears, a back light behind the ear and a key
+light, metres), ``RESOLUTION`` squared px, Cycles CPU on one thread, denoiser off, the medium tone's albedo
+texture.  Materials: Principled BSDF with Subsurface Weight 1, Random Walk (Skin) and a skin-like radius
+(:data:`SKIN_RADIUS_MM`, the mean free paths of Jensen et al. 2001's skin, in metres at Unit Scale 1); the
+live group (Invert Skin Albedo's default) on the same texture; optionally its Bake mode.  Each material renders
+in its own fresh Blender process, at every sample count of ``SAMPLES`` with two seeds; ``ROUNDS`` rounds (the
+materials in alternating order) re-time the same deterministic renders and keep each render's least CPU time.
+
+Noise: for two independent renders A, B at N samples (seeds 1 and 2) of the same scene, mean((A - B)^2) / 2 is
+the per-pixel variance of one render, i.e. the mean squared error against the infinite-sample reference (the
+renders share no bias to cancel: each material is its own reference).  RMSE is taken on linear RGB over every
+pixel.  The fit RMSE(N) = c / sqrt(N) (least squares in log space, slope fixed at -1/2) and CPU seconds
+t(N) = t0 + a N (least squares) give the time to reach an RMSE e as a (c / e)^2 (the per-render sync t0
+excluded), so the ratio live / Principled is (a_live c_live^2) / (a_P c_P^2), whatever e.  CPU time is the
+process's user + system time around bpy.ops.render.render (getrusage), robust to the machine being shared.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[2]
+RESOLUTION = 128
+SAMPLES = (8, 16, 32)
+ROUNDS = 2
+SEEDS = (1, 2)
+TEXTURE = 256
+#: Skin mean free paths (R, G, B) in mm (Jensen et al. 2001, skin 1): the Principled anchor's Subsurface Radius.
+SKIN_RADIUS_MM = (3.67, 1.37, 0.68)
+
+_CHILD = """
+import json, resource, sys, time
+sys.path.insert(0, {root!r})
+import bpy, numpy as np
+import blender_addon
+from training import demo_render
+from training.demo_subject import TONES, skin_albedo_texture
+scene, parts = demo_render._scene({resolution}, 1)
+scene.cycles.use_denoising = False
+scene.cycles.use_adaptive_sampling = False
+scene.render.threads_mode, scene.render.threads = "FIXED", 1
+image = bpy.data.images.load(str(demo_render.write_image({texture_path!r},
+                                  skin_albedo_texture({texture}, seed=0, base=TONES["medium"]))))
+mode = {mode!r}
+mat = demo_render._material("skin", image, "principled_skin" if mode == "principled" else "principled")
+if mode == "principled":
+    p = mat.node_tree.nodes["Principled BSDF"]
+    p.inputs["Subsurface Radius"].default_value = {radius!r}
+    p.inputs["Subsurface Scale"].default_value = 0.001
+demo_render._assign(parts, mat)
+blender_addon.register()
+if mode == "live":
+    demo_render._invert(parts[0], mat)
+elif mode == "bake":
+    parts[0].active_material = mat
+    with bpy.context.temp_override(object=parts[0], active_object=parts[0]):
+        assert bpy.ops.spectral_skin.invert_albedo(mode="BAKE", storage="PACK") == {{"FINISHED"}}
+{variant}
+scene.render.image_settings.file_format = "OPEN_EXR"
+scene.render.image_settings.color_depth = "32"
+renders = []
+for samples in {samples!r}:
+    for seed in {seeds!r}:
+        scene.cycles.samples, scene.cycles.seed = samples, seed
+        scene.render.filepath = f"{out}/{{mode}}_{{samples}}_{{seed}}.exr"
+        r0 = resource.getrusage(resource.RUSAGE_SELF)
+        t0 = time.perf_counter()
+        bpy.ops.render.render(write_still=True)
+        wall = time.perf_counter() - t0
+        r1 = resource.getrusage(resource.RUSAGE_SELF)
+        cpu = (r1.ru_utime - r0.ru_utime) + (r1.ru_stime - r0.ru_stime)
+        renders.append({{"samples": samples, "seed": seed, "cpu_s": cpu, "wall_s": wall,
+                         "path": scene.render.filepath}})
+print("RESULT" + json.dumps(renders))
+"""
+
+_LIVE_GROUP = """
+live_node = next(n for n in mat.node_tree.nodes
+                 if n.type == "GROUP" and n.node_tree.name.startswith("Spectral Skin SSS Live"))
+"""
+_ONE_COMPONENT = """
+mixture = next(n for n in live_node.node_tree.nodes if n.type == "GROUP")
+for k in range(2, 10):
+    sock = mixture.inputs.get(f"k{k} Weight")
+    if sock is not None:
+        for link in list(sock.links):
+            live_node.node_tree.links.remove(link)
+        sock.default_value = (0.0, 0.0, 0.0, 1.0)
+"""
+_SSS = """
+tree = mat.node_tree
+tex = next(n for n in tree.nodes if n.type == "TEX_IMAGE")
+sep = tree.nodes.new("ShaderNodeSeparateColor")
+tree.links.new(tex.outputs["Color"], sep.inputs[0])
+total = None
+for c in {channels}:
+    sss = tree.nodes.new("ShaderNodeSubsurfaceScattering")
+    sss.falloff = "RANDOM_WALK"
+    sss.inputs["Scale"].default_value = 0.001
+    if c is None:
+        tree.links.new(tex.outputs["Color"], sss.inputs["Color"])
+        sss.inputs["Radius"].default_value = {radius!r}
+    else:
+        comb = tree.nodes.new("ShaderNodeCombineColor")
+        tree.links.new(sep.outputs[c], comb.inputs[c])
+        tree.links.new(comb.outputs[0], sss.inputs["Color"])
+        sss.inputs["Radius"].default_value = tuple(r if i == c else 0.0 for i, r in enumerate({radius!r}))
+    if total is None:
+        total = sss.outputs[0]
+    else:
+        add = tree.nodes.new("ShaderNodeAddShader")
+        tree.links.new(total, add.inputs[0])
+        tree.links.new(sss.outputs[0], add.inputs[1])
+        total = add.outputs[0]
+tree.links.new(total, tree.nodes["Material Output"].inputs["Surface"])
+"""
+
+#: Diagnostic materials, built in the child on ``mat``.  On the plain material (texture into an untouched
+#: Principled BSDF): one RGB random-walk Subsurface Scattering closure of the texture's colour and the skin radius,
+#: and the same split into three single-channel closures (colour and radius non-zero in one channel), as the
+#: mixture group splits each of its components.  On the live material: the coat switched off (Specular IOR Level
+#: 0), and every component but the first weighted 0 (Cycles skips zero-weight closures: 3 closures instead of 3K).
+VARIANTS = {
+    "live_no_coat": _LIVE_GROUP + "live_node.inputs['Specular IOR Level'].default_value = 0.0\n",
+    "live_k1": _LIVE_GROUP + _ONE_COMPONENT,
+    "sss_rgb": _SSS.replace("{channels}", "(None,)").replace("{radius!r}", repr(SKIN_RADIUS_MM)),
+    "sss_split": _SSS.replace("{channels}", "(0, 1, 2)").replace("{radius!r}", repr(SKIN_RADIUS_MM)),
+}
+
+
+def _run(script: str) -> list[dict]:
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")]))
+    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, env=env, timeout=1800)
+    line = next((ln for ln in done.stdout.splitlines() if ln.startswith("RESULT")), None)
+    if line is None:
+        raise RuntimeError(f"benchmark subprocess failed:\n{done.stdout[-3000:]}\n{done.stderr[-3000:]}")
+    return json.loads(line[len("RESULT"):])
+
+
+def _read_exr(path: str) -> np.ndarray:
+    """Linear RGB (H, W, 3) float64 of a rendered EXR."""
+    import OpenImageIO as oiio
+
+    buf = oiio.ImageBuf(path)
+    return np.asarray(buf.get_pixels(oiio.FLOAT), np.float64)[..., :3]
+
+
+def noise_rmse(a: np.ndarray, b: np.ndarray) -> float:
+    """RMSE of one render against the infinite-sample reference, from two independent renders a, b (H, W, 3)."""
+    return float(np.sqrt(np.mean((a - b) ** 2) / 2.0))
+
+
+def fit_cost(samples: np.ndarray, rmse: np.ndarray, cpu_s: np.ndarray) -> dict:
+    """c of RMSE = c / sqrt(N), and t0, a of CPU seconds = t0 + a N; cost = a c^2 (CPU s to reach RMSE 1)."""
+    c = float(np.exp(np.mean(np.log(rmse * np.sqrt(samples)))))
+    a, t0 = np.polyfit(samples.astype(np.float64), cpu_s, 1)
+    return {"c": c, "a": float(a), "t0": float(t0), "cost": float(a) * c * c}
+
+
+def measure(modes: tuple[str, ...] = ("principled", "live"), samples: tuple[int, ...] = SAMPLES,
+            resolution: int = RESOLUTION, rounds: int = ROUNDS) -> dict[str, dict]:
+    """Per mode: the RMSE and CPU time per sample count and the fit (:func:`fit_cost`).  The renders are
+    deterministic (fixed seeds), so repeated rounds (modes in alternating order) only re-time them: each render's
+    CPU time is the least over the rounds, the one least disturbed by other work on the machine."""
+    renders: dict[str, list[dict]] = {}
+    with tempfile.TemporaryDirectory(prefix="bench_cost_") as tmp:
+        for round_ in range(rounds):
+            for mode in modes if round_ % 2 == 0 else modes[::-1]:
+                for r in _run(_child_script(mode, samples, resolution, Path(tmp))):
+                    same = [q for q in renders.setdefault(mode, []) if q["samples"] == r["samples"]
+                            and q["seed"] == r["seed"]]
+                    if same:
+                        same[0]["cpu_s"] = min(same[0]["cpu_s"], r["cpu_s"])
+                    else:
+                        renders[mode].append(r)
+        return {mode: _fit_renders(renders[mode], samples) for mode in modes}
+
+
+def _child_script(mode: str, samples: tuple[int, ...], resolution: int, tmp: Path) -> str:
+    base = mode if mode in ("principled", "live", "bake") else "live" if mode.startswith("live_") else "plain"
+    return _CHILD.format(root=str(ROOT), resolution=resolution, texture=TEXTURE,
+                         texture_path=str(tmp / "skin.png"), mode=base, radius=SKIN_RADIUS_MM,
+                         variant=VARIANTS.get(mode, ""), samples=tuple(samples), seeds=SEEDS,
+                         out=str(tmp)).replace("{mode}_", f"{mode}_")
+
+
+def _fit_renders(renders: list[dict], samples: tuple[int, ...]) -> dict:
+    rows = []
+    for n in samples:
+        pair = [r for r in renders if r["samples"] == n]
+        imgs = [_read_exr(r["path"]) for r in pair]
+        cpu = float(np.mean([r["cpu_s"] for r in pair]))
+        rows.append({"samples": n, "rmse": noise_rmse(*imgs), "cpu_s": cpu, "mean": float(np.mean(imgs[0]))})
+    fit = fit_cost(np.array([r["samples"] for r in rows]), np.array([r["rmse"] for r in rows]),
+                   np.array([r["cpu_s"] for r in rows]))
+    return {"rows": rows, **fit}
+
+
+#: The rows: (mode, label, anchor mode) — the live group and the baked maps against Principled Random Walk (Skin),
+#: and the diagnostic split of one RGB random-walk closure into three single-channel closures.
+ROWS = (("live", "live group (default)", "principled"),
+        ("bake", "baked maps (Bake, packed)", "principled"),
+        ("sss_split", "3 single-channel random-walk closures (diagnostic)", "sss_rgb"),
+        ("live_no_coat", "live group with Specular IOR Level 0: no coat (diagnostic, colour differs)", "live"),
+        ("live_k1", "live group with components 2..K weighted 0: 3 closures (diagnostic, colour differs)", "live"))
+MODES = ("principled", "live", "bake", "sss_rgb", "sss_split", "live_no_coat", "live_k1")
+LABELS = {"principled": "Principled BSDF, Random Walk (Skin), skin radius",
+          "sss_rgb": "1 RGB random-walk Subsurface Scattering closure",
+          "live": "the live group (default)"}
+
+
+def _describe(fit: dict) -> str:
+    noise = ", ".join(f"{r['samples']}: {r['rmse']:.4f}" for r in fit["rows"])
+    mean = fit["rows"][0]["mean"]
+    return (f"RMSE c/sqrt(N), c = {fit['c']:.3f} (N: RMSE {noise}; image mean {mean:.3f}); "
+            f"CPU {fit['a'] * 1000:.0f} ms/sample (+{fit['t0']:.2f} s per render)")
+
+
+def benchmarks(quick: bool) -> list[dict]:
+    samples = SAMPLES[:2] if quick else SAMPLES
+    res = measure(MODES, samples, rounds=1 if quick else ROUNDS)
+    rows = []
+    for mode, label, anchor in ROWS:
+        ours, ref = res[mode], res[anchor]
+        relative = ours["c"] / ref["c"] * ref["rows"][0]["mean"] / ours["rows"][0]["mean"]
+        rows.append({"workload": f"render cost, demo head {RESOLUTION}² px, Cycles CPU 1 thread, no denoiser, "
+                                 f"{samples} spp x 2 seeds, least CPU time of {1 if quick else ROUNDS} rounds: "
+                                 f"{label} vs {LABELS[anchor]}",
+                     "ours": _describe(ours),
+                     "anchor": _describe(ref),
+                     "ratio": f"time to equal noise {ours['cost'] / ref['cost']:.2f}x (noise at equal samples "
+                              f"{ours['c'] / ref['c']:.2f}x, relative to the image mean "
+                              f"{relative:.2f}x; time per sample {ours['a'] / ref['a']:.2f}x)",
+                     "error": "-",
+                     "notes": "RMSE: linear RGB, all pixels, from two seeds (mean((A-B)^2)/2 = MSE against the "
+                              "infinite-sample reference); CPU s from getrusage around the render; time to equal "
+                              "noise = a c^2 (per-render sync excluded); fresh process per material"})
+    return rows
