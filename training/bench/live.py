@@ -101,7 +101,9 @@ def skin_albedo(path: Path, size: int) -> Path:
     return path
 
 
-def _run(script: str) -> dict:
+def run_script(script: str):
+    """Run ``script`` in a fresh Python process with the repository on its path; returns the JSON value its
+    ``RESULT`` line carries (RuntimeError with the process's output when there is none)."""
     env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")]))
     done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, env=env, timeout=1800)
     line = next((ln for ln in done.stdout.splitlines() if ln.startswith("RESULT")), None)
@@ -117,9 +119,9 @@ def measure(size: int = SIZE, modes: tuple[str, ...] = ("principled", "live", "b
         albedo = skin_albedo(Path(tmp) / "albedo.png", size)
         for mode in modes:
             blend = str(Path(tmp) / f"{mode}.blend")
-            setup = _run(_SETUP.format(root=str(ROOT), samples=SAMPLES, resolution=RESOLUTION, albedo=str(albedo),
+            setup = run_script(_SETUP.format(root=str(ROOT), samples=SAMPLES, resolution=RESOLUTION, albedo=str(albedo),
                                        mode=mode, blend=blend))
-            render = _run(_RENDER.format(blend=blend, out=str(Path(tmp) / f"{mode}.png")))
+            render = run_script(_RENDER.format(blend=blend, out=str(Path(tmp) / f"{mode}.png")))
             out[mode] = {**setup, **render, "blend_mb": os.path.getsize(blend) / 2 ** 20}
     return out
 

@@ -19,14 +19,12 @@ process's user + system time around bpy.ops.render.render (getrusage), robust to
 
 from __future__ import annotations
 
-import json
-import os
-import subprocess
-import sys
 import tempfile
 from pathlib import Path
 
 import numpy as np
+
+from training.bench.live import run_script
 
 ROOT = Path(__file__).resolve().parents[2]
 RESOLUTION = 128
@@ -137,15 +135,6 @@ VARIANTS = {
 }
 
 
-def _run(script: str) -> list[dict]:
-    env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")]))
-    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, env=env, timeout=1800)
-    line = next((ln for ln in done.stdout.splitlines() if ln.startswith("RESULT")), None)
-    if line is None:
-        raise RuntimeError(f"benchmark subprocess failed:\n{done.stdout[-3000:]}\n{done.stderr[-3000:]}")
-    return json.loads(line[len("RESULT"):])
-
-
 def _read_exr(path: str) -> np.ndarray:
     """Linear RGB (H, W, 3) float64 of a rendered EXR."""
     import OpenImageIO as oiio
@@ -175,7 +164,7 @@ def measure(modes: tuple[str, ...] = ("principled", "live"), samples: tuple[int,
     with tempfile.TemporaryDirectory(prefix="bench_cost_") as tmp:
         for round_ in range(rounds):
             for mode in modes if round_ % 2 == 0 else modes[::-1]:
-                for r in _run(_child_script(mode, samples, resolution, Path(tmp))):
+                for r in run_script(_child_script(mode, samples, resolution, Path(tmp))):
                     same = [q for q in renders.setdefault(mode, []) if q["samples"] == r["samples"]
                             and q["seed"] == r["seed"]]
                     if same:
