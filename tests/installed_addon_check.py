@@ -75,6 +75,19 @@ def skin_scene():
     return obj
 
 
+def textured_material(obj, name: str, image):
+    """A new material on ``obj``: ``image`` in an Image Texture node (active) feeding its Principled BSDF's Base
+    Color."""
+    material = bpy.data.materials.new(name)
+    material.use_nodes = True
+    obj.data.materials.append(material)
+    tex = material.node_tree.nodes.new("ShaderNodeTexImage")
+    tex.image = image
+    material.node_tree.links.new(tex.outputs["Color"], material.node_tree.nodes["Principled BSDF"].inputs[0])
+    material.node_tree.nodes.active = tex
+    return material
+
+
 def main() -> dict:
     zip_path = sys.argv[1]
     out: dict = {"blender": bpy.app.version_string, "python": "{}.{}".format(*sys.version_info[:2])}
@@ -103,13 +116,7 @@ def main() -> dict:
     image = bpy.data.images.new("painted", 4, 4, float_buffer=True)
     image.colorspace_settings.name = "Linear Rec.709"
     image.pixels.foreach_set([*SKIN_LINEAR, 1.0] * 16)
-    material = bpy.data.materials.new("Skin")
-    material.use_nodes = True
-    obj.data.materials.append(material)
-    tex = material.node_tree.nodes.new("ShaderNodeTexImage")
-    tex.image = image
-    material.node_tree.links.new(tex.outputs["Color"], material.node_tree.nodes["Principled BSDF"].inputs[0])
-    material.node_tree.nodes.active = tex
+    material = textured_material(obj, "Skin", image)
     t0 = time.perf_counter()
     try:
         with bpy.context.temp_override(object=obj, active_object=obj):
@@ -151,12 +158,7 @@ def main() -> dict:
 
     # The default of Invert Skin Albedo: the live group, fed by the Image Texture that feeds Base Color.
     obj = skin_scene()
-    material = bpy.data.materials.new("SkinLive")
-    material.use_nodes = True
-    obj.data.materials.append(material)
-    tex = material.node_tree.nodes.new("ShaderNodeTexImage")
-    tex.image = image
-    material.node_tree.links.new(tex.outputs["Color"], material.node_tree.nodes["Principled BSDF"].inputs[0])
+    material = textured_material(obj, "SkinLive", image)
     t0 = time.perf_counter()
     try:
         with bpy.context.temp_override(object=obj, active_object=obj):
