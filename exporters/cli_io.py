@@ -232,8 +232,9 @@ def _onnx_problem(path: Path) -> str | None:
 def _image_problem(path: Path) -> str | None:
     if path.suffix.lower() == ".png":
         return _content_problem(path, "png")
-    import OpenImageIO as oiio
+    from .image_input import openimageio
 
+    oiio = openimageio()
     inp = oiio.ImageInput.open(str(path))
     if inp is None:
         return f"not an image OpenImageIO can read ({' '.join(oiio.geterror().split())[:120]})"
