@@ -39,8 +39,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import cycles
-from .colorimetry import srgb_encode
-from .texel_table import COORDS, TexelTable, channel_names
+from .texel_table import TexelTable, channel_names, skin_coords
 
 #: The images of one component, in order: (name suffix, table channels for R, G, B, A or None).
 IMAGE_KINDS = ("Color", "Log Radius", "Weight")
@@ -164,9 +163,8 @@ def atlas_bytes(layout: AtlasLayout, image_count: int) -> int:
 
 def grid_coords(rgb: np.ndarray, layout: AtlasLayout) -> np.ndarray:
     """Clamped grid coordinates (N, 3) of linear colours (N, 3), as the nodes compute them (NaN -> 0)."""
-    x = np.nan_to_num(np.asarray(rgb, np.float64), nan=0.0)
-    e = srgb_encode(np.clip(x, 0.0, 1.0))
-    g = (e @ COORDS.T - np.array(layout.origin)) / layout.step
+    x = np.nan_to_num(np.asarray(rgb, np.float64), nan=0.0, posinf=1.0, neginf=0.0)
+    g = (skin_coords(x) - np.array(layout.origin)) / layout.step
     return np.clip(g, 0.0, np.array(layout.shape) - 1.0)
 
 
