@@ -31,42 +31,49 @@ never the mean.  Per-channel weights need the closure weight to differ from A pe
 
 The specular coat (skin's surface reflection: highlights, pores and wrinkles through the normal map)::
 
-    shader = F(cos) x Glossy(Multiscatter GGX, white, Roughness, Normal)
-             + (1 - F(cos)) / (1 - F_dr(IOR)) x mixture
+    shader = Principled BSDF(black base; Roughness, IOR, Normal, Specular IOR Level, Specular Tint)
+             + sum over k, c of min(w_kc (1 - F(cos)) / (1 - F_dr), 1) x closure_kc
 
 with F the Fresnel reflectance of the view direction at the shading normal (Cycles' Fresnel node) and F_dr
 the cosine-weighted mean of F (exporters.cycles.DIFFUSE_FRESNEL_POLY).  Why this layering and not another:
 
-* **Energy.**  The coat reflects F and leaves 1 - F to the skin, so no light is counted twice; the white
-  Multiscatter GGX lobe keeps its albedo at 1 for every roughness, so the coat reflects F, not less.
+* **The coat is the artist's specular.**  A Principled BSDF whose base is black keeps only its dielectric
+  specular layer (the black diffuse closure has weight 0 and is dropped), so highlights, rim light and
+  roughness are exactly those of the artist's Principled material.  A Fresnel-weighted white Multiscatter GGX
+  lobe (F at the shading normal, albedo 1) reflects up to 3x more at grazing angles than the Principled layer
+  (its microfacet Fresnel and shadowing): 0.42 against 0.14 of a white world at cos 0.15 (roughness 0.5),
+  which on the demo head's backlit rim made a highlight 1.3-2.5x Principled's and most of the render noise.
 * **The maps already hold the body reflectance behind the boundary.**  A bake targets the model's
   reflectance, which excludes the specular part and includes the Fresnel losses of entering and leaving
   (exporters.collapse step 1).  Weighting the mixture by 1 - F alone would take those losses twice and
   darken skin by F_dr (7.7 % at n = 1.4).  Dividing by 1 - F_dr keeps the cosine-weighted mean of the
   mixture's weight at exactly 1 while its angular shape is the physical 1 - F (brighter than the bare
   mixture face-on, darker at grazing where the coat takes over): the flat-slab test renders the model's
-  colour plus the specular part within 1.3 % (tests/test_bake_fidelity.py; the walk's reflectance varies a
-  little with the view angle, so the body loses 0.2-1.2 %).  The reflectance stays <= F + (1 - F) = 1
-  wherever the mixture reflects at most 1 - F_dr, as a body behind a Fresnel boundary does.
+  colour plus the coat's reflection within 3 % (tests/test_bake_fidelity.py).  The coat and the body's
+  weight are not one energy budget (the Principled layer reflects less than F at grazing, so a little light
+  is lost there), never above 1.
 * **Why not the Principled BSDF's own layering** (Subsurface Weight 1): a Principled BSDF holds ONE
   BSSRDF (one colour, radius, anisotropy); K x 3 of them would add the specular 3 times (sum over k, c of
   w_kc = 3) and would weight the mixture by 1 - (specular albedo), the double loss above.
+* **One closure per component and channel.**  The body weight multiplies each closure's own Mix Shader Fac
+  (w_kc x scale), so every closure appears once in the shader: feeding the summed mixture into further Mix
+  Shaders would emit each closure once per path through them, and Cycles' time per sample grows with the
+  number of subsurface closures (about 2x on the demo head for the doubled set, training.bench.render_cost).
+  A Mix Shader clamps its Fac to 1, so each closure has a second Mix Shader of Fac max(w_kc x scale - 1, 0):
+  Cycles skips it while that Fac is 0, which it is unless a weight exceeds 1 / scale (0.95 face-on at IOR
+  1.4; the shipped fast-path table's largest weight is 0.82).
 * **Why not OSL's ``layer()``** on the OSL path: SVM has no equivalent, and both paths must render the same
-  (tests/test_cycles_mixture.py compares them).
-* Mix Shader clamps its Fac to [0, 1] but the scale (1 - F)/(1 - F_dr) exceeds 1 at most angles (face-on
-  (1 - F0)/(1 - F_dr) = 1.053 at IOR 1.4): the mixture feeds two Mix Shaders, Fac = min(scale, 1) and
-  max(scale - 1, 0), added; Cycles sums the weights of a closure reached along several paths (checked: two
-  Mix Shaders of 0.9 and 0.3 over one Diffuse BSDF render 1.2 x the Diffuse; and the SVM group renders
-  F0 + 1.053 x the bare walk, tests/test_cycles_mixture.py).
-* The coat's Fresnel uses the shading normal, not each microfacet's: for a rough coat the reflected share
-  at grazing angles is a little high (the usual Fresnel-node layering), never above 1.
+  (tests/test_cycles_mixture.py compares them); the OSL script computes the weighted body and the same
+  Principled coat node sits beside it.
+* The body weight's Fresnel uses the shading normal, not each microfacet's.
 * The subsurface closures keep a smooth entry (roughness 0) and the group's IOR, exactly as the bake's
   Cycles reflectance tables assume (exporters.reflectance_tables); IOR 1 switches the coat off.
 
 The Principled BSDF's specular inputs (:data:`SPECULAR_INPUTS`, taken from the artist's Principled BSDF when the
 group is wired) keep their effect: **Specular IOR Level** scales the coat's F0 by 2 x level (the coat's index
 becomes (1 + sqrt F0) / (1 - sqrt F0); the closures keep the tissue's IOR, which the bake's tables assume) and
-**Specular Tint** colours the coat's lobe (SVM; the OSL script's coat keeps level 0.5 and white); over either
+**Specular Tint** colours the coat's lobe (both paths: the coat is the same Principled node; the OSL
+script's body weight keeps F of the tissue's IOR); over either
 path a **clear coat** (Coat Weight x F(Coat IOR) of a white Multiscatter GGX lobe of Coat Roughness, mixed over
 the skin, which keeps the rest) and a **Sheen** BSDF (colour Sheen Weight x Sheen Tint, added on top) follow the
 Principled BSDF's layering; the coat's tint and the sheen's share of the light below it are not modelled.  At
@@ -199,13 +206,16 @@ def build_svm_group(k_count: int = 3, name: str = GROUP_NAME) -> bpy.types.NodeT
     if not 1 <= k_count <= 7:  # 3K closures + coat + margin must stay below Cycles' MAX_CLOSURE = 64
         raise ValueError("k_count must be in 1..7")
     group, gin, gout = _fresh_group(name, k_count, "SVM")
-    mixture = _svm_mixture(group, gin, k_count)
-    group.links.new(_outer_layers(group, gin, _svm_coat(group, gin, mixture)), gout.inputs["BSSRDF"])
+    mixture = _svm_mixture(group, gin, k_count, _body_scale(group, gin))
+    surface = _add_shader(group, principled_specular(group, gin), mixture, 1050.0, 700.0)
+    group.links.new(_outer_layers(group, gin, surface), gout.inputs["BSSRDF"])
     return group
 
 
-def _svm_mixture(group: bpy.types.NodeTree, gin: bpy.types.Node, k_count: int) -> bpy.types.NodeSocket:
-    """The 3K single-channel closures, each scaled by w_kc and summed (module docstring); returns the sum."""
+def _svm_mixture(group: bpy.types.NodeTree, gin: bpy.types.Node, k_count: int,
+                 scale: bpy.types.NodeSocket) -> bpy.types.NodeSocket:
+    """The 3K single-channel closures, each scaled by w_kc x ``scale`` (the coat's body weight) and summed
+    (module docstring); returns the sum."""
     total = None
     for k in range(1, k_count + 1):
         y0 = -(k - 1) * 1500.0
@@ -218,19 +228,27 @@ def _svm_mixture(group: bpy.types.NodeTree, gin: bpy.types.Node, k_count: int) -
         for c in range(3):
             y = y0 - c * 450.0
             sss = _channel_closure(group, gin, seps, k, c, y)
-            mix = group.nodes.new("ShaderNodeMixShader")
-            mix.location = (-200.0, y)
-            group.links.new(seps["Weight"].outputs[c], mix.inputs["Fac"])
-            group.links.new(sss.outputs["BSSRDF"], mix.inputs[2])
-            if total is None:
-                total = mix.outputs[0]
-            else:
-                add = group.nodes.new("ShaderNodeAddShader")
-                add.location = (50.0 + 20.0 * k, y)
-                group.links.new(total, add.inputs[0])
-                group.links.new(mix.outputs[0], add.inputs[1])
-                total = add.outputs[0]
+            weight = _math(group, "MULTIPLY", seps["Weight"].outputs[c], scale, x=-300.0, y=y + 100.0)
+            for part in _weighted(group, sss.outputs["BSSRDF"], weight, y):
+                total = part if total is None else _add_shader(group, total, part, 50.0 + 20.0 * k, y)
     return total
+
+
+def _weighted(group: bpy.types.NodeTree, closure: bpy.types.NodeSocket, weight: bpy.types.NodeSocket,
+              y: float) -> list[bpy.types.NodeSocket]:
+    """``closure`` x ``weight`` for any weight >= 0: Mix Shaders of Fac min(weight, 1) and max(weight - 1, 0)
+    (a Mix Shader clamps its Fac to [0, 1]; Cycles sums a closure reached along both and skips the second
+    while its Fac is 0, i.e. unless the weight exceeds 1)."""
+    parts = []
+    for i, fac in enumerate((_math(group, "MINIMUM", weight, 1.0, x=-250.0, y=y + 50.0),
+                             _math(group, "MAXIMUM", _math(group, "SUBTRACT", weight, 1.0, x=-250.0, y=y - 50.0),
+                                   0.0, x=-200.0, y=y - 50.0))):
+        mix = group.nodes.new("ShaderNodeMixShader")
+        mix.location = (-150.0, y - 100.0 * i)
+        group.links.new(fac, mix.inputs["Fac"])
+        group.links.new(closure, mix.inputs[2])
+        parts.append(mix.outputs[0])
+    return parts
 
 
 def _channel_closure(group, gin, seps: dict, k: int, c: int, y: float) -> bpy.types.Node:
@@ -276,38 +294,29 @@ def _diffuse_fresnel(group: bpy.types.NodeTree, ior: bpy.types.NodeSocket) -> bp
     return _math(group, "MULTIPLY", poly, x, x=0.0, y=900.0)
 
 
-def _svm_coat(group: bpy.types.NodeTree, gin: bpy.types.Node,
-              mixture: bpy.types.NodeSocket) -> bpy.types.NodeSocket:
-    """F x Glossy + (1 - F)/(1 - F_dr) x mixture (module docstring); returns the shader output."""
+def principled_specular(group: bpy.types.NodeTree, gin: bpy.types.Node) -> bpy.types.NodeSocket:
+    """The coat: a Principled BSDF with a black base (its dielectric specular layer alone, the diffuse closure
+    has weight 0 and is dropped) fed the group's Roughness, IOR, Normal, Specular IOR Level and Specular Tint;
+    returns its BSDF output."""
+    spec = group.nodes.new("ShaderNodeBsdfPrincipled")
+    spec.location = (450.0, 1150.0)
+    spec.label = "Specular coat"
+    spec.inputs["Base Color"].default_value = (0.0, 0.0, 0.0, 1.0)
+    for name in ("Roughness", "IOR", "Normal", "Specular IOR Level", "Specular Tint"):
+        group.links.new(gin.outputs[name], spec.inputs[name])
+    return spec.outputs["BSDF"]
+
+
+def _body_scale(group: bpy.types.NodeTree, gin: bpy.types.Node) -> bpy.types.NodeSocket:
+    """(1 - F)/(1 - F_dr) of the coat's index (module docstring): the weight of the mixture below the coat."""
     coat_ior = _level_ior(group, gin.outputs["IOR"], gin.outputs["Specular IOR Level"])
     fresnel = group.nodes.new("ShaderNodeFresnel")
     fresnel.location = (-650.0, 700.0)
     group.links.new(coat_ior, fresnel.inputs["IOR"])
     group.links.new(gin.outputs["Normal"], fresnel.inputs["Normal"])
-    f = fresnel.outputs["Fac"]
-    scale = _math(group, "DIVIDE", _math(group, "SUBTRACT", 1.0, f, x=-450.0, y=700.0),
-                  _math(group, "SUBTRACT", 1.0, _diffuse_fresnel(group, coat_ior), x=150.0, y=900.0),
-                  x=300.0, y=800.0)
-    body = None
-    for i, fac in enumerate((_math(group, "MINIMUM", scale, 1.0, x=450.0, y=850.0),
-                             _math(group, "MAXIMUM", _math(group, "SUBTRACT", scale, 1.0, x=450.0, y=700.0),
-                                   0.0, x=600.0, y=700.0))):
-        part = group.nodes.new("ShaderNodeMixShader")
-        part.location = (750.0, 500.0 - 200.0 * i)
-        group.links.new(fac, part.inputs["Fac"])
-        group.links.new(mixture, part.inputs[2])
-        body = part.outputs[0] if body is None else _add_shader(group, body, part.outputs[0], 900.0, 400.0)
-    glossy = group.nodes.new("ShaderNodeBsdfGlossy")
-    glossy.location = (450.0, 1150.0)
-    glossy.distribution = "MULTI_GGX"
-    group.links.new(gin.outputs["Specular Tint"], glossy.inputs["Color"])
-    group.links.new(gin.outputs["Roughness"], glossy.inputs["Roughness"])
-    group.links.new(gin.outputs["Normal"], glossy.inputs["Normal"])
-    coat = group.nodes.new("ShaderNodeMixShader")
-    coat.location = (750.0, 1000.0)
-    group.links.new(f, coat.inputs["Fac"])
-    group.links.new(glossy.outputs[0], coat.inputs[2])
-    return _add_shader(group, coat.outputs[0], body, 1050.0, 700.0)
+    return _math(group, "DIVIDE", _math(group, "SUBTRACT", 1.0, fresnel.outputs["Fac"], x=-450.0, y=700.0),
+                 _math(group, "SUBTRACT", 1.0, _diffuse_fresnel(group, coat_ior), x=150.0, y=900.0),
+                 x=300.0, y=800.0)
 
 
 def _add_shader(group: bpy.types.NodeTree, a: bpy.types.NodeSocket, b: bpy.types.NodeSocket, x: float,
@@ -376,19 +385,20 @@ def build_osl_group(k_count: int = 3, name: str = GROUP_NAME_OSL) -> bpy.types.N
     if not 1 <= k_count <= 16:
         raise ValueError("k_count must be in 1..16")
     group, gin, gout = _fresh_group(name, k_count, "OSL")
-    source = osl.mixture_source(k_count, SKIN_ROUGHNESS, ENTRY_ROUGHNESS)
+    source = osl.mixture_source(k_count, ENTRY_ROUGHNESS)
     script = osl.script_node(group.nodes, source, f"spectral_skin_sss_k{k_count}.osl")
     for k in range(1, k_count + 1):
         for kind in KINDS:
             group.links.new(gin.outputs[socket_name(k, kind)], script.inputs[osl.param_name(k, kind)])
-    for name, param in (("IOR", "ior"), ("Roughness", "roughness"), ("Normal", "Normal")):
+    for name, param in (("IOR", "ior"), ("Normal", "Normal")):
         group.links.new(gin.outputs[name], script.inputs[param])
-    group.links.new(_outer_layers(group, gin, script.outputs["BSSRDF"]), gout.inputs["BSSRDF"])
+    surface = _add_shader(group, principled_specular(group, gin), script.outputs["BSSRDF"], 1050.0, 700.0)
+    group.links.new(_outer_layers(group, gin, surface), gout.inputs["BSSRDF"])
     return group
 
 
 #: Custom property marking the group layout version (bump when the generated nodes change).
-GROUP_VERSION = 3  # 2: specular coat, Normal input; 3: the Principled BSDF's specular inputs
+GROUP_VERSION = 4  # 2: specular coat, Normal input; 3: the Principled BSDF's specular inputs; 4: Principled coat
 
 
 def ensure_group(k_count: int, backend: str) -> bpy.types.NodeTree:

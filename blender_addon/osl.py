@@ -83,10 +83,13 @@ def ensure_oslquery() -> None:
     _register_bundled_oiio_types(site_packages)
 
 
-def mixture_source(k_count: int, roughness: float, entry_roughness: float) -> str:
-    """OSL shader: the specular coat over the mixture of K random-walk media (blender_addon/nodes.py)::
+def mixture_source(k_count: int, entry_roughness: float) -> str:
+    """OSL shader: the body below the specular coat, the mixture of K random-walk media (blender_addon/nodes.py)::
 
-        F * microfacet_multi_ggx_aniso(Normal, white)  +  (1 - F)/(1 - F_dr(ior)) * sum_k (w_k * A_k) * bssrdf(...)
+        (1 - F)/(1 - F_dr(ior)) * sum_k (w_k * A_k) * bssrdf(...)
+
+    The coat itself (a Principled BSDF's specular layer) is a node beside the script in the group, shared with
+    the SVM group (nodes.principled_specular).
 
     The factor A_k cancels the kernel's division of the throughput by the albedo, so the expected
     contribution of component k in channel c is w_kc times the walk in medium k.  F is Cycles' Fresnel node
@@ -94,7 +97,6 @@ def mixture_source(k_count: int, roughness: float, entry_roughness: float) -> st
     group (exporters.cycles.DIFFUSE_FRESNEL_POLY); the closures' entry has roughness ``entry_roughness`` (the
     group's nodes.ENTRY_ROUGHNESS: smooth).  A zero ``Normal`` (an unlinked group input on some paths) falls back
     to N, as Cycles' closures do.
-    ``roughness``: the default of the coat's roughness parameter.
     """
     params = []
     terms = []
@@ -110,7 +112,7 @@ def mixture_source(k_count: int, roughness: float, entry_roughness: float) -> st
     poly = " + x * (".join(repr(c) for c in fresnel) + ")" * (len(fresnel) - 1)
     return "\n".join(
         [
-            "// Spectral Skin SSS: specular coat over a mixture of K random-walk media with per-channel weights"
+            "// Spectral Skin SSS: the body under the coat, a mixture of K random-walk media with per-channel weights"
             " (generated).",
             '#include "stdcycles.h"',
             '#include "node_fresnel.h"',
@@ -118,7 +120,6 @@ def mixture_source(k_count: int, roughness: float, entry_roughness: float) -> st
             f"shader spectral_skin_sss_k{k_count}(",
             *params,
             f"    float ior = {constants.N_TISSUE!r},",
-            f"    float roughness = {float(roughness)!r},",
             "    normal Normal = N,",
             "    output closure color BSSRDF = 0)",
             "{",
@@ -127,12 +128,9 @@ def mixture_source(k_count: int, roughness: float, entry_roughness: float) -> st
             "    float F = fresnel_dielectric_cos(dot(I, Nn), backfacing() ? 1.0 / eta : eta);",
             "    float x = (eta - 1.0) / (eta + 1.0);",
             f"    float F_dr = x * ({poly});",
-            "    float alpha = clamp(roughness, 0.0, 1.0);",
-            "    alpha = alpha * alpha;",
             "    closure color mixture = 0;",
             *terms,
-            "    BSSRDF = F * microfacet_multi_ggx_aniso(Nn, vector(0.0), alpha, alpha, color(1.0))",
-            "        + ((1.0 - F) / (1.0 - F_dr)) * mixture;",
+            "    BSSRDF = ((1.0 - F) / (1.0 - F_dr)) * mixture;",
             "}",
             "",
         ]

@@ -41,9 +41,16 @@ What "shows" means, and the method
    goes into the weight (the profile width is kept, step 6: at a fixed diffusion length the median exit
    radius changes by at most ~25 % between alpha 0.4 and 0.98), and walks get longer (~1 / (1 - alpha*)).
 5. **Anisotropy.**  One g per component (Cycles takes one per closure; docs/contracts.md §4 stores one channel):
-   the light-weighted mean of g_k over the visible channels, capped at 0.7 (above it Cycles 5.0's walk
-   is biased high: exporters.cycles.RECOMMENDED_G_MAX).  The reflectance of step 4 is solved at this g,
-   so no further similarity transform is needed.
+   the light-weighted mean of g_k over the visible channels, capped at :data:`G_MAX` = 0: every component
+   renders as its similar isotropic medium, with the reflectance of step 4 solved at g = 0 and the
+   diffusion length of step 6 kept (mu_a and the reduced scattering mu_s (1 - g) are what set both).  Why 0
+   and not the largest g Cycles walks accurately (0.7, exporters.cycles.RECOMMENDED_G_MAX): render cost.  At
+   g = 0.7 the painted colour needs alpha >= 0.987 (step 4's face-on floor; alpha* 0.958), at g = 0 only
+   alpha >= 0.91, and Cycles' walk takes sigma_t = 1 / (d (1 - g)), 3.3x denser steps for its first 10
+   events: on the demo head the mixture's CPU time per sample halves (bench/results.md,
+   training.bench.render_cost).  What is given up is the single-scattering lobe of the first events, which
+   matters for collimated light near normal incidence only (diffuse light: none; Cycles itself walks the
+   similar isotropic medium from its 10th event on).
 6. **Profile width.**  The spatial spread of component k's light is set by its diffusion length
    D = 1 / sigma_tr, sigma_tr = sigma_t sqrt(3 (1 - alpha)(1 - alpha g)) (the decay rate of the
    diffusion profile, in cm).  Its light-weighted channel mean D_kc = <omega_c, E_k D_k> / <omega_c, E_k>
@@ -79,8 +86,8 @@ ALPHA_MIN: float = cycles.ALPHA_EXACT_MIN
 ALPHA_STAR_SOFT_MAX: float = 0.99
 #: Absolute ceiling (a component that is brighter than this even at weight 1 is unreachable).
 ALPHA_HARD_MAX: float = reflectance_tables.ALPHA_TABLE_MAX
-#: Anisotropy cap (see exporters.cycles.RECOMMENDED_G_MAX).
-G_MAX: float = cycles.RECOMMENDED_G_MAX
+#: Anisotropy of the rendered components: the similar isotropic medium (step 5 of the module docstring).
+G_MAX: float = 0.0
 #: Smallest mean free path given to Cycles (cm): 10 um (step 7 of the module docstring).
 MIN_MFP_CM: float = 1e-3
 #: Largest weight a Cycles Mix Shader passes (its Fac is clamped to [0, 1]).

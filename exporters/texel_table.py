@@ -56,7 +56,8 @@ from .constants import PARAM_NAMES, PARAM_RANGES
 from .maps import sha256_file
 from .texel_records import CollapseOptions
 
-FORMAT = "spectral_skin_sss texel table v3"
+#: v4: components collapsed to isotropic media (exporters.collapse.G_MAX = 0); v3 tables hold g up to 0.7.
+FORMAT = "spectral_skin_sss texel table v4"
 #: skin space = COORDS @ sRGB-encoded RGB (module docstring).
 COORDS = np.array([[1 / 3, 1 / 3, 1 / 3], [1.0, -1.0, 0.0], [0.0, 1.0, -1.0]])
 COORDS_INV = np.linalg.inv(COORDS)

@@ -127,3 +127,29 @@ def snapshot(folder: Path | None = None) -> dict:
         state["files"] = sorted(p.name for p in folder.iterdir()) if folder.exists() else None
     state["tmp"] = sorted(p for p in os.listdir(tempfile.gettempdir()) if p.startswith("spectral_skin_sss_"))
     return state
+
+
+def principled_coat_reflectance(scene, mus, roughness: float, ior: float) -> np.ndarray:
+    """(len(mus), 3) mean render of the probe slab (blender_addon.probe) under its white world, seen at each
+    view cosine of ``mus``, with a plain Principled BSDF of black base colour, ``roughness`` and ``ior``: what
+    Blender's own Principled specular layer reflects, the reference for the skin group's coat.  The slab's
+    material is restored afterwards."""
+    from blender_addon import probe
+
+    slab = bpy.data.objects["ProbeSlab"]
+    kept = list(slab.data.materials)
+    mat = probe.slab_material("PrincipledCoatReference")
+    spec = mat.node_tree.nodes.new("ShaderNodeBsdfPrincipled")
+    spec.inputs["Base Color"].default_value = (0.0, 0.0, 0.0, 1.0)
+    spec.inputs["Roughness"].default_value = roughness
+    spec.inputs["IOR"].default_value = ior
+    mat.node_tree.links.new(spec.outputs["BSDF"], probe.material_output(mat).inputs["Surface"])
+    out = []
+    for mu in mus:
+        probe.view_from(scene, float(mu))
+        out.append(probe.render_mean(scene)[0])
+    slab.data.materials.clear()
+    for m in kept:
+        slab.data.materials.append(m)
+    bpy.data.materials.remove(mat)
+    return np.array(out)

@@ -79,7 +79,8 @@ def test_cycles_target_maps_and_record(skin_png, tmp_path):
         assert np.all((c >= 0) & (c <= 1)) and np.all(r > cycles.MIN_RADIUS)
         np.testing.assert_array_equal(c[1, 1], c[1, 3])  # same colour in, same maps out
         np.testing.assert_array_equal(c[0, 0], c[2, 4])
-        assert not np.array_equal(c[0, 0], c[1, 1])
+        w = maps.read_exr(out / f"face_k{k}_weight.exr")[0]  # the painted colour lives in the weights
+        assert not np.array_equal(w[0, 0], w[1, 1])
 
 
 @pytest.mark.parametrize("path, rtol, half_atol", [("table", 6e-4, 2.5e-4), ("exact", 1e-5, 1e-7)])
@@ -213,12 +214,12 @@ def test_udim_albedo_bakes_every_tile_to_maps_named_per_tile(tmp_path):
     assert "tile skin.1001.png" in proc.stdout and "tile skin.1002.png" in proc.stdout
     record = json.loads((out / "skin.1002_maps.json").read_text())
     assert record["input"]["image"].endswith("skin.1002.png")
-    first = maps.read_exr(out / "skin.1001_k1_color.exr")[0]
-    second = maps.read_exr(out / "skin.1002_k1_color.exr")[0]
+    first = maps.read_exr(out / "skin.1001_k1_weight.exr")[0]
+    second = maps.read_exr(out / "skin.1002_k1_weight.exr")[0]
     assert first.shape == second.shape == (2, 3, 3) and not np.allclose(first, second)
     alone = tmp_path / "alone"  # a tile baked on its own gives the same maps
     assert bake("--albedo", str(tiles / "skin.1002.png"), "--out", str(alone), "--prune-share", "0").returncode == 0
-    np.testing.assert_array_equal(maps.read_exr(alone / "skin.1002_k1_color.exr")[0], second)
+    np.testing.assert_array_equal(maps.read_exr(alone / "skin.1002_k1_weight.exr")[0], second)
 
 
 def test_udim_albedo_errors_leave_the_folder_as_it_was(tmp_path):

@@ -12,12 +12,13 @@ the OSL node groups.  1 Blender unit = 5 mm, so the slab is
 semi-infinite for every component and Cycles' float32 walk resolves the shortest mean free path.
 
 The group layers a specular coat over the mixture (blender_addon/nodes.py): the render is the model's colour
-(its reflectance excludes the specular part) plus the coat's reflection of the white world, F(mu) at each view
-angle (white Multiscatter GGX: albedo 1 at any roughness), combined with the same quadrature weights:
-sum_i w_i F(mu_i) = 0.07676 (the exact cosine-weighted mean is 0.07681).  The test subtracts it and holds the
-rest to the model's colour, as strictly as before the coat.  The coat's 1 - F weighting of the
-mixture is normalised to a cosine-weighted mean of 1, so it leaves the diffuse colour unchanged to < 1 % (the
-baked walk's reflectance varies a little with the view angle; exporters.cycles.coat_body_scale).
+(its reflectance excludes the specular part) plus the coat's reflection of the white world.  The coat is a
+Principled BSDF's specular layer, so the reference for it is Blender's own Principled BSDF with a black base
+(same roughness and IOR), rendered at the same view angles and combined with the same quadrature weights
+(0.035 at roughness 0.63, IOR 1.4).  The test subtracts it and holds the rest to the model's colour.  The
+coat's 1 - F weighting of the mixture is normalised to a cosine-weighted mean of 1, so it leaves the diffuse
+colour unchanged to < 1 % (the baked walk's reflectance varies a little with the view angle;
+exporters.cycles.coat_body_scale).
 """
 
 from __future__ import annotations
@@ -35,8 +36,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 import blender_addon  # noqa: E402
 from blender_addon import nodes, preferences, probe  # noqa: E402
 from exporters.colorimetry import spectrum_to_linear_srgb  # noqa: E402
-from exporters.cycles import fresnel_dielectric  # noqa: E402
-from tests.addon_scene import run_invert, write_image  # noqa: E402
+from tests.addon_scene import principled_coat_reflectance, run_invert, write_image  # noqa: E402
 
 TONES = {  # linear sRGB albedo (light, medium, dark skin)
     "light": np.array([0.70, 0.45, 0.33]),
@@ -54,10 +54,12 @@ def model_colour(albedo_rgb: np.ndarray) -> np.ndarray:
     return spectrum_to_linear_srgb(refl.astype(np.float64))[0]
 
 
-def coat_reflection(n: int = 4) -> float:
-    """The coat's share of the probe's hemispherical render: sum_i w_i F(mu_i) on the probe's view angles."""
+def coat_reflection(scene, n: int = 4) -> np.ndarray:
+    """The coat's share of the probe's hemispherical render (3,): a plain Principled BSDF with a black base at the
+    group's default roughness and IOR, rendered at the probe's view angles and combined with their weights."""
     mus, weights = probe.hemispherical_nodes(n)
-    return float(np.sum(weights * fresnel_dielectric(mus, nodes.DEFAULT_IOR)))
+    spec = principled_coat_reflectance(scene, mus, nodes.SKIN_ROUGHNESS, nodes.DEFAULT_IOR)
+    return np.sum(weights[:, None] * spec, axis=0)
 
 
 def render_tone(tmp_path: Path, tone: str, backend: str, own_colour: bool):
@@ -72,7 +74,7 @@ def render_tone(tmp_path: Path, tone: str, backend: str, own_colour: bool):
         slab = bpy.data.objects["ProbeSlab"]
         assert run_invert(slab, filepath=str(albedo), backend=backend, model_colour=own_colour) == {"FINISHED"}
         scene.cycles.shading_system = backend == "OSL"  # the artist's step: the add-on never turns OSL on
-        return probe.render_hemispherical(scene, 4)
+        return probe.render_hemispherical(scene, 4), coat_reflection(scene)
     finally:
         blender_addon.unregister()
 
@@ -84,10 +86,10 @@ CASES = [(tone, backend, True) for backend in ("SVM", "OSL") for tone in TONES] 
 @pytest.mark.parametrize("tone, backend, own_colour", CASES)
 def test_cycles_reproduces_the_baked_colour(tmp_path, tone, backend, own_colour):
     target = model_colour(TONES[tone]) if own_colour else TONES[tone]
-    coat = coat_reflection()
-    mean, err, seconds = render_tone(tmp_path, tone, backend, own_colour)
+    (mean, err, seconds), coat = render_tone(tmp_path, tone, backend, own_colour)
     rel = (mean - coat) / target - 1.0  # the render less the coat's reflection, against the baked-for colour
-    print(f"\n{backend} {tone}{'' if own_colour else ' (painted)'}: cycles {np.round(mean, 5)} = coat {coat:.5f} + "
+    print(f"\n{backend} {tone}{'' if own_colour else ' (painted)'}: cycles {np.round(mean, 5)} = "
+          f"coat {np.round(coat, 5)} + "
           f"{np.round(mean - coat, 5)}, model {np.round(target, 5)} rel {np.round(rel * 100, 2)} % (stderr "
           f"{np.round(err / target * 100, 2)} %, {seconds:.1f} s)")
     assert np.all(err / target < 0.01), "too noisy to test 3 %"

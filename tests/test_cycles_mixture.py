@@ -4,9 +4,10 @@ Linearity: a 2-component mixture with per-channel weights must render as the wei
 single-component renders (the closure-pick argument in blender_addon/nodes.py), the OSL group must match
 the SVM group, and a single component through the group must match an independent adding-doubling
 reference (iadpython UR1, n = 1: see tests/test_cycles_render.py for why).  The group's specular coat is
-part of every render: seen face-on under the white world it adds F(1) = 0.0278 (IOR 1.4) and scales the
+part of every render: seen face-on under the white world it adds what a Principled BSDF with a black base
+reflects (rendered here in the same scene, tests/addon_scene.principled_coat_reflectance) and scales the
 mixture by (1 - F(1))/(1 - F_dr) = 1.053 (exporters.cycles.coat_body_scale), so the reference is
-F(1) + 1.053 x UR1; the weight-sum relation holds with the coat as it is (the weights sum to 1 per channel).
+coat + 1.053 x UR1; the weight-sum relation holds with the coat as it is (the weights sum to 1 per channel).
 """
 
 from __future__ import annotations
@@ -22,6 +23,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from blender_addon import nodes, osl, probe  # noqa: E402
 from exporters import cycles  # noqa: E402
+from tests.addon_scene import principled_coat_reflectance  # noqa: E402
 
 SAMPLES = 1024
 UNIT_SCALE_M = 0.01
@@ -47,7 +49,9 @@ def render_group(weights, backend="SVM"):
     mat = probe.slab_material()
     gnode = nodes.wire_into_material(mat, group)
     nodes.set_constant_inputs(gnode, [component(*m, w) for m, w in zip(MEDIA, weights, strict=True)])
-    return probe.render_mean(scene)
+    result = probe.render_mean(scene)
+    coat = principled_coat_reflectance(scene, [1.0], nodes.SKIN_ROUGHNESS, nodes.DEFAULT_IOR)[0]
+    return (*result, coat)
 
 
 def close(a, ea, b, eb, tol=0.01):
@@ -58,16 +62,16 @@ def close(a, ea, b, eb, tol=0.01):
 
 def test_mixture_is_weighted_sum_svm_and_osl():
     ones, zeros = np.ones(3), np.zeros(3)
-    r1, e1, t1 = render_group([ones, zeros])
-    r2, e2, t2 = render_group([zeros, ones])
-    mix, emix, tmix = render_group([W1, 1.0 - W1])
-    mix_osl, emix_osl, tosl = render_group([W1, 1.0 - W1], backend="OSL")
+    r1, e1, t1, coat = render_group([ones, zeros])
+    r2, e2, t2, _ = render_group([zeros, ones])
+    mix, emix, tmix, _ = render_group([W1, 1.0 - W1])
+    mix_osl, emix_osl, tosl, _ = render_group([W1, 1.0 - W1], backend="OSL")
     expect = W1 * r1 + (1.0 - W1) * r2
     eexp = np.hypot(W1 * e1, (1.0 - W1) * e2)
     ok_svm, rel_svm = close(mix, emix, expect, eexp)
     ok_osl, rel_osl = close(mix_osl, emix_osl, expect, eexp)
     ok_pair, rel_pair = close(mix_osl, emix_osl, mix, emix)
-    coat, scale = cycles.fresnel_dielectric(1.0, nodes.DEFAULT_IOR), cycles.coat_body_scale(1.0, nodes.DEFAULT_IOR)
+    scale = cycles.coat_body_scale(1.0, nodes.DEFAULT_IOR)
     refs = [coat + scale * np.array([iadpython.Sample(a=a, b=np.inf, g=m[2], n=1.0, quad_pts=16).rt()[0]
                                      for a in m[0]]) for m in MEDIA]
     ok_r1, rel_r1 = close(r1, e1, refs[0], 0.0)
@@ -108,4 +112,4 @@ def test_osl_source_compiles_for_several_k():
         group = nodes.build_osl_group(k)
         script = next(n for n in group.nodes if n.bl_idname == "ShaderNodeScript")
         assert script.bytecode
-        assert {osl.param_name(k, "Radius"), "ior", "roughness", "Normal"} <= set(script.inputs.keys())
+        assert {osl.param_name(k, "Radius"), "ior", "Normal"} <= set(script.inputs.keys())

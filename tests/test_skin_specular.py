@@ -31,7 +31,14 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from blender_addon import nodes, probe  # noqa: E402
 from exporters import cycles  # noqa: E402
-from tests.addon_scene import image_pixels, run_invert, skin_codes, skin_object, write_image  # noqa: E402
+from tests.addon_scene import (  # noqa: E402
+    image_pixels,
+    principled_coat_reflectance,
+    run_invert,
+    skin_codes,
+    skin_object,
+    write_image,
+)
 
 SIZE = 48
 CAMERA = Vector((0.0, -5.0, 0.0))
@@ -206,9 +213,10 @@ def test_wiring_keeps_user_nodes_and_takes_their_roughness_and_normal():
 
 
 @pytest.mark.parametrize("backend", ["SVM", "OSL"])
-def test_coat_alone_reflects_exactly_fresnel(backend):
+def test_coat_alone_reflects_as_a_principled_specular_layer(backend):
     # Weights 0 (no skin): on the probe slab under the white world (radiance 1) the group renders the coat's
-    # reflectance, F(mu) at every view angle and roughness (white Multiscatter GGX keeps albedo 1).
+    # reflectance, which must be that of Blender's own Principled BSDF with a black base (its specular layer)
+    # at every view angle and roughness; at roughness 0 that is the Fresnel reflectance F(mu).
     scene = probe.new_scene(samples=64, resolution=8, seed=3)
     if backend == "OSL":
         scene.cycles.shading_system = True
@@ -222,10 +230,13 @@ def test_coat_alone_reflects_exactly_fresnel(backend):
         for mu in mus:
             probe.view_from(scene, float(mu))
             got.append(probe.render_mean(scene)[0])
-        expected = cycles.fresnel_dielectric(mus, nodes.DEFAULT_IOR)
+        expected = principled_coat_reflectance(scene, mus, roughness, nodes.DEFAULT_IOR)
         print(f"\n{backend} roughness {roughness:.2f}: mu {np.round(mus, 3)} coat {np.round(np.mean(got, axis=1), 4)} "
-              f"F {np.round(expected, 4)}")
-        np.testing.assert_allclose(np.array(got), expected[:, None] * np.ones(3), rtol=0.005)
+              f"Principled {np.round(expected.mean(axis=1), 4)}")
+        np.testing.assert_allclose(np.array(got), expected, rtol=0.01, atol=2e-4)
+        if roughness == 0.0:
+            fresnel = cycles.fresnel_dielectric(mus, nodes.DEFAULT_IOR)
+            np.testing.assert_allclose(np.array(got), fresnel[:, None] * np.ones(3), rtol=0.01)
 
 
 def test_diffuse_fresnel_fit_and_coat_scale():

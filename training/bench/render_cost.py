@@ -94,6 +94,33 @@ for k in range(2, 10):
             live_node.node_tree.links.remove(link)
         sock.default_value = (0.0, 0.0, 0.0, 1.0)
 """
+_MIXTURE = """
+mixture = next(n for n in live_node.node_tree.nodes if n.type == "GROUP")
+tree = mixture.node_tree
+gin = next(n for n in tree.nodes if n.type == "GROUP_INPUT")
+"""
+_FRESNEL_COAT = """
+spec = next(n for n in tree.nodes if n.type == "BSDF_PRINCIPLED")
+fresnel = tree.nodes.new("ShaderNodeFresnel")
+tree.links.new(gin.outputs["IOR"], fresnel.inputs["IOR"])
+glossy = tree.nodes.new("ShaderNodeBsdfGlossy")
+glossy.distribution = "MULTI_GGX"
+tree.links.new(gin.outputs["Roughness"], glossy.inputs["Roughness"])
+coat = tree.nodes.new("ShaderNodeMixShader")
+tree.links.new(fresnel.outputs["Fac"], coat.inputs["Fac"])
+tree.links.new(glossy.outputs[0], coat.inputs[2])
+for link in list(spec.outputs[0].links):
+    tree.links.new(coat.outputs[0], link.to_socket)
+tree.nodes.remove(spec)
+"""
+_DOUBLED = """
+for node in tree.nodes:
+    fac = node.inputs["Fac"] if node.type == "MIX_SHADER" else None
+    if fac is not None and fac.links and fac.links[0].from_node.type == "MATH" \
+            and fac.links[0].from_node.operation == "MAXIMUM":
+        tree.links.remove(fac.links[0])
+        fac.default_value = 1e-3
+"""
 _SSS = """
 tree = mat.node_tree
 tex = next(n for n in tree.nodes if n.type == "TEX_IMAGE")
@@ -126,9 +153,13 @@ tree.links.new(total, tree.nodes["Material Output"].inputs["Surface"])
 #: Principled BSDF): one RGB random-walk Subsurface Scattering closure of the texture's colour and the skin radius,
 #: and the same split into three single-channel closures (colour and radius non-zero in one channel), as the
 #: mixture group splits each of its components.  On the live material: the coat switched off (Specular IOR Level
-#: 0), and every component but the first weighted 0 (Cycles skips zero-weight closures: 3 closures instead of 3K).
+#: 0), every component but the first weighted 0 (Cycles skips zero-weight closures: 3 closures instead of 3K), the
+#: coat as the Fresnel node's F over a white Multiscatter GGX lobe instead of the Principled specular layer, and
+#: every closure's second Mix Shader (the part of a weight above 1) at Fac 0.001, so Cycles emits each closure twice.
 VARIANTS = {
     "live_no_coat": _LIVE_GROUP + "live_node.inputs['Specular IOR Level'].default_value = 0.0\n",
+    "live_fresnel_coat": _LIVE_GROUP + _MIXTURE + _FRESNEL_COAT,
+    "live_doubled": _LIVE_GROUP + _MIXTURE + _DOUBLED,
     "live_k1": _LIVE_GROUP + _ONE_COMPONENT,
     "sss_rgb": _SSS.replace("{channels}", "(None,)").replace("{radius!r}", repr(SKIN_RADIUS_MM)),
     "sss_split": _SSS.replace("{channels}", "(0, 1, 2)").replace("{radius!r}", repr(SKIN_RADIUS_MM)),
@@ -200,8 +231,13 @@ ROWS = (("live", "live group (default)", "principled"),
         ("bake", "baked maps (Bake, packed)", "principled"),
         ("sss_split", "3 single-channel random-walk closures (diagnostic)", "sss_rgb"),
         ("live_no_coat", "live group with Specular IOR Level 0: no coat (diagnostic, colour differs)", "live"),
+        ("live_fresnel_coat", "live group with the coat as F x white Multiscatter GGX, F the Fresnel node's "
+                              "(diagnostic)", "live"),
+        ("live_doubled", "live group with every subsurface closure reached twice (its second Mix Shader at Fac "
+                         "0.001; diagnostic)", "live"),
         ("live_k1", "live group with components 2..K weighted 0: 3 closures (diagnostic, colour differs)", "live"))
-MODES = ("principled", "live", "bake", "sss_rgb", "sss_split", "live_no_coat", "live_k1")
+MODES = ("principled", "live", "bake", "sss_rgb", "sss_split", "live_no_coat", "live_k1", "live_fresnel_coat",
+         "live_doubled")
 LABELS = {"principled": "Principled BSDF, Random Walk (Skin), skin radius",
           "sss_rgb": "1 RGB random-walk Subsurface Scattering closure",
           "live": "the live group (default)"}
