@@ -47,10 +47,12 @@ What "shows" means, and the method
    and not the largest g Cycles walks accurately (0.7, exporters.cycles.RECOMMENDED_G_MAX): render cost.  At
    g = 0.7 the painted colour needs alpha >= 0.987 (step 4's face-on floor; alpha* 0.958), at g = 0 only
    alpha >= 0.91, and Cycles' walk takes sigma_t = 1 / (d (1 - g)), 3.3x denser steps for its first 10
-   events: on the demo head the mixture's CPU time per sample halves (bench/results.md,
-   training.bench.render_cost).  What is given up is the single-scattering lobe of the first events, which
-   matters for collimated light near normal incidence only (diffuse light: none; Cycles itself walks the
-   similar isotropic medium from its 10th event on).
+   events: on the demo head the live group's CPU time per sample went from 3.3x to 1.3x Principled Random
+   Walk (Skin)'s with the same coat (training.bench.render_cost, before and after this choice).  What is
+   given up is the anisotropy of the first scattering events (Cycles itself walks the similar isotropic
+   medium from its 10th event on): the colour is still solved for (step 4, diffuse light and the face-on
+   view) and the diffusion length kept (step 6), but the reflectance's angular shape and the profile's
+   first tens of micrometres are those of an isotropic medium.
 6. **Profile width.**  The spatial spread of component k's light is set by its diffusion length
    D = 1 / sigma_tr, sigma_tr = sigma_t sqrt(3 (1 - alpha)(1 - alpha g)) (the decay rate of the
    diffusion profile, in cm).  Its light-weighted channel mean D_kc = <omega_c, E_k D_k> / <omega_c, E_k>
