@@ -71,8 +71,8 @@ the cosine-weighted mean of F (exporters.cycles.DIFFUSE_FRESNEL_POLY).  Why this
 The Principled BSDF's specular inputs (:data:`SPECULAR_INPUTS`, taken from the artist's Principled BSDF when the
 group is wired) keep their effect: **Specular IOR Level** scales the coat's F0 by 2 x level (the coat's index
 becomes (1 + sqrt F0) / (1 - sqrt F0); the closures keep the tissue's IOR, which the bake's tables assume) and
-**Specular Tint** colours the coat's lobe (both paths: the coat is the same Principled node; the OSL
-script's body weight keeps F of the tissue's IOR); over either
+**Specular Tint** colours the coat's lobe (both paths: the coat is the same Principled node, and the body
+weight takes F of the coat's index); over either
 path a **clear coat** (Coat Weight x F(Coat IOR) of a white Multiscatter GGX lobe of Coat Roughness, mixed over
 the skin, which keeps the rest) and a **Sheen** BSDF (colour Sheen Weight x Sheen Tint, added on top) follow the
 Principled BSDF's layering; the coat's tint and the sheen's share of the light below it are not modelled.  At
@@ -391,6 +391,7 @@ def build_osl_group(k_count: int = 3, name: str = GROUP_NAME_OSL) -> bpy.types.N
             group.links.new(gin.outputs[socket_name(k, kind)], script.inputs[osl.param_name(k, kind)])
     for name, param in (("IOR", "ior"), ("Normal", "Normal")):
         group.links.new(gin.outputs[name], script.inputs[param])
+    group.links.new(_level_ior(group, gin.outputs["IOR"], gin.outputs["Specular IOR Level"]), script.inputs["coat_ior"])
     surface = _add_shader(group, principled_specular(group, gin), script.outputs["BSSRDF"], 1050.0, 700.0)
     group.links.new(_outer_layers(group, gin, surface), gout.inputs["BSSRDF"])
     return group

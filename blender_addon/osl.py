@@ -93,7 +93,8 @@ def mixture_source(k_count: int, entry_roughness: float) -> str:
 
     The factor A_k cancels the kernel's division of the throughput by the albedo, so the expected
     contribution of component k in channel c is w_kc times the walk in medium k.  F is Cycles' Fresnel node
-    (``fresnel_dielectric_cos`` of node_fresnel.h, 1/IOR on back faces), F_dr the same polynomial as the SVM
+    (``fresnel_dielectric_cos`` of node_fresnel.h, 1/IOR on back faces) at ``coat_ior`` (the coat's index: the group's
+    IOR with its Specular IOR Level; the closures keep ``ior``), F_dr the same polynomial as the SVM
     group (exporters.cycles.DIFFUSE_FRESNEL_POLY); the closures' entry has roughness ``entry_roughness`` (the
     group's nodes.ENTRY_ROUGHNESS: smooth).  A zero ``Normal`` (an unlinked group input on some paths) falls back
     to N, as Cycles' closures do.
@@ -120,11 +121,12 @@ def mixture_source(k_count: int, entry_roughness: float) -> str:
             f"shader spectral_skin_sss_k{k_count}(",
             *params,
             f"    float ior = {constants.N_TISSUE!r},",
+            f"    float coat_ior = {constants.N_TISSUE!r},",
             "    normal Normal = N,",
             "    output closure color BSSRDF = 0)",
             "{",
             "    normal Nn = (length(Normal) > 0.0) ? normalize(Normal) : N;",
-            "    float eta = max(ior, 1.0);",
+            "    float eta = max(coat_ior, 1.0);",
             "    float F = fresnel_dielectric_cos(dot(I, Nn), backfacing() ? 1.0 / eta : eta);",
             "    float x = (eta - 1.0) / (eta + 1.0);",
             f"    float F_dr = x * ({poly});",

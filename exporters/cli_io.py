@@ -452,6 +452,9 @@ def guarded(prog: str, kept: str = NOTHING_KEPT, failed: tuple[type[BaseExceptio
                 return exc.code if isinstance(exc.code, int) else EXIT_BAD_INPUT
             except KeyboardInterrupt:
                 print(f"\n{prog}: interrupted: {kept}", file=sys.stderr)
+                # Objects the interrupt cut short (a numba compilation, say) may fail in __del__ when the
+                # interpreter tears them down; Python prints those as "Exception ignored" after the one line.
+                sys.unraisablehook = _ignore_unraisable
                 return EXIT_INTERRUPTED
             except failed as exc:
                 print(f"error: {one_line(exc)}", file=sys.stderr)
@@ -463,6 +466,10 @@ def guarded(prog: str, kept: str = NOTHING_KEPT, failed: tuple[type[BaseExceptio
         return run
 
     return wrap
+
+
+def _ignore_unraisable(unraisable) -> None:
+    """sys.unraisablehook that drops the report (used once a command has been interrupted)."""
 
 
 def one_line(exc: BaseException) -> str:

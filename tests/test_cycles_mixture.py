@@ -112,4 +112,4 @@ def test_osl_source_compiles_for_several_k():
         group = nodes.build_osl_group(k)
         script = next(n for n in group.nodes if n.bl_idname == "ShaderNodeScript")
         assert script.bytecode
-        assert {osl.param_name(k, "Radius"), "ior", "Normal"} <= set(script.inputs.keys())
+        assert {osl.param_name(k, "Radius"), "ior", "coat_ior", "Normal"} <= set(script.inputs.keys())
