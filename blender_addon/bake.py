@@ -8,10 +8,10 @@
 
 By default the maps render the painted albedo, per channel (exporters.painted); ``--model-colour`` renders the
 model's own reflectance instead (the colour of the biophysical skin the network found).  Texels are looked
-up in the fast-path table shipped beside the model
-(``skin_inversion_table.npz``, exporters.texel_table; colours outside it are evaluated exactly); ``--exact``
-evaluates every distinct colour with the model.  Re-running a bake whose maps in DIR are up to date (same
-image content, model and options) does nothing and says so (``--force`` re-bakes).
+up in the fast-path table shipped beside the model (``skin_inversion_table.npz``, exporters.texel_table; colours
+outside its domain get the nearest skin colour's maps, as the live group renders them); ``--exact`` evaluates
+every distinct colour with the model.  Re-running a bake whose maps in DIR are up to date (same image content,
+model and options) does nothing and says so (``--force`` re-bakes).
 
 Writes float EXR maps (Non-Color) and IMAGE-stem_maps.json into DIR (created if missing).  Exit status 0 on
 success, 2 with a one-line error on stderr for bad input (missing/unreadable image, NaN or negative

@@ -15,8 +15,9 @@ What the nodes compute, for a linear colour ``rgb`` (any node's output):
 4. trilinear interpolation of the table's channels, where nodes outside the RGB cube (NaN in the table)
    were filled by :func:`fill_outside_cube` (means of filled neighbours, layer by layer): inside cells whose
    corners all lie in the cube the values are exactly the fast bake's; in the few cells that straddle the
-   cube's faces (very light or saturated colours, which the fast bake evaluates exactly) they are a smooth
-   extension.  :func:`outside_fraction` counts the texels that fall outside these exact cells.
+   cube's faces (very light or saturated colours) they are a smooth extension, which a bake through the table
+   uses too (exporters.bake.evaluate), so bakes and the live group agree on every colour.
+   :func:`outside_fraction` counts the texels that fall outside these exact cells.
 
 Image layout ("slice atlas"): the grid is cut into its n0 slices of constant l; slice s is a tile of
 (n1 + 2) x (n2 + 2) pixels (x1 along the width, x2 along the height) with a one-pixel border repeating the
@@ -107,6 +108,13 @@ def fill_outside_cube(values: np.ndarray) -> np.ndarray:
         flat[todo[grow]] = total[grow] / count[grow, None]
         filled[todo[grow]] = True
     return flat.reshape(values.shape)
+
+
+def extended_values(table: TexelTable) -> np.ndarray:
+    """Every channel of ``table`` (n0, n1, n2, C) float32 with its nodes outside the RGB cube filled by
+    :func:`fill_outside_cube`: what the live group's images hold, for all channels (the same fill as
+    :func:`grid_values`, which fills a subset of the channels of the same nodes)."""
+    return fill_outside_cube(table.values).astype(np.float32)
 
 
 def _channels(table: TexelTable, k: int, kind: str) -> list[int | None]:

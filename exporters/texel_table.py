@@ -2,7 +2,8 @@
 
 Everything a bake writes depends on the texel's RGB only, so the model and the collapse are evaluated
 once per model on a grid of colours, and a bake interpolates.  Colours outside the grid (or in a cell
-with a corner outside the RGB cube) are evaluated exactly, so every texel gets a value.
+with a corner outside the RGB cube) get the nearest skin colour's values, as the live group answers them
+(exporters.live_table), so every texel gets a value; ``--exact`` bakes evaluate the model everywhere.
 
 Colour space of the grid ("skin space")
 ---------------------------------------
@@ -11,7 +12,7 @@ the coordinates are  l = (e_R + e_G + e_B) / 3,  c1 = e_R - e_G,  c2 = e_G - e_B
 to perceptually uniform, so equal steps give roughly equal colour error at every lightness; skin is a
 thin region of c1, c2 (red above green above blue), so a box l in [0, 1], c1 in [-0.06, 0.40],
 c2 in [-0.08, 0.24] holds it with far fewer nodes than the RGB cube (the decoder's whole biophysical
-range at exposures 0.7-2.5 falls 99.7 % inside; the rest is evaluated exactly).  8-bit sRGB textures
+range at exposures 0.7-2.5 falls 99.7 % inside).  8-bit sRGB textures
 map their codes linearly onto e.
 
 Stored per node (K components; :func:`channel_names`): Cycles colour, log radius (m), weight (K x 3 each),

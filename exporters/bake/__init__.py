@@ -7,8 +7,9 @@ Pipeline.  Every value a bake writes depends on the texel's colour only, so:
    take the most common covered colour, so their colours are never evaluated.
 2. **Records per distinct colour** (:mod:`exporters.bake.evaluate`, exporters.texel_records): by default from
    the fast-path table (exporters.texel_table: trilinear interpolation over skin colours, made from this very
-   model — its SHA-256 is checked, :mod:`exporters.bake.table_cache`; colours outside it are evaluated
-   exactly), or all exactly (``exact=True``: onnxruntime + the collapse).  Only what the targets need is
+   model — its SHA-256 is checked, :mod:`exporters.bake.table_cache`; colours outside its domain get the
+   nearest skin colour's values, as the live group gives them: exporters.live_table), or all exactly
+   (``exact=True``, or no table for the options: onnxruntime + the collapse).  Only what the targets need is
    computed (``spectral`` alone skips the collapse).  By default the maps render the painted albedo
    (exporters.painted); ``model_colour`` renders the model's own reflectance.
 3. **Components** whose share of the rendered colour stays below ``prune_share`` for every texel are
@@ -24,8 +25,8 @@ read, loaded, evaluated or written (``force=True`` re-bakes).
 
 Memory: ``memory_mb`` bounds the bake's working arrays whatever the texture.  It is split in equal shares
 (:data:`exporters.bake.job.WORK_SHARES`): the map rows held (every distinct colour's, or one band's), one table step
-(:func:`exporters.bake.evaluate.table_rows_for`), one inference chunk (the colours outside the table are evaluated
-that many at a time) and the decoded image, whose header is checked against the whole budget before decoding
+(:func:`exporters.bake.evaluate.table_rows_for`), one inference chunk (exact bakes evaluate
+that many colours at a time) and the decoded image, whose header is checked against the whole budget before decoding
 (:func:`exporters.image_input.check_decode_budget`).  When the distinct colours' map rows exceed their share
 (e.g. a noisy image), step 2 runs per band instead and step 3 is skipped.  Fixed costs (the libraries, the model
 session, the fast-path table) and OpenEXR's per-thread write buffers are not counted.

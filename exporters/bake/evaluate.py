@@ -1,5 +1,6 @@
-"""Records per distinct colour: from the fast-path table where it covers them, else by the model and the
-collapse (exporters.texel_records), in chunks; the map rows made from them; the statistics of what was done."""
+"""Records per distinct colour: from the fast-path table (colours outside its domain get the nearest skin
+colour's media, exactly as the live group answers: exporters.live_table), or, without a table, by the model and
+the collapse (exporters.texel_records), in chunks; the map rows made from them; the statistics of what was done."""
 
 from __future__ import annotations
 
@@ -8,7 +9,7 @@ from collections.abc import Callable, Iterator
 
 import numpy as np
 
-from .. import inference, maps, texel_records, texel_table
+from .. import inference, live_table, maps, texel_records, texel_table
 from ..texel_records import CollapseOptions
 from .table_cache import cached_table_path
 from .targets import BakeError, MapSpec
@@ -16,7 +17,7 @@ from .targets import BakeError, MapSpec
 #: Most distinct colours looked up in the fast-path table per step (the UI stays responsive: ~0.1 s each).
 TABLE_CHUNK = 1 << 18
 #: Bytes per distinct colour of one table step: the interpolated values (184 B for K = 3), their records
-#: (376 B), the exact records of the colours outside the table (520 B) and the map rows (120 B), measured
+#: (376 B), the lookup of the colours outside the table (520 B) and the map rows (120 B), measured
 #: for K = 3 and rounded up; a step holds no more rows than the memory budget pays for at this rate.
 TABLE_ROW_BYTES = 2048
 
@@ -30,7 +31,8 @@ class Evaluator:
     """Evaluates distinct colours of ``palette`` (n, 3) linear sRGB for ``targets``: ``table`` (or None: every
     colour exactly), ``model`` (loaded only when a colour must be evaluated exactly), ``options`` of the
     collapse, ``threads`` for the table lookups, ``chunk`` rows per exact step.  Accumulates ``timings``
-    (seconds), ``stats`` (clamp counts over texels), ``counted`` (texels from the table / exactly) and
+    (seconds), ``stats`` (clamp counts over texels), ``counted`` (texels from the table, outside its domain
+    and answered by the nearest skin colour, or evaluated exactly) and
     ``max_share`` (K,): each component's largest share of the colour over every texel evaluated.  K comes
     from the table, else from the model (then loaded here)."""
 
@@ -44,7 +46,8 @@ class Evaluator:
         self.chunk = chunk or inference.chunk_rows_for_k(self.model_k, memory_mb)
         self.table_step = table_rows_for(memory_mb)
         self.stats: dict[str, int] = {}
-        self.counted = {"texels_from_table": 0, "texels_evaluated_exactly": 0}
+        self.counted = {"texels_from_table": 0, "texels_outside_table": 0, "texels_evaluated_exactly": 0}
+        self._extended: np.ndarray | None = None
         self.max_share = np.zeros(self.model_k)
 
     def load_model(self) -> inference.InversionSession:
@@ -55,8 +58,8 @@ class Evaluator:
         return self.model.load()
 
     def records(self, rgb: np.ndarray) -> tuple[dict[str, np.ndarray], np.ndarray]:
-        """Records of distinct colours ``rgb`` (n, 3) float32 (table where it covers them, else exact) and
-        which rows came from the table."""
+        """Records of distinct colours ``rgb`` (n, 3) float32 (the table where it covers them, its nearest skin
+        colour outside; without a table, exact) and which rows lie in the table's domain."""
         inside = np.zeros(len(rgb), bool)
         parts: dict[str, np.ndarray] | None = None
         if self.table is not None:
@@ -70,7 +73,7 @@ class Evaluator:
             rec = parts if parts is not None else texel_records.empty_records(self.model_k, self.targets,
                                                                              self.options.painted)
             return rec, inside
-        exact = self.exact_records(rgb[~inside])
+        exact = self.exact_records(rgb) if self.table is None else self.nearest_records(rgb[~inside])
         if parts is None:
             return exact, inside
         rec = {}
@@ -79,6 +82,18 @@ class Evaluator:
             full[inside], full[~inside] = value, exact[key]
             rec[key] = full
         return rec, inside
+
+    def nearest_records(self, rgb: np.ndarray) -> dict[str, np.ndarray]:
+        """Records of rows ``rgb`` (n, 3) outside the table's domain: the table at the colour projected onto its box,
+        with the nodes outside the RGB cube extended from their skin neighbours (exporters.live_table: the values
+        the live group's images hold, so a bake and the live group agree on every colour)."""
+        t0 = time.perf_counter()
+        if self._extended is None:
+            self._extended = live_table.extended_values(self.table)
+        values = live_table.lookup(self._extended, live_table.layout_of(self.table), rgb).astype(np.float32)
+        rec = self.table.records(rgb, values, self.targets)
+        self.timings["table"] += time.perf_counter() - t0
+        return rec
 
     def exact_records(self, rgb: np.ndarray) -> dict[str, np.ndarray]:
         """Records of rows ``rgb`` (n, 3) float32 by the model, ``chunk`` rows per inference (the memory budget
@@ -124,7 +139,8 @@ class Evaluator:
                 into[name][sl] = v
             c = counts[sl]
             self.counted["texels_from_table"] += int(c[inside].sum())
-            self.counted["texels_evaluated_exactly"] += int(c[~inside].sum())
+            self.counted["texels_outside_table" if self.table is not None else "texels_evaluated_exactly"] += int(
+                c[~inside].sum())
             for key, value in texel_records.count_stats(rec, c, self.targets).items():
                 self.stats[key] = int(self.stats.get(key, 0)) + value
             if "max_share" in rec and len(rec["max_share"]):

@@ -19,7 +19,7 @@ from exporters.colorimetry import srgb_decode
 from training.paths import SHIPPED_MODEL, SHIPPED_TABLE
 
 BAKE = Path(__file__).resolve().parents[2] / "blender_addon" / "bake.py"
-#: Distinct colours outside the fast-path table in the texture (evaluated exactly by the model).
+#: Distinct colours outside the fast-path table in the texture (they get the nearest skin colour's values).
 OUTSIDE_COLOURS = 5000
 
 
