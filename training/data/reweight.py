@@ -25,7 +25,7 @@ import json
 import math
 import os
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -33,6 +33,7 @@ import torch
 
 from exporters.constants import N_TISSUE, N_WAVELENGTHS, PARAM_NAMES, PARAM_RANGES, R_EDGES_CM
 from training.cluster.engine import memo
+from training.data.binned_sums import binned_sums
 from training.data.sampling import T_EPI_LEVELS_CM
 from training.sim.kernel import KIND_REFLECTED, KIND_TRUNCATED
 from training.sim.medium import LayeredMedium
@@ -113,11 +114,22 @@ class Trajectories:
     path_cm: np.ndarray
     truncated: np.ndarray
     seconds: float
+    _by_bin: dict = field(default_factory=dict, repr=False, compare=False)  # channel -> bin_order(c), not saved
 
     def save(self, path: Path) -> None:
         tmp = path.with_name(path.name + ".tmp.npz")
-        np.savez(tmp, **{k: np.asarray(v) for k, v in self.__dict__.items()})
+        np.savez(tmp, **{k: np.asarray(v) for k, v in self.__dict__.items() if not k.startswith("_")})
         tmp.rename(path)  # a killed job leaves no half-written chunk under the real name
+
+    def bin_order(self, c: int) -> tuple[np.ndarray, np.ndarray]:
+        """Channel ``c``'s photons in bin order: (order (n,) int64 into rows offsets[c]:offsets[c + 1], stable;
+        starts (N_BINS + 2,) int64, bin b holds ordered photons starts[b]:starts[b + 1]).  Cached."""
+        if c not in self._by_bin:
+            b = self.bin[int(self.offsets[c]) : int(self.offsets[c + 1])]
+            order = np.argsort(b, kind="stable")
+            starts = np.searchsorted(b[order], np.arange(N_BINS + 2), side="left").astype(np.int64)
+            self._by_bin[c] = (order, starts)
+        return self._by_bin[c]
 
     @classmethod
     def load(cls, path: Path) -> Trajectories:
@@ -218,22 +230,18 @@ def reweight(traj: Trajectories, tones: np.ndarray, device: str = "cpu") -> dict
     d_epi, d_derm = mua_epi - traj.mua0, mua_derm - traj.mua0
     if min(d_epi.min(), d_derm.min()) < -1e-9 * max(1.0, float(traj.mua0.max())):
         raise ValueError("a tone absorbs less than the walk's baseline: walk with baseline_absorption(tones).")
-    # exponent = X @ Y, one row of X per tone, with Y = [path above each level (n_lev rows); total path;
-    # log w] (n_lev + 2, n): X holds -(de - dd) in the tone's level column, -dd and 1.  One sgemm per
-    # wavelength instead of per-tone gathers (hand-written: no library offers this reweighting).
-    n_t, n_ch, n_lev = len(tones), traj.channels.size, traj.levels_cm.size
-    x = np.zeros((n_t, n_ch, n_lev + 2), dtype=np.float32)
-    x[np.arange(n_t), :, lev] = -(d_epi - d_derm)
-    x[:, :, n_lev] = -d_derm
-    x[:, :, n_lev + 1] = 1.0
-    p1 = np.zeros((n_t, n_ch, N_BINS + 1), dtype=np.float32)
+    n_t, n_ch = len(tones), traj.channels.size
+    p1 = np.zeros((n_t, n_ch, N_BINS + 1), dtype=np.float64)
     p2 = np.zeros_like(p1)
     flush = torch.set_flush_denormal(True)  # tiny weights: float32 denormals are ~10x slower on x86 CPUs
     try:
-        _reweight_channels(traj, torch.as_tensor(x, device=torch.device(device)), p1, p2)
-        mean, se = mean_stderr(p1.sum(-1, dtype=np.float64), p2.sum(-1, dtype=np.float64), traj.photons)
-        pm, pse = mean_stderr(torch.from_numpy(p1[..., :N_BINS]), torch.from_numpy(p2[..., :N_BINS]),
-                               traj.photons)
+        if torch.device(device).type == "cpu":
+            _reweight_by_bin(traj, lev, d_epi, d_derm, p1, p2)
+        else:
+            _reweight_channels(traj, _exponent_rows(lev, d_epi, d_derm, traj.levels_cm.size, device), p1, p2)
+        mean, se = mean_stderr(p1.sum(-1), p2.sum(-1), traj.photons)
+        pm, pse = mean_stderr(torch.from_numpy(p1[..., :N_BINS].astype(np.float32)),
+                              torch.from_numpy(p2[..., :N_BINS].astype(np.float32)), traj.photons)
     finally:
         if flush:
             torch.set_flush_denormal(False)
@@ -258,8 +266,55 @@ def one_tone(tone: np.ndarray, photons: int, *, seed: int, device: str = "cpu",
     return reweight(traj, tone[None], device)
 
 
+def _reweight_by_bin(traj: Trajectories, lev: np.ndarray, d_epi: np.ndarray, d_derm: np.ndarray,
+                     p1: np.ndarray, p2: np.ndarray) -> None:
+    """Fill p1, p2 (B, C, 513) float64 on the CPU: per tone, channel and radial bin, sums of photon weights and of
+    their squares.
+
+    A tone at level l weighs a photon exp(-(d_epi - d_derm) L_l - d_derm L - (-log w)), with L_l its path above
+    level l and L its whole path: per channel the tones of one level share the rows (L_l, L, log w), so their
+    exponents are one (B_l, 3) @ (3, n) product; the photons are taken in bin order (``Trajectories.bin_order``),
+    so each bin's sums are a contiguous reduction (``binned_sums``, float64).
+    """
+    n_lev = traj.levels_cm.size
+    groups = [(lv, np.flatnonzero(lev == lv)) for lv in np.unique(lev)]
+    for c in range(traj.channels.size):
+        lo, hi = int(traj.offsets[c]), int(traj.offsets[c + 1])
+        if hi == lo:
+            continue
+        order, starts = traj.bin_order(c)
+        cum = torch.from_numpy(np.ascontiguousarray(traj.path_cm[lo:hi][order].T)).cumsum(0)  # (n_lev + 1, n)
+        log_w = torch.from_numpy(traj.w[lo:hi][order]).log()
+        for lv, rows in groups:
+            y = torch.stack([cum[lv], cum[n_lev], log_w])  # (3, n)
+            coef = torch.from_numpy(np.stack([-(d_epi[rows, c] - d_derm[rows, c]), -d_derm[rows, c],
+                                              np.ones(rows.size)], axis=1).astype(np.float32))
+            # Exponents below -87 are raised to -87 (weights < 1.7e-38, a bias below 1e-32 for 1e6 photons):
+            # expf's underflow path is ~30x slower.
+            wt = (coef @ y).clamp_min_(-87.0).exp_().numpy()
+            s1, s2 = np.zeros((rows.size, N_BINS + 1)), np.zeros((rows.size, N_BINS + 1))
+            binned_sums(wt, starts, s1, s2)
+            p1[rows, c], p2[rows, c] = s1, s2
+
+
+def _exponent_rows(lev: np.ndarray, d_epi: np.ndarray, d_derm: np.ndarray, n_lev: int, device: str) -> torch.Tensor:
+    """X (B, C, n_lev + 2) float32 of ``_reweight_channels``: -(d_epi - d_derm) in the tone's level column, -d_derm
+    and 1."""
+    n_t, n_ch = d_epi.shape
+    x = np.zeros((n_t, n_ch, n_lev + 2), dtype=np.float32)
+    x[np.arange(n_t), :, lev] = -(d_epi - d_derm)
+    x[:, :, n_lev] = -d_derm
+    x[:, :, n_lev + 1] = 1.0
+    return torch.as_tensor(x, device=torch.device(device))
+
+
 def _reweight_channels(traj: Trajectories, x: torch.Tensor, p1: np.ndarray, p2: np.ndarray) -> None:
-    """Fill p1, p2 (B, C, 513): per tone, channel and radial bin, sums of photon weights and of their squares."""
+    """Fill p1, p2 (B, C, 513) on any torch device: per tone, channel and radial bin, sums of photon weights and
+    of their squares (one (B, n_lev + 2) @ (n_lev + 2, n) product and scattered adds per channel).
+
+    The exponent is X @ Y, one row of X per tone (``_exponent_rows``), Y = [path above each level (n_lev rows);
+    total path; log w] (n_lev + 2, n).
+    """
     dev = x.device
     for c in range(traj.channels.size):
         lo, hi = int(traj.offsets[c]), int(traj.offsets[c + 1])
@@ -269,8 +324,7 @@ def _reweight_channels(traj: Trajectories, x: torch.Tensor, p1: np.ndarray, p2: 
         cum = torch.as_tensor(traj.path_cm[lo:hi], device=dev).cumsum(1)  # (n, n_lev + 1): path above levels
         log_w = torch.as_tensor(traj.w[lo:hi], device=dev).log()[:, None]
         y = torch.cat([cum, log_w], dim=1).T  # (n_lev + 2, n)
-        # (B, n): each photon's weight for each tone.  Exponents below -87 are raised to -87 (weights
-        # < 1.7e-38, a bias below 1e-32 for 1e6 photons): expf's underflow path is ~30x slower.
+        # (B, n): each photon's weight for each tone (exponents clamped at -87 as in ``_reweight_by_bin``).
         wt = (x[:, c] @ y).clamp_min_(-87.0).exp_()
         zeros = torch.zeros(x.shape[0], N_BINS + 1, dtype=torch.float32, device=dev)
         p1[:, c] = zeros.index_add(1, b, wt).cpu().numpy()
