@@ -33,7 +33,7 @@ import torch
 
 from exporters.constants import N_TISSUE, N_WAVELENGTHS, PARAM_NAMES, PARAM_RANGES, R_EDGES_CM
 from training.cluster.engine import memo
-from training.data.binned_sums import binned_sums
+from training.data.binned_sums import reweighted_bin_sums
 from training.data.sampling import T_EPI_LEVELS_CM
 from training.sim.kernel import KIND_REFLECTED, KIND_TRUNCATED
 from training.sim.medium import LayeredMedium
@@ -271,30 +271,22 @@ def _reweight_by_bin(traj: Trajectories, lev: np.ndarray, d_epi: np.ndarray, d_d
     """Fill p1, p2 (B, C, 513) float64 on the CPU: per tone, channel and radial bin, sums of photon weights and of
     their squares.
 
-    A tone at level l weighs a photon exp(-(d_epi - d_derm) L_l - d_derm L - (-log w)), with L_l its path above
-    level l and L its whole path: per channel the tones of one level share the rows (L_l, L, log w), so their
-    exponents are one (B_l, 3) @ (3, n) product; the photons are taken in bin order (``Trajectories.bin_order``),
-    so each bin's sums are a contiguous reduction (``binned_sums``, float64).
+    A tone at level l weighs a photon exp(-(d_epi - d_derm) L_l - d_derm L + log w), with L_l its path above
+    level l and L its whole path; per channel the photons are taken in bin order (``Trajectories.bin_order``) and
+    summed by ``binned_sums.reweighted_bin_sums`` (one compiled pass per tone, float64 sums).
     """
-    n_lev = traj.levels_cm.size
-    groups = [(lv, np.flatnonzero(lev == lv)) for lv in np.unique(lev)]
+    a, b = -(d_epi - d_derm), -d_derm
     for c in range(traj.channels.size):
         lo, hi = int(traj.offsets[c]), int(traj.offsets[c + 1])
         if hi == lo:
             continue
         order, starts = traj.bin_order(c)
-        cum = torch.from_numpy(np.ascontiguousarray(traj.path_cm[lo:hi][order].T)).cumsum(0)  # (n_lev + 1, n)
-        log_w = torch.from_numpy(traj.w[lo:hi][order]).log()
-        for lv, rows in groups:
-            y = torch.stack([cum[lv], cum[n_lev], log_w])  # (3, n)
-            coef = torch.from_numpy(np.stack([-(d_epi[rows, c] - d_derm[rows, c]), -d_derm[rows, c],
-                                              np.ones(rows.size)], axis=1).astype(np.float32))
-            # Exponents below -87 are raised to -87 (weights < 1.7e-38, a bias below 1e-32 for 1e6 photons):
-            # expf's underflow path is ~30x slower.
-            wt = (coef @ y).clamp_min_(-87.0).exp_().numpy()
-            s1, s2 = np.zeros((rows.size, N_BINS + 1)), np.zeros((rows.size, N_BINS + 1))
-            binned_sums(wt, starts, s1, s2)
-            p1[rows, c], p2[rows, c] = s1, s2
+        cum = np.cumsum(traj.path_cm[lo:hi][order], axis=1, dtype=np.float32).T  # (n_lev + 1, n): path above levels
+        log_w = np.log(traj.w[lo:hi][order])
+        s1, s2 = np.zeros((lev.size, N_BINS + 1)), np.zeros((lev.size, N_BINS + 1))
+        reweighted_bin_sums(np.ascontiguousarray(cum), log_w, lev.astype(np.int64), np.ascontiguousarray(a[:, c]),
+                            np.ascontiguousarray(b[:, c]), starts, s1, s2)
+        p1[:, c], p2[:, c] = s1, s2
 
 
 def _exponent_rows(lev: np.ndarray, d_epi: np.ndarray, d_derm: np.ndarray, n_lev: int, device: str) -> torch.Tensor:
