@@ -16,10 +16,12 @@ Measured in this run, each on a sample of the real work:
   exponent product over all levels and scattered adds per channel), in CPU-ns per (tone, reflected photon,
   wavelength), on a walk of 20,000 photons at 6 wavelengths; a `paper` build reweights each split's tones from its
   own walk, whose reflected photons per packet the walk sample gives.
-* **fits**: ``fit_rows``'s sweep (``fit_tones_sweep``, K = 1, 2, 3, anchors every 12th fitted wavelength) of a few
-  tones at 94 wavelengths, their profiles reweighted from a sample walk; LUT: the diffusion-dipole stand-in
-  (``training.fit.problems.bench_lut``; $SKIN_SSS_LUT names the MC table).  The sample's profiles hold fewer
-  photons than the dataset's, which may change the iterations the fitter takes.
+* **fits**: ``fit_rows``'s sweep (``fit_tones_sweep``, K = 1, 2, 3, anchors every 12th fitted wavelength) of one
+  chunk of 16 and one of 64 tones (``fit --chunk-tones``: the per-call overhead of the small batched steps is
+  amortised over a chunk's tones) at 94 wavelengths, their profiles reweighted from a sample walk; LUT: the
+  diffusion-dipole stand-in (``training.fit.problems.bench_lut``; $SKIN_SSS_LUT names the MC table, whose 2.6 GB
+  are gathered from at random and may cost more).  The sample's profiles hold fewer photons than the dataset's,
+  which may change the iterations the fitter takes.
 
 Taken from the record, not measured here (each says where): the LUT, training, export and validation.  The old
 projection (``OLD_CPU_H``) is docs/research/scaling_out.md's before the compiled walker and these speed-ups.
@@ -77,7 +79,7 @@ def _walk_and_reweight(quick: bool) -> dict:
     t_new, new = _cpu(lambda: rw.reweight(traj, tones))  # includes sorting the walk's photons by bin
     lev = rw.level_index(tones, traj.levels_cm)
     mua_epi, mua_derm = (m.numpy()[:, traj.channels] for m in rw.absorption(tones))
-    p1 = np.zeros((len(tones), channels.size, rw.N_BINS + 1))
+    p1 = np.zeros((len(tones), traj.channels.size, rw.N_BINS + 1))
     p2 = np.zeros_like(p1)
     x = rw._exponent_rows(lev, mua_epi - traj.mua0, mua_derm - traj.mua0, traj.levels_cm.size, "cpu")
     t_old, _ = _cpu(lambda: rw._reweight_channels(traj, x, p1, p2))
@@ -96,18 +98,21 @@ def _fits(quick: bool) -> dict:
     from training.fit.problems import bench_lut
     from training.fit.sweep import fit_tones_sweep
 
-    n_tones, photons = (2, 1_000) if quick else (4, 2_000)
+    photons = 1_000 if quick else 2_000
+    chunks = (4, 16) if quick else (16, 64)
     widx = np.arange(0, WAVELENGTHS, FIT_STRIDE)
     traj = rw.walk(photons, seed=4, mua0=rw.baseline_absorption(), channels=widx)
-    tones = training_tones(64, seed=7)[[0, 5, 21, 40][:n_tones]]
-    d = rw.reweight(traj, tones)
+    d = rw.reweight(traj, training_tones(max(chunks), seed=7))
     lut, lut_note = bench_lut()
     prof, R, se = (torch.tensor(d[k], dtype=torch.float64) for k in ("profile", "R_d", "profile_stderr"))
     g0 = torch.tensor(anisotropy(np.asarray(WAVELENGTHS_NM)[widx]))
-    t, _ = _cpu(lambda: fit_tones_sweep(lut, prof, R, se, torch.tensor(R_EDGES_CM), float(photons), g0, (1, 2, 3),
-                                        anchor_every=12, wavelength_nm=np.asarray(WAVELENGTHS_NM)[widx]))
-    return {"per_tone": t / n_tones, "tones": n_tones, "photons": photons, "wavelengths": widx.size,
-            "lut": lut_note}
+    per_tone = {}
+    for t in chunks:  # one chunk of t tones, as `fit --chunk-tones t` fits them
+        cpu, _ = _cpu(lambda t=t: fit_tones_sweep(
+            lut, prof[:t], R[:t], se[:t], torch.tensor(R_EDGES_CM), float(photons), g0, (1, 2, 3), anchor_every=12,
+            wavelength_nm=np.asarray(WAVELENGTHS_NM)[widx]))
+        per_tone[t] = cpu / t
+    return {"per_tone": per_tone, "photons": photons, "wavelengths": widx.size, "lut": lut_note}
 
 
 def benchmarks(quick: bool) -> list[dict]:
@@ -130,7 +135,7 @@ def benchmarks(quick: bool) -> list[dict]:
     new = {
         "dataset walks": packets / wr["walk_rate"] / 3600,
         "reweighting": tones * reflected * wr["ns_new"] * 1e-9 / 3600,
-        "fits": tones * fit["per_tone"] / 3600,
+        "fits": tones * fit["per_tone"][max(fit["per_tone"])] / 3600,
         "LUT": LUT_CPU_H,
         "training": LAPTOP_TRAINING_CPU_H * paper.n_train / PRESETS["laptop"].n_train,
         "export": EXPORT_CPU_H,
@@ -144,9 +149,12 @@ def benchmarks(quick: bool) -> list[dict]:
                         f"{wr['ns_old']:.2f} for the torch path on the same walk and 128 tones (that path: "
                         f"{old_rw:.1f} CPU-h; R_d of both agree to {wr['rd_rel_diff']:.1e}); "
                         f"{wr['reflected_per_photon']:.3f} reflected photons per packet, 30,000 tones"),
-        "fits": (f"measured: {fit['per_tone']:.2f} CPU-s per tone at {fit['wavelengths']} wavelengths (every "
-                 f"{FIT_STRIDE}th, the supervised ones), K = 1, 2, 3 swept, {fit['tones']} tones of a "
-                 f"{fit['photons']:,}-photon walk; {fit['lut']}; the old row fitted all 376"),
+        "fits": ("measured: " + ", ".join(f"{v:.2f} CPU-s per tone in chunks of {t}"
+                                          for t, v in fit["per_tone"].items()) +
+                 f" (`fit --chunk-tones`; the projection takes the last) at {fit['wavelengths']} wavelengths (every "
+                 f"{FIT_STRIDE}th, the supervised ones), K = 1, 2, 3 swept, profiles of a {fit['photons']:,}-photon "
+                 f"walk; {fit['lut']} (the laptop fits through the 2.6 GB MC table took 5-6 CPU-s per tone, "
+                 f"docs/research/fitting.md); the old row fitted all 376 wavelengths"),
         "LUT": "recorded (775 s, 800 x 800, 10^6 photons per node); not re-measured",
         "training": ("recorded laptop rebuild (~4 CPU-h: stages 1-2 35 min, stage 3 ~3.3 CPU-h) x 5 the tones at the "
                      "same epochs; not in the old table"),
