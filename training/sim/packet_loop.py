@@ -10,7 +10,10 @@ Random numbers: packet ``q`` of a run (its serial number in the run's ``Source``
 stream (Steele, Lea & Flood 2014, the seeder of java.util.SplittableRandom) started at
 mix(run key ^ mix(q)), with mix the SplitMix64 finaliser: a packet's walk depends on the seed and on q
 only, so a run's records are the same bit for bit whatever the thread count, the batch size or the
-order in which threads pick packets up.  Uniforms have 53 bits and lie in (0, 1).
+order in which threads pick packets up.  Uniforms have 53 bits and lie in (0, 1); the azimuth's point of
+the unit disc takes the two 32-bit halves of one output; free path lengths (standard exponentials) come from
+the ziggurat of numpy's ``Generator.standard_exponential`` (Marsaglia & Tsang's tables for 53-bit integers),
+which needs a logarithm in ~1 % of the draws only.
 
 Differences from the vectorised step, none of which changes the estimand: the walk is float64 (the step's
 dtype does not apply), roulettes are decided right after each interaction (the step checks every
