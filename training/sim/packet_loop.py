@@ -237,6 +237,7 @@ def _walk_one(i, ch, serial, key, t_mut, t_alb, t_g, t_ztop, t_zbot, n, n_below,
     kind = KIND_TRUNCATED
     next_path_roulette = path_n0[c]  # n0 * 2^stage
     steps = 0
+    path_here = 0.0
     if record_paths:
         for k in range(n_layers):
             out_path[i, k] = 0.0
@@ -257,8 +258,7 @@ def _walk_one(i, ch, serial, key, t_mut, t_alb, t_g, t_ztop, t_zbot, n, n_below,
         d = min(max(db if hit else di, 0.0), MAX_HOP_CM)
         x += d * ux
         y += d * uy
-        if record_paths:
-            out_path[i, layer] += d
+        path_here += d  # path in the current layer, stored when the packet leaves it
         steps += 1
         if hit:
             z = zwall
@@ -278,6 +278,9 @@ def _walk_one(i, ch, serial, key, t_mut, t_alb, t_g, t_ztop, t_zbot, n, n_below,
                     kind = KIND_UNSCATTERED if ncoll == 0 else KIND_TRANSMITTED
                     break
             else:
+                if record_paths:
+                    out_path[i, layer] += path_here
+                path_here = 0.0
                 layer += -1 if uz < 0.0 else 1
         else:
             z += d * uz
@@ -314,6 +317,8 @@ def _walk_one(i, ch, serial, key, t_mut, t_alb, t_g, t_ztop, t_zbot, n, n_below,
         if steps >= max_steps:
             kind = KIND_TRUNCATED
             break
+    if record_paths:
+        out_path[i, layer] += path_here
     out_kind[i] = kind
     out_w[i] = 0.0 if kind == KIND_ABSORBED else w
     out_x[i] = x
