@@ -14,8 +14,9 @@ Measured in this run, each on a sample of the real work:
 * **reweighting**: the CPU path of ``reweight`` (photons summed in bin order by one compiled pass per tone,
   ``training.data.binned_sums``) and, side by side on the same walk and tones, the torch path it replaces (one
   exponent product over all levels and scattered adds per channel), in CPU-ns per (tone, reflected photon,
-  wavelength), on a walk of 20,000 photons at 6 wavelengths; a `paper` build reweights each split's tones from its
-  own walk, whose reflected photons per packet the walk sample gives.
+  wavelength), on a walk of 20,000 photons at 6 wavelengths, once the walk's photons are sorted by bin (a process
+  sorts a loaded walk once; that cost is timed apart and counted once per split); a `paper` build reweights each
+  split's tones from its own walk, whose reflected photons per packet the walk sample gives.
 * **fits**: ``fit_rows``'s sweep (``fit_tones_sweep``, K = 1, 2, 3, anchors every 12th fitted wavelength) of one
   chunk of 16 and one of 64 tones (``fit --chunk-tones``: the per-call overhead of the small batched steps is
   amortised over a chunk's tones) at 94 wavelengths, their profiles reweighted from a sample walk; LUT: the
@@ -76,7 +77,8 @@ def _walk_and_reweight(quick: bool) -> dict:
     tones = training_tones(128, seed=9)  # one reweighting chunk of the dataset
     rw.reweight(traj, tones[:2])
     traj._by_bin.clear()
-    t_new, new = _cpu(lambda: rw.reweight(traj, tones))  # includes sorting the walk's photons by bin
+    t_first, _ = _cpu(lambda: rw.reweight(traj, tones))  # includes sorting the walk's photons by bin
+    t_new, new = _cpu(lambda: rw.reweight(traj, tones))  # every later chunk of a process: the order is cached
     lev = rw.level_index(tones, traj.levels_cm)
     mua_epi, mua_derm = (m.numpy()[:, traj.channels] for m in rw.absorption(tones))
     p1 = np.zeros((len(tones), traj.channels.size, rw.N_BINS + 1))
@@ -88,6 +90,7 @@ def _walk_and_reweight(quick: bool) -> dict:
     return {"photons": photons, "channels": channels.size, "walk_rate": photons * channels.size / t_walk,
             "reflected_per_photon": sample.w.size / (photons * channels.size),
             "ns_new": t_new / (len(tones) * n_refl) * 1e9, "ns_old": t_old / (len(tones) * n_refl) * 1e9,
+            "ns_sort": max(t_first - t_new, 0.0) / n_refl * 1e9,
             "rd_rel_diff": float(np.max(np.abs(new["R_d"] - old_rd) / old_rd))}
 
 
@@ -134,7 +137,7 @@ def benchmarks(quick: bool) -> list[dict]:
     reflected = wr["reflected_per_photon"] * paper.photons * WAVELENGTHS  # per split's walk
     new = {
         "dataset walks": packets / wr["walk_rate"] / 3600,
-        "reweighting": tones * reflected * wr["ns_new"] * 1e-9 / 3600,
+        "reweighting": (tones * wr["ns_new"] + 2 * wr["ns_sort"]) * reflected * 1e-9 / 3600,
         "fits": tones * fit["per_tone"][max(fit["per_tone"])] / 3600,
         "LUT": LUT_CPU_H,
         "training": LAPTOP_TRAINING_CPU_H * paper.n_train / PRESETS["laptop"].n_train,
@@ -148,7 +151,8 @@ def benchmarks(quick: bool) -> list[dict]:
         "reweighting": (f"measured: {wr['ns_new']:.2f} CPU-ns per (tone, reflected photon, wavelength) against "
                         f"{wr['ns_old']:.2f} for the torch path on the same walk and 128 tones (that path: "
                         f"{old_rw:.1f} CPU-h; R_d of both agree to {wr['rd_rel_diff']:.1e}); "
-                        f"{wr['reflected_per_photon']:.3f} reflected photons per packet, 30,000 tones"),
+                        f"{wr['reflected_per_photon']:.3f} reflected photons per packet, 30,000 tones; sorting a "
+                        f"walk's photons by bin, once per split and process: {wr['ns_sort']:.0f} ns per photon"),
         "fits": ("measured: " + ", ".join(f"{v:.2f} CPU-s per tone in chunks of {t}"
                                           for t, v in fit["per_tone"].items()) +
                  f" (`fit --chunk-tones`; the projection takes the last) at {fit['wavelengths']} wavelengths (every "

@@ -69,3 +69,18 @@ def reweighted_bin_sums(cum: np.ndarray, log_w: np.ndarray, level: np.ndarray, a
     for t in range(a.shape[0]):
         _weights(cum[level[t]], total, log_w, a[t], b[t], scale_bits, w)
         _bin_sums(w, starts, s1[t], s2[t])
+
+
+@numba.njit(cache=True)
+def cumulative_paths(path_cm: np.ndarray, order: np.ndarray) -> np.ndarray:
+    """(S, n) float32: row l the path above level l of photons ``order`` (the running sum of their per-slab paths
+    ``path_cm`` (N, S) float32 over slabs 0..l, in float32 as ``np.cumsum``), photons in the given order."""
+    n, n_slabs = order.shape[0], path_cm.shape[1]
+    out = np.empty((n_slabs, n), np.float32)
+    for j in range(n):
+        acc = np.float32(0.0)
+        row = path_cm[order[j]]
+        for s in range(n_slabs):
+            acc += row[s]
+            out[s, j] = acc
+    return out

@@ -33,7 +33,7 @@ import torch
 
 from exporters.constants import N_TISSUE, N_WAVELENGTHS, PARAM_NAMES, PARAM_RANGES, R_EDGES_CM
 from training.cluster.engine import memo
-from training.data.binned_sums import reweighted_bin_sums
+from training.data.binned_sums import cumulative_paths, reweighted_bin_sums
 from training.data.sampling import T_EPI_LEVELS_CM
 from training.sim.kernel import KIND_REFLECTED, KIND_TRUNCATED
 from training.sim.medium import LayeredMedium
@@ -281,10 +281,10 @@ def _reweight_by_bin(traj: Trajectories, lev: np.ndarray, d_epi: np.ndarray, d_d
         if hi == lo:
             continue
         order, starts = traj.bin_order(c)
-        cum = np.cumsum(traj.path_cm[lo:hi][order], axis=1, dtype=np.float32).T  # (n_lev + 1, n): path above levels
+        cum = cumulative_paths(traj.path_cm[lo:hi], order)  # (n_lev + 1, n): path above each level, in bin order
         log_w = np.log(traj.w[lo:hi][order])
         s1, s2 = np.zeros((lev.size, N_BINS + 1)), np.zeros((lev.size, N_BINS + 1))
-        reweighted_bin_sums(np.ascontiguousarray(cum), log_w, lev.astype(np.int64), np.ascontiguousarray(a[:, c]),
+        reweighted_bin_sums(cum, log_w, lev.astype(np.int64), np.ascontiguousarray(a[:, c]),
                             np.ascontiguousarray(b[:, c]), starts, s1, s2)
         p1[:, c], p2[:, c] = s1, s2
 
