@@ -14,9 +14,10 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-#: Exponents are kept in [EXP_MIN, EXP_MAX]: below, weights < 1.7e-38 (a bias below 1e-32 for 1e6 photons) that
-#: float32 cannot hold as normal numbers; above, none arises (weights at a tone's absorption are at most 1).
-EXP_MIN, EXP_MAX = -87.0, 88.0
+#: Exponents are kept in [EXP_MIN, EXP_MAX]: below, weights < 4.4e-38 (a bias below 1e-31 for 1e6 photons), near
+#: float32's smallest normal number (the weights are never denormal, so they do not depend on a thread's
+#: flush-to-zero mode); above, none arises (weights at a tone's absorption are at most 1).
+EXP_MIN, EXP_MAX = -86.0, 88.0
 
 
 @numba.njit(cache=True, fastmath=True)
