@@ -43,7 +43,7 @@ TONES = np.array([
 @pytest.fixture(scope="module")
 def both():
     # a cap of 20,000 steps truncates none of this walk's packets (asserted) and saves a third of its time
-    traj = walk(PHOTONS, seed=11, mua0=baseline_absorption(), channels=CHANNELS, max_steps=PHYSICS_CAP)
+    traj = walk(PHOTONS, seed=13, mua0=baseline_absorption(), channels=CHANNELS, max_steps=PHYSICS_CAP)
     assert not np.any(traj.truncated)
     rw = reweight(traj, TONES)
     direct = [simulate(skin_medium(t).select_channels(CHANNELS), PHOTONS, seed=100 + i, max_steps=PHYSICS_CAP)
@@ -155,3 +155,31 @@ def test_a_walk_at_the_tones_own_absorption_reweights_to_its_direct_walk():
     mua0 = baseline_absorption()
     with pytest.raises(ValueError, match="walk_mua"):
         walk(2, seed=1, mua0=mua0, levels_cm=tone[2:3], walk_mua=np.stack([mua0, mua0 - 1.0]))
+
+
+def test_reweighted_bin_sums_match_numpys_exponential():
+    """The compiled per-bin sums (float32 exponential, float64 sums) against numpy's float64 exp and sums of the
+    same exponents, over the range the reweighting meets (weights from 1 down to below float32's normals, held at
+    e^EXP_MIN); no weight is a float32 denormal."""
+    from training.data.binned_sums import EXP_MIN, _weights, reweighted_bin_sums
+
+    rng = np.random.default_rng(5)
+    n, n_lev, nb = 5_000, 4, 7
+    cum = np.cumsum(rng.exponential(0.01, (n_lev + 1, n)), axis=0).astype(np.float32)  # cm
+    log_w = np.log(rng.uniform(1e-4, 1.0, n)).astype(np.float32)
+    starts = np.r_[0, np.sort(rng.choice(np.arange(1, n), nb - 1, replace=False)), n].astype(np.int64)
+    level = np.array([0, 3, 1, 2])
+    a = np.array([-50.0, -2.0, 0.0, -900.0])  # the last tone's weights span e^0 .. far below e^EXP_MIN
+    b = np.array([-10.0, -1.0, 0.0, -400.0])
+    s1, s2 = np.zeros((4, nb)), np.zeros((4, nb))
+    reweighted_bin_sums(cum, log_w, level, a, b, starts, s1, s2)
+    e = a[:, None] * cum[level].astype(np.float64) + b[:, None] * cum[-1].astype(np.float64) + log_w
+    w = np.exp(np.maximum(e, EXP_MIN))
+    ref1 = np.stack([np.add.reduceat(row, starts[:-1]) for row in w])
+    ref2 = np.stack([np.add.reduceat(row * row, starts[:-1]) for row in w])
+    np.testing.assert_allclose(s1, ref1, rtol=1e-6, atol=1e-37)
+    np.testing.assert_allclose(s2, ref2, rtol=2e-6, atol=1e-70)
+    assert np.all(np.isfinite(s1)) and np.all(np.isfinite(s2))
+    held = np.empty(n, np.float32)
+    _weights(cum[level[3]], cum[-1], log_w, a[3], b[3], np.empty(n, np.int32), held)
+    assert held.min() >= np.finfo(np.float32).tiny  # weights held at e^EXP_MIN stay normal numbers

@@ -159,3 +159,23 @@ def test_the_gpu_path_walks_the_same_packets_in_cudas_simulator(tmp_path) -> Non
     if not cuda.is_available():  # no GPU and no simulator in this process
         with pytest.raises(ValueError, match="CUDA GPU"):
             simulate(STACK, 10, engine="numba-cuda")
+
+
+def test_the_walks_exponential_sampler_is_the_exponential_distribution() -> None:
+    """The free paths' ziggurat sampler against the standard exponential: Kolmogorov-Smirnov over 2e6 draws,
+    mean and variance 1 within 5 standard errors, and the tail beyond the ziggurat's base (x > 7.7, drawn by
+    its slow path) and far beyond it (x > 12) as often as exp(-x) says (5 binomial standard errors)."""
+    from scipy import stats
+
+    from training.sim.packet_loop import exponential_samples
+
+    n = 2_000_000
+    x = exponential_samples(2024, n)
+    assert np.all(np.isfinite(x)) and x.min() >= 0.0
+    assert stats.kstest(x, "expon").pvalue > 1e-3
+    assert abs(x.mean() - 1.0) < 5.0 / math.sqrt(n)
+    assert abs(x.var() - 1.0) < 5.0 * math.sqrt(8.0 / n)  # var of (x - 1)^2 for Exp(1) is 8
+    for edge in (7.69711747013104972, 12.0):
+        p = math.exp(-edge)
+        assert abs((x > edge).mean() - p) < 5.0 * math.sqrt(p * (1 - p) / n)
+    assert not np.array_equal(x[:100], exponential_samples(2025, 100))

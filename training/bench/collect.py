@@ -49,6 +49,7 @@ BENCH_MODULES = [
     "training.bench.runtime",
     "training.bench.validate",
     "training.bench.cluster",
+    "training.bench.paper_cost",
 ]
 COLUMNS = ["workload", "ours", "anchor", "ratio", "error", "notes"]
 PACKAGES = ["torch", "numpy", "onnxruntime", "OpenImageIO", "colour-science", "bpy", "iadpython", "mitsuba"]

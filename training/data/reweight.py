@@ -25,7 +25,7 @@ import json
 import math
 import os
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -33,6 +33,7 @@ import torch
 
 from exporters.constants import N_TISSUE, N_WAVELENGTHS, PARAM_NAMES, PARAM_RANGES, R_EDGES_CM
 from training.cluster.engine import memo
+from training.data.binned_sums import cumulative_paths, reweighted_bin_sums
 from training.data.sampling import T_EPI_LEVELS_CM
 from training.sim.kernel import KIND_REFLECTED, KIND_TRUNCATED
 from training.sim.medium import LayeredMedium
@@ -113,11 +114,22 @@ class Trajectories:
     path_cm: np.ndarray
     truncated: np.ndarray
     seconds: float
+    _by_bin: dict = field(default_factory=dict, repr=False, compare=False)  # channel -> bin_order(c), not saved
 
     def save(self, path: Path) -> None:
         tmp = path.with_name(path.name + ".tmp.npz")
-        np.savez(tmp, **{k: np.asarray(v) for k, v in self.__dict__.items()})
+        np.savez(tmp, **{k: np.asarray(v) for k, v in self.__dict__.items() if not k.startswith("_")})
         tmp.rename(path)  # a killed job leaves no half-written chunk under the real name
+
+    def bin_order(self, c: int) -> tuple[np.ndarray, np.ndarray]:
+        """Channel ``c``'s photons in bin order: (order (n,) int64 into rows offsets[c]:offsets[c + 1], stable;
+        starts (N_BINS + 2,) int64, bin b holds ordered photons starts[b]:starts[b + 1]).  Cached."""
+        if c not in self._by_bin:
+            b = self.bin[int(self.offsets[c]) : int(self.offsets[c + 1])]
+            order = np.argsort(b, kind="stable")
+            starts = np.searchsorted(b[order], np.arange(N_BINS + 2), side="left").astype(np.int64)
+            self._by_bin[c] = (order, starts)
+        return self._by_bin[c]
 
     @classmethod
     def load(cls, path: Path) -> Trajectories:
@@ -218,27 +230,30 @@ def reweight(traj: Trajectories, tones: np.ndarray, device: str = "cpu") -> dict
     d_epi, d_derm = mua_epi - traj.mua0, mua_derm - traj.mua0
     if min(d_epi.min(), d_derm.min()) < -1e-9 * max(1.0, float(traj.mua0.max())):
         raise ValueError("a tone absorbs less than the walk's baseline: walk with baseline_absorption(tones).")
-    # exponent = X @ Y, one row of X per tone, with Y = [path above each level (n_lev rows); total path;
-    # log w] (n_lev + 2, n): X holds -(de - dd) in the tone's level column, -dd and 1.  One sgemm per
-    # wavelength instead of per-tone gathers (hand-written: no library offers this reweighting).
-    n_t, n_ch, n_lev = len(tones), traj.channels.size, traj.levels_cm.size
-    x = np.zeros((n_t, n_ch, n_lev + 2), dtype=np.float32)
-    x[np.arange(n_t), :, lev] = -(d_epi - d_derm)
-    x[:, :, n_lev] = -d_derm
-    x[:, :, n_lev + 1] = 1.0
-    p1 = np.zeros((n_t, n_ch, N_BINS + 1), dtype=np.float32)
+    n_t, n_ch = len(tones), traj.channels.size
+    p1 = np.zeros((n_t, n_ch, N_BINS + 1), dtype=np.float64)
     p2 = np.zeros_like(p1)
     flush = torch.set_flush_denormal(True)  # tiny weights: float32 denormals are ~10x slower on x86 CPUs
     try:
-        _reweight_channels(traj, torch.as_tensor(x, device=torch.device(device)), p1, p2)
-        mean, se = mean_stderr(p1.sum(-1, dtype=np.float64), p2.sum(-1, dtype=np.float64), traj.photons)
-        pm, pse = mean_stderr(torch.from_numpy(p1[..., :N_BINS]), torch.from_numpy(p2[..., :N_BINS]),
-                               traj.photons)
+        if torch.device(device).type == "cpu":
+            _reweight_by_bin(traj, lev, d_epi, d_derm, p1, p2)
+        else:
+            _reweight_channels(traj, _exponent_rows(lev, d_epi, d_derm, traj.levels_cm.size, device), p1, p2)
     finally:
         if flush:
             torch.set_flush_denormal(False)
-    area = torch.from_numpy(math.pi * np.diff(R_EDGES_CM**2)).float()
-    return {"R_d": mean, "R_d_stderr": se, "profile": (pm / area).numpy(), "profile_stderr": (pse / area).numpy()}
+    mean, se = mean_stderr(p1.sum(-1), p2.sum(-1), traj.photons)
+    pm, pse = mean_stderr(p1[..., :N_BINS], p2[..., :N_BINS], traj.photons)  # float64: no flush-to-zero question
+    area = math.pi * np.diff(R_EDGES_CM**2)
+    return {"R_d": mean, "R_d_stderr": se, "profile": _float32_normal(pm / area),
+            "profile_stderr": _float32_normal(pse / area)}
+
+
+def _float32_normal(x: np.ndarray) -> np.ndarray:
+    """``x`` in float32 with the values below float32's smallest normal number (1.2e-38) set to 0: whether float32
+    arithmetic keeps such values as denormals depends on the flush-to-zero mode of the thread that runs it (torch
+    sets it, its worker threads need not), which must not change the numbers written."""
+    return np.where(np.abs(x) < np.finfo(np.float32).tiny, 0.0, x).astype(np.float32)
 
 
 def one_tone(tone: np.ndarray, photons: int, *, seed: int, device: str = "cpu",
@@ -258,8 +273,47 @@ def one_tone(tone: np.ndarray, photons: int, *, seed: int, device: str = "cpu",
     return reweight(traj, tone[None], device)
 
 
+def _reweight_by_bin(traj: Trajectories, lev: np.ndarray, d_epi: np.ndarray, d_derm: np.ndarray,
+                     p1: np.ndarray, p2: np.ndarray) -> None:
+    """Fill p1, p2 (B, C, 513) float64 on the CPU: per tone, channel and radial bin, sums of photon weights and of
+    their squares.
+
+    A tone at level l weighs a photon exp(-(d_epi - d_derm) L_l - d_derm L + log w), with L_l its path above
+    level l and L its whole path; per channel the photons are taken in bin order (``Trajectories.bin_order``) and
+    summed by ``binned_sums.reweighted_bin_sums`` (one compiled pass per tone, float64 sums).
+    """
+    a, b = -(d_epi - d_derm), -d_derm
+    for c in range(traj.channels.size):
+        lo, hi = int(traj.offsets[c]), int(traj.offsets[c + 1])
+        if hi == lo:
+            continue
+        order, starts = traj.bin_order(c)
+        cum = cumulative_paths(traj.path_cm[lo:hi], order)  # (n_lev + 1, n): path above each level, in bin order
+        log_w = np.log(traj.w[lo:hi][order])
+        s1, s2 = np.zeros((lev.size, N_BINS + 1)), np.zeros((lev.size, N_BINS + 1))
+        reweighted_bin_sums(cum, log_w, lev.astype(np.int64), np.ascontiguousarray(a[:, c]),
+                            np.ascontiguousarray(b[:, c]), starts, s1, s2)
+        p1[:, c], p2[:, c] = s1, s2
+
+
+def _exponent_rows(lev: np.ndarray, d_epi: np.ndarray, d_derm: np.ndarray, n_lev: int, device: str) -> torch.Tensor:
+    """X (B, C, n_lev + 2) float32 of ``_reweight_channels``: -(d_epi - d_derm) in the tone's level column, -d_derm
+    and 1."""
+    n_t, n_ch = d_epi.shape
+    x = np.zeros((n_t, n_ch, n_lev + 2), dtype=np.float32)
+    x[np.arange(n_t), :, lev] = -(d_epi - d_derm)
+    x[:, :, n_lev] = -d_derm
+    x[:, :, n_lev + 1] = 1.0
+    return torch.as_tensor(x, device=torch.device(device))
+
+
 def _reweight_channels(traj: Trajectories, x: torch.Tensor, p1: np.ndarray, p2: np.ndarray) -> None:
-    """Fill p1, p2 (B, C, 513): per tone, channel and radial bin, sums of photon weights and of their squares."""
+    """Fill p1, p2 (B, C, 513) on any torch device: per tone, channel and radial bin, sums of photon weights and
+    of their squares (one (B, n_lev + 2) @ (n_lev + 2, n) product and scattered adds per channel).
+
+    The exponent is X @ Y, one row of X per tone (``_exponent_rows``), Y = [path above each level (n_lev rows);
+    total path; log w] (n_lev + 2, n).
+    """
     dev = x.device
     for c in range(traj.channels.size):
         lo, hi = int(traj.offsets[c]), int(traj.offsets[c + 1])

@@ -231,11 +231,17 @@ class LookupTables:
         """Normalised radial profile P(r | alpha, g, sigma_t) = sigma_t^2 P_LUT(sigma_t r | alpha, g), cm^-2.
 
         ``r_cm``: radii in cm, shape (..., M) (r >= 0); ``alpha``, ``g``, ``sigma_t`` (cm^-1): shapes
-        broadcastable to the same leading dims (...).  Returns shape broadcast(...) + (M,).
+        broadcastable to the same leading dims (...).  Returns shape broadcast(...) + (M,).  On a float64 table
+        on the CPU, with r_cm 1-D and no gradient to carry, computed by ``training.sim.lut_kernel`` (the same
+        values, one compiled pass).
         """
         alpha, g, sigma_t = self._as_tensors(alpha, g, sigma_t)
         r_cm = self._as_tensors(r_cm)[0]
         lead = torch.broadcast_shapes(alpha.shape, g.shape, sigma_t.shape, r_cm.shape[:-1])
+        if self._compiled(alpha, g, sigma_t) and r_cm.dim() == 1:
+            from training.sim.lut_kernel import profile_kernel
+
+            return self._run_compiled(profile_kernel, 1, r_cm, *(t.expand(lead) for t in (alpha, g, sigma_t)))[0]
         rows = self.profile_rows(alpha.expand(lead), g.expand(lead))  # lead + (NR,)
         sig = _clamp_sigma(sigma_t.expand(lead))
         # log radius in mfp; r = 0 maps to a huge negative number (holds the first bin).
@@ -296,8 +302,13 @@ class LookupTables:
         through slow Python decompositions here).  ``r_cm`` (M,); ``alpha``, ``g``, ``sigma_t`` of one
         common shape (...) with the table's dtype/device.  Each output has shape (..., M); units cm^-2
         (per unit of the differentiated parameter).  Piecewise derivatives: one-sided at knots, 0
-        where a value is held.
+        where a value is held.  Compiled (``training.sim.lut_kernel``) on a float64 table on the CPU when no
+        gradient is to be carried, as ``profile``.
         """
+        if self._compiled(alpha, g, sigma_t):
+            from training.sim.lut_kernel import profile_grad_kernel
+
+            return self._run_compiled(profile_grad_kernel, 4, r_cm, alpha, g, sigma_t)
         ia, ta, qa, ha = _axis_weights(self.albedo, alpha)
         ig, tg, qg, hg = _axis_weights(self.g, g)
         P = self.P
@@ -322,6 +333,23 @@ class LookupTables:
         v0, v1, val = radial(rows)
         d_log_s = (2.0 * val + (v1 - v0) * hr * qr) * s2
         return val * s2, radial(rows_a)[2] * s2, radial(rows_g)[2] * s2, d_log_s
+
+    def _compiled(self, *inputs: torch.Tensor) -> bool:
+        """Whether lookups of ``inputs`` go through ``training.sim.lut_kernel``: float64 tables on the CPU and no
+        gradient to carry (the kernels give torch's values to rounding, without autograd)."""
+        return (self.P.device.type == "cpu" and self.P.dtype == torch.float64
+                and not (torch.is_grad_enabled() and any(t.requires_grad for t in inputs)))
+
+    def _run_compiled(self, kernel, n_out: int, r_cm: torch.Tensor, alpha: torch.Tensor, g: torch.Tensor,
+                      sigma_t: torch.Tensor) -> tuple[torch.Tensor, ...]:
+        """``n_out`` outputs of shape alpha.shape + (M,) of a ``lut_kernel`` kernel at radii r_cm (M,)."""
+        lead = alpha.shape
+        flat = [t.detach().reshape(-1).contiguous().numpy() for t in (alpha, g, _clamp_sigma(sigma_t))]
+        log_r = torch.log(r_cm.clamp_min(1e-300)).contiguous().numpy()
+        out = [np.empty((flat[0].size, log_r.size)) for _ in range(n_out)]
+        kernel(self.P.numpy(), self.albedo.numpy(), self.g.numpy(), self.log_centres.numpy(), self._uniform_log,
+               self._dlog, self.log_r_max, log_r, *flat, *out)
+        return tuple(torch.from_numpy(o).reshape(*lead, log_r.size) for o in out)
 
     def _as_tensors(self, *xs) -> list[torch.Tensor]:
         """Convert inputs to tensors on the table's device and dtype; reject NaN / Inf."""

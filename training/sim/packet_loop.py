@@ -10,7 +10,10 @@ Random numbers: packet ``q`` of a run (its serial number in the run's ``Source``
 stream (Steele, Lea & Flood 2014, the seeder of java.util.SplittableRandom) started at
 mix(run key ^ mix(q)), with mix the SplitMix64 finaliser: a packet's walk depends on the seed and on q
 only, so a run's records are the same bit for bit whatever the thread count, the batch size or the
-order in which threads pick packets up.  Uniforms have 53 bits and lie in (0, 1).
+order in which threads pick packets up.  Uniforms have 53 bits and lie in (0, 1); the azimuth's point of
+the unit disc takes the two 32-bit halves of one output; free path lengths (standard exponentials) come from
+the ziggurat of numpy's ``Generator.standard_exponential`` (Marsaglia & Tsang's tables for 53-bit integers),
+which needs a logarithm in ~1 % of the draws only.
 
 Differences from the vectorised step, none of which changes the estimand: the walk is float64 (the step's
 dtype does not apply), roulettes are decided right after each interaction (the step checks every
@@ -45,9 +48,35 @@ _GOLDEN = np.uint64(0x9E3779B97F4A7C15)
 _MIX1 = np.uint64(0xBF58476D1CE4E5B9)
 _MIX2 = np.uint64(0x94D049BB133111EB)
 _S11, _S27, _S30, _S31 = np.uint64(11), np.uint64(27), np.uint64(30), np.uint64(31)
+_S32, _LOW32 = np.uint64(32), np.uint64(0xFFFFFFFF)
 _TWO_M53 = 2.0**-53
+_TWO_M31 = 2.0**-31
 _TWO_PI = 2.0 * math.pi
 _INF = math.inf
+
+
+def _exponential_ziggurat(layers: int = 256, r: float = 7.69711747013104972, v: float = 3.949659822581572e-3,
+                          bits: int = 53) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Tables (k, w, f) of the exponential ziggurat (Marsaglia & Tsang 2000, J. Stat. Softw. 5(8), ``zigset``),
+    for ``bits``-bit integers as numpy's ``random_standard_exponential`` draws them: ``layers`` strips of area
+    ``v`` each, the base strip ending at ``r``.  k: acceptance bounds (uint64), w: integer-to-x scales, f: exp(-x)
+    at the strips' edges."""
+    m = 2.0**bits
+    k, w, f = np.zeros(layers, np.uint64), np.zeros(layers), np.zeros(layers)
+    de = te = r
+    q = v / math.exp(-de)
+    k[0], w[0], w[-1], f[0], f[-1] = np.uint64(de / q * m), q / m, de / m, 1.0, math.exp(-de)
+    for i in range(layers - 2, 0, -1):
+        de = -math.log(v / de + math.exp(-de))
+        k[i + 1] = np.uint64(de / te * m)
+        te = de
+        f[i], w[i] = math.exp(-de), de / m
+    return k, w, f
+
+
+_ZIG_K, _ZIG_W, _ZIG_F = _exponential_ziggurat()
+_ZIG_R = 7.69711747013104972
+_S3, _S8, _LOW8 = np.uint64(3), np.uint64(8), np.uint64(0xFF)
 
 
 def mix64_py(v: int) -> int:
@@ -76,7 +105,62 @@ def _uniform(state):
     """Advance a SplitMix64 state; returns (new state, uniform in (0, 1))."""
     state = state + _GOLDEN
     z = _mix64(state)
-    return state, (float(z >> _S11) + 0.5) * _TWO_M53
+    return state, (float(np.int64(z >> _S11)) + 0.5) * _TWO_M53  # < 2^53: a signed conversion is exact
+
+
+@numba.njit(cache=True)
+def _exponential_slow(state, idx, x):
+    """The ziggurat's rare cases (~1.1 % of draws): the tail beyond r, the wedge test, or a fresh draw."""
+    while True:
+        if idx == 0:  # the tail: r + a standard exponential
+            state, u = _uniform(state)
+            return state, _ZIG_R - math.log(u)
+        state, u = _uniform(state)
+        if (_ZIG_F[idx - 1] - _ZIG_F[idx]) * u + _ZIG_F[idx] < math.exp(-x):
+            return state, x
+        state = state + _GOLDEN
+        ri = _mix64(state) >> _S3
+        idx = int(ri & _LOW8)
+        ri = ri >> _S8
+        x = float(np.int64(ri)) * _ZIG_W[idx]
+        if ri < _ZIG_K[idx]:
+            return state, x
+
+
+@numba.njit(cache=True, inline="always")
+def _exponential(state):
+    """Advance a SplitMix64 state; returns (new state, a standard exponential variate) by the ziggurat (the
+    algorithm of numpy's ``Generator.standard_exponential``: 53 bits of one output for x, 8 for the strip),
+    without a logarithm in ~98.9 % of the draws."""
+    state = state + _GOLDEN
+    ri = _mix64(state) >> _S3
+    idx = int(ri & _LOW8)
+    ri = ri >> _S8
+    x = float(np.int64(ri)) * _ZIG_W[idx]
+    if ri < _ZIG_K[idx]:
+        return state, x
+    return _exponential_slow(state, idx, x)
+
+
+@numba.njit(cache=True)
+def exponential_samples(seed: int, count: int) -> np.ndarray:
+    """``count`` draws of the walk's exponential sampler from the stream of packet 0 of run ``seed`` (checks)."""
+    state = _mix64(np.uint64(seed) ^ _mix64(np.uint64(0)))
+    out = np.empty(count)
+    for i in range(count):
+        state, out[i] = _exponential(state)
+    return out
+
+
+@numba.njit(cache=True, inline="always")
+def _uniform_pair(state):
+    """Advance a SplitMix64 state; returns (new state, a, b): two uniforms in (-1, 1) from the two 32-bit
+    halves of one output (for the azimuth, where 32 bits are ample)."""
+    state = state + _GOLDEN
+    z = _mix64(state)
+    a = (float(np.int64(z >> _S32)) + 0.5) * _TWO_M31 - 1.0
+    b = (float(np.int64(z & _LOW32)) + 0.5) * _TWO_M31 - 1.0
+    return state, a, b
 
 
 @numba.njit(cache=True, inline="always")
@@ -143,8 +227,7 @@ def _walk_one(i, ch, serial, key, t_mut, t_alb, t_g, t_ztop, t_zbot, n, n_below,
     else:
         r_sp = ((n - 1.0) / (n + 1.0)) ** 2
         ux, uy, uz = 0.0, 0.0, 1.0
-    state, u = _uniform(state)
-    s = -math.log(u)
+    state, s = _exponential(state)
     x, y, z = 0.0, 0.0, 0.0
     w = 1.0 - r_sp
     absorbed = 0.0
@@ -154,6 +237,7 @@ def _walk_one(i, ch, serial, key, t_mut, t_alb, t_g, t_ztop, t_zbot, n, n_below,
     kind = KIND_TRUNCATED
     next_path_roulette = path_n0[c]  # n0 * 2^stage
     steps = 0
+    path_here = 0.0
     if record_paths:
         for k in range(n_layers):
             out_path[i, k] = 0.0
@@ -174,8 +258,7 @@ def _walk_one(i, ch, serial, key, t_mut, t_alb, t_g, t_ztop, t_zbot, n, n_below,
         d = min(max(db if hit else di, 0.0), MAX_HOP_CM)
         x += d * ux
         y += d * uy
-        if record_paths:
-            out_path[i, layer] += d
+        path_here += d  # path in the current layer, stored when the packet leaves it
         steps += 1
         if hit:
             z = zwall
@@ -195,23 +278,24 @@ def _walk_one(i, ch, serial, key, t_mut, t_alb, t_g, t_ztop, t_zbot, n, n_below,
                     kind = KIND_UNSCATTERED if ncoll == 0 else KIND_TRANSMITTED
                     break
             else:
+                if record_paths:
+                    out_path[i, layer] += path_here
+                path_here = 0.0
                 layer += -1 if uz < 0.0 else 1
         else:
             z += d * uz
-            state, u = _uniform(state)
-            s = -math.log(u)
+            state, s = _exponential(state)
             dw = w * (1.0 - t_alb[k])
             w -= dw
             absorbed += dw
             state, u1 = _uniform(state)
             while True:  # azimuth: a uniform point of the unit disc gives (cos 2 phi, sin 2 phi) (von Neumann)
-                state, u2 = _uniform(state)
-                state, u3 = _uniform(state)
-                a, b = 2.0 * u2 - 1.0, 2.0 * u3 - 1.0
+                state, a, b = _uniform_pair(state)
                 r2 = a * a + b * b
                 if r2 <= 1.0:
                     break
-            ux, uy, uz = _rotate(ux, uy, uz, _hg_cos(t_g[k], u1), (a * a - b * b) / r2, 2.0 * a * b / r2)
+            inv_r2 = 1.0 / r2
+            ux, uy, uz = _rotate(ux, uy, uz, _hg_cos(t_g[k], u1), (a * a - b * b) * inv_r2, 2.0 * a * b * inv_r2)
             ncoll += 1
             if w < roulette_threshold:  # weight roulette: survive with weight w / keep
                 state, u = _uniform(state)
@@ -233,6 +317,8 @@ def _walk_one(i, ch, serial, key, t_mut, t_alb, t_g, t_ztop, t_zbot, n, n_below,
         if steps >= max_steps:
             kind = KIND_TRUNCATED
             break
+    if record_paths:
+        out_path[i, layer] += path_here
     out_kind[i] = kind
     out_w[i] = 0.0 if kind == KIND_ABSORBED else w
     out_x[i] = x
