@@ -17,10 +17,9 @@ import numpy as np
 
 
 @numba.njit(cache=True, inline="always")
-def _axis(grid, x):
-    """(idx, t, inside, inv_h) of ``lut_interp._axis_weights`` for one value."""
+def _cell(grid, idx, x):
+    """(idx, t, inside, inv_h) for ``x`` in the cell from node ``idx`` (clamped to the grid's cells)."""
     n = grid.shape[0]
-    idx = np.searchsorted(grid, x, side="right") - 1
     idx = min(max(idx, 0), n - 2)
     g0 = grid[idx]
     inv_h = 1.0 / (grid[idx + 1] - g0)
@@ -30,21 +29,17 @@ def _axis(grid, x):
 
 
 @numba.njit(cache=True, inline="always")
+def _axis(grid, x):
+    """(idx, t, inside, inv_h) of ``lut_interp._axis_weights`` for one value."""
+    return _cell(grid, np.searchsorted(grid, x, side="right") - 1, x)
+
+
+@numba.njit(cache=True, inline="always")
 def _radial(lc, uniform, dlog, x):
     """(idx, t, inside, inv_h) of ``LookupTables._radial_weights`` for one log radius."""
     if not uniform:
         return _axis(lc, x)
-    n = lc.shape[0]
-    if x < lc[1]:
-        idx = 0
-    else:
-        idx = int(math.floor((x - lc[1]) / dlog)) + 1
-    idx = min(max(idx, 0), n - 2)
-    g0 = lc[idx]
-    inv_h = 1.0 / (lc[idx + 1] - g0)
-    t = min(max((x - g0) * inv_h, 0.0), 1.0)
-    inside = 1.0 if (x >= lc[0] and x <= lc[n - 1]) else 0.0
-    return idx, t, inside, inv_h
+    return _cell(lc, 0 if x < lc[1] else int(math.floor((x - lc[1]) / dlog)) + 1, x)
 
 
 @numba.njit(cache=True, inline="always")

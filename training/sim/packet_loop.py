@@ -118,13 +118,20 @@ def _exponential_slow(state, idx, x):
         state, u = _uniform(state)
         if (_ZIG_F[idx - 1] - _ZIG_F[idx]) * u + _ZIG_F[idx] < math.exp(-x):
             return state, x
-        state = state + _GOLDEN
-        ri = _mix64(state) >> _S3
-        idx = int(ri & _LOW8)
-        ri = ri >> _S8
-        x = float(np.int64(ri)) * _ZIG_W[idx]
-        if ri < _ZIG_K[idx]:
+        state, idx, x, accept = _ziggurat_draw(state)
+        if accept:
             return state, x
+
+
+@numba.njit(cache=True, inline="always")
+def _ziggurat_draw(state):
+    """One ziggurat step from a fresh SplitMix64 output: (new state, strip index, x, whether x lies inside the
+    strip's rectangle and is accepted at once)."""
+    state = state + _GOLDEN
+    ri = _mix64(state) >> _S3
+    idx = int(ri & _LOW8)
+    ri = ri >> _S8
+    return state, idx, float(np.int64(ri)) * _ZIG_W[idx], ri < _ZIG_K[idx]
 
 
 @numba.njit(cache=True, inline="always")
@@ -132,12 +139,8 @@ def _exponential(state):
     """Advance a SplitMix64 state; returns (new state, a standard exponential variate) by the ziggurat (the
     algorithm of numpy's ``Generator.standard_exponential``: 53 bits of one output for x, 8 for the strip),
     without a logarithm in ~98.9 % of the draws."""
-    state = state + _GOLDEN
-    ri = _mix64(state) >> _S3
-    idx = int(ri & _LOW8)
-    ri = ri >> _S8
-    x = float(np.int64(ri)) * _ZIG_W[idx]
-    if ri < _ZIG_K[idx]:
+    state, idx, x, accept = _ziggurat_draw(state)
+    if accept:
         return state, x
     return _exponential_slow(state, idx, x)
 
