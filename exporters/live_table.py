@@ -111,10 +111,10 @@ def fill_outside_cube(values: np.ndarray) -> np.ndarray:
 
 
 def extended_values(table: TexelTable) -> np.ndarray:
-    """Every channel of ``table`` (n0, n1, n2, C) float32 with its nodes outside the RGB cube filled by
-    :func:`fill_outside_cube`: what the live group's images hold, for all channels (the same fill as
-    :func:`grid_values`, which fills a subset of the channels of the same nodes)."""
-    return fill_outside_cube(table.values).astype(np.float32)
+    """Every channel of ``table`` (n0, n1, n2, C) float64 with its nodes outside the RGB cube filled by
+    :func:`fill_outside_cube`: what the live group's images hold (:func:`grid_values` picks their channels), for
+    all channels."""
+    return fill_outside_cube(table.values)
 
 
 def _channels(table: TexelTable, k: int, kind: str) -> list[int | None]:
@@ -127,16 +127,12 @@ def _channels(table: TexelTable, k: int, kind: str) -> list[int | None]:
 def grid_values(table: TexelTable) -> dict[str, np.ndarray]:
     """The filled grid (n0, n1, n2, 4) float64 of each image name ``k{k} {kind}``, alpha 1 where unused; colour,
     weight and anisotropy clipped to the ranges a bake clips them to (exporters.texel_table.TexelTable.records)."""
-    used = sorted({i for k in range(1, table.k + 1) for kind in IMAGE_KINDS for i in _channels(table, k, kind)
-                   if i is not None})
-    filled = fill_outside_cube(table.values[..., used])
-    column = {c: j for j, c in enumerate(used)}
+    filled = extended_values(table)
     ones = np.ones(table.shape)
     out = {}
     for k in range(1, table.k + 1):
         for kind in IMAGE_KINDS:
-            grid = np.stack([filled[..., column[i]] if i is not None else ones for i in _channels(table, k, kind)],
-                            axis=-1)
+            grid = np.stack([filled[..., i] if i is not None else ones for i in _channels(table, k, kind)], axis=-1)
             if kind == "Color":
                 grid[..., :3] = np.clip(grid[..., :3], 0.0, 1.0)
                 grid[..., 3] = np.clip(grid[..., 3], cycles.G_MIN, cycles.RECOMMENDED_G_MAX)

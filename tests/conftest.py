@@ -1,7 +1,13 @@
-"""Suite-wide settings."""
+"""Suite-wide settings and fixtures."""
+
+import subprocess
+import sys
+from pathlib import Path
 
 import pytest
 import torch
+
+ROOT = Path(__file__).resolve().parents[1]
 
 
 @pytest.fixture(scope="session", autouse=True)
@@ -13,6 +19,20 @@ def _one_torch_thread():
     torch.set_num_threads(1)
     yield
     torch.set_num_threads(before)
+
+
+@pytest.fixture(scope="session")
+def ext_zip(tmp_path_factory) -> Path:
+    """The extension zip ``make extension`` builds for this platform (blender_addon/package.py, validated by
+    Blender's own extension tool), built once per test process."""
+    out = tmp_path_factory.mktemp("dist")
+    proc = subprocess.run([sys.executable, str(ROOT / "blender_addon" / "package.py"), "--out", str(out)],
+                          capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-2000:]
+    assert "built and validated" in proc.stdout
+    zips = list(out.glob("spectral_skin_sss-*.zip"))
+    assert len(zips) == 1
+    return zips[0]
 
 
 @pytest.fixture()

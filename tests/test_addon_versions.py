@@ -28,23 +28,14 @@ BLENDERS = [
 ]
 
 
-@pytest.fixture(scope="module")
-def linux_zip(tmp_path_factory) -> Path:
-    out = tmp_path_factory.mktemp("dist")
-    proc = subprocess.run([sys.executable, str(ROOT / "blender_addon" / "package.py"), "--out", str(out)],
-                          capture_output=True, text=True, timeout=600)
-    assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-2000:]
-    return next(out.glob("spectral_skin_sss-*.zip"))
-
-
 @pytest.mark.parametrize("case,python,version,py_version", BLENDERS, ids=[b[0] for b in BLENDERS])
-def test_installs_bakes_renders_and_exits_cleanly(case, python, version, py_version, linux_zip, tmp_path):
+def test_installs_bakes_renders_and_exits_cleanly(case, python, version, py_version, ext_zip, tmp_path):
     if not python.is_file():
         pytest.skip(f"{python.parent.parent.name} is missing: `make blender-envs` creates it (make test does)")
     env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "PYTHONHOME")}
     env["BLENDER_USER_RESOURCES"] = str(tmp_path / "user")
     # The script is left to exit by itself with the add-on still enabled: a hang is a timeout, a crash a signal.
-    proc = subprocess.run([str(python), str(CHECK), str(linux_zip), str(tmp_path)], capture_output=True, text=True,
+    proc = subprocess.run([str(python), str(CHECK), str(ext_zip), str(tmp_path)], capture_output=True, text=True,
                           timeout=240, env=env, cwd=tmp_path)
     lines = [ln for ln in proc.stdout.splitlines() if ln.startswith("RESULT")]
     assert proc.returncode == 0 and lines, f"exit status {proc.returncode}\n{proc.stdout[-2000:]}{proc.stderr[-3000:]}"
@@ -80,14 +71,14 @@ def test_installs_bakes_renders_and_exits_cleanly(case, python, version, py_vers
 
 
 @pytest.mark.parametrize("case,python,version,py_version", BLENDERS, ids=[b[0] for b in BLENDERS])
-def test_a_script_that_registers_and_never_unregisters_exits_cleanly(case, python, version, py_version, linux_zip,
+def test_a_script_that_registers_and_never_unregisters_exits_cleanly(case, python, version, py_version, ext_zip,
                                                                        tmp_path):
     # Blender 4.2's bpy module crashes and 4.5's hangs at exit when classes are left registered.
     if not python.is_file():
         pytest.skip(f"{python.parent.parent.name} is missing: `make blender-envs` creates it (make test does)")
     env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "PYTHONHOME")}
     env["BLENDER_USER_RESOURCES"] = str(tmp_path / "user")
-    proc = subprocess.run([str(python), str(CHECK), str(linux_zip), str(tmp_path), "register-only"],
+    proc = subprocess.run([str(python), str(CHECK), str(ext_zip), str(tmp_path), "register-only"],
                           capture_output=True, text=True, timeout=120, env=env, cwd=tmp_path)
     lines = [ln for ln in proc.stdout.splitlines() if ln.startswith("RESULT")]
     assert proc.returncode == 0 and lines, f"exit status {proc.returncode}\n{proc.stdout[-2000:]}{proc.stderr[-3000:]}"

@@ -9,10 +9,10 @@ import sys
 from pathlib import Path
 
 import numpy as np
-import OpenImageIO as oiio
 import pytest
 
 from exporters import cycles, maps
+from tests.addon_scene import write_image
 
 ROOT = Path(__file__).resolve().parents[1]
 BAKE = ROOT / "blender_addon" / "bake.py"
@@ -25,21 +25,12 @@ def bake(*args: str, timeout: int = 120) -> subprocess.CompletedProcess:
                           cwd=str(ROOT))
 
 
-def write_png(path: Path, codes: np.ndarray) -> Path:
-    h, w, c = codes.shape
-    out = oiio.ImageOutput.create(str(path))
-    assert out.open(str(path), oiio.ImageSpec(w, h, c, "uint8"))
-    assert out.write_image(np.ascontiguousarray(codes))
-    out.close()
-    return path
-
-
 @pytest.fixture(scope="module")
 def skin_png(tmp_path_factory) -> Path:
     codes = np.empty((3, 5, 3), np.uint8)  # non-square; two colours, the second one repeated
     codes[...] = (224, 172, 150)
     codes[1, 1:4] = (150, 100, 80)
-    return write_png(tmp_path_factory.mktemp("img") / "face.png", codes)
+    return write_image(tmp_path_factory.mktemp("img") / "face.png", codes, "uint8")
 
 
 def files_for(stem: str, targets: tuple[str, ...]) -> set[str]:
@@ -172,7 +163,7 @@ def test_colours_no_medium_can_take_are_clamped_counted_and_reported(tmp_path):
     codes = np.empty((2, 4, 3), np.uint8)
     codes[...] = (224, 172, 150)
     codes[0, :3] = (0, 255, 0)  # saturated green: no skin's spectrum bends that far
-    png = write_png(tmp_path / "green.png", codes)
+    png = write_image(tmp_path / "green.png", codes, "uint8")
     out = tmp_path / "maps"
     # through the table a non-skin colour gets the nearest skin colour's maps, said as a warning
     proc = bake("--albedo", str(png), "--out", str(tmp_path / "table"), "--threads", "1")
@@ -208,9 +199,9 @@ def test_udim_albedo_bakes_every_tile_to_maps_named_per_tile(tmp_path):
     tiles = tmp_path / "tiles"
     tiles.mkdir()
     light, dark = np.full((2, 3, 3), (224, 172, 150), np.uint8), np.full((2, 3, 3), (120, 80, 60), np.uint8)
-    write_png(tiles / "skin.1001.png", light)
-    write_png(tiles / "skin.1002.png", dark)
-    write_png(tiles / "skin.1000.png", dark)
+    write_image(tiles / "skin.1001.png", light, "uint8")
+    write_image(tiles / "skin.1002.png", dark, "uint8")
+    write_image(tiles / "skin.1000.png", dark, "uint8")
     out = tmp_path / "maps"
     proc = bake("--albedo", str(tiles / "skin.<UDIM>.png"), "--out", str(out), "--threads", "1")
     assert proc.returncode == 0, proc.stderr
@@ -234,7 +225,7 @@ def test_udim_albedo_errors_leave_the_folder_as_it_was(tmp_path):
     assert proc.stderr.strip().splitlines() == [
         f"bake.py: error: no UDIM tile of {tmp_path / 'skin.<UDIM>.png'} found (files named skin.1001.png, "
         "skin.1002.png ...)"]
-    write_png(tmp_path / "skin.1001.png", np.full((2, 2, 3), (224, 172, 150), np.uint8))
+    write_image(tmp_path / "skin.1001.png", np.full((2, 2, 3), (224, 172, 150), np.uint8), "uint8")
     (tmp_path / "skin.1002.png").write_bytes(b"not a png")  # the second tile fails after the first was baked
     proc = bake("--albedo", str(tmp_path / "skin.<UDIM>.png"), "--out", str(out))
     assert proc.returncode == 2 and "skin.1002.png" in proc.stderr and not out.exists()

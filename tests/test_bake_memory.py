@@ -11,11 +11,11 @@ import zlib
 from pathlib import Path
 
 import numpy as np
-import OpenImageIO as oiio
 import pytest
 
 from exporters import texel_table
 from exporters.colorimetry import srgb_decode
+from tests.addon_scene import write_image
 
 ROOT = Path(__file__).resolve().parents[1]
 BAKE = ROOT / "blender_addon" / "bake.py"
@@ -24,15 +24,6 @@ BUDGET_MB = 160
 OUTSIDE_COLOURS = 2000
 #: Distinct colours of the texture baked with ``--exact`` (the model evaluates ~500 colours per CPU-second).
 EXACT_COLOURS = 4000
-
-
-def write_png(path: Path, codes: np.ndarray) -> Path:
-    h, w, c = codes.shape
-    out = oiio.ImageOutput.create(str(path))
-    assert out.open(str(path), oiio.ImageSpec(w, h, c, "uint8"))
-    assert out.write_image(np.ascontiguousarray(codes))
-    out.close()
-    return path
 
 
 def random_texture(size: int, outside: int, seed: int = 0) -> np.ndarray:
@@ -63,9 +54,9 @@ def textures(tmp_path_factory) -> dict[str, Path]:
     folder = tmp_path_factory.mktemp("textures")
     rng = np.random.default_rng(1)
     palette = rng.integers(0, 256, (EXACT_COLOURS, 3), dtype=np.uint8)
-    return {"big": write_png(folder / "random1k.png", random_texture(1024, OUTSIDE_COLOURS)),
-            "few": write_png(folder / "few1k.png", palette[rng.integers(0, EXACT_COLOURS, (1024, 1024))]),
-            "tiny": write_png(folder / "tiny.png", rng.integers(0, 256, (8, 8, 3), dtype=np.uint8))}
+    return {"big": write_image(folder / "random1k.png", random_texture(1024, OUTSIDE_COLOURS), "uint8"),
+            "few": write_image(folder / "few1k.png", palette[rng.integers(0, EXACT_COLOURS, (1024, 1024))], "uint8"),
+            "tiny": write_image(folder / "tiny.png", rng.integers(0, 256, (8, 8, 3), dtype=np.uint8), "uint8")}
 
 
 def test_peak_memory_of_a_random_colour_texture_stays_within_the_budget(textures, tmp_path):

@@ -12,23 +12,9 @@ import textwrap
 import zipfile
 from pathlib import Path
 
-import pytest
-
 from tests.addon_scene import skin_codes, write_image
 
 ROOT = Path(__file__).resolve().parents[1]
-
-
-@pytest.fixture(scope="module")
-def ext_zip(tmp_path_factory) -> Path:
-    out = tmp_path_factory.mktemp("dist")
-    proc = subprocess.run([sys.executable, str(ROOT / "blender_addon" / "package.py"), "--out", str(out)],
-                          capture_output=True, text=True, timeout=600)
-    assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-2000:]
-    assert "built and validated" in proc.stdout
-    zips = list(out.glob("spectral_skin_sss-*.zip"))
-    assert len(zips) == 1
-    return zips[0]
 
 
 def test_zip_contents_and_manifest(ext_zip):

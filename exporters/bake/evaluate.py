@@ -17,8 +17,9 @@ from .targets import BakeError, MapSpec
 #: Most distinct colours looked up in the fast-path table per step (the UI stays responsive: ~0.1 s each).
 TABLE_CHUNK = 1 << 18
 #: Bytes per distinct colour of one table step: the interpolated values (184 B for K = 3), their records
-#: (376 B), the lookup of the colours outside the table (520 B) and the map rows (120 B), measured
-#: for K = 3 and rounded up; a step holds no more rows than the memory budget pays for at this rate.
+#: (376 B) and the map rows (120 B), measured for K = 3, and for a colour outside the table the nearest-colour
+#: lookup's float64 arrays (~1.2 kB at their peak, counted from live_table.lookup's arrays for the table's 46
+#: channels); rounded up: a step holds no more rows than the memory budget pays for at this rate.
 TABLE_ROW_BYTES = 2048
 
 
@@ -73,13 +74,13 @@ class Evaluator:
             rec = parts if parts is not None else texel_records.empty_records(self.model_k, self.targets,
                                                                              self.options.painted)
             return rec, inside
-        exact = self.exact_records(rgb) if self.table is None else self.nearest_records(rgb[~inside])
+        rest = self.exact_records(rgb) if self.table is None else self.nearest_records(rgb[~inside])
         if parts is None:
-            return exact, inside
+            return rest, inside
         rec = {}
         for key, value in parts.items():
             full = np.empty((len(rgb), *value.shape[1:]), value.dtype)
-            full[inside], full[~inside] = value, exact[key]
+            full[inside], full[~inside] = value, rest[key]
             rec[key] = full
         return rec, inside
 
