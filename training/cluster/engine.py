@@ -300,3 +300,9 @@ def memo(kind: str, key: Any, make: Callable[[], Any]) -> Any:
         value = make()
         _MEMO[kind] = (key, value)
         return value
+
+
+def forget(kind: str) -> None:
+    """Drop the per-process value of ``kind`` that ``memo`` holds (no-op when none)."""
+    with _MEMO_LOCK:
+        _MEMO.pop(kind, None)

@@ -12,6 +12,10 @@ reweighting chunks, as Dask tasks; the same files as one process (no merge), res
 --method reweighted (default): one baseline walk per split (saved in DIR/trajectories_<split>/, in
 photon chunks, shared by the shards of a split) reweighted for every tone; --method direct: one full
 Monte Carlo run per tone (slow; for checks).
+
+The `paper` preset builds a split 8 wavelengths at a time (its whole walk would not fit in memory or on disk):
+each block walked, reweighted into DIR/<split>.blocks/ and its walk deleted; DIR/<split>.h5 then joins the
+blocks (keep the .blocks folder beside it).  Run one process per split (--split train, --split validation).
 """
 
 from __future__ import annotations
@@ -51,6 +55,26 @@ def _estimator(args: argparse.Namespace, preset, split: str):
     store = TrajectoryStore(args.out / f"trajectories_{split}", preset.photons, seed, device=args.device,
                             shard=args.shard, progress=not args.no_progress, **walk)
     return store, preset.reweighted_chunk_tones
+
+
+def _build_blocked(args: argparse.Namespace, preset, splits: tuple[str, ...]) -> int:
+    """Build ``splits`` a block of wavelengths at a time (``training.data.blocks``), one process per split."""
+    from training.data.blocks import build_split_blocked
+    from training.data.reweight import TrajectoryStore
+
+    if args.shard != (0, 1) or args.scheduler is not None:
+        raise ValueError(f"the {preset.name!r} preset builds a split a block of wavelengths at a time, in one process "
+                         "per split: run --split train and --split validation as two processes (no --shard or "
+                         "--scheduler)")
+    walk = {k: v for k, v in (("chunk_photons", preset.walk_chunk_photons), ("max_steps", preset.walk_max_steps))
+            if v is not None}
+    for split in splits:
+        def store(b, channels, seed, split=split):
+            return TrajectoryStore(args.out / f"trajectories_{split}" / f"block{b:03d}", preset.photons, seed,
+                                   device=args.device, progress=not args.no_progress, channels=channels, **walk)
+
+        print(build_split_blocked(preset, split, args.out, store, device=args.device, progress=not args.no_progress))
+    return 0
 
 
 def _check_paths(args: argparse.Namespace) -> None:
@@ -120,6 +144,8 @@ def main(argv: list[str]) -> int:
                 engine.job(args.scheduler, f"dataset {args.preset}", shared=[args.out], threads=max(1, args.threads),
                            progress=not args.no_progress) as job:
             paths = []
+            if preset.wavelength_block is not None and args.method == "reweighted":
+                return _build_blocked(args, preset, splits)
             for split in splits:
                 simulate, chunk = _estimator(args, preset, split)
                 paths.append(build_split(preset, split, args.out, simulate, method=args.method, shard=args.shard,

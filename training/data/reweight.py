@@ -32,7 +32,7 @@ import numpy as np
 import torch
 
 from exporters.constants import N_TISSUE, N_WAVELENGTHS, PARAM_NAMES, PARAM_RANGES, R_EDGES_CM
-from training.cluster.engine import memo
+from training.cluster.engine import forget, memo
 from training.data.binned_sums import cumulative_paths, reweighted_bin_sums
 from training.data.sampling import T_EPI_LEVELS_CM
 from training.sim.kernel import KIND_REFLECTED, KIND_TRUNCATED
@@ -331,6 +331,17 @@ def _reweight_channels(traj: Trajectories, x: torch.Tensor, p1: np.ndarray, p2: 
         p2[:, c] = zeros.index_add(1, b, wt.mul_(wt)).cpu().numpy()
 
 
+#: What ``TrajectoryStore.discard`` leaves of a deleted walk: its seconds and photons (JSON).
+WALKED_FILE = "walked.json"
+
+
+def walk_seconds(folder: Path) -> float:
+    """Seconds spent walking the trajectories under ``folder``: its chunk files and its deleted walks."""
+    folder = Path(folder)
+    kept = sum(float(np.load(p)["seconds"]) for p in sorted(folder.rglob("chunk*.npz")))
+    return kept + sum(json.loads(p.read_text())["seconds"] for p in folder.rglob(WALKED_FILE))
+
+
 class TrajectoryStore:
     """The baseline walk of one dataset split on disk, in photon chunks (resumable), and its reweighting.
 
@@ -339,15 +350,18 @@ class TrajectoryStore:
     share the folder: shard I/N walks chunks j = I (mod N) first, then whatever is still missing (a
     chunk may then be walked twice, never corrupted: chunks are deterministic and renamed into place).
     On a Dask cluster (``submit_walk``) each missing chunk is a task that writes its file the same way.
+    ``channels``: the wavelength indices walked (default all 376): a walk of a block of wavelengths, for builds
+    that take the wavelengths a block at a time (``training.data.blocks``).
     """
 
     def __init__(self, folder: Path, photons: int, seed: int, *, device: str = "cpu",
                  shard: tuple[int, int] = (0, 1), chunk_photons: int | None = None,
-                 max_steps: int = WALK_MAX_STEPS, progress: bool = False) -> None:
+                 max_steps: int = WALK_MAX_STEPS, progress: bool = False, channels: np.ndarray | None = None) -> None:
         self.folder, self.photons, self.seed, self.device = Path(folder), int(photons), int(seed), device
         chunk = walk_chunk_photons(device) if chunk_photons is None else chunk_photons
         self.shard, self.chunk, self.max_steps, self.progress = shard, int(chunk), int(max_steps), progress
         self.mua0 = baseline_absorption()
+        self.channels = np.arange(self.mua0.size) if channels is None else np.asarray(channels, dtype=np.int64)
         self._traj: Trajectories | None = None
 
     def __getstate__(self) -> dict:
@@ -365,10 +379,10 @@ class TrajectoryStore:
         path = self.chunk_path(j)
         if not path.exists():
             if verbose:
-                print(f"walking trajectory chunk {j + 1}/{len(self._chunks())} ({count} photons x {self.mua0.size} "
+                print(f"walking trajectory chunk {j + 1}/{len(self._chunks())} ({count} photons x {self.channels.size} "
                       f"wavelengths) into {self.folder}", flush=True)
-            walk(count, seed=self.seed * 1_000_003 + j, mua0=self.mua0, device=self.device,
-                 compile=self.photons * self.mua0.size > (1 << 23), max_steps=self.max_steps).save(path)
+            walk(count, seed=self.seed * 1_000_003 + j, mua0=self.mua0, channels=self.channels, device=self.device,
+                 compile=self.photons * self.channels.size > (1 << 23), max_steps=self.max_steps).save(path)
         return str(path)
 
     def submit_walk(self, job) -> list:
@@ -404,12 +418,15 @@ class TrajectoryStore:
         a prefix of them.  The manifest keeps the largest count walked so far.
         """
         manifest = {"photons": self.photons, "seed": self.seed, "chunk_photons": self.chunk,
-                    "levels_cm": T_EPI_LEVELS_CM.tolist(), "mua0_sum": float(np.sum(self.mua0)),
+                    "levels_cm": T_EPI_LEVELS_CM.tolist(), "mua0_sum": float(np.sum(self.mua0[self.channels])),
                     "max_steps": self.max_steps}
+        if self.channels.size != self.mua0.size:  # a block of wavelengths (whole walks keep their old manifest)
+            manifest["channels"] = self.channels.tolist()
         path = self.folder / "manifest.json"
         if path.exists():
             old = {"max_steps": WALK_MAX_STEPS, **json.loads(path.read_text())}  # walks from before the cap was kept
-            diff = [k for k in manifest if not np.allclose(old.get(k, np.nan), manifest[k], rtol=1e-12, atol=0)]
+            diff = [k for k in manifest if np.shape(old.get(k)) != np.shape(manifest[k])
+                    or not np.allclose(old.get(k, np.nan), manifest[k], rtol=1e-12, atol=0)]
             if diff == ["photons"] and old["photons"] % self.chunk == 0 and self.photons % self.chunk == 0:
                 manifest["photons"] = max(int(old["photons"]), self.photons)
             elif diff:
@@ -423,6 +440,19 @@ class TrajectoryStore:
     def prepare(self) -> None:
         """Walk (or load) the trajectories now, so that chunk timings measure the reweighting alone."""
         self.trajectories()
+
+    def discard(self) -> None:
+        """Delete the walk's chunk files and forget the loaded walk: for a block of wavelengths whose tones are all
+        reweighted (its records are ~70 bytes per reflected photon).  The manifest stays, and ``walked.json``
+        keeps the walk's CPU seconds (``walk_seconds``) for the dataset's summary."""
+        paths = [self.chunk_path(j) for j, _ in self._chunks() if self.chunk_path(j).exists()]
+        if paths:
+            seconds = sum(float(np.load(p)["seconds"]) for p in paths)
+            (self.folder / WALKED_FILE).write_text(json.dumps({"seconds": seconds, "photons": self.photons}))
+        for p in paths:
+            p.unlink()
+        self._traj = None
+        forget("trajectories")
 
     def __call__(self, tones: np.ndarray, photons: int, seed: int, device: str) -> dict[str, np.ndarray]:
         """The dataset's SimulateFn: reweight ``tones`` (per-chunk seed unused: the walk is shared)."""

@@ -70,16 +70,23 @@ def pending(path: Path) -> np.ndarray:
         return np.flatnonzero(~f["done"][:])
 
 
-def write_rows(path: Path, rows: np.ndarray, values: dict[str, np.ndarray], seconds: float = 0.0) -> None:
+def write_rows(path: Path, rows: np.ndarray, values: dict[str, np.ndarray], seconds: float = 0.0,
+               fields: tuple[str, ...] = SIMULATED) -> None:
     """Write simulated ``values`` (each (len(rows), ...)) at local ``rows`` and mark them done.
 
-    ``seconds`` (the time it took to simulate them) adds to the file attribute ``seconds``.
+    ``seconds`` (the time it took to simulate them) adds to the file attribute ``seconds``; ``fields``: the
+    values written (a block file of ``training.data.blocks`` holds fewer).
     """
+    rows = np.asarray(rows)
+    run = len(rows) > 0 and np.array_equal(rows, np.arange(rows[0], rows[0] + len(rows)))
     with h5py.File(path, "r+") as f:
-        for name in SIMULATED:
+        for name in fields:
             data = np.asarray(values[name])
             if not np.all(np.isfinite(data)):
                 raise ValueError(f"refusing to store non-finite {name} for rows {rows.tolist()}")
+            if run:  # consecutive rows: one write
+                f[name][rows[0] : rows[0] + len(rows)] = data
+                continue
             for i, row in enumerate(rows):
                 f[name][row] = data[i]
         done = f["done"][:]

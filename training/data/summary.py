@@ -17,7 +17,7 @@ import numpy as np
 from exporters.colorimetry import linear_srgb_to_lab, srgb_encode
 from exporters.constants import WAVELENGTHS_NM
 from training.data.build import SPLITS
-from training.data.reweight import Trajectories, reweight
+from training.data.reweight import Trajectories, reweight, walk_seconds
 from training.data.sampling import quantise_thickness
 from training.skin.tones import load_tones
 
@@ -33,11 +33,11 @@ def split_summary(out: Path, split: str) -> dict:
         attrs = {k: (v.item() if hasattr(v, "item") else v) for k, v in f.attrs.items()}
         done = int(f["done"][:].sum())
     walk_dir = out / f"trajectories_{split}"
-    walk_s = sum(float(np.load(p)["seconds"]) for p in sorted(walk_dir.glob("chunk*.npz")))
+    walk_s = walk_seconds(walk_dir)
     return {
         "tones": done, "of": int(attrs["n_total"]), "photons": int(attrs["photons"]), "method": attrs["method"],
         "reweight_or_simulate_s": float(attrs.get("seconds", float("nan"))), "walk_s": walk_s,
-        "file_bytes": path.stat().st_size, "walk_bytes": _folder_bytes(walk_dir),
+        "file_bytes": path.stat().st_size + _folder_bytes(out / f"{split}.blocks"), "walk_bytes": _folder_bytes(walk_dir),
     }
 
 
