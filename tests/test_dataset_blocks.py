@@ -25,7 +25,7 @@ class Interrupt(Exception):
     pass
 
 
-def stores(out, preset, log=None, fail_block=None):
+def stores(out, preset, log=None, fail_block=None, split="validation"):
     """walk_store for build_split_blocked: the real TrajectoryStore of each block; ``log`` gets the blocks that
     reweight tones; block ``fail_block`` dies after its first chunk of tones (a kill)."""
     class Store(TrajectoryStore):
@@ -38,7 +38,7 @@ def stores(out, preset, log=None, fail_block=None):
 
     def make(b, channels, seed):
         cap = {} if preset.walk_max_steps is None else {"max_steps": preset.walk_max_steps}
-        s = Store(out / "trajectories_validation" / f"block{b:03d}", preset.photons, seed, channels=channels,
+        s = Store(out / f"trajectories_{split}" / f"block{b:03d}", preset.photons, seed, channels=channels,
                   chunk_photons=preset.walk_chunk_photons, **cap)
         s.block = b
         return s
@@ -76,7 +76,8 @@ def test_blocked_split_resumes_deletes_its_walks_and_reads_as_one_file(tmp_path,
         r_d, profile = f["R_d"][:], f["profile"][2]
         assert np.all(np.isfinite(profile)) and np.all(np.isfinite(r_d)) and r_d.min() > 0
     # every block's columns are that block's own reweighting: walk block 2 again (same seed) and compare
-    again = stores(tmp_path / "again", TINY)(2, wavelength_blocks(100)[2], block_seed(split_tones(TINY, "validation")[1], 2))
+    seed = split_tones(TINY, "validation")[1]
+    again = stores(tmp_path / "again", TINY)(2, wavelength_blocks(100)[2], block_seed(seed, 2))
     np.testing.assert_array_equal(again(tones, TINY.photons, 0, "cpu")["R_d"].astype(np.float32), r_d[:, 200:300])
     split = store.read_split(path, ("tone", "R_d", "albedo_rgb"))
     assert split["albedo_rgb"].shape == (4, 3) and np.all(split["albedo_rgb"] > 0)
@@ -96,13 +97,30 @@ def test_blocked_split_agrees_with_one_walk_of_all_wavelengths(tmp_path):
     blocked = build_split_blocked(preset, "validation", tmp_path / "b", stores(tmp_path / "b", preset),
                                   progress=False)
     seed = split_tones(preset, "validation")[1]
-    whole = build_split(preset, "validation", tmp_path / "w", TrajectoryStore(tmp_path / "w" / "t", preset.photons, seed,
-                        chunk_photons=300), method="reweighted", progress=False, chunk_tones=2)
+    walk = TrajectoryStore(tmp_path / "w" / "t", preset.photons, seed, chunk_photons=300)
+    whole = build_split(preset, "validation", tmp_path / "w", walk, method="reweighted", progress=False, chunk_tones=2)
     with h5py.File(blocked) as a, h5py.File(whole) as b:
         z = (a["R_d"][:] - b["R_d"][:]) / np.hypot(a["R_d_stderr"][:], b["R_d_stderr"][:])
         assert a.attrs["wavelength_block"] == 94
     assert np.all(np.isfinite(z))
     assert abs(z.mean()) < 0.15 and 0.8 < z.std() < 1.25 and np.mean(np.abs(z) > 3.5) < 0.01, (z.mean(), z.std())
+
+
+def test_training_split_keeps_profiles_at_the_fitted_wavelengths(tmp_path):
+    preset = replace(TINY, n_train=2, train_profile_stride=4)
+    path = build_split_blocked(preset, "train", tmp_path, stores(tmp_path, preset, split="train"), progress=False)
+    with h5py.File(path, "r") as f:
+        kept = np.arange(0, N_WAVELENGTHS, 4)
+        assert np.all(np.isfinite(f["profile"][:, kept])) and np.all(np.isfinite(f["profile_stderr"][:, kept]))
+        assert np.all(np.isnan(f["profile"][:, 1::4])) and np.all(np.isfinite(f["R_d"][:]))
+        store.check_profile_wavelengths(f, kept, "fit it")
+        with pytest.raises(ValueError, match="every 4th wavelength only"):
+            store.check_profile_wavelengths(f, np.arange(0, N_WAVELENGTHS, 2), "fit it")
+    with h5py.File(tmp_path / "train.blocks" / "block000.h5", "r") as f:
+        assert f["profile"].shape == (2, 25, N_RADIAL_BINS)  # what is not kept is not stored
+    with pytest.raises(ValueError, match="multiple of train_profile_stride"):
+        odd = replace(preset, wavelength_block=6)
+        build_split_blocked(odd, "train", tmp_path / "x", stores(tmp_path / "x", odd, split="train"))
 
 
 def test_paper_preset_builds_a_split_per_process(tmp_path, capsys):

@@ -192,8 +192,9 @@ def benchmarks(quick: bool) -> list[dict]:
                      f"tones: {LAPTOP_TRAINING_CPU_H * PAPER_EPOCH_FACTOR:.1f} CPU-h; not in the old table"),
         "export": "recorded: seconds",
         "validation": (f"measured: the gate's ground-truth walk at {wr['gate_walk_rate']:,.0f} packets per CPU-s "
-                       f"({gate.gt_photons:,} photons x {gate_channels} wavelengths, its 20 tones' baseline); recorded: "
-                       f"its paper-method fits ~{VALIDATION_FITS_CPU_H} CPU-h (the old row counted 31 min wall of one run)"),
+                       f"({gate.gt_photons:,} photons x {gate_channels} wavelengths, its 20 tones' baseline); "
+                       f"recorded: its paper-method fits ~{VALIDATION_FITS_CPU_H} CPU-h (the old row counted 31 min "
+                       "wall of one run)"),
     }
     rows = []
     for stage, hours in new.items():

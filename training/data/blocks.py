@@ -62,15 +62,23 @@ def block_folder(out: Path, split: str) -> Path:
     return Path(out) / f"{split}.blocks"
 
 
-def _create_block(path: Path, tones: np.ndarray, channels: np.ndarray, attrs: dict) -> None:
-    """An empty block file for ``tones`` (N, 5) at wavelength indices ``channels`` (C,)."""
+def profile_slice(channels: np.ndarray, stride: int) -> slice:
+    """The block's wavelengths that keep profiles (those at multiples of ``stride``), as a slice of the 376."""
+    lo, hi = int(channels[0]), int(channels[-1]) + 1
+    return slice(-(-lo // stride) * stride, hi, stride)
+
+
+def _create_block(path: Path, tones: np.ndarray, channels: np.ndarray, stride: int, attrs: dict) -> None:
+    """An empty block file for ``tones`` (N, 5) at wavelength indices ``channels`` (C,), profiles at every
+    ``stride``-th wavelength."""
     tmp = path.with_suffix(".tmp")
     n, c = len(tones), channels.size
+    cp = len(range(N_WAVELENGTHS)[profile_slice(channels, stride)])
     with h5py.File(tmp, "w") as f:
         for name in BLOCK_FIELDS:
             big = name.startswith("profile")
-            shape = (n, c, N_RADIAL_BINS) if big else (n, c)
-            f.create_dataset(name, shape=shape, dtype="f4", chunks=(1, c, N_RADIAL_BINS) if big else None,
+            shape = (n, cp, N_RADIAL_BINS) if big else (n, c)
+            f.create_dataset(name, shape=shape, dtype="f4", chunks=(1, cp, N_RADIAL_BINS) if big else None,
                              compression="lzf" if big else None, shuffle=big)
         f.create_dataset("tone", data=tones)
         f.create_dataset("channels", data=channels)
@@ -87,9 +95,13 @@ def build_split_blocked(preset: Preset, split: str, out: Path, walk_store: WalkS
     and written at once (default ``preset.reweighted_chunk_tones``).  Returns the joined ``DIR/<split>.h5``.
     """
     tones, seed = split_tones(preset, split)
+    stride = preset.train_profile_stride if split == "train" else 1
+    if preset.wavelength_block % stride:
+        raise ValueError(f"wavelength_block ({preset.wavelength_block}) must be a multiple of train_profile_stride "
+                         f"({stride}).")
     attrs = {"preset": preset.name, "split": split, "photons": preset.photons, "seed": seed, "shard": "0/1",
              "method": "reweighted", "n_total": len(tones), "created_by": "python -m training dataset",
-             "wavelength_block": preset.wavelength_block}
+             "wavelength_block": preset.wavelength_block, "profile_stride": stride}
     target = Path(out) / f"{split}.h5"
     if target.exists():
         store.check_matches(target, tones, attrs)
@@ -104,7 +116,7 @@ def build_split_blocked(preset: Preset, split: str, out: Path, walk_store: WalkS
         if path.exists():
             store.check_matches(path, tones, attrs)
         else:
-            _create_block(path, tones, channels, attrs)
+            _create_block(path, tones, channels, stride, attrs)
         todo = store.pending(path)
         walk = walk_store(b, channels, block_seed(seed, b))
         if len(todo):
@@ -115,6 +127,8 @@ def build_split_blocked(preset: Preset, split: str, out: Path, walk_store: WalkS
             rows = todo[start : start + chunk]
             t0 = time.perf_counter()
             values = walk(tones[rows], preset.photons, seed, device)
+            kept = np.asarray(range(N_WAVELENGTHS)[profile_slice(channels, stride)]) - int(channels[0])
+            values = {**values, **{k: values[k][:, kept] for k in ("profile", "profile_stderr")}}
             store.write_rows(path, rows, values, seconds=time.perf_counter() - t0, fields=BLOCK_FIELDS)
             bar.update(len(rows))
         bar.close()
@@ -141,9 +155,11 @@ def join_blocks(target: Path, tones: np.ndarray, attrs: dict, paths: list[Path])
             r_d[:, lo:hi] = f["R_d"][:]
             seconds += float(f.attrs.get("seconds", 0.0))
             for name in BLOCK_FIELDS:
+                cols = profile_slice(channels, int(attrs["profile_stride"])) if name.startswith("profile") \
+                    else slice(lo, hi)
                 # the source named relative to the joined file, so the dataset folder can move as a whole
                 source = h5py.VirtualSource(f"{path.parent.name}/{path.name}", name, shape=f[name].shape)
-                layouts[name][:, lo:hi] = source
+                layouts[name][:, cols] = source
         covered.extend(range(lo, hi))
     if covered != list(range(N_WAVELENGTHS)):
         raise ValueError(f"the blocks of {target.name} do not cover the {N_WAVELENGTHS} wavelengths once, in order.")

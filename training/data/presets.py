@@ -16,6 +16,8 @@ class Preset:
     ``wavelength_block``: walk and reweight that many wavelengths at a time, deleting each block's walk once its
     tones are done (``training.data.blocks``), for splits whose whole walk does not fit in memory or on disk;
     None: one walk of all 376 wavelengths per split, kept (it can grow by more photon chunks).
+    ``train_profile_stride``: with ``wavelength_block``, the training split keeps its radial profiles at every n-th
+    wavelength only (R_d at all): the fits and the training read them at the fitted wavelengths alone.
     """
 
     name: str
@@ -29,6 +31,7 @@ class Preset:
     walk_chunk_photons: int | None = None
     walk_max_steps: int | None = None
     wavelength_block: int | None = None
+    train_profile_stride: int = 1
 
 
 PRESETS: dict[str, Preset] = {
@@ -46,7 +49,8 @@ PRESETS: dict[str, Preset] = {
     # Paper: 25,000 + 5,000 tones at noise equal to 1e6 direct photons per wavelength (see laptop).  A split's whole
     # walk would hold ~40 GB of records (70 bytes x 0.87 reflected photons per packet x 1.65e6 x 376), so it is
     # built 8 wavelengths at a time (~0.9 GB of walk in memory; on disk at most one block's walk per split), its
-    # tones reweighted 1,024 at a time (~25 s per chunk of a block on one core).
+    # tones reweighted 1,024 at a time (~25 s per chunk of a block on one core).  Its training profiles are kept at
+    # the fitted wavelengths (every 4th, `fit --wavelength-stride 4`): all 376 would take ~30 GB of disk (LZF).
     "paper": Preset("paper", n_train=25_000, n_validation=5_000, photons=1_650_000, chunk_tones=64,
-                    reweighted_chunk_tones=1_024, wavelength_block=8),
+                    reweighted_chunk_tones=1_024, wavelength_block=8, train_profile_stride=4),
 }

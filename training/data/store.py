@@ -9,7 +9,9 @@ Datasets (N tones, W = 376 wavelengths, B = 512 radial bins):
   (LZF-compressed: far bins of absorbing wavelengths are empty),
   albedo_rgb (N, 3) linear sRGB under D65, done (N,) bool, index (N,) position in the full split.
 File attributes: preset, split, photons, seed, shard ("I/N"), method, n_total, created_by, seconds
-(simulation time so far; the reweighted walk's time is in each trajectory chunk).
+(simulation time so far; the reweighted walk's time is in each trajectory chunk); a split built a block of
+wavelengths at a time (``training.data.blocks``) adds wavelength_block and profile_stride (profiles kept at every
+n-th wavelength; NaN elsewhere, ``check_profile_wavelengths``).
 """
 
 from __future__ import annotations
@@ -94,6 +96,19 @@ def write_rows(path: Path, rows: np.ndarray, values: dict[str, np.ndarray], seco
         f["done"][:] = done
         f.attrs["seconds"] = float(f.attrs.get("seconds", 0.0)) + float(seconds)
         f.flush()
+
+
+def profile_stride(f: h5py.File) -> int:
+    """The split keeps radial profiles at every n-th wavelength (attribute ``profile_stride``; 1: all of them)."""
+    return int(f.attrs.get("profile_stride", 1))
+
+
+def check_profile_wavelengths(f: h5py.File, wavelength_index: np.ndarray, what: str) -> None:
+    """ValueError unless the open split ``f`` keeps profiles at every wavelength index asked for."""
+    stride = profile_stride(f)
+    if np.any(np.asarray(wavelength_index) % stride):
+        raise ValueError(f"{f.filename} keeps radial profiles at every {stride}th wavelength only: {what} at a "
+                         f"wavelength stride that is a multiple of {stride}.")
 
 
 def read_split(path: Path, fields: tuple[str, ...] = ("tone", "R_d", "albedo_rgb")) -> dict[str, np.ndarray]:

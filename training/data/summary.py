@@ -37,7 +37,8 @@ def split_summary(out: Path, split: str) -> dict:
     return {
         "tones": done, "of": int(attrs["n_total"]), "photons": int(attrs["photons"]), "method": attrs["method"],
         "reweight_or_simulate_s": float(attrs.get("seconds", float("nan"))), "walk_s": walk_s,
-        "file_bytes": path.stat().st_size + _folder_bytes(out / f"{split}.blocks"), "walk_bytes": _folder_bytes(walk_dir),
+        "file_bytes": path.stat().st_size + _folder_bytes(out / f"{split}.blocks"),  # a blocked split's data too
+        "walk_bytes": _folder_bytes(walk_dir),
     }
 
 

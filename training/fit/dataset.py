@@ -49,6 +49,7 @@ from tqdm import tqdm
 
 from exporters.constants import anisotropy
 from exporters.maps import sha256_file
+from training.data import store
 from training.fit.optimize import WARM_LM_ITERS, fit_schedule
 from training.fit.sweep import fit_tones_sweep
 from training.sim.lut_extend import extension_record
@@ -277,9 +278,10 @@ def fit_split(
         albedo_all = f["albedo_rgb"][:]
         wl = f["wavelength_nm"][:]
         src_attrs = {f"dataset_{k}": str(v) for k, v in f.attrs.items()}
+        widx = np.arange(0, len(wl), wavelength_stride)
+        store.check_profile_wavelengths(f, widx, "fit it (--wavelength-stride)")
     i, n = shard
     index = select_tones(albedo_all, max_tones, select)[i::n]
-    widx = np.arange(0, len(wl), wavelength_stride)
     attrs = {
         "ks": ",".join(map(str, ks)),
         "method": method,

@@ -35,6 +35,7 @@ import numpy as np
 import torch
 
 from exporters.constants import WAVELENGTHS_NM
+from training.data import store
 from training.fit.loss import Target, make_target
 from training.fit.matching import matched
 
@@ -154,6 +155,7 @@ def load_shape_target(path: Path, rows: np.ndarray, wavelength_index: np.ndarray
     Read ``SHAPE_CHUNK`` tones at a time, twice (the bins used, then the targets)."""
     R = torch.as_tensor(np.asarray(R_mc, np.float64))
     with h5py.File(path, "r") as f:
+        store.check_profile_wavelengths(f, wavelength_index, "train on fits made")
         edges = torch.as_tensor(np.asarray(f["r_edges_cm"][:], np.float64))
 
         def chunks():

@@ -18,6 +18,7 @@ import h5py
 import numpy as np
 
 from exporters.constants import WAVELENGTHS_NM
+from training.data import store
 from training.paths import portable
 from training.validate.metrics import BANDS, band_mask
 
@@ -93,6 +94,8 @@ def network_profile_fidelity(dataset_dir: Path, lut, decoder: Path, *, max_tones
         raise ValueError(f"{path} not found: pass the dataset folder of `python -m training dataset`.")
     with h5py.File(path, "r") as f:
         done = np.flatnonzero(f["done"][:])
+        store.check_profile_wavelengths(f, np.arange(WAVELENGTHS_NM.size), "take the network's profile row from "
+                                        "a split")
         photons = float(f.attrs["photons"])
         ds_attrs = {k: (v.item() if hasattr(v, "item") else str(v)) for k, v in f.attrs.items()}
     if done.size == 0:
