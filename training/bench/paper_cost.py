@@ -80,7 +80,7 @@ def _walk_and_reweight(quick: bool) -> dict:
     # the reweighting's cost per photon, on a walk with many photons per wavelength (per-channel costs amortised
     # as at the paper's 1.4e6 reflected photons per wavelength)
     traj = rw.walk(4_000 if quick else 20_000, seed=5, mua0=mua0, channels=channels[::8])
-    tones = training_tones(128, seed=9)  # one reweighting chunk of the dataset
+    tones = training_tones(PRESETS["paper"].reweighted_chunk_tones, seed=9)  # one reweighting chunk of the build
     rw.reweight(traj, tones[:2])
     traj._by_bin.clear()
     t_first, _ = _cpu(lambda: rw.reweight(traj, tones))  # includes sorting the walk's photons by bin
@@ -96,6 +96,7 @@ def _walk_and_reweight(quick: bool) -> dict:
     gate = _gate_walk_rate(600 if quick else 2_000)
     return {"photons": photons, "channels": channels.size, "walk_rate": photons * channels.size / t_walk,
             "gate_walk_rate": gate,
+            "record_bytes": traj.w.itemsize + traj.bin.itemsize + traj.path_cm[0].nbytes,
             "reflected_per_photon": sample.w.size / (photons * channels.size),
             "ns_new": t_new / (len(tones) * n_refl) * 1e9, "ns_old": t_old / (len(tones) * n_refl) * 1e9,
             "ns_sort": max(t_first - t_new, 0.0) / n_refl * 1e9,
@@ -140,6 +141,38 @@ def _fits(quick: bool) -> dict:
     return {"per_tone": per_tone, "photons": photons, "wavelengths": widx.size, "lut": lut_note}
 
 
+def _footprint_rows(paper, reflected_per_packet: float, record_bytes: int) -> list[dict]:
+    """Memory of a dataset process and the build's disk, the block-wise `paper` preset against one walk of all
+    wavelengths per split (counted from the measured record size, float32 arrays uncompressed: upper bounds)."""
+    from exporters.constants import N_RADIAL_BINS
+
+    gb = 1e-9
+    walk_per_channel = paper.photons * reflected_per_packet * record_bytes  # bytes
+    whole_walk = walk_per_channel * WAVELENGTHS
+    block_walk = walk_per_channel * paper.wavelength_block
+    spectra = 2 * WAVELENGTHS * 4  # R_d and its standard error per tone
+    profiles = 2 * N_RADIAL_BINS * 4  # a profile and its standard errors per tone and wavelength
+    train = paper.n_train * (spectra + profiles * len(range(0, WAVELENGTHS, paper.train_profile_stride)))
+    validation = paper.n_validation * (spectra + profiles * WAVELENGTHS)
+    full = (paper.n_train + paper.n_validation) * (spectra + profiles * WAVELENGTHS)
+    machine = "this machine: 24 GB of memory, ~39 GB of free disk"
+    return [
+        {"workload": "`paper` build: walk records in a dataset process's memory", "ours":
+         f"{block_walk * gb:.1f} GB (a block of {paper.wavelength_block} wavelengths)",
+         "anchor": f"{whole_walk * gb:.0f} GB (one walk of all {WAVELENGTHS})",
+         "ratio": f"{whole_walk / block_walk:.0f}x", "error": "",
+         "notes": f"{record_bytes} bytes per reflected photon (measured record), {reflected_per_packet:.3f} reflected "
+                  f"per packet, {paper.photons:,} photons per wavelength; {machine}"},
+        {"workload": "`paper` build: disk (dataset + walks kept)", "ours":
+         f"{(train + validation + 2 * block_walk) * gb:.0f} GB (training profiles every "
+         f"{paper.train_profile_stride}th wavelength: {train * gb:.1f} GB; validation {validation * gb:.1f} GB; one "
+         "block's walk per split)",
+         "anchor": f"{(full + 2 * whole_walk) * gb:.0f} GB (all profiles {full * gb:.0f} GB, both walks kept)",
+         "ratio": f"{(full + 2 * whole_walk) / (train + validation + 2 * block_walk):.1f}x", "error": "",
+         "notes": f"float32 before LZF (upper bounds; the `laptop` files compress to ~70 %); {machine}"},
+    ]
+
+
 def benchmarks(quick: bool) -> list[dict]:
     """Rows for bench/results.md: one per stage (old and new projection side by side) and the total."""
     import numba
@@ -176,7 +209,8 @@ def benchmarks(quick: bool) -> list[dict]:
         "dataset walks": (f"measured: {wr['walk_rate']:,.0f} packets per CPU-s (baseline slab medium, paths recorded, "
                           f"{wr['photons']:,} photons x {wr['channels']} wavelengths); 2 x 1.65e6 x 376 packets"),
         "reweighting": (f"measured: {wr['ns_new']:.2f} CPU-ns per (tone, reflected photon, wavelength) against "
-                        f"{wr['ns_old']:.2f} for the torch path on the same walk and 128 tones (that path: "
+                        f"{wr['ns_old']:.2f} for the torch path on the same walk and "
+                        f"{paper.reweighted_chunk_tones:,} tones (the preset's chunk; that path: "
                         f"{old_rw:.1f} CPU-h; R_d of both agree to {wr['rd_rel_diff']:.1e}); "
                         f"{wr['reflected_per_photon']:.3f} reflected photons per packet, 30,000 tones; sorting a "
                         f"walk's photons by bin, once per split and process: {wr['ns_sort']:.0f} ns per photon"),
@@ -202,6 +236,7 @@ def benchmarks(quick: bool) -> list[dict]:
         rows.append({"workload": f"`paper` build: {stage}", "ours": f"{hours:.1f} CPU-h",
                      "anchor": "—" if old is None else f"{old:.1f} CPU-h (old projection)",
                      "ratio": "—" if old is None else f"{old / hours:.1f}x", "error": "", "notes": how[stage]})
+    rows += _footprint_rows(paper, wr["reflected_per_photon"], wr["record_bytes"])
     total, old_total = sum(new.values()), sum(v for v in OLD_CPU_H.values() if v)
     rows.append({"workload": "`paper` build: total (dataset, fits, LUT, training, export, validation)",
                  "ours": f"{total:.0f} CPU-h ({total / 2:.0f} h wall on 2 idle cores)",

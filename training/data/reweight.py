@@ -358,10 +358,12 @@ class TrajectoryStore:
                  shard: tuple[int, int] = (0, 1), chunk_photons: int | None = None,
                  max_steps: int = WALK_MAX_STEPS, progress: bool = False, channels: np.ndarray | None = None) -> None:
         self.folder, self.photons, self.seed, self.device = Path(folder), int(photons), int(seed), device
-        chunk = walk_chunk_photons(device) if chunk_photons is None else chunk_photons
-        self.shard, self.chunk, self.max_steps, self.progress = shard, int(chunk), int(max_steps), progress
         self.mua0 = baseline_absorption()
         self.channels = np.arange(self.mua0.size) if channels is None else np.asarray(channels, dtype=np.int64)
+        # a block of fewer wavelengths walks more photons per chunk: the same packets per chunk
+        chunk = (walk_chunk_photons(device) * self.mua0.size // self.channels.size if chunk_photons is None
+                 else chunk_photons)
+        self.shard, self.chunk, self.max_steps, self.progress = shard, int(chunk), int(max_steps), progress
         self._traj: Trajectories | None = None
 
     def __getstate__(self) -> dict:
