@@ -115,6 +115,25 @@ def equivalent_photons(dataset: Path, photons: int = 3000, n_tones: int = 6, spl
             "share_below_dataset_photons": np.nanmean(n_eq < n_data, axis=1).tolist()}
 
 
+def preset_variance_ratio(preset: str = "paper", n_tones: int = 12, photons: int = 2_000) -> dict:
+    """The R_d variance ratio (reweighted / direct squared standard errors) on the first ``n_tones`` training
+    tones of ``preset``: one baseline walk of ``photons`` reweighted to them, against a direct run of each at
+    ``photons``.  Per tone its mean, median and largest ratio over the wavelengths, and the mean over tones and
+    wavelengths, by which a preset's walked photons are set (``training.data.presets``)."""
+    p = PRESETS[preset]
+    tones = training_tones(p.n_train, seed=p.train_seed)[:n_tones]
+    rw = reweight(walk(photons, seed=5, mua0=baseline_absorption()), tones)
+    per_tone = []
+    for i, t in enumerate(tones):
+        se = simulate(skin_medium(t), photons, seed=100 + i, compile=True, r_edges_cm=None).R_d_stderr
+        ok = (se > 0) & (rw["R_d_stderr"][i] > 0)
+        ratio = (rw["R_d_stderr"][i][ok] / se[ok]) ** 2
+        per_tone.append({"tone": t.tolist(), "mean": float(ratio.mean()), "median": float(np.median(ratio)),
+                         "max": float(ratio.max())})
+    return {"preset": preset, "photons": photons, "tones": per_tone,
+            "mean_variance_ratio": float(np.mean([t["mean"] for t in per_tone]))}
+
+
 def benchmarks(quick: bool) -> list[dict]:
     """Rows for bench/results.md (see the module docstring)."""
     before = torch.get_num_threads()
@@ -143,6 +162,9 @@ if __name__ == "__main__":
         print(json.dumps(colour_agreement(int(sys.argv[2]))))
     elif len(sys.argv) > 2 and sys.argv[1] == "--equivalent":  # ... --equivalent DATASET_DIR [PHOTONS]
         print(json.dumps(equivalent_photons(Path(sys.argv[2]), *map(int, sys.argv[3:4])), indent=1))
+    elif len(sys.argv) > 1 and sys.argv[1] == "--variance-ratio":  # ... --variance-ratio [PRESET [TONES [PHOTONS]]]
+        args = sys.argv[2:]
+        print(json.dumps(preset_variance_ratio(*args[:1], *map(int, args[1:3])), indent=1))
     else:
         for row in benchmarks(quick=True):
             print(row)
