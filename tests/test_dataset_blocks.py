@@ -6,6 +6,7 @@ import h5py
 import numpy as np
 import pytest
 
+from exporters.cli_io import output_lock
 from exporters.constants import N_RADIAL_BINS, N_WAVELENGTHS
 from training.commands.dataset import main as dataset_main
 from training.data import store
@@ -123,6 +124,26 @@ def test_training_split_keeps_profiles_at_the_fitted_wavelengths(tmp_path):
         build_split_blocked(odd, "train", tmp_path / "x", stores(tmp_path / "x", odd, split="train"))
 
 
-def test_paper_preset_builds_a_split_per_process(tmp_path, capsys):
-    assert dataset_main(["--preset", "paper", "--out", str(tmp_path / "d"), "--shard", "0/2"]) == 2
-    assert "one process per split" in capsys.readouterr().err
+def test_shards_build_disjoint_blocks_and_the_last_joins_them(tmp_path):
+    """--shard I/N: blocks I, I + N, ...; the shard that finds every block complete joins the split, the same
+    file bit for bit as one process's."""
+    assert build_split_blocked(TINY, "validation", tmp_path, stores(tmp_path, TINY), progress=False,
+                               shard=(0, 2)) is None
+    assert sorted(p.name for p in (tmp_path / "validation.blocks").glob("*.h5")) == ["block000.h5", "block002.h5"]
+    path = build_split_blocked(TINY, "validation", tmp_path, stores(tmp_path, TINY), progress=False, shard=(1, 2))
+    one = build_split_blocked(TINY, "validation", tmp_path / "one", stores(tmp_path / "one", TINY), progress=False)
+    with h5py.File(path) as a, h5py.File(one) as b:
+        for name in ("R_d", "R_d_stderr", "profile", "profile_stderr", "albedo_rgb"):
+            np.testing.assert_array_equal(a[name][:], b[name][:])
+
+
+def test_paper_preset_refuses_a_scheduler_and_splits_run_side_by_side(tmp_path, capsys):
+    out = tmp_path / "d"
+    out.mkdir()
+    assert dataset_main(["--preset", "paper", "--out", str(out), "--scheduler", "local:2"]) == 2
+    assert "without --scheduler" in capsys.readouterr().err
+    with output_lock(out, "test", "train"):  # a process building the training split
+        assert dataset_main(["--preset", "ci", "--out", str(out), "--no-progress"]) == 2  # both splits: refused
+        assert "in use by process" in capsys.readouterr().err
+        assert dataset_main(["--preset", "smoke", "--split", "validation", "--out", str(out), "--no-progress"]) == 0
+    assert (out / "validation.h5").exists() and not (out / "train.h5").exists()

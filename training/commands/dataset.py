@@ -15,12 +15,14 @@ Monte Carlo run per tone (slow; for checks).
 
 The `paper` preset builds a split 8 wavelengths at a time (its whole walk would not fit in memory or on disk):
 each block walked, reweighted into DIR/<split>.blocks/ and its walk deleted; DIR/<split>.h5 then joins the
-blocks (keep the .blocks folder beside it).  Run one process per split (--split train, --split validation).
+blocks (keep the .blocks folder beside it).  Run one process per split (--split train, --split validation) or
+per share of the blocks (--shard I/N: blocks I, I + N, ...); no --scheduler.
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 from pathlib import Path
 
@@ -62,10 +64,6 @@ def _build_blocked(args: argparse.Namespace, preset, splits: tuple[str, ...]) ->
     from training.data.blocks import build_split_blocked
     from training.data.reweight import TrajectoryStore
 
-    if args.shard != (0, 1) or args.scheduler is not None:
-        raise ValueError(f"the {preset.name!r} preset builds a split a block of wavelengths at a time, in one process "
-                         "per split: run --split train and --split validation as two processes (no --shard or "
-                         "--scheduler)")
     walk = {k: v for k, v in (("chunk_photons", preset.walk_chunk_photons), ("max_steps", preset.walk_max_steps))
             if v is not None}
     for split in splits:
@@ -73,8 +71,24 @@ def _build_blocked(args: argparse.Namespace, preset, splits: tuple[str, ...]) ->
             return TrajectoryStore(args.out / f"trajectories_{split}" / f"block{b:03d}", preset.photons, seed,
                                    device=args.device, progress=not args.no_progress, channels=channels, **walk)
 
-        print(build_split_blocked(preset, split, args.out, store, device=args.device, progress=not args.no_progress))
+        path = build_split_blocked(preset, split, args.out, store, device=args.device, progress=not args.no_progress,
+                                   shard=args.shard)
+        print(path or f"{split}: this shard's blocks are done; the split is joined when the other shards' are")
     return 0
+
+
+@contextlib.contextmanager
+def _locks(out: Path, split: str, shard: tuple[int, int]):
+    """Hold --out's locks: one per split written (the processes of --split train and --split validation write
+    disjoint files and run together), and the whole folder's for both splits at once (the lock a second run of
+    the same command meets first)."""
+    part = shard_part(shard)
+    parts = ([part] + [f"{s}{'-' + part if part else ''}" for s in SPLITS] if split == "both"
+             else [f"{split}{'-' + part if part else ''}"])
+    with contextlib.ExitStack() as stack:
+        for p in parts:
+            stack.enter_context(output_lock(out, "--out", p))
+        yield
 
 
 def _check_paths(args: argparse.Namespace) -> None:
@@ -135,16 +149,21 @@ def main(argv: list[str]) -> int:
             from dataclasses import replace
 
             preset = replace(preset, train_seed=args.seed, validation_seed=args.seed + 1)
+        blocked = preset.wavelength_block is not None and args.method == "reweighted"
+        if blocked and args.scheduler is not None:
+            raise ValueError(f"the {preset.name!r} preset builds a split a block of wavelengths at a time, without "
+                             "--scheduler: run one process per split (--split train, --split validation) or per "
+                             "share of the blocks (--shard I/N)")
         if args.scheduler is not None:
             if args.shard != (0, 1):
                 raise ValueError("--shard and --scheduler exclude each other: the cluster takes every chunk")
             args.out = args.out.resolve()  # the workers write the walk chunks there
         args.out.mkdir(parents=True, exist_ok=True)
-        with output_lock(args.out, "--out", shard_part(args.shard)), \
+        with _locks(args.out, args.split, args.shard), \
                 engine.job(args.scheduler, f"dataset {args.preset}", shared=[args.out], threads=max(1, args.threads),
                            progress=not args.no_progress) as job:
             paths = []
-            if preset.wavelength_block is not None and args.method == "reweighted":
+            if blocked:
                 return _build_blocked(args, preset, splits)
             for split in splits:
                 simulate, chunk = _estimator(args, preset, split)

@@ -10,6 +10,7 @@ dataset.  So such a split is built per block of ``Preset.wavelength_block`` wave
    ``done`` mask: a killed build resumes at the chunk in flight);
 3. delete the block's walk.
 
+Blocks are independent: ``--shard I/N`` builds blocks I, I + N, ... (processes or machines sharing the folder).
 When every block is done, ``DIR/<split>.h5`` is written with the small fields (tone, albedo_rgb, done, index,
 wavelength_nm, r_edges_cm) as data and R_d, R_d_stderr, profile and profile_stderr as HDF5 virtual datasets
 over the block files: readers see the usual (N, 376) and (N, 376, 512) arrays (``training.data.store``), as long
@@ -21,6 +22,7 @@ independent of the others', as in one walk of all wavelengths.
 
 from __future__ import annotations
 
+import os
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -88,11 +90,14 @@ def _create_block(path: Path, tones: np.ndarray, channels: np.ndarray, stride: i
 
 
 def build_split_blocked(preset: Preset, split: str, out: Path, walk_store: WalkStoreFn, *, device: str = "cpu",
-                        progress: bool = True, chunk_tones: int | None = None) -> Path:
+                        progress: bool = True, chunk_tones: int | None = None,
+                        shard: tuple[int, int] = (0, 1)) -> Path | None:
     """Build ``split`` of ``preset`` in ``out`` a block of wavelengths at a time (module docstring); resumes.
 
     ``walk_store(b, channels, seed)``: the reweighting estimator of block ``b``; ``chunk_tones``: tones reweighted
-    and written at once (default ``preset.reweighted_chunk_tones``).  Returns the joined ``DIR/<split>.h5``.
+    and written at once (default ``preset.reweighted_chunk_tones``); ``shard`` (I, N): build blocks I, I + N, ...
+    only (processes or machines sharing ``out``).  Returns the joined ``DIR/<split>.h5``, written by whichever
+    shard finds every block complete; None while other shards' blocks are not.
     """
     tones, seed = split_tones(preset, split)
     stride = preset.train_profile_stride if split == "train" else 1
@@ -110,9 +115,12 @@ def build_split_blocked(preset: Preset, split: str, out: Path, walk_store: WalkS
     folder.mkdir(parents=True, exist_ok=True)
     chunk = chunk_tones or preset.reweighted_chunk_tones
     blocks = wavelength_blocks(preset.wavelength_block)
-    paths = []
+    paths = [folder / f"block{b:03d}.h5" for b in range(len(blocks))]
+    i, n = shard
     for b, channels in enumerate(blocks):
-        path = folder / f"block{b:03d}.h5"
+        path = paths[b]
+        if b % n != i:
+            continue
         if path.exists():
             store.check_matches(path, tones, attrs)
         else:
@@ -133,7 +141,8 @@ def build_split_blocked(preset: Preset, split: str, out: Path, walk_store: WalkS
             bar.update(len(rows))
         bar.close()
         walk.discard()
-        paths.append(path)
+    if not all(p.exists() and not len(store.pending(p)) for p in paths):
+        return None
     join_blocks(target, tones, attrs, paths)
     return target
 
@@ -163,7 +172,7 @@ def join_blocks(target: Path, tones: np.ndarray, attrs: dict, paths: list[Path])
         covered.extend(range(lo, hi))
     if covered != list(range(N_WAVELENGTHS)):
         raise ValueError(f"the blocks of {target.name} do not cover the {N_WAVELENGTHS} wavelengths once, in order.")
-    tmp = target.with_suffix(".tmp")
+    tmp = target.with_suffix(f".{os.getpid()}.tmp")  # two shards may join at once: the same file either way
     with h5py.File(tmp, "w") as f:
         for name, layout in layouts.items():
             f.create_virtual_dataset(name, layout, fillvalue=np.nan)
