@@ -1,7 +1,7 @@
 """A dataset split built a block of wavelengths at a time (presets with ``wavelength_block``, `paper`).
 
-The reweighted estimator's walk of a split keeps ~70 bytes per reflected photon: 4 GB at the `laptop` preset,
-~40 GB per split at the `paper` preset, more than this project's machines hold in memory or on disk beside the
+The reweighted estimator's walk of a split keeps 74 bytes per reflected photon: 4 GB at the `laptop` preset,
+~32 GB per split at the `paper` preset, more than this project's machines hold in memory or on disk beside the
 dataset.  So such a split is built per block of ``Preset.wavelength_block`` wavelengths:
 
 1. walk the block (``TrajectoryStore`` in ``DIR/trajectories_<split>/block<b>/``, photon chunks, resumable);
@@ -9,6 +9,9 @@ dataset.  So such a split is built per block of ``Preset.wavelength_block`` wave
    ``DIR/<split>.blocks/block<b>.h5`` (R_d, R_d_stderr (N, C), profile, profile_stderr (N, C, 512) and a
    ``done`` mask: a killed build resumes at the chunk in flight);
 3. delete the block's walk.
+
+The training split keeps its radial profiles at every ``Preset.train_profile_stride``-th wavelength only (the
+fitted ones); the block files store nothing of the others, and the joined file reads NaN there.
 
 Blocks are independent: ``--shard I/N`` builds blocks I, I + N, ... (processes or machines sharing the folder).
 When every block is done, ``DIR/<split>.h5`` is written with the small fields (tone, albedo_rgb, done, index,
@@ -61,6 +64,7 @@ def block_seed(seed: int, b: int) -> int:
 
 
 def block_folder(out: Path, split: str) -> Path:
+    """Where the block files of ``split`` live: ``DIR/<split>.blocks``."""
     return Path(out) / f"{split}.blocks"
 
 
