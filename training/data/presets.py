@@ -43,8 +43,8 @@ PRESETS: dict[str, Preset] = {
     # CI: under 2 minutes on 2 CPU cores; enough to exercise every later stage end to end.
     "ci": Preset("ci", n_train=24, n_validation=8, photons=500, chunk_tones=8),
     # Laptop: >= 5,000 + 1,000 tones at noise equal to >= 1e5 direct photons per wavelength (a few hours,
-    # resumable): the reweighted variance was 1.61x the direct one (mean over tones and wavelengths,
-    # training/bench/data.py, skin model of 2026-11-22), so 1.65e5 photons are walked.
+    # resumable): the reweighted variance was 1.61x the direct one for the skin model before its real-skin
+    # calibration (mean over tones and wavelengths, training/bench/data.py), so 1.65e5 photons are walked.
     "laptop": Preset("laptop", n_train=5_000, n_validation=1_000, photons=165_000, chunk_tones=16),
     # Paper: 25,000 + 5,000 tones at noise equal to >= 1e6 direct photons per wavelength: the variance ratio of
     # the present skin model is 1.17 on the preset's first 12 training tones (`python -m training.bench.data
