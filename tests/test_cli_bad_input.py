@@ -378,16 +378,19 @@ def test_second_process_then_ctrl_c(tmp_path):
     """A dataset run holds its folder: a second run on it exits 2 naming the first's PID; Ctrl-C ends the first
     with one line saying what was kept and how to resume (exit 130)."""
     out = tmp_path / "d"
-    # the laptop preset: a build of hours, so the first run is still walking when the test interrupts it (the ci
-    # build ends in ~30 s, sooner than a loaded machine may start the second process)
-    first = subprocess.Popen(_command(["dataset", "--preset", "laptop", "--out", str(out), "--no-progress"]),
+    # the direct estimator: the ci build then takes minutes, so the first run is still walking when the test
+    # interrupts it (the reweighted ci build ends in ~30 s, sooner than a loaded machine may start the second
+    # process), and it returns to Python after each tone's walk (a larger preset's walk batches can outlast the
+    # 60 s the test gives Ctrl-C on a loaded machine)
+    direct = ["--preset", "ci", "--method", "direct", "--out", str(out)]
+    first = subprocess.Popen(_command(["dataset", *direct, "--no-progress"]),
                              env=_env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=ROOT)
     try:
         deadline = time.monotonic() + 90
         while not (out / ".lock").exists() and time.monotonic() < deadline and first.poll() is None:
             time.sleep(0.2)
         assert (out / ".lock").exists(), first.stderr.read() if first.poll() is not None else "no lock in 90 s"
-        second = subprocess.run(_command(["dataset", "--preset", "laptop", "--out", str(out)]), capture_output=True,
+        second = subprocess.run(_command(["dataset", *direct]), capture_output=True,
                                 text=True, timeout=120, env=_env(), cwd=ROOT)
         assert_one_line(second.returncode, second.stderr, "in use by process")
         assert str(first.pid) in second.stderr
