@@ -102,9 +102,9 @@ def _walk_and_reweight(quick: bool) -> dict:
     t_old, _ = _cpu(lambda: rw._reweight_channels(traj, x, p1, p2))
     old_rd = rw.mean_stderr(p1.sum(-1), p2.sum(-1), traj.photons)[0]
     n_refl = traj.w.size
-    gate = _gate_walk_rate(600 if quick else 2_000)
+    gate = _gate_walk(600 if quick else 2_000)
     return {"photons": photons, "channels": channels.size, "walk_rate": photons * channels.size / t_walk,
-            "gate_walk_rate": gate,
+            "gate_walk": gate,
             "record_bytes": traj.w.itemsize + traj.bin.itemsize + traj.path_cm[0].nbytes,
             "reflected_per_photon": sample.w.size / (photons * channels.size),
             "ns_new": t_new / (len(tones) * n_refl) * 1e9, "ns_old": t_old / (len(tones) * n_refl) * 1e9,
@@ -112,18 +112,22 @@ def _walk_and_reweight(quick: bool) -> dict:
             "rd_rel_diff": float(np.max(np.abs(new["R_d"] - old_rd) / old_rd))}
 
 
-def _gate_walk_rate(photons: int) -> float:
-    """Packets per CPU-s of the gate's ground-truth walk (``validate.gate.ground_truth``: the 20 gate tones'
-    baseline, every other wavelength, compiled), on a sample of ``photons`` per wavelength."""
+def _gate_walk(photons: int) -> dict:
+    """The gate's ground-truth walk (``validate.gate.ground_truth``: the 20 gate tones' baseline, every other
+    wavelength, compiled) timed on a sample of ``photons`` per wavelength: its packets per CPU-s, its wavelengths
+    and photons per wavelength (``GateConfig``), and the CPU-hours of the whole walk."""
     from training.data import reweight as rw
     from training.validate.gate import GateConfig, gate_tones, validation_indices
     from training.validate.run import FULL_TONES
 
     tones = gate_tones(FULL_TONES).values
-    wl = validation_indices(GateConfig(tones=FULL_TONES).wavelength_step)
+    gate = GateConfig(tones=FULL_TONES)
+    wl = validation_indices(gate.wavelength_step)
     mua0, levels = rw.baseline_absorption(tones), np.unique(tones[:, 2])
     t, _ = _cpu(lambda: rw.walk(photons, seed=11, mua0=mua0, levels_cm=levels, channels=wl, compile=True))
-    return photons * wl.size / t
+    rate = photons * wl.size / t
+    return {"rate": rate, "channels": wl.size, "photons": gate.gt_photons,
+            "cpu_h": gate.gt_photons * wl.size / rate / 3600}
 
 
 def _fits(quick: bool) -> dict:
@@ -195,11 +199,7 @@ def benchmarks(quick: bool) -> list[dict]:
     finally:
         torch.set_num_threads(threads_t)
         numba.set_num_threads(threads_n)
-    from training.validate.gate import GateConfig, validation_indices
-    from training.validate.run import FULL_TONES
-
-    gate = GateConfig(tones=FULL_TONES)
-    gate_channels = validation_indices(gate.wavelength_step).size
+    gate = wr["gate_walk"]
     paper = PRESETS["paper"]
     tones = paper.n_train + paper.n_validation
     packets = 2 * paper.photons * WAVELENGTHS  # one walk per split
@@ -211,7 +211,7 @@ def benchmarks(quick: bool) -> list[dict]:
         "LUT": LUT_CPU_H,
         "training": LAPTOP_TRAINING_CPU_H + LAPTOP_PROFILE_LOAD_CPU_H * (PAPER_EPOCH_FACTOR - 1),
         "export": EXPORT_CPU_H,
-        "validation": gate.gt_photons * gate_channels / wr["gate_walk_rate"] / 3600 + VALIDATION_FITS_CPU_H,
+        "validation": gate["cpu_h"] + VALIDATION_FITS_CPU_H,
     }
     old_rw = tones * reflected * wr["ns_old"] * 1e-9 / 3600
     how = {
@@ -236,8 +236,8 @@ def benchmarks(quick: bool) -> list[dict]:
                      "steps (`train --epochs 120,200,60`), its profile loading x 5; the paper's epochs over 25,000 "
                      f"tones: {LAPTOP_TRAINING_CPU_H * PAPER_EPOCH_FACTOR:.1f} CPU-h; not in the old table"),
         "export": "recorded: seconds",
-        "validation": (f"measured: the gate's ground-truth walk at {wr['gate_walk_rate']:,.0f} packets per CPU-s "
-                       f"({gate.gt_photons:,} photons x {gate_channels} wavelengths, its 20 tones' baseline); "
+        "validation": (f"measured: the gate's ground-truth walk at {gate['rate']:,.0f} packets per CPU-s "
+                       f"({gate['photons']:,} photons x {gate['channels']} wavelengths, its 20 tones' baseline); "
                        f"recorded: its paper-method fits ~{VALIDATION_FITS_CPU_H} CPU-h (the old row counted 31 min "
                        "wall of one run)"),
     }

@@ -42,6 +42,12 @@ from training.data.build import SPLITS, build_split, merge
 from training.data.presets import PRESETS
 
 
+def _walk_options(preset) -> dict:
+    """The TrajectoryStore options that ``preset`` sets (walk chunk and cap; the store's defaults elsewhere)."""
+    return {k: v for k, v in (("chunk_photons", preset.walk_chunk_photons), ("max_steps", preset.walk_max_steps))
+            if v is not None}
+
+
 def _estimator(args: argparse.Namespace, preset, split: str):
     """The SimulateFn of ``args.method`` for ``split`` and its chunk size (tones written at once)."""
     if args.method == "direct":
@@ -52,10 +58,8 @@ def _estimator(args: argparse.Namespace, preset, split: str):
     from training.data.reweight import TrajectoryStore
 
     seed = split_tones(preset, split)[1]
-    walk = {k: v for k, v in (("chunk_photons", preset.walk_chunk_photons), ("max_steps", preset.walk_max_steps))
-            if v is not None}
     store = TrajectoryStore(args.out / f"trajectories_{split}", preset.photons, seed, device=args.device,
-                            shard=args.shard, progress=not args.no_progress, **walk)
+                            shard=args.shard, progress=not args.no_progress, **_walk_options(preset))
     return store, preset.reweighted_chunk_tones
 
 
@@ -64,8 +68,7 @@ def _build_blocked(args: argparse.Namespace, preset, splits: tuple[str, ...]) ->
     from training.data.blocks import build_split_blocked
     from training.data.reweight import TrajectoryStore
 
-    walk = {k: v for k, v in (("chunk_photons", preset.walk_chunk_photons), ("max_steps", preset.walk_max_steps))
-            if v is not None}
+    walk = _walk_options(preset)
     for split in splits:
         def store(b, channels, seed, split=split):
             return TrajectoryStore(args.out / f"trajectories_{split}" / f"block{b:03d}", preset.photons, seed,
@@ -162,9 +165,9 @@ def main(argv: list[str]) -> int:
         with _locks(args.out, args.split, args.shard), \
                 engine.job(args.scheduler, f"dataset {args.preset}", shared=[args.out], threads=max(1, args.threads),
                            progress=not args.no_progress) as job:
-            paths = []
             if blocked:
                 return _build_blocked(args, preset, splits)
+            paths = []
             for split in splits:
                 simulate, chunk = _estimator(args, preset, split)
                 paths.append(build_split(preset, split, args.out, simulate, method=args.method, shard=args.shard,

@@ -74,12 +74,17 @@ def profile_slice(channels: np.ndarray, stride: int) -> slice:
     return slice(-(-lo // stride) * stride, hi, stride)
 
 
+def kept_columns(channels: np.ndarray, stride: int) -> np.ndarray:
+    """Positions within the block (C,) of the wavelengths that keep profiles (``profile_slice``)."""
+    return np.arange(N_WAVELENGTHS)[profile_slice(channels, stride)] - int(channels[0])
+
+
 def _create_block(path: Path, tones: np.ndarray, channels: np.ndarray, stride: int, attrs: dict) -> None:
     """An empty block file for ``tones`` (N, 5) at wavelength indices ``channels`` (C,), profiles at every
     ``stride``-th wavelength."""
     tmp = path.with_suffix(".tmp")
     n, c = len(tones), channels.size
-    cp = len(range(N_WAVELENGTHS)[profile_slice(channels, stride)])
+    cp = kept_columns(channels, stride).size
     with h5py.File(tmp, "w") as f:
         for name in BLOCK_FIELDS:
             big = name.startswith("profile")
@@ -130,6 +135,7 @@ def build_split_blocked(preset: Preset, split: str, out: Path, walk_store: WalkS
         else:
             _create_block(path, tones, channels, stride, attrs)
         todo = store.pending(path)
+        kept = kept_columns(channels, stride)
         walk = walk_store(b, channels, block_seed(seed, b))
         if len(todo):
             walk.prepare()
@@ -139,7 +145,6 @@ def build_split_blocked(preset: Preset, split: str, out: Path, walk_store: WalkS
             rows = todo[start : start + chunk]
             t0 = time.perf_counter()
             values = walk(tones[rows], preset.photons, seed, device)
-            kept = np.asarray(range(N_WAVELENGTHS)[profile_slice(channels, stride)]) - int(channels[0])
             values = {**values, **{k: values[k][:, kept] for k in ("profile", "profile_stderr")}}
             store.write_rows(path, rows, values, seconds=time.perf_counter() - t0, fields=BLOCK_FIELDS)
             bar.update(len(rows))

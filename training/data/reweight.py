@@ -445,11 +445,11 @@ class TrajectoryStore:
 
     def discard(self) -> None:
         """Delete the walk's chunk files and forget the loaded walk: for a block of wavelengths whose tones are all
-        reweighted (its records are ~70 bytes per reflected photon).  The manifest stays, and ``walked.json``
+        reweighted (its records are 74 bytes per reflected photon).  The manifest stays, and ``walked.json``
         keeps the walk's CPU seconds (``walk_seconds``) for the dataset's summary."""
         paths = [self.chunk_path(j) for j, _ in self._chunks() if self.chunk_path(j).exists()]
-        if paths:
-            seconds = sum(float(np.load(p)["seconds"]) for p in paths)
+        if paths:  # the seconds of these chunks and of any walk discarded here before
+            seconds = walk_seconds(self.folder)
             (self.folder / WALKED_FILE).write_text(json.dumps({"seconds": seconds, "photons": self.photons}))
         for p in paths:
             p.unlink()
