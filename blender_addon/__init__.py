@@ -1,10 +1,11 @@
 """Spectral Skin SSS: Blender add-on (bpy layer over the numpy core in ``exporters``, reached through ``core``).
 
 Modules: ``preferences`` (model path, threads), ``operators`` (Invert Skin Albedo, Add Skin SSS
-Mixture), ``baker`` (the bpy side of a bake: albedo source, images, wiring), ``panels`` (Shader Editor tab
-"Skin SSS", Material properties, per-scene bake settings), ``nodes`` (the node group), ``osl`` (Script-node
-helpers), ``probe`` (render-fidelity probe used by the tests), ``core`` (``exporters`` beside this package);
-``bake.py`` is the headless script.
+Mixture, Remove Skin SSS), ``baker`` (the bpy side of a bake: albedo source, images, wiring), ``panels`` (Shader
+Editor tab "Skin SSS", Material properties, per-scene bake settings), ``nodes`` (the node group), ``wiring`` (where
+the add-on's nodes sit in a material, and how they leave it), ``osl`` (Script-node helpers), ``probe``
+(render-fidelity probe used by the tests), ``core`` (``exporters`` beside this package); ``bake.py`` is the headless
+script.
 
 As an extension the repository-root ``__init__.py`` calls :func:`register` with the extension's module
 name, so that the preferences are found under it; imported directly (tests, scripts) the name is this

@@ -20,7 +20,7 @@ from pathlib import Path
 import bpy
 import numpy as np
 
-from . import nodes, tiles
+from . import nodes, tiles, wiring
 from .core import bake, image_input, inference, maps, uv_coverage
 
 AlbedoImage, IndexedAlbedo = image_input.AlbedoImage, image_input.IndexedAlbedo
@@ -195,14 +195,11 @@ def mesh_uv_mask(obj, source_node, width: int, height: int) -> tuple[np.ndarray 
 
 
 def _wired_to(material: bpy.types.Material, images: dict[tuple[int, str], bpy.types.Image]) -> bool:
-    """Whether the material's active output is fed by a mixture group node whose inputs read exactly
-    ``images`` (so re-applying them would change nothing)."""
-    tree = material.node_tree
-    outs = [n for n in tree.nodes if n.bl_idname == "ShaderNodeOutputMaterial" and n.is_active_output]
-    links = outs[0].inputs["Surface"].links if outs else []
-    if not links or links[0].from_node.bl_idname != "ShaderNodeGroup":
+    """Whether Cycles renders the material through a mixture group node of the add-on's current layout whose
+    inputs read exactly ``images`` (so re-applying them would change nothing)."""
+    gnode = wiring.wired_group_node(material)
+    if gnode is None or not wiring.is_added(gnode):
         return False
-    gnode = links[0].from_node
     for (k, kind), image in images.items():
         sock = gnode.inputs.get(nodes.socket_name(k, kind))
         if sock is None or not sock.is_linked or getattr(sock.links[0].from_node, "image", None) != image:
@@ -398,6 +395,7 @@ class AddonBake:
             group = nodes.ensure_group(k_count, self.backend)
             report = f"{'reused' if reused else 'baked'} {len(images)} maps (K={k_count})"
             if self.material is not None:
+                wiring.unwire(self.material)  # first: a failure below leaves the artist's own material
                 before = {n.name for n in self.material.node_tree.nodes}
                 out_links = [ln for ln in self.material.node_tree.links
                              if ln.to_node.bl_idname == "ShaderNodeOutputMaterial" and ln.to_socket.name == "Surface"]

@@ -32,7 +32,7 @@ from pathlib import Path
 import bpy
 import numpy as np
 
-from . import nodes
+from . import nodes, wiring
 from .core import bake as core_bake
 from .core import colorimetry, image_input, live_table, maps, texel_table
 
@@ -326,52 +326,36 @@ def ensure_live_group(table: texel_table.TexelTable) -> bpy.types.NodeTree:
 
 # -- wiring ----------------------------------------------------------------------------------------------------
 def colour_source(material: bpy.types.Material) -> tuple[bpy.types.Node, bpy.types.NodeSocket | None, tuple]:
-    """The surface node feeding the active Material Output (a Principled BSDF, or a live group wired before),
-    the output socket feeding its colour (None when unlinked) and its colour value."""
+    """The artist's Principled BSDF (the one feeding the active Material Output, or in a material wired before the
+    per-target outputs the one named in ``material[PREVIOUS_SURFACE_PROP]``), the output socket feeding its Base
+    Color (None when unlinked) and its Base Color value."""
     tree = material.node_tree
-    out = nodes._material_output(tree)
-    links = [ln for ln in out.inputs["Surface"].links if not ln.is_muted]
+    out = wiring.active_output(tree)
+    links = [ln for ln in out.inputs["Surface"].links if not ln.is_muted] if out is not None else []
     surface = links[0].from_node if links else None
-    name = "Base Color" if surface is not None and surface.bl_idname == "ShaderNodeBsdfPrincipled" else "Color"
-    is_live = (surface is not None and surface.bl_idname == "ShaderNodeGroup" and surface.node_tree is not None
-               and surface.node_tree.get("spectral_skin_sss_backend") == "LIVE")
-    if surface is None or not (is_live or name == "Base Color"):
+    if surface is not None and (wiring.is_added(surface) or (surface.bl_idname == "ShaderNodeGroup"
+                                                               and wiring.is_addon_group(surface.node_tree))):
+        surface = tree.nodes.get(material.get(nodes.PREVIOUS_SURFACE_PROP, ""))
+    if surface is None or surface.bl_idname != "ShaderNodeBsdfPrincipled":
         raise LiveInputError(f"material '{material.name}': no Principled BSDF feeds its Material Output's Surface; "
                              "connect one (its Base Color is the skin's albedo) or choose Bake")
-    socket = surface.inputs[name]
+    socket = surface.inputs["Base Color"]
     return surface, nodes._feeding_socket(socket), tuple(socket.default_value)
 
 
 def wire_live(material: bpy.types.Material, group: bpy.types.NodeTree, unit_scale_m: float) -> bpy.types.Node:
     """Insert the live group into ``material``: fed by what fed the Principled BSDF's Base Color (or its value),
-    its Normal and Roughness (nodes.wire_into_material), its Cycles output into the active Material Output and its
-    EEVEE output into a Material Output of target EEVEE (added, or the one wired before).  Every node of the
-    artist's is kept; the name of the surface node it replaces goes to ``material[PREVIOUS_SURFACE_PROP]``."""
-    surface, colour, value = colour_source(material)
-    tree = material.node_tree
-    gnode = nodes.wire_into_material(material, group, output="Cycles")
+    its Normal and Roughness (nodes.wire_into_material), its Cycles output into a Material Output of target Cycles
+    and its EEVEE output into one of target EEVEE; the artist's Principled BSDF keeps feeding the active Material
+    Output, which Blender's exporters read (blender_addon.wiring).  Every node of the artist's is kept."""
+    _, colour, value = colour_source(material)
+    gnode = nodes.wire_into_material(material, group, output="Cycles", eevee_output="EEVEE")
     gnode.inputs["Unit Scale"].default_value = unit_scale_m
     if colour is not None:
-        tree.links.new(colour, gnode.inputs["Color"])
+        material.node_tree.links.new(colour, gnode.inputs["Color"])
     else:
         gnode.inputs["Color"].default_value = value
-    eevee = _eevee_output(tree, gnode)
-    tree.links.new(gnode.outputs["EEVEE"], eevee.inputs["Surface"])
-    if surface.bl_idname == "ShaderNodeGroup":  # a re-wire: the old live node is left in place, unlinked
-        material[nodes.PREVIOUS_SURFACE_PROP] = surface.name
     return gnode
-
-
-def _eevee_output(tree: bpy.types.NodeTree, gnode: bpy.types.Node) -> bpy.types.Node:
-    for node in tree.nodes:
-        if node.bl_idname == "ShaderNodeOutputMaterial" and node.target == "EEVEE":
-            return node
-    out = tree.nodes.new("ShaderNodeOutputMaterial")
-    out.target = "EEVEE"
-    out.label = "EEVEE (Spectral Skin SSS Live)"
-    out.location = (gnode.location.x + 300.0, gnode.location.y - 250.0)
-    out.parent = gnode.parent
-    return out
 
 
 # -- outside the domain ----------------------------------------------------------------------------------------
@@ -432,16 +416,18 @@ def apply(context: bpy.types.Context, model_path: str, unit_scale_m: float, colo
     if material is None or material.node_tree is None:
         raise LiveInputError("no active material with nodes: select the skin object (its material's Principled "
                              "BSDF gives the albedo)")
+    error = wiring.linked_error(material)
+    if error:
+        raise LiveInputError(error)
     table = table_for_model(model_path)
-    surface, colour, _ = colour_source(material)
-    if surface.bl_idname == "ShaderNodeGroup" and surface.node_tree.get(TABLE_PROP) == table.sha256 \
-            and surface.node_tree.get("spectral_skin_sss_version") == LIVE_VERSION:
-        surface.inputs["Unit Scale"].default_value = unit_scale_m
-        surface.inputs["Principled Convention"].default_value = float(principled_convention)
-        material.node_tree.links.new(surface.outputs["EEVEE"],
-                                     _eevee_output(material.node_tree, surface).inputs["Surface"])
+    wired = wiring.wired_group_node(material)
+    if wired is not None and wiring.is_added(wired) and wired.node_tree.get(TABLE_PROP) == table.sha256 \
+            and wired.node_tree.get("spectral_skin_sss_version") == LIVE_VERSION:
+        wired.inputs["Unit Scale"].default_value = unit_scale_m
+        wired.inputs["Principled Convention"].default_value = float(principled_convention)
         return (f"up to date: '{material.name}' already renders through the live group (Unit Scale {unit_scale_m:g} m "
                 "per Blender unit)")
+    _, colour, _ = colour_source(material)
     before = _state(material)
     try:
         group = ensure_live_group(table)
@@ -478,25 +464,25 @@ def _state(material: bpy.types.Material) -> dict:
             "nodes": {n.name for n in tree.nodes},
             "links": [(ln.from_node.name, ln.from_socket.identifier, ln.to_node.name, ln.to_socket.identifier)
                       for ln in tree.links],
-            "previous": material.get(nodes.PREVIOUS_SURFACE_PROP)}
+            "props": {p: material[p] for p in (nodes.PREVIOUS_SURFACE_PROP, wiring.REPLACED_LINKS_PROP)
+                      if p in material}}
 
 
 def _restore(material: bpy.types.Material, state: dict) -> None:
-    """Undo a failed wiring: new nodes, groups and images removed, the links as they were."""
+    """Undo a failed wiring: new nodes, groups and images removed, the links and the add-on's material properties
+    as they were (links to nodes no longer there are skipped)."""
     tree = material.node_tree
     for node in [n for n in tree.nodes if n.name not in state["nodes"]]:
         tree.nodes.remove(node)
     for link in list(tree.links):
         tree.links.remove(link)
-    for from_node, from_id, to_node, to_id in state["links"]:
-        src = next(s for s in tree.nodes[from_node].outputs if s.identifier == from_id)
-        dst = next(s for s in tree.nodes[to_node].inputs if s.identifier == to_id)
-        tree.links.new(src, dst)
+    for link in state["links"]:
+        wiring.relink(tree, *link)
     for name in set(bpy.data.node_groups.keys()) - state["groups"]:
         bpy.data.node_groups.remove(bpy.data.node_groups[name])
     for name in set(bpy.data.images.keys()) - state["images"]:
         bpy.data.images.remove(bpy.data.images[name])
-    if state["previous"] is None:
-        material.pop(nodes.PREVIOUS_SURFACE_PROP, None)
-    else:
-        material[nodes.PREVIOUS_SURFACE_PROP] = state["previous"]
+    for prop in (nodes.PREVIOUS_SURFACE_PROP, wiring.REPLACED_LINKS_PROP):
+        material.pop(prop, None)
+    for prop, value in state["props"].items():
+        material[prop] = value

@@ -88,7 +88,7 @@ import math
 
 import bpy
 
-from . import osl
+from . import osl, wiring
 from .core import cycles, reflectance_tables
 
 GROUP_NAME = "Spectral Skin SSS Mixture"
@@ -96,9 +96,9 @@ GROUP_NAME_OSL = "Spectral Skin SSS Mixture (OSL)"
 CHANNELS = ("Red", "Green", "Blue")
 #: Map kinds of docs/contracts.md §4 (--target cycles), in socket order.
 KINDS = ("Color", "Radius", "Weight", "Anisotropy")
-FRAME_LABEL = "Spectral Skin SSS"
-#: Custom property remembering what fed the Material Output before wiring (for the user to restore).
-PREVIOUS_SURFACE_PROP = "spectral_skin_sss_previous_surface"
+FRAME_LABEL = wiring.FRAME_LABEL
+#: Custom property remembering what fed the Material Output before wiring.
+PREVIOUS_SURFACE_PROP = wiring.PREVIOUS_SURFACE_PROP
 #: The tissue index (docs/contracts.md §1): the coat's Fresnel and the closures' entry bounce (the bake's default IOR).
 DEFAULT_IOR = reflectance_tables.CYCLES_IOR
 #: Smallest IOR the group takes: 1 turns the coat off (Cycles clamps the closures' IOR to
@@ -427,54 +427,49 @@ def set_constant_inputs(node: bpy.types.Node, components: list[dict]) -> None:
             sock.default_value = float(value) if kind == "Anisotropy" else (*map(float, value), 1.0)
 
 
-def _material_output(tree: bpy.types.NodeTree) -> bpy.types.Node:
-    outputs = [n for n in tree.nodes if n.bl_idname == "ShaderNodeOutputMaterial"]
-    active = [n for n in outputs if n.is_active_output]
-    if active:
-        return active[0]
-    if outputs:
-        return outputs[0]
-    out = tree.nodes.new("ShaderNodeOutputMaterial")
-    out.location = (400.0, 0.0)
-    return out
-
-
 def wire_into_material(material: bpy.types.Material, group: bpy.types.NodeTree,
                        images: dict[tuple[int, str], bpy.types.Image] | None = None,
-                       interpolation: str = "Closest", output: str = "BSSRDF") -> bpy.types.Node:
+                       interpolation: str = "Closest", output: str = "BSSRDF",
+                       eevee_output: str | None = None) -> bpy.types.Node:
     """Add the group (and Image Texture nodes for ``images[(k, kind)]``) to ``material``.
 
-    Every existing node and link is kept except the link into the active Material Output's Surface,
-    which now comes from the group; the name of the node that fed it is stored in
-    ``material[PREVIOUS_SURFACE_PROP]``.  If that node is a Principled BSDF (or a group wired here before),
-    what feeds its Normal (normal map, bump chain) also feeds the group's Normal, and its Roughness (the
-    link, else the value) becomes the coat's; otherwise the coat gets :data:`SKIN_ROUGHNESS`.  New nodes
-    sit in a frame labelled "Spectral Skin SSS".  Images are set to Non-Color.  ``interpolation`` defaults to
-    Closest because the maps hold Cycles' colour A, not the albedo alpha = f(A), and f is non-linear
-    (linear filtering gives a small bias at texel edges).  ``output``: the group's output that feeds the Surface
-    (the live group's is "Cycles").
+    Every node and link of the artist's is kept: the active Material Output stays fed by what fed it (the
+    Principled BSDF, which Blender's exporters read), and the group's ``output`` feeds a Material Output of target
+    Cycles, its ``eevee_output`` (default: the same output) one of target EEVEE (blender_addon.wiring: what each
+    renderer renders).  Whatever was wired by the add-on before is removed first.  The name of the node that fed
+    the active output is stored in ``material[PREVIOUS_SURFACE_PROP]``.  If that node is a Principled BSDF (or a
+    group wired here before), what feeds its Normal (normal map, bump chain) also feeds the group's Normal, and its
+    Roughness (the link, else the value) becomes the coat's; otherwise the coat gets :data:`SKIN_ROUGHNESS`.  New
+    nodes sit in a frame labelled "Spectral Skin SSS" and are tagged (``wiring.ADDED_PROP``) for removal.  Images
+    are set to Non-Color.  ``interpolation`` defaults to Closest because the maps hold Cycles' colour A, not the
+    albedo alpha = f(A), and f is non-linear (linear filtering gives a small bias at texel edges).
+    Raises ValueError for a linked material (wiring.linked_error).
     Undo: call from an operator with ``bl_options = {'REGISTER', 'UNDO'}``.
     """
+    error = wiring.linked_error(material)
+    if error:
+        raise ValueError(error)
+    wiring.unwire(material)
     tree = material.node_tree
-    out = _material_output(tree)
-    frame = tree.nodes.new("NodeFrame")
+    out = wiring.active_output(tree)
+    x, y = (out.location.x, out.location.y) if out is not None else (400.0, 0.0)
+    frame = wiring.tag(tree.nodes.new("NodeFrame"))
     frame.label = FRAME_LABEL
-    gnode = tree.nodes.new("ShaderNodeGroup")
+    gnode = wiring.tag(tree.nodes.new("ShaderNodeGroup"))
     gnode.node_tree = group
     gnode.label = group.name
-    gnode.location = (out.location.x - 300.0, out.location.y)
+    gnode.location = (x - 300.0, y - 400.0)
     gnode.parent = frame
-    surface = out.inputs["Surface"]
-    previous = None
-    for link in list(surface.links):
-        previous = link.from_node
+    links = out.inputs["Surface"].links if out is not None else []
+    previous = next((ln.from_node for ln in links if not ln.is_muted), None)
+    if previous is not None:
         material[PREVIOUS_SURFACE_PROP] = previous.name
-        tree.links.remove(link)
-    tree.links.new(gnode.outputs[output], surface)
+    wiring.feed_render_outputs(material, {"CYCLES": gnode.outputs[output],
+                                          "EEVEE": gnode.outputs[eevee_output or output]}, gnode)
     _take_surface_inputs(tree, previous, gnode)
     for i, ((k, kind), image) in enumerate(sorted((images or {}).items())):
         image.colorspace_settings.name = "Non-Color"
-        tex = tree.nodes.new("ShaderNodeTexImage")
+        tex = wiring.tag(tree.nodes.new("ShaderNodeTexImage"))
         tex.image = image
         tex.interpolation = interpolation
         tex.label = socket_name(k, kind)

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import bpy
 
-from . import baker, live, nodes, preferences
+from . import baker, live, nodes, preferences, wiring
 from .core import bake as _core_bake
 
 one_line = _core_bake.one_line
@@ -129,6 +129,8 @@ class SPECTRAL_SKIN_OT_invert_albedo(bpy.types.Operator):
         return "BAKE" if self.filepath or self.image_name else "LIVE"
 
     def execute(self, context):
+        if _refused_linked(self, context):
+            return {"CANCELLED"}
         if self._mode() == "LIVE":
             return self._live(context)
         if self.principled_convention:
@@ -153,6 +155,8 @@ class SPECTRAL_SKIN_OT_invert_albedo(bpy.types.Operator):
     def invoke(self, context, event):
         if self._mode() == "LIVE" or bpy.app.background or context.window is None:
             return self.execute(context)
+        if _refused_linked(self, context):
+            return {"CANCELLED"}
         try:
             self._bake = baker.AddonBake(context, self._settings(context))
         except _EXPECTED as exc:
@@ -198,6 +202,21 @@ class SPECTRAL_SKIN_OT_invert_albedo(bpy.types.Operator):
         _set_progress(context, 0.0, running=False)
 
 
+def _active_material(context) -> bpy.types.Material | None:
+    obj = context.object
+    return obj.active_material if obj is not None else None
+
+
+def _refused_linked(operator: bpy.types.Operator, context) -> bool:
+    """Report and return True when the active material is linked from a library (its node changes would vanish on
+    reload: blender_addon.wiring.linked_error)."""
+    material = _active_material(context)
+    error = wiring.linked_error(material) if material is not None else None
+    if error:
+        operator.report({"ERROR"}, error)
+    return bool(error)
+
+
 def _level(message: str) -> set[str]:
     """WARNING when the report carries a warning (e.g. painted colours that had to be clamped), else INFO."""
     return {"WARNING"} if "warning: " in message else {"INFO"}
@@ -240,6 +259,11 @@ class SPECTRAL_SKIN_OT_add_mixture(bpy.types.Operator):
 
     def execute(self, context):
         mat = context.object.active_material
+        if _refused_linked(self, context):
+            return {"CANCELLED"}
+        if mat.node_tree is None:
+            self.report({"ERROR"}, f"material '{mat.name}' has no node tree: turn on Use Nodes and run this again")
+            return {"CANCELLED"}
         if self.backend == "OSL":
             group = nodes.build_osl_group(self.components)
         else:
@@ -251,4 +275,31 @@ class SPECTRAL_SKIN_OT_add_mixture(bpy.types.Operator):
         return {"FINISHED"}
 
 
-classes = (SPECTRAL_SKIN_OT_invert_albedo, SPECTRAL_SKIN_OT_add_mixture)
+class SPECTRAL_SKIN_OT_remove(bpy.types.Operator):
+    """Remove Spectral Skin SSS from the active material: its nodes go and the links it replaced come back, so the
+    material is again what it was before (blender_addon.wiring); the add-on's node groups and images go too when no
+    material uses them any more"""
+
+    bl_idname = "spectral_skin.remove"
+    bl_label = "Remove Skin SSS"
+    bl_options = {"REGISTER", "UNDO"}
+
+    @classmethod
+    def poll(cls, context):
+        return _active_material(context) is not None
+
+    def execute(self, context):
+        material = _active_material(context)
+        if _refused_linked(self, context):
+            return {"CANCELLED"}
+        removed = wiring.unwire(material) if material.node_tree is not None else 0
+        if not removed:
+            self.report({"INFO"}, f"nothing to remove: '{material.name}' holds no Spectral Skin SSS nodes")
+            return {"CANCELLED"}
+        groups, images = wiring.purge_unused()
+        self.report({"INFO"}, f"removed Spectral Skin SSS from '{material.name}' ({removed} nodes; {groups} node "
+                              f"groups and {images} images no material used any more)")
+        return {"FINISHED"}
+
+
+classes = (SPECTRAL_SKIN_OT_invert_albedo, SPECTRAL_SKIN_OT_add_mixture, SPECTRAL_SKIN_OT_remove)

@@ -1,0 +1,218 @@
+"""How the add-on's nodes sit in an artist's material, and how they leave it again.
+
+**Per-target outputs.**  The artist's Principled BSDF stays linked to the artist's active Material Output (target
+All): Blender's exporters (glTF 2.0 reads the Principled BSDF linked to the active output, FBX's
+node_shader_utils and OBJ the first Principled BSDF linked straight into a Material Output, USD the first
+Principled BSDF of the tree) keep writing its base colour texture, roughness and normal map.  The renderers
+prefer a Material Output whose target is exactly theirs over one of target All (Blender's
+``ntreeShaderOutputNode``), so a Material Output of target **Cycles** fed by the add-on's group renders in Cycles
+and one of target **EEVEE** in EEVEE and Material Preview: the render is that of the group, the export that of
+the artist's Principled.
+
+Where the artist already has an output of one of those targets (the active one, or an inactive one the renderer
+would take first), its Surface link is replaced instead of adding a node, and the replaced link is recorded in
+``material[REPLACED_LINKS_PROP]`` (JSON) so that it comes back on removal.
+
+**Removal.**  Every node the add-on adds is tagged ``node[ADDED_PROP]``; the artist's nodes are never changed (only
+links from their outputs into the add-on's nodes are added).  :func:`unwire` removes the tagged nodes (their links
+go with them), relinks the recorded links and drops the add-on's material properties, so the material is again
+exactly what the artist had; everything lives in the .blend, so this holds after save and reopen.  Materials wired
+before the tags existed (the group fed the active output; the node it replaced named in
+``material[PREVIOUS_SURFACE_PROP]``) are recognised by the add-on's frame, groups and EEVEE output and restored the
+same way.  :func:`purge_unused` then removes the add-on's node groups and images that no material uses any more.
+
+**Linked data.**  A material linked from another .blend, or a library override of one, cannot keep node edits
+(they are not saved: the library's material comes back on reload), so :func:`linked_error` says so and what to do.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+
+import bpy
+
+#: Custom property on every node the add-on adds to a material.
+ADDED_PROP = "spectral_skin_sss_added"
+#: Custom property (JSON list) on a material: the artist's links the add-on replaced, to put back on removal.
+REPLACED_LINKS_PROP = "spectral_skin_sss_replaced_links"
+#: Custom property remembering what fed the Material Output before wiring (the node's name).
+PREVIOUS_SURFACE_PROP = "spectral_skin_sss_previous_surface"
+#: Label of the frame holding the add-on's nodes.
+FRAME_LABEL = "Spectral Skin SSS"
+#: Labels of the per-target Material Outputs the add-on adds.
+OUTPUT_LABELS = {"CYCLES": "Cycles (Spectral Skin SSS)", "EEVEE": "EEVEE (Spectral Skin SSS)"}
+#: The EEVEE output's label in files wired before the per-target outputs.
+_LEGACY_OUTPUT_LABEL = "EEVEE (Spectral Skin SSS Live)"
+#: Custom properties the add-on puts on node groups and images it makes (what :func:`purge_unused` may remove).
+_GROUP_TAG = "spectral_skin_sss_backend"
+_IMAGE_TAGS = ("spectral_skin_sss_table", "spectral_skin_sss_bake_key")
+#: Material properties the add-on sets (removed by :func:`unwire`).
+_MATERIAL_PROPS = (PREVIOUS_SURFACE_PROP, REPLACED_LINKS_PROP)
+
+
+def linked_error(material: bpy.types.Material) -> str | None:
+    """A one-line message when ``material`` cannot keep the add-on's nodes (linked from a library, or a library
+    override), else None."""
+    library = material.library
+    if library is not None:
+        name = os.path.basename(bpy.path.abspath(library.filepath)) or library.name
+        return (f"material '{material.name}' is linked from {name} and read-only (node changes are lost on reload): "
+                f"make it local (Object > Relations > Make Local > Selected Objects, Data and Materials) and run "
+                f"this again, or run it in {name}")
+    if material.override_library is not None:
+        return (f"material '{material.name}' is a library override, whose nodes are not saved: make it local "
+                "(Object > Relations > Make Local > Selected Objects, Data and Materials) and run this again")
+    return None
+
+
+def tag(node: bpy.types.Node) -> bpy.types.Node:
+    """Mark ``node`` as the add-on's (removed by :func:`unwire`)."""
+    node[ADDED_PROP] = True
+    return node
+
+
+def is_added(node: bpy.types.Node) -> bool:
+    return bool(node.get(ADDED_PROP))
+
+
+def _outputs(tree: bpy.types.NodeTree) -> list[bpy.types.Node]:
+    return [n for n in tree.nodes if n.bl_idname == "ShaderNodeOutputMaterial"]
+
+
+def active_output(tree: bpy.types.NodeTree) -> bpy.types.Node | None:
+    """The tree's active Material Output (the first one when none is flagged), or None."""
+    outputs = _outputs(tree)
+    return next((n for n in outputs if n.is_active_output), outputs[0] if outputs else None)
+
+
+def render_output(tree: bpy.types.NodeTree, target: str) -> bpy.types.Node | None:
+    """The Material Output the renderer of ``target`` ("CYCLES" or "EEVEE") uses, as Blender picks it: one of
+    exactly that target (the active one first, else the first), else one of target All (the active one first)."""
+    outputs = _outputs(tree)
+    exact = [n for n in outputs if n.target == target]
+    pool = exact or [n for n in outputs if n.target == "ALL"]
+    return next((n for n in pool if n.is_active_output), pool[0] if pool else None)
+
+
+def _record_replaced(material: bpy.types.Material, link: bpy.types.NodeLink) -> None:
+    links = json.loads(material.get(REPLACED_LINKS_PROP, "[]"))
+    links.append({"from_node": link.from_node.name, "from_socket": link.from_socket.identifier,
+                  "to_node": link.to_node.name, "to_socket": link.to_socket.identifier})
+    material[REPLACED_LINKS_PROP] = json.dumps(links)
+
+
+def feed_render_outputs(material: bpy.types.Material, sockets: dict[str, bpy.types.NodeSocket],
+                        near: bpy.types.Node) -> list[bpy.types.Node]:
+    """Make ``sockets[target]`` ("CYCLES", "EEVEE") what that renderer renders (module docstring): a new, tagged
+    Material Output of that target beside ``near`` (the group node), or the artist's output of that target with its
+    Surface link replaced (and recorded).  Returns the outputs fed."""
+    tree = material.node_tree
+    fed = []
+    for i, (target, socket) in enumerate(sockets.items()):
+        exact = [n for n in _outputs(tree) if n.target == target and not is_added(n)]
+        if exact:
+            out = render_output(tree, target)
+            for link in list(out.inputs["Surface"].links):
+                _record_replaced(material, link)
+                tree.links.remove(link)
+        else:
+            out = tag(tree.nodes.new("ShaderNodeOutputMaterial"))
+            out.target = target
+            out.label = OUTPUT_LABELS[target]
+            out.location = (near.location.x + 300.0, near.location.y - 220.0 * i)
+            out.parent = near.parent
+            out.is_active_output = False
+        tree.links.new(socket, out.inputs["Surface"])
+        fed.append(out)
+    return fed
+
+
+# -- finding and removing the add-on's nodes --------------------------------------------------------------------
+def is_addon_group(tree: bpy.types.NodeTree | None) -> bool:
+    return tree is not None and (_GROUP_TAG in tree or "spectral_skin_sss_k" in tree)
+
+
+def _legacy_nodes(tree: bpy.types.NodeTree) -> set[str]:
+    """Names of the add-on's nodes in a material wired before the tags: its frames, the nodes in them, its group
+    nodes and its EEVEE output."""
+    frames = {n.name for n in tree.nodes if n.bl_idname == "NodeFrame" and n.label == FRAME_LABEL}
+    names = set(frames)
+    for node in tree.nodes:
+        if node.parent is not None and node.parent.name in frames:
+            names.add(node.name)
+        elif node.bl_idname == "ShaderNodeGroup" and is_addon_group(node.node_tree):
+            names.add(node.name)
+        elif node.bl_idname == "ShaderNodeOutputMaterial" and node.label == _LEGACY_OUTPUT_LABEL:
+            names.add(node.name)
+    return names
+
+
+def added_nodes(material: bpy.types.Material) -> list[bpy.types.Node]:
+    """The add-on's nodes in ``material`` (tagged, or those of an earlier layout)."""
+    tree = material.node_tree
+    if tree is None:
+        return []
+    names = {n.name for n in tree.nodes if is_added(n)} | _legacy_nodes(tree)
+    return [n for n in tree.nodes if n.name in names]
+
+
+def wired_group_node(material: bpy.types.Material) -> bpy.types.Node | None:
+    """The add-on's group node that Cycles renders in ``material`` (through its Cycles output), or None."""
+    tree = material.node_tree
+    out = render_output(tree, "CYCLES") if tree is not None else None
+    links = [ln for ln in out.inputs["Surface"].links if not ln.is_muted] if out is not None else []
+    node = links[0].from_node if links else None
+    if node is not None and node.bl_idname == "ShaderNodeGroup" and is_addon_group(node.node_tree):
+        return node
+    return None
+
+
+def unwire(material: bpy.types.Material) -> int:
+    """Remove the add-on's nodes from ``material`` and put back the links they replaced (module docstring); returns
+    how many nodes were removed (0: nothing of the add-on's was there, nothing changed)."""
+    tree = material.node_tree
+    ours = added_nodes(material)
+    if not ours and not any(p in material for p in _MATERIAL_PROPS):
+        return 0
+    out = active_output(tree)
+    legacy_fed = out is not None and any(ln.from_node in ours for ln in out.inputs["Surface"].links)
+    previous = material.get(PREVIOUS_SURFACE_PROP)
+    replaced = json.loads(material.get(REPLACED_LINKS_PROP, "[]"))
+    for node in ours:
+        tree.nodes.remove(node)
+    for link in replaced:
+        relink(tree, link["from_node"], link["from_socket"], link["to_node"], link["to_socket"])
+    if legacy_fed and previous in tree.nodes and not out.inputs["Surface"].is_linked:
+        tree.links.new(tree.nodes[previous].outputs[0], out.inputs["Surface"])
+    for prop in _MATERIAL_PROPS:
+        material.pop(prop, None)
+    return len(ours)
+
+
+def relink(tree: bpy.types.NodeTree, from_node: str, from_id: str, to_node: str, to_id: str) -> None:
+    """The link (from_node.from_id -> to_node.to_id), when both nodes and sockets still exist."""
+    source, target = tree.nodes.get(from_node), tree.nodes.get(to_node)
+    if source is None or target is None:
+        return
+    src = next((s for s in source.outputs if s.identifier == from_id), None)
+    dst = next((s for s in target.inputs if s.identifier == to_id), None)
+    if src is not None and dst is not None:
+        tree.links.new(src, dst)
+
+
+def purge_unused() -> tuple[int, int]:
+    """Remove the add-on's node groups and images (the live group's table images, baked maps) that nothing uses
+    any more; returns (groups, images) removed."""
+    groups = 0
+    removed = True
+    while removed:  # a live group holds the mixture group: free the outer one first
+        removed = False
+        for group in [g for g in bpy.data.node_groups if is_addon_group(g) and g.users == 0]:
+            bpy.data.node_groups.remove(group)
+            groups += 1
+            removed = True
+    images = [im for im in bpy.data.images if any(t in im for t in _IMAGE_TAGS) and im.users == 0]
+    for image in images:
+        bpy.data.images.remove(image)
+    return groups, len(images)

@@ -1,0 +1,59 @@
+"""Blender's own exporters keep the artist's material after Invert Skin Albedo, in the oldest (bpy 4.2 LTS), the
+project's (bpy 5.0.1) and the newest (bpy 5.3) Blender the manifest claims.
+
+tests/export_check.py installs the extension zip in each Blender, builds an artist's material (albedo, roughness and
+normal-map PNGs into a Principled BSDF), exports it with glTF 2.0, FBX, OBJ and USD, runs Invert Skin Albedo (the
+live group, then in a fresh scene baked maps) and exports again.  Each exporter must write, after the operator,
+exactly what it wrote before: glTF's materials, textures and images; OBJ's .mtl; the PNGs the FBX file names; USD's
+shader inputs.  Before the per-target outputs (blender_addon.wiring) glTF wrote baseColorFactor [0, 0, 0, 1] with no
+texture, OBJ ``Kd 0.8`` with no ``map_Kd``, and FBX lost the images.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+CHECK = ROOT / "tests" / "export_check.py"
+BLENDERS = [
+    ("4.2", ROOT / ".venv-blender42" / "bin" / "python", "4.2."),
+    ("5.0-project", Path(sys.executable), "5.0."),
+    ("5.3", ROOT / ".venv-blender53" / "bin" / "python", "5.3."),
+]
+
+
+@pytest.mark.parametrize("case,python,version", BLENDERS, ids=[b[0] for b in BLENDERS])
+def test_exporters_write_the_artists_material_after_invert(case, python, version, ext_zip, tmp_path):
+    if not python.is_file():
+        pytest.skip(f"{python.parent.parent.name} is missing: `make blender-envs` creates it (make test does)")
+    env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "PYTHONHOME")}
+    env["BLENDER_USER_RESOURCES"] = str(tmp_path / "user")
+    proc = subprocess.run([str(python), str(CHECK), str(ext_zip), str(tmp_path)], capture_output=True, text=True,
+                          timeout=300, env=env, cwd=tmp_path)
+    lines = [ln for ln in proc.stdout.splitlines() if ln.startswith("RESULT")]
+    assert proc.returncode == 0 and lines, f"exit status {proc.returncode}\n{proc.stdout[-2000:]}{proc.stderr[-3000:]}"
+    out = json.loads(lines[-1][len("RESULT"):])
+    assert out["blender"].startswith(version)
+    for mode, group in (("LIVE", "Spectral Skin SSS Live"), ("BAKE", "Spectral Skin SSS Mixture")):
+        run = out[mode]
+        assert run["invert"] == ["FINISHED"] and any(g.startswith(group) for g in run["groups"]), (mode, run)
+        before, after = run["before"], run["after"]
+        # What each exporter writes for the artist's Principled BSDF: its three textures and its values.
+        material = before["gltf"]["materials"][0]
+        assert {"baseColorTexture", "metallicRoughnessTexture"} <= set(material["pbrMetallicRoughness"]), material
+        assert "normalTexture" in material
+        assert sorted(im["uri"] for im in before["gltf"]["images"]) == ["albedo.png", "normal.png", "rough.png"]
+        assert any(ln.startswith("map_Kd") and ln.endswith("albedo.png") for ln in before["mtl"]), before["mtl"]
+        assert any(ln.startswith("map_Ns") and ln.endswith("rough.png") for ln in before["mtl"]), before["mtl"]
+        assert any(ln.startswith("map_Bump") and ln.endswith("normal.png") for ln in before["mtl"]), before["mtl"]
+        assert before["fbx"] == ["albedo.png", "normal.png", "rough.png"]
+        assert sum("asset inputs:file" in ln for ln in before["usd"]) == 3, before["usd"]
+        # ... and the same after Invert Skin Albedo.
+        for exporter in ("gltf", "mtl", "fbx", "usd"):
+            assert after[exporter] == before[exporter], (mode, exporter, before[exporter], after[exporter])
