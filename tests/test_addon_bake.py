@@ -15,7 +15,7 @@ import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from blender_addon import baker, nodes, preferences  # noqa: E402
+from blender_addon import baker, nodes, preferences, wiring  # noqa: E402
 from exporters import bake, image_input, inference, maps  # noqa: E402
 from tests.addon_scene import (  # noqa: E402
     image_pixels,
@@ -61,8 +61,9 @@ def test_bake_svm_packed_wired_and_renders(addon, albedo_png, reference_maps):
     gnode = group_node(mat)
     assert gnode.node_tree.name.startswith(nodes.GROUP_NAME) and gnode.node_tree["spectral_skin_sss_k"] == K
     assert gnode.node_tree["spectral_skin_sss_backend"] == "SVM"
-    out = next(n for n in tree.nodes if n.bl_idname == "ShaderNodeOutputMaterial")
-    assert out.inputs["Surface"].links[0].from_node == gnode
+    out = tree.nodes["Material Output"]  # still the Principled BSDF (Blender's exporters read it); Cycles the group
+    assert out.is_active_output and out.inputs["Surface"].links[0].from_node == tree.nodes["Principled BSDF"]
+    assert wiring.wired_group_node(mat) == gnode
     assert mat[nodes.PREVIOUS_SURFACE_PROP] == "Principled BSDF"
     assert gnode.inputs["IOR"].default_value == pytest.approx(1.4)
     principled = tree.nodes["Principled BSDF"]  # the coat takes the user's roughness (0.5, Blender's default)

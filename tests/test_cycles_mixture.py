@@ -99,9 +99,12 @@ def test_wiring_keeps_user_nodes_and_records_previous_surface():
     tree = mat.node_tree
     assert before <= {n.name for n in tree.nodes}
     assert mat[nodes.PREVIOUS_SURFACE_PROP] == "Principled BSDF"
-    out = next(n for n in tree.nodes if n.bl_idname == "ShaderNodeOutputMaterial")
-    assert out.inputs["Surface"].links[0].from_node == gnode
-    assert len(tree.links) == links_before + 1  # surface link replaced, image link added
+    out = tree.nodes["Material Output"]  # the user's output keeps its Principled BSDF (what exporters read)
+    assert out.is_active_output and out.inputs["Surface"].links[0].from_node == tree.nodes["Principled BSDF"]
+    fed = {n.target: n.inputs["Surface"].links[0].from_node for n in tree.nodes
+           if n.bl_idname == "ShaderNodeOutputMaterial" and n != out}
+    assert fed == {"CYCLES": gnode, "EEVEE": gnode}  # what each renderer renders
+    assert len(tree.links) == links_before + 3  # the image link and the two outputs' links added
     assert image.colorspace_settings.name == "Non-Color"
     assert gnode.inputs["k1 Color"].links[0].from_node.image == image
 

@@ -292,7 +292,8 @@ def test_operator_default_wires_the_live_group_and_keeps_the_artists_nodes(tmp_p
     assert gnode.inputs["Roughness"].default_value == pytest.approx(0.37)
     outputs = {n.target: n for n in tree.nodes if n.bl_idname == "ShaderNodeOutputMaterial"}
     assert outputs["EEVEE"].inputs["Surface"].links[0].from_socket == gnode.outputs["EEVEE"]
-    assert outputs["ALL"].inputs["Surface"].links[0].from_socket == gnode.outputs["Cycles"]
+    assert outputs["CYCLES"].inputs["Surface"].links[0].from_socket == gnode.outputs["Cycles"]
+    assert outputs["ALL"].inputs["Surface"].links[0].from_node == bsdf and outputs["ALL"].is_active_output
     assert gnode.inputs["Unit Scale"].default_value == pytest.approx(1.0)
     share = live_table.outside_fraction(live.table_for_model(preferences.DEFAULT_MODEL),
                                         _decode(codes.reshape(-1, 3)))
