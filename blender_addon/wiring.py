@@ -3,11 +3,10 @@
 **Per-target outputs.**  The artist's Principled BSDF stays linked to the artist's active Material Output (target
 All): Blender's exporters (glTF 2.0 reads the Principled BSDF linked to the active output, FBX's
 node_shader_utils and OBJ the first Principled BSDF linked straight into a Material Output, USD the first
-Principled BSDF of the tree) keep writing its base colour texture, roughness and normal map.  The renderers
-prefer a Material Output whose target is exactly theirs over one of target All (Blender's
-``ntreeShaderOutputNode``), so a Material Output of target **Cycles** fed by the add-on's group renders in Cycles
-and one of target **EEVEE** in EEVEE and Material Preview: the render is that of the group, the export that of
-the artist's Principled.
+Principled BSDF of the tree) keep writing its base colour texture, roughness and normal map.  The renderers prefer
+a Material Output whose target is exactly theirs over one of target All (``ShaderNodeTree.get_output_node``), so
+a Material Output of target **Cycles** fed by the add-on's group renders in Cycles and one of target **EEVEE** in
+EEVEE and Material Preview: the render is that of the group, the export that of the artist's Principled.
 
 Where the artist already has an output of one of those targets (the active one, or an inactive one the renderer
 would take first), its Surface link is replaced instead of adding a node, and the replaced link is recorded in
@@ -87,12 +86,10 @@ def active_output(tree: bpy.types.NodeTree) -> bpy.types.Node | None:
 
 
 def render_output(tree: bpy.types.NodeTree, target: str) -> bpy.types.Node | None:
-    """The Material Output the renderer of ``target`` ("CYCLES" or "EEVEE") uses, as Blender picks it: one of
-    exactly that target (the active one first, else the first), else one of target All (the active one first)."""
-    outputs = _outputs(tree)
-    exact = [n for n in outputs if n.target == target]
-    pool = exact or [n for n in outputs if n.target == "ALL"]
-    return next((n for n in pool if n.is_active_output), pool[0] if pool else None)
+    """The Material Output the renderer of ``target`` ("CYCLES", "EEVEE"; "ALL" for the exporters' view) uses, as
+    Blender picks it (``ShaderNodeTree.get_output_node``: one of exactly that target, the active one first, else
+    one of target All)."""
+    return tree.get_output_node(target)
 
 
 def _record_replaced(material: bpy.types.Material, link: bpy.types.NodeLink) -> None:

@@ -6,7 +6,8 @@ baked maps), through the extension zip installed in Blender's extension system.
 
 The material: an albedo PNG in an Image Texture feeding the Principled BSDF's Base Color, a roughness PNG
 (Non-Color) feeding Roughness, a normal-map PNG through a Normal Map node feeding Normal.  For each mode the scene is
-exported before and after the operator, each into its own folder; what each exporter wrote about the material is
+exported before and after the operator, each into its own folder; which node each renderer's Material Output takes
+after it, and what each exporter wrote about the material is
 printed as one line ``RESULT{json}`` for the caller to compare: glTF's materials, textures and images; OBJ's .mtl
 (less its comment lines); the names of the three PNGs found in the FBX file's bytes; USD's shader inputs (the
 ``inputs:`` lines of the .usda's Material prims, sorted).  BLENDER_USER_RESOURCES must point into WORKDIR.  Imports
@@ -108,6 +109,18 @@ def usd_material_inputs(usda: str) -> list[str]:
     return sorted(lines)
 
 
+def renders(tree) -> dict:
+    """For each target (All: what exporters read; Cycles; EEVEE) the node feeding the Material Output Blender picks
+    for it (``ShaderNodeTree.get_output_node``): a node group's name, else the node's type."""
+    out = {}
+    for target in ("ALL", "CYCLES", "EEVEE"):
+        links = tree.get_output_node(target).inputs["Surface"].links
+        node = links[0].from_node if links else None
+        out[target] = None if node is None else (node.node_tree.name if node.bl_idname == "ShaderNodeGroup"
+                                                 else node.bl_idname)
+    return out
+
+
 def main() -> dict:
     work = sys.argv[2]
     bpy.ops.extensions.package_install_files(filepath=sys.argv[1], repo="user_default", enable_on_install=True)
@@ -123,9 +136,9 @@ def main() -> dict:
                 result = sorted(bpy.ops.spectral_skin.invert_albedo(mode=mode, exact=(mode == "BAKE")))
         except RuntimeError as exc:
             result = [f"ERROR {exc}"]
-        groups = sorted(n.node_tree.name for n in obj.active_material.node_tree.nodes
-                        if n.bl_idname == "ShaderNodeGroup")
-        out[mode] = {"invert": result, "groups": groups, "before": before,
+        tree = obj.active_material.node_tree
+        groups = sorted(n.node_tree.name for n in tree.nodes if n.bl_idname == "ShaderNodeGroup")
+        out[mode] = {"invert": result, "groups": groups, "before": before, "renders": renders(tree),
                      "after": export_all(os.path.join(folder, "after"))}
     return out
 

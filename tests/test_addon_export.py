@@ -43,6 +43,9 @@ def test_exporters_write_the_artists_material_after_invert(case, python, version
     for mode, group in (("LIVE", "Spectral Skin SSS Live"), ("BAKE", "Spectral Skin SSS Mixture")):
         run = out[mode]
         assert run["invert"] == ["FINISHED"] and any(g.startswith(group) for g in run["groups"]), (mode, run)
+        # Blender's choice of output per target: the artist's Principled BSDF for All, the group for the renderers.
+        assert run["renders"]["ALL"] == "ShaderNodeBsdfPrincipled", run["renders"]
+        assert run["renders"]["CYCLES"].startswith(group) and run["renders"]["EEVEE"].startswith(group)
         before, after = run["before"], run["after"]
         # What each exporter writes for the artist's Principled BSDF: its three textures and its values.
         material = before["gltf"]["materials"][0]

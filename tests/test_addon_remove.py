@@ -134,6 +134,9 @@ def test_each_renderer_renders_the_group_and_cycles_renders_as_before(tmp_path, 
     by_target = {n.target: n for n in outputs if n is not active}
     assert by_target["CYCLES"].inputs["Surface"].links[0].from_socket == gnode.outputs["Cycles"]
     assert by_target["EEVEE"].inputs["Surface"].links[0].from_socket == gnode.outputs["EEVEE"]
+    # ... and they are the outputs Blender picks for each renderer (EEVEE asks for the same as this function).
+    assert tree.get_output_node("CYCLES") == by_target["CYCLES"] and tree.get_output_node("EEVEE") == by_target["EEVEE"]
+    assert tree.get_output_node("ALL") == active
     bpy.context.scene.cycles.seed = 3
     now = render_small(size=16, samples=4)
     # The layout before: the group's Cycles output into the active output, no Cycles-target output.
