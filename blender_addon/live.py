@@ -12,7 +12,7 @@ Interface (docs/contracts.md §5):
   (blender_addon.nodes.SPECULAR_INPUTS: IOR Level, tint, coat, sheen), passed to the mixture group and to the
   EEVEE closure, and ``Principled Convention`` (0: the body renders the colour, the coat on top; 1: the body
   renders it darkened as a Principled BSDF's base under its specular layer, :data:`PRINCIPLED_BASE_SHARE`);
-* outputs ``Cycles`` (the mixture with its specular coat, for a Material Output of target All or Cycles),
+* outputs ``Cycles`` (the mixture with its specular coat, for a Material Output of target Cycles: wiring.py),
   ``EEVEE`` (one Principled BSDF with Subsurface Weight 1 at the colour (body at the painted colour, as in Cycles:
   :data:`PRINCIPLED_BASE_SHARE`) and the mixture's effective radius
   sum_k w_k r_k per channel, for a Material Output of target EEVEE: EEVEE and Material Preview) and

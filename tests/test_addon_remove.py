@@ -6,6 +6,7 @@
     value, every link, the material's custom properties — for the live group and for baked maps, also when the file
     was saved and reopened between wiring and removing and after saving and reopening the removed state; the shared
     group and its table images go once no material uses them; Ctrl+Z (an undo step) brings the wiring back;
+    an output of the artist's of target EEVEE is fed instead of adding one, and its link comes back on removal;
 (c) a material wired in the add-on's earlier layout (the group fed the active output) is restored the same way;
 (d) a material linked from another .blend (a real library file written here), or the material of a linked object,
     is refused in one line that says to make it local, with nothing changed; made local, the operator works and the
@@ -198,6 +199,26 @@ def test_rewiring_keeps_one_set_of_nodes_and_remove_still_restores(tmp_path, add
     assert len(mat.node_tree.nodes) == count
     assert remove(obj) == {"FINISHED"}
     assert dump(mat) == original
+
+
+def test_an_artists_eevee_output_is_fed_and_given_back(tmp_path, addon):
+    obj, mat = artist_material(tmp_path)
+    tree = mat.node_tree
+    viewport = tree.nodes.new("ShaderNodeEmission")  # the artist's own look for EEVEE
+    eevee = tree.nodes.new("ShaderNodeOutputMaterial")
+    eevee.target = "EEVEE"
+    tree.links.new(viewport.outputs[0], eevee.inputs["Surface"])
+    tree.nodes["Material Output"].is_active_output = True
+    original = dump(mat)
+    assert invert(obj) == {"FINISHED"}
+    gnode = wiring.wired_group_node(mat)
+    assert tree.get_output_node("EEVEE") == eevee  # still the output EEVEE takes, now fed by the group
+    assert eevee.inputs["Surface"].links[0].from_socket == gnode.outputs["EEVEE"]
+    assert len([n for n in tree.nodes if n.bl_idname == "ShaderNodeOutputMaterial" and n.target == "EEVEE"]) == 1
+    name = obj.name
+    reopen(tmp_path / "eevee.blend")
+    assert remove(bpy.data.objects[name]) == {"FINISHED"}
+    assert dump(bpy.data.materials["Skin"]) == original
 
 
 # -- (c) the earlier layout ------------------------------------------------------------------------------------
