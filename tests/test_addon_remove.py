@@ -123,28 +123,30 @@ def addon_data() -> tuple[list[str], list[str]]:
 
 
 # -- (a) what renders ------------------------------------------------------------------------------------------
-def test_each_renderer_renders_the_group_and_cycles_renders_as_before(tmp_path, addon):
+@pytest.mark.parametrize("mode", ["LIVE", "BAKE"])
+def test_each_renderer_renders_the_group_and_cycles_renders_as_before(tmp_path, addon, mode):
     obj, mat = artist_material(tmp_path)
-    assert invert(obj) == {"FINISHED"}
+    assert invert(obj, mode=mode, exact=True) == {"FINISHED"}
     tree = mat.node_tree
     gnode = wiring.wired_group_node(mat)
+    cycles, eevee = ("Cycles", "EEVEE") if mode == "LIVE" else ("BSSRDF", "BSSRDF")
     bsdf = tree.nodes["Principled BSDF"]
     outputs = [n for n in tree.nodes if n.bl_idname == "ShaderNodeOutputMaterial"]
     active = next(n for n in outputs if n.is_active_output)
     assert active.target == "ALL" and active.inputs["Surface"].links[0].from_node == bsdf  # what exporters read
     by_target = {n.target: n for n in outputs if n is not active}
-    assert by_target["CYCLES"].inputs["Surface"].links[0].from_socket == gnode.outputs["Cycles"]
-    assert by_target["EEVEE"].inputs["Surface"].links[0].from_socket == gnode.outputs["EEVEE"]
+    assert by_target["CYCLES"].inputs["Surface"].links[0].from_socket == gnode.outputs[cycles]
+    assert by_target["EEVEE"].inputs["Surface"].links[0].from_socket == gnode.outputs[eevee]
     # ... and they are the outputs Blender picks for each renderer (EEVEE asks for the same as this function).
     assert tree.get_output_node("CYCLES") == by_target["CYCLES"] and tree.get_output_node("EEVEE") == by_target["EEVEE"]
     assert tree.get_output_node("ALL") == active
     bpy.context.scene.cycles.seed = 3
     now = render_small(size=16, samples=4)
-    # The layout before: the group's Cycles output into the active output, no Cycles-target output.
+    # The layout before: the group's output into the active output, no Cycles-target output.
     tree.nodes.remove(by_target["CYCLES"])
-    tree.links.new(gnode.outputs["Cycles"], active.inputs["Surface"])
-    for cam in [o for o in bpy.data.objects if o.type in ("CAMERA", "LIGHT")]:
-        bpy.data.objects.remove(cam)
+    tree.links.new(gnode.outputs[cycles], active.inputs["Surface"])
+    for helper in [o for o in bpy.data.objects if o.type in ("CAMERA", "LIGHT")]:
+        bpy.data.objects.remove(helper)
     earlier = render_small(size=16, samples=4)
     assert now[..., :3].std() > 0.01  # something rendered
     np.testing.assert_array_equal(now, earlier)
