@@ -275,8 +275,10 @@ def test_a_linked_material_is_refused_in_one_line_and_works_once_made_local(tmp_
         with pytest.raises(RuntimeError, match=r"linked from characters\.blend .*make it local") as err:
             invert(obj, mode=mode, exact=True)
         assert "\n" not in str(err.value).strip()
-    with pytest.raises(RuntimeError, match="make it local"):
-        remove(obj)
+    with bpy.context.temp_override(object=obj, active_object=obj):
+        for operator in (bpy.ops.spectral_skin.remove, bpy.ops.spectral_skin.add_mixture):
+            with pytest.raises(RuntimeError, match="make it local"):
+                operator()
     assert dump(mat) == before and addon_data() == ([], [])
     # Made local as the message says, the operator's work lasts.
     if what == "object":
