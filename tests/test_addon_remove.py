@@ -1,7 +1,8 @@
 """The artist's material around Invert Skin Albedo: what renders, what Remove Skin SSS gives back, linked data.
 
 (a) the per-target outputs (blender_addon.wiring) render in Cycles exactly what the group rendered when it fed the
-    active Material Output (one seed: bit for bit), and each renderer's output is the group's;
+    active Material Output (one seed: bit for bit), and each renderer's output is the group's; EEVEE (opt-in:
+    software OpenGL takes minutes) renders the group's EEVEE output bit for bit as when it fed the active output;
 (b) Remove Skin SSS returns the material to exactly what the artist had — every node, every property and socket
     value, every link, the material's custom properties — for the live group and for baked maps, also when the file
     was saved and reopened between wiring and removing and after saving and reopening the removed state; the shared
@@ -15,6 +16,9 @@
 
 from __future__ import annotations
 
+import json
+import os
+import subprocess
 import sys
 from pathlib import Path
 
@@ -150,6 +154,65 @@ def test_each_renderer_renders_the_group_and_cycles_renders_as_before(tmp_path, 
     earlier = render_small(size=16, samples=4)
     assert now[..., :3].std() > 0.01  # something rendered
     np.testing.assert_array_equal(now, earlier)
+
+
+EEVEE_SCRIPT = """
+import json, sys
+sys.path.insert(0, {root!r})
+from pathlib import Path
+import bpy, numpy as np
+import blender_addon
+from blender_addon import wiring
+from tests.addon_scene import skin_codes, skin_object, write_image
+bpy.ops.wm.read_homefile(use_empty=True)
+blender_addon.register()
+obj, mat, _ = skin_object(write_image(Path({tmp!r}) / "albedo.png", skin_codes(), "uint8"))
+scene = bpy.context.scene
+scene.render.engine = "BLENDER_EEVEE"
+scene.eevee.taa_render_samples = 4
+scene.render.resolution_x = scene.render.resolution_y = 16
+cam = bpy.data.objects.new("Cam", bpy.data.cameras.new("Cam"))
+cam.location, cam.rotation_euler = (0.0, -4.0, 0.0), (np.pi / 2, 0.0, 0.0)
+scene.collection.objects.link(cam)
+scene.camera, scene.world = cam, bpy.data.worlds.new("World")
+scene.collection.objects.link(bpy.data.objects.new("Sun", bpy.data.lights.new("Sun", "SUN")))
+def render(tag):
+    scene.render.image_settings.file_format = "OPEN_EXR"
+    scene.render.filepath = str(Path({tmp!r}) / f"{{tag}}.exr")
+    bpy.ops.render.render(write_still=True)
+    image = bpy.data.images.load(scene.render.filepath)
+    px = np.empty(16 * 16 * 4, np.float32)
+    image.pixels.foreach_get(px)
+    return px
+principled = render("principled")
+with bpy.context.temp_override(object=obj, active_object=obj):
+    assert bpy.ops.spectral_skin.invert_albedo() == {{"FINISHED"}}
+wired = render("wired")
+tree = mat.node_tree
+gnode = wiring.wired_group_node(mat)
+for node in [n for n in tree.nodes if n.bl_idname == "ShaderNodeOutputMaterial" and n.target != "ALL"]:
+    tree.nodes.remove(node)
+tree.links.new(gnode.outputs["EEVEE"], tree.nodes["Material Output"].inputs["Surface"])
+alone = render("alone")
+print("RESULT" + json.dumps({{"wired_vs_alone": float(np.abs(wired - alone).max()),
+                              "wired_vs_principled": float(np.abs(wired - principled).max())}}))
+"""
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(os.environ.get("SPECTRAL_SKIN_EEVEE_TESTS") != "1",
+                    reason="EEVEE needs a GPU, or minutes of software OpenGL (EGL_PLATFORM=surfaceless): set "
+                           "SPECTRAL_SKIN_EEVEE_TESTS=1 to run it")
+def test_eevee_renders_the_groups_eevee_output(tmp_path):
+    """EEVEE renders the wired material bit for bit as the group's EEVEE output alone in the active output (the
+    earlier layout), and not as the artist's Principled BSDF (which the exporters read)."""
+    script = EEVEE_SCRIPT.format(root=str(ROOT), tmp=str(tmp_path))
+    env = dict(os.environ, EGL_PLATFORM=os.environ.get("EGL_PLATFORM", "surfaceless"))
+    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, env=env, timeout=1200)
+    line = next((ln for ln in done.stdout.splitlines() if ln.startswith("RESULT")), None)
+    assert line is not None, done.stdout[-2000:] + done.stderr[-2000:]
+    diff = json.loads(line[len("RESULT"):])
+    assert diff["wired_vs_alone"] == 0.0 and diff["wired_vs_principled"] > 0.01, diff
 
 
 # -- (b) remove ------------------------------------------------------------------------------------------------
