@@ -5,8 +5,9 @@ tests/export_check.py installs the extension zip in each Blender, builds an arti
 normal-map PNGs into a Principled BSDF), exports it with glTF 2.0, FBX, OBJ and USD, runs Invert Skin Albedo (the
 live group, then in a fresh scene baked maps) and exports again.  Each exporter must write, after the operator,
 exactly what it wrote before: glTF's materials, textures and images; OBJ's .mtl; the PNGs the FBX file names; USD's
-shader inputs.  Before the per-target outputs (blender_addon.wiring) glTF wrote baseColorFactor [0, 0, 0, 1] with no
-texture, OBJ ``Kd 0.8`` with no ``map_Kd``, and FBX lost the images.
+shader inputs.  What this guards against: with the group feeding the active Material Output instead of the
+per-target outputs (blender_addon.wiring), glTF writes baseColorFactor [0, 0, 0, 1] with no texture, OBJ ``Kd 0.8``
+with no ``map_Kd``, and the FBX file names none of the images.
 """
 
 from __future__ import annotations
