@@ -297,8 +297,8 @@ class SPECTRAL_SKIN_OT_remove(bpy.types.Operator):
             self.report({"INFO"}, f"nothing to remove: '{material.name}' holds no Spectral Skin SSS nodes")
             return {"CANCELLED"}
         groups, images = wiring.purge_unused()
-        self.report({"INFO"}, f"removed Spectral Skin SSS from '{material.name}' ({removed} nodes; {groups} node "
-                              f"groups and {images} images no material used any more)")
+        self.report({"INFO"}, f"removed Spectral Skin SSS from '{material.name}' ({groups} node groups and {images} "
+                              "images no material used any more went too)")
         return {"FINISHED"}
 
 

@@ -167,7 +167,7 @@ def wired_group_node(material: bpy.types.Material) -> bpy.types.Node | None:
 
 def unwire(material: bpy.types.Material) -> int:
     """Remove the add-on's nodes from ``material`` and put back the links they replaced (module docstring); returns
-    how many nodes were removed (0: nothing of the add-on's was there, nothing changed)."""
+    how many nodes and material properties of the add-on's were removed (0: none was there, nothing changed)."""
     tree = material.node_tree
     ours = added_nodes(material)
     if not ours and not any(p in material for p in _MATERIAL_PROPS):
@@ -182,9 +182,10 @@ def unwire(material: bpy.types.Material) -> int:
         relink(tree, link["from_node"], link["from_socket"], link["to_node"], link["to_socket"])
     if legacy_fed and previous in tree.nodes and not out.inputs["Surface"].is_linked:
         tree.links.new(tree.nodes[previous].outputs[0], out.inputs["Surface"])
-    for prop in _MATERIAL_PROPS:
-        material.pop(prop, None)
-    return len(ours)
+    props = [p for p in _MATERIAL_PROPS if p in material]
+    for prop in props:
+        del material[prop]
+    return len(ours) + len(props)
 
 
 def relink(tree: bpy.types.NodeTree, from_node: str, from_id: str, to_node: str, to_id: str) -> None:
