@@ -7,7 +7,8 @@ baked maps), through the extension zip installed in Blender's extension system.
 The material: an albedo PNG in an Image Texture feeding the Principled BSDF's Base Color, a roughness PNG
 (Non-Color) feeding Roughness, a normal-map PNG through a Normal Map node feeding Normal.  For each mode the scene is
 exported before and after the operator, each into its own folder; which node each renderer's Material Output takes
-after it, and what each exporter wrote about the material is
+after it, whether Remove Skin SSS then gives back the material's nodes, values and links, and what each exporter
+wrote about the material is
 printed as one line ``RESULT{json}`` for the caller to compare: glTF's materials, textures and images; OBJ's .mtl
 (less its comment lines); the names of the three PNGs found in the FBX file's bytes; USD's shader inputs (the
 ``inputs:`` lines of the .usda's Material prims, sorted).  BLENDER_USER_RESOURCES must point into WORKDIR.  Imports
@@ -109,6 +110,18 @@ def usd_material_inputs(usda: str) -> list[str]:
     return sorted(lines)
 
 
+def tree_state(material) -> tuple:
+    """The material's nodes (name, type, location, socket values) and links, and its custom properties."""
+    def value(socket):
+        v = getattr(socket, "default_value", None)
+        return None if v is None else (tuple(v) if hasattr(v, "__len__") and not isinstance(v, str) else v)
+    tree = material.node_tree
+    nodes = sorted((n.name, n.bl_idname, tuple(n.location), tuple(value(s) for s in n.inputs)) for n in tree.nodes)
+    links = sorted((ln.from_node.name, ln.from_socket.identifier, ln.to_node.name, ln.to_socket.identifier)
+                   for ln in tree.links)
+    return nodes, links, sorted(material.keys())
+
+
 def renders(tree) -> dict:
     """For each target (All: what exporters read; Cycles; EEVEE) the node feeding the Material Output Blender picks
     for it (``ShaderNodeTree.get_output_node``): a node group's name, else the node's type."""
@@ -130,6 +143,7 @@ def main() -> dict:
         folder = os.path.join(work, mode.lower())
         os.makedirs(folder, exist_ok=True)
         obj = artist_scene(folder)
+        original = tree_state(obj.active_material)
         before = export_all(os.path.join(folder, "before"))
         try:
             with bpy.context.temp_override(object=obj, active_object=obj):
@@ -140,6 +154,9 @@ def main() -> dict:
         groups = sorted(n.node_tree.name for n in tree.nodes if n.bl_idname == "ShaderNodeGroup")
         out[mode] = {"invert": result, "groups": groups, "before": before, "renders": renders(tree),
                      "after": export_all(os.path.join(folder, "after"))}
+        with bpy.context.temp_override(object=obj, active_object=obj):
+            out[mode]["remove"] = sorted(bpy.ops.spectral_skin.remove())
+        out[mode]["restored"] = tree_state(obj.active_material) == original
     return out
 
 
