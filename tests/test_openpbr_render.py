@@ -1,0 +1,68 @@
+"""The OpenPBR maps in a renderer: Blender's Principled BSDF (which follows OpenPBR Surface) reads them in Cycles.
+
+The painted colour: the three stripes of tests/test_bake_painted_colour.py (lightest and darkest NIST subject, dark
+skin) on the probe box, white world, camera straight above, baked with ``--target openpbr`` and rendered through a
+Principled BSDF (training.openpbr_check.principled_material: Subsurface Weight, Radius, Scale, Anisotropy from the
+maps, Random Walk, the written material's roughness and IOR).  Its own specular layer reflects the white world; that
+reflection, measured in the same scene with a black base (tests/addon_scene.principled_coat_reflectance), is the
+"coat": the render minus it must be the painted colour, ΔE76 <= 1.0 mean and <= 2.0 max.
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import bpy
+import numpy as np
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from blender_addon import probe  # noqa: E402
+from exporters import bake  # noqa: E402
+from exporters.bake import material_files  # noqa: E402
+from exporters.colorimetry import delta_e76, linear_srgb_to_lab, srgb_decode  # noqa: E402
+from tests.addon_scene import principled_coat_reflectance  # noqa: E402
+from tests.test_bake_painted_colour import STRIPE, painted_codes, render_stripes, stripes_texture  # noqa: E402
+from training.openpbr_check import principled_material  # noqa: E402
+
+MODEL = ROOT / "blender_addon" / "models" / "skin_inversion.onnx"
+SAMPLES = 256
+
+
+def _object_coords(tree):
+    """Object coordinates of the probe's top face mapped onto [0, 1] (as the painted-colour test's texture)."""
+    coords = tree.nodes.new("ShaderNodeTexCoord")
+    mapping = tree.nodes.new("ShaderNodeMapping")
+    mapping.inputs["Location"].default_value = (0.5, 0.5, 0.0)
+    tree.links.new(coords.outputs["Object"], mapping.inputs["Vector"])
+    return mapping.outputs["Vector"]
+
+
+@pytest.mark.slow
+def test_principled_renders_the_painted_colour_from_the_openpbr_maps(tmp_path):
+    codes = painted_codes()
+    png = stripes_texture(tmp_path / "painted.png", codes)
+    maps_dir = tmp_path / "maps"
+    maps_dir.mkdir()
+    bake.bake(png, maps_dir, MODEL, bake.BakeOptions(targets=("openpbr",), unit_scale_m=0.1))
+    scene = probe.new_scene(samples=SAMPLES, resolution=3 * STRIPE, seed=11)
+    scene.render.resolution_y = STRIPE
+    scene.unit_settings.system, scene.unit_settings.scale_length = "METRIC", 0.1
+    roughness, ior = material_files.SPECULAR_ROUGHNESS, 1.4
+    mat = principled_material("OpenPBR", maps_dir, "painted", roughness, ior, coords=_object_coords)
+    slab = bpy.data.objects["ProbeSlab"]
+    slab.data.materials.clear()
+    slab.data.materials.append(mat)
+    skin, err = render_stripes(scene, tmp_path, "openpbr")
+    coat = principled_coat_reflectance(scene, [1.0], roughness, ior)[0]
+    painted = srgb_decode(codes / 255.0)
+    body = skin - coat
+    de = delta_e76(linear_srgb_to_lab(body), linear_srgb_to_lab(painted))
+    print(f"\npainted {np.round(painted, 4).tolist()}\n  render - coat {np.round(coat, 4).tolist()} = "
+          f"{np.round(body, 4).tolist()}\n  rel {np.round((body / painted - 1) * 100, 2).tolist()} %, "
+          f"ΔE76 {np.round(de, 2).tolist()}")
+    assert np.all(err / painted < 0.01), "too noisy to test"
+    assert de.mean() <= 1.0 and de.max() <= 2.0, de
