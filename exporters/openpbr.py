@@ -17,16 +17,24 @@ the one medium that reproduces the mixture best, per texel and channel:
 2. **Anisotropy.**  The light-weighted mean of g_k over components and channels (0 for the bake's media:
    exporters.collapse step 5), clipped to [0, 0.7] (the largest g Cycles walks accurately).
 3. **Translucency, as close as one medium can.**  A component's light spreads over its diffusion length
-   D_kc = 1 / sigma_tr,kc, sigma_tr = sigma_t sqrt(3 (1 - alpha)(1 - alpha g)).  The single medium keeps the
-   light-weighted mean D_c = sum_k s_kc D_kc (s_kc = w_kc R_cycles(alpha_kc, g_k) / T_c, the component's share of
-   the channel's light): in the diffusion regime the mean distance at which light leaves the skin is D, so the
-   mixture's and the single medium's mean exit distances agree per channel.  Its extinction follows from its own
-   albedo: sigma_t,c = 1 / (D_c sqrt(3 (1 - alpha_c)(1 - alpha_c g))), and ``mean_free_path`` = 1 / sigma_t,c
-   (OpenPBR's subsurface_radius x subsurface_radius_scale, in scene units after ``unit_scale_m``), at least
-   exporters.collapse.MIN_MFP_CM.  What one medium cannot keep: the mixture's profile is a sum of K exponentials
-   (a sharp core and a long tail); one exponential with the same mean is too wide near the point of entry and too
-   short in the tail, so thin back-lit parts (ears, nostrils) transmit less (docs/user/other_renderers.md has the
-   numbers for the representative tones: :func:`fidelity`).
+   D_kc = 1 / sigma_tr,kc, sigma_tr = sigma_t sqrt(3 (1 - alpha)(1 - alpha g)).  One medium has one D per channel,
+   and two things a viewer sees depend on it: how far light bleeds sideways (across a shadow edge: about the
+   light-weighted mean sum_k s_kc D_kc, s_kc = w_kc R_cycles(alpha_kc, g_k) / T_c the component's share of the
+   channel's light) and how much light passes through a thin part (a back-lit ear: in the diffusion approximation
+   a(alpha) exp(-L / D) through a thickness L, with a(alpha) = alpha (1 - alpha) the share of the light that
+   enters, diffuses and leaves the other side: :func:`transmission_amplitude`).  The single medium's albedo is set
+   by the colour (step 1) and is lower than the components' (their weights below 1 absorb the rest), so with the
+   mean D it lets more light through an ear (medium skin on the demo head: red +18 %, green +170 %, blue +220 %,
+   training.openpbr_check).  D_c is therefore the one whose transmission through :data:`THIN_MM` (3 mm, an ear or a
+   nostril wing) equals the mixture's, a(alpha_c) exp(-L / D_c) = sum_k w_kc a(alpha_kc) exp(-L / D_kc) (in
+   log space), kept between the smallest and largest D_kc of the components carrying at least 1 % of the light:
+   for skin it lies within ~15 % of the light-weighted mean, so the sideways bleed changes little.  Thinner parts
+   (an ear's rim) still pass more green and blue than the mixture: docs/user/other_renderers.md.  Its extinction
+   follows from its own albedo, sigma_t,c = 1 / (D_c sqrt(3 (1 - alpha_c)(1 - alpha_c g))), and
+   ``mean_free_path`` = 1 / sigma_t,c (OpenPBR's subsurface_radius x subsurface_radius_scale, in scene units after
+   ``unit_scale_m``), at least exporters.collapse.MIN_MFP_CM.  What one medium cannot keep: the mixture's profile
+   is a sum of K exponentials (a sharp core and a long tail), one exponential cannot be both
+   (docs/user/other_renderers.md has the numbers for the representative tones: :func:`fidelity`).
 4. **Weight.**  ``subsurface_weight`` 1 everywhere: skin is all subsurface (the mixture's weights below 1 are the
    absorbed share, already in the colour).
 
@@ -49,6 +57,11 @@ SPECULAR_IOR: float = reflectance_tables.CYCLES_IOR
 #: Subsurface Scale that makes Cycles' Principled BSDF walk OpenPBR's mean free path: Cycles divides Radius x Scale
 #: by 4 pi (closure/bssrdf.h bssrdf_setup_radius, exporters.cycles.RADIUS_TO_D) before taking sigma_t = 1 / d.
 CYCLES_RADIUS_SCALE: float = 4.0 * np.pi
+#: Thickness (mm) through which the single medium transmits what the mixture transmits (step 3 of the module
+#: docstring): a human ear's helix and a nostril wing are 2-4 mm thick.
+THIN_MM: float = 3.0
+#: Smallest share of a channel's light a component needs to bound the single medium's diffusion length.
+SHARE_MIN: float = 0.01
 #: The albedo grid on which R1(alpha; mu = 1) is inverted (dense near 1, where skin's albedos lie).
 _N_ALBEDO = 4097
 
@@ -60,7 +73,8 @@ class SingleMedium:
     ``base_color`` (N, 3) the colour the mixture renders (linear sRGB); ``subsurface_color`` (N, 3) OpenPBR's
     subsurface_color (step 1 of the module docstring); ``alpha`` (N, 3) the walk's single-scattering albedo;
     ``mean_free_path_cm`` (N, 3) 1 / sigma_t in cm; ``anisotropy`` (N,); ``weight`` (N,) subsurface_weight;
-    ``diffusion_length_cm`` (N, 3) D_c kept from the mixture.
+    ``diffusion_length_cm`` (N, 3) D_c of the single medium (step 3); ``mean_diffusion_length_cm`` (N, 3) the
+    mixture's light-weighted mean D.
     """
 
     base_color: np.ndarray
@@ -70,10 +84,33 @@ class SingleMedium:
     anisotropy: np.ndarray
     weight: np.ndarray
     diffusion_length_cm: np.ndarray
+    mean_diffusion_length_cm: np.ndarray
 
     def mean_free_path(self, unit_scale_m: float) -> np.ndarray:
         """(N, 3) mean free path in scene units of ``unit_scale_m`` metres."""
         return self.mean_free_path_cm / (cycles.CM_PER_M * float(unit_scale_m))
+
+
+def transmission_amplitude(alpha) -> np.ndarray:
+    """a(alpha) = alpha (1 - alpha): in the diffusion approximation the light a medium of albedo ``alpha`` passes
+    through a thickness L >> D is a(alpha) exp(-L / D) times factors that do not depend on the medium: alpha the
+    light scattered at all, and at each of the two boundaries the share that diffuses rather than escapes,
+    proportional to sigma_tr / sigma_t = sqrt(3 (1 - alpha)) (isotropic scattering; step 3)."""
+    al = np.clip(np.asarray(alpha, np.float64), 0.0, 1.0)
+    return al * (1.0 - al)
+
+
+def thin_diffusion_length_cm(weight, alpha, d_k_cm, alpha_single, thin_mm: float | None = None) -> np.ndarray:
+    """D (N, 3) in cm of a medium of albedo ``alpha_single`` (N, 3) that passes through ``thin_mm`` what the mixture
+    (``weight``, ``alpha``, diffusion lengths ``d_k_cm``: (N, K, 3)) passes, bounded by the D_kc of the components
+    carrying at least SHARE_MIN of the light (``weight`` > 0 where the bound applies; step 3)."""
+    thick = (THIN_MM if thin_mm is None else thin_mm) / 10.0
+    w, al, d_k = (np.asarray(x, np.float64) for x in (weight, alpha, d_k_cm))
+    log_terms = np.log(np.maximum(w * transmission_amplitude(al), 1e-300)) - thick / d_k
+    top = log_terms.max(axis=1)
+    log_mix = top + np.log(np.sum(np.exp(log_terms - top[:, None, :]), axis=1))
+    gap = np.log(np.maximum(transmission_amplitude(alpha_single), 1e-300)) - log_mix
+    return thick / np.maximum(gap, 1e-12)
 
 
 def diffusion_length_cm(alpha, sigma_t_cm, g) -> np.ndarray:
@@ -114,7 +151,12 @@ def single_medium(weight, alpha, sigma_t_cm, anisotropy, ior: float = SPECULAR_I
     total = np.where(target > 0.0, target, 1.0)[:, None, :]
     share = np.where(target[:, None, :] > 0.0, light / total, w / np.maximum(w.sum(axis=1, keepdims=True), 1e-30))
     g_single = np.clip(np.einsum("nkc,nk->n", share, g) / 3.0, cycles.G_MIN, cycles.RECOMMENDED_G_MAX)
-    d_mix = np.sum(share * diffusion_length_cm(al, st, g[..., None]), axis=1)  # (N, 3)
+    d_k = diffusion_length_cm(al, st, g[..., None])  # (N, K, 3)
+    d_mean = np.sum(share * d_k, axis=1)  # (N, 3)
+    carrying = share >= SHARE_MIN
+    d_lo = np.min(np.where(carrying, d_k, np.inf), axis=1)
+    d_hi = np.max(np.where(carrying, d_k, 0.0), axis=1)
+    d_lo, d_hi = np.where(np.isfinite(d_lo), d_lo, d_mean), np.where(d_hi > 0.0, d_hi, d_mean)
     base = np.clip(target, 0.0, 1.0)
     alpha_s = np.empty_like(base)
     for gv in np.unique(g_single):
@@ -122,11 +164,12 @@ def single_medium(weight, alpha, sigma_t_cm, anisotropy, ior: float = SPECULAR_I
         alpha_s[rows] = face_on_albedo_for(base[rows], float(gv), ior)
     alpha_s = np.clip(alpha_s, 0.0, reflectance_tables.ALPHA_TABLE_MAX)
     colour = cycles.rw_albedo_inverse(alpha_s, g_single[:, None]).color
-    sigma_t = 1.0 / (d_mix * np.sqrt(3.0 * (1.0 - alpha_s) * (1.0 - alpha_s * g_single[:, None])))
+    d_single = np.clip(thin_diffusion_length_cm(w, al, d_k, alpha_s), d_lo, d_hi)
+    sigma_t = 1.0 / (d_single * np.sqrt(3.0 * (1.0 - alpha_s) * (1.0 - alpha_s * g_single[:, None])))
     mfp = np.maximum(1.0 / sigma_t, collapse.MIN_MFP_CM)
     out = SingleMedium(base_color=base, subsurface_color=np.clip(colour, 0.0, 1.0), alpha=alpha_s,
                        mean_free_path_cm=mfp, anisotropy=g_single, weight=np.ones(len(base)),
-                       diffusion_length_cm=d_mix)
+                       diffusion_length_cm=d_single, mean_diffusion_length_cm=d_mean)
     for name in ("base_color", "subsurface_color", "alpha", "mean_free_path_cm", "anisotropy"):
         if not np.all(np.isfinite(getattr(out, name))):
             raise RuntimeError(f"single medium: non-finite {name}")  # guarded above; never expected
@@ -135,40 +178,54 @@ def single_medium(weight, alpha, sigma_t_cm, anisotropy, ior: float = SPECULAR_I
 
 @dataclass(frozen=True)
 class Fidelity:
-    """How far the single medium is from the mixture, per texel (N) and channel (3), in the diffusion model where a
-    medium of diffusion length D sends the fraction exp(-r / D) of its light beyond the distance r from where it
-    entered (the exponential tail of the diffusion profile; the mean exit distance is D):
+    """How far the single medium is from the mixture, per texel (N) and channel (3), in the diffusion model of step 3
+    (a medium of diffusion length D sends the fraction exp(-r / D) of its light beyond the distance r from where it
+    entered, and passes a(alpha) exp(-L / D) through a thickness L):
 
-    ``d_mix_mm`` (N, 3) D_c of the single medium (the mixture's light-weighted mean); ``d_max_mm`` (N, 3) the
-    longest-reaching component's D that carries at least 1 % of the channel's light; ``half_light`` (N, 3) the
-    single medium's half-light radius over the mixture's (1: same); ``tail`` (N, 3) the light beyond 1 mm,
-    single over mixture (how a thin back-lit part transmits: below 1 transmits less)."""
+    ``d_single_mm``, ``d_mean_mm`` (N, 3) the single medium's D and the mixture's light-weighted mean D;
+    ``d_lo_mm``, ``d_hi_mm`` (N, 3) the smallest and largest D of the components carrying >= 1 % of the light;
+    ``bleed`` (N, 3) d_single / d_mean (the sideways bleed, single over mixture: 1 is the same);
+    ``half_light`` (N, 3) the single medium's half-light radius over the mixture's;
+    ``thin`` (N, 3, len(thin_mm)) the light passed through each thickness of ``thin_mm``, single over mixture."""
 
-    d_mix_mm: np.ndarray
-    d_max_mm: np.ndarray
+    d_single_mm: np.ndarray
+    d_mean_mm: np.ndarray
+    d_lo_mm: np.ndarray
+    d_hi_mm: np.ndarray
+    bleed: np.ndarray
     half_light: np.ndarray
-    tail: np.ndarray
+    thin: np.ndarray
+    thin_mm: tuple[float, ...]
 
 
-def fidelity(weight, alpha, sigma_t_cm, anisotropy, ior: float = SPECULAR_IOR, tail_mm: float = 1.0) -> Fidelity:
+def fidelity(weight, alpha, sigma_t_cm, anisotropy, ior: float = SPECULAR_IOR,
+             thin_mm: tuple[float, ...] = (1.0, THIN_MM, 6.0)) -> Fidelity:
     """:class:`Fidelity` of the single medium of these media (arguments as :func:`single_medium`)."""
+    medium = single_medium(weight, alpha, sigma_t_cm, anisotropy, ior)
     w, al, st = (np.asarray(x, np.float64) for x in (weight, alpha, sigma_t_cm))
     g = np.asarray(anisotropy, np.float64)
     light = w * reflectance_tables.reflectance("cycles", al, g[..., None], ior)
     share = light / np.maximum(light.sum(axis=1, keepdims=True), 1e-30)
     d_k = diffusion_length_cm(al, st, g[..., None]) * 10.0  # mm
-    d_mix = np.sum(share * d_k, axis=1)
-    d_max = np.max(np.where(share >= 0.01, d_k, 0.0), axis=1)
+    d_s = medium.diffusion_length_cm * 10.0
+    carrying = share >= SHARE_MIN
 
     def beyond(r: np.ndarray) -> np.ndarray:  # mixture's light beyond r (N, 3)
         return np.sum(share * np.exp(-r[:, None, :] / d_k), axis=1)
 
-    lo, hi = np.zeros_like(d_mix), np.maximum(d_k.max(axis=1), d_mix) * 10.0
+    lo, hi = np.zeros_like(d_s), d_k.max(axis=1) * 10.0
     for _ in range(80):  # bisection: beyond(r) = 0.5 (decreasing in r)
         mid = 0.5 * (lo + hi)
         big = beyond(mid) > 0.5
         lo, hi = np.where(big, mid, lo), np.where(big, hi, mid)
     r50_mix = 0.5 * (lo + hi)
-    r = np.full_like(d_mix, tail_mm)
-    tail = np.exp(-r / d_mix) / np.maximum(beyond(r), 1e-300)
-    return Fidelity(d_mix_mm=d_mix, d_max_mm=d_max, half_light=d_mix * np.log(2.0) / r50_mix, tail=tail)
+    thin = []
+    for thickness in thin_mm:
+        log_mix = np.log(np.sum(w * transmission_amplitude(al) * np.exp(-thickness / d_k), axis=1) + 1e-300)
+        log_single = np.log(transmission_amplitude(medium.alpha) + 1e-300) - thickness / d_s
+        thin.append(np.exp(np.clip(log_single - log_mix, -700.0, 700.0)))
+    return Fidelity(d_single_mm=d_s, d_mean_mm=medium.mean_diffusion_length_cm * 10.0,
+                    d_lo_mm=np.min(np.where(carrying, d_k, np.inf), axis=1),
+                    d_hi_mm=np.max(np.where(carrying, d_k, 0.0), axis=1),
+                    bleed=d_s / (medium.mean_diffusion_length_cm * 10.0), half_light=d_s * np.log(2.0) / r50_mix,
+                    thin=np.stack(thin, axis=-1), thin_mm=tuple(float(t) for t in thin_mm))

@@ -186,6 +186,7 @@ def _usd_material(tmp: Path, files: dict[str, str], name: str, ior: float, rough
     _, Usd, UsdShade, Sdf, _, UsdGeom = require()
     stage = Usd.Stage.CreateNew(str(tmp))
     UsdGeom.SetStageMetersPerUnit(stage, float(unit_scale_m))
+    UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.z)  # Blender's
     root = UsdGeom.Scope.Define(stage, f"/{name}")
     stage.SetDefaultPrim(root.GetPrim())
     material = UsdShade.Material.Define(stage, f"/{name}/Skin")
