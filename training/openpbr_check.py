@@ -317,12 +317,55 @@ def _edge_numbers(edge: dict) -> dict:
     return {"live_mm": live.tolist(), "openpbr_mm": pbr.tolist(), "relative": (pbr / live - 1.0).tolist()}
 
 
+def representative_fidelity() -> tuple[list[str], np.ndarray, object]:
+    """The single medium against the mixture (exporters.openpbr.fidelity) for the colours of the 10 representative
+    tones (training/skin/tones.csv: their reflectance by skin_decoder.onnx, in linear sRGB under D65), evaluated
+    exactly (the network and the collapse, the painted colour): (names, colours (10, 3), Fidelity)."""
+    from exporters import collapse, inference, openpbr, texel_records
+    from exporters.texel_records import CollapseOptions
+    from training.skin.tones import load_tones
+
+    tones = load_tones().select("representative")
+    refl = inference.run_decoder(tones.values, MODEL.with_name("skin_decoder.onnx"), ["reflectance"])["reflectance"]
+    rgb = np.clip(refl @ collapse.channel_matrix().T, 0.0, 1.0)
+    rec = texel_records.exact_records(inference.load_model(MODEL), rgb.astype(np.float32), ("physical",),
+                                      CollapseOptions())
+    return list(tones.names), rgb, openpbr.fidelity(rec["weight"], rec["alpha"], rec["sigma_t_cm"],
+                                                    rec["anisotropy"])
+
+
+def fidelity_markdown() -> str:
+    """The table of docs/user/other_renderers.md: per representative tone, per channel (R / G / B)."""
+    names, rgb, f = representative_fidelity()
+
+    def cell(values, fmt: str) -> str:
+        return " / ".join(format(float(v), fmt) for v in values)
+
+    head = ("| tone | colour (linear) | D mixture, mean (mm) | D components (mm) | D single (mm) | bleed | "
+            "half-light radius | " + " | ".join(f"through {t:g} mm" for t in f.thin_mm) + " |")
+    rows = [head, "|" + "---|" * (7 + len(f.thin_mm))]
+    for i, name in enumerate(names):
+        comp = " / ".join(f"{lo:.2f}-{hi:.2f}" for lo, hi in zip(f.d_lo_mm[i], f.d_hi_mm[i], strict=True))
+        rows.append(f"| {name} | {cell(rgb[i], '.3f')} | {cell(f.d_mean_mm[i], '.3f')} | {comp} | "
+                    f"{cell(f.d_single_mm[i], '.3f')} | {cell(f.bleed[i], '.2f')} | {cell(f.half_light[i], '.2f')} | "
+                    + " | ".join(cell(f.thin[i, :, j], '.2f') for j in range(len(f.thin_mm))) + " |")
+    return "\n".join(rows) + "\n"
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="python -m training.openpbr_check", description=__doc__.splitlines()[0])
-    p.add_argument("--out", required=True, type=Path, help="folder for the renders, checks.json and the figure")
+    p.add_argument("--out", type=Path, help="folder for the renders, checks.json and the figure")
     p.add_argument("--figure", type=Path, default=None, help="also write the figure here (.png or .jpg)")
+    p.add_argument("--table", action="store_true",
+                   help="print the single medium against the mixture on the representative tones (Markdown; no "
+                        "rendering)")
     args = p.parse_args(argv)
-    print(json.dumps(run(args.out, args.figure), indent=2))
+    if args.table:
+        print(fidelity_markdown(), end="")
+    if args.out is not None:
+        print(json.dumps(run(args.out, args.figure), indent=2))
+    elif not args.table:
+        p.error("give --out (the renders) and/or --table")
     return 0
 
 
