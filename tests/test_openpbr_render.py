@@ -6,6 +6,12 @@ Principled BSDF (training.openpbr_check.principled_material: Subsurface Weight, 
 maps, Random Walk, the written material's roughness and IOR).  Its own specular layer reflects the white world; that
 reflection, measured in the same scene with a black base (tests/addon_scene.principled_coat_reflectance), is the
 "coat": the render minus it must be the painted colour, ΔE76 <= 1.0 mean and <= 2.0 max.
+
+The translucency, against the live group (the K-media mixture) on the same scenes (training.openpbr_check), medium
+skin: the light bleeding across a sharp shadow edge (integrated over the shadow, over the lit level) within 15 % per
+channel; the back-lit ear of the demo head within 15 % in red.  One medium lets more green and blue through the ear's
+thin rim than the mixture (docs/user/other_renderers.md: measured about +100 % and +180 %, more than the 15 % asked):
+that is checked to stay below 3x, so a regression shows.
 """
 
 from __future__ import annotations
@@ -26,6 +32,7 @@ from exporters.bake import material_files  # noqa: E402
 from exporters.colorimetry import delta_e76, linear_srgb_to_lab, srgb_decode  # noqa: E402
 from tests.addon_scene import principled_coat_reflectance  # noqa: E402
 from tests.test_bake_painted_colour import STRIPE, painted_codes, render_stripes, stripes_texture  # noqa: E402
+from training import openpbr_check  # noqa: E402
 from training.openpbr_check import principled_material  # noqa: E402
 
 MODEL = ROOT / "blender_addon" / "models" / "skin_inversion.onnx"
@@ -66,3 +73,23 @@ def test_principled_renders_the_painted_colour_from_the_openpbr_maps(tmp_path):
           f"ΔE76 {np.round(de, 2).tolist()}")
     assert np.all(err / painted < 0.01), "too noisy to test"
     assert de.mean() <= 1.0 and de.max() <= 2.0, de
+
+
+@pytest.mark.slow
+def test_shadow_edge_bleed_matches_the_mixture(tmp_path):
+    edge = openpbr_check.shadow_edge(tmp_path, "medium", samples=64)
+    live, pbr = (np.array(edge[m]["bleed_width_mm"]) for m in ("live", "openpbr"))
+    print(f"\nbleed width (mm): live {np.round(live, 3).tolist()}, OpenPBR {np.round(pbr, 3).tolist()}")
+    assert np.all(live > 0.02), live  # light does bleed into the shadow
+    np.testing.assert_allclose(np.array(edge["openpbr"]["lit"]), np.array(edge["live"]["lit"]), rtol=0.03)
+    assert np.all(np.abs(pbr / live - 1.0) <= 0.15), pbr / live
+
+
+@pytest.mark.slow
+def test_back_lit_ear(tmp_path):
+    ear = openpbr_check.ear(tmp_path, "medium", samples=32)
+    live, pbr = (np.array(ear[m]["ear_mean"]) for m in ("live", "openpbr"))
+    print(f"\near ({ear['ear_pixels']} px): live {np.round(live, 4).tolist()}, OpenPBR {np.round(pbr, 4).tolist()}")
+    assert ear["ear_pixels"] > 100 and live[0] > 3 * live[1]  # the ear glows red: light came through it
+    assert abs(pbr[0] / live[0] - 1.0) <= 0.15
+    assert np.all(pbr[1:] > live[1:]) and np.all(pbr[1:] < 3.0 * live[1:])  # the documented loss, bounded

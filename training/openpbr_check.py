@@ -29,9 +29,9 @@ ROOT = Path(__file__).resolve().parents[1]
 MODEL = ROOT / "blender_addon" / "models" / "skin_inversion.onnx"
 #: The box of :func:`shadow_edge`: unit scale (m per unit: 1 unit = 1 cm), view width (units), height of the hidden
 #: plate above the box (units), the lit side's texels averaged for the lit level (from this far from the edge, units).
-BOX_UNIT_M, BOX_VIEW, PLATE_HEIGHT, LIT_FROM = 0.01, 1.5, 0.01, 0.35
+BOX_UNIT_M, BOX_VIEW, PLATE_HEIGHT, LIT_FROM = 0.01, 1.0, 0.01, 0.3
 #: Render size of the box (pixels across the edge x along it) and of the head (square).
-BOX_PIXELS, HEAD_PIXELS = (96, 32), 96
+BOX_PIXELS, HEAD_PIXELS = (128, 32), 96
 #: The skin colours checked (sRGB codes of the demo's light, medium and dark textures: training.demo_subject.TONES).
 SHADOW_TONES = ("light", "medium", "dark")
 
@@ -161,6 +161,7 @@ def shadow_scene(samples: int, seed: int = 3):
     scene = probe.new_scene(samples=samples, resolution=BOX_PIXELS[0], seed=seed)
     scene.render.resolution_y = BOX_PIXELS[1]
     scene.camera.data.ortho_scale = BOX_VIEW
+    scene.cycles.filter_width = 0.01  # no pixel filter: it would spread the lit side over the edge by ~1 px
     scene.unit_settings.system, scene.unit_settings.scale_length = "METRIC", BOX_UNIT_M
     scene.world.node_tree.nodes["Background"].inputs["Strength"].default_value = 0.0
     sun = bpy.data.lights.new("Sun", "SUN")
