@@ -196,3 +196,27 @@ def test_without_materialx_and_usd_the_target_says_so_and_others_bake(face, tmp_
                             "print('MaterialX' in sys.modules or 'pxr' in sys.modules)"],
                            capture_output=True, text=True, cwd=str(ROOT), timeout=60)
     assert probe.stdout.strip() == "False", probe.stderr  # only the writers import them, when asked
+
+
+def test_single_medium_stays_finite_and_bounded():
+    """Edge cases of exporters.openpbr.single_medium: a component without weight, albedos at 0 and near 1, a black
+    channel, a white one: finite everywhere, the diffusion length between 0.85 and 1 times the light-weighted mean."""
+    from exporters import openpbr
+
+    rng = np.random.default_rng(5)
+    n, k = 200, 3
+    weight = rng.uniform(0.0, 1.0, (n, k, 3))
+    weight[:20, 0] = 0.0
+    alpha = rng.uniform(0.0, 0.9999, (n, k, 3))
+    alpha[20:30] = 0.0
+    alpha[30:40] = 0.999999
+    sigma_t = 10.0 ** rng.uniform(0.0, 4.0, (n, k, 3))
+    medium = openpbr.single_medium(weight, alpha, sigma_t, np.zeros((n, k)))
+    for name in ("base_color", "subsurface_color", "alpha", "mean_free_path_cm", "diffusion_length_cm"):
+        assert np.all(np.isfinite(getattr(medium, name))), name
+    assert np.all((medium.base_color >= 0) & (medium.base_color <= 1))
+    ratio = medium.diffusion_length_cm / medium.mean_diffusion_length_cm
+    assert np.all((ratio >= 0.85 - 1e-9) & (ratio <= 1.0 + 1e-9))
+    assert np.all(medium.mean_free_path_cm >= 1e-3 * (1 - 1e-12))  # exporters.collapse.MIN_MFP_CM
+    with pytest.raises(ValueError, match="NaN"):
+        openpbr.single_medium(np.full((1, 1, 3), np.nan), alpha[:1, :1], sigma_t[:1, :1], np.zeros((1, 1)))
