@@ -30,7 +30,7 @@ from blender_addon import probe  # noqa: E402
 from exporters import bake  # noqa: E402
 from exporters.bake import material_files  # noqa: E402
 from exporters.colorimetry import delta_e76, linear_srgb_to_lab, srgb_decode  # noqa: E402
-from tests.addon_scene import principled_coat_reflectance  # noqa: E402
+from tests.addon_scene import principled_coat_reflectance, run_invert, skin_codes, skin_object, write_image  # noqa: E402
 from tests.test_bake_painted_colour import STRIPE, painted_codes, render_stripes, stripes_texture  # noqa: E402
 from training import openpbr_check  # noqa: E402
 from training.openpbr_check import principled_material  # noqa: E402
@@ -93,3 +93,26 @@ def test_back_lit_ear(tmp_path):
     assert ear["ear_pixels"] > 100 and live[0] > 3 * live[1]  # the ear glows red: light came through it
     assert abs(pbr[0] / live[0] - 1.0) <= 0.15
     assert np.all(pbr[1:] > live[1:]) and np.all(pbr[1:] < 3.0 * live[1:])  # the documented loss, bounded
+
+
+def test_addon_bake_mode_writes_the_openpbr_files(tmp_path):
+    """Invert Skin Albedo, mode Bake maps, maps as files, *OpenPBR, MaterialX and USD* ticked: the cycles maps it
+    wires and the openpbr target's files beside them; packed maps refuse the option in one line."""
+    import blender_addon
+
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    png = write_image(tmp_path / "albedo.png", skin_codes(), "uint8")
+    blender_addon.register()
+    try:
+        obj, mat, _ = skin_object(png)
+        with pytest.raises(RuntimeError, match="Files") as info:
+            run_invert(obj, storage="PACK", openpbr=True)
+        assert "\n" not in str(info.value).strip()
+        out = tmp_path / "maps"
+        assert run_invert(obj, storage="FILES", output_dir=str(out), openpbr=True) == {"FINISHED"}
+    finally:
+        blender_addon.unregister()
+    names = {p.name for p in out.iterdir()}
+    assert {"albedo_openpbr.mtlx", "albedo_openpbr.usda", "albedo_openpbr_subsurface_color.exr",
+            "albedo_k1_color.exr", "albedo_maps.json"} <= names
+    assert not any(i.filepath.endswith("_openpbr_base_color.exr") for i in bpy.data.images)  # not loaded in Blender
