@@ -224,6 +224,9 @@ class AddonBake:
 
     def __init__(self, context: bpy.types.Context, settings: BakeSettings) -> None:
         self.settings = settings
+        if settings.openpbr and settings.storage != "FILES":
+            raise BakeInputError("the OpenPBR, MaterialX and USD files are for other renderers, which read files: "
+                                 "choose Maps: Files (an output folder) to write them")
         self.scene = context.scene
         obj = context.object
         self.material = obj.active_material if obj is not None else None
@@ -246,9 +249,6 @@ class AddonBake:
                                   else (None, "off"))
         self.out_dir, self._temp_dir = self._output_folder()
         scale = scene_unit_scale(self.scene) if settings.unit_scale_m is None else float(settings.unit_scale_m)
-        if settings.openpbr and settings.storage != "FILES":
-            raise BakeInputError("the OpenPBR, MaterialX and USD files are for other renderers, which read files: "
-                                 "choose Maps: Files (an output folder) to write them")
         self.options = bake.BakeOptions(targets=("cycles", "openpbr") if settings.openpbr else ("cycles",),
                                         unit_scale_m=scale,
                                         threads=settings.threads, chunk=settings.chunk,

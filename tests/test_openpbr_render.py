@@ -17,6 +17,7 @@ that is checked to stay below 3x, so a regression shows.
 from __future__ import annotations
 
 import sys
+import tempfile
 from pathlib import Path
 
 import bpy
@@ -108,6 +109,7 @@ def test_addon_bake_mode_writes_the_openpbr_files(tmp_path):
         with pytest.raises(RuntimeError, match="Files") as info:
             run_invert(obj, storage="PACK", openpbr=True)
         assert "\n" not in str(info.value).strip()
+        assert not any(p.name.startswith("spectral_skin_sss_") for p in Path(tempfile.gettempdir()).iterdir())
         out = tmp_path / "maps"
         assert run_invert(obj, storage="FILES", output_dir=str(out), openpbr=True) == {"FINISHED"}
     finally:
