@@ -9,6 +9,9 @@ model's K components (arrays in a dict, float64 unless said otherwise):
 * ``alpha`` (N, K, 3) single-scattering albedo, ``sigma_t_cm`` (N, K, 3) in cm^-1 — with ``weight`` and
   ``anisotropy`` the ``physical`` target;
 * ``biophysical`` (N, 5) and ``exposure`` (N,) — the ``spectral`` target;
+* for the ``openpbr`` target, the single medium made from ``weight``, ``alpha``, ``sigma_t_cm`` and ``anisotropy``
+  (:func:`add_single_medium`, exporters.openpbr): ``pbr_base_color``, ``pbr_subsurface_color`` (N, 3),
+  ``pbr_radius`` (N,) in scene units, ``pbr_radius_scale`` (N, 3), ``pbr_anisotropy`` and ``pbr_weight`` (N,);
 * ``max_share`` (N, K): each component's largest share of the rendered colour over the three channels,
   w_kc R_cycles(alpha_kc, g_k) / sum_j w_jc R_cycles(alpha_jc, g_j) (components below a small share
   everywhere are dropped from a bake);
@@ -69,7 +72,7 @@ class CollapseOptions:
 
 
 def needs_media(targets: tuple[str, ...]) -> bool:
-    """Whether ``targets`` need the collapse (cycles or physical maps)."""
+    """Whether ``targets`` need the collapse (cycles, physical or openpbr maps)."""
     return any(t in MEDIA_TARGETS for t in targets)
 
 
