@@ -26,7 +26,7 @@ $(STAMP): pyproject.toml
 	$(PY) -m pip install -q --upgrade pip
 	# CPU build of torch only (a local wheel on these machines); never the CUDA wheels.
 	$(PY) -m pip install -q "torch==2.13.0+cpu"
-	$(PY) -m pip install -q -e ".[training,blender,test,cluster]"
+	$(PY) -m pip install -q -e ".[training,blender,test,cluster,openpbr]"
 	touch $(STAMP)
 
 # Mitsuba 3 (the validation renderer): the pinned `mitsuba` extra, and libLLVM 19 for its llvm_ad_* variants

@@ -1,6 +1,6 @@
 """Bake an RGB skin albedo texture into spectral-skin subsurface maps (docs/contracts.md §4), headless.
 
-    python blender_addon/bake.py --albedo IMAGE --out DIR [--target cycles,physical,spectral]
+    python blender_addon/bake.py --albedo IMAGE --out DIR [--target cycles,physical,spectral,openpbr]
         [--colorspace auto|srgb|linear] [--unit-scale M_PER_UNIT] [--overwrite] [--model PATH] [--threads N]
         [--model-colour] [--exact] [--table PATH] [--force] [--uv-mask IMAGE] [--prune-share S]
         [--exr-compression piz|zip|...] [--float-maps]
@@ -110,8 +110,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--albedo", required=True, help="albedo image (PNG/TIFF 8 or 16 bit, EXR, ...); a UDIM image as "
                                                    "its tiles' pattern, e.g. skin.<UDIM>.png: every tile is baked")
     p.add_argument("--out", required=True, help="output folder (created if missing)")
-    p.add_argument("--target", default="cycles", help="comma-separated subset of cycles,physical,spectral "
-                                                      "(default cycles)")
+    p.add_argument("--target", default="cycles", help="comma-separated subset of cycles,physical,spectral,openpbr "
+                                                      "(default cycles; openpbr: OpenPBR maps, a MaterialX "
+                                                      "document and a USD layer, docs/user/other_renderers.md)")
     p.add_argument("--colorspace", default="auto", choices=image_input.COLORSPACES,
                    help="how the image is encoded; auto: sRGB unless the file says linear or stores floats")
     p.add_argument("--unit-scale", type=float, default=defaults.unit_scale_m, metavar="M_PER_UNIT",
@@ -204,10 +205,13 @@ def main(argv: list[str] | None = None) -> int:
         # one bake per folder; a read-only folder can only hold a finished bake (reused) or fail its checks
         lock = cli_io.output_lock(out, "--out") if os.access(out, os.W_OK) else contextlib.nullcontext()
         with lock:
-            for albedo in _albedo_files(args.albedo, args.uv_mask, image_input):
+            albedos = _albedo_files(args.albedo, args.uv_mask, image_input)
+            for i, albedo in enumerate(albedos):
                 if not args.quiet and albedo != args.albedo:
                     print(f"bake.py: tile {Path(albedo).name}", flush=True)
-                results.append(bake.bake(albedo, out, args.model, options, colorspace=args.colorspace,
+                tile_options = options if albedo == args.albedo else bake.udim_tile_options(
+                    options, args.albedo, last=i == len(albedos) - 1)
+                results.append(bake.bake(albedo, out, args.model, tile_options, colorspace=args.colorspace,
                                          progress=progress))
                 last[0] = 0.0
     except bad_input as exc:

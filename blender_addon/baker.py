@@ -49,7 +49,8 @@ class BakeSettings:
     the maps render the model's own reflectance instead of the painted albedo.  ``exact``: every distinct colour through
     the model instead of the fast-path table; ``uv_coverage``: evaluate only the texels the active mesh's UVs
     cover (the others take the maps of the most common covered colour); ``unit_scale_m``: metres per Blender
-    unit for the radii (None: the scene's, :func:`scene_unit_scale`)."""
+    unit for the radii (None: the scene's, :func:`scene_unit_scale`); ``openpbr``: also the OpenPBR maps, MaterialX
+    document and USD layer of ``--target openpbr`` (storage "FILES" only: other renderers read files)."""
 
     model_path: str
     filepath: str = ""
@@ -65,6 +66,7 @@ class BakeSettings:
     exact: bool = False
     uv_coverage: bool = True
     unit_scale_m: float | None = None
+    openpbr: bool = False
 
 
 def scene_unit_scale(scene: bpy.types.Scene) -> float:
@@ -219,6 +221,9 @@ class AddonBake:
 
     def __init__(self, context: bpy.types.Context, settings: BakeSettings) -> None:
         self.settings = settings
+        if settings.openpbr and settings.storage != "FILES":
+            raise BakeInputError("the OpenPBR, MaterialX and USD files are for other renderers, which read files: "
+                                 "choose Maps: Files (an output folder) to write them")
         self.scene = context.scene
         obj = context.object
         self.material = obj.active_material if obj is not None else None
@@ -241,7 +246,8 @@ class AddonBake:
                                   else (None, "off"))
         self.out_dir, self._temp_dir = self._output_folder()
         scale = scene_unit_scale(self.scene) if settings.unit_scale_m is None else float(settings.unit_scale_m)
-        self.options = bake.BakeOptions(targets=("cycles",), unit_scale_m=scale,
+        self.options = bake.BakeOptions(targets=("cycles", "openpbr") if settings.openpbr else ("cycles",),
+                                        unit_scale_m=scale,
                                         threads=settings.threads, chunk=settings.chunk,
                                         model_colour=settings.model_colour, overwrite=settings.overwrite,
                                         exact=settings.exact, texel_mask=mask,
@@ -426,6 +432,8 @@ class AddonBake:
         images = {}
         k_count = self.result.k
         for spec in self.job.specs or bake.map_specs(self.stem, k_count, ("cycles",)):
+            if spec.target == "openpbr":  # files for other renderers (the report names the folder)
+                continue
             path = str(self.out_dir / spec.name)
             name = self._tile_pattern(spec.name)
             if self.settings.storage == "PACK":

@@ -74,6 +74,10 @@ class SPECTRAL_SKIN_OT_invert_albedo(bpy.types.Operator):
     colorspace: bpy.props.EnumProperty(name="Colour space", items=_COLORSPACES, default="FROM_IMAGE")
     backend: bpy.props.EnumProperty(name="Shading", items=_BACKENDS, default="SVM")
     overwrite: bpy.props.BoolProperty(name="Overwrite files", default=False)
+    openpbr: bpy.props.BoolProperty(
+        name="OpenPBR, MaterialX and USD", default=False,
+        description="Bake maps mode, maps as files: also write the OpenPBR maps, a MaterialX document and a USD "
+                    "layer for other renderers (needs the materialx and usd-core packages in Blender's Python)")
     model_colour: bpy.props.BoolProperty(
         name="Model's own colour", default=False, description=MODEL_COLOUR_HELP)
     #: Scripts written before the painted colour became the default passed match_exposure=True (the painted
@@ -101,13 +105,14 @@ class SPECTRAL_SKIN_OT_invert_albedo(bpy.types.Operator):
                                   image_name=self.image_name, storage=self.storage, output_dir=self.output_dir,
                                   colorspace=self.colorspace, backend=self.backend, overwrite=self.overwrite,
                                   model_colour=self.model_colour, threads=preferences.threads(context),
-                                  exact=self.exact, uv_coverage=self.uv_coverage,
+                                  exact=self.exact, uv_coverage=self.uv_coverage, openpbr=self.openpbr,
                                   unit_scale_m=baker.scene_unit_scale(context.scene))
 
     def _live(self, context):
         """The live group (mode LIVE): options that only a bake can honour are refused, not ignored."""
         refused = [("an albedo file", self.filepath), ("an image", self.image_name),
-                   ("the model's own colour", self.model_colour), ("OSL", self.backend == "OSL")]
+                   ("the model's own colour", self.model_colour), ("OSL", self.backend == "OSL"),
+                   ("OpenPBR files", self.openpbr)]
         asked = [what for what, value in refused if value]
         if asked:
             self.report({"ERROR"}, f"the live group reads the colour that feeds the Principled BSDF and runs as SVM "

@@ -59,10 +59,11 @@ class TiledJob:
         """``read(path, colorspace)``: how a tile's file is read (default exporters.image_input.read_albedo_indexed)."""
         read = read or (lambda path, colorspace: image_input.read_albedo_indexed(path, colorspace=colorspace))
         self.jobs = []
-        for number, path in albedo.tiles:
+        for i, (number, path) in enumerate(albedo.tiles):
             image = read(path, albedo.colorspace)
             stem = image_input.udim_tile_stem(albedo.pattern, number)
-            self.jobs.append(bake.BakeJob(image, out_dir, stem, model, options, input_image=path,
+            tile_options = bake.udim_tile_options(options, albedo.pattern, last=i == len(albedo.tiles) - 1)
+            self.jobs.append(bake.BakeJob(image, out_dir, stem, model, tile_options, input_image=path,
                                           image_id=bake.file_id(path, albedo.colorspace)))
         self.key = hashlib.sha256(" ".join(job.key for job in self.jobs).encode()).hexdigest()
 

@@ -87,6 +87,12 @@ def _publish(tmp: Path, final: Path, overwrite: bool) -> None:
             tmp.unlink()
 
 
+def publish_file(tmp: str | os.PathLike, final: str | os.PathLike, overwrite: bool = False) -> None:
+    """Move a finished temporary file (in the folder of ``final``) into place, as the maps are published: an existing
+    ``final`` is FileExistsError unless ``overwrite``; the temporary file is gone afterwards either way."""
+    _publish(Path(tmp), Path(final), overwrite)
+
+
 def _refuse_existing(path: Path, overwrite: bool) -> None:
     if path.exists() and not overwrite:
         raise FileExistsError(f"{path} exists; pass overwrite=True (--overwrite) to replace it")

@@ -9,6 +9,9 @@ model's K components (arrays in a dict, float64 unless said otherwise):
 * ``alpha`` (N, K, 3) single-scattering albedo, ``sigma_t_cm`` (N, K, 3) in cm^-1 — with ``weight`` and
   ``anisotropy`` the ``physical`` target;
 * ``biophysical`` (N, 5) and ``exposure`` (N,) — the ``spectral`` target;
+* for the ``openpbr`` target, the single medium made from ``weight``, ``alpha``, ``sigma_t_cm`` and ``anisotropy``
+  (:func:`add_single_medium`, exporters.openpbr): ``pbr_base_color``, ``pbr_subsurface_color`` (N, 3),
+  ``pbr_radius`` (N,) in scene units, ``pbr_radius_scale`` (N, 3), ``pbr_anisotropy`` and ``pbr_weight`` (N,);
 * ``max_share`` (N, K): each component's largest share of the rendered colour over the three channels,
   w_kc R_cycles(alpha_kc, g_k) / sum_j w_jc R_cycles(alpha_jc, g_j) (components below a small share
   everywhere are dropped from a bake);
@@ -30,10 +33,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import collapse, cycles, reflectance_tables
+from . import collapse, cycles, openpbr, reflectance_tables
 from .colorimetry import SRGB_LUMINANCE
 
-MEDIA_TARGETS = ("cycles", "physical")
+MEDIA_TARGETS = ("cycles", "physical", "openpbr")
 COUNT_FIELDS = ("n_low", "n_high", "n_unreachable", "n_capped")
 #: Stats keys of S_maps.json for each count field (texel x component x channel events, summed over texels).
 STAT_NAMES = {"n_low": "alpha_raised_to_floor", "n_high": "weight_raised", "n_unreachable": "unreachable_channels",
@@ -69,7 +72,7 @@ class CollapseOptions:
 
 
 def needs_media(targets: tuple[str, ...]) -> bool:
-    """Whether ``targets`` need the collapse (cycles or physical maps)."""
+    """Whether ``targets`` need the collapse (cycles, physical or openpbr maps)."""
     return any(t in MEDIA_TARGETS for t in targets)
 
 
@@ -165,8 +168,30 @@ def map_values(kind: str, k: int, rec: dict[str, np.ndarray], unit_scale_m: floa
     if kind in ("g", "anisotropy"):
         g = rec["anisotropy"][:, i, None]
         return (np.repeat(g, 3, axis=1) if kind == "g" else g).astype(np.float32)
+    if kind in OPENPBR_FIELDS:
+        return rec[OPENPBR_FIELDS[kind]].reshape(len(rec[OPENPBR_FIELDS[kind]]), -1).astype(np.float32)
     field = {"color": "color", "weight": "weight", "alpha": "alpha", "sigma_t": "sigma_t_cm"}[kind]
     return rec[field][:, i].astype(np.float32)
+
+
+#: Record fields of the single medium (``--target openpbr``, :func:`add_single_medium`) per map kind.
+OPENPBR_FIELDS = {"openpbr_base_color": "pbr_base_color", "openpbr_subsurface_color": "pbr_subsurface_color",
+                  "openpbr_subsurface_radius": "pbr_radius", "openpbr_subsurface_radius_scale": "pbr_radius_scale",
+                  "openpbr_subsurface_anisotropy": "pbr_anisotropy", "openpbr_subsurface_weight": "pbr_weight"}
+
+
+def add_single_medium(rec: dict[str, np.ndarray], ior: float, unit_scale_m: float) -> None:
+    """Add the single medium of each texel's media (exporters.openpbr) to ``rec`` (which needs ``weight``,
+    ``alpha``, ``sigma_t_cm`` and ``anisotropy``): the fields of OPENPBR_FIELDS, the radius in scene units of
+    ``unit_scale_m`` metres (the largest channel's mean free path) and the scale per channel (<= 1)."""
+    if "pbr_base_color" in rec:
+        return
+    medium = openpbr.single_medium(rec["weight"], rec["alpha"], rec["sigma_t_cm"], rec["anisotropy"], ior)
+    mfp = medium.mean_free_path(unit_scale_m)
+    radius = mfp.max(axis=1) if len(mfp) else np.zeros(0)
+    rec.update(pbr_base_color=medium.base_color, pbr_subsurface_color=medium.subsurface_color,
+               pbr_radius=radius, pbr_radius_scale=mfp / np.maximum(radius, 1e-300)[:, None],
+               pbr_anisotropy=medium.anisotropy, pbr_weight=medium.weight)
 
 
 def count_stats(rec: dict[str, np.ndarray], counts: np.ndarray, targets: tuple[str, ...] = ()) -> dict[str, int]:

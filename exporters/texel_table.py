@@ -219,7 +219,7 @@ class TexelTable:
                    max_share=share, unreachable=unreachable, n_unreachable=unreachable.sum(axis=1).astype(np.int64))
         for name in ("n_low", "n_high", "n_capped"):
             rec[name] = np.rint(values[:, col[name]]).astype(np.int64)
-        if "physical" in targets:
+        if "physical" in targets or "openpbr" in targets:
             rec["alpha"] = cycles.rw_albedo_forward(color, g[..., None])
             rec["sigma_t_cm"] = 4.0 * np.pi / (radius_m * (1.0 - g[..., None]) * cycles.CM_PER_M)
         return rec

@@ -33,6 +33,7 @@ LAYERS: tuple[str, ...] = (
     "training.validate",
     "training.ablations",
     "training.demo_render",
+    "training.openpbr_check",
     "training.bench",
     "training.commands",
     "training.__main__",

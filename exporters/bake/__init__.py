@@ -37,6 +37,7 @@ progress bar; :func:`bake` runs it to the end.  What to ask for: :class:`BakeOpt
 """
 
 from .job import BakeJob, bake
+from .material_files import udim_tile_options
 from .options import DEFAULT_BAND_TEXELS, DEFAULT_PRUNE_SHARE, FAST_MANTISSA_BITS, BakeOptions
 from .report import BakeResult, input_notes, one_line
 from .reuse import KEY_VERSION, bake_key, file_id, find_up_to_date, job_key, mask_sha256, pixels_id
@@ -46,4 +47,5 @@ from .targets import HALF_KINDS, TARGETS, UNITS, BakeError, MapSpec, map_specs, 
 __all__ = ["DEFAULT_BAND_TEXELS", "DEFAULT_PRUNE_SHARE", "FAST_MANTISSA_BITS", "HALF_KINDS", "KEY_VERSION", "TARGETS",
            "UNITS", "BakeError", "BakeJob", "BakeOptions", "BakeResult", "MapSpec", "bake", "bake_key",
            "cached_table_path", "default_table_path", "file_id", "find_table", "find_up_to_date", "input_notes",
-           "job_key", "map_specs", "mask_sha256", "one_line", "parse_targets", "pixels_id", "table_cache_dir"]
+           "job_key", "map_specs", "mask_sha256", "one_line", "parse_targets", "pixels_id", "table_cache_dir",
+           "udim_tile_options"]

@@ -114,6 +114,8 @@ class Evaluator:
                mantissa_bits: int) -> dict[str, np.ndarray]:
         """Map rows (n, channels) float32 of ``specs`` from records, rounded to ``mantissa_bits``."""
         out = {}
+        if any(spec.target == "openpbr" for spec in specs):
+            texel_records.add_single_medium(rec, self.options.ior, unit_scale_m)
         for spec in specs:
             try:
                 v = texel_records.map_values(spec.kind, spec.source_k or spec.k, rec, unit_scale_m)

@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import image_input, inference, maps, texel_records
-from . import masking, report, reuse
+from . import masking, material_files, report, reuse
 from .evaluate import Evaluator
 from .options import FAST_MANTISSA_BITS, BakeOptions
 from .report import BakeResult
@@ -72,6 +72,8 @@ class BakeJob:
 
     def _set_up(self, image: image_input.IndexedAlbedo) -> None:
         opts = self.options
+        if self.writes_material:
+            material_files.require()  # before any work: a Python without the libraries says so in one line
         uncovered = 0
         if opts.texel_mask is not None:
             self.palette, self.index, uncovered = masking.apply_mask(image, np.asarray(opts.texel_mask, bool))
@@ -120,11 +122,24 @@ class BakeJob:
     def _check_folder(self) -> None:
         maps.check_output_folder(self.out_dir)
         if not self.options.overwrite:
-            names = [s.name for s in self.specs] + [f"{self.stem}_maps.json"]
+            names = [s.name for s in self.specs] + [f"{self.stem}_maps.json"] + self.material_names
             taken = [n for n in names if (self.out_dir / n).exists()]
             if taken:
                 raise BakeError(f"{len(taken)} file(s) exist in {self.out_dir} (e.g. {taken[0]}) from another bake; "
                                 "choose another folder or allow overwriting (--overwrite)")
+
+    @property
+    def writes_material(self) -> bool:
+        """Whether this bake writes the openpbr target's MaterialX and USD files."""
+        return "openpbr" in self.targets and self.options.write_material
+
+    @property
+    def material_names(self) -> list[str]:
+        """File names of the material files this bake writes (none without them)."""
+        if not self.writes_material:
+            return []
+        names = material_files.material_names(self.options.material_stem or self.stem)
+        return [names.mtlx, names.usda]
 
     @property
     def json_path(self) -> Path:
@@ -283,6 +298,13 @@ class BakeJob:
             files = maps.publish_maps(self._streams)
         finally:
             self._done = True
+        try:
+            files += self._write_material()
+        except BaseException:
+            for f in files:
+                if not self.options.overwrite:
+                    f.unlink(missing_ok=True)
+            raise
         self.timings["write"] += time.perf_counter() - t0
         timings = {**self.timings, **(extra_timings or {})}
         self.stats.update(self.evaluator.stats)
@@ -298,6 +320,16 @@ class BakeJob:
         return BakeResult(out_dir=self.out_dir, stem=self.stem, files=files, json_path=json_path, k=self.k,
                           notes=list(self.notes), stats=dict(self.stats), timings_s=timings,
                           components=list(self.components))
+
+
+    def _write_material(self) -> list[Path]:
+        """The openpbr target's MaterialX document and USD layer (exporters.bake.material_files), or nothing."""
+        if not self.writes_material:
+            return []
+        opts = self.options
+        return material_files.write_material(self.out_dir, self.specs, opts.material_stem or self.stem,
+                                             opts.unit_scale_m, opts.overwrite, ior=opts.ior,
+                                             map_stem=opts.material_maps_stem)
 
 
 def _as_written(values: dict[str, np.ndarray], pixel_types: dict[str, str]) -> dict[str, np.ndarray]:

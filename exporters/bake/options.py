@@ -43,7 +43,12 @@ class BakeOptions:
     faster to compress — and all 23 for exact bakes); ``half_maps``: the maps of ``HALF_KINDS`` stored as
     half floats, and the radius maps too when every radius lies in half's normal range (None: on the fast
     path, not with ``exact``); ``cache_min_colours``: distinct colours from which a
-    bake without a usable table builds one (grid step ``cache_step``) into the user cache."""
+    bake without a usable table builds one (grid step ``cache_step``) into the user cache.
+
+    ``--target openpbr``: ``material_stem`` names its material files (``<stem>_openpbr.mtlx`` / ``.usda``; None: the
+    image's stem) and ``material_maps_stem`` the maps they read (None: this bake's; a UDIM set's last tile passes the
+    set's ``skin.<UDIM>`` so that one material reads every tile); ``write_material`` False leaves them out (the
+    other tiles of a UDIM set)."""
 
     targets: tuple[str, ...] = ("cycles",)
     unit_scale_m: float = 1.0
@@ -66,6 +71,9 @@ class BakeOptions:
     half_maps: bool | None = None
     cache_min_colours: int = 50_000  # building evaluates ~34,000 grid nodes: it pays off from ~1.5x that
     cache_step: float = texel_table.DEFAULT_STEP
+    write_material: bool = True
+    material_stem: str | None = None
+    material_maps_stem: str | None = None
 
     def collapse_options(self) -> CollapseOptions:
         return CollapseOptions(colour="model" if self.model_colour else "painted", ior=float(self.ior),

@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .. import collapse, maps, painted
+from .. import collapse, maps, openpbr, painted
 from ..cli_io import one_line  # noqa: F401 - re-exported (exporters.bake.one_line)
 from ..image_input import AlbedoImage, IndexedAlbedo
 from ..texel_records import CLAMPED_CYCLES, CLAMPED_SPECTRAL, needs_media
@@ -96,6 +96,10 @@ def write_record(job: BakeJob, timings: dict[str, float], files: list[Path], fil
     colour = opts.collapse_options().colour
     listed = {s.name: {"units": units_of(s, opts.unit_scale_m), "channels": list(s.channels), "target": s.target,
                        "component": s.k or None, "kind": s.kind, "colorspace": "Non-Color"} for s in job.specs}
+    for name in job.material_names:
+        listed[name] = {"target": "openpbr", "kind": "materialx" if name.endswith(".mtlx") else "usd",
+                        "units": f"scene units of {opts.unit_scale_m:g} m", "channels": [],
+                        "reads": "the openpbr maps by relative paths"}
     extra = {
         "image_size": [job.width, job.height],
         "targets": list(job.targets),
@@ -122,6 +126,11 @@ def write_record(job: BakeJob, timings: dict[str, float], files: list[Path], fil
                          "alpha_min": "face-on albedo alpha*(g) (exporters.collapse.face_on_albedo)"
                          if colour == "painted" else collapse.ALPHA_MIN,
                          "ior": float(opts.ior), "min_mean_free_path_m": float(opts.min_mfp_m)}
+    if "openpbr" in job.targets:
+        extra["openpbr"] = {"method": "exporters.openpbr (one medium per texel: the mixture's colour face-on, its "
+                                      "light-weighted diffusion length per channel)",
+                            "specular_ior": float(opts.ior), "cycles_subsurface_scale": openpbr.CYCLES_RADIUS_SCALE,
+                            "material_files": job.material_names}
     sha = {job.model.path.name: job.model.sha256}
     return maps.write_maps_json(job.json_path, listed, job.k, sha, job.input_image, job.albedo_colorspace, timings,
                                 unit_scale_m=opts.unit_scale_m, overwrite=opts.overwrite, extra=extra)

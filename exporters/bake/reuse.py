@@ -33,6 +33,8 @@ def bake_key(image_id: str, model_sha256: str, stem: str, options: BakeOptions, 
             **options.collapse_options().as_dict(), "exact": bool(options.exact),
             "prune_share": float(options.prune_share), "uv_mask": mask_sha256, "compression": options.compression,
             "mantissa_bits": options.mantissa_bits, "half_maps": options.half_maps}
+    if "openpbr" in spec["targets"]:
+        spec["material"] = [options.write_material, options.material_stem, options.material_maps_stem]
     return hashlib.sha256(json.dumps(spec, sort_keys=True).encode()).hexdigest()
 
 

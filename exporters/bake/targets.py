@@ -6,7 +6,7 @@ from dataclasses import dataclass
 
 from .. import maps
 
-TARGETS: tuple[str, ...] = ("cycles", "physical", "spectral")
+TARGETS: tuple[str, ...] = ("cycles", "physical", "spectral", "openpbr")
 #: Units strings stored in each EXR header and in S_maps.json.
 UNITS = {
     "color": "1 (Cycles Subsurface Color, RANDOM_WALK)",
@@ -17,6 +17,21 @@ UNITS = {
     "sigma_t": "cm^-1",
     "g": "1 (Henyey-Greenstein g)",
     "biophysical": "f_mel 1, f_blood 1, t_epi cm, so2 1, b_mel 1, exposure 1",
+    "openpbr_base_color": "1 (OpenPBR base_color: the colour the mixture renders, linear Rec.709)",
+    "openpbr_subsurface_color": "1 (OpenPBR subsurface_color, linear Rec.709)",
+    "openpbr_subsurface_radius": "scene units (OpenPBR subsurface_radius: the largest channel's mean free path)",
+    "openpbr_subsurface_radius_scale": "1 (OpenPBR subsurface_radius_scale: mean free path / subsurface_radius)",
+    "openpbr_subsurface_anisotropy": "1 (OpenPBR subsurface_scatter_anisotropy, Henyey-Greenstein g)",
+    "openpbr_subsurface_weight": "1 (OpenPBR subsurface_weight)",
+}
+#: The maps of ``--target openpbr`` (one medium per texel, exporters.openpbr): kind -> channels.
+OPENPBR_KINDS: dict[str, tuple[str, ...]] = {
+    "openpbr_base_color": maps.RGB_CHANNELS,
+    "openpbr_subsurface_color": maps.RGB_CHANNELS,
+    "openpbr_subsurface_radius": maps.SINGLE_CHANNEL,
+    "openpbr_subsurface_radius_scale": maps.RGB_CHANNELS,
+    "openpbr_subsurface_anisotropy": maps.SINGLE_CHANNEL,
+    "openpbr_subsurface_weight": maps.SINGLE_CHANNEL,
 }
 #: Cycles map kinds bounded to [-1, 1] (colour, weights, anisotropy): the fast path stores them as half floats
 #: (BakeOptions.half_maps).  Their rounding (<= 2.4e-4 below 1) is a tenth of the table's interpolation error in
@@ -67,6 +82,10 @@ def map_specs(stem: str, k_count: int, targets: tuple[str, ...],
             specs[f"{stem}_biophysical.exr"] = MapSpec(f"{stem}_biophysical.exr", "biophysical", 0,
                                                        maps.BIOPHYSICAL_CHANNELS, target)
             continue
+        if target == "openpbr":
+            for kind, channels in OPENPBR_KINDS.items():
+                specs[f"{stem}_{kind}.exr"] = MapSpec(f"{stem}_{kind}.exr", kind, 0, channels, target)
+            continue
         kinds = (("color", rgb), ("radius", rgb), ("weight", rgb), ("anisotropy", one)) if target == "cycles" else \
             (("alpha", rgb), ("sigma_t", rgb), ("g", rgb), ("weight", rgb))
         for k, source in enumerate(kept, start=1):
@@ -80,4 +99,6 @@ def units_of(spec: MapSpec, unit_scale_m: float) -> str:
     """The units string of a map (radii name the Blender unit's length)."""
     if spec.kind == "radius":
         return f"{UNITS['radius']}; 1 BU = {unit_scale_m:g} m"
+    if spec.kind == "openpbr_subsurface_radius":
+        return f"{UNITS[spec.kind]}; 1 unit = {unit_scale_m:g} m"
     return UNITS[spec.kind]

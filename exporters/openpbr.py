@@ -1,0 +1,240 @@
+"""One homogeneous medium per texel for OpenPBR Surface (``--target openpbr``): the K-media mixture collapsed once more.
+
+OpenPBR Surface 1.1 (and Blender's Principled BSDF, Arnold's standard_surface, RenderMan's PxrSurface) holds ONE
+subsurface medium per point: a colour (the multiple-scattering albedo the surface shows), a mean free path per
+channel, one anisotropy and a weight.  The bake's records (exporters.texel_records) hold, per channel c, the K media
+Cycles walks (alpha_kc, sigma_t,kc, g_k) and their weights w_kc (exporters.collapse).  This module turns them into
+the one medium that reproduces the mixture best, per texel and channel:
+
+1. **Colour, exactly.**  The mixture renders T_c = sum_k w_kc R_cycles(alpha_kc, g_k) (the painted colour, or the
+   model's with ``--model-colour``; exporters.collapse step 4).  ``base_color`` is T_c.  ``subsurface_color`` is the
+   colour whose random walk, under OpenPBR's dielectric specular layer, renders T_c seen straight above under a
+   uniform white world (the artist's check): the walk's albedo alpha_c solves
+   (1 - F0(ior)) R1(alpha_c, g; mu = 1) = T_c, R1 the directional reflectance of Cycles' walk along the normal
+   (exporters.reflectance_tables.normal_reflectance) and 1 - F0 the light the specular layer lets through face-on;
+   then ``subsurface_color`` = f^-1(alpha_c; g), the inverse of the albedo mapping Cycles (Chiang et al. 2016,
+   the fit OpenPBR renderers share) applies to a subsurface colour (exporters.cycles.rw_albedo_inverse).
+2. **Anisotropy.**  The light-weighted mean of g_k over components and channels (0 for the bake's media:
+   exporters.collapse step 5), clipped to [0, 0.7] (the largest g Cycles walks accurately).
+3. **Translucency, as close as one medium can.**  A component's light spreads over its diffusion length
+   D_kc = 1 / sigma_tr,kc, sigma_tr = sigma_t sqrt(3 (1 - alpha)(1 - alpha g)).  One medium has one D per channel,
+   and two things a viewer sees depend on it: how far light bleeds sideways (across a shadow edge: about the
+   light-weighted mean sum_k s_kc D_kc, s_kc = w_kc R_cycles(alpha_kc, g_k) / T_c the component's share of the
+   channel's light) and how much light passes through a thin part (a back-lit ear: in the diffusion approximation
+   a(alpha) exp(-L / D) through a thickness L, with a(alpha) = alpha (1 - alpha) the share of the light that
+   enters, diffuses and leaves the other side: :func:`transmission_amplitude`).  The single medium's albedo is set
+   by the colour (step 1) and is lower than the components' (their weights below 1 absorb the rest), so with the
+   mean D it lets more light through an ear (medium skin on the demo head: red +18 %, green +170 %, blue +220 %,
+   training.openpbr_check).  D_c is therefore the one whose transmission through :data:`THIN_MM` (3 mm, an ear or a
+   nostril wing) equals the mixture's, a(alpha_c) exp(-L / D_c) = sum_k w_kc a(alpha_kc) exp(-L / D_kc) (in
+   log space), kept between the smallest and largest D_kc of the components carrying at least 1 % of the light
+   and between 0.85 (:data:`BLEED_TOLERANCE`) and 1 times the light-weighted mean, so that the sideways bleed changes
+   little (dark skin, whose light barely crosses 3 mm, sits at the mean).  Thinner parts
+   (an ear's rim) still pass more green and blue than the mixture: docs/user/other_renderers.md.  Its extinction
+   follows from its own albedo, sigma_t,c = 1 / (D_c sqrt(3 (1 - alpha_c)(1 - alpha_c g))), and
+   ``mean_free_path`` = 1 / sigma_t,c (OpenPBR's subsurface_radius x subsurface_radius_scale, in scene units after
+   ``unit_scale_m``), at least exporters.collapse.MIN_MFP_CM.  What one medium cannot keep: the mixture's profile
+   is a sum of K exponentials (a sharp core and a long tail), one exponential cannot be both
+   (docs/user/other_renderers.md has the numbers for the representative tones: :func:`fidelity`).
+4. **Weight.**  ``subsurface_weight`` 1 everywhere: skin is all subsurface (the mixture's weights below 1 are the
+   absorbed share, already in the colour).
+
+Renderers differ in what a "radius" is: OpenPBR's is the extinction mean free path 1 / sigma_t; Cycles' Principled
+BSDF walks sigma_t = 4 pi / (Radius x Scale x (1 - g)) (exporters.cycles.RADIUS_TO_D), so OpenPBR's radius renders
+in Cycles with Subsurface Scale = :data:`CYCLES_RADIUS_SCALE` (4 pi).  All arrays float64; finite in, finite out.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import cache
+
+import numpy as np
+
+from . import collapse, cycles, reflectance_tables
+
+#: Index of refraction of the specular layer (OpenPBR specular_ior) and of the walk's entry: the tissue's.
+SPECULAR_IOR: float = reflectance_tables.CYCLES_IOR
+#: Subsurface Scale that makes Cycles' Principled BSDF walk OpenPBR's mean free path: Cycles divides Radius x Scale
+#: by 4 pi (closure/bssrdf.h bssrdf_setup_radius, exporters.cycles.RADIUS_TO_D) before taking sigma_t = 1 / d.
+CYCLES_RADIUS_SCALE: float = 4.0 * np.pi
+#: Thickness (mm) through which the single medium transmits what the mixture transmits (step 3 of the module
+#: docstring): a human ear's helix and a nostril wing are 2-4 mm thick.
+THIN_MM: float = 3.0
+#: Largest relative shortening of the diffusion length from the mixture's light-weighted mean (step 3); it never
+#: grows beyond that mean.  Dark skin, whose light barely crosses 3 mm, would otherwise take its longest component's
+#: D and bleed 2-4x wider; and at the same D the single medium's lower albedo already bleeds a little wider than the
+#: mixture (measured on the shadow edge of training.openpbr_check, dark skin: +23 % green, +37 % blue at 1.07-1.15x
+#: the mean D; -4 % and -9 % at 0.85x).
+BLEED_TOLERANCE: float = 0.15
+#: Smallest share of a channel's light a component needs to bound the single medium's diffusion length.
+SHARE_MIN: float = 0.01
+#: The albedo grid on which R1(alpha; mu = 1) is inverted (dense near 1, where skin's albedos lie).
+_N_ALBEDO = 4097
+
+
+@dataclass(frozen=True)
+class SingleMedium:
+    """One medium per texel (N) and channel (3).
+
+    ``base_color`` (N, 3) the colour the mixture renders (linear sRGB); ``subsurface_color`` (N, 3) OpenPBR's
+    subsurface_color (step 1 of the module docstring); ``alpha`` (N, 3) the walk's single-scattering albedo;
+    ``mean_free_path_cm`` (N, 3) 1 / sigma_t in cm; ``anisotropy`` (N,); ``weight`` (N,) subsurface_weight;
+    ``diffusion_length_cm`` (N, 3) D_c of the single medium (step 3); ``mean_diffusion_length_cm`` (N, 3) the
+    mixture's light-weighted mean D.
+    """
+
+    base_color: np.ndarray
+    subsurface_color: np.ndarray
+    alpha: np.ndarray
+    mean_free_path_cm: np.ndarray
+    anisotropy: np.ndarray
+    weight: np.ndarray
+    diffusion_length_cm: np.ndarray
+    mean_diffusion_length_cm: np.ndarray
+
+    def mean_free_path(self, unit_scale_m: float) -> np.ndarray:
+        """(N, 3) mean free path in scene units of ``unit_scale_m`` metres."""
+        return self.mean_free_path_cm / (cycles.CM_PER_M * float(unit_scale_m))
+
+
+def transmission_amplitude(alpha) -> np.ndarray:
+    """a(alpha) = alpha (1 - alpha): in the diffusion approximation the light a medium of albedo ``alpha`` passes
+    through a thickness L >> D is a(alpha) exp(-L / D) times factors that do not depend on the medium: alpha the
+    light scattered at all, and at each of the two boundaries the share that diffuses rather than escapes,
+    proportional to sigma_tr / sigma_t = sqrt(3 (1 - alpha)) (isotropic scattering; step 3)."""
+    al = np.clip(np.asarray(alpha, np.float64), 0.0, 1.0)
+    return al * (1.0 - al)
+
+
+def thin_diffusion_length_cm(weight, alpha, d_k_cm, alpha_single, thin_mm: float | None = None) -> np.ndarray:
+    """D (N, 3) in cm of a medium of albedo ``alpha_single`` (N, 3) that passes through ``thin_mm`` what the mixture
+    (``weight``, ``alpha``, diffusion lengths ``d_k_cm``: (N, K, 3)) passes, bounded by the D_kc of the components
+    carrying at least SHARE_MIN of the light (``weight`` > 0 where the bound applies; step 3)."""
+    thick = (THIN_MM if thin_mm is None else thin_mm) / 10.0
+    w, al, d_k = (np.asarray(x, np.float64) for x in (weight, alpha, d_k_cm))
+    log_terms = np.log(np.maximum(w * transmission_amplitude(al), 1e-300)) - thick / d_k
+    top = log_terms.max(axis=1)
+    log_mix = top + np.log(np.sum(np.exp(log_terms - top[:, None, :]), axis=1))
+    gap = np.log(np.maximum(transmission_amplitude(alpha_single), 1e-300)) - log_mix
+    return thick / np.maximum(gap, 1e-12)
+
+
+def diffusion_length_cm(alpha, sigma_t_cm, g) -> np.ndarray:
+    """D = 1 / (sigma_t sqrt(3 (1 - alpha)(1 - alpha g))) in cm (broadcast shapes); alpha is held below 1 - 1e-12."""
+    al = np.minimum(np.asarray(alpha, np.float64), 1.0 - 1e-12)
+    return 1.0 / (np.asarray(sigma_t_cm, np.float64) * np.sqrt(3.0 * (1.0 - al) * (1.0 - al * np.asarray(g))))
+
+
+@cache
+def _normal_curve(g: float) -> tuple[np.ndarray, np.ndarray]:
+    """(R1(alpha; mu = 1) increasing, alpha) on a grid dense near alpha = 1, for anisotropy ``g``."""
+    alpha = 1.0 - np.linspace(1.0, reflectance_tables.U_MIN, _N_ALBEDO) ** 2  # uniform in sqrt(1 - alpha)
+    r1 = reflectance_tables.normal_reflectance(alpha, np.full_like(alpha, g))
+    return np.maximum.accumulate(r1), alpha
+
+
+def face_on_albedo_for(colour: np.ndarray, g: float, ior: float = SPECULAR_IOR) -> np.ndarray:
+    """alpha (shape of ``colour``) whose walk renders ``colour`` straight above under the specular layer:
+    (1 - F0(ior)) R1(alpha, g; mu = 1) = colour (clipped to what the walk can show)."""
+    r1, alpha = _normal_curve(round(float(g), 6))
+    through = 1.0 - float(cycles.fresnel_dielectric(1.0, ior))
+    return np.interp(np.asarray(colour, np.float64) / through, r1, alpha)
+
+
+def single_medium(weight, alpha, sigma_t_cm, anisotropy, ior: float = SPECULAR_IOR) -> SingleMedium:
+    """The single medium (module docstring) of the bake's per-channel media: ``weight``, ``alpha``, ``sigma_t_cm``
+    (N, K, 3) and ``anisotropy`` (N, K), as exporters.texel_records holds them."""
+    w, al, st = (np.asarray(x, np.float64) for x in (weight, alpha, sigma_t_cm))
+    g = np.asarray(anisotropy, np.float64)
+    for name, x in (("weight", w), ("alpha", al), ("sigma_t_cm", st), ("anisotropy", g)):
+        if not np.all(np.isfinite(x)):
+            raise ValueError(f"{name}: NaN or infinite value(s)")
+    if w.ndim != 3 or w.shape[2] != 3 or al.shape != w.shape or st.shape != w.shape or g.shape != w.shape[:2]:
+        raise ValueError(f"need (N, K, 3) media and (N, K) anisotropy, got {w.shape}, {al.shape}, {st.shape}, "
+                         f"{g.shape}")
+    light = w * reflectance_tables.reflectance("cycles", al, g[..., None], ior)  # (N, K, 3)
+    target = light.sum(axis=1)
+    total = np.where(target > 0.0, target, 1.0)[:, None, :]
+    share = np.where(target[:, None, :] > 0.0, light / total, w / np.maximum(w.sum(axis=1, keepdims=True), 1e-30))
+    g_single = np.clip(np.einsum("nkc,nk->n", share, g) / 3.0, cycles.G_MIN, cycles.RECOMMENDED_G_MAX)
+    d_k = diffusion_length_cm(al, st, g[..., None])  # (N, K, 3)
+    d_mean = np.sum(share * d_k, axis=1)  # (N, 3)
+    carrying = share >= SHARE_MIN
+    d_lo = np.min(np.where(carrying, d_k, np.inf), axis=1)
+    d_hi = np.max(np.where(carrying, d_k, 0.0), axis=1)
+    d_lo, d_hi = np.where(np.isfinite(d_lo), d_lo, d_mean), np.where(d_hi > 0.0, d_hi, d_mean)
+    d_lo = np.maximum(np.minimum(d_lo, d_mean), (1.0 - BLEED_TOLERANCE) * d_mean)
+    d_hi = d_mean
+    base = np.clip(target, 0.0, 1.0)
+    alpha_s = np.empty_like(base)
+    for gv in np.unique(g_single):
+        rows = g_single == gv
+        alpha_s[rows] = face_on_albedo_for(base[rows], float(gv), ior)
+    alpha_s = np.clip(alpha_s, 0.0, reflectance_tables.ALPHA_TABLE_MAX)
+    colour = cycles.rw_albedo_inverse(alpha_s, g_single[:, None]).color
+    d_single = np.clip(thin_diffusion_length_cm(w, al, d_k, alpha_s), d_lo, d_hi)
+    sigma_t = 1.0 / (d_single * np.sqrt(3.0 * (1.0 - alpha_s) * (1.0 - alpha_s * g_single[:, None])))
+    mfp = np.maximum(1.0 / sigma_t, collapse.MIN_MFP_CM)
+    out = SingleMedium(base_color=base, subsurface_color=np.clip(colour, 0.0, 1.0), alpha=alpha_s,
+                       mean_free_path_cm=mfp, anisotropy=g_single, weight=np.ones(len(base)),
+                       diffusion_length_cm=d_single, mean_diffusion_length_cm=d_mean)
+    for name in ("base_color", "subsurface_color", "alpha", "mean_free_path_cm", "anisotropy"):
+        if not np.all(np.isfinite(getattr(out, name))):
+            raise RuntimeError(f"single medium: non-finite {name}")  # guarded above; never expected
+    return out
+
+
+@dataclass(frozen=True)
+class Fidelity:
+    """How far the single medium is from the mixture, per texel (N) and channel (3), in the diffusion model of step 3
+    (a medium of diffusion length D sends the fraction exp(-r / D) of its light beyond the distance r from where it
+    entered, and passes a(alpha) exp(-L / D) through a thickness L):
+
+    ``d_single_mm``, ``d_mean_mm`` (N, 3) the single medium's D and the mixture's light-weighted mean D;
+    ``d_lo_mm``, ``d_hi_mm`` (N, 3) the smallest and largest D of the components carrying >= 1 % of the light;
+    ``bleed`` (N, 3) d_single / d_mean (the sideways bleed, single over mixture: 1 is the same);
+    ``half_light`` (N, 3) the single medium's half-light radius over the mixture's;
+    ``thin`` (N, 3, len(thin_mm)) the light passed through each thickness of ``thin_mm``, single over mixture."""
+
+    d_single_mm: np.ndarray
+    d_mean_mm: np.ndarray
+    d_lo_mm: np.ndarray
+    d_hi_mm: np.ndarray
+    bleed: np.ndarray
+    half_light: np.ndarray
+    thin: np.ndarray
+    thin_mm: tuple[float, ...]
+
+
+def fidelity(weight, alpha, sigma_t_cm, anisotropy, ior: float = SPECULAR_IOR,
+             thin_mm: tuple[float, ...] = (1.0, THIN_MM, 6.0)) -> Fidelity:
+    """:class:`Fidelity` of the single medium of these media (arguments as :func:`single_medium`)."""
+    medium = single_medium(weight, alpha, sigma_t_cm, anisotropy, ior)
+    w, al, st = (np.asarray(x, np.float64) for x in (weight, alpha, sigma_t_cm))
+    g = np.asarray(anisotropy, np.float64)
+    light = w * reflectance_tables.reflectance("cycles", al, g[..., None], ior)
+    share = light / np.maximum(light.sum(axis=1, keepdims=True), 1e-30)
+    d_k = diffusion_length_cm(al, st, g[..., None]) * 10.0  # mm
+    d_s = medium.diffusion_length_cm * 10.0
+    carrying = share >= SHARE_MIN
+
+    def beyond(r: np.ndarray) -> np.ndarray:  # mixture's light beyond r (N, 3)
+        return np.sum(share * np.exp(-r[:, None, :] / d_k), axis=1)
+
+    lo, hi = np.zeros_like(d_s), d_k.max(axis=1) * 10.0
+    for _ in range(80):  # bisection: beyond(r) = 0.5 (decreasing in r)
+        mid = 0.5 * (lo + hi)
+        big = beyond(mid) > 0.5
+        lo, hi = np.where(big, mid, lo), np.where(big, hi, mid)
+    r50_mix = 0.5 * (lo + hi)
+    thin = []
+    for thickness in thin_mm:
+        log_mix = np.log(np.sum(w * transmission_amplitude(al) * np.exp(-thickness / d_k), axis=1) + 1e-300)
+        log_single = np.log(transmission_amplitude(medium.alpha) + 1e-300) - thickness / d_s
+        thin.append(np.exp(np.clip(log_single - log_mix, -700.0, 700.0)))
+    return Fidelity(d_single_mm=d_s, d_mean_mm=medium.mean_diffusion_length_cm * 10.0,
+                    d_lo_mm=np.min(np.where(carrying, d_k, np.inf), axis=1),
+                    d_hi_mm=np.max(np.where(carrying, d_k, 0.0), axis=1),
+                    bleed=d_s / (medium.mean_diffusion_length_cm * 10.0), half_light=d_s * np.log(2.0) / r50_mix,
+                    thin=np.stack(thin, axis=-1), thin_mm=tuple(float(t) for t in thin_mm))
