@@ -163,7 +163,10 @@ def _cases() -> list[tuple[str, str, list[str], str]]:
 
     numbers = {
         "simulate-layers": (["--layer", "1", "10", "0.8", "inf"], [("--photons", ("0", "-1", "nan")),
-                                                                   ("--n-medium", ("nan", "0"))]),
+                                                                   ("--n-medium", ("nan", "0")),
+                                                                   ("--illumination", ("collimated:90",
+                                                                                       "collimated:nan",
+                                                                                       "collimated:-5", "oblique"))]),
         "simulate": ([*TONE, "--out", "{base}/s.npz"], [("--photons", ("0", "-1", "1", "nan"))]),
         "lut": (["--albedo-n", "4", "--g-n", "4", "--out", "{base}/l.npz"],
                 [("--photons", ("0", "-1", "nan")), ("--threads", ("-1", "0")), ("--g-min", ("nan",)),
