@@ -46,3 +46,14 @@ def test_a_tiny_run_resumes_from_its_cache(tmp_path):
     rows = {r["theta_deg"]: r for r in oblique.summarise(runs)}
     assert rows[0.0]["dE76_angle"] == 0.0 and rows[70.0]["dE76_angle"] > 0.0
     assert rows[70.0]["NIR_xmean_truth_mm"] > 0.05 and rows[70.0]["NIR_xmean_mix_mm"] > 0.05
+
+
+def test_reweighted_weights_match_the_truth_where_the_components_allow():
+    r_k = np.array([[0.2, 0.2, 0.5], [0.4, 0.3, 0.6], [0.6, 0.35, 0.7]])
+    w = np.full((3, 3), 1 / 3)
+    run = {"weight": w, "mix_R_k": r_k, "truth_R": np.array([0.45, 0.1, 0.6])}
+    w2 = oblique.reweighted(run)
+    assert np.all(w2 >= 0) and w2.sum(axis=0) == pytest.approx(np.ones(3))
+    mix = np.sum(w2 * r_k, axis=0)
+    assert mix[0] == pytest.approx(0.45) and mix[2] == pytest.approx(0.6)  # reachable: matched
+    assert 0.2 <= mix[1] < np.sum(w * r_k, axis=0)[1]  # below every component: moved towards the truth
