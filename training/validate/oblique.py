@@ -45,7 +45,7 @@ BANDS: dict[str, tuple[float, float]] = {"UV": (250.0, 400.0), "Vis": (400.0, 70
 #: Signed edges along the plane of incidence, cm: the radial edges mirrored.
 X_EDGES_CM: np.ndarray = np.concatenate([-R_EDGES_CM[:0:-1], R_EDGES_CM])
 #: Tones named in the figure (light and dark).
-FIGURE_TONES: tuple[str, ...] = ("R01", "R05", "R09")
+FIGURE_TONES: tuple[str, ...] = ("R01", "R09")
 DEFAULT_CACHE = Path("build") / "oblique"
 
 
@@ -313,8 +313,9 @@ def remedy_markdown(rows: list[dict]) -> str:
 
 
 def plot(runs: dict, rows: list[dict], path: Path) -> None:
-    """Figure: Delta E76 and the visible r50 error against the angle per tone; the plane-of-incidence profiles of a
-    light and a dark tone at 560 nm for each angle (truth solid, mixture dashed)."""
+    """Figure: Delta E76, the angle's added Delta E76 and the visible r50 error against the angle per tone; the
+    plane-of-incidence profiles of a light and a dark tone (``FIGURE_TONES``) at 560 nm for each angle (truth
+    solid, mixture dashed)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -338,8 +339,9 @@ def plot(runs: dict, rows: list[dict], path: Path) -> None:
     ax[0].legend(fontsize=7, ncol=2)
     col = int(np.argmin(np.abs(np.asarray(SAMPLE_NM) - 560.0)))
     centres = 0.5 * (X_EDGES_CM[1:] + X_EDGES_CM[:-1]) * 10
-    coarse = np.linspace(-3.0, 3.0, 61)
-    for a, name in zip(ax[3:], (names[0], names[-1]), strict=True):
+    coarse = np.linspace(-1.0, 1.5, 51)
+    shown = [n for n in FIGURE_TONES if n in names] or names[:1]
+    for a, name in zip(ax[3:], (shown[0], shown[-1]), strict=True):
         for theta, colour in zip(THETAS_DEG, ("k", "C0", "C1", "C3"), strict=True):
             if (name, theta) not in runs:
                 continue
