@@ -398,7 +398,8 @@ def main(argv: list[str]) -> int:
     if args.out is not None:
         args.out.mkdir(parents=True, exist_ok=True)
         result = {"photons": args.photons, "seed": args.seed, "wavelengths_nm": list(SAMPLE_NM),
-                  "thetas_deg": list(THETAS_DEG), "cpu_walk_seconds": float(sum(r["seconds"] for r in runs.values())),
+                  "thetas_deg": list(THETAS_DEG),
+                  "walk_wall_seconds": float(sum(float(r["seconds"]) for r in runs.values())),
                   "rows": rows, "remedy_rows": remedy}
         (args.out / "oblique.json").write_text(json.dumps(result, indent=1))
         plot(runs, rows, args.out / "fig_oblique.png")
