@@ -45,7 +45,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--illumination", type=_illumination, default="diffuse", metavar="{diffuse,normal,collimated:THETA}",
                    help="diffuse (cosine-weighted lobe), normal (collimated beam) or collimated:THETA (a collimated "
                    "beam at THETA degrees from the normal, in the x-z plane; the JSON then adds the specular "
-                   "(Fresnel) part and shift_cm, the reflected light's mean exit x along the plane of incidence)")
+                   "(Fresnel) part and, on the numba engine, shift_cm, the reflected light's mean exit x along the "
+                   "plane of incidence)")
     p.add_argument("--photons", type=count, required=True)
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--device", choices=("cpu", "cuda"), default="cpu")
@@ -105,8 +106,11 @@ def _walk(args: argparse.Namespace, layers: tuple[np.ndarray, ...]) -> dict:
         r_edges_cm=None, progress=args.progress, compile={"auto": "auto", "on": True, "off": False}[args.compile],
         engine=args.engine, threads=args.threads,
     )
-    return {"R_d": res.R_d, "R_d_stderr": res.R_d_stderr, "T_d": res.T_d, "photons": res.photons,
-            "seconds": res.seconds}
+    out = {"R_d": res.R_d, "R_d_stderr": res.R_d_stderr, "T_d": res.T_d, "photons": res.photons,
+           "seconds": res.seconds}
+    if parse_illumination(args.illumination).cos_in < 1.0:
+        out["specular"] = res.specular
+    return out
 
 
 @command("simulate-layers")
