@@ -163,12 +163,15 @@ def _cases() -> list[tuple[str, str, list[str], str]]:
 
     numbers = {
         "simulate-layers": (["--layer", "1", "10", "0.8", "inf"], [("--photons", ("0", "-1", "nan")),
-                                                                   ("--n-medium", ("nan", "0"))]),
+                                                                   ("--n-medium", ("nan", "0")),
+                                                                   ("--illumination", ("collimated:90",
+                                                                                       "collimated:nan",
+                                                                                       "collimated:-5", "oblique"))]),
         "simulate": ([*TONE, "--out", "{base}/s.npz"], [("--photons", ("0", "-1", "1", "nan"))]),
         "lut": (["--albedo-n", "4", "--g-n", "4", "--out", "{base}/l.npz"],
                 [("--photons", ("0", "-1", "nan")), ("--threads", ("-1", "0")), ("--g-min", ("nan",)),
                  ("--albedo-max", ("2",))]),
-        "dataset": (["--out", "{base}/d"], [("--threads", ("0", "-1"))]),
+        "dataset": (["--out", "{base}/d"], [("--threads", ("0", "-1")), ("--device", ("tpu", "cuda:x"))]),
         "fit": (["--tone-file", "{npz}", "--lut", "{npz}"], [("--chunk-tones", ("0",)), ("--wavelength-stride", ("0",)),
                                                              ("--max-tones", ("-1",)), ("--threads", ("-1",))]),
         "train": (["--dataset", "{dir}", "--fits", "{dir}", "--lut", "{npz}", "--out", "{base}/t"],
@@ -431,3 +434,15 @@ def test_a_truncated_part_file_on_resume(tmp_path, capsys):
     assert_one_line(code, err, "g_0001.npz")
     assert "run the same command again" in err
     assert snapshot(tmp_path) == before
+
+
+def test_a_cuda_device_torch_does_not_see_is_one_line(world, capsys):
+    """``--device cuda`` where torch sees no GPU: the one-line refusal, not torch's traceback."""
+    import torch
+
+    if torch.cuda.is_available():
+        pytest.skip("this machine has a CUDA device")
+    before = snapshot(world["base"])
+    code, err = run_in_process(_argv(["dataset", "--out", "{base}/d", "--device", "cuda"], world), capsys)
+    assert_one_line(code, err, "CUDA")
+    assert snapshot(world["base"]) == before

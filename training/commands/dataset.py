@@ -29,6 +29,7 @@ from pathlib import Path
 from exporters.cli_io import OneLineParser
 from training.cluster import engine
 from training.commands.options import (
+    check_cuda,
     check_input,
     check_output_folder,
     command,
@@ -37,6 +38,7 @@ from training.commands.options import (
     output_lock,
     parse_shard,
     shard_part,
+    torch_device,
 )
 from training.data.build import SPLITS, build_split, merge
 from training.data.presets import PRESETS
@@ -119,7 +121,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--summary", action="store_true",
                         help="write --out/summary.json and summary.png for a built dataset")
     parser.add_argument("--seed", type=int, default=None, help="override the preset's sampling seeds")
-    parser.add_argument("--device", default="cpu", help="cpu or cuda")
+    parser.add_argument("--device", type=torch_device, default="cpu", help="cpu, cuda or cuda:N")
     parser.add_argument("--threads", type=count, default=1,
                         help="torch CPU threads (reweighting); the walk's compiled kernel runs on every CPU the "
                         "process may use (taskset or NUMBA_NUM_THREADS limit it; cluster workers walk on --threads)")
@@ -147,6 +149,7 @@ def main(argv: list[str]) -> int:
             for split in splits:
                 print(merge(args.out, split))
             return 0
+        check_cuda(args.device)
         preset = PRESETS[args.preset]
         if args.seed is not None:
             from dataclasses import replace

@@ -4,6 +4,7 @@ they share with ``blender_addon/bake.py`` are ``exporters.cli_io`` (re-exported 
 from __future__ import annotations
 
 import argparse
+import re
 import sys
 
 from exporters.cli_io import (  # noqa: F401 - the commands' shared front
@@ -41,6 +42,27 @@ def parse_shard(text: str) -> tuple[int, int]:
     if not (n >= 1 and 0 <= i < n):
         raise argparse.ArgumentTypeError(f"--shard I/N needs 0 <= I < N, got {text!r}")
     return i, n
+
+
+def torch_device(text: str) -> str:
+    """argparse type of ``--device``: "cpu", "cuda" or "cuda:N" (the devices the walk and torch's code here run
+    on), checked without importing torch; whether a CUDA device is present is ``check_cuda``'s to say."""
+    if re.fullmatch(r"cpu|cuda(:\d+)?", text) is None:
+        raise argparse.ArgumentTypeError(f"must be cpu, cuda or cuda:N, got {text!r}")
+    return text
+
+
+def check_cuda(device: str) -> None:
+    """ValueError naming the fix when ``device`` is a CUDA device and torch sees none."""
+    if device.startswith("cuda"):
+        import torch
+
+        if not torch.cuda.is_available():
+            raise ValueError(f"--device {device}: torch sees no CUDA device here; use --device cpu")
+        index = int(device.split(":")[1]) if ":" in device else 0
+        if index >= torch.cuda.device_count():
+            raise ValueError(f"--device {device}: torch sees {torch.cuda.device_count()} CUDA device(s) "
+                             "(cuda:0 ...); pick one of them")
 
 
 def triple(text: str, kind: type) -> list:

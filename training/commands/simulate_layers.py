@@ -15,9 +15,20 @@ import math
 import numpy as np
 
 from exporters.cli_io import OneLineParser
+from exporters.constants import R_EDGES_CM
 from training.commands.options import command, count, error_status, in_range
+from training.sim.illumination import parse_illumination
 from training.sim.medium_check import check_layer_values
 from training.sim.walk_constants import ENGINES
+
+
+def _illumination(text: str) -> str:
+    """argparse type of ``--illumination`` (``training.sim.illumination.parse_illumination``)."""
+    try:
+        parse_illumination(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc).removeprefix("illumination ")) from None
+    return text
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -31,7 +42,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--n-medium", type=in_range(1.0, 3.0), default=1.4,
                    help="refractive index of all layers (air above), in [1, 3]")
     p.add_argument("--n-below", type=in_range(1.0, 3.0), default=1.0, help="index below a finite stack (default air)")
-    p.add_argument("--illumination", choices=("normal", "diffuse"), default="diffuse")
+    p.add_argument("--illumination", type=_illumination, default="diffuse", metavar="{diffuse,normal,collimated:THETA}",
+                   help="diffuse (cosine-weighted lobe), normal (collimated beam) or collimated:THETA (a collimated "
+                   "beam at THETA degrees from the normal, in the x-z plane; the JSON then adds the specular "
+                   "(Fresnel) part and, on the numba engine, shift_cm, the reflected light's mean exit x along the "
+                   "plane of incidence)")
     p.add_argument("--photons", type=count, required=True)
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--device", choices=("cpu", "cuda"), default="cpu")
@@ -77,9 +92,11 @@ def _walk(args: argparse.Namespace, layers: tuple[np.ndarray, ...]) -> dict:
         from training.sim.compiled_transport import simulate_compiled
 
         mua, mus, g, thickness = layers
+        oblique = parse_illumination(args.illumination).cos_in < 1.0
         return simulate_compiled(mua, mus, g, thickness, args.photons, n_medium=args.n_medium,
                                  n_below=args.n_below, illumination=args.illumination, seed=args.seed,
-                                 threads=args.threads, progress=args.progress)
+                                 threads=args.threads, progress=args.progress,
+                                 r_edges_cm=R_EDGES_CM if oblique else None)
     from training.sim.medium import LayeredMedium
     from training.sim.transport import simulate
 
@@ -89,8 +106,11 @@ def _walk(args: argparse.Namespace, layers: tuple[np.ndarray, ...]) -> dict:
         r_edges_cm=None, progress=args.progress, compile={"auto": "auto", "on": True, "off": False}[args.compile],
         engine=args.engine, threads=args.threads,
     )
-    return {"R_d": res.R_d, "R_d_stderr": res.R_d_stderr, "T_d": res.T_d, "photons": res.photons,
-            "seconds": res.seconds}
+    out = {"R_d": res.R_d, "R_d_stderr": res.R_d_stderr, "T_d": res.T_d, "photons": res.photons,
+           "seconds": res.seconds}
+    if parse_illumination(args.illumination).cos_in < 1.0:
+        out["specular"] = res.specular
+    return out
 
 
 @command("simulate-layers")
@@ -111,5 +131,6 @@ def main(argv: list[str]) -> int:
         "photons": int(res["photons"]),
         "seconds": round(float(res["seconds"]), 4),
     }
+    out.update({k: float(res[k][0]) for k in ("specular", "shift_cm") if k in res})
     print(json.dumps(out))
     return 0

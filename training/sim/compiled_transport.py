@@ -57,21 +57,30 @@ def walk_tables(mua: np.ndarray, mus: np.ndarray, g: np.ndarray, thickness: np.n
 
 def simulate_compiled(mua: np.ndarray, mus: np.ndarray, g: np.ndarray, thickness: np.ndarray, photons: int, *,
                       n_medium: float = 1.4, n_below: float = 1.0, illumination: str = "diffuse", seed: int = 0,
-                      max_steps: int = 100_000, threads: int | None = None, progress: bool = False) -> dict:
+                      max_steps: int = 100_000, threads: int | None = None, progress: bool = False,
+                      r_edges_cm: np.ndarray | None = None, x_edges_cm: np.ndarray | None = None) -> dict:
     """Monte Carlo R_d and T_d of a layered medium at all its channels, walked by the numba engine.
 
     mua, mus, g (L, W) float64 (cm^-1, cm^-1, HG g), thickness (L,) cm (the last may be inf), already checked
-    (``training.sim.medium_check.check_layer_values``); photons per channel; illumination "diffuse" or
-    "normal"; seed, max_steps and threads as ``training.sim.transport.simulate``.
+    (``training.sim.medium_check.check_layer_values``); photons per channel; illumination "diffuse", "normal"
+    or "collimated:THETA" (degrees; the beam travels towards +x, so x-z is the plane of incidence:
+    ``training.sim.illumination``); seed, max_steps and threads as ``training.sim.transport.simulate``.
     Returns numpy float64 (W,) arrays R_d, R_d_stderr, T_d, T_d_stderr (per-photon std / sqrt(N)), photons
-    and seconds (the walk's wall time).
+    and seconds (the walk's wall time).  With ``r_edges_cm`` (NB + 1,) also ``profile`` (W, NB) cm^-2, the
+    azimuthally averaged reflected exitance per unit incident power in each annulus (``SimResult.profile``);
+    with ``x_edges_cm`` (NX + 1,), increasing, signed, also ``profile_plane`` (W, NX) cm^-1, the reflected
+    exitance integrated across the plane of incidence (over y) per unit length along it (x).  With either,
+    ``shift_cm`` (W,): the reflected light's mean exit x (its centroid along the plane of incidence, cm), and
+    the per-channel ``specular`` (W,) (the beam's Fresnel part).
     """
+    from training.sim.illumination import parse_illumination
     from training.sim.packet_loop import walk_compiled
 
-    if illumination not in ("diffuse", "normal"):
-        raise ValueError(f"illumination must be 'diffuse' or 'normal', got {illumination!r}")
+    light = parse_illumination(illumination)
     n_layers, n_ch = mua.shape
-    r1, r2, t1, t2 = (np.zeros(n_ch) for _ in range(4))
+    r1, r2, t1, t2, xw = (np.zeros(n_ch) for _ in range(5))
+    hists = {name: (np.asarray(e, dtype=np.float64), np.zeros((n_ch, len(e) - 1)))
+             for name, e in (("r", r_edges_cm), ("x", x_edges_cm)) if e is not None}
     bar = progress_bar(photons * n_ch, progress)
 
     def tally(ch: np.ndarray, pid: np.ndarray, out: dict[str, np.ndarray]) -> None:
@@ -80,19 +89,40 @@ def simulate_compiled(mua: np.ndarray, mus: np.ndarray, g: np.ndarray, thickness
             w = out["w"][m]
             np.add.at(s1, ch[m], w)
             np.add.at(s2, ch[m], w * w)
+        if hists:
+            m = out["kind"] == KIND_REFLECTED
+            c, w, x = ch[m], out["w"][m], out["x"][m]
+            np.add.at(xw, c, w * x)
+            for name, (edges, h) in hists.items():
+                v = np.hypot(x, out["y"][m]) if name == "r" else x
+                b = np.searchsorted(edges, v, side="right") - 1
+                ok = (b >= 0) & (b < h.shape[1])
+                np.add.at(h, (c[ok], b[ok]), w[ok])
         if bar:
             bar.update(ch.shape[0])
 
     t0 = time.perf_counter()
-    walk_compiled(walk_tables(mua, mus, g, thickness), float(n_medium), float(n_below), n_layers, n_ch,
-                  photons=int(photons), order="interleaved", seed=int(seed), diffuse=illumination == "diffuse",
-                  pool_packets=max(POOL_PACKETS_CPU, n_ch), max_steps=int(max_steps),
-                  roulette_threshold=ROULETTE_THRESHOLD, roulette_boost=ROULETTE_BOOST,
-                  path_n0=np.full(n_ch, np.inf), path_keep=1.0, record_paths=False, threads=threads, sink=tally)
+    spec, _, _, _ = walk_compiled(
+        walk_tables(mua, mus, g, thickness), float(n_medium), float(n_below), n_layers, n_ch,
+        photons=int(photons), order="interleaved", seed=int(seed), diffuse=light.diffuse,
+        pool_packets=max(POOL_PACKETS_CPU, n_ch), max_steps=int(max_steps),
+        roulette_threshold=ROULETTE_THRESHOLD, roulette_boost=ROULETTE_BOOST,
+        path_n0=np.full(n_ch, np.inf), path_keep=1.0, record_paths=False, threads=threads, sink=tally,
+        cos_in=light.cos_in)
     if bar:
         bar.close()
     seconds = time.perf_counter() - t0
-    r_d, r_se = mean_stderr(r1, r2, int(photons))
-    t_d, t_se = mean_stderr(t1, t2, int(photons))
-    return {"R_d": r_d, "R_d_stderr": r_se, "T_d": t_d, "T_d_stderr": t_se, "photons": int(photons),
-            "seconds": seconds}
+    n = int(photons)
+    r_d, r_se = mean_stderr(r1, r2, n)
+    t_d, t_se = mean_stderr(t1, t2, n)
+    res = {"R_d": r_d, "R_d_stderr": r_se, "T_d": t_d, "T_d_stderr": t_se, "photons": n, "seconds": seconds}
+    if hists:
+        res["specular"] = spec / n
+        res["shift_cm"] = np.where(r1 > 0, xw / np.where(r1 > 0, r1, 1.0), 0.0)
+    if "r" in hists:
+        edges, h = hists["r"]
+        res["profile"] = h / n / (np.pi * np.diff(edges**2))
+    if "x" in hists:
+        edges, h = hists["x"]
+        res["profile_plane"] = h / n / np.diff(edges)
+    return res

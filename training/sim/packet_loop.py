@@ -210,7 +210,7 @@ def _rotate(ux, uy, uz, cos_t, cos_phi, sin_phi):
 
 @numba.njit(cache=True)
 def _walk_one(i, ch, serial, key, t_mut, t_alb, t_g, t_ztop, t_zbot, n, n_below, n_layers, n_ch,
-              diffuse, max_steps, roulette_threshold, roulette_keep, path_n0, path_keep, record_paths,
+              diffuse, cos_in, max_steps, roulette_threshold, roulette_keep, path_n0, path_keep, record_paths,
               out_kind, out_w, out_x, out_y, out_ncoll, out_absorbed, out_path, out_specular,
               out_roulette, out_steps):
     """Walk packet ``i`` of the batch to its end and write its record into the out_* arrays."""
@@ -227,6 +227,11 @@ def _walk_one(i, ch, serial, key, t_mut, t_alb, t_g, t_ztop, t_zbot, n, n_below,
         state, u = _uniform(state)
         phi = _TWO_PI * u
         ux, uy, uz = st * math.cos(phi), st * math.sin(phi), ct
+    elif cos_in < 1.0:  # collimated at a polar angle: refracted in the x-z plane, towards +x
+        r_sp = _fresnel(cos_in, 1.0, n)
+        ratio = 1.0 / n
+        ct = math.sqrt(max(1.0 - ratio * ratio * (1.0 - cos_in * cos_in), 0.0))
+        ux, uy, uz = math.sqrt(max(1.0 - ct * ct, 0.0)), 0.0, ct
     else:
         r_sp = ((n - 1.0) / (n + 1.0)) ** 2
         ux, uy, uz = 0.0, 0.0, 1.0
@@ -335,14 +340,16 @@ def _walk_one(i, ch, serial, key, t_mut, t_alb, t_g, t_ztop, t_zbot, n, n_below,
 
 @numba.njit(cache=True, parallel=True)
 def walk_batch(ch, serial, key, t_mut, t_alb, t_g, t_ztop, t_zbot, n, n_below, n_layers, n_ch,
-               diffuse, max_steps, roulette_threshold, roulette_keep, path_n0, path_keep, record_paths,
+               diffuse, cos_in, max_steps, roulette_threshold, roulette_keep, path_n0, path_keep, record_paths,
                out_kind, out_w, out_x, out_y, out_ncoll, out_absorbed, out_path, out_specular,
                out_roulette, out_steps):
     """Walk every packet of a batch (parallel over blocks of ``BLOCK_PACKETS`` packets).
 
     Inputs: ch (m,) int64 channel, serial (m,) int64 packet serial in the run, key uint64 run key;
     property tables t_mut, t_alb, t_g (L * C,) float64 indexed by layer * C + channel, layer tops /
-    bottoms t_ztop, t_zbot (L,) cm; n, n_below indices; diffuse (bool) illumination; max_steps walk cap;
+    bottoms t_ztop, t_zbot (L,) cm; n, n_below indices; diffuse (bool) illumination, else a collimated beam
+    whose polar cosine in air is cos_in (1.0: normal incidence; below 1 the beam travels towards +x, so the
+    x-z plane is the plane of incidence); max_steps walk cap;
     weight roulette below roulette_threshold with survival roulette_keep; path roulette at
     path_n0[channel] * 2^k collisions (inf: none) with survival path_keep; record_paths (bool).
     Outputs (written, length m): kind int8, w (exit weight, 0 when absorbed), x, y (exit point, cm),
@@ -354,7 +361,7 @@ def walk_batch(ch, serial, key, t_mut, t_alb, t_g, t_ztop, t_zbot, n, n_below, n
     for b in numba.prange(n_blocks):
         for i in range(b * BLOCK_PACKETS, min(m, (b + 1) * BLOCK_PACKETS)):
             _walk_one(i, ch, serial, key, t_mut, t_alb, t_g, t_ztop, t_zbot, n, n_below, n_layers, n_ch,
-                      diffuse, max_steps, roulette_threshold, roulette_keep, path_n0, path_keep, record_paths,
+                      diffuse, cos_in, max_steps, roulette_threshold, roulette_keep, path_n0, path_keep, record_paths,
                       out_kind, out_w, out_x, out_y, out_ncoll, out_absorbed, out_path, out_specular,
                       out_roulette, out_steps)
 
@@ -400,12 +407,13 @@ def walk_compiled(tables: tuple[np.ndarray, ...], n: float, n_below: float, n_la
                   photons: int, order: str, seed: int, diffuse: bool, pool_packets: int, max_steps: int,
                   roulette_threshold: float, roulette_boost: float, path_n0: np.ndarray, path_keep: float,
                   record_paths: bool, threads: int | None, sink: BatchSink,
-                  walk: Callable = walk_batch) -> tuple[np.ndarray, np.ndarray, int, int]:
+                  walk: Callable = walk_batch, cos_in: float = 1.0) -> tuple[np.ndarray, np.ndarray, int, int]:
     """Walk every packet of a run in batches of ``pool_packets`` (each batch to its end), handing each batch to
     ``sink``.
 
     tables: (t_mut, t_alb, t_g, t_ztop, t_zbot) float64 as ``walk_batch`` takes them; path_n0 (n_ch,) path
-    roulette thresholds (inf: none); walk: ``walk_batch`` or ``packet_loop_cuda.walk_batch_cuda``.
+    roulette thresholds (inf: none); walk: ``walk_batch`` or ``packet_loop_cuda.walk_batch_cuda``; cos_in: the
+    polar cosine in air of a collimated beam (``diffuse`` False; 1.0: normal incidence).
     Returns the per-channel specular and roulette balance sums (n_ch,) float64 (added packet by packet, so they
     do not depend on the batch size), the total packet steps and the longest walk in steps.
     """
@@ -422,7 +430,7 @@ def walk_compiled(tables: tuple[np.ndarray, ...], n: float, n_below: float, n_la
                    "path": np.empty((m, n_layers) if record_paths else (1, n_layers)),
                    "specular": np.empty(m), "roulette": np.empty(m), "steps": np.empty(m, np.int64)}
             walk(ch, np.arange(q0, q0 + m, dtype=np.int64), key, *tables, n, n_below, n_layers, n_ch, diffuse,
-                 max_steps, roulette_threshold, 1.0 / roulette_boost, path_n0, path_keep, record_paths,
+                 float(cos_in), max_steps, roulette_threshold, 1.0 / roulette_boost, path_n0, path_keep, record_paths,
                  out["kind"], out["w"], out["x"], out["y"], out["ncoll"], out["absorbed"], out["path"],
                  out["specular"], out["roulette"], out["steps"])
             np.add.at(spec, ch, out["specular"])

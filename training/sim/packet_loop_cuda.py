@@ -26,13 +26,13 @@ THREADS_PER_BLOCK = 128
 
 @cuda.jit
 def _walk_kernel(ch, serial, key, t_mut, t_alb, t_g, t_ztop, t_zbot, n, n_below, n_layers, n_ch,
-                 diffuse, max_steps, roulette_threshold, roulette_keep, path_n0, path_keep, record_paths,
+                 diffuse, cos_in, max_steps, roulette_threshold, roulette_keep, path_n0, path_keep, record_paths,
                  out_kind, out_w, out_x, out_y, out_ncoll, out_absorbed, out_path, out_specular,
                  out_roulette, out_steps):
     i = cuda.grid(1)
     if i < ch.shape[0]:
         _walk_one(i, ch, serial, key, t_mut, t_alb, t_g, t_ztop, t_zbot, n, n_below, n_layers, n_ch,
-                  diffuse, max_steps, roulette_threshold, roulette_keep, path_n0, path_keep, record_paths,
+                  diffuse, cos_in, max_steps, roulette_threshold, roulette_keep, path_n0, path_keep, record_paths,
                   out_kind, out_w, out_x, out_y, out_ncoll, out_absorbed, out_path, out_specular,
                   out_roulette, out_steps)
 

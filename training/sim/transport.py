@@ -140,7 +140,8 @@ def simulate(
     Args:
         medium: the layered medium (W channels).
         photons: photons per channel (each photon is one packet per channel).
-        illumination: "diffuse" (cosine-weighted from air, the dataset's) or "normal" (collimated).
+        illumination: "diffuse" (cosine-weighted from air, the dataset's), "normal" (collimated) or
+            "collimated:THETA" (collimated at THETA degrees, towards +x; ``training.sim.illumination``).
         seed: seed of the torch.Generator; results are deterministic for fixed arguments.
         device: "cpu" or "cuda" (same code).
         r_edges_cm: radial bin edges (NB + 1,), cm, increasing from 0; None skips the profile.

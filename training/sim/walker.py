@@ -33,6 +33,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import torch
 
+from training.sim.illumination import parse_illumination
 from training.sim.kernel import (
     KIND_ABSORBED,
     KIND_TRUNCATED,
@@ -56,8 +57,10 @@ class WalkConfig:
     """Walker settings.
 
     illumination: "diffuse" (cosine-weighted lobe from air, refracted at the origin; the Fresnel part
-        of each photon is tallied as specular) or "normal" (collimated normal beam, specular
-        ((n - 1) / (n + 1))^2).
+        of each photon is tallied as specular), "normal" (collimated normal beam, specular
+        ((n - 1) / (n + 1))^2) or "collimated:THETA" (a collimated beam at polar angle THETA degrees in air,
+        travelling towards +x, refracted at the origin; specular its Fresnel reflectance;
+        ``training.sim.illumination``).
     pool_packets: packets walked at once (memory ~ 100 bytes each).
     max_steps: walk cap per packet (steps = interactions + boundary events); packets still alive are
         finished as KIND_TRUNCATED with their weight reported.
@@ -82,8 +85,7 @@ class WalkConfig:
     check_every: int = 8
 
     def __post_init__(self) -> None:
-        if self.illumination not in ("diffuse", "normal"):
-            raise ValueError(f"illumination must be 'diffuse' or 'normal', got {self.illumination!r}")
+        parse_illumination(self.illumination)
         if self.pool_packets < 1 or self.max_steps < 1 or self.check_every < 1:
             raise ValueError("pool_packets, max_steps and check_every must be >= 1")
         if not (0.0 < self.roulette_threshold < 1.0 and self.roulette_boost > 1.0):
@@ -150,6 +152,7 @@ class Walker:
         if dtype not in (torch.float32, torch.float64):
             raise ValueError("dtype must be torch.float32 or torch.float64")
         self.medium, self.cfg, self.dtype = medium, cfg, dtype
+        self.cos_in = parse_illumination(cfg.illumination).cos_in
         self.device = torch.device(device)
         self.engine = resolve_engine(engine, self.device)
         self.threads = threads
@@ -206,6 +209,12 @@ class Walker:
             phi = (2.0 * math.pi) * u[1]
             ux, uy, uz = st * torch.cos(phi), st * torch.sin(phi), ct
             s0 = -torch.log1p(-u[2])
+        elif self.cos_in < 1.0:  # collimated at a polar angle, refracted in the x-z plane towards +x
+            ci = torch.full((m,), self.cos_in, device=dev, dtype=dt)
+            r_sp = fresnel_unpolarised(ci, 1.0, self.n)
+            uz = refract_cos(ci, 1.0, self.n)
+            ux, uy = torch.sqrt((1.0 - uz * uz).clamp_min(0.0)), torch.zeros(m, device=dev, dtype=dt)
+            s0 = -torch.log1p(-self._rand(m))
         else:
             r0 = ((self.n - 1.0) / (self.n + 1.0)) ** 2
             r_sp = torch.full((m,), r0, device=dev, dtype=dt)
@@ -357,7 +366,7 @@ class Walker:
             seed=self.seed, diffuse=cfg.illumination == "diffuse", pool_packets=cfg.pool_packets,
             max_steps=cfg.max_steps, roulette_threshold=cfg.roulette_threshold, roulette_boost=cfg.roulette_boost,
             path_n0=n0, path_keep=cfg.path_roulette_keep, record_paths=cfg.record_paths, threads=self.threads,
-            sink=batch_sink, walk=walk_batch)
+            sink=batch_sink, walk=walk_batch, cos_in=self.cos_in)
         self.totals.packet_steps += packet_steps
         self.totals.steps = max(self.totals.steps, longest)
         self.totals.specular += torch.from_numpy(spec).to(self.device)
