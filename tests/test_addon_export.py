@@ -13,34 +13,19 @@ this guards against: with the group feeding the active Material Output instead o
 
 from __future__ import annotations
 
-import json
-import os
-import subprocess
-import sys
 from pathlib import Path
 
 import pytest
 
+from tests.blender_versions import BLENDERS, IDS, run_check
+
 ROOT = Path(__file__).resolve().parents[1]
 CHECK = ROOT / "tests" / "export_check.py"
-BLENDERS = [
-    ("4.2", ROOT / ".venv-blender42" / "bin" / "python", "4.2."),
-    ("5.0-project", Path(sys.executable), "5.0."),
-    ("5.3", ROOT / ".venv-blender53" / "bin" / "python", "5.3."),
-]
 
 
-@pytest.mark.parametrize("case,python,version", BLENDERS, ids=[b[0] for b in BLENDERS])
-def test_exporters_write_the_artists_material_after_invert(case, python, version, ext_zip, tmp_path):
-    if not python.is_file():
-        pytest.skip(f"{python.parent.parent.name} is missing: `make blender-envs` creates it (make test does)")
-    env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "PYTHONHOME")}
-    env["BLENDER_USER_RESOURCES"] = str(tmp_path / "user")
-    proc = subprocess.run([str(python), str(CHECK), str(ext_zip), str(tmp_path)], capture_output=True, text=True,
-                          timeout=300, env=env, cwd=tmp_path)
-    lines = [ln for ln in proc.stdout.splitlines() if ln.startswith("RESULT")]
-    assert proc.returncode == 0 and lines, f"exit status {proc.returncode}\n{proc.stdout[-2000:]}{proc.stderr[-3000:]}"
-    out = json.loads(lines[-1][len("RESULT"):])
+@pytest.mark.parametrize("case,python,version,py_version", BLENDERS, ids=IDS)
+def test_exporters_write_the_artists_material_after_invert(case, python, version, py_version, ext_zip, tmp_path):
+    out = run_check(python, CHECK, ext_zip, tmp_path, timeout=300)
     assert out["blender"].startswith(version)
     for mode, group in (("LIVE", "Spectral Skin SSS Live"), ("BAKE", "Spectral Skin SSS Mixture")):
         run = out[mode]

@@ -10,36 +10,20 @@ case and says how to make it.
 
 from __future__ import annotations
 
-import json
-import os
-import subprocess
-import sys
 from pathlib import Path
 
 import pytest
 
+from tests.blender_versions import BLENDERS, IDS, run_check
+
 ROOT = Path(__file__).resolve().parents[1]
 CHECK = ROOT / "tests" / "installed_addon_check.py"
-#: (case, the interpreter, the Blender version it must report, its Python).
-BLENDERS = [
-    ("4.2", ROOT / ".venv-blender42" / "bin" / "python", "4.2.", "3.11"),
-    ("5.0-project", Path(sys.executable), "5.0.", "3.11"),
-    ("5.3", ROOT / ".venv-blender53" / "bin" / "python", "5.3.", "3.13"),
-]
 
 
-@pytest.mark.parametrize("case,python,version,py_version", BLENDERS, ids=[b[0] for b in BLENDERS])
+@pytest.mark.parametrize("case,python,version,py_version", BLENDERS, ids=IDS)
 def test_installs_bakes_renders_and_exits_cleanly(case, python, version, py_version, ext_zip, tmp_path):
-    if not python.is_file():
-        pytest.skip(f"{python.parent.parent.name} is missing: `make blender-envs` creates it (make test does)")
-    env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "PYTHONHOME")}
-    env["BLENDER_USER_RESOURCES"] = str(tmp_path / "user")
     # The script is left to exit by itself with the add-on still enabled: a hang is a timeout, a crash a signal.
-    proc = subprocess.run([str(python), str(CHECK), str(ext_zip), str(tmp_path)], capture_output=True, text=True,
-                          timeout=240, env=env, cwd=tmp_path)
-    lines = [ln for ln in proc.stdout.splitlines() if ln.startswith("RESULT")]
-    assert proc.returncode == 0 and lines, f"exit status {proc.returncode}\n{proc.stdout[-2000:]}{proc.stderr[-3000:]}"
-    out = json.loads(lines[-1][len("RESULT"):])
+    out = run_check(python, CHECK, ext_zip, tmp_path, timeout=240)
     assert out["blender"].startswith(version) and out["python"] == py_version, out
     assert out["enabled"]
     # Self-contained: the core is the extension's own subpackage; nothing top-level, nothing on sys.path.
@@ -70,17 +54,9 @@ def test_installs_bakes_renders_and_exits_cleanly(case, python, version, py_vers
         assert r > g > b > 0.05, (key, out[key])
 
 
-@pytest.mark.parametrize("case,python,version,py_version", BLENDERS, ids=[b[0] for b in BLENDERS])
+@pytest.mark.parametrize("case,python,version,py_version", BLENDERS, ids=IDS)
 def test_a_script_that_registers_and_never_unregisters_exits_cleanly(case, python, version, py_version, ext_zip,
                                                                        tmp_path):
     # Blender 4.2's bpy module crashes and 4.5's hangs at exit when classes are left registered.
-    if not python.is_file():
-        pytest.skip(f"{python.parent.parent.name} is missing: `make blender-envs` creates it (make test does)")
-    env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "PYTHONHOME")}
-    env["BLENDER_USER_RESOURCES"] = str(tmp_path / "user")
-    proc = subprocess.run([str(python), str(CHECK), str(ext_zip), str(tmp_path), "register-only"],
-                          capture_output=True, text=True, timeout=120, env=env, cwd=tmp_path)
-    lines = [ln for ln in proc.stdout.splitlines() if ln.startswith("RESULT")]
-    assert proc.returncode == 0 and lines, f"exit status {proc.returncode}\n{proc.stdout[-2000:]}{proc.stderr[-3000:]}"
-    out = json.loads(lines[-1][len("RESULT"):])
+    out = run_check(python, CHECK, ext_zip, tmp_path, 120, "register-only")
     assert out["blender"].startswith(version) and out["registered"] and not out["enabled"]
