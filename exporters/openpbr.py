@@ -18,20 +18,25 @@ the one medium that reproduces the mixture best, per texel and channel:
    exporters.collapse step 5), clipped to [0, 0.7] (the largest g Cycles walks accurately).
 3. **Translucency, as close as one medium can.**  A component's light spreads over its diffusion length
    D_kc = 1 / sigma_tr,kc, sigma_tr = sigma_t sqrt(3 (1 - alpha)(1 - alpha g)).  One medium has one D per channel,
-   and two things a viewer sees depend on it: how far light bleeds sideways (across a shadow edge: about the
-   light-weighted mean sum_k s_kc D_kc, s_kc = w_kc R_cycles(alpha_kc, g_k) / T_c the component's share of the
-   channel's light) and how much light passes through a thin part (a back-lit ear: in the diffusion approximation
-   a(alpha) exp(-L / D) through a thickness L, with a(alpha) = alpha (1 - alpha) the share of the light that
-   enters, diffuses and leaves the other side: :func:`transmission_amplitude`).  The single medium's albedo is set
-   by the colour (step 1) and is lower than the components' (their weights below 1 absorb the rest), so with the
-   mean D it lets more light through an ear (medium skin on the demo head: red +18 %, green +170 %, blue +220 %,
-   training.openpbr_check).  D_c is therefore the one whose transmission through :data:`THIN_MM` (3 mm, an ear or a
-   nostril wing) equals the mixture's, a(alpha_c) exp(-L / D_c) = sum_k w_kc a(alpha_kc) exp(-L / D_kc) (in
-   log space), kept between the smallest and largest D_kc of the components carrying at least 1 % of the light
-   and between 0.85 (:data:`BLEED_TOLERANCE`) and 1 times the light-weighted mean, so that the sideways bleed changes
-   little (dark skin, whose light barely crosses 3 mm, sits at the mean).  Thinner parts
-   (an ear's rim) still pass more green and blue than the mixture: docs/user/other_renderers.md.  Its extinction
-   follows from its own albedo, sigma_t,c = 1 / (D_c sqrt(3 (1 - alpha_c)(1 - alpha_c g))), and
+   and two things a viewer sees depend on it: how far light bleeds sideways (across a shadow edge) and how much
+   light passes through a thin part (a back-lit ear).
+   *Sideways.*  A medium's light reaches about D (1 + kappa t) across a shadow edge, t = sqrt(3 (1 - alpha')) the
+   transport mean free path over D (alpha' the reduced albedo, :func:`transport_ratio`) and kappa =
+   :data:`BLEED_KAPPA` (fitted on Cycles renders): the light that leaves after few scattering events goes a little
+   further than diffusion says, the more so the lower the albedo.  The single medium's albedo is set by the colour
+   (step 1) and is lower than the components' (their weights below 1 absorb the rest), so at the mixture's
+   light-weighted mean D it bleeds wider (dark skin: +19 % green, +20 % blue).  The bleed-matched D_bleed solves
+   D_bleed (1 + kappa t_c) = sum_k s_kc D_kc (1 + kappa t_kc), s_kc = w_kc R_cycles(alpha_kc, g_k) / T_c the
+   component's share of the channel's light (:func:`bleed_diffusion_length_cm`).
+   *Through.*  In the diffusion approximation a medium passes a(alpha) exp(-L / D) through a thickness L, with
+   a(alpha) = alpha (1 - alpha) the share of the light that enters, diffuses and leaves the other side
+   (:func:`transmission_amplitude`); the single medium's lower albedo and longer mean free path pass more.  D_c is
+   the one whose transmission through :data:`THIN_MM` (3 mm, an ear or a nostril wing) equals the mixture's,
+   a(alpha_c) exp(-L / D_c) = sum_k w_kc a(alpha_kc) exp(-L / D_kc) (in log space), kept between
+   1 - :data:`BLEED_TOLERANCE` and 1 times D_bleed, so that the sideways bleed stays within about 15 %.  Thinner
+   parts (an ear's rim) still pass about twice the green and three times the blue of the mixture:
+   docs/user/other_renderers.md, with what was tried against it (subsurface weight, anisotropy).
+   Its extinction follows from its own albedo, sigma_t,c = 1 / (D_c sqrt(3 (1 - alpha_c)(1 - alpha_c g))), and
    ``mean_free_path`` = 1 / sigma_t,c (OpenPBR's subsurface_radius x subsurface_radius_scale, in scene units after
    ``unit_scale_m``), at least exporters.collapse.MIN_MFP_CM.  What one medium cannot keep: the mixture's profile
    is a sum of K exponentials (a sharp core and a long tail), one exponential cannot be both
@@ -61,13 +66,17 @@ CYCLES_RADIUS_SCALE: float = 4.0 * np.pi
 #: Thickness (mm) through which the single medium transmits what the mixture transmits (step 3 of the module
 #: docstring): a human ear's helix and a nostril wing are 2-4 mm thick.
 THIN_MM: float = 3.0
-#: Largest relative shortening of the diffusion length from the mixture's light-weighted mean (step 3); it never
-#: grows beyond that mean.  Dark skin, whose light barely crosses 3 mm, would otherwise take its longest component's
-#: D and bleed 2-4x wider; and at the same D the single medium's lower albedo already bleeds a little wider than the
-#: mixture (measured on the shadow edge of training.openpbr_check, dark skin: +23 % green, +37 % blue at 1.07-1.15x
-#: the mean D; -4 % and -9 % at 0.85x).
+#: kappa of the bleed model of step 3: a medium's light reaches kappa transport mean free paths further across a
+#: shadow edge than its diffusion length alone says (the light that leaves after few scattering events).  Fitted on
+#: the shadow edges of training.openpbr_check (medium and dark skin, Cycles' Principled BSDF against the live group:
+#: at the mixture's mean D the single medium bled 0 / +19 / +20 % (dark skin, R / G / B), at kappa 0.22 +2 / -6 /
+#: -15 %, at 0.18 -8 / -1 / -7 %); light skin, not used in the fit, is the check (docs/user/other_renderers.md).
+BLEED_KAPPA: float = 0.18
+#: Largest relative shortening of the diffusion length below the bleed-matched one (step 3), to pass through
+#: THIN_MM what the mixture passes; it never grows beyond the bleed-matched D.
 BLEED_TOLERANCE: float = 0.15
-#: Smallest share of a channel's light a component needs to bound the single medium's diffusion length.
+#: Smallest share of a channel's light a component needs to count among the components whose D :func:`fidelity`
+#: reports.
 SHARE_MIN: float = 0.01
 #: The albedo grid on which R1(alpha; mu = 1) is inverted (dense near 1, where skin's albedos lie).
 _N_ALBEDO = 4097
@@ -109,8 +118,7 @@ def transmission_amplitude(alpha) -> np.ndarray:
 
 def thin_diffusion_length_cm(weight, alpha, d_k_cm, alpha_single, thin_mm: float | None = None) -> np.ndarray:
     """D (N, 3) in cm of a medium of albedo ``alpha_single`` (N, 3) that passes through ``thin_mm`` what the mixture
-    (``weight``, ``alpha``, diffusion lengths ``d_k_cm``: (N, K, 3)) passes, bounded by the D_kc of the components
-    carrying at least SHARE_MIN of the light (``weight`` > 0 where the bound applies; step 3)."""
+    (``weight``, ``alpha``, diffusion lengths ``d_k_cm``: (N, K, 3)) passes (step 3; the caller bounds it)."""
     thick = (THIN_MM if thin_mm is None else thin_mm) / 10.0
     w, al, d_k = (np.asarray(x, np.float64) for x in (weight, alpha, d_k_cm))
     log_terms = np.log(np.maximum(w * transmission_amplitude(al), 1e-300)) - thick / d_k
@@ -118,6 +126,26 @@ def thin_diffusion_length_cm(weight, alpha, d_k_cm, alpha_single, thin_mm: float
     log_mix = top + np.log(np.sum(np.exp(log_terms - top[:, None, :]), axis=1))
     gap = np.log(np.maximum(transmission_amplitude(alpha_single), 1e-300)) - log_mix
     return thick / np.maximum(gap, 1e-12)
+
+
+def transport_ratio(alpha, g) -> np.ndarray:
+    """Transport mean free path over diffusion length, sqrt(3 (1 - alpha')) with alpha' = alpha (1 - g) / (1 - alpha g)
+    the reduced albedo (broadcast shapes): how far a medium's light spreads before diffusion takes over, in units
+    of its diffusion length (0 for a medium that absorbs nothing)."""
+    al = np.clip(np.asarray(alpha, np.float64), 0.0, 1.0)
+    gg = np.asarray(g, np.float64)
+    reduced = al * (1.0 - gg) / np.maximum(1.0 - al * gg, 1e-12)
+    return np.sqrt(3.0 * np.clip(1.0 - reduced, 0.0, 1.0))
+
+
+def bleed_diffusion_length_cm(share, alpha, d_k_cm, g, alpha_single, g_single) -> np.ndarray:
+    """D (N, 3) in cm of a medium of albedo ``alpha_single`` (N, 3) and anisotropy ``g_single`` (N,) whose light
+    bleeds across a shadow edge as far as the mixture's: the bleed model of step 3, D (1 + kappa t) with t the
+    transport ratio (:func:`transport_ratio`), equal to the light-weighted sum over the components (``share``,
+    ``alpha``, ``d_k_cm``: (N, K, 3), ``g``: (N, K))."""
+    kappa = BLEED_KAPPA
+    reach = np.sum(share * d_k_cm * (1.0 + kappa * transport_ratio(alpha, np.asarray(g)[..., None])), axis=1)
+    return reach / (1.0 + kappa * transport_ratio(alpha_single, np.asarray(g_single)[:, None]))
 
 
 def diffusion_length_cm(alpha, sigma_t_cm, g) -> np.ndarray:
@@ -160,12 +188,6 @@ def single_medium(weight, alpha, sigma_t_cm, anisotropy, ior: float = SPECULAR_I
     g_single = np.clip(np.einsum("nkc,nk->n", share, g) / 3.0, cycles.G_MIN, cycles.RECOMMENDED_G_MAX)
     d_k = diffusion_length_cm(al, st, g[..., None])  # (N, K, 3)
     d_mean = np.sum(share * d_k, axis=1)  # (N, 3)
-    carrying = share >= SHARE_MIN
-    d_lo = np.min(np.where(carrying, d_k, np.inf), axis=1)
-    d_hi = np.max(np.where(carrying, d_k, 0.0), axis=1)
-    d_lo, d_hi = np.where(np.isfinite(d_lo), d_lo, d_mean), np.where(d_hi > 0.0, d_hi, d_mean)
-    d_lo = np.maximum(np.minimum(d_lo, d_mean), (1.0 - BLEED_TOLERANCE) * d_mean)
-    d_hi = d_mean
     base = np.clip(target, 0.0, 1.0)
     alpha_s = np.empty_like(base)
     for gv in np.unique(g_single):
@@ -173,7 +195,9 @@ def single_medium(weight, alpha, sigma_t_cm, anisotropy, ior: float = SPECULAR_I
         alpha_s[rows] = face_on_albedo_for(base[rows], float(gv), ior)
     alpha_s = np.clip(alpha_s, 0.0, reflectance_tables.ALPHA_TABLE_MAX)
     colour = cycles.rw_albedo_inverse(alpha_s, g_single[:, None]).color
-    d_single = np.clip(thin_diffusion_length_cm(w, al, d_k, alpha_s), d_lo, d_hi)
+    d_bleed = bleed_diffusion_length_cm(share, al, d_k, g, alpha_s, g_single)
+    d_lo = (1.0 - BLEED_TOLERANCE) * d_bleed
+    d_single = np.clip(thin_diffusion_length_cm(w, al, d_k, alpha_s), d_lo, d_bleed)
     sigma_t = 1.0 / (d_single * np.sqrt(3.0 * (1.0 - alpha_s) * (1.0 - alpha_s * g_single[:, None])))
     mfp = np.maximum(1.0 / sigma_t, collapse.MIN_MFP_CM)
     out = SingleMedium(base_color=base, subsurface_color=np.clip(colour, 0.0, 1.0), alpha=alpha_s,
@@ -193,7 +217,7 @@ class Fidelity:
 
     ``d_single_mm``, ``d_mean_mm`` (N, 3) the single medium's D and the mixture's light-weighted mean D;
     ``d_lo_mm``, ``d_hi_mm`` (N, 3) the smallest and largest D of the components carrying >= 1 % of the light;
-    ``bleed`` (N, 3) d_single / d_mean (the sideways bleed, single over mixture: 1 is the same);
+    ``bleed`` (N, 3) the sideways bleed, single over mixture, in the bleed model of step 3 (1 is the same);
     ``half_light`` (N, 3) the single medium's half-light radius over the mixture's;
     ``thin`` (N, 3, len(thin_mm)) the light passed through each thickness of ``thin_mm``, single over mixture."""
 
@@ -218,6 +242,8 @@ def fidelity(weight, alpha, sigma_t_cm, anisotropy, ior: float = SPECULAR_IOR,
     d_k = diffusion_length_cm(al, st, g[..., None]) * 10.0  # mm
     d_s = medium.diffusion_length_cm * 10.0
     carrying = share >= SHARE_MIN
+    reach_mix = np.sum(share * d_k * (1.0 + BLEED_KAPPA * transport_ratio(al, g[..., None])), axis=1)
+    bleed = d_s * (1.0 + BLEED_KAPPA * transport_ratio(medium.alpha, medium.anisotropy[:, None])) / reach_mix
 
     def beyond(r: np.ndarray) -> np.ndarray:  # mixture's light beyond r (N, 3)
         return np.sum(share * np.exp(-r[:, None, :] / d_k), axis=1)
@@ -236,5 +262,5 @@ def fidelity(weight, alpha, sigma_t_cm, anisotropy, ior: float = SPECULAR_IOR,
     return Fidelity(d_single_mm=d_s, d_mean_mm=medium.mean_diffusion_length_cm * 10.0,
                     d_lo_mm=np.min(np.where(carrying, d_k, np.inf), axis=1),
                     d_hi_mm=np.max(np.where(carrying, d_k, 0.0), axis=1),
-                    bleed=d_s / (medium.mean_diffusion_length_cm * 10.0), half_light=d_s * np.log(2.0) / r50_mix,
+                    bleed=bleed, half_light=d_s * np.log(2.0) / r50_mix,
                     thin=np.stack(thin, axis=-1), thin_mm=tuple(float(t) for t in thin_mm))
