@@ -9,11 +9,8 @@ reflection, measured in the same scene with a black base (tests/addon_scene.prin
 
 The translucency, against the live group (the K-media mixture) on the same scenes (training.openpbr_check): the light
 bleeding across a sharp shadow edge (integrated over the shadow, over the lit level) within 15 % per channel, medium
-and dark skin (the bleed model's kappa was fitted on these two; light skin, the held-out check, is in
-docs/user/other_renderers.md); the back-lit ear of the demo head within 15 % in red.  One medium lets more green and
-blue through the ear's thin rim than the mixture (docs/user/other_renderers.md: measured +99 % and +172 %, far more
-than the 15 % asked, and neither a subsurface weight below 1 nor anisotropy brings them there with the colour and the
-bleed kept): that is checked to stay below 2.2x and 3x, so a regression shows.
+and dark skin (the bleed model's kappa and the coat's entry gain were fitted on these two; light skin, the held-out
+check, is in docs/user/other_renderers.md); the back-lit ear of the demo head within 15 % per channel.
 """
 
 from __future__ import annotations
@@ -95,8 +92,7 @@ def test_back_lit_ear(tmp_path):
     live, pbr = (np.array(ear[m]["ear_mean"]) for m in ("live", "openpbr"))
     print(f"\near ({ear['ear_pixels']} px): live {np.round(live, 4).tolist()}, OpenPBR {np.round(pbr, 4).tolist()}")
     assert ear["ear_pixels"] > 100 and live[0] > 3 * live[1]  # the ear glows red: light came through it
-    assert abs(pbr[0] / live[0] - 1.0) <= 0.15
-    assert np.all(pbr[1:] > live[1:]) and pbr[1] < 2.2 * live[1] and pbr[2] < 3.0 * live[2]  # the documented loss
+    assert np.all(np.abs(pbr / live - 1.0) <= 0.15), pbr / live
 
 
 def test_addon_bake_mode_writes_the_openpbr_files(tmp_path):
