@@ -11,7 +11,8 @@ model's K components (arrays in a dict, float64 unless said otherwise):
 * ``biophysical`` (N, 5) and ``exposure`` (N,) — the ``spectral`` target;
 * for the ``openpbr`` target, the single medium made from ``weight``, ``alpha``, ``sigma_t_cm`` and ``anisotropy``
   (:func:`add_single_medium`, exporters.openpbr): ``pbr_base_color``, ``pbr_subsurface_color`` (N, 3),
-  ``pbr_radius`` (N,) in scene units, ``pbr_radius_scale`` (N, 3), ``pbr_anisotropy`` and ``pbr_weight`` (N,);
+  ``pbr_radius`` (N,) in scene units, ``pbr_radius_scale`` (N, 3), ``pbr_anisotropy`` and ``pbr_weight`` (N,),
+  ``pbr_coat_color`` (N, 3);
 * ``max_share`` (N, K): each component's largest share of the rendered colour over the three channels,
   w_kc R_cycles(alpha_kc, g_k) / sum_j w_jc R_cycles(alpha_jc, g_j) (components below a small share
   everywhere are dropped from a bake);
@@ -177,7 +178,8 @@ def map_values(kind: str, k: int, rec: dict[str, np.ndarray], unit_scale_m: floa
 #: Record fields of the single medium (``--target openpbr``, :func:`add_single_medium`) per map kind.
 OPENPBR_FIELDS = {"openpbr_base_color": "pbr_base_color", "openpbr_subsurface_color": "pbr_subsurface_color",
                   "openpbr_subsurface_radius": "pbr_radius", "openpbr_subsurface_radius_scale": "pbr_radius_scale",
-                  "openpbr_subsurface_anisotropy": "pbr_anisotropy", "openpbr_subsurface_weight": "pbr_weight"}
+                  "openpbr_subsurface_anisotropy": "pbr_anisotropy", "openpbr_subsurface_weight": "pbr_weight",
+                  "openpbr_coat_color": "pbr_coat_color"}
 
 
 def add_single_medium(rec: dict[str, np.ndarray], ior: float, unit_scale_m: float) -> None:
@@ -191,7 +193,7 @@ def add_single_medium(rec: dict[str, np.ndarray], ior: float, unit_scale_m: floa
     radius = mfp.max(axis=1) if len(mfp) else np.zeros(0)
     rec.update(pbr_base_color=medium.base_color, pbr_subsurface_color=medium.subsurface_color,
                pbr_radius=radius, pbr_radius_scale=mfp / np.maximum(radius, 1e-300)[:, None],
-               pbr_anisotropy=medium.anisotropy, pbr_weight=medium.weight)
+               pbr_anisotropy=medium.anisotropy, pbr_weight=medium.weight, pbr_coat_color=medium.coat_color)
 
 
 def count_stats(rec: dict[str, np.ndarray], counts: np.ndarray, targets: tuple[str, ...] = ()) -> dict[str, int]:

@@ -7,11 +7,10 @@ maps, Random Walk, the written material's roughness and IOR).  Its own specular 
 reflection, measured in the same scene with a black base (tests/addon_scene.principled_coat_reflectance), is the
 "coat": the render minus it must be the painted colour, ΔE76 <= 1.0 mean and <= 2.0 max.
 
-The translucency, against the live group (the K-media mixture) on the same scenes (training.openpbr_check), medium
-skin: the light bleeding across a sharp shadow edge (integrated over the shadow, over the lit level) within 15 % per
-channel; the back-lit ear of the demo head within 15 % in red.  One medium lets more green and blue through the ear's
-thin rim than the mixture (docs/user/other_renderers.md: measured about +100 % and +180 %, more than the 15 % asked):
-that is checked to stay below 3x, so a regression shows.
+The translucency, against the live group (the K-media mixture) on the same scenes (training.openpbr_check): the light
+bleeding across a sharp shadow edge (integrated over the shadow, over the lit level) within 15 % per channel, medium
+and dark skin (the bleed model's kappa and the coat's entry gain were fitted on these two; light skin, the held-out
+check, is in docs/user/other_renderers.md); the back-lit ear of the demo head within 15 % per channel.
 """
 
 from __future__ import annotations
@@ -77,11 +76,12 @@ def test_principled_renders_the_painted_colour_from_the_openpbr_maps(tmp_path):
 
 
 @pytest.mark.slow
-def test_shadow_edge_bleed_matches_the_mixture(tmp_path):
-    edge = openpbr_check.shadow_edge(tmp_path, "medium", samples=64)
+@pytest.mark.parametrize("tone", ["medium", "dark"])
+def test_shadow_edge_bleed_matches_the_mixture(tmp_path, tone):
+    edge = openpbr_check.shadow_edge(tmp_path, tone, samples=64)
     live, pbr = (np.array(edge[m]["bleed_width_mm"]) for m in ("live", "openpbr"))
     print(f"\nbleed width (mm): live {np.round(live, 3).tolist()}, OpenPBR {np.round(pbr, 3).tolist()}")
-    assert np.all(live > 0.02), live  # light does bleed into the shadow
+    assert np.all(live > (0.02 if tone == "medium" else 0.004)), live  # light does bleed into the shadow
     np.testing.assert_allclose(np.array(edge["openpbr"]["lit"]), np.array(edge["live"]["lit"]), rtol=0.03)
     assert np.all(np.abs(pbr / live - 1.0) <= 0.15), pbr / live
 
@@ -92,8 +92,7 @@ def test_back_lit_ear(tmp_path):
     live, pbr = (np.array(ear[m]["ear_mean"]) for m in ("live", "openpbr"))
     print(f"\near ({ear['ear_pixels']} px): live {np.round(live, 4).tolist()}, OpenPBR {np.round(pbr, 4).tolist()}")
     assert ear["ear_pixels"] > 100 and live[0] > 3 * live[1]  # the ear glows red: light came through it
-    assert abs(pbr[0] / live[0] - 1.0) <= 0.15
-    assert np.all(pbr[1:] > live[1:]) and np.all(pbr[1:] < 3.0 * live[1:])  # the documented loss, bounded
+    assert np.all(np.abs(pbr / live - 1.0) <= 0.15), pbr / live
 
 
 def test_addon_bake_mode_writes_the_openpbr_files(tmp_path):

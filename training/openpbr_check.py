@@ -4,7 +4,8 @@ Surface, reads them in Cycles and is compared with the live group (the K-media m
 * :func:`principled_material` — the OpenPBR maps through a Principled BSDF: Base Color = subsurface_color,
   Subsurface Weight, Radius = subsurface_radius_scale, Scale = subsurface_radius x 4 pi (Cycles walks
   sigma_t = 4 pi / (Radius x Scale); OpenPBR's radius is the mean free path 1 / sigma_t: exporters.openpbr),
-  Subsurface Anisotropy, Random Walk; Roughness and IOR of the written material.
+  Subsurface Anisotropy, Random Walk, Coat Tint = coat_color under Coat Weight 1 with the written material's IOR and
+  roughness as Coat IOR and Coat Roughness (its clear coat); Roughness and IOR of the written material.
 * :func:`shadow_edge` — a flat skin box (1 unit = 1 cm) lit straight from above by a sun whose light a hidden
   plate stops over half of it: the light that bleeds under the plate, integrated across the shadow and divided by
   the lit level, is the *bleed width* (mm, per channel).
@@ -78,6 +79,10 @@ def principled_material(name: str, maps_dir: Path, stem: str, roughness: float, 
     tree.links.new(read("subsurface_radius"), scale.inputs[0])
     tree.links.new(scale.outputs[0], bsdf.inputs["Subsurface Scale"])
     tree.links.new(read("subsurface_anisotropy"), bsdf.inputs["Subsurface Anisotropy"])
+    tree.links.new(read("coat_color"), bsdf.inputs["Coat Tint"])
+    bsdf.inputs["Coat Weight"].default_value = 1.0
+    bsdf.inputs["Coat IOR"].default_value = ior
+    bsdf.inputs["Coat Roughness"].default_value = roughness
     bsdf.inputs["Roughness"].default_value = roughness
     bsdf.inputs["IOR"].default_value = ior
     return mat

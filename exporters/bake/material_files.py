@@ -41,9 +41,10 @@ INPUTS: dict[str, tuple[str, str]] = {
     "openpbr_subsurface_radius_scale": ("subsurface_radius_scale", "color3"),
     "openpbr_subsurface_anisotropy": ("subsurface_scatter_anisotropy", "float"),
     "openpbr_subsurface_weight": ("subsurface_weight", "float"),
+    "openpbr_coat_color": ("coat_color", "color3"),
 }
 #: Colour inputs read as linear Rec.709 (the maps are linear); the other maps are data (no colour transform).
-COLOR_KINDS = frozenset({"openpbr_base_color", "openpbr_subsurface_color"})
+COLOR_KINDS = frozenset({"openpbr_base_color", "openpbr_subsurface_color", "openpbr_coat_color"})
 SHADER_ID = "ND_open_pbr_surface_surfaceshader"
 
 
@@ -112,6 +113,16 @@ def _temp(folder: Path, name: str) -> Path:
     return Path(tmp)
 
 
+def coat_values(ior: float, roughness: float) -> dict[str, float]:
+    """The constant inputs of the OpenPBR Surface: the specular layer, and over it the clear coat of the same IOR and
+    roughness that carries the ``coat_color`` map (exporters.openpbr step 2: the coat's reflection is the skin's
+    specular; the base, at the relative IOR 1 under it, reflects none).  ``coat_darkening`` 0: OpenPBR's darkening
+    of the base by light reflected back inside the coat is not the mixture's (which the coat colour alone
+    reproduces), and Blender's Principled BSDF has none."""
+    return {"specular_ior": float(ior), "specular_roughness": float(roughness), "coat_weight": 1.0,
+            "coat_ior": float(ior), "coat_roughness": float(roughness), "coat_darkening": 0.0}
+
+
 def mtlx_document(mx, files: dict[str, str], name: str, ior: float, roughness: float):
     """The MaterialX document (not yet written) of the maps ``files`` (kind -> relative path)."""
     doc = mx.createDocument()
@@ -129,8 +140,8 @@ def mtlx_document(mx, files: dict[str, str], name: str, ior: float, roughness: f
         output.setConnectedNode(image)
         shader_input = shader.addInput(input_name, mtype)
         shader_input.setConnectedOutput(output)
-    shader.setInputValue("specular_ior", float(ior))
-    shader.setInputValue("specular_roughness", float(roughness))
+    for input_name, value in coat_values(ior, roughness).items():
+        shader.setInputValue(input_name, value)
     doc.addMaterialNode(name, shader)
     return doc
 
@@ -205,8 +216,8 @@ def _usd_material(tmp: Path, files: dict[str, str], name: str, ior: float, rough
         graph_out = graph.CreateOutput(input_name, value_type[mtype])
         graph_out.ConnectToSource(out)
         openpbr_shader.CreateInput(input_name, value_type[mtype]).ConnectToSource(graph_out)
-    openpbr_shader.CreateInput("specular_ior", Sdf.ValueTypeNames.Float).Set(float(ior))
-    openpbr_shader.CreateInput("specular_roughness", Sdf.ValueTypeNames.Float).Set(float(roughness))
+    for input_name, value in coat_values(ior, roughness).items():
+        openpbr_shader.CreateInput(input_name, Sdf.ValueTypeNames.Float).Set(value)
     surface = openpbr_shader.CreateOutput("out", Sdf.ValueTypeNames.Token)
     material.CreateSurfaceOutput("mtlx").ConnectToSource(surface)
     _preview_surface(stage, UsdShade, Sdf, material, files["openpbr_base_color"], ior, roughness)

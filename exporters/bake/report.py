@@ -13,6 +13,7 @@ from .. import collapse, maps, openpbr, painted
 from ..cli_io import one_line  # noqa: F401 - re-exported (exporters.bake.one_line)
 from ..image_input import AlbedoImage, IndexedAlbedo
 from ..texel_records import CLAMPED_CYCLES, CLAMPED_SPECTRAL, needs_media
+from . import material_files
 from .targets import units_of
 
 if TYPE_CHECKING:
@@ -127,9 +128,11 @@ def write_record(job: BakeJob, timings: dict[str, float], files: list[Path], fil
                          if colour == "painted" else collapse.ALPHA_MIN,
                          "ior": float(opts.ior), "min_mean_free_path_m": float(opts.min_mfp_m)}
     if "openpbr" in job.targets:
-        extra["openpbr"] = {"method": "exporters.openpbr (one medium per texel: the mixture's colour face-on, its "
-                                      "light-weighted diffusion length per channel)",
+        extra["openpbr"] = {"method": "exporters.openpbr (one medium per texel at the mixture's albedo, under a clear "
+                                      "coat tinted by the share the mixture absorbs: the mixture's colour face-on, "
+                                      "its bleed-matched diffusion length per channel)",
                             "specular_ior": float(opts.ior), "cycles_subsurface_scale": openpbr.CYCLES_RADIUS_SCALE,
+                            "coat": material_files.coat_values(float(opts.ior), material_files.SPECULAR_ROUGHNESS),
                             "material_files": job.material_names}
     sha = {job.model.path.name: job.model.sha256}
     return maps.write_maps_json(job.json_path, listed, job.k, sha, job.input_image, job.albedo_colorspace, timings,

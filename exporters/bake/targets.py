@@ -23,6 +23,7 @@ UNITS = {
     "openpbr_subsurface_radius_scale": "1 (OpenPBR subsurface_radius_scale: mean free path / subsurface_radius)",
     "openpbr_subsurface_anisotropy": "1 (OpenPBR subsurface_scatter_anisotropy, Henyey-Greenstein g)",
     "openpbr_subsurface_weight": "1 (OpenPBR subsurface_weight)",
+    "openpbr_coat_color": "1 (OpenPBR coat_color: the share of the light the mixture absorbs, linear Rec.709)",
 }
 #: The maps of ``--target openpbr`` (one medium per texel, exporters.openpbr): kind -> channels.
 OPENPBR_KINDS: dict[str, tuple[str, ...]] = {
@@ -32,6 +33,7 @@ OPENPBR_KINDS: dict[str, tuple[str, ...]] = {
     "openpbr_subsurface_radius_scale": maps.RGB_CHANNELS,
     "openpbr_subsurface_anisotropy": maps.SINGLE_CHANNEL,
     "openpbr_subsurface_weight": maps.SINGLE_CHANNEL,
+    "openpbr_coat_color": maps.RGB_CHANNELS,
 }
 #: Cycles map kinds bounded to [-1, 1] (colour, weights, anisotropy): the fast path stores them as half floats
 #: (BakeOptions.half_maps).  Their rounding (<= 2.4e-4 below 1) is a tenth of the table's interpolation error in
