@@ -11,11 +11,11 @@ What the live group computes for a painted colour c and controls (m, b, o):
    the nearest skin colour's shift, so the answer is continuous) holding at level i of control j:
    RGB = ln(C_edited / C_painted) per channel (exporters.skin_edits.colour_ratio), A = the log-radius correction
    (below);
-4. edited colour c' = clip(c exp(D_RGB), 0, 1): the media are the texel table's at c' (the inversion of the edited
-   colour) with every radius times exp(D_A).  A is the mean over channels of ln(r_exact / r_table(c')): how much
-   the edited tone's effective radius sum_k w_k r_k (exporters.skin_edits.edited_records) differs from that of the
-   tone the inversion finds for c' (melanin sits in the epidermis and blood in the dermis, so tones of one colour
-   can differ in depth).
+4. edited colour c' = c exp(D_RGB) (the lookups clamp it to [0, 1]): the media are the texel table's at c' (the
+   inversion of the edited colour) with every radius times exp(D_A).  A is the mean over channels of
+   ln(r_exact / r_table(c')): how much the edited tone's effective radius sum_k w_k r_k
+   (exporters.skin_edits.edited_records) differs from that of the tone the inversion finds for c' (melanin sits in
+   the epidermis and blood in the dermis, so tones of one colour can differ in depth).
 
 The controls combine additively in log space (step 3): measured against the exact answer by
 ``python -m training edit-table --check`` (docs/research/skin_model.md).  At neutral the shift is exactly 0 and
@@ -118,9 +118,10 @@ def shift(table: EditTable, rgb: np.ndarray, edits: np.ndarray) -> np.ndarray:
 
 
 def edited_colour(rgb: np.ndarray, d: np.ndarray) -> np.ndarray:
-    """c' = clip(c exp(D_RGB), 0, 1) (N, 3) of painted colours (N, 3) and shifts (N, 4)."""
-    c = np.clip(np.nan_to_num(np.asarray(rgb, np.float64), nan=0.0, posinf=1.0, neginf=0.0), 0.0, 1.0)
-    return np.clip(c * np.exp(d[:, :3]), 0.0, 1.0)
+    """c' = c exp(D_RGB) (N, 3) of painted colours (N, 3) and shifts (N, 4), as the nodes compute it (the lookups
+    clamp it to [0, 1]; NaN/Inf painted values are first made finite, as the lookups do)."""
+    c = np.nan_to_num(np.asarray(rgb, np.float64), nan=0.0, posinf=1.0, neginf=0.0)
+    return c * np.exp(d[:, :3])
 
 
 def table_records(texels: texel_table.TexelTable, rgb: np.ndarray, targets: tuple[str, ...],

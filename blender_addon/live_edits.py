@@ -1,0 +1,185 @@
+"""The live group's skin edits: inputs **Melanin**, **Blood** and **Oxygenation** (exporters.skin_edits) in nodes.
+
+The edit table (exporters.edit_table) is packed into twelve small float images (one per control and level, slice
+atlases as exporters.live_table's).  For the painted colour c the nodes compute, exactly as
+exporters.edit_table.shift and edited_colour:
+
+* control coordinates s = (log2 clamp(Melanin), log2 clamp(Blood), clamp(Oxygenation)), hat weights of the
+  levels, and the shift D = sum of weight x (trilinear lookup of the level's image at c);
+* the edited colour c exp(D_RGB) (what the rest of the group reads instead of c: the table's lookup, the EEVEE
+  colour) and the radius factor exp(D_A) (every component's radius is multiplied by it).
+
+At neutral inputs every weight is exactly 0, so D = 0, c exp(0) = c and r x exp(0) = r: the group renders its
+unedited result bit for bit.  Each input takes a value or any node (a painted mask through a Mix node, an
+attribute, a driver); its keyframes animate it.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+import bpy
+
+from .core import edit_table, maps, skin_edits
+
+#: Custom property on the edit images and the group: the SHA-256 of the edit table they were made from.
+EDIT_TABLE_PROP = "spectral_skin_sss_edit_table"
+IMAGE_PREFIX = "Spectral Skin SSS Edits"
+#: The group's inputs, in order: (name, default, soft minimum, soft maximum, tooltip).
+INPUTS = tuple(
+    (name.title(), skin_edits.NEUTRAL[j], *skin_edits.CONTROL_RANGES[name], tip)
+    for j, (name, tip) in enumerate((
+        ("melanin", "Multiplies the epidermis's melanin fraction (1 = as painted): tan above 1, lighter below"),
+        ("blood", "Multiplies the dermis's blood fraction (1 = as painted): flush above 1, pallor below"),
+        ("oxygenation", "Shifts the blood's oxygen saturation (0 = as painted): below 0 cold, bluish skin"))))
+
+
+def table_for_model(model_path: str, texel_sha256: str) -> edit_table.EditTable | None:
+    """The edit table beside ``model_path`` made from that model and the texel table of SHA-256 ``texel_sha256``, or
+    None (the group is then built without the edit inputs)."""
+    path = edit_table.default_path(model_path)
+    try:
+        table = edit_table.load(path)
+    except edit_table.EditTableError:
+        return None
+    if table.meta.get("model_sha256") != maps.sha256_file(model_path) or \
+            table.meta.get("texel_table_sha256") != texel_sha256:
+        return None
+    return table
+
+
+def ensure_images(table: edit_table.EditTable) -> dict[str, bpy.types.Image]:
+    """The edit table's atlas images, packed, one set per file (reused when images of this table exist)."""
+    atlases = None
+    images = {}
+    for name_j in range(len(skin_edits.CONTROLS)):
+        for level in range(table.values.shape[4]):
+            name = edit_table.image_name(name_j, level)
+            full = f"{IMAGE_PREFIX} {name}"
+            image = bpy.data.images.get(full)
+            if image is not None and image.get(EDIT_TABLE_PROP) == table.sha256:
+                images[name] = image
+                continue
+            atlases = atlases if atlases is not None else table.atlases()
+            pixels = atlases[name]
+            if image is not None and image.users == 0:
+                bpy.data.images.remove(image)
+            image = bpy.data.images.new(full, pixels.shape[1], pixels.shape[0], alpha=True, float_buffer=True)
+            image.colorspace_settings.name = "Non-Color"
+            image.alpha_mode = "CHANNEL_PACKED"  # A holds the log-radius correction, not coverage
+            image.pixels.foreach_set(pixels.ravel())
+            image.pack()
+            image[EDIT_TABLE_PROP] = table.sha256
+            images[name] = image
+    return images
+
+
+def add_inputs(group: bpy.types.NodeTree) -> None:
+    """The Melanin, Blood and Oxygenation inputs of the group interface (neutral defaults)."""
+    for name, default, lo, hi, tip in INPUTS:
+        socket = group.interface.new_socket(name, in_out="INPUT", socket_type="NodeSocketFloat")
+        socket.default_value, socket.min_value, socket.max_value = default, lo, hi
+        socket.description = tip
+
+
+@dataclass
+class EditBranch:
+    """What the edit nodes give the group: the edited ``colour`` and the ``radius_factor`` exp(D_A)."""
+
+    colour: bpy.types.NodeSocket
+    radius_factor: bpy.types.NodeSocket
+
+
+def _coordinate(b, gin, j: int, stage: int):
+    """Control coordinate s_j: log2 of the clamped multiplier, or the clamped shift."""
+    name = skin_edits.CONTROLS[j]
+    lo, hi = skin_edits.CONTROL_RANGES[name]
+    x = b.math("MINIMUM", stage + 1, b.math("MAXIMUM", stage, gin.outputs[INPUTS[j][0]], lo), hi)
+    return x if name == "oxygenation" else b.math("LOGARITHM", stage + 2, x, 2.0)
+
+
+def add_edit_branch(b, gin, table: edit_table.EditTable, images: dict[str, bpy.types.Image]) -> EditBranch:
+    """The edit nodes (module docstring) on the group's Color input; ``b`` the group's builder (blender_addon.live)."""
+    from . import live
+
+    layout = table.layout()
+    colour = gin.outputs["Color"]
+    e = [live._srgb_encode(b, _channel(b, colour, c), 31) for c in range(3)]
+    coords = [b.math("MULTIPLY", 36, b.math("ADD", 35, b.math("ADD", 35, e[0], e[1]), e[2]), 1.0 / 3.0),
+              b.math("SUBTRACT", 36, e[0], e[1]), b.math("SUBTRACT", 36, e[1], e[2])]
+    x = [b.math("MINIMUM", 39, b.math("MAXIMUM", 38, b.math("MULTIPLY_ADD", 37, coord, 1.0 / layout.step,
+                                                                        -layout.origin[d] / layout.step), 0.0),
+                layout.shape[d] - 1.0) for d, coord in enumerate(coords)]
+    s = b.math("MINIMUM", 41, b.math("FLOOR", 40, x[0]), layout.shape[0] - 2.0)
+    frac = b.math("SUBTRACT", 42, x[0], s)
+    uvs = (live._slice_uv(b, layout, s, x[1], x[2], 42), live._slice_uv(b, layout, b.math("ADD", 42, s, 1.0),
+                                                                           x[1], x[2], 42))
+    shift_rgb, shift_a = None, None
+    for j, name in enumerate(skin_edits.CONTROLS):
+        coordinate = _coordinate(b, gin, j, 44)
+        h = edit_table.SPACING[name]
+        for i, level in enumerate(edit_table.LEVELS[name]):
+            gap = b.math("ABSOLUTE", 48, b.math("SUBTRACT", 47, coordinate, level))
+            weight = b.math("MAXIMUM", 50, b.math("MULTIPLY_ADD", 49, gap, -1.0 / h, 1.0), 0.0)
+            rgb, alpha = live._lookup(b, images[edit_table.image_name(j, i)], uvs, frac, 51)
+            term = b.node("ShaderNodeVectorMath", 53, operation="SCALE")
+            b.link(rgb, term.inputs[0])
+            b.link(weight, term.inputs["Scale"])
+            if shift_rgb is None:
+                shift_rgb, shift_a = term.outputs[0], b.math("MULTIPLY", 53, alpha, weight)
+            else:
+                add = b.node("ShaderNodeVectorMath", 54, operation="ADD")
+                b.link(shift_rgb, add.inputs[0])
+                b.link(term.outputs[0], add.inputs[1])
+                shift_rgb = add.outputs[0]
+                shift_a = b.math("MULTIPLY_ADD", 54, alpha, weight, shift_a)
+    sep = b.node("ShaderNodeSeparateColor", 55)
+    b.link(shift_rgb, sep.inputs[0])
+    factor = b.node("ShaderNodeCombineColor", 57)
+    for c in range(3):
+        b.link(b.math("EXPONENT", 56, sep.outputs[c]), factor.inputs[c])
+    edited = b.node("ShaderNodeVectorMath", 58, operation="MULTIPLY")
+    b.link(colour, edited.inputs[0])
+    b.link(factor.outputs[0], edited.inputs[1])
+    return EditBranch(colour=edited.outputs[0], radius_factor=b.math("EXPONENT", 56, shift_a))
+
+
+def _channel(b, colour, c: int):
+    sep = b.node("ShaderNodeSeparateColor", 30)
+    b.link(colour, sep.inputs[0])
+    return sep.outputs[c]
+
+
+def scale_radius(b, radius, factor) -> bpy.types.NodeSocket:
+    """``radius`` (vector) times the scalar ``factor``."""
+    node = b.node("ShaderNodeVectorMath", 22, operation="SCALE")
+    b.link(radius, node.inputs[0])
+    b.link(factor, node.inputs["Scale"])
+    return node.outputs[0]
+
+
+def live_node(material: bpy.types.Material) -> bpy.types.Node | None:
+    """The live group node feeding ``material``'s output that has the edit inputs, or None."""
+    if material is None or material.node_tree is None:
+        return None
+    for node in material.node_tree.nodes:
+        if (node.bl_idname == "ShaderNodeGroup" and node.node_tree is not None
+                and node.node_tree.get("spectral_skin_sss_backend") == "LIVE" and "Melanin" in node.inputs):
+            return node
+    return None
+
+
+def apply_preset(node: bpy.types.Node, preset: str) -> None:
+    """Set the node's Melanin, Blood and Oxygenation to a preset of exporters.skin_edits.PRESETS (linked inputs are
+    left as they are)."""
+    edit = skin_edits.PRESETS[preset]
+    for (name, *_), value in zip(INPUTS, edit.row(), strict=True):
+        if not node.inputs[name].is_linked:
+            node.inputs[name].default_value = float(value)
+
+
+def model_has_edits(model_path: str | os.PathLike) -> bool:
+    """Whether an edit table is shipped beside the model."""
+    return edit_table.default_path(Path(model_path)).is_file()
