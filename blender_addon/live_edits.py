@@ -183,3 +183,56 @@ def apply_preset(node: bpy.types.Node, preset: str) -> None:
 def model_has_edits(model_path: str | os.PathLike) -> bool:
     """Whether an edit table is shipped beside the model."""
     return edit_table.default_path(Path(model_path)).is_file()
+
+
+#: Presets of the panel: exporters.skin_edits.PRESETS and "as painted".
+PRESET_ITEMS = [(name.upper(), name.title(),
+                 f"Melanin {p.melanin:g}, Blood {p.blood:g}, Oxygenation {p.oxygenation:+g}")
+                for name, p in skin_edits.PRESETS.items()]
+PRESET_ITEMS.append(("NEUTRAL", "As painted", "Melanin 1, Blood 1, Oxygenation 0"))
+
+
+class SPECTRAL_SKIN_OT_skin_edit_preset(bpy.types.Operator):
+    """Set the live group's Melanin, Blood and Oxygenation to a preset (inputs fed by a node are left as they are)"""
+
+    bl_idname = "spectral_skin.skin_edit_preset"
+    bl_label = "Skin Edit Preset"
+    bl_options = {"REGISTER", "UNDO"}
+
+    preset: bpy.props.EnumProperty(name="Preset", items=PRESET_ITEMS, default="NEUTRAL")
+
+    @classmethod
+    def poll(cls, context):
+        return live_node(getattr(context, "material", None)) is not None
+
+    def execute(self, context):
+        node = live_node(context.material)
+        if self.preset == "NEUTRAL":
+            for name, default, *_ in INPUTS:
+                if not node.inputs[name].is_linked:
+                    node.inputs[name].default_value = default
+        else:
+            apply_preset(node, self.preset.lower())
+        self.report({"INFO"}, f"'{context.material.name}': skin edit {self.preset.lower()}")
+        return {"FINISHED"}
+
+
+def draw_controls(layout, context) -> None:
+    """The selected material's Melanin, Blood and Oxygenation (its live group node's inputs) and the presets."""
+    node = live_node(getattr(context, "material", None))
+    if node is None:
+        return
+    box = layout.box()
+    box.label(text="Skin edits (live)")
+    for name, *_ in INPUTS:
+        socket = node.inputs[name]
+        if socket.is_linked:
+            box.label(text=f"{name}: from node '{socket.links[0].from_node.name}'", icon="LINKED")
+        else:
+            box.prop(socket, "default_value", text=name)
+    row = box.row(align=True)
+    for key, label, _ in PRESET_ITEMS:
+        row.operator(SPECTRAL_SKIN_OT_skin_edit_preset.bl_idname, text=label).preset = key
+
+
+classes = (SPECTRAL_SKIN_OT_skin_edit_preset,)

@@ -2,7 +2,8 @@
 group looks up under an edit equal the numpy reference (exporters.edit_table: shift, edited colour, texel table at
 the edited colour, radius factor), at neutral inputs they equal those of a group built without the edit nodes bit
 for bit, and keyframes on the node's inputs animate them.  Each check renders one socket of the group as emission,
-one pixel per colour (tests/test_live_group.py's probe strip)."""
+one pixel per colour (tests/test_live_group.py's probe strip).  Invert Skin Albedo wires a group with the inputs
+and the panel's presets set them."""
 
 from __future__ import annotations
 
@@ -18,7 +19,8 @@ sys.path.insert(0, str(ROOT))
 
 import blender_addon  # noqa: E402
 from blender_addon import live, live_edits, preferences, probe  # noqa: E402
-from exporters import edit_table, live_table  # noqa: E402
+from exporters import edit_table, live_table, skin_edits  # noqa: E402
+from tests.addon_scene import run_invert, skin_codes, skin_object, write_image  # noqa: E402
 from tests.test_live_group import _probe_strip, _render_row  # noqa: E402
 
 #: Skin colours light to dark, a saturated red, a colour outside the box (blue) and one above 1.
@@ -130,3 +132,26 @@ def test_neutral_inputs_render_the_unedited_group_bit_for_bit_and_keyframes_anim
     blood.default_value = 2.0
     np.testing.assert_array_equal(animated, _render(scene, tree, gnode, emission, name))
     assert not np.array_equal(animated, before[name])
+
+
+def test_operator_wires_the_edit_inputs_and_presets_set_them(tmp_path, addon):
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    png = write_image(tmp_path / "skin.png", skin_codes(), "uint8")
+    obj, mat, _ = skin_object(png)
+    assert run_invert(obj, mode="LIVE") == {"FINISHED"}
+    node = live_edits.live_node(mat)
+    assert node is not None and [node.inputs[n].default_value for n in EDIT] == [1.0, 1.0, 0.0]
+    images = [i for i in bpy.data.images if i.name.startswith(live_edits.IMAGE_PREFIX)]
+    assert len(images) == 12 and all(i.packed_file is not None for i in images)
+    assert sum(i.size[0] * i.size[1] * 16 for i in images) <= 8e6  # the images the edits add: at most 8 MB
+    mask = mat.node_tree.nodes.new("ShaderNodeValue")  # an input fed by a node is left as it is
+    mat.node_tree.links.new(mask.outputs[0], node.inputs["Oxygenation"])
+    with bpy.context.temp_override(material=mat, object=obj, active_object=obj):
+        assert bpy.ops.spectral_skin.skin_edit_preset(preset="FLUSH") == {"FINISHED"}
+    flush = skin_edits.PRESETS["flush"]
+    assert node.inputs["Melanin"].default_value == pytest.approx(flush.melanin)
+    assert node.inputs["Blood"].default_value == pytest.approx(flush.blood)
+    assert node.inputs["Oxygenation"].default_value == 0.0
+    with bpy.context.temp_override(material=mat, object=obj, active_object=obj):
+        assert bpy.ops.spectral_skin.skin_edit_preset(preset="NEUTRAL") == {"FINISHED"}
+    assert [node.inputs[n].default_value for n in ("Melanin", "Blood")] == [1.0, 1.0]
