@@ -137,3 +137,21 @@ def test_bake_cli_takes_edits_and_masks(tmp_path):
     bad = subprocess.run([sys.executable, str(script), "--albedo", str(png), "--out", str(tmp_path / "bad"),
                           "--blood", "7"], capture_output=True, text=True, cwd=ROOT)
     assert bad.returncode == 2 and "--blood" in bad.stderr and len(bad.stderr.strip().splitlines()) == 1
+
+
+def test_edits_move_colours_outside_the_skin_box_continuously():
+    """Colours outside the table's box take the shift of their nearest skin colour: along a path from skin to pure
+    blue (and beyond 1) the shift changes in small steps, no step standing out from its neighbours."""
+    from exporters import edit_table
+
+    table = edit_table.load(edit_table.default_path(MODEL))
+    t = np.linspace(0.0, 1.0, 401)[:, None]
+    path = np.concatenate([(1 - t) * SKIN[1] + t * np.array([0.0, 0.0, 1.0]),
+                           (1 - t) * SKIN[0] + t * np.array([3.0, 2.0, 1.5])])
+    d = edit_table.shift(table, path, np.array([2.0, 2.5, -0.3]))
+    assert np.all(np.isfinite(d))
+    for part in (d[:401], d[401:]):
+        steps = np.abs(np.diff(part, axis=0)).max(axis=1)
+        neighbours = np.maximum(steps[:-2], steps[2:])
+        assert np.all(steps[1:-1] <= 2.0 * neighbours + 1e-3)
+        assert steps.max() < 0.05

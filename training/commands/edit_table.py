@@ -6,7 +6,10 @@
 ``--check`` measures the live group's answer (the tables) against the exact one (the network, the decoder and the
 collapse) on the colours of the representative tones R01-R09 (training/skin/tones.csv, through the decoder) under
 single-control edits spanning each control's range and under combined edits (the presets and a few more), and
-prints ΔE76 of the colour and the relative error of the effective radius per channel.
+prints ΔE76 of the colour and the relative error of the effective radius per channel.  ``--monte-carlo PHOTONS``
+checks the reference itself: the decoder's colour of edited tones (R02, R05 and R08, as inverted and under each
+preset) against the two-layer Monte Carlo of the same tones (training.sim, PHOTONS packets per visible wavelength,
+diffuse illumination as the dataset's).
 """
 
 from __future__ import annotations
@@ -19,6 +22,7 @@ import numpy as np
 
 from exporters import edit_table, inference, skin_edits, texel_table
 from exporters.cli_io import OneLineParser, check_input, check_output_file, in_range, non_negative_int
+from exporters.constants import N_WAVELENGTHS
 from training.commands.options import command
 from training.paths import SHIPPED_DECODER, SHIPPED_EDIT_TABLE, SHIPPED_MODEL, SHIPPED_TABLE
 from training.skin.tones import load_tones
@@ -43,6 +47,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--threads", type=non_negative_int, default=0, help="onnxruntime threads (0 = all cores)")
     parser.add_argument("--overwrite", action="store_true")
     parser.add_argument("--check", action="store_true", help="measure --out against the exact answer")
+    parser.add_argument("--monte-carlo", type=non_negative_int, default=0, metavar="PHOTONS",
+                        help="compare the decoder's colour of edited tones with the Monte Carlo of those tones")
     return parser
 
 
@@ -50,6 +56,32 @@ def check_colours(decoder: Path) -> np.ndarray:
     """Linear sRGB (9, 3) of the representative tones R01-R09 (R10 is near black)."""
     rows = load_tones().select("representative").values[:9]
     return skin_edits.model_colour(inference.run_decoder(rows, decoder)["reflectance"])
+
+
+def monte_carlo_rows(decoder: Path, photons: int) -> list[str]:
+    """One line per (tone, edit): ΔE76 between the decoder's and the Monte Carlo's colour of the edited tone."""
+    from exporters.colorimetry import delta_e76, linear_srgb_to_lab
+    from training.sim.tissue import skin_medium
+    from training.sim.transport import simulate
+
+    matrix = skin_edits.model_colour(np.eye(N_WAVELENGTHS)).T  # (3, 376)
+    support = np.flatnonzero(np.abs(matrix).sum(axis=0) > 0)
+    tones = load_tones().select("representative")
+    rows = []
+    for name, tone in zip(tones.names, tones.values, strict=True):
+        if name not in ("R02", "R05", "R08"):
+            continue
+        for edit_name, edit in (("as painted", skin_edits.SkinEdit()), *skin_edits.PRESETS.items()):
+            edited = skin_edits.apply_edit(tone[None], edit.row())
+            result = simulate(skin_medium(edited[0]).select_channels(support), photons, illumination="diffuse",
+                              seed=1, r_edges_cm=None)
+            mc = np.zeros(376)
+            mc[support] = result.R_d
+            ours = skin_edits.model_colour(inference.run_decoder(edited, decoder)["reflectance"])
+            de = delta_e76(linear_srgb_to_lab(ours), linear_srgb_to_lab(skin_edits.model_colour(mc[None])))[0]
+            rows.append(f"{name} {edit_name}: f_mel {edited[0, 0]:.3f} f_blood {edited[0, 1]:.3f} so2 "
+                        f"{edited[0, 3]:.2f}  decoder vs Monte Carlo ΔE76 {de:.2f}")
+    return rows
 
 
 @command("edit-table")
@@ -60,6 +92,10 @@ def main(argv: list[str] | None = None) -> int:
         check_input(path, option, kind)
     model = inference.load_model(args.model, threads=args.threads)
     texels = texel_table.load(args.table)
+    if args.monte_carlo:
+        for line in monte_carlo_rows(args.decoder, args.monte_carlo):
+            print(line)
+        return 0
     if args.check:
         check_input(args.out, "--out", "npz")
         table = edit_table.load(args.out)
