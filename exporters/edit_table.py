@@ -268,5 +268,6 @@ def check(model: inference.InversionSession, texels: texel_table.TexelTable, tab
     return {"cases": len(x), "de_mean": float(de.mean()), "de_max": float(de.max()),
             "de_reference_mean": float(de_ref.mean()), "de_reference_max": float(de_ref.max()),
             "radius_rel_mean": float(rel.mean()), "radius_rel_max": float(rel.max()),
+            "radius_share_over_10pct": float((rel > 0.10).mean()),
             "radius_rel_uncorrected_mean": float(rel_plain.mean()),
             "radius_rel_uncorrected_max": float(rel_plain.max())}
