@@ -265,7 +265,7 @@ def build_live_group(table: texel_table.TexelTable, layout: live_table.AtlasLayo
     if edits is not None:
         live_edits.add_inputs(group)
         group[live_edits.EDIT_TABLE_PROP] = edits[0].sha256
-        branch = live_edits.add_edit_branch(b, gin, *edits)
+        branch = live_edits.edit_node(b, gin, *edits)
     colour = branch.colour if branch is not None else None
     (x0, x1, x2), outside = _grid_coords(b, gin, layout, colour)
     s = b.math("MINIMUM", 11, b.math("FLOOR", 10, x0), layout.shape[0] - 2.0)

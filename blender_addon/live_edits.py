@@ -92,6 +92,43 @@ class EditBranch:
     radius_factor: bpy.types.NodeSocket
 
 
+EDIT_GROUP_NAME = "Spectral Skin SSS Edits"
+
+
+def ensure_edit_group(table: edit_table.EditTable, images: dict[str, bpy.types.Image]) -> bpy.types.NodeTree:
+    """The edit nodes as their own group (inputs Color, Melanin, Blood, Oxygenation; outputs Color, Radius Factor),
+    one per edit table and file: Blender adds nodes to a tree in time growing with its size, so the edit nodes in a
+    group of their own keep the live group's build (the operator) fast."""
+    from . import live
+
+    for group in bpy.data.node_groups:
+        if group.name.startswith(EDIT_GROUP_NAME) and group.get(EDIT_TABLE_PROP) == table.sha256 \
+                and group.get("spectral_skin_sss_version") == live.LIVE_VERSION:
+            return group
+    group = bpy.data.node_groups.new(EDIT_GROUP_NAME, "ShaderNodeTree")
+    group[EDIT_TABLE_PROP] = table.sha256
+    group["spectral_skin_sss_version"] = live.LIVE_VERSION
+    group.interface.new_socket("Color", in_out="INPUT", socket_type="NodeSocketColor")
+    add_inputs(group)
+    group.interface.new_socket("Color", in_out="OUTPUT", socket_type="NodeSocketColor")
+    group.interface.new_socket("Radius Factor", in_out="OUTPUT", socket_type="NodeSocketFloat")
+    gin = group.nodes.new("NodeGroupInput")
+    gout = group.nodes.new("NodeGroupOutput")
+    gin.location, gout.location = (-1900.0, 0.0), (4400.0, 0.0)
+    branch = add_edit_branch(live._Builder(group), gin, table, images)
+    group.links.new(branch.colour, gout.inputs["Color"])
+    group.links.new(branch.radius_factor, gout.inputs["Radius Factor"])
+    return group
+
+
+def edit_node(b, gin, table: edit_table.EditTable, images: dict[str, bpy.types.Image]) -> EditBranch:
+    """A node of the edit group (:func:`ensure_edit_group`) in the live group, fed by its Color and edit inputs."""
+    node = b.node("ShaderNodeGroup", 1, node_tree=ensure_edit_group(table, images))
+    for name in ("Color", *(spec[0] for spec in INPUTS)):
+        b.link(gin.outputs[name], node.inputs[name])
+    return EditBranch(colour=node.outputs["Color"], radius_factor=node.outputs["Radius Factor"])
+
+
 def _coordinate(b, gin, j: int, stage: int):
     """Control coordinate s_j: log2 of the clamped multiplier, or the clamped shift."""
     name = skin_edits.CONTROLS[j]

@@ -45,7 +45,7 @@ def _tables():
 
 def _with_checks(group: bpy.types.NodeTree, k: int) -> list[str]:
     """Outputs 'Check k{i} {kind}' exposing the media the group hands its mixture."""
-    mixture = next(n for n in group.nodes if n.bl_idname == "ShaderNodeGroup")
+    mixture = next(n for n in group.nodes if n.bl_idname == "ShaderNodeGroup" and "k1 Color" in n.inputs)
     gout = next(n for n in group.nodes if n.bl_idname == "NodeGroupOutput")
     names = []
     for i in range(1, k + 1):
