@@ -1,9 +1,9 @@
 """The live group's Melanin, Blood and Oxygenation inputs (blender_addon.live_edits) in real Cycles: the K media the
 group looks up under an edit equal the numpy reference (exporters.edit_table: shift, edited colour, texel table at
-the edited colour, radius factor), at neutral inputs they equal those of a group built without the edit nodes bit
-for bit, and keyframes on the node's inputs animate them.  Each check renders one socket of the group as emission,
-one pixel per colour (tests/test_live_group.py's probe strip).  Invert Skin Albedo wires a group with the inputs
-and the panel's presets set them."""
+the edited colour, radius factor) and the maps a fast bake writes with the same edit; at neutral inputs they equal
+those of a group built without the edit nodes bit for bit, and keyframes on the node's inputs animate them.  Each
+check renders one socket of the group as emission, one pixel per colour (tests/test_live_group.py's probe strip).
+Invert Skin Albedo wires a group with the inputs and the panel's presets set them."""
 
 from __future__ import annotations
 
@@ -19,7 +19,7 @@ sys.path.insert(0, str(ROOT))
 
 import blender_addon  # noqa: E402
 from blender_addon import live, live_edits, preferences, probe  # noqa: E402
-from exporters import edit_table, live_table, skin_edits  # noqa: E402
+from exporters import bake, edit_table, live_table, maps, skin_edits  # noqa: E402
 from tests.addon_scene import run_invert, skin_codes, skin_object, write_image  # noqa: E402
 from tests.test_live_group import _probe_strip, _render_row  # noqa: E402
 
@@ -80,7 +80,7 @@ def _render(scene, tree, gnode, emission, name: str) -> np.ndarray:
     return _render_row(scene)
 
 
-def test_edited_media_equal_the_reference(tmp_path, addon):
+def test_edited_media_equal_the_reference_and_the_fast_bake(tmp_path, addon):
     scene, tree, gnode, emission = _strip(tmp_path)
     table, edits = _tables()
     group = live.ensure_live_group(table, edits)
@@ -94,6 +94,11 @@ def test_edited_media_equal_the_reference(tmp_path, addon):
     assert np.abs(d).max() > 0.05  # the edit does something
     edited = edit_table.edited_colour(COLOURS, d)
     grids, layout = live_table.grid_values(table), live_table.layout_of(table)
+    albedo = write_image(tmp_path / "edited.exr", COLOURS[None].astype(np.float32), "float")
+    (tmp_path / "bake").mkdir()
+    bake.bake(albedo, tmp_path / "bake", preferences.DEFAULT_MODEL,
+              bake.BakeOptions(threads=1, prune_share=0.0, half_maps=False, mantissa_bits=23,
+                               edit=skin_edits.SkinEdit(*row[0])), colorspace="linear")
     for name in names:
         k, kind = name.split()[1], name.split()[2]
         ref = live_table.lookup(grids[f"{k} {'Log Radius' if kind == 'Radius' else kind}"], layout, edited)[:, :3]
@@ -101,6 +106,8 @@ def test_edited_media_equal_the_reference(tmp_path, addon):
             ref = np.exp(ref) * np.exp(d[:, 3:4])
         rendered = _render(scene, tree, gnode, emission, name)
         np.testing.assert_allclose(rendered, ref, rtol=5e-4, atol=1e-7, err_msg=name)
+        baked = maps.read_exr(tmp_path / "bake" / f"edited_{k}_{kind.lower()}.exr")[0][0].astype(np.float64)
+        np.testing.assert_allclose(baked, rendered, rtol=5e-4, atol=1e-7, err_msg=f"bake {name}")  # bake = live
 
 
 def test_neutral_inputs_render_the_unedited_group_bit_for_bit_and_keyframes_animate(tmp_path, addon):
