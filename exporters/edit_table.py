@@ -160,7 +160,7 @@ def log_radius_ratio(exact: np.ndarray, base: np.ndarray) -> np.ndarray:
 
 def build(model: inference.InversionSession, texels: texel_table.TexelTable,
           decoder: str | os.PathLike, step: float = DEFAULT_STEP,
-          box: tuple[tuple[float, float], ...] = texel_table.DEFAULT_BOX, chunk: int = 512) -> EditTable:
+          box: tuple[tuple[float, float], ...] = texel_table.DEFAULT_BOX, chunk: int = 1024) -> EditTable:
     """Evaluate every grid node inside the RGB cube at every level of every control (exact: the network, the
     decoder and the collapse) and fill the rest; the texel table ``texels`` gives the correction's baseline."""
     if not (np.isfinite(step) and 0.005 <= step <= 0.5):
