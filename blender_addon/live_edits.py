@@ -153,25 +153,22 @@ def add_edit_branch(b, gin, table: edit_table.EditTable, images: dict[str, bpy.t
     frac = b.math("SUBTRACT", 42, x[0], s)
     uvs = (live._slice_uv(b, layout, s, x[1], x[2], 42), live._slice_uv(b, layout, b.math("ADD", 42, s, 1.0),
                                                                            x[1], x[2], 42))
-    shift_rgb, shift_a = None, None
+    shift_rgb, shift_a = (0.0, 0.0, 0.0, 1.0), None
     for j, name in enumerate(skin_edits.CONTROLS):
         coordinate = _coordinate(b, gin, j, 44)
         h = edit_table.SPACING[name]
         for i, level in enumerate(edit_table.LEVELS[name]):
             gap = b.math("ABSOLUTE", 48, b.math("SUBTRACT", 47, coordinate, level))
-            weight = b.math("MAXIMUM", 50, b.math("MULTIPLY_ADD", 49, gap, -1.0 / h, 1.0), 0.0)
+            weight = _hat(b, gap, h, 49)
             rgb, alpha = live._lookup(b, images[edit_table.image_name(j, i)], uvs, frac, 51)
-            term = b.node("ShaderNodeVectorMath", 53, operation="SCALE")
-            b.link(rgb, term.inputs[0])
-            b.link(weight, term.inputs["Scale"])
-            if shift_rgb is None:
-                shift_rgb, shift_a = term.outputs[0], b.math("MULTIPLY", 53, alpha, weight)
-            else:
-                add = b.node("ShaderNodeVectorMath", 54, operation="ADD")
-                b.link(shift_rgb, add.inputs[0])
-                b.link(term.outputs[0], add.inputs[1])
-                shift_rgb = add.outputs[0]
-                shift_a = b.math("MULTIPLY_ADD", 54, alpha, weight, shift_a)
+            add = b.node("ShaderNodeMix", 54, data_type="RGBA", blend_type="ADD", clamp_factor=False,
+                         clamp_result=False)
+            sockets = [socket for socket in add.inputs if socket.enabled]  # Factor, A, B
+            for value, socket in zip((weight, shift_rgb, rgb), sockets, strict=True):
+                b.link(value, socket)
+            shift_rgb = next(socket for socket in add.outputs if socket.enabled)
+            shift_a = (b.math("MULTIPLY", 53, alpha, weight) if shift_a is None
+                       else b.math("MULTIPLY_ADD", 54, alpha, weight, shift_a))
     sep = b.node("ShaderNodeSeparateColor", 55)
     b.link(shift_rgb, sep.inputs[0])
     factor = b.node("ShaderNodeCombineColor", 57)
@@ -181,6 +178,15 @@ def add_edit_branch(b, gin, table: edit_table.EditTable, images: dict[str, bpy.t
     b.link(colour, edited.inputs[0])
     b.link(factor.outputs[0], edited.inputs[1])
     return EditBranch(colour=edited.outputs[0], radius_factor=b.math("EXPONENT", 56, shift_a))
+
+
+def _hat(b, gap, h: float, stage: int):
+    """max(0, 1 - gap / h) in one Map Range node (linear, clamped): exactly 0 for gap >= h."""
+    node = b.node("ShaderNodeMapRange", stage, data_type="FLOAT", interpolation_type="LINEAR", clamp=True)
+    b.link(gap, node.inputs["Value"])
+    for socket, value in (("From Min", 0.0), ("From Max", h), ("To Min", 1.0), ("To Max", 0.0)):
+        node.inputs[socket].default_value = value
+    return node.outputs["Result"]
 
 
 def _channel(b, colour, c: int):
