@@ -104,6 +104,9 @@ class BakeJob:
         self.evaluator = Evaluator(self.palette, self.targets, self.model, table, copts, self.threads, self.timings,
                                    chunk=opts.chunk, memory_mb=share_mb, edits=self.palette_edits)
         self.model_k = self.evaluator.model_k
+        if opts.edited and table is not None and self.evaluator.edit_table() is None:
+            self.notes.append("no edit table made from this model and table beside the model: edited texels are "
+                              "evaluated exactly (python -m training edit-table builds one)")
         self.components = list(range(1, self.model_k + 1))
         self.specs = map_specs(self.stem, self.model_k, self.targets)
         self._check_folder()
