@@ -1,17 +1,18 @@
 """The live group's skin edits: inputs **Melanin**, **Blood** and **Oxygenation** (exporters.skin_edits) in nodes.
 
-The edit table (exporters.edit_table) is packed into twelve small float images (one per control and level, slice
-atlases as exporters.live_table's).  For the painted colour c the nodes compute, exactly as
-exporters.edit_table.shift and edited_colour:
+The edit table (exporters.edit_table) is packed into three small float images (one per control: its levels' slice
+atlases, as exporters.live_table's, stacked with a zero atlas for the neutral level).  For the painted colour c the
+nodes compute, as exporters.edit_table.shift and edited_colour:
 
-* control coordinates s = (log2 clamp(Melanin), log2 clamp(Blood), clamp(Oxygenation)), hat weights of the
-  levels, and the shift D = sum of weight x (trilinear lookup of the level's image at c);
+* control coordinates s = (log2 clamp(Melanin), log2 clamp(Blood), clamp(Oxygenation)); per control the two
+  levels around s, read by trilinear lookups at c and interpolated linearly (the hat weights of
+  exporters.edit_table.shift); the shift D is their sum over the controls;
 * the edited colour c exp(D_RGB) (what the rest of the group reads instead of c: the table's lookup, the EEVEE
   colour) and the radius factor exp(D_A) (every component's radius is multiplied by it).
 
-At neutral inputs every weight is exactly 0, so D = 0, c exp(0) = c and r x exp(0) = r: the group renders its
-unedited result bit for bit.  Each input takes a value or any node (a painted mask through a Mix node, an
-attribute, a driver); its keyframes animate it.
+At neutral inputs each control reads its zero atlas with weight exactly 1 (its neighbour with weight exactly 0), so
+D = 0, c exp(0) = c and r x exp(0) = r: the group renders its unedited result bit for bit.  Each input takes a value
+or any node (a painted mask through a Mix node, an attribute, a driver); its keyframes animate it.
 """
 
 from __future__ import annotations
@@ -22,7 +23,7 @@ from pathlib import Path
 
 import bpy
 
-from .core import edit_table, maps, skin_edits
+from .core import edit_table, live_table, maps, skin_edits
 
 #: Custom property on the edit images and the group: the SHA-256 of the edit table they were made from.
 EDIT_TABLE_PROP = "spectral_skin_sss_edit_table"
@@ -51,28 +52,28 @@ def table_for_model(model_path: str, texel_sha256: str) -> edit_table.EditTable 
 
 
 def ensure_images(table: edit_table.EditTable) -> dict[str, bpy.types.Image]:
-    """The edit table's atlas images, packed, one set per file (reused when images of this table exist)."""
+    """The edit table's images (one per control, its levels' atlases stacked), packed, one set per file (reused
+    when images of this table exist)."""
     atlases = None
     images = {}
-    for name_j in range(len(skin_edits.CONTROLS)):
-        for level in range(table.values.shape[4]):
-            name = edit_table.image_name(name_j, level)
-            full = f"{IMAGE_PREFIX} {name}"
-            image = bpy.data.images.get(full)
-            if image is not None and image.get(EDIT_TABLE_PROP) == table.sha256:
-                images[name] = image
-                continue
-            atlases = atlases if atlases is not None else table.atlases()
-            pixels = atlases[name]
-            if image is not None and image.users == 0:
-                bpy.data.images.remove(image)
-            image = bpy.data.images.new(full, pixels.shape[1], pixels.shape[0], alpha=True, float_buffer=True)
-            image.colorspace_settings.name = "Non-Color"
-            image.alpha_mode = "CHANNEL_PACKED"  # A holds the log-radius correction, not coverage
-            image.pixels.foreach_set(pixels.ravel())
-            image.pack()
-            image[EDIT_TABLE_PROP] = table.sha256
+    for j in range(len(skin_edits.CONTROLS)):
+        name = edit_table.image_name(j)
+        full = f"{IMAGE_PREFIX} {name}"
+        image = bpy.data.images.get(full)
+        if image is not None and image.get(EDIT_TABLE_PROP) == table.sha256:
             images[name] = image
+            continue
+        atlases = atlases if atlases is not None else table.atlases()
+        pixels = atlases[name]
+        if image is not None and image.users == 0:
+            bpy.data.images.remove(image)
+        image = bpy.data.images.new(full, pixels.shape[1], pixels.shape[0], alpha=True, float_buffer=True)
+        image.colorspace_settings.name = "Non-Color"
+        image.alpha_mode = "CHANNEL_PACKED"  # A holds the log-radius correction, not coverage
+        image.pixels.foreach_set(pixels.ravel())
+        image.pack()
+        image[EDIT_TABLE_PROP] = table.sha256
+        images[name] = image
     return images
 
 
@@ -151,24 +152,35 @@ def add_edit_branch(b, gin, table: edit_table.EditTable, images: dict[str, bpy.t
                 layout.shape[d] - 1.0) for d, coord in enumerate(coords)]
     s = b.math("MINIMUM", 41, b.math("FLOOR", 40, x[0]), layout.shape[0] - 2.0)
     frac = b.math("SUBTRACT", 42, x[0], s)
-    uvs = (live._slice_uv(b, layout, s, x[1], x[2], 42), live._slice_uv(b, layout, b.math("ADD", 42, s, 1.0),
-                                                                           x[1], x[2], 42))
-    shift_rgb, shift_a = (0.0, 0.0, 0.0, 1.0), None
+    bases = [_stacked_uv(b, layout, slice_index, x[1], x[2], 42)
+             for slice_index in (s, b.math("ADD", 42, s, 1.0))]
+    shift_rgb, shift_a = None, None
     for j, name in enumerate(skin_edits.CONTROLS):
-        coordinate = _coordinate(b, gin, j, 44)
+        levels = edit_table.LEVELS[name]
         h = edit_table.SPACING[name]
-        for i, level in enumerate(edit_table.LEVELS[name]):
-            gap = b.math("ABSOLUTE", 48, b.math("SUBTRACT", 47, coordinate, level))
-            weight = _hat(b, gap, h, 49)
-            rgb, alpha = live._lookup(b, images[edit_table.image_name(j, i)], uvs, frac, 51)
-            add = b.node("ShaderNodeMix", 54, data_type="RGBA", blend_type="ADD", clamp_factor=False,
-                         clamp_result=False)
-            sockets = [socket for socket in add.inputs if socket.enabled]  # Factor, A, B
-            for value, socket in zip((weight, shift_rgb, rgb), sockets, strict=True):
-                b.link(value, socket)
-            shift_rgb = next(socket for socket in add.outputs if socket.enabled)
-            shift_a = (b.math("MULTIPLY", 53, alpha, weight) if shift_a is None
-                       else b.math("MULTIPLY_ADD", 54, alpha, weight, shift_a))
+        t = b.math("MULTIPLY_ADD", 47, _coordinate(b, gin, j, 44), 1.0 / h, -levels[0] / h)
+        lower = b.math("MINIMUM", 49, b.math("FLOOR", 48, t), edit_table.STACKED - 2.0)
+        fraction = b.math("SUBTRACT", 50, t, lower)
+        found = []
+        for step in (0.0, 1.0):  # the two levels around the control's value
+            uvs = []
+            for u, v in bases:
+                offset = b.math("MULTIPLY_ADD", 51, lower, 1.0 / edit_table.STACKED, v)
+                uv = b.node("ShaderNodeCombineXYZ", 52)
+                b.link(u, uv.inputs[0])
+                b.link(b.math("ADD", 51, offset, step / edit_table.STACKED) if step else offset, uv.inputs[1])
+                uvs.append(uv.outputs[0])
+            found.append(live._lookup(b, images[edit_table.image_name(j)], uvs, frac, 53))
+        rgb = b.mix("RGBA", 55, fraction, found[0][0], found[1][0])
+        alpha = b.mix("FLOAT", 55, fraction, found[0][1], found[1][1])
+        if shift_rgb is None:
+            shift_rgb, shift_a = rgb, alpha
+        else:
+            add = b.node("ShaderNodeVectorMath", 56, operation="ADD")
+            b.link(shift_rgb, add.inputs[0])
+            b.link(rgb, add.inputs[1])
+            shift_rgb = add.outputs[0]
+            shift_a = b.math("ADD", 56, shift_a, alpha)
     sep = b.node("ShaderNodeSeparateColor", 55)
     b.link(shift_rgb, sep.inputs[0])
     factor = b.node("ShaderNodeCombineColor", 57)
@@ -180,13 +192,19 @@ def add_edit_branch(b, gin, table: edit_table.EditTable, images: dict[str, bpy.t
     return EditBranch(colour=edited.outputs[0], radius_factor=b.math("EXPONENT", 56, shift_a))
 
 
-def _hat(b, gap, h: float, stage: int):
-    """max(0, 1 - gap / h) in one Map Range node (linear, clamped): exactly 0 for gap >= h."""
-    node = b.node("ShaderNodeMapRange", stage, data_type="FLOAT", interpolation_type="LINEAR", clamp=True)
-    b.link(gap, node.inputs["Value"])
-    for socket, value in (("From Min", 0.0), ("From Max", h), ("To Min", 1.0), ("To Max", 0.0)):
-        node.inputs[socket].default_value = value
-    return node.outputs["Result"]
+def _stacked_uv(b, layout, slice_index, x1, x2, stage: int):
+    """(u, v) of grid point (slice, x1, x2) in the lowest atlas of a control's image (edit_table.STACKED atlases
+    stacked bottom to top): level k lies at v + k / STACKED (the slice atlas of exporters.live_table)."""
+    width, height = layout.size
+    tile_w, tile_h = layout.tile
+    border = live_table.BORDER + 0.5
+    row = b.math("FLOOR", stage + 1, b.math("DIVIDE", stage, b.math("ADD", stage, slice_index, 0.5),
+                                            float(layout.columns)))
+    col = b.math("MULTIPLY_ADD", stage + 2, row, -float(layout.columns), slice_index)
+    px = b.math("MULTIPLY_ADD", stage + 3, col, float(tile_w), b.math("ADD", stage + 2, x1, border))
+    py = b.math("MULTIPLY_ADD", stage + 3, row, float(tile_h), b.math("ADD", stage + 2, x2, border))
+    return (b.math("DIVIDE", stage + 4, px, float(width)),
+            b.math("DIVIDE", stage + 4, py, float(edit_table.STACKED * height)))
 
 
 def _channel(b, colour, c: int):

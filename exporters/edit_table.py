@@ -5,7 +5,9 @@ What the live group computes for a painted colour c and controls (m, b, o):
 
 1. control coordinates s = (log2 m, log2 b, o), each clamped to its range (exporters.skin_edits.CONTROL_RANGES);
 2. per control j, hat-function weights of s_j on the levels ``LEVELS[j]`` (equally spaced, h apart, the neutral
-   level 0 left out: w_i = max(0, 1 - |s_j - level_i| / h)); at neutral every weight is exactly 0;
+   level 0 left out: w_i = max(0, 1 - |s_j - level_i| / h)); at neutral every weight is exactly 0.  At most two
+   adjacent levels weigh: the nodes read just those two (linear interpolation between them, the neutral level
+   holding zero);
 3. the shift D(c, s) = sum_j sum_i w_ji T_ji(c), where T_ji(c) (RGBA) is trilinear in a coarse grid over skin
    space (the grid, box and projection of exporters.texel_table / exporters.live_table: colours outside the box take
    the nearest skin colour's shift, so the answer is continuous) holding at level i of control j:
@@ -79,14 +81,31 @@ class EditTable:
                                       step=float(self.step), columns=best)
 
     def atlases(self) -> dict[str, np.ndarray]:
-        """Image name ``{Control} {level index}`` -> atlas (height, width, 4) float32."""
+        """Image name (the control's, :func:`image_name`) -> its levels' atlases stacked bottom to top in the order
+        of :func:`stacked_levels`, the neutral level (all zero) in the middle: (STACKED x height, width, 4)
+        float32."""
         layout = self.layout()
-        return {image_name(j, i): live_table.atlas_of(self.values[:, :, :, j, i], layout)
-                for j in range(len(skin_edits.CONTROLS)) for i in range(self.values.shape[4])}
+        out = {}
+        for j in range(len(skin_edits.CONTROLS)):
+            grids = stacked_levels(self.values[:, :, :, j])
+            out[image_name(j)] = np.concatenate([live_table.atlas_of(g, layout) for g in grids], axis=0)
+        return out
 
 
-def image_name(control: int, level: int) -> str:
-    return f"{skin_edits.CONTROLS[control].title()} {level}"
+#: Atlases stacked per control image: the levels below neutral, neutral (zero), the levels above.
+STACKED = 5
+
+
+def stacked_levels(values: np.ndarray) -> list[np.ndarray]:
+    """The grids (n0, n1, n2, 4) of one control's levels (``values`` (n0, n1, n2, L, 4)) in stacking order, a zero
+    grid for the neutral level between the negative and the positive ones."""
+    half = values.shape[3] // 2
+    grids = [values[:, :, :, i] for i in range(values.shape[3])]
+    return [*grids[:half], np.zeros_like(grids[0]), *grids[half:]]
+
+
+def image_name(control: int) -> str:
+    return skin_edits.CONTROLS[control].title()
 
 
 def control_coords(edits: np.ndarray) -> np.ndarray:
