@@ -24,9 +24,9 @@ import atexit
 
 import bpy
 
-from . import operators, panels, preferences
+from . import live_edits, operators, panels, preferences
 
-_classes = (preferences.SpectralSkinPreferences, *operators.classes, *panels.classes)
+_classes = (preferences.SpectralSkinPreferences, *operators.classes, *live_edits.classes, *panels.classes)
 
 
 def register(addon_name: str | None = None) -> None:

@@ -4,6 +4,7 @@
         [--colorspace auto|srgb|linear] [--unit-scale M_PER_UNIT] [--overwrite] [--model PATH] [--threads N]
         [--model-colour] [--exact] [--table PATH] [--force] [--uv-mask IMAGE] [--prune-share S]
         [--exr-compression piz|zip|...] [--float-maps]
+        [--melanin V] [--blood V] [--oxygenation V] [--melanin-map IMAGE] [--blood-map IMAGE] [--oxygenation-map IMAGE]
     blender -b --factory-startup --python blender_addon/bake.py -- --albedo IMAGE --out DIR ...
 
 By default the maps render the painted albedo, per channel (exporters.painted); ``--model-colour`` renders the
@@ -12,6 +13,10 @@ up in the fast-path table shipped beside the model (``skin_inversion_table.npz``
 outside its domain get the nearest skin colour's maps, as the live group renders them); ``--exact`` evaluates
 every distinct colour with the model.  Re-running a bake whose maps in DIR are up to date (same image content,
 model and options) does nothing and says so (``--force`` re-bakes).
+
+Skin edits (exporters.skin_edits): ``--melanin V`` and ``--blood V`` multiply the tone's melanin and blood fractions,
+``--oxygenation V`` shifts its oxygen saturation; ``--melanin-map IMAGE`` etc. weigh an edit per texel (a mask, 0 =
+as painted, 1 = the full edit), as a Mix node before the live group's input would.
 
 Writes float EXR maps (Non-Color) and IMAGE-stem_maps.json into DIR (created if missing).  Exit status 0 on
 success, 2 with a one-line error on stderr for bad input (missing/unreadable image, NaN or negative
@@ -148,6 +153,16 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--float-maps", action="store_true",
                    help="store every map as 32-bit float (default on the fast path: colour, weight and anisotropy "
                         "maps as half floats, step <= 2.4e-4, which halves the write)")
+    skin_edits = core("skin_edits")
+    for name in skin_edits.CONTROLS:
+        lo, hi = skin_edits.CONTROL_RANGES[name]
+        neutral = skin_edits.NEUTRAL[skin_edits.CONTROLS.index(name)]
+        what = ("shifts the blood's oxygen saturation by" if name == "oxygenation"
+                else f"multiplies the {name} fraction by")
+        p.add_argument(f"--{name}", type=cli_io.in_range(lo, hi), default=neutral, metavar="V",
+                       help=f"skin edit: {what} V, in [{lo:g}, {hi:g}] (default {neutral:g}: as painted)")
+        p.add_argument(f"--{name}-map", default=None, metavar="IMAGE",
+                       help=f"mask (first channel, 0-1, albedo's size) weighing the --{name} edit per texel")
     p.add_argument("--quiet", action="store_true")
     return p
 
@@ -158,7 +173,9 @@ def check_paths(args: argparse.Namespace) -> None:
 
     inputs = []
     for option, value, kind in (("--albedo", args.albedo, "image"), ("--model", args.model, "onnx"),
-                                ("--table", args.table, "npz"), ("--uv-mask", args.uv_mask, "image")):
+                                ("--table", args.table, "npz"), ("--uv-mask", args.uv_mask, "image"),
+                                *((f"--{n}-map", getattr(args, f"{n}_map"), "image")
+                                  for n in ("melanin", "blood", "oxygenation"))):
         if value is not None and (option not in ("--albedo", "--model") or Path(value).exists()):
             cli_io.check_input(value, option, kind)  # a missing image or model: the library's own message
         inputs.append((option, value))
@@ -193,7 +210,8 @@ def main(argv: list[str] | None = None) -> int:
                                    force=args.force, texel_mask=_read_mask(args.uv_mask, args.memory_mb),
                                    prune_share=_prune_share(args, bake, image_input),
                                    compression=args.exr_compression or maps.DEFAULT_COMPRESSION,
-                                   half_maps=False if args.float_maps else None)
+                                   half_maps=False if args.float_maps else None,
+                                   **_edit_options(args, args.memory_mb))
         last = [0.0]
 
         def progress(fraction: float) -> None:
@@ -283,6 +301,18 @@ def _read_mask(path: str | None, memory_mb: float | None = None):
         return None
     image = core("image_input").read_albedo(path, colorspace="linear", memory_mb=memory_mb)
     return (image.rgb > 0).any(axis=2)
+
+
+def _edit_options(args: argparse.Namespace, memory_mb: float | None = None) -> dict:
+    """BakeOptions' ``edit`` and ``edit_masks`` from --melanin/--blood/--oxygenation and their --*-map masks."""
+    skin_edits = core("skin_edits")
+    edit = skin_edits.SkinEdit(**{name: getattr(args, name) for name in skin_edits.CONTROLS})
+    masks = {}
+    for name in skin_edits.CONTROLS:
+        path = getattr(args, f"{name}_map")
+        if path is not None:
+            masks[name] = core("image_input").read_albedo(path, colorspace="linear", memory_mb=memory_mb).rgb[..., 0]
+    return {"edit": edit, "edit_masks": masks or None}
 
 
 def _remove_if_empty(folder: Path) -> None:

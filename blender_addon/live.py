@@ -32,7 +32,7 @@ from pathlib import Path
 import bpy
 import numpy as np
 
-from . import nodes, wiring
+from . import live_edits, nodes, wiring
 from .core import bake as core_bake
 from .core import colorimetry, image_input, live_table, maps, texel_table
 
@@ -40,7 +40,7 @@ GROUP_NAME = "Spectral Skin SSS Live"
 #: Custom properties: on the group and the images, the SHA-256 of the table they were made from.
 TABLE_PROP = "spectral_skin_sss_table"
 #: Layout version of the live group (bump when the generated nodes change).
-LIVE_VERSION = 2
+LIVE_VERSION = 3
 IMAGE_PREFIX = "Spectral Skin SSS Table"
 #: sRGB encoding (IEC 61966-2-1): linear segment below this value, slope 12.92 there.
 _SRGB_KNEE, _SRGB_SLOPE = 0.0031308, 12.92
@@ -170,10 +170,11 @@ def _srgb_encode(b: _Builder, linear: bpy.types.NodeSocket, stage: int) -> bpy.t
     return b.math("MULTIPLY_ADD", stage + 3, low, b.math("SUBTRACT", stage + 2, lin, curve), curve)
 
 
-def _grid_coords(b: _Builder, gin: bpy.types.Node, layout: live_table.AtlasLayout):
-    """Clamped grid coordinates x0, x1, x2 of the input colour and its distance from the box (skin space)."""
+def _grid_coords(b: _Builder, gin: bpy.types.Node, layout: live_table.AtlasLayout, colour=None):
+    """Clamped grid coordinates x0, x1, x2 of the input colour (or ``colour``) and its distance from the box (skin
+    space)."""
     sep = b.node("ShaderNodeSeparateColor", 0)
-    b.link(_convention(b, gin, 1.0, PRINCIPLED_BASE_SHARE), sep.inputs[0])
+    b.link(_convention(b, gin, 1.0, PRINCIPLED_BASE_SHARE, colour), sep.inputs[0])
     e = [_srgb_encode(b, sep.outputs[i], 1) for i in range(3)]
     coords = [b.math("MULTIPLY", 6, b.math("ADD", 5, b.math("ADD", 5, e[0], e[1]), e[2]), 1.0 / 3.0),
               b.math("SUBTRACT", 6, e[0], e[1]), b.math("SUBTRACT", 6, e[1], e[2])]
@@ -254,11 +255,19 @@ def _new_group(k_count: int, table_sha: str) -> tuple[bpy.types.NodeTree, bpy.ty
 
 
 def build_live_group(table: texel_table.TexelTable, layout: live_table.AtlasLayout,
-                     images: dict[str, bpy.types.Image]) -> bpy.types.NodeTree:
-    """A new live group reading ``images`` (from :func:`ensure_images`) of ``table``; see the module docstring."""
+                     images: dict[str, bpy.types.Image], edits=None) -> bpy.types.NodeTree:
+    """A new live group reading ``images`` (from :func:`ensure_images`) of ``table``; see the module docstring.
+    ``edits``: (edit table, its images from live_edits.ensure_images) for the Melanin, Blood and Oxygenation inputs
+    (blender_addon.live_edits), or None."""
     group, gin, gout = _new_group(table.k, table.sha256)
     b = _Builder(group)
-    (x0, x1, x2), outside = _grid_coords(b, gin, layout)
+    branch = None
+    if edits is not None:
+        live_edits.add_inputs(group)
+        group[live_edits.EDIT_TABLE_PROP] = edits[0].sha256
+        branch = live_edits.edit_node(b, gin, *edits)
+    colour = branch.colour if branch is not None else None
+    (x0, x1, x2), outside = _grid_coords(b, gin, layout, colour)
     s = b.math("MINIMUM", 11, b.math("FLOOR", 10, x0), layout.shape[0] - 2.0)
     frac = b.math("SUBTRACT", 12, x0, s)
     uvs = (_slice_uv(b, layout, s, x1, x2, 12), _slice_uv(b, layout, b.math("ADD", 12, s, 1.0), x1, x2, 12))
@@ -269,6 +278,8 @@ def build_live_group(table: texel_table.TexelTable, layout: live_table.AtlasLayo
         log_r, _ = _lookup(b, images[f"k{k} Log Radius"], uvs, frac, 18)
         weight, _ = _lookup(b, images[f"k{k} Weight"], uvs, frac, 18)
         radius = _radius(b, log_r, gin.outputs["Unit Scale"], 20)
+        if branch is not None:
+            radius = live_edits.scale_radius(b, radius, branch.radius_factor)
         for kind, value in (("Color", colour), ("Radius", radius), ("Weight", weight), ("Anisotropy", g)):
             b.link(value, mixture.inputs[nodes.socket_name(k, kind)])
         term = b.node("ShaderNodeVectorMath", 24, operation="MULTIPLY")
@@ -285,25 +296,27 @@ def build_live_group(table: texel_table.TexelTable, layout: live_table.AtlasLayo
     for name in ("Roughness", "Normal", *nodes.SPECULAR_INPUTS):
         b.link(gin.outputs[name], mixture.inputs[name])
     b.link(mixture.outputs["BSSRDF"], gout.inputs["Cycles"])
-    b.link(_eevee_surface(b, gin, effective, table.options.ior), gout.inputs["EEVEE"])
+    b.link(_eevee_surface(b, gin, effective, table.options.ior, colour), gout.inputs["EEVEE"])
     b.link(outside, gout.inputs["Outside"])
     return group
 
 
-def _convention(b: _Builder, gin: bpy.types.Node, painted: float, principled: float) -> bpy.types.NodeSocket:
-    """The input colour times ``painted`` (Principled Convention 0) or ``principled`` (1), mixed in between."""
+def _convention(b: _Builder, gin: bpy.types.Node, painted: float, principled: float,
+                colour=None) -> bpy.types.NodeSocket:
+    """The input colour (or ``colour``) times ``painted`` (Principled Convention 0) or ``principled`` (1), mixed in
+    between."""
     gain = b.math("MULTIPLY_ADD", 0, gin.outputs["Principled Convention"], principled - painted, painted)
     scale = b.node("ShaderNodeVectorMath", 0, operation="SCALE")
-    b.link(gin.outputs["Color"], scale.inputs[0])
+    b.link(colour if colour is not None else gin.outputs["Color"], scale.inputs[0])
     b.link(gain, scale.inputs["Scale"])
     return scale.outputs[0]
 
 
-def _eevee_surface(b: _Builder, gin: bpy.types.Node, radius, ior: float) -> bpy.types.NodeSocket:
+def _eevee_surface(b: _Builder, gin: bpy.types.Node, radius, ior: float, colour=None) -> bpy.types.NodeSocket:
     """One Principled BSDF: the colour (over PRINCIPLED_BASE_SHARE in the painted convention) as Base Color,
     Subsurface Weight 1 at the effective radius."""
     bsdf = b.node("ShaderNodeBsdfPrincipled", 27)
-    b.link(_convention(b, gin, 1.0 / PRINCIPLED_BASE_SHARE, 1.0), bsdf.inputs["Base Color"])
+    b.link(_convention(b, gin, 1.0 / PRINCIPLED_BASE_SHARE, 1.0, colour), bsdf.inputs["Base Color"])
     bsdf.inputs["Subsurface Weight"].default_value = 1.0
     bsdf.inputs["Subsurface Scale"].default_value = 1.0
     bsdf.inputs["IOR"].default_value = ior
@@ -313,15 +326,18 @@ def _eevee_surface(b: _Builder, gin: bpy.types.Node, radius, ior: float) -> bpy.
     return bsdf.outputs[0]
 
 
-def ensure_live_group(table: texel_table.TexelTable) -> bpy.types.NodeTree:
-    """The live group of ``table``: an existing one of this table and version is reused (every material shares
-    it and its images), else one is built."""
+def ensure_live_group(table: texel_table.TexelTable, edits=None) -> bpy.types.NodeTree:
+    """The live group of ``table`` (and of the edit table ``edits``, or None: no edit inputs): an existing one of
+    these tables and this version is reused (every material shares it and its images), else one is built."""
+    edit_sha = edits.sha256 if edits is not None else None
     for group in bpy.data.node_groups:
         if (group.name.startswith(GROUP_NAME) and group.get(TABLE_PROP) == table.sha256
-                and group.get("spectral_skin_sss_version") == LIVE_VERSION):
+                and group.get("spectral_skin_sss_version") == LIVE_VERSION
+                and group.get(live_edits.EDIT_TABLE_PROP) == edit_sha):
             return group
     layout, images = ensure_images(table)
-    return build_live_group(table, layout, images)
+    edit_images = (edits, live_edits.ensure_images(edits)) if edits is not None else None
+    return build_live_group(table, layout, images, edit_images)
 
 
 # -- wiring ----------------------------------------------------------------------------------------------------
@@ -420,9 +436,11 @@ def apply(context: bpy.types.Context, model_path: str, unit_scale_m: float, colo
     if error:
         raise LiveInputError(error)
     table = table_for_model(model_path)
+    edits = live_edits.table_for_model(model_path, table.sha256)
     wired = wiring.wired_group_node(material)
     if wired is not None and wiring.is_added(wired) and wired.node_tree.get(TABLE_PROP) == table.sha256 \
-            and wired.node_tree.get("spectral_skin_sss_version") == LIVE_VERSION:
+            and wired.node_tree.get("spectral_skin_sss_version") == LIVE_VERSION \
+            and wired.node_tree.get(live_edits.EDIT_TABLE_PROP) == (edits.sha256 if edits is not None else None):
         wired.inputs["Unit Scale"].default_value = unit_scale_m
         wired.inputs["Principled Convention"].default_value = float(principled_convention)
         return (f"up to date: '{material.name}' already renders through the live group (Unit Scale {unit_scale_m:g} m "
@@ -430,7 +448,7 @@ def apply(context: bpy.types.Context, model_path: str, unit_scale_m: float, colo
     _, colour, _ = colour_source(material)
     before = _state(material)
     try:
-        group = ensure_live_group(table)
+        group = ensure_live_group(table, edits)
         gnode = wire_live(material, group, unit_scale_m)
         gnode.inputs["Principled Convention"].default_value = float(principled_convention)
     except BaseException:

@@ -7,7 +7,7 @@ import os
 
 import bpy
 
-from . import baker, operators, preferences
+from . import baker, live_edits, operators, preferences
 
 
 class SpectralSkinSettings(bpy.types.PropertyGroup):
@@ -76,6 +76,7 @@ def _draw(layout, context) -> None:
         op.overwrite, op.model_colour = settings.overwrite, settings.model_colour
         op.exact, op.uv_coverage = settings.exact, settings.uv_coverage
     layout.operator("spectral_skin.add_mixture", icon="NODETREE")
+    live_edits.draw_controls(layout, context)
     layout.operator("spectral_skin.remove", icon="TRASH")
 
 

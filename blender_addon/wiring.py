@@ -45,7 +45,9 @@ OUTPUT_LABELS = {"CYCLES": "Cycles (Spectral Skin SSS)", "EEVEE": "EEVEE (Spectr
 _LEGACY_OUTPUT_LABEL = "EEVEE (Spectral Skin SSS Live)"
 #: Custom properties the add-on puts on node groups and images it makes (what :func:`purge_unused` may remove).
 _GROUP_TAG = "spectral_skin_sss_backend"
-_IMAGE_TAGS = ("spectral_skin_sss_table", "spectral_skin_sss_bake_key")
+#: Custom property on the skin-edit group and its images (blender_addon.live_edits): the edit table's SHA-256.
+EDIT_TABLE_PROP = "spectral_skin_sss_edit_table"
+_IMAGE_TAGS = ("spectral_skin_sss_table", "spectral_skin_sss_bake_key", EDIT_TABLE_PROP)
 #: Material properties the add-on sets (removed by :func:`unwire`).
 _MATERIAL_PROPS = (PREVIOUS_SURFACE_PROP, REPLACED_LINKS_PROP)
 
@@ -127,7 +129,7 @@ def feed_render_outputs(material: bpy.types.Material, sockets: dict[str, bpy.typ
 
 # -- finding and removing the add-on's nodes --------------------------------------------------------------------
 def is_addon_group(tree: bpy.types.NodeTree | None) -> bool:
-    return tree is not None and (_GROUP_TAG in tree or "spectral_skin_sss_k" in tree)
+    return tree is not None and (_GROUP_TAG in tree or "spectral_skin_sss_k" in tree or EDIT_TABLE_PROP in tree)
 
 
 def _legacy_nodes(tree: bpy.types.NodeTree) -> set[str]:

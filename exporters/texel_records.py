@@ -96,11 +96,18 @@ def exact_records(model, rgb: np.ndarray, targets: tuple[str, ...], options: Col
     collapse); ``with_luminance`` adds ``y_model`` (N,), the luminance of the model's reflectance.
     """
     out = model.run(rgb)
+    painted_rgb = np.asarray(rgb, np.float64) if options.painted else None
+    return records_of(out, painted_rgb, targets, options, with_luminance)
+
+
+def records_of(out: dict[str, np.ndarray], painted_rgb: np.ndarray | None, targets: tuple[str, ...],
+               options: CollapseOptions, with_luminance: bool = False) -> dict[str, np.ndarray]:
+    """Records of model outputs ``out`` (exporters.inference.OUTPUT_SHAPES, N rows): the collapse reproduces
+    ``painted_rgb`` (N, 3) (None: the colour of ``out``'s reflectance)."""
     rec: dict[str, np.ndarray] = {"biophysical": out["biophysical"].astype(np.float64),
                                   "exposure": out["exposure"][:, 0].astype(np.float64)}
     if with_luminance:
         rec["y_model"] = model_luminance(out["reflectance"])
-    painted_rgb = np.asarray(rgb, np.float64) if options.painted else None
     if not needs_media(targets):
         if painted_rgb is not None and "spectral" in targets:
             rec["spectral_clamped"] = collapse.painted_clamped(out["alpha"], out["g"], out["weight"],

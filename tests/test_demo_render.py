@@ -106,3 +106,15 @@ def test_model_summary_comes_from_the_card():
     assert "integration model" not in text and "16 training tones" not in text
     assert summary({}) == "unnamed model"
     assert summary({"name": "m", "K": 2}) == "m, K = 2"
+
+
+def test_edits_row_shows_the_ear_glow_follow_melanin_and_blood(tmp_path):
+    """The skin-edits row at a tiny size: under the back light the ear's glow darkens with a tan (melanin x2 absorbs
+    more of the light crossing the ear), brightens with pallor (less blood absorbs less) and loses green with a flush
+    (haemoglobin's bands absorb green); the row figure is written."""
+    info = demo_render.edits_row(tmp_path, texture_size=64, render_size=64, samples=8)
+    ear = {key: np.array(v) for key, v in info["ear_mean_srgb"].items()}
+    assert info["ear_pixels"] > 20
+    assert ear["tan"] @ LUMINANCE < ear["as painted"] @ LUMINANCE < ear["pallor"] @ LUMINANCE
+    assert ear["flush"][1] < ear["as painted"][1]
+    assert (tmp_path / "skin_edits_row.png").is_file()

@@ -180,7 +180,7 @@ def test_outside_colours_get_the_reference_media_continuously(tmp_path, addon):
     scene, mat, _ = _probe_strip(colours, tmp_path)
     table = live.table_for_model(preferences.DEFAULT_MODEL)
     group = live.ensure_live_group(table)
-    mixture = next(n for n in group.nodes if n.bl_idname == "ShaderNodeGroup")
+    mixture = next(n for n in group.nodes if n.bl_idname == "ShaderNodeGroup" and "k1 Color" in n.inputs)
     gout = next(n for n in group.nodes if n.bl_idname == "NodeGroupOutput")
     tree = mat.node_tree
     tex = next(n for n in tree.nodes if n.bl_idname == "ShaderNodeTexImage")

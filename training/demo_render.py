@@ -242,9 +242,10 @@ def contact_sheet(maps_dir: Path, stem: str, k_count: int, albedo: np.ndarray, p
 
 
 def comparison_figure(panels: dict[tuple[str, str], np.ndarray], tones: list[str], paths: list[Path],
-                      footer: str = "") -> list[Path]:
-    """One row per tone, one column per method (METHODS), panels (H, W, 3) in [0, 1] shown pixel for pixel
-    under a header; ``footer``: a line of small print below.  Written to each of ``paths`` (.png or .jpg)."""
+                      footer: str = "", columns: tuple[tuple[str, str], ...] = METHODS) -> list[Path]:
+    """One row per tone, one column per (key, label) of ``columns`` (default METHODS), panels (H, W, 3) in [0, 1]
+    shown pixel for pixel under a header; ``footer``: a line of small print below.  Written to each of ``paths``
+    (.png or .jpg)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -252,9 +253,9 @@ def comparison_figure(panels: dict[tuple[str, str], np.ndarray], tones: list[str
 
     h, w = next(iter(panels.values())).shape[:2]
     gap, left, top, bottom = 4, 70, 44, 22 if footer else 4
-    grid = np.ones((len(tones) * (h + gap) - gap, len(METHODS) * (w + gap) - gap, 3), np.float32)
+    grid = np.ones((len(tones) * (h + gap) - gap, len(columns) * (w + gap) - gap, 3), np.float32)
     for i, tone in enumerate(tones):
-        for j, (method, _) in enumerate(METHODS):
+        for j, (method, _) in enumerate(columns):
             grid[i * (h + gap):i * (h + gap) + h, j * (w + gap):j * (w + gap) + w] = panels[tone, method]
     width, height = grid.shape[1] + left, grid.shape[0] + top + bottom
     dpi = 100
@@ -262,7 +263,7 @@ def comparison_figure(panels: dict[tuple[str, str], np.ndarray], tones: list[str
     ax = fig.add_axes((left / width, bottom / height, grid.shape[1] / width, grid.shape[0] / height))
     ax.imshow(np.clip(grid, 0.0, 1.0), interpolation="nearest")
     ax.axis("off")
-    for j, (_, label) in enumerate(METHODS):
+    for j, (_, label) in enumerate(columns):
         fig.text((left + j * (w + gap) + w / 2) / width, 1 - 4 / height, label, ha="center", va="top", fontsize=8.5)
     for i, tone in enumerate(tones):
         fig.text(6 / width, 1 - (top + i * (h + gap) + h / 2) / height, f"{tone}\nskin", ha="left", va="center",
@@ -370,6 +371,91 @@ def run(out: Path, texture_size: int = 512, render_size: int = RENDER_SIZE, samp
             "ear_pixels": int(ear.sum())}
 
 
+#: The skin edits of the demo's row (exporters.skin_edits.PRESETS): key, label.
+EDIT_ROW: tuple[tuple[str, str], ...] = (("as painted", "as painted"), ("tan", "tan\nmelanin x2"),
+                                         ("flush", "flush\nblood x2.5"), ("pallor", "pallor\nblood x0.4"))
+
+
+def edits_row(out: Path, texture_size: int = 512, render_size: int = RENDER_SIZE, samples: int = SAMPLES,
+              tone: str = "medium", figure: Path | None = None) -> dict:
+    """The ``tone`` head through the live group as painted and under the tan, flush and pallor presets (the group
+    node's Melanin, Blood and Oxygenation inputs), under the demo's lights (back light behind the ear); writes the
+    row (``out``/skin_edits_row.png, and ``figure`` when given) and returns the left ear's mean colour per edit."""
+    import bpy
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+    import blender_addon
+    from blender_addon import live_edits
+    from exporters import skin_edits
+
+    out.mkdir(parents=True, exist_ok=True)
+    scene, parts = _scene(render_size, samples)
+    ear = _ear_mask(scene, parts, out / "ear_mask.png")
+    texture = skin_albedo_texture(texture_size, seed=0, base=TONES[tone])
+    image = bpy.data.images.load(str(write_image(out / f"skin_{tone}.png", texture)))
+    material = _material(f"{tone} edited", image, "principled")
+    blender_addon.register()
+    try:
+        _invert(parts[0], material)
+    finally:
+        blender_addon.unregister()
+    _assign(parts, material)
+    node = live_edits.live_node(material)
+    panels, ear_means = {}, {}
+    for key, _ in EDIT_ROW:
+        edit = skin_edits.PRESETS.get(key, skin_edits.SkinEdit())
+        for (name, *_), value in zip(live_edits.INPUTS, edit.row(), strict=True):
+            node.inputs[name].default_value = float(value)
+        panels[tone, key] = _render(scene, out / f"render_{tone}_{key.replace(' ', '_')}.png")
+        ear_means[key] = panels[tone, key][ear].mean(axis=0).tolist()
+    footer = (f"Cycles {bpy.app.version_string}, {render_size} px, {samples} spp + OpenImageDenoise; live group, "
+              "Melanin / Blood / Oxygenation inputs; back light behind the ear.")
+    comparison_figure(panels, [tone], [out / "skin_edits_row.png", *([figure] if figure else [])], footer, EDIT_ROW)
+    return {"ear_mean_srgb": ear_means, "ear_pixels": int(ear.sum())}
+
+
+def flush_strip(out: Path, texture_size: int = 256, render_size: int = 80, samples: int = 8, tone: str = "medium",
+                frames: int = 24, peak: float = 2.5, figure: Path | None = None) -> dict:
+    """A flush as an animation: the live group's Blood input keyframed 1 -> ``peak`` -> 1 over ``frames`` frames
+    (Bezier keys at the first, middle and last frame), every frame rendered, side by side in one strip
+    (``out``/flush_strip.png, and ``figure`` when given).  Returns the Blood value and the left ear's mean colour
+    per frame."""
+    import bpy
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+    import blender_addon
+    from blender_addon import live_edits
+
+    out.mkdir(parents=True, exist_ok=True)
+    scene, parts = _scene(render_size, samples)
+    ear = _ear_mask(scene, parts, out / "ear_mask_strip.png")
+    texture = skin_albedo_texture(texture_size, seed=0, base=TONES[tone])
+    image = bpy.data.images.load(str(write_image(out / f"skin_{tone}.png", texture)))
+    material = _material(f"{tone} flush", image, "principled")
+    blender_addon.register()
+    try:
+        _invert(parts[0], material)
+    finally:
+        blender_addon.unregister()
+    _assign(parts, material)
+    blood = live_edits.live_node(material).inputs["Blood"]
+    for frame, value in ((1, 1.0), ((frames + 1) // 2, peak), (frames, 1.0)):
+        blood.default_value = value
+        blood.keyframe_insert("default_value", frame=frame)
+    tiles, values, ear_means = [], [], []
+    for frame in range(1, frames + 1):
+        scene.frame_set(frame)
+        values.append(float(blood.default_value))
+        tile = _render(scene, out / f"flush_{frame:02d}.png")
+        ear_means.append(tile[ear].mean(axis=0).tolist())
+        tiles.append(tile)
+    strip = np.concatenate(tiles, axis=1)
+    codes = np.clip(np.rint(strip * 255.0), 0, 255).astype(np.uint8)
+    for path in (out / "flush_strip.png", *([figure] if figure else [])):
+        write_image(path, codes)
+    return {"blood": values, "ear_mean_srgb": ear_means}
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m training.demo_render", description=__doc__.splitlines()[0])
     parser.add_argument("--out", type=Path, default=Path("demo/out"))
@@ -377,7 +463,19 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--render-size", type=int, default=RENDER_SIZE)
     parser.add_argument("--samples", type=int, default=SAMPLES)
     parser.add_argument("--figure", type=Path, default=None, help="also write the figure here (.png or .jpg)")
+    parser.add_argument("--edits-row", action="store_true",
+                        help="only the skin-edits row: the medium head as painted, tanned, flushed and pale")
+    parser.add_argument("--flush-strip", action="store_true",
+                        help="only the animated flush: Blood keyframed 1 -> 2.5 -> 1 over 24 frames, as a strip")
     args = parser.parse_args(argv)
+    if args.flush_strip:
+        info = flush_strip(args.out, figure=args.figure)
+        print(json.dumps(info))
+        return 0
+    if args.edits_row:
+        info = edits_row(args.out, args.texture_size, args.render_size, args.samples, figure=args.figure)
+        print(json.dumps(info, indent=1))
+        return 0
     info = run(args.out, args.texture_size, args.render_size, args.samples, figure=args.figure)
     print(json.dumps({k: v for k, v in info.items() if k != "records"}, indent=1))
     return 0

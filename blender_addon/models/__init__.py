@@ -16,5 +16,7 @@ INVERSION_MODEL = MODEL_DIR / "skin_inversion.onnx"
 DECODER_MODEL = MODEL_DIR / "skin_decoder.onnx"
 #: The fast-path texel table built from INVERSION_MODEL (``python -m training texel-table``), beside it.
 TEXEL_TABLE = MODEL_DIR / "skin_inversion_table.npz"
+#: The skin-edit table built from INVERSION_MODEL, DECODER_MODEL and TEXEL_TABLE (``python -m training edit-table``).
+EDIT_TABLE = MODEL_DIR / "skin_inversion_edits.npz"
 #: The model card (architecture, training data, validation numbers) of INVERSION_MODEL.
 MODEL_CARD = MODEL_DIR / "skin_inversion.json"

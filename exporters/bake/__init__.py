@@ -19,6 +19,11 @@ Pipeline.  Every value a bake writes depends on the texel's colour only, so:
    threads.  Only when every band is done are the maps moved into place (all or none), then ``S_maps.json``
    is written (:mod:`exporters.bake.report`).  Cancelling or any error leaves the output folder as it was.
 
+Skin edits (exporters.skin_edits, :mod:`exporters.bake.edits`): ``BakeOptions.edit`` and ``edit_masks`` change the
+tone of every texel, or of the texels a mask paints; the distinct entries are then (colour, edit) pairs, neutral
+ones evaluated as without edits, edited ones from the edit table (exporters.edit_table, as the live group) or, with
+``exact``, by the network and the decoder.
+
 A bake that is already up to date (:mod:`exporters.bake.reuse`) — ``S_maps.json`` in the folder records the
 same key (image content, model SHA-256, options) and every map it lists is unchanged — is reused: nothing is
 read, loaded, evaluated or written (``force=True`` re-bakes).

@@ -9,7 +9,7 @@ from collections.abc import Callable, Iterator
 
 import numpy as np
 
-from .. import inference, live_table, maps, texel_records, texel_table
+from .. import edit_table, inference, live_table, maps, skin_edits, texel_records, texel_table
 from ..texel_records import CollapseOptions
 from .table_cache import cached_table_path
 from .targets import BakeError, MapSpec
@@ -40,8 +40,10 @@ class Evaluator:
     def __init__(self, palette: np.ndarray, targets: tuple[str, ...], model: inference.ModelFile,
                  table: texel_table.TexelTable | None, options: CollapseOptions, threads: int,
                  timings: dict[str, float], chunk: int | None = None,
-                 memory_mb: float = inference.DEFAULT_MEMORY_MB) -> None:
+                 memory_mb: float = inference.DEFAULT_MEMORY_MB, edits: np.ndarray | None = None) -> None:
         self.palette, self.targets, self.model, self.table = palette, targets, model, table
+        self.edits = edits
+        self._edit_table: edit_table.EditTable | None = None
         self.options, self.threads, self.timings = options, threads, timings
         self.model_k = table.k if table is not None else self.load_model().k
         self.chunk = chunk or inference.chunk_rows_for_k(self.model_k, memory_mb)
@@ -83,6 +85,57 @@ class Evaluator:
             full[inside], full[~inside] = value, rest[key]
             rec[key] = full
         return rec, inside
+
+    def edited_records(self, rgb: np.ndarray, edits: np.ndarray) -> tuple[dict[str, np.ndarray], np.ndarray]:
+        """:meth:`records` of colours ``rgb`` (n, 3) under edit rows ``edits`` (n, 3): neutral rows exactly as
+        without edits; edited rows from the edit table (exporters.edit_table, as the live group) on the fast path,
+        else by the network and the decoder (exporters.skin_edits)."""
+        neutral = skin_edits.neutral_rows(edits)
+        if neutral.all():
+            return self.records(rgb)
+        edited = ~neutral
+        part, inside_n = self.records(rgb[neutral])
+        t0 = time.perf_counter()
+        table = self.edit_table() if self.table is not None else None
+        if table is not None:
+            if self._extended is None:
+                self._extended = live_table.extended_values(self.table)
+            rest = edit_table.approx_records(self.table, table, rgb[edited], edits[edited], self.targets,
+                                             self._extended)
+            self.timings["table"] += time.perf_counter() - t0
+        else:
+            model = self.load_model()
+            decoder = skin_edits.decoder_beside(model.path)
+            rest = texel_records.concat_records([
+                skin_edits.edited_records(model, rgb[edited][s:s + self.chunk], edits[edited][s:s + self.chunk],
+                                          self.targets, self.options, decoder)
+                for s in range(0, int(edited.sum()), self.chunk)])
+            self.timings["inference"] += time.perf_counter() - t0
+        rec = {}
+        for key in [k for k in rest if k in part or not neutral.any()]:
+            full = np.empty((len(rgb), *rest[key].shape[1:]), rest[key].dtype)
+            full[edited] = rest[key]
+            if neutral.any():
+                full[neutral] = part[key]
+            rec[key] = full
+        inside = np.zeros(len(rgb), bool)
+        inside[neutral] = inside_n
+        inside[edited] = table is not None
+        return rec, inside
+
+    def edit_table(self) -> edit_table.EditTable | None:
+        """The edit table beside the model, made from it (else None: edited colours are evaluated exactly)."""
+        if self._edit_table is None:
+            path = edit_table.default_path(self.model.path)
+            try:
+                table = edit_table.load(path)
+            except edit_table.EditTableError:
+                return None
+            if table.meta.get("model_sha256") != self.model.sha256 or \
+                    table.meta.get("texel_table_sha256") != self.table.sha256:
+                return None
+            self._edit_table = table
+        return self._edit_table
 
     def nearest_records(self, rgb: np.ndarray) -> dict[str, np.ndarray]:
         """Records of rows ``rgb`` (n, 3) outside the table's domain: the table at the colour projected onto its box,
@@ -137,7 +190,7 @@ class Evaluator:
             sl = slice(start, min(start + step, len(ids)))
             t0 = time.perf_counter()
             rgb = self.palette[ids[sl]].astype(np.float32)
-            rec, inside = self.records(rgb)
+            rec, inside = self.records(rgb) if self.edits is None else self.edited_records(rgb, self.edits[ids[sl]])
             for name, v in self.values(rec, specs, unit_scale_m, mantissa_bits).items():
                 into[name][sl] = v
             c = counts[sl]

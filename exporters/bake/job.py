@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import image_input, inference, maps, texel_records
-from . import masking, material_files, report, reuse
+from . import edits, masking, material_files, report, reuse
 from .evaluate import Evaluator
 from .options import FAST_MANTISSA_BITS, BakeOptions
 from .report import BakeResult
@@ -79,6 +79,10 @@ class BakeJob:
             self.palette, self.index, uncovered = masking.apply_mask(image, np.asarray(opts.texel_mask, bool))
         else:
             self.palette, self.index = image.palette, image.index
+        self.palette_edits = None
+        if opts.edited:
+            self.palette, self.index, self.palette_edits = edits.edited_palette(self.palette, self.index, opts.edit,
+                                                                                opts.edit_masks)
         self.counts = np.bincount(self.index.ravel(), minlength=len(self.palette))
         if uncovered:
             self.notes.append(f"{uncovered} texel(s) not covered by the mesh's UVs were not evaluated: they hold the "
@@ -100,8 +104,11 @@ class BakeJob:
         # step's records, one inference chunk (and the decoded image's index, counted when it was read)
         share_mb = opts.memory_mb / WORK_SHARES
         self.evaluator = Evaluator(self.palette, self.targets, self.model, table, copts, self.threads, self.timings,
-                                   chunk=opts.chunk, memory_mb=share_mb)
+                                   chunk=opts.chunk, memory_mb=share_mb, edits=self.palette_edits)
         self.model_k = self.evaluator.model_k
+        if opts.edited and table is not None and self.evaluator.edit_table() is None:
+            self.notes.append("no edit table made from this model and table beside the model: edited texels are "
+                              "evaluated exactly (python -m training edit-table builds one)")
         self.components = list(range(1, self.model_k + 1))
         self.specs = map_specs(self.stem, self.model_k, self.targets)
         self._check_folder()

@@ -7,7 +7,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .. import collapse, inference, maps, reflectance_tables, texel_table
+from .. import collapse, inference, maps, reflectance_tables, skin_edits, texel_table
 from ..texel_records import CollapseOptions
 from .targets import BakeError, parse_targets
 
@@ -48,7 +48,13 @@ class BakeOptions:
     ``--target openpbr``: ``material_stem`` names its material files (``<stem>_openpbr.mtlx`` / ``.usda``; None: the
     image's stem) and ``material_maps_stem`` the maps they read (None: this bake's; a UDIM set's last tile passes the
     set's ``skin.<UDIM>`` so that one material reads every tile); ``write_material`` False leaves them out (the
-    other tiles of a UDIM set)."""
+    other tiles of a UDIM set).
+
+    Skin edits (exporters.skin_edits): ``edit`` the Melanin, Blood and Oxygenation controls for every texel;
+    ``edit_masks`` {control name: (H, W) mask in [0, 1]} paint a control's edit per texel (exporters.bake.edits).
+    Edited texels come from the edit table beside the model (``<model stem>_edits.npz``, exporters.edit_table, as
+    the live group renders them) on the fast path, from the network and the decoder (``skin_decoder.onnx`` beside
+    the model) with ``exact``."""
 
     targets: tuple[str, ...] = ("cycles",)
     unit_scale_m: float = 1.0
@@ -74,6 +80,13 @@ class BakeOptions:
     write_material: bool = True
     material_stem: str | None = None
     material_maps_stem: str | None = None
+    edit: skin_edits.SkinEdit = field(default_factory=skin_edits.SkinEdit)
+    edit_masks: dict[str, np.ndarray] | None = field(default=None, repr=False)
+
+    @property
+    def edited(self) -> bool:
+        """Whether any texel's tone is edited."""
+        return not self.edit.neutral
 
     def collapse_options(self) -> CollapseOptions:
         return CollapseOptions(colour="model" if self.model_colour else "painted", ior=float(self.ior),
@@ -97,4 +110,13 @@ class BakeOptions:
             raise BakeError(f"mantissa bits must lie in 1..23, got {self.mantissa_bits}")
         if self.compression not in maps.COMPRESSIONS:
             raise BakeError(f"EXR compression must be one of {', '.join(maps.COMPRESSIONS)}, not {self.compression!r}")
+        for name in skin_edits.CONTROLS:
+            lo, hi = skin_edits.CONTROL_RANGES[name]
+            value = getattr(self.edit, name)
+            if not lo <= value <= hi:
+                raise BakeError(f"{name} must lie in [{lo:g}, {hi:g}], got {value:g}")
+        if self.edit_masks and any(getattr(self.edit, n) == v for n, v in zip(skin_edits.CONTROLS, skin_edits.NEUTRAL,
+                                                                                strict=True) if n in self.edit_masks):
+            raise BakeError("an edit mask weighs its control's edit: give the control's value too (e.g. --melanin 1.5 "
+                            "with --melanin-map)")
         return targets

@@ -35,6 +35,11 @@ def bake_key(image_id: str, model_sha256: str, stem: str, options: BakeOptions, 
             "mantissa_bits": options.mantissa_bits, "half_maps": options.half_maps}
     if "openpbr" in spec["targets"]:
         spec["material"] = [options.write_material, options.material_stem, options.material_maps_stem]
+    if options.edited:  # absent when neutral: the keys of unedited bakes stay as they were
+        spec["edit"] = [float(v) for v in options.edit.row()]
+        spec["edit_masks"] = {name: hashlib.sha256(np.ascontiguousarray(mask, np.float32).tobytes()
+                                                   + str(np.shape(mask)).encode()).hexdigest()
+                              for name, mask in sorted((options.edit_masks or {}).items())}
     return hashlib.sha256(json.dumps(spec, sort_keys=True).encode()).hexdigest()
 
 

@@ -35,6 +35,8 @@ COMMANDS: dict[str, tuple[str, str]] = {
                    "compared at equal photons (paper §3)."),
     "demo": ("training.commands.demo", "What `make demo` runs: the best end-to-end path available today."),
     "texel-table": ("training.commands.texel_table", "Build (or --check) a model's fast-path texel table."),
+    "edit-table": ("training.commands.edit_table", "Build (or --check) the table of the skin edits (Melanin, Blood, "
+                   "Oxygenation) the live group and the fast bake apply."),
     "reflectance-tables": ("training.commands.reflectance_tables",
                            "Recompute the adding-doubling reflectance tables the bake reads (iadpython)."),
     "channel-matrix": ("training.commands.channel_matrix", "Write the linear-sRGB channel matrix the bake reads."),

@@ -1,0 +1,292 @@
+"""The edit table: how the Melanin, Blood and Oxygenation controls (exporters.skin_edits) change a painted colour,
+tabulated over skin colours so that a shader (blender_addon.live_edits) and the fast bake can apply them.
+
+What the live group computes for a painted colour c and controls (m, b, o):
+
+1. control coordinates s = (log2 m, log2 b, o), each clamped to its range (exporters.skin_edits.CONTROL_RANGES);
+2. per control j, hat-function weights of s_j on the levels ``LEVELS[j]`` (equally spaced, h apart, the neutral
+   level 0 left out: w_i = max(0, 1 - |s_j - level_i| / h)); at neutral every weight is exactly 0.  At most two
+   adjacent levels weigh: the nodes read just those two (linear interpolation between them, the neutral level
+   holding zero);
+3. the shift D(c, s) = sum_j sum_i w_ji T_ji(c), where T_ji(c) (RGBA) is trilinear in a coarse grid over skin
+   space (the grid, box and projection of exporters.texel_table / exporters.live_table: colours outside the box take
+   the nearest skin colour's shift, so the answer is continuous) holding at level i of control j:
+   RGB = ln(C_edited / C_painted) per channel (exporters.skin_edits.colour_ratio), A = the log-radius correction
+   (below);
+4. edited colour c' = c exp(D_RGB) (the lookups clamp it to [0, 1]): the media are the texel table's at c' (the
+   inversion of the edited colour) with every radius times exp(D_A).  A is the mean over channels of
+   ln(r_exact / r_table(c')): how much the edited tone's effective radius sum_k w_k r_k
+   (exporters.skin_edits.edited_records) differs from that of the tone the inversion finds for c' (melanin sits in
+   the epidermis and blood in the dermis, so tones of one colour can differ in depth).
+
+The controls combine additively in log space (step 3): measured against the exact answer by
+``python -m training edit-table --check`` (docs/research/skin_model.md).  At neutral the shift is exactly 0 and
+c' = c bit for bit.
+
+File (``.npz``): ``values`` float32 (n0, n1, n2, 3 controls, levels, 4), NaN-free (nodes outside the RGB cube
+filled by exporters.live_table.fill_outside_cube), the grid, and a JSON header with the SHA-256 of the model,
+decoder and texel table it was made from.
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import json
+import os
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from . import inference, live_table, skin_edits, texel_records, texel_table
+from .cli_io import atomic_file
+from .maps import sha256_file
+
+FORMAT = "spectral_skin_sss edit table v1"
+#: Grid step in skin space: coarser than the texel table's (the shifts vary slowly with the colour).
+DEFAULT_STEP: float = 0.04
+#: Levels of each control coordinate (log2 m, log2 b, o), equally spaced, 0 (neutral) left out.
+LEVELS: dict[str, tuple[float, ...]] = {"melanin": (-2.0, -1.0, 1.0, 2.0), "blood": (-2.0, -1.0, 1.0, 2.0),
+                                        "oxygenation": (-0.5, -0.25, 0.25, 0.5)}
+#: Spacing h of each control's levels.
+SPACING: dict[str, float] = {"melanin": 1.0, "blood": 1.0, "oxygenation": 0.25}
+#: Channels per level: ln colour ratio (R, G, B) and log-radius correction.
+CHANNELS = 4
+
+
+class EditTableError(ValueError):
+    """An edit table that cannot be used (missing, wrong format, another model); the message says what to do."""
+
+
+@dataclass
+class EditTable:
+    """``values`` (n0, n1, n2, 3, L, 4) float32; ``origin``, ``step`` of the grid in skin space; ``meta``."""
+
+    values: np.ndarray
+    origin: np.ndarray
+    step: float
+    meta: dict
+    sha256: str = ""
+
+    @property
+    def shape(self) -> tuple[int, int, int]:
+        return tuple(self.values.shape[:3])
+
+    def layout(self, columns: int | None = None) -> live_table.AtlasLayout:
+        """The slice-atlas layout of the grid (exporters.live_table), about square."""
+        n0, n1, n2 = self.shape
+        best = columns or min(range(1, n0 + 1), key=lambda c: abs(c * (n1 + 2) - (-(-n0 // c)) * (n2 + 2)))
+        return live_table.AtlasLayout(shape=(n0, n1, n2), origin=tuple(float(o) for o in self.origin),
+                                      step=float(self.step), columns=best)
+
+    def atlases(self) -> dict[str, np.ndarray]:
+        """Image name (the control's, :func:`image_name`) -> its levels' atlases stacked bottom to top in the order
+        of :func:`stacked_levels`, the neutral level (all zero) in the middle: (STACKED x height, width, 4)
+        float32."""
+        layout = self.layout()
+        out = {}
+        for j in range(len(skin_edits.CONTROLS)):
+            grids = stacked_levels(self.values[:, :, :, j])
+            out[image_name(j)] = np.concatenate([live_table.atlas_of(g, layout) for g in grids], axis=0)
+        return out
+
+
+#: Atlases stacked per control image: the levels below neutral, neutral (zero), the levels above.
+STACKED = 5
+
+
+def stacked_levels(values: np.ndarray) -> list[np.ndarray]:
+    """The grids (n0, n1, n2, 4) of one control's levels (``values`` (n0, n1, n2, L, 4)) in stacking order, a zero
+    grid for the neutral level between the negative and the positive ones."""
+    half = values.shape[3] // 2
+    grids = [values[:, :, :, i] for i in range(values.shape[3])]
+    return [*grids[:half], np.zeros_like(grids[0]), *grids[half:]]
+
+
+def image_name(control: int) -> str:
+    return skin_edits.CONTROLS[control].title()
+
+
+def control_coords(edits: np.ndarray) -> np.ndarray:
+    """(N, 3): log2 melanin, log2 blood, oxygenation of edit rows (N, 3), clamped to the controls' ranges."""
+    e = skin_edits.clamp_controls(edits)
+    return np.stack([np.log2(e[:, 0]), np.log2(e[:, 1]), e[:, 2]], axis=1)
+
+
+def level_weights(coords: np.ndarray) -> np.ndarray:
+    """(N, 3, L): hat weights of each control's levels (module docstring step 2)."""
+    out = []
+    for j, name in enumerate(skin_edits.CONTROLS):
+        lv = np.array(LEVELS[name])
+        out.append(np.maximum(0.0, 1.0 - np.abs(coords[:, j:j + 1] - lv) / SPACING[name]))
+    return np.stack(out, axis=1)
+
+
+def shift(table: EditTable, rgb: np.ndarray, edits: np.ndarray) -> np.ndarray:
+    """Reference of the nodes: D (N, 4) (module docstring step 3) at painted colours (N, 3) under edits (N, 3)."""
+    rgb = np.asarray(rgb, np.float64).reshape(-1, 3)
+    w = level_weights(control_coords(np.broadcast_to(edits, rgb.shape) if np.size(edits) == 3 else edits))
+    layout = table.layout()
+    out = np.zeros((len(rgb), CHANNELS))
+    for j in range(table.values.shape[3]):
+        for i in range(table.values.shape[4]):
+            if np.any(w[:, j, i] != 0.0):
+                out += w[:, j, i, None] * live_table.lookup(table.values[:, :, :, j, i], layout, rgb)
+    return out
+
+
+def edited_colour(rgb: np.ndarray, d: np.ndarray) -> np.ndarray:
+    """c' = c exp(D_RGB) (N, 3) of painted colours (N, 3) and shifts (N, 4), as the nodes compute it (the lookups
+    clamp it to [0, 1]; NaN/Inf painted values are first made finite, as the lookups do)."""
+    c = np.nan_to_num(np.asarray(rgb, np.float64), nan=0.0, posinf=1.0, neginf=0.0)
+    return c * np.exp(d[:, :3])
+
+
+def table_records(texels: texel_table.TexelTable, rgb: np.ndarray, targets: tuple[str, ...],
+                  extended: np.ndarray | None = None) -> dict[str, np.ndarray]:
+    """Records of colours (N, 3) as the live group looks them up (the texel table at the colour projected onto its
+    box, nodes outside the cube extended: exporters.live_table)."""
+    values = extended if extended is not None else live_table.extended_values(texels)
+    found = live_table.lookup(values, live_table.layout_of(texels), rgb).astype(np.float32)
+    return texels.records(np.asarray(rgb, np.float64), found, targets)
+
+
+def approx_records(texels: texel_table.TexelTable, table: EditTable, rgb: np.ndarray, edits: np.ndarray,
+                   targets: tuple[str, ...], extended: np.ndarray | None = None) -> dict[str, np.ndarray]:
+    """Records of painted colours (N, 3) under edits (N, 3) as the live group renders them (module docstring)."""
+    d = shift(table, rgb, edits)
+    rec = table_records(texels, edited_colour(rgb, d), targets, extended)
+    if "radius_m" in rec:
+        rec["radius_m"] = rec["radius_m"] * np.exp(d[:, 3])[:, None, None]
+        if "sigma_t_cm" in rec:
+            rec["sigma_t_cm"] = rec["sigma_t_cm"] / np.exp(d[:, 3])[:, None, None]
+    return rec
+
+
+def effective_radius(rec: dict[str, np.ndarray]) -> np.ndarray:
+    """(N, 3): sum_k w_k r_k per channel (m), the radius the live group gives EEVEE."""
+    return np.sum(rec["weight"] * rec["radius_m"], axis=1)
+
+
+def log_radius_ratio(exact: np.ndarray, base: np.ndarray) -> np.ndarray:
+    """(N,): mean over channels of ln(exact / base) of effective radii (N, 3), over the channels where both are
+    positive (0 where none is: a black channel has no radius to correct)."""
+    ok = (exact > 0.0) & (base > 0.0)
+    logs = np.where(ok, np.log(np.where(ok, exact, 1.0) / np.where(ok, base, 1.0)), 0.0)
+    return logs.sum(axis=1) / np.maximum(ok.sum(axis=1), 1)
+
+
+def build(model: inference.InversionSession, texels: texel_table.TexelTable,
+          decoder: str | os.PathLike, step: float = DEFAULT_STEP,
+          box: tuple[tuple[float, float], ...] = texel_table.DEFAULT_BOX, chunk: int = 1024) -> EditTable:
+    """Evaluate every grid node inside the RGB cube at every level of every control (exact: the network, the
+    decoder and the collapse) and fill the rest; the texel table ``texels`` gives the correction's baseline."""
+    if not (np.isfinite(step) and 0.005 <= step <= 0.5):
+        raise ValueError(f"step must lie in [0.005, 0.5], got {step}")
+    origin = np.array([b[0] for b in box], np.float64)
+    shape = tuple(int(np.floor((b[1] - b[0]) / step + 1e-9)) + 1 for b in box)
+    axes = [origin[d] + step * np.arange(shape[d]) for d in range(3)]
+    nodes = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
+    rgb, ok = texel_table.rgb_of_coords(nodes)
+    n_levels = len(LEVELS["melanin"])
+    values = np.full((len(nodes), 3, n_levels, CHANNELS), np.nan)
+    extended = live_table.extended_values(texels)
+    options = texels.options
+    todo = np.flatnonzero(ok)
+    t0 = time.perf_counter()
+    for start in range(0, len(todo), chunk):
+        idx = todo[start:start + chunk]
+        x = rgb[idx].astype(np.float32)
+        out = model.run(x)
+        for j, name in enumerate(skin_edits.CONTROLS):
+            for i, level in enumerate(LEVELS[name]):
+                row = np.array(skin_edits.NEUTRAL, np.float64)
+                row[j] = 2.0 ** level if name != "oxygenation" else level
+                edits = np.tile(row, (len(idx), 1))
+                tone = skin_edits.tones_of(out, x, edits, decoder)
+                outputs = {"biophysical": tone["edited"].astype(np.float32), "exposure": tone["exposure"][:, None],
+                           **{n: tone[n] for n in ("reflectance", "alpha", "sigma_t", "g", "weight")}}
+                exact = texel_records.records_of(outputs, tone["colour"] if options.painted else None, ("cycles",),
+                                                 options)
+                base = table_records(texels, tone["colour"], ("cycles",), extended)
+                corr = log_radius_ratio(effective_radius(exact), effective_radius(base))
+                values[idx, j, i] = np.column_stack([np.log(tone["ratio"]), corr])
+    seconds = time.perf_counter() - t0
+    grid = values.reshape(*shape, 3 * n_levels * CHANNELS)
+    filled = live_table.fill_outside_cube(grid).reshape(*shape, 3, n_levels, CHANNELS)
+    meta = {"format": FORMAT, "model_sha256": model.sha256, "decoder_sha256": sha256_file(decoder),
+            "texel_table_sha256": texels.sha256, "controls": list(skin_edits.CONTROLS),
+            "levels": {k: list(v) for k, v in LEVELS.items()}, "box": [list(map(float, b)) for b in box],
+            "step": float(step), "shape": list(shape), "valid_nodes": int(ok.sum()),
+            "build_seconds": round(seconds, 2),
+            "created_utc": _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds")}
+    return EditTable(values=filled.astype(np.float32), origin=origin, step=float(step), meta=meta)
+
+
+def save(table: EditTable, path: str | os.PathLike, overwrite: bool = False) -> Path:
+    """Write ``table`` as a compressed .npz; refuses to replace a file unless ``overwrite``."""
+    path = Path(path)
+    if path.exists() and not overwrite:
+        raise FileExistsError(f"{path} exists; pass --overwrite to replace it")
+    with atomic_file(path) as f:
+        np.savez_compressed(f, values=table.values, origin=table.origin, step=np.float64(table.step),
+                            meta=np.array(json.dumps(table.meta)))
+    return path
+
+
+def load(path: str | os.PathLike) -> EditTable:
+    """Read a table written by :func:`save`; EditTableError if it is missing or not one."""
+    path = Path(path)
+    if not path.is_file():
+        raise EditTableError(f"no edit table at {path}: build it with python -m training edit-table")
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            values, origin, step = data["values"], data["origin"], float(data["step"])
+            meta = json.loads(str(data["meta"]))
+    except (OSError, KeyError, ValueError) as exc:
+        raise EditTableError(f"{path} is not an edit table ({exc}); rebuild it with python -m training edit-table"
+                             ) from None
+    if meta.get("format") != FORMAT:
+        raise EditTableError(f"{path}: format {meta.get('format')!r}, expected {FORMAT!r}; rebuild it")
+    if not np.all(np.isfinite(values)):
+        raise EditTableError(f"{path} holds NaN/Inf values; rebuild it")
+    return EditTable(values=values, origin=np.asarray(origin, np.float64), step=step, meta=meta,
+                     sha256=sha256_file(path))
+
+
+def default_path(model_path: str | os.PathLike) -> Path:
+    """``<model stem>_edits.npz`` beside the model (the shipped edit table)."""
+    p = Path(model_path)
+    return p.with_name(f"{p.stem}_edits.npz")
+
+
+def check(model: inference.InversionSession, texels: texel_table.TexelTable, table: EditTable, rgb: np.ndarray,
+          edits: np.ndarray, decoder: str | os.PathLike) -> dict[str, float]:
+    """The live group's answer (:func:`approx_records`) against the exact one (exporters.skin_edits) for every
+    painted colour of ``rgb`` (N, 3) under every edit of ``edits`` (M, 3): ΔE76 of the colour (mean, max; against
+    the exact edited colour c' and against the skin model's colour exposure x C(edited tone)), relative error of the
+    effective radius per channel (mean, max) and, for comparison, that of the media at c' without the correction."""
+    from .colorimetry import delta_e76, linear_srgb_to_lab
+
+    rgb = np.asarray(rgb, np.float64).reshape(-1, 3)
+    edits = np.asarray(edits, np.float64).reshape(-1, 3)
+    x = np.repeat(rgb, len(edits), axis=0)
+    e = np.tile(edits, (len(rgb), 1))
+    tone = skin_edits.edited_tones(model, x, e, decoder)
+    exact = skin_edits.edited_records(model, x, e, ("cycles",), texels.options, decoder)
+    extended = live_table.extended_values(texels)
+    approx = approx_records(texels, table, x, e, ("cycles",), extended)
+    colour = edited_colour(x, shift(table, x, e))
+    lab = linear_srgb_to_lab(colour)
+    de = delta_e76(lab, linear_srgb_to_lab(tone["colour"]))
+    de_ref = delta_e76(lab, linear_srgb_to_lab(np.clip(tone["reference"], 0.0, 1.0)))
+    r_exact = effective_radius(exact)
+    rel = np.abs(effective_radius(approx) / r_exact - 1.0)
+    rel_plain = np.abs(effective_radius(table_records(texels, tone["colour"], ("cycles",), extended)) / r_exact - 1.0)
+    return {"cases": len(x), "de_mean": float(de.mean()), "de_max": float(de.max()),
+            "de_reference_mean": float(de_ref.mean()), "de_reference_max": float(de_ref.max()),
+            "radius_rel_mean": float(rel.mean()), "radius_rel_max": float(rel.max()),
+            "radius_share_over_10pct": float((rel > 0.10).mean()),
+            "radius_rel_uncorrected_mean": float(rel_plain.mean()),
+            "radius_rel_uncorrected_max": float(rel_plain.max())}

@@ -1,0 +1,164 @@
+"""The live group's Melanin, Blood and Oxygenation inputs (blender_addon.live_edits) in real Cycles: the K media the
+group looks up under an edit equal the numpy reference (exporters.edit_table: shift, edited colour, texel table at
+the edited colour, radius factor) and the maps a fast bake writes with the same edit; at neutral inputs they equal
+those of a group built without the edit nodes bit for bit, and keyframes on the node's inputs animate them.  Each
+check renders one socket of the group as emission, one pixel per colour (tests/test_live_group.py's probe strip).
+Invert Skin Albedo wires a group with the inputs and the panel's presets set them."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import bpy
+import numpy as np
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+import blender_addon  # noqa: E402
+from blender_addon import live, live_edits, preferences, probe  # noqa: E402
+from exporters import bake, edit_table, live_table, maps, skin_edits  # noqa: E402
+from tests.addon_scene import run_invert, skin_codes, skin_object, write_image  # noqa: E402
+from tests.test_live_group import _probe_strip, _render_row  # noqa: E402
+
+#: Skin colours light to dark, a saturated red, a colour outside the box (blue) and one above 1.
+COLOURS = np.array([[0.62, 0.42, 0.33], [0.45, 0.28, 0.20], [0.40, 0.20, 0.12], [0.25, 0.14, 0.09],
+                    [0.10, 0.055, 0.035], [0.9, 0.02, 0.01], [0.05, 0.1, 0.8], [1.2, 0.9, 0.8]])
+EDIT = {"Melanin": 2.0, "Blood": 0.5, "Oxygenation": -0.2}
+
+
+@pytest.fixture
+def addon():
+    blender_addon.register()
+    yield
+    blender_addon.unregister()
+
+
+def _tables():
+    table = live.table_for_model(preferences.DEFAULT_MODEL)
+    edits = live_edits.table_for_model(preferences.DEFAULT_MODEL, table.sha256)
+    assert edits is not None, "the shipped edit table must belong to the shipped model and texel table"
+    return table, edits
+
+
+def _with_checks(group: bpy.types.NodeTree, k: int) -> list[str]:
+    """Outputs 'Check k{i} {kind}' exposing the media the group hands its mixture."""
+    mixture = next(n for n in group.nodes if n.bl_idname == "ShaderNodeGroup" and "k1 Color" in n.inputs)
+    gout = next(n for n in group.nodes if n.bl_idname == "NodeGroupOutput")
+    names = []
+    for i in range(1, k + 1):
+        for kind in ("Color", "Radius", "Weight"):
+            name = f"Check k{i} {kind}"
+            group.interface.new_socket(name, in_out="OUTPUT", socket_type="NodeSocketColor")
+            group.links.new(mixture.inputs[f"k{i} {kind}"].links[0].from_socket, gout.inputs[name])
+            names.append(name)
+    return names
+
+
+def _strip(tmp_path: Path):
+    """The probe strip (a new scene: make groups after it) with a group node fed by the colours."""
+    scene, mat, _ = _probe_strip(COLOURS, tmp_path)
+    tree = mat.node_tree
+    tex = next(n for n in tree.nodes if n.bl_idname == "ShaderNodeTexImage")
+    gnode = tree.nodes.new("ShaderNodeGroup")
+    gnode["colour_source"] = tex.name
+    emission = tree.nodes.new("ShaderNodeEmission")
+    tree.links.new(emission.outputs[0], probe.material_output(mat).inputs["Surface"])
+    return scene, tree, gnode, emission
+
+
+def _use(tree, gnode, group: bpy.types.NodeTree) -> None:
+    """Give the strip's group node ``group``, fed by the colours."""
+    gnode.node_tree = group
+    tree.links.new(tree.nodes[gnode["colour_source"]].outputs["Color"], gnode.inputs["Color"])
+
+
+def _render(scene, tree, gnode, emission, name: str) -> np.ndarray:
+    tree.links.new(gnode.outputs[name], emission.inputs["Color"])
+    return _render_row(scene)
+
+
+def test_edited_media_equal_the_reference_and_the_fast_bake(tmp_path, addon):
+    scene, tree, gnode, emission = _strip(tmp_path)
+    table, edits = _tables()
+    group = live.ensure_live_group(table, edits)
+    assert all(name in group.interface.items_tree for name in EDIT)
+    names = _with_checks(group, table.k)
+    _use(tree, gnode, group)
+    for name, value in EDIT.items():
+        gnode.inputs[name].default_value = value
+    row = np.array([[EDIT["Melanin"], EDIT["Blood"], EDIT["Oxygenation"]]])
+    d = edit_table.shift(edits, COLOURS, row)
+    assert np.abs(d).max() > 0.05  # the edit does something
+    edited = edit_table.edited_colour(COLOURS, d)
+    grids, layout = live_table.grid_values(table), live_table.layout_of(table)
+    albedo = write_image(tmp_path / "edited.exr", COLOURS[None].astype(np.float32), "float")
+    (tmp_path / "bake").mkdir()
+    bake.bake(albedo, tmp_path / "bake", preferences.DEFAULT_MODEL,
+              bake.BakeOptions(threads=1, prune_share=0.0, half_maps=False, mantissa_bits=23,
+                               edit=skin_edits.SkinEdit(*row[0])), colorspace="linear")
+    for name in names:
+        k, kind = name.split()[1], name.split()[2]
+        ref = live_table.lookup(grids[f"{k} {'Log Radius' if kind == 'Radius' else kind}"], layout, edited)[:, :3]
+        if kind == "Radius":
+            ref = np.exp(ref) * np.exp(d[:, 3:4])
+        rendered = _render(scene, tree, gnode, emission, name)
+        np.testing.assert_allclose(rendered, ref, rtol=5e-4, atol=1e-7, err_msg=name)
+        baked = maps.read_exr(tmp_path / "bake" / f"edited_{k}_{kind.lower()}.exr")[0][0].astype(np.float64)
+        np.testing.assert_allclose(baked, rendered, rtol=5e-4, atol=1e-7, err_msg=f"bake {name}")  # bake = live
+
+
+def test_neutral_inputs_render_the_unedited_group_bit_for_bit_and_keyframes_animate(tmp_path, addon):
+    scene, tree, gnode, emission = _strip(tmp_path)
+    table, edits = _tables()
+    layout, images = live.ensure_images(table)
+    plain = live.build_live_group(table, layout, images)
+    edited = live.build_live_group(table, layout, images, (edits, live_edits.ensure_images(edits)))
+    names = _with_checks(plain, table.k)
+    _with_checks(edited, table.k)
+    _use(tree, gnode, plain)
+    before = {name: _render(scene, tree, gnode, emission, name) for name in names}
+    _use(tree, gnode, edited)
+    for name in names:
+        np.testing.assert_array_equal(_render(scene, tree, gnode, emission, name), before[name], err_msg=name)
+    # keyframes on the node's input: frame 1 as painted, frame 11 twice the blood
+    blood = gnode.inputs["Blood"]
+    scene.frame_set(1)
+    blood.default_value = 1.0
+    blood.keyframe_insert("default_value", frame=1)
+    blood.default_value = 2.0
+    blood.keyframe_insert("default_value", frame=11)
+    name = names[1]  # k1 Radius
+    scene.frame_set(1)
+    np.testing.assert_array_equal(_render(scene, tree, gnode, emission, name), before[name])
+    scene.frame_set(11)
+    animated = _render(scene, tree, gnode, emission, name)
+    tree.animation_data_clear()
+    blood.default_value = 2.0
+    np.testing.assert_array_equal(animated, _render(scene, tree, gnode, emission, name))
+    assert not np.array_equal(animated, before[name])
+
+
+def test_operator_wires_the_edit_inputs_and_presets_set_them(tmp_path, addon):
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    png = write_image(tmp_path / "skin.png", skin_codes(), "uint8")
+    obj, mat, _ = skin_object(png)
+    assert run_invert(obj, mode="LIVE") == {"FINISHED"}
+    node = live_edits.live_node(mat)
+    assert node is not None and [node.inputs[n].default_value for n in EDIT] == [1.0, 1.0, 0.0]
+    images = [i for i in bpy.data.images if i.name.startswith(live_edits.IMAGE_PREFIX)]
+    assert len(images) == 3 and all(i.packed_file is not None for i in images)
+    assert sum(i.size[0] * i.size[1] * 16 for i in images) <= 8e6  # the images the edits add: at most 8 MB
+    mask = mat.node_tree.nodes.new("ShaderNodeValue")  # an input fed by a node is left as it is
+    mat.node_tree.links.new(mask.outputs[0], node.inputs["Oxygenation"])
+    with bpy.context.temp_override(material=mat, object=obj, active_object=obj):
+        assert bpy.ops.spectral_skin.skin_edit_preset(preset="FLUSH") == {"FINISHED"}
+    flush = skin_edits.PRESETS["flush"]
+    assert node.inputs["Melanin"].default_value == pytest.approx(flush.melanin)
+    assert node.inputs["Blood"].default_value == pytest.approx(flush.blood)
+    assert node.inputs["Oxygenation"].default_value == 0.0
+    with bpy.context.temp_override(material=mat, object=obj, active_object=obj):
+        assert bpy.ops.spectral_skin.skin_edit_preset(preset="NEUTRAL") == {"FINISHED"}
+    assert [node.inputs[n].default_value for n in ("Melanin", "Blood")] == [1.0, 1.0]

@@ -1,0 +1,157 @@
+"""Skin edits (exporters.skin_edits, exporters.bake.edits) with the real shipped network and decoder: the edited tone
+stays in the skin model's domain, the edits move colour the way the chromophores do, the exact answer matches the
+skin model's colour for the edited tone, neutral edits leave bakes bit for bit as they were, and masks paint edits
+per texel in bakes and through bake.py."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from exporters import bake, inference, maps, skin_edits, texel_records
+from exporters.colorimetry import delta_e76, linear_srgb_to_lab
+from exporters.constants import PARAM_NAMES, PARAM_RANGES
+from tests.addon_scene import write_image
+
+ROOT = Path(__file__).resolve().parents[1]
+MODEL = ROOT / "blender_addon" / "models" / "skin_inversion.onnx"
+DECODER = skin_edits.decoder_beside(MODEL)
+#: Painted skin colours, light to dark (linear sRGB).
+SKIN = np.array([[0.62, 0.42, 0.33], [0.45, 0.28, 0.20], [0.25, 0.14, 0.09], [0.10, 0.055, 0.035]])
+
+
+@pytest.fixture(scope="module")
+def model() -> inference.InversionSession:
+    return inference.load_model(MODEL, threads=1)
+
+
+def test_apply_edit_scales_the_chromophores_and_stays_in_the_domain():
+    bio = np.array([[0.05, 0.02, 0.01, 0.7, 0.8], [0.5, 0.2, 0.01, 0.95, 0.8]])
+    out = skin_edits.apply_edit(bio, np.array([[2.0, 0.5, -0.1], [4.0, 4.0, 0.5]]))
+    np.testing.assert_allclose(out[0], [0.10, 0.01, 0.01, 0.6, 0.8])
+    assert out[1, 0] == PARAM_RANGES["f_mel"][1] and out[1, 1] == PARAM_RANGES["f_blood"][1]
+    assert out[1, 3] == PARAM_RANGES["so2"][1]
+    # controls beyond their ranges are clamped to them; NaN is neutral
+    wild = skin_edits.apply_edit(bio[:1], np.array([[100.0, np.nan, -3.0]]))
+    np.testing.assert_allclose(wild[0], [0.05 * 4.0, 0.02, 0.01, PARAM_RANGES["so2"][0], 0.8])
+    lo = np.array([PARAM_RANGES[p][0] for p in PARAM_NAMES])
+    hi = np.array([PARAM_RANGES[p][1] for p in PARAM_NAMES])
+    grid = skin_edits.apply_edit(np.tile(bio[1], (3, 1)), np.array([[0.25, 0.25, -0.5], [1, 1, 0], [4, 4, 0.5]]))
+    assert np.all((grid >= lo) & (grid <= hi))
+    assert skin_edits.neutral_rows(np.array([[1, 1, 0], [1, 1, 1e-9], [np.nan, 1, 0]])).tolist() == [True, False, True]
+
+
+def test_edits_move_colour_as_the_chromophores_do(model):
+    """More melanin darkens every tone (luminance falls); more blood reddens the lighter tones (haemoglobin's bands
+    near 540-580 nm absorb green more than red; on the darkest tone, inverted with 10 % blood already, doubling it
+    darkens red as well)."""
+    n = len(SKIN)
+    base = skin_edits.edited_tones(model, SKIN, np.tile([1.0, 1.0, 0.0], (n, 1)), DECODER)["colour"]
+    np.testing.assert_array_equal(base, SKIN.astype(np.float32).astype(np.float64))  # neutral: the painted colour
+    tan = skin_edits.edited_tones(model, SKIN, np.tile([2.0, 1.0, 0.0], (n, 1)), DECODER)["colour"]
+    flush = skin_edits.edited_tones(model, SKIN, np.tile([1.0, 2.0, 0.0], (n, 1)), DECODER)["colour"]
+    y = np.array([0.2126, 0.7152, 0.0722])
+    assert np.all(tan @ y < base @ y)
+    assert np.all(flush[:3, 0] / flush[:3, 1] > base[:3, 0] / base[:3, 1])
+    de = delta_e76(linear_srgb_to_lab(flush[:1]), linear_srgb_to_lab(base[:1]))[0]
+    assert de > 3.0  # a visible flush on light skin
+
+
+def test_exact_edit_matches_the_skin_models_colour_of_the_edited_tone(model):
+    edits = np.array([[0.25, 1, 0], [4, 1, 0], [1, 0.25, 0], [1, 4, 0], [1, 1, -0.5], [1, 1, 0.5], [2, 2, -0.2]])
+    rgb = np.repeat(SKIN, len(edits), axis=0)
+    e = np.tile(edits, (len(SKIN), 1))
+    tone = skin_edits.edited_tones(model, rgb, e, DECODER)
+    lab = linear_srgb_to_lab(tone["colour"])
+    de = delta_e76(lab, linear_srgb_to_lab(np.clip(tone["reference"], 0, 1)))
+    assert de.max() < 0.5, de.max()  # the inversion's own reproduction of the painted colour, nothing more
+    rec = skin_edits.edited_records(model, rgb, e, ("cycles", "physical"), texel_records.CollapseOptions(), DECODER)
+    rendered = texel_records.cycles_contributions(rec, texel_records.CollapseOptions().ior).sum(axis=1)
+    reachable = rec["n_unreachable"] == 0
+    assert reachable.mean() > 0.9
+    assert delta_e76(linear_srgb_to_lab(rendered[reachable]), lab[reachable]).max() < 0.5
+    for key in ("color", "radius_m", "weight", "alpha", "sigma_t_cm"):
+        assert np.all(np.isfinite(rec[key]))
+
+
+def skin_image(tmp_path: Path) -> Path:
+    rng = np.random.default_rng(5)
+    rows = SKIN[rng.integers(0, len(SKIN), 64)].reshape(8, 8, 3)
+    return write_image(tmp_path / "skin.exr", rows.astype(np.float32), "float")
+
+
+def bake_into(png: Path, out: Path, **options) -> bake.BakeResult:
+    out.mkdir()
+    return bake.bake(png, out, MODEL, bake.BakeOptions(**options))
+
+
+def read_maps(folder: Path, stem: str, k: int) -> dict[str, np.ndarray]:
+    return {f"{kind}{i}": maps.read_exr(folder / f"{stem}_k{i}_{kind}.exr")[0]
+            for i in range(1, k + 1) for kind in ("color", "radius", "weight")}
+
+
+@pytest.mark.parametrize("exact", [True, False])
+def test_neutral_edit_bakes_bit_for_bit_and_masks_paint_the_edit(tmp_path, exact):
+    png = skin_image(tmp_path)
+    opts = {"threads": 1, "exact": exact, "prune_share": 0.0}
+    plain = bake_into(png, tmp_path / "plain", **opts)
+    neutral = bake_into(png, tmp_path / "neutral", edit=skin_edits.SkinEdit(), **opts)
+    a, b = read_maps(tmp_path / "plain", "skin", plain.k), read_maps(tmp_path / "neutral", "skin", neutral.k)
+    for name in a:
+        np.testing.assert_array_equal(a[name], b[name])
+    flush = skin_edits.SkinEdit(blood=2.0)
+    whole = bake_into(png, tmp_path / "whole", edit=flush, **opts)
+    mask = np.zeros((8, 8))
+    mask[:, 4:] = 1.0
+    half = bake_into(png, tmp_path / "half", edit=flush, edit_masks={"blood": mask}, **opts)
+    w, h = read_maps(tmp_path / "whole", "skin", whole.k), read_maps(tmp_path / "half", "skin", half.k)
+    assert sum(not np.array_equal(w[n], a[n]) for n in a) >= len(a) // 2  # the flush changes the media
+    for name in a:
+        np.testing.assert_array_equal(h[name][:, :4], a[name][:, :4])  # mask 0: as painted, bit for bit
+        np.testing.assert_array_equal(h[name][:, 4:], w[name][:, 4:])  # mask 1: the whole edit
+    with pytest.raises(bake.BakeError, match="value"):
+        bake.BakeOptions(edit_masks={"blood": mask}).check()
+    with pytest.raises(bake.BakeError, match="blood must lie"):
+        bake.BakeOptions(edit=skin_edits.SkinEdit(blood=9.0)).check()
+
+
+def test_bake_cli_takes_edits_and_masks(tmp_path):
+    png = skin_image(tmp_path)
+    mask = write_image(tmp_path / "mask.png", np.ones((8, 8, 3), np.float32), "uint8")
+    script = ROOT / "blender_addon" / "bake.py"
+    out = tmp_path / "cli"
+    run = subprocess.run([sys.executable, str(script), "--albedo", str(png), "--out", str(out), "--quiet",
+                          "--threads", "1", "--exact", "--melanin", "1.5", "--blood", "2", "--oxygenation", "-0.2",
+                          "--melanin-map", str(mask)], capture_output=True, text=True, cwd=ROOT)
+    assert run.returncode == 0, run.stderr
+    api = tmp_path / "api"
+    edit = skin_edits.SkinEdit(melanin=1.5, blood=2.0, oxygenation=-0.2)
+    result = bake_into(png, api, threads=1, exact=True, edit=edit)
+    cli_maps, api_maps = read_maps(out, "skin", result.k), read_maps(api, "skin", result.k)
+    for name in api_maps:
+        np.testing.assert_array_equal(cli_maps[name], api_maps[name])
+    bad = subprocess.run([sys.executable, str(script), "--albedo", str(png), "--out", str(tmp_path / "bad"),
+                          "--blood", "7"], capture_output=True, text=True, cwd=ROOT)
+    assert bad.returncode == 2 and "--blood" in bad.stderr and len(bad.stderr.strip().splitlines()) == 1
+
+
+def test_edits_move_colours_outside_the_skin_box_continuously():
+    """Colours outside the table's box take the shift of their nearest skin colour: along a path from skin to pure
+    blue (and beyond 1) the shift changes in small steps, no step standing out from its neighbours."""
+    from exporters import edit_table
+
+    table = edit_table.load(edit_table.default_path(MODEL))
+    t = np.linspace(0.0, 1.0, 401)[:, None]
+    path = np.concatenate([(1 - t) * SKIN[1] + t * np.array([0.0, 0.0, 1.0]),
+                           (1 - t) * SKIN[0] + t * np.array([3.0, 2.0, 1.5])])
+    d = edit_table.shift(table, path, np.array([2.0, 2.5, -0.3]))
+    assert np.all(np.isfinite(d))
+    for part in (d[:401], d[401:]):
+        steps = np.abs(np.diff(part, axis=0)).max(axis=1)
+        neighbours = np.maximum(steps[:-2], steps[2:])
+        assert np.all(steps[1:-1] <= 2.0 * neighbours + 1e-3)
+        assert steps.max() < 0.05
