@@ -6,7 +6,9 @@ Inputs, for each component k = 1..K (the baked maps of docs/contracts.md §4, ``
 then ``IOR`` (the tissue index: the specular coat's Fresnel and the closures' refractive entry, which the
 bake's tables assume), ``Roughness`` (the coat's specular roughness, Blender's perceptual roughness, GGX
 alpha = Roughness^2) and ``Normal`` (normal/bump map; unlinked: the shading normal), which feeds the coat,
-its Fresnel weight and every subsurface closure.  Output: ``BSSRDF`` (the whole surface shader: coat plus
+its Fresnel weight and every subsurface closure; then the Principled BSDF's specular inputs (below) and
+``Body`` (a shader added beside the mixture under the coat's clear coat and sheen: the live group's diffuse body
+where Subsurface Weight is below 1; unlinked, nothing).  Output: ``BSSRDF`` (the whole surface shader: coat plus
 mixture; the name is kept for files wired before the coat existed).
 
 Why a sum of closures weighted by w_k *is* "pick component k with probability w_k, then walk in medium k"

@@ -75,7 +75,7 @@ def main() -> None:
     scene.unit_settings.scale_length = 0.1
     blender_addon.register()
     with tempfile.TemporaryDirectory() as tmp:
-        png = write_image(Path(tmp) / "face.png", codes[::-1], "uint8")  # Blender's rows run bottom to top
+        png = write_image(Path(tmp) / "face.png", codes, "uint8")  # row 0 at the top of the file
         material = box_material(bpy.data.images.load(str(png)), "principled")
         assert run_invert(bpy.data.objects["ProbeSlab"], mode="LIVE") == {"FINISHED"}
         rendered = render(scene, Path(tmp) / "render.exr")
