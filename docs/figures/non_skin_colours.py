@@ -1,9 +1,12 @@
 """Make docs/figures/non_skin_colours.png: a face-like texture with lipstick, eyeshadow, eyebrows and a tattoo,
-rendered in Cycles through the live group at Invert Skin Albedo's defaults.
+rendered in Cycles through the live group at Invert Skin Albedo's defaults; and docs/figures/non_skin_gradient.png:
+a gradient from medium skin to a blue eyeshadow that leaves the table's skin colours half-way.
 
-Panels, left to right: the painted texture; the render (the probe box of blender_addon/probe.py: camera straight
-above, white world, 1 Blender unit = 10 cm, so the face is 10 cm wide); the group's ``Outside`` output (white where
-a colour is not a skin colour of the table).  Run from the repository root (about a minute on two cores)::
+Face panels, left to right: the painted texture; the render (the probe box of blender_addon/probe.py: camera
+straight above, white world, 1 Blender unit = 10 cm, so the face is 10 cm wide); the group's ``Outside`` output
+(white where a colour is not a skin colour of the table).  Gradient: the painted gradient above, its render below
+the white line, the coat's reflection (0.026) subtracted, a tick under the column where it leaves the skin
+colours.  Run from the repository root (about two minutes on two cores; ``face`` or ``gradient`` makes one)::
 
     .venv/bin/python docs/figures/non_skin_colours.py
 """
@@ -30,6 +33,9 @@ from tests.test_bake_painted_colour import box_material  # noqa: E402
 
 SIZE, SAMPLES = 128, 128
 OUT = ROOT / "docs" / "figures" / "non_skin_colours.png"
+GRADIENT_OUT = ROOT / "docs" / "figures" / "non_skin_gradient.png"
+GRADIENT_WIDTH, GRADIENT_HEIGHT, GRADIENT_SAMPLES = 64, 16, 512
+COAT = 0.026  # the coat's reflection of the white world straight above (tests/test_live_colours.py measures it)
 
 
 def face() -> np.ndarray:
@@ -59,16 +65,48 @@ def face() -> np.ndarray:
 
 
 def render(scene: bpy.types.Scene, path: Path) -> np.ndarray:
-    """Render; linear RGB (SIZE, SIZE, 3), row 0 at the top."""
+    """Render; linear RGB (height, width, 3), row 0 at the top."""
     scene.render.filepath = str(path)
     bpy.ops.render.render(write_still=True)
     image = bpy.data.images.load(str(path))
-    px = np.empty(SIZE * SIZE * 4, np.float32)
+    w, h = image.size
+    px = np.empty(w * h * 4, np.float32)
     image.pixels.foreach_get(px)
-    return px.reshape(SIZE, SIZE, 4)[::-1, :, :3].astype(np.float64)
+    return px.reshape(h, w, 4)[::-1, :, :3].astype(np.float64)
 
 
-def main() -> None:
+def save(rgb: np.ndarray, path: Path, zoom: int) -> None:
+    image = Image.fromarray(np.round(255 * srgb_encode(np.clip(rgb, 0.0, 1.0))).astype(np.uint8))
+    image.resize((image.width * zoom, image.height * zoom), Image.NEAREST).save(path, optimize=True)
+    print(f"wrote {path}")
+
+
+def gradient_figure() -> None:
+    from blender_addon import live, preferences
+
+    t = np.linspace(0.0, 1.0, GRADIENT_WIDTH)[:, None]
+    painted = (1.0 - t) * np.array([0.40, 0.20, 0.12]) + t * np.array([0.02, 0.15, 0.6])
+    edge = int(np.argmax(~live.table_for_model(preferences.DEFAULT_MODEL).locate(painted)[0]))
+    scene = probe.new_scene(samples=GRADIENT_SAMPLES, resolution=GRADIENT_WIDTH, seed=2)
+    scene.render.resolution_y = GRADIENT_HEIGHT
+    blender_addon.register()
+    with tempfile.TemporaryDirectory() as tmp:
+        exr = write_image(Path(tmp) / "gradient.exr", np.repeat(painted[None], GRADIENT_HEIGHT, axis=0).astype(
+            np.float32), "float")
+        image = bpy.data.images.load(str(exr))
+        image.colorspace_settings.name = "Linear Rec.709"
+        box_material(image, "principled")
+        assert run_invert(bpy.data.objects["ProbeSlab"], mode="LIVE") == {"FINISHED"}
+        rendered = render(scene, Path(tmp) / "gradient_render.exr") - COAT
+    blender_addon.unregister()
+    top = np.repeat(painted[None], GRADIENT_HEIGHT, axis=0)
+    line = np.ones((1, GRADIENT_WIDTH, 3))
+    tick = np.ones((3, GRADIENT_WIDTH, 3))
+    tick[:, edge] = 0.0
+    save(np.concatenate([top, line, rendered, tick]), GRADIENT_OUT, 8)
+
+
+def face_figure() -> None:
     codes = face()
     scene = probe.new_scene(samples=SAMPLES, resolution=SIZE, seed=2)
     scene.unit_settings.system = "METRIC"
@@ -85,14 +123,16 @@ def main() -> None:
         material.node_tree.links.new(emission.outputs[0], probe.material_output(material).inputs["Surface"])
         scene.cycles.samples = 1
         outside = render(scene, Path(tmp) / "outside.exr")
+    blender_addon.unregister()
     painted = srgb_decode(codes / 255.0)
     panels_rgb = [painted, rendered, np.where(outside > 0.0, 1.0, 0.08)]
     gap = np.ones((SIZE, 4, 3))
-    strip = np.concatenate([panels_rgb[0], gap, panels_rgb[1], gap, panels_rgb[2]], axis=1)
-    image = Image.fromarray(np.round(255 * srgb_encode(np.clip(strip, 0.0, 1.0))).astype(np.uint8))
-    image.resize((image.width * 2, image.height * 2), Image.NEAREST).save(OUT, optimize=True)
-    print(f"wrote {OUT}")
+    save(np.concatenate([panels_rgb[0], gap, panels_rgb[1], gap, panels_rgb[2]], axis=1), OUT, 2)
 
 
 if __name__ == "__main__":
-    main()
+    which = sys.argv[1] if len(sys.argv) > 1 else "all"
+    if which in ("face", "all"):
+        face_figure()
+    if which in ("gradient", "all"):
+        gradient_figure()
