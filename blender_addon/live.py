@@ -298,17 +298,17 @@ def build_live_group(table: texel_table.TexelTable, layout: live_table.AtlasLayo
     weight_share = b.math("ADD", 24, gin.outputs["Subsurface Weight"], 0.0, clamp=True)
     media, effective = [], None
     for k in range(1, table.k + 1):
-        colour, g = _lookup(b, images[f"k{k} Color"], uvs, frac, 18)
+        rho, g = _lookup(b, images[f"k{k} Color"], uvs, frac, 18)  # the colour's body reflectance
         log_r, _ = _lookup(b, images[f"k{k} Log Radius"], uvs, frac, 18)
         weight, _ = _lookup(b, images[f"k{k} Weight"], uvs, frac, 18)
         radius = _radius(b, log_r, unit, 20)
-        media.append((colour, weight))
+        media.append((rho, weight))
         b.link(radius, mixture.inputs[nodes.socket_name(k, "Radius")])
         b.link(g, mixture.inputs[nodes.socket_name(k, "Anisotropy")])
         term = b.vec("MULTIPLY", 24, weight, radius)
         effective = term if effective is None else b.vec("ADD", 25, effective, term)
     fit = painted_gain.body_fit(table.options.ior)
-    for k, (colour, weight) in enumerate(_painted_media(b, painted, media, fit, 22), start=1):
+    for k, (colour, weight) in enumerate(_painted_media(b, painted, media, fit, 23), start=1):
         b.link(colour, mixture.inputs[nodes.socket_name(k, "Color")])
         scaled = b.node("ShaderNodeVectorMath", 33, operation="SCALE", name=f"Subsurface Weight k{k}")
         b.link(weight, scaled.inputs[0])
@@ -324,18 +324,6 @@ def build_live_group(table: texel_table.TexelTable, layout: live_table.AtlasLayo
     return group
 
 
-def _body_reflectance(b: _Builder, colour, fit: painted_gain.BodyFit, stage: int) -> bpy.types.NodeSocket:
-    """rho of a Subsurface Color (vector): exporters.painted_gain.body_reflectance with nodes."""
-    top = b.vec("SUBTRACT", stage + 2, fit.top, b.vec("MINIMUM", stage + 1, b.vec("MAXIMUM", stage, colour, fit.low),
-                                                      fit.top))
-    sep = b.node("ShaderNodeSeparateXYZ", stage + 3)
-    b.link(top, sep.inputs[0])
-    comb = b.node("ShaderNodeCombineXYZ", stage + 5)
-    for i in range(3):
-        b.link(b.math("SQRT", stage + 4, sep.outputs[i]), comb.inputs[i])
-    return _horner(b, fit.forward, comb.outputs[0], stage + 6)
-
-
 def _horner(b: _Builder, coeffs: tuple[float, ...], x, stage: int) -> bpy.types.NodeSocket:
     """sum_i coeffs[i] x^i per component of the vector ``x`` (exporters.painted_gain._horner)."""
     out = b.vec("MULTIPLY_ADD", stage, coeffs[-1], x, coeffs[-2])
@@ -345,22 +333,20 @@ def _horner(b: _Builder, coeffs: tuple[float, ...], x, stage: int) -> bpy.types.
 
 
 def _painted_media(b: _Builder, painted, media: list, fit: painted_gain.BodyFit, stage: int) -> list[tuple]:
-    """Each component's (colour, weight) brought to the ``painted`` colour: exporters.painted_gain.painted_media
-    with nodes, operation for operation."""
-    rho = [_body_reflectance(b, colour, fit, stage) for colour, _ in media]
+    """Each component's (colour, weight) from its looked-up (body reflectance rho, weight), brought to the
+    ``painted`` colour: exporters.painted_gain.painted_media with nodes, operation for operation."""
     total = None
-    for (_, weight), r in zip(media, rho, strict=True):
-        term = b.vec("MULTIPLY", stage + 12, weight, r)
-        total = term if total is None else b.vec("ADD", stage + 13, total, term)
-    gain = b.vec("DIVIDE", stage + 15, painted, b.vec("MAXIMUM", stage + 14, total, painted_gain.GAIN_FLOOR))
+    for rho, weight in media:
+        term = b.vec("MULTIPLY", stage, weight, rho)
+        total = term if total is None else b.vec("ADD", stage + 1, total, term)
+    gain = b.vec("DIVIDE", stage + 3, painted, b.vec("MAXIMUM", stage + 2, total, painted_gain.GAIN_FLOOR))
     out = []
-    for (colour, weight), r in zip(media, rho, strict=True):
-        scaled = b.vec("MULTIPLY", stage + 16, weight, gain)
-        r_new = b.vec("MAXIMUM", stage + 18, r, b.vec("MINIMUM", stage + 17, b.vec("MULTIPLY", stage + 16, scaled, r),
-                                                      fit.reach))
-        shift = b.vec("SUBTRACT", stage + 20, _horner(b, fit.inverse, r_new, stage + 19),
-                      _horner(b, fit.inverse, r, stage + 19))
-        out.append((b.vec("ADD", stage + 21, colour, shift), b.vec("MINIMUM", stage + 21, scaled, 1.0)))
+    for rho, weight in media:
+        scaled = b.vec("MULTIPLY", stage + 4, weight, gain)
+        r_new = b.vec("MAXIMUM", stage + 6, rho, b.vec("MINIMUM", stage + 5, b.vec("MULTIPLY", stage + 4, scaled, rho),
+                                                        fit.reach))
+        colour = _horner(b, fit.inverse, b.vec("MAXIMUM", stage + 7, r_new, fit.low), stage + 8)
+        out.append((colour, b.vec("MINIMUM", stage + 9, scaled, 1.0)))
     return out
 
 

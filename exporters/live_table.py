@@ -38,8 +38,9 @@ tile's edge, so bilinear filtering at a clamped coordinate never reads the next 
 u = (px + 0.5) / width, as Cycles' and the GPU's bilinear filters assume.  The third axis is interpolated by
 two lookups (slices s and s + 1) mixed with the fraction of x0.
 
-Images (float32 RGBA, Non-Color, alpha channel-packed), for each component k: ``k{k} Color`` (RGB the
-Subsurface Color, A the anisotropy g), ``k{k} Log Radius`` (RGB natural log of the radius in metres),
+Images (float32 RGBA, Non-Color, alpha channel-packed), for each component k: ``k{k} Color`` (RGB the body
+reflectance rho of the Subsurface Color, exporters.painted_gain.body_reflectance: step 5 works on it, and the
+nodes turn it back into a colour; A the anisotropy g), ``k{k} Log Radius`` (RGB natural log of the radius in metres),
 ``k{k} Weight`` (RGB the weight).  With the shipped table (67 x 31 x 22 nodes, K = 3): nine images of
 231 x 240 pixels, 8.0 MB (7.6 MiB) in all (:func:`atlas_bytes`), whatever the textures and however many materials
 share them.
@@ -137,16 +138,17 @@ def _channels(table: TexelTable, k: int, kind: str) -> list[int | None]:
 
 
 def grid_values(table: TexelTable) -> dict[str, np.ndarray]:
-    """The filled grid (n0, n1, n2, 4) float64 of each image name ``k{k} {kind}``, alpha 1 where unused; colour,
-    weight and anisotropy clipped to the ranges a bake clips them to (exporters.texel_table.TexelTable.records)."""
+    """The filled grid (n0, n1, n2, 4) float64 of each image name ``k{k} {kind}``, alpha 1 where unused; weight and
+    anisotropy clipped to the ranges a bake clips them to (exporters.texel_table.TexelTable.records), the colour
+    (clipped to [0, 1]) as its body reflectance rho (exporters.painted_gain.body_reflectance)."""
     filled = extended_values(table)
     ones = np.ones(table.shape)
     out = {}
     for k in range(1, table.k + 1):
         for kind in IMAGE_KINDS:
             grid = np.stack([filled[..., i] if i is not None else ones for i in _channels(table, k, kind)], axis=-1)
-            if kind == "Color":
-                grid[..., :3] = np.clip(grid[..., :3], 0.0, 1.0)
+            if kind == "Color":  # the body reflectance of the colour (exporters.painted_gain): what the nodes use
+                grid[..., :3] = painted_gain.body_reflectance(grid[..., :3], table.options.ior)
                 grid[..., 3] = np.clip(grid[..., 3], cycles.G_MIN, cycles.RECOMMENDED_G_MAX)
             elif kind == "Weight":
                 grid[..., :3] = np.maximum(grid[..., :3], 0.0)
@@ -217,9 +219,9 @@ def group_media(table: TexelTable, rgb: np.ndarray, grids: dict[str, np.ndarray]
     layout = layout_of(table)
     looked = {name: lookup(grid, layout, rgb) for name, grid in grids.items()}
     ks = range(1, table.k + 1)
-    colour = np.stack([looked[f"k{k} Color"][:, :3] for k in ks], axis=1)
+    rho = np.stack([looked[f"k{k} Color"][:, :3] for k in ks], axis=1)
     weight = np.stack([looked[f"k{k} Weight"][:, :3] for k in ks], axis=1)
-    colour, weight = painted_gain.painted_media(colour, weight, rgb, painted_gain.body_fit(table.options.ior))
+    colour, weight = painted_gain.painted_media(rho, weight, rgb, painted_gain.body_fit(table.options.ior))
     out = {}
     for i, k in enumerate(ks):
         out[f"k{k} Color"], out[f"k{k} Weight"] = colour[:, i], weight[:, i]

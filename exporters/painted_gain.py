@@ -14,9 +14,11 @@ radii and anisotropy (their translucency):
   takes the gain while it stays at most 1 (exact: the light is linear in the weight, the walk unchanged), the
   albedo the rest (weight 1, rho' = G w rho, at most rho of the collapse's largest albedo).
 
-Skin colours inside the table have G = 1 within the fit and the table's own error (0.1-1 %); the live group
-(blender_addon.live) computes exactly this with nodes, and a bake through the table applies it to every texel
-(exporters.texel_table.TexelTable.records), so both agree on every colour.
+The live group's images hold rho of each node's colour (exporters.live_table), so the nodes interpolate rho and
+only the way back to a Subsurface Color is a fit (:class:`BodyFit`, within 5e-4).  Skin colours inside the table
+have G = 1 within the table's own error (0.1-1 %); a bake through the table applies the same step to every texel
+(exporters.texel_table.TexelTable.records: rho of its interpolated colour), so both agree on every colour (within
+the difference between interpolating A and rho: 1e-4).
 """
 
 from __future__ import annotations
@@ -28,28 +30,24 @@ import numpy as np
 
 from . import collapse, cycles, painted, reflectance_tables
 
-#: Smallest Subsurface Color the body fit covers (the shipped table's components with any weight hold 0.49-0.78:
-#: the painted colour's albedo floor, exporters.collapse step 4); smaller colours are read as this one.
+#: Smallest Subsurface Color the inverse fit covers (the shipped table's components with any weight hold 0.49-0.78:
+#: the painted colour's albedo floor, exporters.collapse step 4); smaller reflectances are read as its.
 FIT_COLOUR_MIN: float = 0.3
-#: Degrees of the body fit's two polynomials (forward in sqrt(top - A), inverse in rho): max relative error
-#: 0.1 % forward, 5e-4 in A inverse over [FIT_COLOUR_MIN, top] (tests/test_painted_gain.py).
-FIT_DEGREES: tuple[int, int] = (4, 6)
+#: Degree of the inverse fit A(rho): within 5e-4 of A over [FIT_COLOUR_MIN, top] (tests/test_painted_gain.py).
+INVERSE_DEGREE: int = 6
 #: Smallest predicted body reflectance the gain divides by (keeps G finite for black).
 GAIN_FLOOR: float = 1e-6
 
 
 @dataclass(frozen=True)
 class BodyFit:
-    """rho(A), the reflectance Cycles' random walk renders for an isotropic closure of Subsurface Color A
-    (averaged over view directions: exporters.reflectance_tables "cycles" of exporters.cycles.rw_albedo_forward),
-    as two polynomials the nodes evaluate: rho ~ sum_i forward[i] s^i with s = sqrt(top - A) (rho behaves like
-    1 - c sqrt(1 - alpha) near alpha = 1), A ~ sum_i inverse[i] rho^i.  ``top``: the colour of the largest albedo
-    the collapse gives (exporters.collapse.ALPHA_HARD_MAX), ``reach`` = rho(top), ``low`` = FIT_COLOUR_MIN."""
+    """The Subsurface Color A of a body reflectance rho (:func:`body_reflectance`) as a polynomial the nodes
+    evaluate, A ~ sum_i inverse[i] rho^i for rho in [low, reach]: ``top`` the colour of the collapse's largest
+    albedo (exporters.collapse.ALPHA_HARD_MAX), ``reach`` = rho(top), ``low`` = rho(FIT_COLOUR_MIN)."""
 
     top: float
     low: float
     reach: float
-    forward: tuple[float, ...]
     inverse: tuple[float, ...]
 
 
@@ -62,12 +60,9 @@ def body_fit(ior: float) -> BodyFit:
 def _body_fit(ior: float) -> BodyFit:
     top = float(cycles.rw_albedo_inverse(collapse.ALPHA_HARD_MAX, 0.0).color)
     colour = np.linspace(FIT_COLOUR_MIN, top, 2001)
-    rho = reflectance_tables.reflectance("cycles", cycles.rw_albedo_forward(colour, 0.0), 0.0, ior)
-    poly = np.polynomial.polynomial
-    forward = poly.polyfit(np.sqrt(top - colour), rho, FIT_DEGREES[0], w=1.0 / rho)
-    inverse = poly.polyfit(rho, colour, FIT_DEGREES[1])
-    return BodyFit(top=top, low=FIT_COLOUR_MIN, reach=float(rho[-1]), forward=tuple(map(float, forward)),
-                   inverse=tuple(map(float, inverse)))
+    rho = body_reflectance(colour, ior)
+    inverse = np.polynomial.polynomial.polyfit(rho, colour, INVERSE_DEGREE)
+    return BodyFit(top=top, low=float(rho[0]), reach=float(rho[-1]), inverse=tuple(map(float, inverse)))
 
 
 def _horner(coeffs: tuple[float, ...], x: np.ndarray) -> np.ndarray:
@@ -78,26 +73,27 @@ def _horner(coeffs: tuple[float, ...], x: np.ndarray) -> np.ndarray:
     return out
 
 
-def body_reflectance(colour: np.ndarray, fit: BodyFit) -> np.ndarray:
-    """rho of Subsurface Colors (any shape), the colour clamped to [fit.low, fit.top]."""
-    s = np.sqrt(fit.top - np.clip(colour, fit.low, fit.top))
-    return _horner(fit.forward, s)
+def body_reflectance(colour, ior: float) -> np.ndarray:
+    """rho(A): the reflectance Cycles' random walk renders for an isotropic closure of Subsurface Color A (any
+    shape, clipped to [0, 1]) and IOR ``ior``, averaged over view directions (exporters.reflectance_tables "cycles"
+    of exporters.cycles.rw_albedo_forward); float64."""
+    alpha = cycles.rw_albedo_forward(np.clip(np.asarray(colour, np.float64), 0.0, 1.0), 0.0)
+    return reflectance_tables.reflectance("cycles", alpha, 0.0, ior)
 
 
 def body_colour(rho: np.ndarray, fit: BodyFit) -> np.ndarray:
-    """The Subsurface Color of reflectance ``rho`` (any shape; the inverse fit)."""
-    return _horner(fit.inverse, rho)
+    """The Subsurface Color of reflectance ``rho`` (any shape, read as at least ``fit.low``; the inverse fit)."""
+    return _horner(fit.inverse, np.maximum(rho, fit.low))
 
 
-def painted_media(colour: np.ndarray, weight: np.ndarray, rgb: np.ndarray, fit: BodyFit
+def painted_media(rho: np.ndarray, weight: np.ndarray, rgb: np.ndarray, fit: BodyFit
                   ) -> tuple[np.ndarray, np.ndarray]:
-    """Colours and weights (N, K, 3) of looked-up media ``colour``, ``weight`` (N, K, 3) brought to the painted
-    linear colours ``rgb`` (N, 3) (module docstring; NaN is 0, +Inf 1, as in the nodes).  Returns
-    new arrays (float64)."""
-    colour, weight = np.asarray(colour, np.float64), np.asarray(weight, np.float64)
+    """Subsurface Colors and weights (N, K, 3) of media of body reflectance ``rho`` (:func:`body_reflectance` of
+    their colours) and weights ``weight`` (N, K, 3), brought to the painted linear colours ``rgb`` (N, 3) (module
+    docstring; NaN is 0, +Inf 1, as in the nodes).  Returns new arrays (float64)."""
+    rho, weight = np.asarray(rho, np.float64), np.asarray(weight, np.float64)
     target = painted.target_colour(np.nan_to_num(np.asarray(rgb, np.float64), nan=0.0, posinf=1.0, neginf=0.0))
-    rho = body_reflectance(colour, fit)
     gain = target / np.maximum(np.sum(weight * rho, axis=1), GAIN_FLOOR)  # (N, 3)
     scaled = weight * gain[:, None, :]
     rho_new = np.maximum(rho, np.minimum(scaled * rho, fit.reach))
-    return colour + (body_colour(rho_new, fit) - body_colour(rho, fit)), np.minimum(scaled, 1.0)
+    return body_colour(rho_new, fit), np.minimum(scaled, 1.0)
