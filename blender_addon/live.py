@@ -16,8 +16,8 @@ Interface (docs/contracts.md §5):
   ``Subsurface Weight`` (0: a diffuse body of the painted colour under the coat; 1: the skin; a mask blends),
   ``Alpha`` and ``Emission Color`` / ``Strength`` (blender_addon.nodes.ARTIST_INPUTS);
 * outputs ``Cycles`` (the mixture with its specular coat, for a Material Output of target All or Cycles),
-  ``EEVEE`` (one Principled BSDF with Subsurface Weight 1 at the colour (body at the painted colour, as in Cycles:
-  :data:`PRINCIPLED_BASE_SHARE`) and the mixture's effective radius
+  ``EEVEE`` (one Principled BSDF with the group's Subsurface Weight, Alpha and Emission at the colour (body at
+  the painted colour, as in Cycles: :data:`PRINCIPLED_BASE_SHARE`) and the mixture's effective radius
   sum_k w_k r_k per channel, for a Material Output of target EEVEE: EEVEE and Material Preview) and
   ``Outside`` (distance of the colour from the table's box of skin colours in skin space, 0 inside: how far
   the colour is from skin; it renders as painted all the same, with the translucency of the skin colour it was
@@ -389,7 +389,7 @@ def _convention(b: _Builder, gin: bpy.types.Node, painted: float, principled: fl
 
 def _eevee_surface(b: _Builder, gin: bpy.types.Node, radius, ior: float) -> bpy.types.NodeSocket:
     """One Principled BSDF: the colour (over PRINCIPLED_BASE_SHARE in the painted convention) as Base Color,
-    Subsurface Weight 1 at the effective radius."""
+    the group's Subsurface Weight (1 by default), Alpha and Emission, the effective radius."""
     bsdf = b.node("ShaderNodeBsdfPrincipled", 35)
     b.link(_convention(b, gin, 1.0 / PRINCIPLED_BASE_SHARE, 1.0), bsdf.inputs["Base Color"])
     bsdf.inputs["Subsurface Scale"].default_value = 1.0
