@@ -11,17 +11,26 @@ Interface (docs/contracts.md §5):
   the radii are in Blender units), ``Roughness``, ``Normal`` and the Principled BSDF's specular inputs
   (blender_addon.nodes.SPECULAR_INPUTS: IOR Level, tint, coat, sheen), passed to the mixture group and to the
   EEVEE closure, and ``Principled Convention`` (0: the body renders the colour, the coat on top; 1: the body
-  renders it darkened as a Principled BSDF's base under its specular layer, :data:`PRINCIPLED_BASE_SHARE`);
+  renders it darkened as a Principled BSDF's base under its specular layer, :data:`PRINCIPLED_BASE_SHARE`),
+  ``Translucency`` (scales every mean free path: 1 is the physical skin) and the Principled BSDF's
+  ``Subsurface Weight`` (0: a diffuse body of the painted colour under the coat; 1: the skin; a mask blends),
+  ``Alpha`` and ``Emission Color`` / ``Strength`` (blender_addon.nodes.ARTIST_INPUTS);
 * outputs ``Cycles`` (the mixture with its specular coat, for a Material Output of target Cycles: wiring.py),
-  ``EEVEE`` (one Principled BSDF with Subsurface Weight 1 at the colour (body at the painted colour, as in Cycles:
-  :data:`PRINCIPLED_BASE_SHARE`) and the mixture's effective radius
+  ``EEVEE`` (one Principled BSDF with the group's Subsurface Weight, Alpha and Emission at the colour (body at
+  the painted colour, as in Cycles: :data:`PRINCIPLED_BASE_SHARE`) and the mixture's effective radius
   sum_k w_k r_k per channel, for a Material Output of target EEVEE: EEVEE and Material Preview) and
-  ``Outside`` (distance of the colour from the table's box in skin space, 0 inside: where the answer is the
-  projection onto the nearest skin colour).
+  ``Outside`` (distance of the colour from the table's box of skin colours in skin space, 0 inside: how far
+  the colour is from skin; it renders as painted all the same, with the translucency of the skin colour it was
+  projected onto).
+
+Every colour renders as painted: the media looked up for the nearest skin colour are brought to the painted
+colour per channel in the reflectance domain (exporters.painted_gain, step 5 of exporters.live_table), the
+radii kept, so a gradient leaving the skin colours changes its translucency continuously.
 
 The images are shared by every material of the file (one set per table, tagged with the table's SHA-256) and
 packed into the .blend (8.0 MB with the shipped table), so the file renders anywhere, render farms included.
-The group's math follows exporters.live_table step by step; ``exporters.live_table.lookup`` is its reference.
+The group's math follows exporters.live_table step by step; ``exporters.live_table.lookup`` and
+``exporters.live_table.group_media`` are its reference.
 """
 
 from __future__ import annotations
@@ -34,13 +43,13 @@ import numpy as np
 
 from . import live_edits, nodes, wiring
 from .core import bake as core_bake
-from .core import colorimetry, image_input, live_table, maps, texel_table
+from .core import colorimetry, image_input, live_table, maps, painted_gain, texel_table
 
 GROUP_NAME = "Spectral Skin SSS Live"
 #: Custom properties: on the group and the images, the SHA-256 of the table they were made from.
 TABLE_PROP = "spectral_skin_sss_table"
 #: Layout version of the live group (bump when the generated nodes change).
-LIVE_VERSION = 3
+LIVE_VERSION = 4
 IMAGE_PREFIX = "Spectral Skin SSS Table"
 #: sRGB encoding (IEC 61966-2-1): linear segment below this value, slope 12.92 there.
 _SRGB_KNEE, _SRGB_SLOPE = 0.0031308, 12.92
@@ -50,6 +59,8 @@ _SRGB_KNEE, _SRGB_SLOPE = 0.0031308, 12.92
 #: divided by it (the body at the painted colour, as in Cycles); with ``Principled Convention`` 1 the colour is
 #: multiplied by it before the table (the body darker by as much as under a Principled BSDF's specular layer).
 PRINCIPLED_BASE_SHARE = 0.957
+#: Smallest Translucency the group takes (the mean free paths scaled by it; 0 would make them 0).
+TRANSLUCENCY_MIN = 1e-3
 #: Texels read (at most) to count the share of a texture outside the table's domain.
 OUTSIDE_SAMPLE = 1 << 18
 
@@ -152,6 +163,16 @@ class _Builder:
                 self.link(value if isinstance(value, bpy.types.NodeSocket) else float(value), node.inputs[i])
         return node.outputs[0]
 
+    def vec(self, op: str, stage: int, a, b=None, c=None) -> bpy.types.NodeSocket:
+        """A Vector Math node ``op`` of a, b, c (sockets, or numbers for constant vectors); its output."""
+        node = self.node("ShaderNodeVectorMath", stage, operation=op)
+        for i, value in enumerate((a, b, c)):
+            if isinstance(value, bpy.types.NodeSocket):
+                self.group.links.new(value, node.inputs[i])
+            elif value is not None:
+                node.inputs[i].default_value = (float(value),) * 3
+        return node.outputs["Vector"]
+
     def mix(self, data_type: str, stage: int, fac, a, b) -> bpy.types.NodeSocket:
         node = self.node("ShaderNodeMix", stage, data_type=data_type, clamp_factor=False)
         sockets = [s for s in node.inputs if s.enabled]
@@ -161,9 +182,8 @@ class _Builder:
         return next(s for s in node.outputs if s.enabled)
 
 
-def _srgb_encode(b: _Builder, linear: bpy.types.NodeSocket, stage: int) -> bpy.types.NodeSocket:
-    """e = sRGB encoding of clamp(linear, 0, 1), piecewise as exporters.colorimetry.srgb_encode."""
-    c = b.math("ADD", stage, linear, 0.0, clamp=True)
+def _srgb_encode(b: _Builder, c: bpy.types.NodeSocket, stage: int) -> bpy.types.NodeSocket:
+    """e = sRGB encoding of ``c`` (clamped to [0, 1]), piecewise as exporters.colorimetry.srgb_encode."""
     lin = b.math("MULTIPLY", stage + 1, c, _SRGB_SLOPE)
     curve = b.math("MULTIPLY_ADD", stage + 2, b.math("POWER", stage + 1, c, 1.0 / 2.4), 1.055, -0.055)
     low = b.math("LESS_THAN", stage + 1, c, _SRGB_KNEE)
@@ -171,21 +191,25 @@ def _srgb_encode(b: _Builder, linear: bpy.types.NodeSocket, stage: int) -> bpy.t
 
 
 def _grid_coords(b: _Builder, gin: bpy.types.Node, layout: live_table.AtlasLayout, colour=None):
-    """Clamped grid coordinates x0, x1, x2 of the input colour (or ``colour``) and its distance from the box (skin
-    space)."""
+    """Clamped grid coordinates x0, x1, x2 of the input colour (or ``colour``: the edited one), its distance from
+    the box (skin space) and the painted colour (that colour clamped to [0, 1], a vector)."""
     sep = b.node("ShaderNodeSeparateColor", 0)
     b.link(_convention(b, gin, 1.0, PRINCIPLED_BASE_SHARE, colour), sep.inputs[0])
-    e = [_srgb_encode(b, sep.outputs[i], 1) for i in range(3)]
+    clamped = [b.math("ADD", 1, sep.outputs[i], 0.0, clamp=True) for i in range(3)]
+    painted = b.node("ShaderNodeCombineXYZ", 2)
+    for i in range(3):
+        b.link(clamped[i], painted.inputs[i])
+    e = [_srgb_encode(b, clamped[i], 1) for i in range(3)]
     coords = [b.math("MULTIPLY", 6, b.math("ADD", 5, b.math("ADD", 5, e[0], e[1]), e[2]), 1.0 / 3.0),
               b.math("SUBTRACT", 6, e[0], e[1]), b.math("SUBTRACT", 6, e[1], e[2])]
-    clamped, outside = [], None
+    grid, outside = [], None
     for d, coord in enumerate(coords):
         raw = b.math("MULTIPLY_ADD", 7, coord, 1.0 / layout.step, -layout.origin[d] / layout.step)
         x = b.math("MINIMUM", 9, b.math("MAXIMUM", 8, raw, 0.0), layout.shape[d] - 1.0)
         gap = b.math("ABSOLUTE", 11, b.math("SUBTRACT", 10, raw, x))
         outside = gap if outside is None else b.math("ADD", 12, outside, gap)
-        clamped.append(x)
-    return clamped, b.math("MULTIPLY", 13, outside, layout.step)
+        grid.append(x)
+    return grid, b.math("MULTIPLY", 13, outside, layout.step), painted.outputs[0]
 
 
 def _slice_uv(b: _Builder, layout: live_table.AtlasLayout, s, x1, x2, stage: int) -> bpy.types.NodeSocket:
@@ -218,7 +242,8 @@ def _lookup(b: _Builder, image: bpy.types.Image, uvs, frac, stage: int):
 
 
 def _radius(b: _Builder, log_radius, metres_per_unit, stage: int) -> bpy.types.NodeSocket:
-    """Radius in Blender units: exp(log r / m - ln(metres per unit)) per channel."""
+    """Radius in Blender units: exp(log r / m - ln(metres per unit)) per channel (``metres_per_unit``: the Unit
+    Scale over the Translucency)."""
     sep = b.node("ShaderNodeSeparateColor", stage)
     b.link(log_radius, sep.inputs[0])
     log_unit = b.math("LOGARITHM", stage, metres_per_unit, float(np.e))
@@ -245,12 +270,15 @@ def _new_group(k_count: int, table_sha: str) -> tuple[bpy.types.NodeTree, bpy.ty
     nodes.add_specular_inputs(group)
     convention = iface.new_socket("Principled Convention", in_out="INPUT", socket_type="NodeSocketFloat")
     convention.default_value, convention.min_value, convention.max_value = 0.0, 0.0, 1.0
+    translucency = iface.new_socket("Translucency", in_out="INPUT", socket_type="NodeSocketFloat")
+    translucency.default_value, translucency.min_value, translucency.max_value = 1.0, TRANSLUCENCY_MIN, 100.0
+    nodes.add_specular_inputs(group, nodes.ARTIST_INPUTS)
     iface.new_socket("Cycles", in_out="OUTPUT", socket_type="NodeSocketShader")
     iface.new_socket("EEVEE", in_out="OUTPUT", socket_type="NodeSocketShader")
     iface.new_socket("Outside", in_out="OUTPUT", socket_type="NodeSocketFloat")
     gin = group.nodes.new("NodeGroupInput")
     gout = group.nodes.new("NodeGroupOutput")
-    gin.location, gout.location = (-1900.0, 0.0), (4400.0, 0.0)
+    gin.location, gout.location = (-1900.0, 0.0), (6400.0, 0.0)
     return group, gin, gout
 
 
@@ -266,39 +294,98 @@ def build_live_group(table: texel_table.TexelTable, layout: live_table.AtlasLayo
         live_edits.add_inputs(group)
         group[live_edits.EDIT_TABLE_PROP] = edits[0].sha256
         branch = live_edits.edit_node(b, gin, *edits)
-    colour = branch.colour if branch is not None else None
-    (x0, x1, x2), outside = _grid_coords(b, gin, layout, colour)
+    edited = branch.colour if branch is not None else None
+    (x0, x1, x2), outside, painted = _grid_coords(b, gin, layout, edited)
     s = b.math("MINIMUM", 11, b.math("FLOOR", 10, x0), layout.shape[0] - 2.0)
     frac = b.math("SUBTRACT", 12, x0, s)
     uvs = (_slice_uv(b, layout, s, x1, x2, 12), _slice_uv(b, layout, b.math("ADD", 12, s, 1.0), x1, x2, 12))
-    mixture = b.node("ShaderNodeGroup", 26, node_tree=nodes.ensure_group(table.k, "SVM"))
-    effective = None
+    mixture = b.node("ShaderNodeGroup", 34, node_tree=nodes.ensure_group(table.k, "SVM"))
+    unit = b.math("DIVIDE", 19, gin.outputs["Unit Scale"], b.math("MAXIMUM", 18, gin.outputs["Translucency"],
+                                                                   TRANSLUCENCY_MIN))
+    unit.node.name = "Translucency"
+    weight_share = b.math("ADD", 24, gin.outputs["Subsurface Weight"], 0.0, clamp=True)
+    media, effective = [], None
     for k in range(1, table.k + 1):
-        colour, g = _lookup(b, images[f"k{k} Color"], uvs, frac, 18)
+        rho, g = _lookup(b, images[f"k{k} Color"], uvs, frac, 18)  # the colour's body reflectance
         log_r, _ = _lookup(b, images[f"k{k} Log Radius"], uvs, frac, 18)
         weight, _ = _lookup(b, images[f"k{k} Weight"], uvs, frac, 18)
-        radius = _radius(b, log_r, gin.outputs["Unit Scale"], 20)
+        radius = _radius(b, log_r, unit, 20)
         if branch is not None:
             radius = live_edits.scale_radius(b, radius, branch.radius_factor)
-        for kind, value in (("Color", colour), ("Radius", radius), ("Weight", weight), ("Anisotropy", g)):
-            b.link(value, mixture.inputs[nodes.socket_name(k, kind)])
-        term = b.node("ShaderNodeVectorMath", 24, operation="MULTIPLY")
-        b.link(weight, term.inputs[0])
-        b.link(radius, term.inputs[1])
-        if effective is None:
-            effective = term.outputs[0]
-        else:
-            add = b.node("ShaderNodeVectorMath", 25, operation="ADD")
-            b.link(effective, add.inputs[0])
-            b.link(term.outputs[0], add.inputs[1])
-            effective = add.outputs[0]
+        media.append((rho, weight))
+        b.link(radius, mixture.inputs[nodes.socket_name(k, "Radius")])
+        b.link(g, mixture.inputs[nodes.socket_name(k, "Anisotropy")])
+        term = b.vec("MULTIPLY", 24, weight, radius)
+        effective = term if effective is None else b.vec("ADD", 25, effective, term)
+    fit = painted_gain.body_fit(table.options.ior)
+    for k, (colour, weight) in enumerate(_painted_media(b, painted, media, fit, 23), start=1):
+        b.link(colour, mixture.inputs[nodes.socket_name(k, "Color")])
+        scaled = b.node("ShaderNodeVectorMath", 33, operation="SCALE", name=f"Subsurface Weight k{k}")
+        b.link(weight, scaled.inputs[0])
+        b.link(weight_share, scaled.inputs["Scale"])
+        b.link(scaled.outputs[0], mixture.inputs[nodes.socket_name(k, "Weight")])
+    b.link(_diffuse_body(b, gin, painted, weight_share), mixture.inputs["Body"])
     mixture.inputs["IOR"].default_value = table.options.ior
     for name in ("Roughness", "Normal", *nodes.SPECULAR_INPUTS):
         b.link(gin.outputs[name], mixture.inputs[name])
-    b.link(mixture.outputs["BSSRDF"], gout.inputs["Cycles"])
-    b.link(_eevee_surface(b, gin, effective, table.options.ior, colour), gout.inputs["EEVEE"])
+    b.link(_alpha_emission(b, gin, mixture.outputs["BSSRDF"]), gout.inputs["Cycles"])
+    b.link(_eevee_surface(b, gin, effective, table.options.ior, edited), gout.inputs["EEVEE"])
     b.link(outside, gout.inputs["Outside"])
     return group
+
+
+def _horner(b: _Builder, coeffs: tuple[float, ...], x, stage: int) -> bpy.types.NodeSocket:
+    """sum_i coeffs[i] x^i per component of the vector ``x`` (exporters.painted_gain._horner)."""
+    out = b.vec("MULTIPLY_ADD", stage, coeffs[-1], x, coeffs[-2])
+    for c in reversed(coeffs[:-2]):
+        out = b.vec("MULTIPLY_ADD", stage, out, x, c)
+    return out
+
+
+def _painted_media(b: _Builder, painted, media: list, fit: painted_gain.BodyFit, stage: int) -> list[tuple]:
+    """Each component's (colour, weight) from its looked-up (body reflectance rho, weight), brought to the
+    ``painted`` colour: exporters.painted_gain.painted_media with nodes, operation for operation."""
+    total = None
+    for rho, weight in media:
+        term = b.vec("MULTIPLY", stage, weight, rho)
+        total = term if total is None else b.vec("ADD", stage + 1, total, term)
+    gain = b.vec("DIVIDE", stage + 3, painted, b.vec("MAXIMUM", stage + 2, total, painted_gain.GAIN_FLOOR))
+    out = []
+    for rho, weight in media:
+        scaled = b.vec("MULTIPLY", stage + 4, weight, gain)
+        r_new = b.vec("MAXIMUM", stage + 6, rho, b.vec("MINIMUM", stage + 5, b.vec("MULTIPLY", stage + 4, scaled, rho),
+                                                        fit.reach))
+        colour = _horner(b, fit.inverse, b.vec("MAXIMUM", stage + 7, r_new, fit.low), stage + 8)
+        out.append((colour, b.vec("MINIMUM", stage + 9, scaled, 1.0)))
+    return out
+
+
+def _diffuse_body(b: _Builder, gin: bpy.types.Node, painted, weight_share) -> bpy.types.NodeSocket:
+    """A Diffuse BSDF of the painted colour weighted 1 - Subsurface Weight (the mixture's Body: under its coat)."""
+    diffuse = b.node("ShaderNodeBsdfDiffuse", 32)
+    b.link(painted, diffuse.inputs["Color"])
+    diffuse.inputs["Roughness"].default_value = 0.0
+    b.link(gin.outputs["Normal"], diffuse.inputs["Normal"])
+    mix = b.node("ShaderNodeMixShader", 33, name="Diffuse body")
+    b.link(b.math("SUBTRACT", 32, 1.0, weight_share), mix.inputs["Fac"])
+    b.link(diffuse.outputs[0], mix.inputs[2])
+    return mix.outputs[0]
+
+
+def _alpha_emission(b: _Builder, gin: bpy.types.Node, surface) -> bpy.types.NodeSocket:
+    """The Principled BSDF's Emission (added) and Alpha (a Transparent BSDF mixed in) over ``surface``."""
+    emission = b.node("ShaderNodeEmission", 35)
+    b.link(gin.outputs["Emission Color"], emission.inputs["Color"])
+    b.link(gin.outputs["Emission Strength"], emission.inputs["Strength"])
+    add = b.node("ShaderNodeAddShader", 36, name="Emission")
+    b.link(surface, add.inputs[0])
+    b.link(emission.outputs[0], add.inputs[1])
+    transparent = b.node("ShaderNodeBsdfTransparent", 36)
+    mix = b.node("ShaderNodeMixShader", 37, name="Alpha")
+    b.link(b.math("ADD", 36, gin.outputs["Alpha"], 0.0, clamp=True), mix.inputs["Fac"])
+    b.link(transparent.outputs[0], mix.inputs[1])
+    b.link(add.outputs[0], mix.inputs[2])
+    return mix.outputs[0]
 
 
 def _convention(b: _Builder, gin: bpy.types.Node, painted: float, principled: float,
@@ -314,14 +401,13 @@ def _convention(b: _Builder, gin: bpy.types.Node, painted: float, principled: fl
 
 def _eevee_surface(b: _Builder, gin: bpy.types.Node, radius, ior: float, colour=None) -> bpy.types.NodeSocket:
     """One Principled BSDF: the colour (over PRINCIPLED_BASE_SHARE in the painted convention) as Base Color,
-    Subsurface Weight 1 at the effective radius."""
-    bsdf = b.node("ShaderNodeBsdfPrincipled", 27)
+    the group's Subsurface Weight (1 by default), Alpha and Emission, the effective radius."""
+    bsdf = b.node("ShaderNodeBsdfPrincipled", 35)
     b.link(_convention(b, gin, 1.0 / PRINCIPLED_BASE_SHARE, 1.0, colour), bsdf.inputs["Base Color"])
-    bsdf.inputs["Subsurface Weight"].default_value = 1.0
     bsdf.inputs["Subsurface Scale"].default_value = 1.0
     bsdf.inputs["IOR"].default_value = ior
     b.link(radius, bsdf.inputs["Subsurface Radius"])
-    for name in ("Roughness", "Normal", *nodes.SPECULAR_INPUTS):
+    for name in ("Roughness", "Normal", *nodes.SPECULAR_INPUTS, *nodes.ARTIST_INPUTS):
         b.link(gin.outputs[name], bsdf.inputs[name])
     return bsdf.outputs[0]
 
@@ -463,7 +549,7 @@ def apply(context: bpy.types.Context, model_path: str, unit_scale_m: float, colo
 
 
 def outside_report(table: texel_table.TexelTable, image: bpy.types.Image, colorspace: str) -> str:
-    """How much of ``image`` lies outside the table's domain (a warning when any does)."""
+    """How much of ``image`` lies outside the table's domain of skin colours (it renders as painted all the same)."""
     from .baker import _image_colorspace  # the bake's reading of Blender's colour-space setting
 
     rgb = image_colours(image, _image_colorspace(image, colorspace))
@@ -471,9 +557,10 @@ def outside_report(table: texel_table.TexelTable, image: bpy.types.Image, colors
         return f"image '{image.name}' has no pixels to check"
     share = live_table.outside_fraction(table, rgb)
     if share == 0.0:
-        return f"every texel of '{image.name}' lies inside the table's domain"
-    return (f"warning: {100 * share:.2f} % of the texels of '{image.name}' lie outside the table's domain (not skin "
-            "colours: they render as the nearest skin colour; docs/user/live_group.md)")
+        return f"every texel of '{image.name}' is a skin colour of the table"
+    return (f"{100 * share:.2f} % of the texels of '{image.name}' lie outside the table's skin colours (make-up, "
+            "ink, paint: they render as painted, with the translucency of the nearest skin colour; "
+            "docs/user/non_skin_colours.md)")
 
 
 def _state(material: bpy.types.Material) -> dict:

@@ -6,7 +6,9 @@ Inputs, for each component k = 1..K (the baked maps of docs/contracts.md §4, ``
 then ``IOR`` (the tissue index: the specular coat's Fresnel and the closures' refractive entry, which the
 bake's tables assume), ``Roughness`` (the coat's specular roughness, Blender's perceptual roughness, GGX
 alpha = Roughness^2) and ``Normal`` (normal/bump map; unlinked: the shading normal), which feeds the coat,
-its Fresnel weight and every subsurface closure.  Output: ``BSSRDF`` (the whole surface shader: coat plus
+its Fresnel weight and every subsurface closure; then the Principled BSDF's specular inputs (below) and
+``Body`` (a shader added beside the mixture under the coat's clear coat and sheen: the live group's diffuse body
+where Subsurface Weight is below 1; unlinked, nothing).  Output: ``BSSRDF`` (the whole surface shader: coat plus
 mixture; the name is kept for files wired before the coat existed).
 
 Why a sum of closures weighted by w_k *is* "pick component k with probability w_k, then walk in medium k"
@@ -131,6 +133,17 @@ SPECULAR_INPUTS: dict[str, tuple[str, object]] = {
 }
 
 
+#: The Principled BSDF's inputs besides the specular ones that the live group takes (name: socket type, its default
+#: in the group): Subsurface Weight (0: the painted colour as a diffuse body under the coat, 1: the skin; a mask
+#: works), Alpha (a Transparent BSDF mixed in) and Emission (added).  At these defaults none changes the render.
+ARTIST_INPUTS: dict[str, tuple[str, object]] = {
+    "Subsurface Weight": ("NodeSocketFloat", 1.0),
+    "Alpha": ("NodeSocketFloat", 1.0),
+    "Emission Color": ("NodeSocketColor", (1.0, 1.0, 1.0, 1.0)),
+    "Emission Strength": ("NodeSocketFloat", 0.0),
+}
+
+
 def socket_name(k: int, kind: str) -> str:
     """Group input name for component k (1-based) and map kind, e.g. ``k2 Radius``."""
     return f"k{k} {kind}"
@@ -155,16 +168,19 @@ def _new_interface(group: bpy.types.NodeTree, k_count: int) -> None:
     normal = iface.new_socket("Normal", in_out="INPUT", socket_type="NodeSocketVector")
     normal.hide_value = True  # like the Principled BSDF's Normal: unlinked means the shading normal
     add_specular_inputs(group)
+    iface.new_socket("Body", in_out="INPUT", socket_type="NodeSocketShader")  # added under the coat (live group)
     iface.new_socket("BSSRDF", in_out="OUTPUT", socket_type="NodeSocketShader")
 
 
-def add_specular_inputs(group: bpy.types.NodeTree) -> None:
-    """The Principled BSDF's specular inputs (:data:`SPECULAR_INPUTS`, its names and defaults) on ``group``."""
-    for name, (stype, default) in SPECULAR_INPUTS.items():
+def add_specular_inputs(group: bpy.types.NodeTree, inputs: dict[str, tuple[str, object]] = SPECULAR_INPUTS) -> None:
+    """The Principled BSDF's specular inputs (:data:`SPECULAR_INPUTS`, or ``inputs``: its names and defaults) on
+    ``group``."""
+    for name, (stype, default) in inputs.items():
         sock = group.interface.new_socket(name, in_out="INPUT", socket_type=stype)
         sock.default_value = default
         if stype == "NodeSocketFloat":
-            sock.min_value, sock.max_value = (1.0, 4.0) if name == "Coat IOR" else (0.0, 1.0)
+            high = {"Coat IOR": 4.0, "Emission Strength": 1e6}.get(name, 1.0)
+            sock.min_value, sock.max_value = (1.0 if name == "Coat IOR" else 0.0), high
 
 
 def _group_io(group: bpy.types.NodeTree) -> tuple[bpy.types.Node, bpy.types.Node]:
@@ -207,6 +223,7 @@ def build_svm_group(k_count: int = 3, name: str = GROUP_NAME) -> bpy.types.NodeT
     group, gin, gout = _fresh_group(name, k_count, "SVM")
     mixture = _svm_mixture(group, gin, k_count, _body_scale(group, gin))
     surface = _add_shader(group, principled_specular(group, gin), mixture, 1050.0, 700.0)
+    surface = _add_shader(group, surface, gin.outputs["Body"], 1150.0, 700.0)
     group.links.new(_outer_layers(group, gin, surface), gout.inputs["BSSRDF"])
     return group
 
@@ -393,12 +410,13 @@ def build_osl_group(k_count: int = 3, name: str = GROUP_NAME_OSL) -> bpy.types.N
         group.links.new(gin.outputs[name], script.inputs[param])
     group.links.new(_level_ior(group, gin.outputs["IOR"], gin.outputs["Specular IOR Level"]), script.inputs["coat_ior"])
     surface = _add_shader(group, principled_specular(group, gin), script.outputs["BSSRDF"], 1050.0, 700.0)
+    surface = _add_shader(group, surface, gin.outputs["Body"], 1150.0, 700.0)
     group.links.new(_outer_layers(group, gin, surface), gout.inputs["BSSRDF"])
     return group
 
 
 #: Custom property marking the group layout version (bump when the generated nodes change).
-GROUP_VERSION = 4  # 2: specular coat, Normal input; 3: the Principled BSDF's specular inputs; 4: Principled coat
+GROUP_VERSION = 5  # 2: specular coat, Normal input; 3: specular inputs; 4: Principled coat; 5: Body input
 
 
 def ensure_group(k_count: int, backend: str) -> bpy.types.NodeTree:
@@ -509,12 +527,15 @@ def _take_surface_inputs(tree: bpy.types.NodeTree, previous: bpy.types.Node | No
     if source is None:
         gnode.inputs["Roughness"].default_value = SKIN_ROUGHNESS
         return
-    for name in ("Normal", "Roughness", *SPECULAR_INPUTS):
+    for name in ("Normal", "Roughness", *SPECULAR_INPUTS, *ARTIST_INPUTS):
         theirs, ours = source.inputs.get(name), gnode.inputs.get(name)
-        if theirs is None or ours is None:  # a group wired by an older version of the add-on
+        if theirs is None or ours is None:  # a group wired by an older version, or one without these inputs
             continue
         feed = _feeding_socket(theirs)
         if feed is not None:
             tree.links.new(feed, ours)
+        elif name == "Subsurface Weight" and source.bl_idname == "ShaderNodeBsdfPrincipled" \
+                and theirs.default_value == 0.0:
+            ours.default_value = 1.0  # Blender's default: subsurface never switched on; the operator asks for skin
         elif name != "Normal":
             ours.default_value = theirs.default_value

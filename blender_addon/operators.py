@@ -89,8 +89,8 @@ class SPECTRAL_SKIN_OT_invert_albedo(bpy.types.Operator):
     exact: bpy.props.BoolProperty(
         name="Exact (slow)", default=False,
         description="Evaluate every distinct colour with the network instead of the fast-path table shipped with the "
-                    "model (the table is within ~0.1 ΔE of it on skin; outside the table's domain it gives the "
-                    "nearest skin colour, as the live group does)")
+                    "model (the table is within ~0.1 ΔE of it on skin; outside the table's skin colours it renders "
+                    "the painted colour with the nearest skin colour's translucency, as the live group does)")
     uv_coverage: bpy.props.BoolProperty(
         name="Only UV-covered texels", default=True,
         description="Evaluate only the texels the active mesh's UVs cover; the others get the maps of the most "

@@ -50,6 +50,7 @@ def _draw(layout, context) -> None:
         layout.prop(settings, "mode", expand=True)
         if settings.mode == "LIVE":
             layout.prop(settings, "principled_convention")
+    _draw_live_node(layout, getattr(context, "material", None))
     if settings is not None and settings.mode == "BAKE":
         col = layout.column()
         col.prop(settings, "image")
@@ -109,6 +110,32 @@ class SPECTRAL_SKIN_PT_material(bpy.types.Panel):
 
 
 classes = (SpectralSkinSettings, SPECTRAL_SKIN_PT_shader_editor, SPECTRAL_SKIN_PT_material)
+
+
+def live_node(material: bpy.types.Material | None) -> bpy.types.Node | None:
+    """The live group node (blender_addon.live) of ``material`` with a Translucency input, or None."""
+    if material is None or material.node_tree is None:
+        return None
+    for node in material.node_tree.nodes:
+        tree = getattr(node, "node_tree", None)
+        if (node.bl_idname == "ShaderNodeGroup" and tree is not None and tree.get("spectral_skin_sss_backend") == "LIVE"
+                and "Translucency" in node.inputs):
+            return node
+    return None
+
+
+def _draw_live_node(layout: bpy.types.UILayout, material: bpy.types.Material | None) -> None:
+    """The active material's live group inputs an artist tunes: Translucency (and its Subsurface Weight when it is
+    a value, not a mask)."""
+    node = live_node(material)
+    if node is None:
+        return
+    box = layout.box()
+    box.label(text="Live group", icon="NODETREE")
+    box.prop(node.inputs["Translucency"], "default_value", text="Translucency")
+    weight = node.inputs["Subsurface Weight"]
+    if not weight.is_linked:
+        box.prop(weight, "default_value", text="Subsurface Weight")
 
 
 def shading_of(settings: SpectralSkinSettings) -> str:

@@ -17,7 +17,19 @@ What the nodes compute, for a linear colour ``rgb`` (any node's output):
    corners all lie in the cube the values are exactly the fast bake's; in the few cells that straddle the
    cube's faces (very light or saturated colours) they are a smooth extension, which a bake through the table
    uses too (exporters.bake.evaluate), so bakes and the live group agree on every colour.
-   :func:`outside_fraction` counts the texels that fall outside these exact cells.
+   :func:`outside_fraction` counts the texels that fall outside these exact cells;
+5. **the painted colour** (exporters.painted_gain): the media looked up so far render the skin colour nearest the
+   painted one (or, in the extended cells, about it).  Each channel is brought to the painted colour P
+   (clamped to [0, 1]) in the reflectance domain, the media's translucency (radius, anisotropy) kept.  The
+   closure of component k in channel c adds w_kc rho(A_kc) to the channel (blender_addon.nodes: the mixture
+   is a sum of closures), with rho(A) the reflectance Cycles' walk renders for Subsurface Color A
+   (exporters.reflectance_tables, "cycles", at the table's IOR; exporters.painted_gain.BodyFit).  With
+   Q = sum_k w_k rho(A_k) and gain G = P / Q, every component's light becomes G w_k rho(A_k), exactly as the
+   collapse shares a colour among the components (exporters.collapse, step 4): the weight takes it while it
+   stays at most 1 (exact: the light is linear in the weight, the walk unchanged), the albedo the rest
+   (weight 1, rho' = G w rho, at most rho of the largest albedo).  Skin colours have G = 1 up to the fit
+   (0.1 %); a colour outside the box keeps the radii of the skin colour it was projected onto, so its
+   translucency changes continuously across the box's edge while its colour is the painted one.
 
 Image layout ("slice atlas"): the grid is cut into its n0 slices of constant l; slice s is a tile of
 (n1 + 2) x (n2 + 2) pixels (x1 along the width, x2 along the height) with a one-pixel border repeating the
@@ -26,8 +38,9 @@ tile's edge, so bilinear filtering at a clamped coordinate never reads the next 
 u = (px + 0.5) / width, as Cycles' and the GPU's bilinear filters assume.  The third axis is interpolated by
 two lookups (slices s and s + 1) mixed with the fraction of x0.
 
-Images (float32 RGBA, Non-Color, alpha channel-packed), for each component k: ``k{k} Color`` (RGB the
-Subsurface Color, A the anisotropy g), ``k{k} Log Radius`` (RGB natural log of the radius in metres),
+Images (float32 RGBA, Non-Color, alpha channel-packed), for each component k: ``k{k} Color`` (RGB the body
+reflectance rho of the Subsurface Color, exporters.painted_gain.body_reflectance: step 5 works on it, and the
+nodes turn it back into a colour; A the anisotropy g), ``k{k} Log Radius`` (RGB natural log of the radius in metres),
 ``k{k} Weight`` (RGB the weight).  With the shipped table (67 x 31 x 22 nodes, K = 3): nine images of
 231 x 240 pixels, 8.0 MB (7.6 MiB) in all (:func:`atlas_bytes`), whatever the textures and however many materials
 share them.
@@ -39,7 +52,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import cycles
+from . import cycles, painted_gain
 from .texel_table import TexelTable, channel_names, skin_coords
 
 #: The images of one component, in order: (name suffix, table channels for R, G, B, A or None).
@@ -125,16 +138,17 @@ def _channels(table: TexelTable, k: int, kind: str) -> list[int | None]:
 
 
 def grid_values(table: TexelTable) -> dict[str, np.ndarray]:
-    """The filled grid (n0, n1, n2, 4) float64 of each image name ``k{k} {kind}``, alpha 1 where unused; colour,
-    weight and anisotropy clipped to the ranges a bake clips them to (exporters.texel_table.TexelTable.records)."""
+    """The filled grid (n0, n1, n2, 4) float64 of each image name ``k{k} {kind}``, alpha 1 where unused; weight and
+    anisotropy clipped to the ranges a bake clips them to (exporters.texel_table.TexelTable.records), the colour
+    (clipped to [0, 1]) as its body reflectance rho (exporters.painted_gain.body_reflectance)."""
     filled = extended_values(table)
     ones = np.ones(table.shape)
     out = {}
     for k in range(1, table.k + 1):
         for kind in IMAGE_KINDS:
             grid = np.stack([filled[..., i] if i is not None else ones for i in _channels(table, k, kind)], axis=-1)
-            if kind == "Color":
-                grid[..., :3] = np.clip(grid[..., :3], 0.0, 1.0)
+            if kind == "Color":  # the body reflectance of the colour (exporters.painted_gain): what the nodes use
+                grid[..., :3] = painted_gain.body_reflectance(grid[..., :3], table.options.ior)
                 grid[..., 3] = np.clip(grid[..., 3], cycles.G_MIN, cycles.RECOMMENDED_G_MAX)
             elif kind == "Weight":
                 grid[..., :3] = np.maximum(grid[..., :3], 0.0)
@@ -193,3 +207,24 @@ def outside_fraction(table: TexelTable, rgb: np.ndarray) -> float:
         return 0.0
     inside, _, _ = table.locate(np.nan_to_num(rgb, nan=0.0, posinf=1.0, neginf=0.0))
     return float(1.0 - inside.mean())
+
+
+# -- the group's media -----------------------------------------------------------------------------------------
+def group_media(table: TexelTable, rgb: np.ndarray, grids: dict[str, np.ndarray] | None = None
+                ) -> dict[str, np.ndarray]:
+    """Reference of the live group's media at linear colours ``rgb`` (N, 3) (the colour entering the table):
+    ``{"k{k} Color": (N, 3), "k{k} Radius": (N, 3) in metres, "k{k} Weight": (N, 3), "k{k} Anisotropy": (N,)}``
+    after steps 1-5.  ``grids``: :func:`grid_values` of ``table`` when already made."""
+    grids = grids if grids is not None else grid_values(table)
+    layout = layout_of(table)
+    looked = {name: lookup(grid, layout, rgb) for name, grid in grids.items()}
+    ks = range(1, table.k + 1)
+    rho = np.stack([looked[f"k{k} Color"][:, :3] for k in ks], axis=1)
+    weight = np.stack([looked[f"k{k} Weight"][:, :3] for k in ks], axis=1)
+    colour, weight = painted_gain.painted_media(rho, weight, rgb, painted_gain.body_fit(table.options.ior))
+    out = {}
+    for i, k in enumerate(ks):
+        out[f"k{k} Color"], out[f"k{k} Weight"] = colour[:, i], weight[:, i]
+        out[f"k{k} Radius"] = np.exp(looked[f"k{k} Log Radius"][:, :3])
+        out[f"k{k} Anisotropy"] = looked[f"k{k} Color"][:, 3]
+    return out

@@ -3,7 +3,9 @@
 Everything a bake writes depends on the texel's RGB only, so the model and the collapse are evaluated
 once per model on a grid of colours, and a bake interpolates.  Colours outside the grid (or in a cell
 with a corner outside the RGB cube) get the nearest skin colour's values, as the live group answers them
-(exporters.live_table), so every texel gets a value; ``--exact`` bakes evaluate the model everywhere.
+(exporters.live_table), so every texel gets a value; with the painted colour every texel's media are then
+brought to its painted colour, the translucency kept (exporters.painted_gain, :meth:`TexelTable.records`), as the
+live group does; ``--exact`` bakes evaluate the model everywhere.
 
 Colour space of the grid ("skin space")
 ---------------------------------------
@@ -50,7 +52,7 @@ from pathlib import Path
 
 import numpy as np
 
-from . import cycles, inference, texel_records
+from . import cycles, inference, painted_gain, texel_records
 from .cli_io import atomic_file
 from .colorimetry import srgb_decode, srgb_encode
 from .constants import PARAM_NAMES, PARAM_RANGES
@@ -191,7 +193,8 @@ class TexelTable:
         return out
 
     def records(self, rgb: np.ndarray, values: np.ndarray, targets: tuple[str, ...]) -> dict[str, np.ndarray]:
-        """Records (exporters.texel_records) of rows ``rgb`` (n, 3) from their interpolated ``values`` (n, C)."""
+        """Records (exporters.texel_records) of rows ``rgb`` (n, 3) from their interpolated ``values`` (n, C); with
+        the painted colour, colours and weights brought to ``rgb`` (exporters.painted_gain)."""
         n, k = len(values), self.k
         col = {name: i for i, name in enumerate(channel_names(k))}
 
@@ -211,11 +214,14 @@ class TexelTable:
             return rec
         g = np.clip(values[:, col["anisotropy_k1"]:col[f"anisotropy_k{k}"] + 1].astype(np.float64), cycles.G_MIN,
                     cycles.RECOMMENDED_G_MAX)
-        color = np.clip(block("color"), 0.0, 1.0)
+        color, weight = np.clip(block("color"), 0.0, 1.0), np.maximum(block("weight"), 0.0)
+        if self.options.painted:  # the painted colour, whatever the colour (exporters.painted_gain)
+            rho = painted_gain.body_reflectance(color, self.options.ior)
+            color, weight = painted_gain.painted_media(rho, weight, rgb, painted_gain.body_fit(self.options.ior))
         radius_m = np.exp(block("log_radius_m"))
         unreachable = (values[:, col["unreachable_r"]:col["unreachable_b"] + 1] > 0.5).astype(np.float64)
         share = np.clip(values[:, col["share_k1"]:col[f"share_k{k}"] + 1].astype(np.float64), 0.0, 1.0)
-        rec.update(color=color, radius_m=radius_m, weight=np.maximum(block("weight"), 0.0), anisotropy=g,
+        rec.update(color=color, radius_m=radius_m, weight=weight, anisotropy=g,
                    max_share=share, unreachable=unreachable, n_unreachable=unreachable.sum(axis=1).astype(np.int64))
         for name in ("n_low", "n_high", "n_capped"):
             rec[name] = np.rint(values[:, col[name]]).astype(np.int64)

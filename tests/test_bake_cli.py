@@ -165,10 +165,10 @@ def test_colours_no_medium_can_take_are_clamped_counted_and_reported(tmp_path):
     codes[0, :3] = (0, 255, 0)  # saturated green: no skin's spectrum bends that far
     png = write_image(tmp_path / "green.png", codes, "uint8")
     out = tmp_path / "maps"
-    # through the table a non-skin colour gets the nearest skin colour's maps, said as a warning
+    # through the table a non-skin colour gets the painted colour on the nearest skin colour's media, said in a note
     proc = bake("--albedo", str(png), "--out", str(tmp_path / "table"), "--threads", "1")
     assert proc.returncode == 0, proc.stderr
-    assert "bake.py: warning: 3 of 8 texel(s) lie outside the fast-path table's domain" in proc.stderr
+    assert "bake.py: note: 3 of 8 texel(s) lie outside the fast-path table's skin colours" in proc.stdout
     # the network itself (--exact) is asked for the painted green: clamped, counted, reported
     proc = bake("--albedo", str(png), "--out", str(out), "--target", "cycles,spectral", "--threads", "1", "--exact")
     assert proc.returncode == 0, proc.stderr

@@ -95,27 +95,36 @@ def test_table_bake_matches_exact_bake(skin_png, tmp_path):
     assert json.loads((tmp_path / "exact" / "skin_maps.json").read_text())["evaluation"]["mode"] == "exact"
 
 
-def test_colours_outside_the_table_get_the_nearest_skin_colour(tmp_path):
-    """Blue, green and red texels (not skin) bake to the maps of their projection onto the table's box in skin
-    space, as the live group looks them up: the same maps as a bake of the projected colours themselves, which
-    lie inside the table (nudged 1e-6 of a step into the box, which moves no map value measurably)."""
+def test_colours_outside_the_table_keep_the_nearest_skin_colours_translucency_and_render_as_painted(tmp_path):
+    """Blue, green and red texels (not skin) bake to the radii and anisotropy of their projection onto the table's
+    box in skin space, as the live group looks them up: those of a bake of the projected colours themselves, which
+    lie inside the table (nudged 1e-6 of a step into the box, which moves no map value measurably); their colour
+    and weight maps render the painted colour (exporters.painted_gain), by the reflectance tables."""
     codes = np.array([[[224, 172, 150], [30, 60, 220]], [[0, 255, 0], [250, 20, 20]]], np.uint8)
     png = write_image(tmp_path / "odd.png", codes, "uint8")
     fast = bake_png(png, tmp_path / "fast")
     assert fast.stats["texels_outside_table"] == 3 and fast.stats["texels_from_table"] == 1
     assert fast.stats["texels_evaluated_exactly"] == 0
     table = texel_table.load(SHIPPED_TABLE)
-    coords = texel_table.skin_coords(srgb_decode(codes.reshape(-1, 3) / 255.0))
+    painted = srgb_decode(codes.reshape(-1, 3) / 255.0)
+    coords = texel_table.skin_coords(painted)
     top = table.origin + table.step * (np.array(table.shape) - 1)
     projected, in_cube = texel_table.rgb_of_coords(np.clip(coords, table.origin + 1e-6 * table.step,
                                                            top - 1e-6 * table.step))
     assert in_cube.all() and table.locate(projected.astype(np.float32))[0].all()
     exr = write_image(tmp_path / "projected.exr", projected.reshape(2, 2, 3).astype(np.float32), "float")
     bake_png(exr, tmp_path / "projected")
-    for kind in ("k1_color", "k2_radius", "k3_weight", "k1_anisotropy"):
+    for kind in ("k1_radius", "k2_radius", "k3_radius", "k1_anisotropy"):
         a = maps.read_exr(tmp_path / "fast" / f"odd_{kind}.exr")[0]
         b = maps.read_exr(tmp_path / "projected" / f"projected_{kind}.exr")[0]
         np.testing.assert_allclose(a, b, rtol=1e-3, atol=1e-6, err_msg=kind)
+    body = 0.0
+    for k in range(1, table.k + 1):
+        colour = maps.read_exr(tmp_path / "fast" / f"odd_k{k}_color.exr")[0].reshape(-1, 3).astype(np.float64)
+        weight = maps.read_exr(tmp_path / "fast" / f"odd_k{k}_weight.exr")[0].reshape(-1, 3).astype(np.float64)
+        alpha = cycles.rw_albedo_forward(np.clip(colour, 0.0, 1.0), 0.0)
+        body = body + weight * reflectance_tables.reflectance("cycles", alpha, 0.0, table.options.ior)
+    np.testing.assert_allclose(body, painted, rtol=5e-3, atol=5e-4)  # half-float maps: ~5e-4
 
 
 def _pixel_type(path: Path) -> str:

@@ -69,13 +69,14 @@ def input_notes(albedo: AlbedoImage | IndexedAlbedo) -> list[str]:
 
 
 def clamp_warnings(stats: dict[str, int], texels: int) -> list[str]:
-    """Warnings (prefixed "warning: ") for painted colours a medium cannot produce, from the bake's stats."""
+    """Warnings (prefixed "warning: ") for painted colours a medium cannot produce, from the bake's stats, after a
+    note (no prefix) on the texels that are not skin colours of the fast-path table."""
     out = []
     n = int(stats.get("texels_outside_table", 0))
     if n:
-        out.append(f"warning: {n:,} of {texels:,} texel(s) lie outside the fast-path table's domain (not skin "
-                   "colours): they get the nearest skin colour's maps, as the live group renders them (--exact "
-                   "runs the network on them)")
+        out.append(f"{n:,} of {texels:,} texel(s) lie outside the fast-path table's skin colours (make-up, ink, "
+                   "paint): their maps render the painted colour with the translucency of the nearest skin colour, "
+                   "as the live group renders them (--exact runs the network on them)")
     n = int(stats.get(CLAMPED_CYCLES, 0))
     if n:
         out.append(f"warning: {n:,} of {texels:,} texel(s) are painted brighter than Cycles' walk can render "

@@ -184,7 +184,7 @@ def network_targets_md(targets: list[dict]) -> list[str]:
     """The rebuilt network's targets (``assemble.NETWORK_TARGETS``), each with ours and, where missed, by how much."""
     if not targets:
         return []
-    out = ["The network's targets (issue 23):", "", "| target | ours | goal | |", "|---|---|---|---|"]
+    out = ["The network's targets:", "", "| target | ours | goal | |", "|---|---|---|---|"]
     for t in targets:
         if t["met"] is None:
             verdict = "not measured"
