@@ -145,7 +145,7 @@ def add_edit_branch(b, gin, table: edit_table.EditTable, images: dict[str, bpy.t
 
     layout = table.layout()
     colour = gin.outputs["Color"]
-    e = [live._srgb_encode(b, _channel(b, colour, c), 31) for c in range(3)]
+    e = [live._srgb_encode(b, b.math("ADD", 30, _channel(b, colour, c), 0.0, clamp=True), 31) for c in range(3)]
     coords = [b.math("MULTIPLY", 36, b.math("ADD", 35, b.math("ADD", 35, e[0], e[1]), e[2]), 1.0 / 3.0),
               b.math("SUBTRACT", 36, e[0], e[1]), b.math("SUBTRACT", 36, e[1], e[2])]
     x = [b.math("MINIMUM", 39, b.math("MAXIMUM", 38, b.math("MULTIPLY_ADD", 37, coord, 1.0 / layout.step,

@@ -217,6 +217,7 @@ def group_media(table: TexelTable, rgb: np.ndarray, grids: dict[str, np.ndarray]
     after steps 1-5.  ``grids``: :func:`grid_values` of ``table`` when already made."""
     grids = grids if grids is not None else grid_values(table)
     layout = layout_of(table)
+    rgb = painted_gain.painted_target(rgb)  # the group clamps the colour before its lookup
     looked = {name: lookup(grid, layout, rgb) for name, grid in grids.items()}
     ks = range(1, table.k + 1)
     rho = np.stack([looked[f"k{k} Color"][:, :3] for k in ks], axis=1)

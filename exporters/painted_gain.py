@@ -86,13 +86,19 @@ def body_colour(rho: np.ndarray, fit: BodyFit) -> np.ndarray:
     return _horner(fit.inverse, np.maximum(rho, fit.low))
 
 
+def painted_target(rgb) -> np.ndarray:
+    """The painted linear colours ``rgb`` (N, 3) as the live group reads them: NaN is 0, +Inf 1, then clamped to
+    [0, 1] (float64)."""
+    return painted.target_colour(np.nan_to_num(np.asarray(rgb, np.float64), nan=0.0, posinf=1.0, neginf=0.0))
+
+
 def painted_media(rho: np.ndarray, weight: np.ndarray, rgb: np.ndarray, fit: BodyFit
                   ) -> tuple[np.ndarray, np.ndarray]:
     """Subsurface Colors and weights (N, K, 3) of media of body reflectance ``rho`` (:func:`body_reflectance` of
     their colours) and weights ``weight`` (N, K, 3), brought to the painted linear colours ``rgb`` (N, 3) (module
     docstring; NaN is 0, +Inf 1, as in the nodes).  Returns new arrays (float64)."""
     rho, weight = np.asarray(rho, np.float64), np.asarray(weight, np.float64)
-    target = painted.target_colour(np.nan_to_num(np.asarray(rgb, np.float64), nan=0.0, posinf=1.0, neginf=0.0))
+    target = painted_target(rgb)
     gain = target / np.maximum(np.sum(weight * rho, axis=1), GAIN_FLOOR)  # (N, 3)
     scaled = weight * gain[:, None, :]
     rho_new = np.maximum(rho, np.minimum(scaled * rho, fit.reach))
