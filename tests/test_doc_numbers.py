@@ -46,7 +46,8 @@ def test_a_stale_or_unknown_quote_is_named():
             "stale: ~63 CPU-h<!-- bench:paper_total_cpu_h -->\n"
             "unknown: 5<!-- bench:no_such_figure -->\n"
             "missing row: 2.03×<!-- bench:walker_vs_mcml_1_thread -->\n"
-            "no number: <!-- bench:paper_total_cpu_h -->")
+            "no number: <!-- bench:paper_total_cpu_h -->\n"
+            "an example in code: `63<!-- bench:paper_total_cpu_h -->`")
     problems = quotes.stale_quotes(page, results)
     assert len(problems) == 4, problems
     assert problems[0] == "line 2: quotes 63 for paper_total_cpu_h, the bench shows 31"

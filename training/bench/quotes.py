@@ -110,9 +110,15 @@ def agrees(quoted: str, measured: str) -> bool:
     return abs(round(_number(measured), digits) - _number(quoted)) < 0.5 * 10.0 ** -digits
 
 
+#: Code: fenced blocks and inline spans, where a marker is an example of the syntax, not a quote.
+_CODE = re.compile(r"```.*?```|`[^`\n]+`", re.S)
+
+
 def stale_quotes(text: str, results: dict) -> list[str]:
     """Each marker of a page whose number differs from the bench's (or names no figure), as one line each:
-    ``line N: quotes X for KEY, the bench shows Y``."""
+    ``line N: quotes X for KEY, the bench shows Y``.  Markers inside code (spans, fenced blocks) are examples and
+    are not read."""
+    text = _CODE.sub(lambda m: re.sub(r"[^\n]", " ", m.group(0)), text)
     problems = []
     quoted_at = {m.end(): m for m in MARKER.finditer(text)}
     for marker in _ANY_MARKER.finditer(text):
