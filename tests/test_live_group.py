@@ -12,7 +12,9 @@
 (d) a UDIM (two-tile) albedo feeding the Principled BSDF: each tile renders as the live group renders its colour;
 (e) the operator: the live group is its default, fed by what fed Base Color, every artist node kept, Normal and
     Roughness taken, an EEVEE-target output added; it reports the share of the image outside the domain; a
-    material without a Principled BSDF is refused with nothing changed.
+    material without a Principled BSDF is refused with nothing changed;
+(f) EEVEE (software OpenGL where there is no GPU, one subprocess): the live group's EEVEE output near the painted
+    colour, and PRINCIPLED_BASE_SHARE against a Principled BSDF rendered in EEVEE.
 """
 
 from __future__ import annotations
