@@ -3,10 +3,10 @@
 Three representative tones (light R01, medium R05, dark R10) at five wavelengths from UV to NIR, the same decoder
 media in both renderers; they must agree within 2 % or 4 combined standard errors, and the test first checks that
 it can tell: 4 combined standard errors stay under 3.5 % of R_d at every tone and wavelength, so a 5 % error
-anywhere fails it.  The samples are set per tone for that (``SAMPLES``), on ``llvm_ad_rgb`` with the paired
-specular render (training.validate.mitsuba_scene): at the dark tone's R_d ~ 0.001 the scalar variant's estimate,
-with the exact specular part subtracted, carries 80-150 % of noise at 8,192 paths.  Without libLLVM 19 only the
-light tone runs, on the scalar variant.
+anywhere fails it.  The samples are set per tone for that (``SAMPLES``): the light tone on the scalar variant (the
+exact specular part subtracted), the darker ones on ``llvm_ad_rgb`` with the paired specular render
+(training.validate.mitsuba_scene): at the dark tone's R_d ~ 0.001 the scalar estimate carries 80-150 % of noise
+at 8,192 paths.  Without libLLVM 19 only the light tone runs.
 """
 
 from __future__ import annotations
@@ -23,11 +23,9 @@ from training.validate.mixture import mixture_reflectance
 
 WAVELENGTHS = [300.0, 450.0, 550.0, 650.0, 950.0]
 #: Per tone: Mitsuba's variant and paths, our photons (per component and wavelength), chosen so that 4 combined
-#: standard errors are under 3.5 % of R_d everywhere.  The dark tones need llvm_ad_rgb's paired specular render;
-#: the light tone runs on the scalar variant where libLLVM 19 is missing (``SCALAR_FALLBACK``).
-SAMPLES = {"R01": ("llvm_ad_rgb", 65536, 60000), "R05": ("llvm_ad_rgb", 262144, 200000),
-           "R10": ("llvm_ad_rgb", 1048576, 800000)}
-SCALAR_FALLBACK = {"R01": ("scalar_rgb", 32768, 60000)}
+#: standard errors are under 3.5 % of R_d everywhere.  The dark tones need llvm_ad_rgb's paired specular render.
+SAMPLES = {"R01": ("scalar_rgb", 32768, 60000), "R05": ("llvm_ad_rgb", 262144, 200000),
+           "R10": ("llvm_ad_rgb", 2097152, 1600000)}
 #: A relative error the comparison must be able to catch at every tone and wavelength.
 CATCH = 0.05
 
@@ -35,7 +33,7 @@ CATCH = 0.05
 @pytest.mark.slow
 @pytest.mark.parametrize("name", list(SAMPLES))
 def test_mitsuba_and_ours_agree_and_would_catch_a_5_percent_error(name):
-    variant, spp, photons = SAMPLES[name] if em.llvm_available() else SCALAR_FALLBACK.get(name, SAMPLES[name])
+    variant, spp, photons = SAMPLES[name]
     if variant.startswith("llvm") and not em.llvm_available():
         pytest.skip("libLLVM 19 not installed (make mitsuba installs libllvm19 as root): the dark tones need "
                     "llvm_ad_rgb's paired specular render")
