@@ -24,7 +24,7 @@ from training.validate.mixture import mixture_reflectance
 
 WAVELENGTHS = [300.0, 450.0, 550.0, 650.0, 950.0]
 #: Per tone: Mitsuba's variant and paths, our photons (per component and wavelength), chosen so that 4 combined
-#: standard errors are under 4 % of R_d everywhere (measured: R05 <= 3.1 %, R10 <= 3.7 %).
+#: standard errors are under 4 % of R_d everywhere (measured: R01 <= 2.8 %, R05 <= 3.1 %, R10 <= 3.7 %).
 SAMPLES = {"R01": ("llvm_ad_rgb", 262144, 60000), "R05": ("llvm_ad_rgb", 262144, 200000),
            "R10": ("llvm_ad_rgb", 2097152, 1600000)}
 #: A relative error the comparison must be able to catch at every tone and wavelength.
