@@ -11,7 +11,7 @@ Interface (docs/contracts.md §5):
   the radii are in Blender units), ``Roughness``, ``Normal`` and the Principled BSDF's specular inputs
   (blender_addon.nodes.SPECULAR_INPUTS: IOR Level, tint, coat, sheen), passed to the mixture group and to the
   EEVEE closure, and ``Principled Convention`` (0: the body renders the colour, the coat on top; 1: the body
-  renders it darkened as a Principled BSDF's base under its specular layer, :data:`PRINCIPLED_BASE_SHARE`),
+  renders it darkened as a Principled BSDF's base under its specular layer, :data:`PRINCIPLED_BASE_SHARE_CYCLES`),
   ``Translucency`` (scales every mean free path: 1 is the physical skin) and the Principled BSDF's
   ``Subsurface Weight`` (0: a diffuse body of the painted colour under the coat; 1: the skin; a mask blends),
   ``Alpha`` and ``Emission Color`` / ``Strength`` (blender_addon.nodes.ARTIST_INPUTS);
@@ -49,16 +49,20 @@ GROUP_NAME = "Spectral Skin SSS Live"
 #: Custom properties: on the group and the images, the SHA-256 of the table they were made from.
 TABLE_PROP = "spectral_skin_sss_table"
 #: Layout version of the live group (bump when the generated nodes change).
-LIVE_VERSION = 4
+LIVE_VERSION = 5
 IMAGE_PREFIX = "Spectral Skin SSS Table"
 #: sRGB encoding (IEC 61966-2-1): linear segment below this value, slope 12.92 there.
 _SRGB_KNEE, _SRGB_SLOPE = 0.0031308, 12.92
-#: The share of the light the Principled BSDF's specular layer leaves to its base colour: about 0.957 at skin's
-#: IOR 1.4 and Roughness 0.5 (EEVEE, straight above under a white world, measured on three skin colours by
-#: tests/test_live_group.py: 0.952-0.961 of the painted colour).  The EEVEE output's Base Color is the colour
-#: divided by it (the body at the painted colour, as in Cycles); with ``Principled Convention`` 1 the colour is
-#: multiplied by it before the table (the body darker by as much as under a Principled BSDF's specular layer).
+#: The share of the light the Principled BSDF's specular layer leaves to its base colour in EEVEE, at skin's IOR 1.4
+#: and Roughness 0.5, straight above under a white world: a Principled BSDF rendered in EEVEE keeps 0.965-0.968 of
+#: three skin colours by luminance (tests/test_live_group.py, which holds this value within 0.015 of it).  The
+#: EEVEE output's Base Color is the colour divided by it: the body at the painted colour, as in Cycles, within
+#: ΔE76 1 of the painted colour plus the coat's F0 (the same test file).
 PRINCIPLED_BASE_SHARE = 0.957
+#: The same share in Cycles: 0.972 (0.9717-0.9727 at Roughness 0.3-0.5, IOR 1.4; a Principled BSDF rendered in
+#: Cycles by tests/test_live_specular.py).  With ``Principled Convention`` 1 the colour is multiplied by it before
+#: the table, so the Cycles body is as much darker than the painted colour as a Principled BSDF's base.
+PRINCIPLED_BASE_SHARE_CYCLES = 0.972
 #: Smallest Translucency the group takes (the mean free paths scaled by it; 0 would make them 0).
 TRANSLUCENCY_MIN = 1e-3
 #: Texels read (at most) to count the share of a texture outside the table's domain.
@@ -194,7 +198,7 @@ def _grid_coords(b: _Builder, gin: bpy.types.Node, layout: live_table.AtlasLayou
     """Clamped grid coordinates x0, x1, x2 of the input colour (or ``colour``: the edited one), its distance from
     the box (skin space) and the painted colour (that colour clamped to [0, 1], a vector)."""
     sep = b.node("ShaderNodeSeparateColor", 0)
-    b.link(_convention(b, gin, 1.0, PRINCIPLED_BASE_SHARE, colour), sep.inputs[0])
+    b.link(_convention(b, gin, 1.0, PRINCIPLED_BASE_SHARE_CYCLES, colour), sep.inputs[0])
     clamped = [b.math("ADD", 1, sep.outputs[i], 0.0, clamp=True) for i in range(3)]
     painted = b.node("ShaderNodeCombineXYZ", 2)
     for i in range(3):

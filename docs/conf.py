@@ -219,6 +219,18 @@ _parse_parser = sphinxarg.ext.parse_parser
 sphinxarg.ext.parse_parser = _parse_parser_escaped
 
 
+def check_bench_numbers(app, docname: str, source: list[str]) -> None:
+    """Warn (an error under ``make docs``'s -W) for every benchmark number a page quotes that the bench's own
+    results (bench/results.json) no longer show (training.bench.quotes)."""
+    from sphinx.util import logging
+
+    from training.bench import quotes
+
+    for problem in quotes.stale_quotes(source[0], quotes.load_results()):
+        logging.getLogger(__name__).warning(f"stale benchmark number: {problem}", location=docname)
+
+
 def setup(app) -> None:
+    app.connect("source-read", check_bench_numbers)
     # After napoleon (priority 500), which turns the few Google-style sections into fields first.
     app.connect("autodoc-process-docstring", plain_docstring_to_rst, priority=600)

@@ -223,7 +223,8 @@ def _onnx_problem(path: Path) -> str | None:
     try:
         model = onnx.load(str(path), load_external_data=False)
     except Exception as exc:  # onnx raises DecodeError / its own errors for a file that is not a model
-        return f"not an ONNX model ({type(exc).__name__}); export the model again (python -m training export)"
+        return (f"not an ONNX model or truncated ({type(exc).__name__}); export the model again "
+                "(python -m training export)")
     if not model.graph.node:
         return "not an ONNX model (no graph); export the model again (python -m training export)"
     return None

@@ -4,9 +4,10 @@ Three skin colours — the lightest and the darkest subject of the NIST skin ref
 training/realskin/data (measured spectra under D65 -> 8-bit sRGB) and a dark skin colour — are painted as
 vertical stripes of one 8-bit sRGB texture on the top of a flat box (blender_addon/probe.py: 100-unit box,
 orthographic camera straight above, uniform white world).  The material is the artist's: Image Texture
--> Principled BSDF.  Invert Skin Albedo bakes it at default settings (painted colour, fast-path table) and
-wires the Spectral Skin SSS Mixture (SVM, then OSL); the reference is the same texture through a Diffuse
-BSDF.  Each stripe's mean over its inner texels is compared in CIE Lab: mean ΔE76 <= 0.5, max <= 1.0.
+-> Principled BSDF.  Invert Skin Albedo runs at its default (the live group **Spectral Skin SSS Live**, nothing
+baked) and in mode Bake (painted colour, fast-path table; the Spectral Skin SSS Mixture, SVM, then OSL); the
+reference is the same texture through a Diffuse BSDF.  Each stripe's mean over its inner texels is compared in
+CIE Lab: mean ΔE76 <= 0.5, max <= 1.0.
 
 The group's specular coat (a Principled BSDF's specular layer) reflects the white world: straight above, what
 Blender's own Principled BSDF with a black base reflects at the material's roughness and the group's IOR 1.4
@@ -29,7 +30,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 import blender_addon  # noqa: E402
-from blender_addon import nodes, probe  # noqa: E402
+from blender_addon import live, nodes, probe  # noqa: E402
 from exporters.colorimetry import (  # noqa: E402
     delta_e76,
     linear_srgb_to_lab,
@@ -122,8 +123,9 @@ def _scene() -> bpy.types.Scene:
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("backend", ["SVM", "OSL"])
+@pytest.mark.parametrize("backend", ["LIVE", "SVM", "OSL"])
 def test_cycles_renders_the_painted_colour(tmp_path, backend, diffuse_reference):
+    """LIVE: the operator as an artist first meets it (no option given: the live group); SVM, OSL: mode Bake."""
     codes = painted_codes()
     lab_codes = linear_srgb_to_lab(diffuse_reference)
     assert np.all(np.diff(lab_codes[:, 0]) < -10)  # light, medium, dark: distinct colours
@@ -133,7 +135,13 @@ def test_cycles_renders_the_painted_colour(tmp_path, backend, diffuse_reference)
         png = stripes_texture(tmp_path / "painted.png", codes)
         mat = box_material(bpy.data.images.load(str(png)), "principled")
         slab = bpy.data.objects["ProbeSlab"]
-        assert run_invert(slab, backend=backend) == {"FINISHED"}
+        if backend == "LIVE":
+            with bpy.context.temp_override(object=slab, active_object=slab):
+                assert bpy.ops.spectral_skin.invert_albedo() == {"FINISHED"}
+            assert any(n.bl_idname == "ShaderNodeGroup" and n.node_tree.name.startswith(live.GROUP_NAME)
+                       for n in mat.node_tree.nodes)
+        else:
+            assert run_invert(slab, backend=backend) == {"FINISHED"}
         scene.cycles.shading_system = backend == "OSL"  # the artist's step: the add-on never turns OSL on
         assert mat.node_tree.nodes.active is not None
         skin, err = render_stripes(scene, tmp_path, f"skin_{backend}")

@@ -14,6 +14,7 @@ from __future__ import annotations
 import hashlib
 import importlib.util
 import os
+import re
 import shutil
 import signal
 import stat
@@ -293,6 +294,11 @@ def run_in_process(argv: list[str], capsys) -> tuple[int, str]:
     return code, capsys.readouterr().err
 
 
+#: What the one line must say about an input file, by category, beside the option's name: the problem itself.
+PROBLEM = {"input missing": r"not found", "input empty": r"empty file", "input truncated": r"truncated",
+           "input disguised": r"\bnot an? (NumPy|ONNX|PNG|HDF5|image)\b|a (file|folder), not a (folder|file)"}
+
+
 def assert_one_line(code, err: str, word: str) -> None:
     assert code == 2, err
     assert "Traceback" not in err, err
@@ -306,6 +312,8 @@ def test_bad_input_is_one_line_and_touches_nothing(world, capsys, category, argv
     before = snapshot(world["base"])
     code, err = run_in_process(_argv(argv, world), capsys)
     assert_one_line(code, err, word)
+    if category in PROBLEM:
+        assert re.search(PROBLEM[category], err), f"{category}: the message does not name the problem: {err}"
     assert snapshot(world["base"]) == before
 
 

@@ -5,7 +5,8 @@ orthographic camera looking straight down.  Cycles' RANDOM_WALK entry has no Fre
 has no Fresnel/refraction (kernel integrator/subsurface.h), so the medium is index-matched: the reference is
 iadpython UR1 (normal-incidence total reflectance) with n = 1.  Each channel carries its own medium
 (alpha_c, sigma_t,c); g is one per closure.  Tolerances: 1% + 4 standard errors where Cycles' walk is
-accurate (g <= 0.7), and the measured bias of Cycles' anisotropic walk where it is not.
+accurate (g <= 0.7, and g = 0 where the shipped collapse moves skin's g), and the measured bias of Cycles'
+anisotropic walk where it is not.
 """
 
 from __future__ import annotations
@@ -20,7 +21,7 @@ import pytest
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from blender_addon import probe  # noqa: E402
-from exporters import cycles  # noqa: E402
+from exporters import collapse, cycles  # noqa: E402
 
 SAMPLES = 1024
 UNIT_SCALE_M = 0.01  # 1 BU = 1 cm, so sigma_t in cm^-1 equals sigma_t per BU
@@ -65,14 +66,18 @@ def test_cycles_matches_adding_doubling(alpha, g):
     assert np.all(np.abs(rel) <= 0.01 + 4 * err / ref), rel
 
 
-def test_skin_like_high_g_through_similarity_cap():
-    # Skin g(lambda) ~ 0.75-0.9: medium_to_cycles moves g to 0.7 by the similarity relation (documented
-    # in exporters.cycles).  Against the *exact* g = 0.85 medium the result stays within 2.5%.
-    alpha, g = np.array([0.95, 0.99, 0.998]), np.full(3, 0.85)
-    mean, err, seconds = render_medium(alpha, g)
-    ref = np.array([reference_ur1(a, 0.85) for a in alpha])
-    rel = report("g=0.85 via cap 0.7", mean, err, ref, seconds)
-    assert np.all(np.abs(rel) <= 0.025 + 4 * err / ref), rel
+def test_skin_like_high_g_through_the_isotropic_collapse():
+    # Skin g(lambda) ~ 0.75-0.9: the shipped collapse (exporters.collapse.G_MAX = 0) hands Cycles each medium's
+    # similar isotropic medium.  The reference is that medium computed here from the similarity relation
+    # (van de Hulst: mu_a and the reduced scattering mu_s (1 - g) kept), alpha* = alpha (1 - g) / (1 - alpha g),
+    # through adding-doubling at g = 0: Cycles' isotropic walk must render it within 1 % + 4 standard errors.
+    alpha, g = np.array([0.95, 0.99, 0.998]), 0.85
+    mean, err, seconds = render_medium(alpha, np.full(3, g), g_max=collapse.G_MAX)
+    assert cycles.medium_to_cycles(alpha, SIGMA_T_CM, np.full(3, g), g_max=collapse.G_MAX).g.max() == 0.0
+    alpha_iso = alpha * (1.0 - g) / (1.0 - alpha * g)
+    ref = np.array([reference_ur1(a, 0.0) for a in alpha_iso])
+    rel = report(f"g={g} as the isotropic alpha*={np.round(alpha_iso, 4)}", mean, err, ref, seconds)
+    assert np.all(np.abs(rel) <= 0.01 + 4 * err / ref), rel
 
 
 def test_raw_high_g_walk_is_biased_which_is_why_g_is_capped():

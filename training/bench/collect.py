@@ -7,6 +7,9 @@ error, notes (human-readable, units included).  This module only collects them, 
 versions, and writes the tables (docs/contracts.md §6): one section per module, headed by the module's name, when it
 ran, in which mode and under which load.  ``--only M ...`` re-runs those modules and replaces their sections
 in an existing file, keeping the others (each keeps its own stamp).
+
+Beside the Markdown file it writes the same tables as JSON (``bench/results.json``: :func:`results_record`), the
+machine-readable home of every measured number the README and ``docs/`` quote (:mod:`training.bench.quotes`).
 """
 
 from __future__ import annotations
@@ -15,6 +18,7 @@ import argparse
 import datetime as dt
 import importlib
 import importlib.util
+import json
 import os
 import platform
 import re
@@ -118,6 +122,45 @@ def read_sections(text: str) -> dict[str, str]:
             for i, m in enumerate(marks)}
 
 
+_ROW = re.compile(r"^\|(.*)\|\s*$")
+
+
+def _table_rows(section_text: str) -> list[dict[str, str]]:
+    """The rows of the one table of a section, as {column: cell} (cells stripped; the separator line skipped)."""
+    lines = [m.group(1) for m in map(_ROW.match, section_text.splitlines()) if m]
+    if len(lines) < 2:
+        return []
+    header = [c.strip() for c in lines[0].split("|")]
+    return [dict(zip(header, (c.strip() for c in line.split("|")), strict=True)) for line in lines[2:]]
+
+
+def results_record(text: str) -> dict:
+    """The JSON form of a results file's text: its machine lines and, per module, the stamp and the rows
+    (the cells exactly as the Markdown shows them: units and notes included)."""
+    head = text.split("\n## ", 1)[0]
+    record: dict = {"written_by": "python -m training bench",
+                    "machine": [ln[2:] for ln in head.splitlines() if ln.startswith("- ")], "sections": {}}
+    for name, body in read_sections(text).items():
+        paragraphs = [p.strip() for p in body.split("\n\n")]
+        stamp = next((p for p in paragraphs[1:] if p and not p.startswith("|")), "")
+        record["sections"][name] = {"stamp": stamp, "rows": _table_rows(body)}
+    return record
+
+
+def json_path(markdown: Path) -> Path:
+    """The JSON file written beside a results Markdown file (``bench/results.md`` -> ``bench/results.json``)."""
+    return markdown.with_suffix(".json")
+
+
+def write_results(out: Path, text: str) -> None:
+    """Write the Markdown results file and its JSON form beside it, each atomically."""
+    out.parent.mkdir(parents=True, exist_ok=True)
+    with atomic_file(out, "w") as f:
+        f.write(text)
+    with atomic_file(json_path(out), "w") as f:
+        f.write(json.dumps(results_record(text), indent=1, ensure_ascii=False) + "\n")
+
+
 def _importable(name: str) -> bool:
     """Whether ``name`` is a module that can be imported (without importing it)."""
     if name in sys.modules:
@@ -131,7 +174,8 @@ def _importable(name: str) -> bool:
 def build_parser() -> argparse.ArgumentParser:
     """The command's argument parser (the CLI reference of the documentation reads it too)."""
     parser = OneLineParser(prog="python -m training bench", description=__doc__.splitlines()[0])
-    parser.add_argument("--out", type=Path, default=Path("bench/results.md"), help="Markdown file to write")
+    parser.add_argument("--out", type=Path, default=Path("bench/results.md"),
+                        help="Markdown file to write; its JSON form goes beside it (.json)")
     parser.add_argument("--quick", action="store_true", help="small sizes (about a minute per module)")
     parser.add_argument("--only", nargs="*", default=None,
                         help="module names to run (default: all); their sections replace those in --out")
@@ -157,8 +201,6 @@ def main(argv: list[str]) -> int:
     text = "\n".join(["# Benchmarks", "", "Written by `python -m training bench` (`make bench`); each section says "
                       "when, how and under which load it was measured.", "", *machine_lines(), "",
                       *(sections[m] for m in order)])
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    with atomic_file(args.out, "w") as f:
-        f.write(text)
+    write_results(args.out, text)
     print(text)
     return 0
