@@ -1,13 +1,34 @@
 """Suite-wide settings and fixtures."""
 
+import os
+import shutil
 import subprocess
 import sys
+import tempfile
 from pathlib import Path
 
 import pytest
 import torch
 
 ROOT = Path(__file__).resolve().parents[1]
+
+
+def pytest_configure(config):
+    """Each test process (each pytest-xdist worker) gets a temporary folder of its own, as TMPDIR and for
+    ``tempfile``: the tests that check that a bake leaves no temporary files behind look in that folder, where
+    another worker's bake running at the same moment would otherwise show."""
+    worker = os.environ.get("PYTEST_XDIST_WORKER", "main")
+    folder = Path(tempfile.mkdtemp(prefix=f"skin-sss-tests-{worker}-"))
+    config._skin_sss_tmp = folder
+    os.environ["TMPDIR"] = str(folder)
+    tempfile.tempdir = str(folder)
+
+
+def pytest_unconfigure(config):
+    folder = getattr(config, "_skin_sss_tmp", None)
+    if folder is not None:
+        tempfile.tempdir = None
+        shutil.rmtree(folder, ignore_errors=True)
 
 
 @pytest.fixture(scope="session", autouse=True)

@@ -196,6 +196,7 @@ def _cases() -> list[tuple[str, str, list[str], str]]:
         "texel-table": (["--model", "{onnx}", "--out", "{base}/tt.npz"],
                         [("--step", ("0", "nan", "-0.1")), ("--ior", ("nan", "0.5")), ("--min-mfp-m", ("-1", "nan")),
                          ("--threads", ("-1",))]),
+        "edit-table": (["--out", "{base}/et.npz"], [("--step", ("0", "nan", "-0.1")), ("--threads", ("-1",))]),
         "bake.py": (["--albedo", "{png}", "--out", "{base}/b", "--model", "{onnx}"],
                     [("--memory-mb", ("nan", "0", "-64")), ("--threads", ("-1",)), ("--prune-share", ("2", "nan")),
                      ("--ior", ("nan",))]),
