@@ -70,6 +70,21 @@ def run_invert(obj, **kwargs) -> set[str]:
         return bpy.ops.spectral_skin.invert_albedo(**kwargs)
 
 
+def render_linear(scene: bpy.types.Scene, path: Path) -> np.ndarray:
+    """Render ``scene`` to ``path`` (its file format) and read it back: linear RGB (H, W, 3) float64, row 0 at the
+    bottom (Blender's order); fails on a non-finite pixel."""
+    scene.render.filepath = str(path)
+    bpy.ops.render.render(write_still=True)
+    image = bpy.data.images.load(str(path))
+    w, h = image.size
+    px = np.empty(w * h * 4, np.float32)
+    image.pixels.foreach_get(px)
+    bpy.data.images.remove(image)
+    rgb = px.reshape(h, w, 4)[..., :3].astype(np.float64)
+    assert np.all(np.isfinite(rgb)), f"non-finite pixels in {path}"
+    return rgb
+
+
 def render_small(size: int = 32, samples: int = 8) -> np.ndarray:
     """Render the current scene with Cycles (CPU) from a camera in front of the origin, lit by a sun and a
     grey world; returns the (size, size, 4) float pixels."""

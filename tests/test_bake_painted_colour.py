@@ -39,7 +39,7 @@ from exporters.colorimetry import (  # noqa: E402
     srgb_encode,
 )
 from exporters.constants import WAVELENGTHS_NM  # noqa: E402
-from tests.addon_scene import principled_coat_reflectance, run_invert, write_image  # noqa: E402
+from tests.addon_scene import principled_coat_reflectance, render_linear, run_invert, write_image  # noqa: E402
 
 NIST = ROOT / "training" / "realskin" / "data" / "nist_skin_reflectance_odd_subjects.csv"
 #: Dark skin, linear sRGB (the dark tone of tests/test_bake_fidelity.py; darker than every NIST subject).
@@ -85,16 +85,7 @@ def box_material(image: bpy.types.Image, shader: str) -> bpy.types.Material:
 
 def render_stripes(scene: bpy.types.Scene, tmp: Path, name: str) -> tuple[np.ndarray, np.ndarray]:
     """Mean linear RGB (3, 3) of each stripe's inner pixels and its standard error."""
-    path = tmp / f"{name}.exr"
-    scene.render.filepath = str(path)
-    bpy.ops.render.render(write_still=True)
-    image = bpy.data.images.load(str(path))
-    w, h = image.size
-    px = np.empty(w * h * 4, np.float32)
-    image.pixels.foreach_get(px)
-    bpy.data.images.remove(image)
-    rgb = px.reshape(h, w, 4)[..., :3].astype(np.float64)
-    assert np.all(np.isfinite(rgb))
+    rgb = render_linear(scene, tmp / f"{name}.exr")
     cells = [rgb[:, i * STRIPE + EDGE:(i + 1) * STRIPE - EDGE].reshape(-1, 3) for i in range(3)]
     return (np.array([c.mean(axis=0) for c in cells]),
             np.array([c.std(axis=0, ddof=1) / np.sqrt(len(c)) for c in cells]))

@@ -28,7 +28,7 @@ sys.path.insert(0, str(ROOT))
 import blender_addon  # noqa: E402
 from blender_addon import nodes, panels, probe  # noqa: E402
 from exporters.colorimetry import delta_e76, linear_srgb_to_lab, srgb_decode  # noqa: E402
-from tests.addon_scene import principled_coat_reflectance, run_invert, write_image  # noqa: E402
+from tests.addon_scene import principled_coat_reflectance, render_linear, run_invert, write_image  # noqa: E402
 from tests.test_bake_painted_colour import box_material  # noqa: E402
 
 CODES = np.array([(180, 120, 95), (190, 30, 45)], np.uint8)  # medium skin, lipstick red
@@ -54,15 +54,7 @@ def _scene(tmp: Path, columns: int = 2, samples: int = 64) -> tuple[bpy.types.Sc
 
 
 def _render(scene: bpy.types.Scene, tmp: Path, name: str) -> np.ndarray:
-    path = tmp / f"{name}.exr"
-    scene.render.filepath = str(path)
-    bpy.ops.render.render(write_still=True)
-    image = bpy.data.images.load(str(path))
-    w, h = image.size
-    px = np.empty(w * h * 4, np.float32)
-    image.pixels.foreach_get(px)
-    bpy.data.images.remove(image)
-    return px.reshape(h, w, 4)[..., :3].astype(np.float64)
+    return render_linear(scene, tmp / f"{name}.exr")
 
 
 def _stripes(rgb: np.ndarray) -> np.ndarray:

@@ -29,7 +29,7 @@ import blender_addon  # noqa: E402
 from blender_addon import live, preferences, probe  # noqa: E402
 from exporters import live_table  # noqa: E402
 from exporters.colorimetry import delta_e76, linear_srgb_to_lab, srgb_decode  # noqa: E402
-from tests.addon_scene import principled_coat_reflectance, run_invert, write_image  # noqa: E402
+from tests.addon_scene import principled_coat_reflectance, render_linear, run_invert, write_image  # noqa: E402
 from tests.test_bake_painted_colour import box_material  # noqa: E402
 from tests.test_painted_gain import NON_SKIN  # noqa: E402
 
@@ -50,17 +50,7 @@ def addon():
 
 def _render(scene: bpy.types.Scene, tmp: Path, name: str) -> np.ndarray:
     """Render; linear RGB (H, W, 3)."""
-    path = tmp / f"{name}.exr"
-    scene.render.filepath = str(path)
-    bpy.ops.render.render(write_still=True)
-    image = bpy.data.images.load(str(path))
-    w, h = image.size
-    px = np.empty(w * h * 4, np.float32)
-    image.pixels.foreach_get(px)
-    bpy.data.images.remove(image)
-    rgb = px.reshape(h, w, 4)[..., :3].astype(np.float64)
-    assert np.all(np.isfinite(rgb))
-    return rgb
+    return render_linear(scene, tmp / f"{name}.exr")
 
 
 def _stripes(rgb: np.ndarray, n: int) -> np.ndarray:
