@@ -376,6 +376,30 @@ EDIT_ROW: tuple[tuple[str, str], ...] = (("as painted", "as painted"), ("tan", "
                                          ("flush", "flush\nblood x2.5"), ("pallor", "pallor\nblood x0.4"))
 
 
+def _live_head(out: Path, texture_size: int, render_size: int, samples: int, tone: str, label: str,
+               mask_name: str):
+    """The demo's head scene with the ``tone`` skin texture through Invert Skin Albedo (the live group) on every
+    part; returns (scene, the left ear's pixel mask, the material)."""
+    import bpy
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+    import blender_addon
+
+    out.mkdir(parents=True, exist_ok=True)
+    scene, parts = _scene(render_size, samples)
+    ear = _ear_mask(scene, parts, out / mask_name)
+    texture = skin_albedo_texture(texture_size, seed=0, base=TONES[tone])
+    image = bpy.data.images.load(str(write_image(out / f"skin_{tone}.png", texture)))
+    material = _material(f"{tone} {label}", image, "principled")
+    blender_addon.register()
+    try:
+        _invert(parts[0], material)
+    finally:
+        blender_addon.unregister()
+    _assign(parts, material)
+    return scene, ear, material
+
+
 def edits_row(out: Path, texture_size: int = 512, render_size: int = RENDER_SIZE, samples: int = SAMPLES,
               tone: str = "medium", figure: Path | None = None) -> dict:
     """The ``tone`` head through the live group as painted and under the tan, flush and pallor presets (the group
@@ -384,22 +408,10 @@ def edits_row(out: Path, texture_size: int = 512, render_size: int = RENDER_SIZE
     import bpy
 
     sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-    import blender_addon
     from blender_addon import live_edits
     from exporters import skin_edits
 
-    out.mkdir(parents=True, exist_ok=True)
-    scene, parts = _scene(render_size, samples)
-    ear = _ear_mask(scene, parts, out / "ear_mask.png")
-    texture = skin_albedo_texture(texture_size, seed=0, base=TONES[tone])
-    image = bpy.data.images.load(str(write_image(out / f"skin_{tone}.png", texture)))
-    material = _material(f"{tone} edited", image, "principled")
-    blender_addon.register()
-    try:
-        _invert(parts[0], material)
-    finally:
-        blender_addon.unregister()
-    _assign(parts, material)
+    scene, ear, material = _live_head(out, texture_size, render_size, samples, tone, "edited", "ear_mask.png")
     node = live_edits.live_node(material)
     panels, ear_means = {}, {}
     for key, _ in EDIT_ROW:
@@ -420,24 +432,11 @@ def flush_strip(out: Path, texture_size: int = 256, render_size: int = 80, sampl
     (Bezier keys at the first, middle and last frame), every frame rendered, side by side in one strip
     (``out``/flush_strip.png, and ``figure`` when given).  Returns the Blood value and the left ear's mean colour
     per frame."""
-    import bpy
 
     sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-    import blender_addon
     from blender_addon import live_edits
 
-    out.mkdir(parents=True, exist_ok=True)
-    scene, parts = _scene(render_size, samples)
-    ear = _ear_mask(scene, parts, out / "ear_mask_strip.png")
-    texture = skin_albedo_texture(texture_size, seed=0, base=TONES[tone])
-    image = bpy.data.images.load(str(write_image(out / f"skin_{tone}.png", texture)))
-    material = _material(f"{tone} flush", image, "principled")
-    blender_addon.register()
-    try:
-        _invert(parts[0], material)
-    finally:
-        blender_addon.unregister()
-    _assign(parts, material)
+    scene, ear, material = _live_head(out, texture_size, render_size, samples, tone, "flush", "ear_mask_strip.png")
     blood = live_edits.live_node(material).inputs["Blood"]
     for frame, value in ((1, 1.0), ((frames + 1) // 2, peak), (frames, 1.0)):
         blood.default_value = value
