@@ -200,9 +200,6 @@ print("RESULT" + json.dumps({{"wired_vs_alone": float(np.abs(wired - alone).max(
 
 
 @pytest.mark.slow
-@pytest.mark.skipif(os.environ.get("SPECTRAL_SKIN_EEVEE_TESTS") != "1",
-                    reason="EEVEE needs a GPU, or minutes of software OpenGL (EGL_PLATFORM=surfaceless): set "
-                           "SPECTRAL_SKIN_EEVEE_TESTS=1 to run it")
 def test_eevee_renders_the_groups_eevee_output(tmp_path):
     """EEVEE renders the wired material bit for bit as the group's EEVEE output alone in the active output (the
     earlier layout), and not as the artist's Principled BSDF (which the exporters read)."""
