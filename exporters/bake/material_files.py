@@ -21,6 +21,8 @@ from __future__ import annotations
 import os
 import re
 import tempfile
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -106,11 +108,21 @@ def _map_files(specs: list[MapSpec], map_stem: str | None) -> dict[str, str]:
     return out
 
 
-def _temp(folder: Path, name: str) -> Path:
-    stem, suffix = os.path.splitext(name)
-    fd, tmp = tempfile.mkstemp(prefix=f".{stem}.", suffix=suffix, dir=folder)
+@contextmanager
+def _temp_beside(path: Path, writer_creates: bool = False) -> Iterator[Path]:
+    """A new hidden temporary file beside ``path`` (same suffix), removed when the block fails; kept otherwise (the
+    bake moves it into place).  ``writer_creates``: the name only, for writers that create the file themselves."""
+    stem, suffix = os.path.splitext(path.name)
+    fd, name = tempfile.mkstemp(prefix=f".{stem}.", suffix=suffix, dir=path.parent)
     os.close(fd)
-    return Path(tmp)
+    tmp = Path(name)
+    if writer_creates:
+        tmp.unlink()
+    try:
+        yield tmp
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
 
 
 def coat_values(ior: float, roughness: float) -> dict[str, float]:
@@ -167,27 +179,18 @@ def write_mtlx(path: Path, files: dict[str, str], name: str, ior: float, roughne
     mx = require()[0]
     doc = mtlx_document(mx, files, name, ior, roughness)
     check_mtlx(mx, doc)
-    tmp = _temp(path.parent, path.name)
-    try:
+    with _temp_beside(path) as tmp:
         mx.writeToXmlFile(doc, str(tmp))
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
     return tmp
 
 
 def write_usda(path: Path, files: dict[str, str], name: str, ior: float, roughness: float,
                unit_scale_m: float) -> Path:
     """Write the USD layer to a temporary ``.usda`` beside ``path`` and re-open it to check it; returns that file."""
-    _, Usd, UsdShade, Sdf, _, UsdGeom = require()
-    tmp = _temp(path.parent, path.name)
-    tmp.unlink()  # usd-core creates the layer itself
-    try:
+    require()  # one line naming the missing package, before any file is made
+    with _temp_beside(path, writer_creates=True) as tmp:  # usd-core creates the layer itself
         _usd_material(tmp, files, name, ior, roughness, unit_scale_m)
         check_usda(tmp, name)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
     return tmp
 
 
