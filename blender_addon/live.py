@@ -41,7 +41,7 @@ from pathlib import Path
 import bpy
 import numpy as np
 
-from . import live_edits, nodes, wiring
+from . import live_edits, nodes, oblique, wiring
 from .core import bake as core_bake
 from .core import colorimetry, image_input, live_table, maps, painted_gain, texel_table
 
@@ -49,8 +49,10 @@ GROUP_NAME = "Spectral Skin SSS Live"
 #: Custom properties: on the group and the images, the SHA-256 of the table they were made from.
 TABLE_PROP = "spectral_skin_sss_table"
 #: Layout version of the live group (bump when the generated nodes change).
-LIVE_VERSION = 5
+LIVE_VERSION = 6
 IMAGE_PREFIX = "Spectral Skin SSS Table"
+#: Custom property on the group: whether it holds the grazing-light correction (blender_addon.oblique).
+GRAZING_PROP = "spectral_skin_sss_grazing"
 #: sRGB encoding (IEC 61966-2-1): linear segment below this value, slope 12.92 there.
 _SRGB_KNEE, _SRGB_SLOPE = 0.0031308, 12.92
 #: The share of the light the Principled BSDF's specular layer leaves to its base colour in EEVEE, at skin's IOR 1.4
@@ -287,11 +289,13 @@ def _new_group(k_count: int, table_sha: str) -> tuple[bpy.types.NodeTree, bpy.ty
 
 
 def build_live_group(table: texel_table.TexelTable, layout: live_table.AtlasLayout,
-                     images: dict[str, bpy.types.Image], edits=None) -> bpy.types.NodeTree:
+                     images: dict[str, bpy.types.Image], edits=None, grazing: bool = True) -> bpy.types.NodeTree:
     """A new live group reading ``images`` (from :func:`ensure_images`) of ``table``; see the module docstring.
     ``edits``: (edit table, its images from live_edits.ensure_images) for the Melanin, Blood and Oxygenation inputs
-    (blender_addon.live_edits), or None."""
+    (blender_addon.live_edits), or None; ``grazing``: with the grazing-light correction of the Cycles output's
+    weights and radii (blender_addon.oblique; False: the mixture as fitted at every angle)."""
     group, gin, gout = _new_group(table.k, table.sha256)
+    group[GRAZING_PROP] = grazing
     b = _Builder(group)
     branch = None
     if edits is not None:
@@ -300,6 +304,11 @@ def build_live_group(table: texel_table.TexelTable, layout: live_table.AtlasLayo
         branch = live_edits.edit_node(b, gin, *edits)
     edited = branch.colour if branch is not None else None
     (x0, x1, x2), outside, painted = _grid_coords(b, gin, layout, edited)
+    factors = None
+    if grazing:
+        factors = b.node("ShaderNodeGroup", 26, node_tree=oblique.ensure_group(), name="Grazing")
+        b.link(painted, factors.inputs["Color"])
+        b.link(gin.outputs["Normal"], factors.inputs["Normal"])
     s = b.math("MINIMUM", 11, b.math("FLOOR", 10, x0), layout.shape[0] - 2.0)
     frac = b.math("SUBTRACT", 12, x0, s)
     uvs = (_slice_uv(b, layout, s, x1, x2, 12), _slice_uv(b, layout, b.math("ADD", 12, s, 1.0), x1, x2, 12))
@@ -317,7 +326,7 @@ def build_live_group(table: texel_table.TexelTable, layout: live_table.AtlasLayo
         if branch is not None:
             radius = live_edits.scale_radius(b, radius, branch.radius_factor)
         media.append((rho, weight))
-        b.link(radius, mixture.inputs[nodes.socket_name(k, "Radius")])
+        b.link(_grazing(b, radius, factors, "Radius"), mixture.inputs[nodes.socket_name(k, "Radius")])
         b.link(g, mixture.inputs[nodes.socket_name(k, "Anisotropy")])
         term = b.vec("MULTIPLY", 24, weight, radius)
         effective = term if effective is None else b.vec("ADD", 25, effective, term)
@@ -325,7 +334,7 @@ def build_live_group(table: texel_table.TexelTable, layout: live_table.AtlasLayo
     for k, (colour, weight) in enumerate(_painted_media(b, painted, media, fit, 23), start=1):
         b.link(colour, mixture.inputs[nodes.socket_name(k, "Color")])
         scaled = b.node("ShaderNodeVectorMath", 33, operation="SCALE", name=f"Subsurface Weight k{k}")
-        b.link(weight, scaled.inputs[0])
+        b.link(_grazing(b, weight, factors, "Weight"), scaled.inputs[0])
         b.link(weight_share, scaled.inputs["Scale"])
         b.link(scaled.outputs[0], mixture.inputs[nodes.socket_name(k, "Weight")])
     b.link(_diffuse_body(b, gin, painted, weight_share), mixture.inputs["Body"])
@@ -336,6 +345,15 @@ def build_live_group(table: texel_table.TexelTable, layout: live_table.AtlasLayo
     b.link(_eevee_surface(b, gin, effective, table.options.ior, edited), gout.inputs["EEVEE"])
     b.link(outside, gout.inputs["Outside"])
     return group
+
+
+def _grazing(b: _Builder, value: bpy.types.NodeSocket, factors: bpy.types.Node | None,
+             which: str) -> bpy.types.NodeSocket:
+    """``value`` (a component's weight or radius, RGB) times its grazing-light factor (the output ``which`` of the
+    Grazing group node ``factors``; unchanged without one)."""
+    if factors is None:
+        return value
+    return b.vec("MULTIPLY", 30, value, factors.outputs[which])
 
 
 def _horner(b: _Builder, coeffs: tuple[float, ...], x, stage: int) -> bpy.types.NodeSocket:
@@ -416,18 +434,20 @@ def _eevee_surface(b: _Builder, gin: bpy.types.Node, radius, ior: float, colour=
     return bsdf.outputs[0]
 
 
-def ensure_live_group(table: texel_table.TexelTable, edits=None) -> bpy.types.NodeTree:
-    """The live group of ``table`` (and of the edit table ``edits``, or None: no edit inputs): an existing one of
-    these tables and this version is reused (every material shares it and its images), else one is built."""
+def ensure_live_group(table: texel_table.TexelTable, edits=None, grazing: bool = True) -> bpy.types.NodeTree:
+    """The live group of ``table`` (and of the edit table ``edits``, or None: no edit inputs; ``grazing``: with the
+    grazing-light correction): an existing one of these tables, this version and this choice is reused (every
+    material shares it and its images), else one is built."""
     edit_sha = edits.sha256 if edits is not None else None
     for group in bpy.data.node_groups:
         if (group.name.startswith(GROUP_NAME) and group.get(TABLE_PROP) == table.sha256
                 and group.get("spectral_skin_sss_version") == LIVE_VERSION
-                and group.get(live_edits.EDIT_TABLE_PROP) == edit_sha):
+                and group.get(live_edits.EDIT_TABLE_PROP) == edit_sha
+                and group.get(GRAZING_PROP, False) == grazing):
             return group
     layout, images = ensure_images(table)
     edit_images = (edits, live_edits.ensure_images(edits)) if edits is not None else None
-    return build_live_group(table, layout, images, edit_images)
+    return build_live_group(table, layout, images, edit_images, grazing)
 
 
 # -- wiring ----------------------------------------------------------------------------------------------------

@@ -1,0 +1,108 @@
+"""The grazing-light correction in nodes: the node group **Spectral Skin SSS Grazing**, per-channel factors on the
+mixture's weights and radii that grow with the view's facing angle (exporters.oblique_correction, whose ``factors``
+the nodes follow operation for operation).
+
+Inputs ``Color`` (the painted colour, linear; clamped to [0, 1] here) and ``Normal`` (unlinked: the shading
+normal); outputs ``Weight`` and ``Radius`` (the factors f and s per channel R, G, B).  1 - mu = 1 - |N . I| is
+Layer Weight's Facing (Blend 0.5); h a Map Range (Smooth Step) of it; Y the luminance of the colour; the slopes
+a_c(Y), b_c(Y) piecewise linear between the knots (a sum of clamped ramps, one Map Range per knot interval);
+f = 1 + a h_w, s = 1 + b h_r.  Where h = 0 (face-on views) both are 1 exactly.  The live group
+(blender_addon.live) multiplies its components' weights and radii by them before the mixture group.
+"""
+
+from __future__ import annotations
+
+import hashlib
+
+import bpy
+import numpy as np
+
+from .core import colorimetry, oblique_correction
+
+GROUP_NAME = "Spectral Skin SSS Grazing"
+#: Custom property on the group: the SHA-256 of the correction (its JSON) the nodes were built from.
+CORRECTION_PROP = "spectral_skin_sss_oblique"
+
+
+def correction_sha(corr: oblique_correction.ObliqueCorrection) -> str:
+    return hashlib.sha256(corr.to_json().encode()).hexdigest()
+
+
+def ensure_group(corr: oblique_correction.ObliqueCorrection | None = None) -> bpy.types.NodeTree:
+    """The group of ``corr`` (default: the shipped correction): reused when one of that correction exists."""
+    corr = corr or oblique_correction.shipped()
+    sha = correction_sha(corr)
+    for group in bpy.data.node_groups:
+        if group.name.startswith(GROUP_NAME) and group.get(CORRECTION_PROP) == sha:
+            return group
+    return build_group(corr)
+
+
+def _node(tree, kind: str, x: float, y: float, **props):
+    node = tree.nodes.new(kind)
+    node.location = (x, y)
+    for key, value in props.items():
+        setattr(node, key, value)
+    return node
+
+
+def _map_range(tree, value, lo: float, hi: float, x: float, y: float, interpolation: str = "LINEAR"):
+    """Map Range (clamped) of ``value`` from [lo, hi] to [0, 1]; its Result socket."""
+    node = _node(tree, "ShaderNodeMapRange", x, y, data_type="FLOAT", interpolation_type=interpolation, clamp=True)
+    tree.links.new(value, node.inputs["Value"])
+    node.inputs["From Min"].default_value, node.inputs["From Max"].default_value = float(lo), float(hi)
+    node.inputs["To Min"].default_value, node.inputs["To Max"].default_value = 0.0, 1.0
+    return node.outputs["Result"]
+
+
+def _piecewise(tree, ramps: list, values: np.ndarray, x: float, y: float):
+    """values[0] + sum_i (values[i+1] - values[i]) ramps[i]: the piecewise linear interpolation of ``values``
+    (N, 3) between the knots whose clamped ramps are ``ramps``, as a vector socket."""
+    out = None
+    for i, t in enumerate(ramps):
+        node = _node(tree, "ShaderNodeVectorMath", x + 160.0 * i, y, operation="MULTIPLY_ADD")
+        tree.links.new(t, node.inputs[0])
+        node.inputs[1].default_value = tuple(float(v) for v in values[i + 1] - values[i])
+        if out is None:
+            node.inputs[2].default_value = tuple(float(v) for v in values[0])
+        else:
+            tree.links.new(out, node.inputs[2])
+        out = node.outputs["Vector"]
+    return out
+
+
+def build_group(corr: oblique_correction.ObliqueCorrection) -> bpy.types.NodeTree:
+    """A new group of ``corr`` (module docstring)."""
+    tree = bpy.data.node_groups.new(GROUP_NAME, "ShaderNodeTree")
+    tree[CORRECTION_PROP] = correction_sha(corr)
+    tree["spectral_skin_sss_backend"] = "GRAZING"  # an add-on group: Remove Skin SSS purges it when unused
+    iface = tree.interface
+    iface.new_socket("Color", in_out="INPUT", socket_type="NodeSocketColor").default_value = (0.6, 0.4, 0.3, 1.0)
+    iface.new_socket("Normal", in_out="INPUT", socket_type="NodeSocketVector").hide_value = True
+    iface.new_socket("Weight", in_out="OUTPUT", socket_type="NodeSocketVector")
+    iface.new_socket("Radius", in_out="OUTPUT", socket_type="NodeSocketVector")
+    gin = _node(tree, "NodeGroupInput", -900.0, 0.0)
+    gout = _node(tree, "NodeGroupOutput", 160.0 * len(corr.luminance) + 400.0, 0.0)
+    layer = _node(tree, "ShaderNodeLayerWeight", -700.0, 300.0, name="Facing")
+    layer.inputs["Blend"].default_value = 0.5
+    tree.links.new(gin.outputs["Normal"], layer.inputs["Normal"])
+    dot = _node(tree, "ShaderNodeVectorMath", -700.0, -100.0, operation="DOT_PRODUCT")
+    clamp = _node(tree, "ShaderNodeMix", -850.0, -100.0, data_type="RGBA", clamp_result=True)
+    clamp.inputs["Factor"].default_value = 0.0
+    tree.links.new(gin.outputs["Color"], clamp.inputs[6])  # A: the colour, clamped to [0, 1] on the way out
+    tree.links.new(clamp.outputs[2], dot.inputs[0])
+    dot.inputs[1].default_value = tuple(float(v) for v in colorimetry.SRGB_LUMINANCE)
+    lum = dot.outputs["Value"]
+    ramps = [_map_range(tree, lum, lo, hi, -500.0, -100.0 - 120.0 * i)
+             for i, (lo, hi) in enumerate(zip(corr.luminance[:-1], corr.luminance[1:], strict=True))]
+    for row, (slope, ramp, name) in enumerate(((corr.weight_slope, corr.weight_ramp, "Weight"),
+                                               (corr.radius_slope, corr.radius_ramp, "Radius"))):
+        y = 300.0 - 400.0 * row
+        h = _map_range(tree, layer.outputs["Facing"], *ramp, -300.0, y + 150.0, interpolation="SMOOTHSTEP")
+        a = _piecewise(tree, ramps, slope, -300.0, y)
+        out = _node(tree, "ShaderNodeVectorMath", 160.0 * len(ramps) - 100.0, y, operation="MULTIPLY_ADD")
+        tree.links.new(a, out.inputs[0])
+        tree.links.new(h, out.inputs[1])
+        out.inputs[2].default_value = (1.0, 1.0, 1.0)
+        tree.links.new(out.outputs["Vector"], gout.inputs[name])
+    return tree

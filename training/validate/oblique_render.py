@@ -1,0 +1,231 @@
+"""Grazing light in a render: the live group in Cycles against the oblique Monte Carlo, without and with the
+grazing-light correction (exporters.oblique_correction).
+
+* :func:`slab` — the probe block (blender_addon.probe: a block 1 m deep at 1 BU = 1 cm, a uniform white world,
+  an orthographic camera) painted one tone's colour through the live group, seen from polar angles 0, 45, 70, 85
+  degrees.  By reciprocity the radiance seen from angle theta under a uniform white world is the reflectance of a
+  beam arriving at theta, the quantity the Monte Carlo (``training.validate.oblique``) walks: the skin's body
+  reflectance R_d(theta) is the render less the render of the same group painted black (its specular coat alone;
+  black takes every weight to 0).  The Monte Carlo's skin is semi-infinite (a finite epidermis over a
+  semi-infinite dermis), so the block is deep, not thin.
+* :func:`head` — the demo head (training.demo_subject) painted the demo's dark tone, lit from behind and grazing
+  (the demo's lights): the live group without and with the correction, and their difference.
+
+``python -m training.validate.oblique_render --out docs/validation`` writes ``oblique_render.json`` and
+``fig_oblique_render.png``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from exporters.colorimetry import linear_srgb_to_lab
+from training.paths import SHIPPED_MODEL_DIR
+from training.validate import oblique, oblique_fit
+
+ROOT = Path(__file__).resolve().parents[2]
+MODEL = ROOT / "blender_addon" / "models" / "skin_inversion.onnx"
+#: The block's unit scale (m per BU) and the view angles rendered (degrees).
+UNIT_SCALE_M = 0.01
+VIEW_DEG: tuple[float, ...] = oblique.THETAS_DEG
+#: Tones rendered on the block.
+SLAB_TONES: tuple[str, ...] = ("R01", "R05", "R07", "R08", "R09", "R10")
+
+
+def _bpy():
+    import bpy
+
+    return bpy
+
+
+def live_groups():
+    """The live group of the shipped table without and with the grazing-light correction (no edit inputs)."""
+    from blender_addon import live
+
+    table = live.table_for_model(str(MODEL))
+    return live.ensure_live_group(table, None, grazing=False), live.ensure_live_group(table, None, grazing=True)
+
+
+def _slab_node(group, colour) -> object:
+    from blender_addon import probe
+
+    mat = probe.slab_material("Oblique slab")
+    node = mat.node_tree.nodes.new("ShaderNodeGroup")
+    node.node_tree = group
+    node.inputs["Color"].default_value = (*map(float, colour), 1.0)
+    node.inputs["Unit Scale"].default_value = UNIT_SCALE_M
+    mat.node_tree.links.new(node.outputs["Cycles"], probe.material_output(mat).inputs["Surface"])
+    return node
+
+
+def slab(colours: dict[str, np.ndarray], samples: int = 128, resolution: int = 12) -> dict:
+    """Rendered linear RGB of the block seen from each of ``VIEW_DEG``: {"coat": (A, 3), tone: {"shipped":
+    (A, 3), "corrected": (A, 3), "stderr": (A, 3)}} (the coat: the group painted black), and the seconds."""
+    from blender_addon import probe
+
+    scene = probe.new_scene(samples=samples, resolution=resolution, seed=5)
+    shipped, corrected = live_groups()
+    out: dict = {}
+    start = time.perf_counter()
+
+    def views(group, colour) -> tuple[np.ndarray, np.ndarray]:
+        _slab_node(group, colour)
+        got = []
+        for theta in VIEW_DEG:
+            probe.view_from(scene, float(np.cos(np.radians(theta))))
+            got.append(probe.render_mean(scene)[:2])
+        return np.array([g[0] for g in got]), np.array([g[1] for g in got])
+
+    out["coat"] = views(shipped, (0.0, 0.0, 0.0))[0].tolist()
+    for name, colour in colours.items():
+        s, err = views(shipped, colour)
+        c, _ = views(corrected, colour)
+        out[name] = {"colour": list(map(float, colour)), "shipped": s.tolist(), "corrected": c.tolist(),
+                     "stderr": err.tolist()}
+    out["seconds"] = time.perf_counter() - start
+    return out
+
+
+def compare(render: dict, runs: dict) -> list[dict]:
+    """Per (tone, angle): the rendered body reflectance (render less coat) as shipped and corrected, and the Monte
+    Carlo's truth and mixture (linear sRGB), with Delta E76 of each against the truth."""
+    coat = np.asarray(render["coat"])
+    rows = []
+    for name, r in render.items():
+        if name in ("coat", "seconds"):
+            continue
+        for i, theta in enumerate(VIEW_DEG):
+            walk = runs[(name, theta)]
+            truth, mix = oblique_fit.rgb(walk["truth_R"]), oblique_fit.rgb(walk["mix_R"])
+            body = {k: np.asarray(r[k])[i] - coat[i] for k in ("shipped", "corrected")}
+            lab_t = linear_srgb_to_lab(truth)
+
+            def de(v: np.ndarray, lab_t=lab_t) -> float:
+                return float(np.linalg.norm(linear_srgb_to_lab(np.clip(v, 1e-6, None)) - lab_t))
+
+            rows.append({"tone": name, "theta_deg": theta, "truth": truth.tolist(), "mc_mix": mix.tolist(),
+                         "render_shipped": body["shipped"].tolist(), "render_corrected": body["corrected"].tolist(),
+                         "dE76_mc_mix": de(mix), "dE76_render_shipped": de(body["shipped"]),
+                         "dE76_render_corrected": de(body["corrected"])})
+    return rows
+
+
+def head(tmp: Path, samples: int = 32, size: int = 96, tone: str = "dark") -> dict:
+    """The demo head painted ``tone`` through the live group without and with the correction (linear renders)."""
+    import blender_addon
+    from blender_addon import live
+    from training import demo_render, openpbr_check
+    from training.demo_subject import TONES, skin_albedo_texture
+
+    png = demo_render.write_image(tmp / f"head_{tone}.png", skin_albedo_texture(64, 0, TONES[tone]))
+    scene, parts = demo_render._scene(size, samples)
+    scene.cycles.use_denoising = False
+    mat = openpbr_check.live_material("Live head", png, 0.5, 1.4)
+    blender_addon.register()
+    try:
+        openpbr_check.invert_live(parts[0], mat)
+    finally:
+        blender_addon.unregister()
+    demo_render._assign(parts, mat)
+    node = next(n for n in mat.node_tree.nodes if n.bl_idname == "ShaderNodeGroup"
+                and n.node_tree.name.startswith(live.GROUP_NAME))
+    corrected = node.node_tree
+    table = live.table_for_model(str(MODEL))
+    edits = live.live_edits.table_for_model(str(MODEL), table.sha256)
+    shipped = live.ensure_live_group(table, edits, grazing=False)
+    out = {}
+    for label, group in (("shipped", shipped), ("corrected", corrected)):
+        node.node_tree = group
+        out[label] = openpbr_check._render_linear(scene, tmp / f"head_{label}.exr")
+    return out
+
+
+def figure(rows: list[dict], heads: dict, path: Path) -> Path:
+    """Left: swatches of the block's body colour per tone (rows) and view angle (groups of four: the Monte Carlo's
+    truth and mixture, the render as shipped and corrected), each row scaled alike (its truth at 0 degrees to 0.8);
+    middle: Delta E76 of the renders against the truth; right: the dark head as shipped, corrected, difference."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from exporters.colorimetry import srgb_encode
+
+    tones = list(dict.fromkeys(r["tone"] for r in rows))
+    cols = ("truth", "mc_mix", "render_shipped", "render_corrected")
+    width = len(cols) + 1
+    img = np.ones((len(tones), len(VIEW_DEG) * width, 3))
+    for r in rows:
+        i, j = tones.index(r["tone"]), VIEW_DEG.index(r["theta_deg"])
+        top = max(next(q for q in rows if q["tone"] == r["tone"] and q["theta_deg"] == 0.0)["truth"])
+        for c, key in enumerate(cols):
+            img[i, j * width + c] = srgb_encode(np.clip(np.asarray(r[key]) * 0.8 / top, 0.0, 1.0))
+    fig = plt.figure(figsize=(17, 5.0))
+    ax = fig.add_axes([0.03, 0.1, 0.3, 0.8])
+    ax.imshow(img, aspect="auto", interpolation="nearest")
+    ax.set_yticks(range(len(tones)), tones)
+    ax.set_xticks([j * width + 1.5 for j in range(len(VIEW_DEG))], [f"θ = {t:g}°" for t in VIEW_DEG])
+    ax.set_title("block, white world, seen at θ: MC truth | MC mixture | render | render corrected", fontsize=8)
+    ax = fig.add_axes([0.37, 0.1, 0.17, 0.8])
+    for n, tone in enumerate(tones):
+        rr = [r for r in rows if r["tone"] == tone]
+        th = [r["theta_deg"] for r in rr]
+        ax.plot(th, [r["dE76_render_shipped"] for r in rr], "o-", color=f"C{n}", label=f"{tone} render")
+        ax.plot(th, [r["dE76_render_corrected"] for r in rr], "s--", color=f"C{n}", label=f"{tone} corrected")
+    ax.axhline(1.0, color="grey", lw=0.8, ls=":")
+    ax.set(xlabel="view angle θ (°)", ylabel="ΔE76 render vs Monte Carlo truth")
+    ax.legend(fontsize=6, ncol=2)
+    for k, label in enumerate(("shipped", "corrected", "difference")):
+        a = fig.add_axes([0.57 + 0.14 * k, 0.1, 0.13, 0.8])
+        if label == "difference":
+            a.imshow(np.clip((heads["shipped"] - heads["corrected"]) * 8.0 + 0.5, 0, 1)[::-1], interpolation="nearest")
+            a.set_title("shipped − corrected (×8, grey = 0)", fontsize=8)
+        else:
+            a.imshow(srgb_encode(np.clip(heads[label], 0, 1))[::-1], interpolation="nearest")
+            a.set_title(f"dark head, live group {label}", fontsize=8)
+        a.axis("off")
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def main(argv: list[str]) -> int:
+    p = argparse.ArgumentParser(prog="python -m training.validate.oblique_render", description=__doc__.splitlines()[0])
+    p.add_argument("--out", type=Path, required=True, help="folder for oblique_render.json and the figure")
+    p.add_argument("--samples", type=int, default=128, help="Cycles samples per pixel of the block")
+    p.add_argument("--head-samples", type=int, default=32)
+    p.add_argument("--tones", default=",".join(SLAB_TONES))
+    p.add_argument("--cache", type=Path, default=oblique.DEFAULT_CACHE, help="the oblique walks (10,000 photons)")
+    args = p.parse_args(argv)
+    decoder = SHIPPED_MODEL_DIR / "skin_decoder.onnx"
+    try:
+        tones = oblique_fit._tones(args.tones)
+        runs = oblique.run(tones, decoder, 10000, args.cache, 0, log=lambda s: print(s, file=sys.stderr))
+    except (OSError, ValueError) as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    colours = dict(zip(tones.names, oblique_fit.tone_colours(tones, decoder), strict=True))
+    args.out.mkdir(parents=True, exist_ok=True)
+    render = slab(colours, args.samples)
+    rows = compare(render, runs)
+    with tempfile.TemporaryDirectory(prefix="oblique_head_") as tmp:
+        heads = head(Path(tmp), args.head_samples)
+    (args.out / "oblique_render.json").write_text(json.dumps({"samples": args.samples, "rows": rows,
+                                                              "coat": render["coat"],
+                                                              "slab_seconds": render["seconds"]}, indent=1))
+    figure(rows, heads, args.out / "fig_oblique_render.png")
+    for r in rows:
+        print(f"{r['tone']} {r['theta_deg']:g}: dE76 MC mix {r['dE76_mc_mix']:.2f}, "
+              f"render {r['dE76_render_shipped']:.2f} -> corrected {r['dE76_render_corrected']:.2f}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))
