@@ -20,7 +20,7 @@ from pathlib import Path
 import bpy
 import numpy as np
 
-from . import nodes, tiles, wiring
+from . import nodes, oblique, tiles, wiring
 from .core import bake, image_input, inference, maps, uv_coverage
 
 AlbedoImage, IndexedAlbedo = image_input.AlbedoImage, image_input.IndexedAlbedo
@@ -204,7 +204,7 @@ def _wired_to(material: bpy.types.Material, images: dict[tuple[int, str], bpy.ty
         return False
     for (k, kind), image in images.items():
         sock = gnode.inputs.get(nodes.socket_name(k, kind))
-        if sock is None or not sock.is_linked or getattr(sock.links[0].from_node, "image", None) != image:
+        if sock is None or getattr(oblique.map_node(sock), "image", None) != image:
             return False
     return True
 
@@ -407,6 +407,7 @@ class AddonBake:
                              if ln.to_node.bl_idname == "ShaderNodeOutputMaterial" and ln.to_socket.name == "Surface"]
                 previous_surface = [(ln.from_socket, ln.to_socket) for ln in out_links]
                 gnode = nodes.wire_into_material(self.material, group, images)
+                oblique.wire_baked(self.material, gnode)
                 created_nodes = [n.name for n in self.material.node_tree.nodes if n.name not in before]
                 gnode.inputs["IOR"].default_value = self.options.ior  # the IOR the maps were baked for
                 self._follow_source_uv(gnode)
@@ -472,13 +473,12 @@ class AddonBake:
         tree = self.material.node_tree
         vec = src.inputs["Vector"]
         for sock in gnode.inputs:
-            for link in sock.links:
-                tex = link.from_node
-                if tex.bl_idname != "ShaderNodeTexImage":
-                    continue
-                tex.projection, tex.extension = src.projection, src.extension
-                if vec.is_linked:
-                    tree.links.new(vec.links[0].from_socket, tex.inputs["Vector"])
+            tex = oblique.map_node(sock)  # a map, also behind the grazing-light correction's Multiply
+            if tex is None or tex.bl_idname != "ShaderNodeTexImage":
+                continue
+            tex.projection, tex.extension = src.projection, src.extension
+            if vec.is_linked:
+                tree.links.new(vec.links[0].from_socket, tex.inputs["Vector"])
 
     def _undo_apply(self, images, node_names, groups_before, osl_before, previous_surface, previous_prop) -> None:
         if self.material is not None:

@@ -106,3 +106,56 @@ def build_group(corr: oblique_correction.ObliqueCorrection) -> bpy.types.NodeTre
         out.inputs[2].default_value = (1.0, 1.0, 1.0)
         tree.links.new(out.outputs["Vector"], gout.inputs[name])
     return tree
+
+
+def wire_baked(material: bpy.types.Material, gnode: bpy.types.Node) -> bpy.types.Node | None:
+    """Put the correction between a baked material's maps and its mixture group node ``gnode``
+    (blender_addon.baker): each ``k Weight`` and ``k Radius`` map multiplied by the Grazing group's factor, the
+    group fed the colour that fed the artist's Principled BSDF's Base Color (the baked albedo) and the mixture's
+    Normal.  The new nodes are tagged (Remove Skin SSS removes them).  Returns the Grazing node, or None when the
+    material has no Principled BSDF behind the group (nothing is changed then)."""
+    from . import nodes, wiring
+
+    tree = material.node_tree
+    source = tree.nodes.get(material.get(nodes.PREVIOUS_SURFACE_PROP, ""))
+    if source is None or source.bl_idname != "ShaderNodeBsdfPrincipled":
+        return None
+    grazing = wiring.tag(tree.nodes.new("ShaderNodeGroup"))
+    grazing.node_tree = ensure_group()
+    grazing.label, grazing.parent = GROUP_NAME, gnode.parent
+    grazing.location = (gnode.location.x - 700.0, gnode.location.y + 200.0)
+    colour = nodes._feeding_socket(source.inputs["Base Color"])
+    if colour is not None:
+        tree.links.new(colour, grazing.inputs["Color"])
+    else:
+        grazing.inputs["Color"].default_value = tuple(source.inputs["Base Color"].default_value)
+    normal = nodes._feeding_socket(gnode.inputs["Normal"])
+    if normal is not None:
+        tree.links.new(normal, grazing.inputs["Normal"])
+    for socket in gnode.inputs:
+        kind = socket.name.rpartition(" ")[2]
+        feed = nodes._feeding_socket(socket) if socket.name.startswith("k") and kind in ("Weight", "Radius") else None
+        if feed is None:
+            continue
+        scale = wiring.tag(tree.nodes.new("ShaderNodeVectorMath"))
+        scale.operation, scale.parent = "MULTIPLY", gnode.parent
+        scale.location = (gnode.location.x - 200.0, feed.node.location.y)
+        tree.links.new(feed, scale.inputs[0])
+        tree.links.new(grazing.outputs[kind], scale.inputs[1])
+        tree.links.new(scale.outputs["Vector"], socket)
+    return grazing
+
+
+def map_node(socket: bpy.types.NodeSocket) -> bpy.types.Node | None:
+    """The node feeding a mixture group's input ``socket`` in a baked material: the map's Image Texture behind the
+    correction's Multiply (:func:`wire_baked`), else whatever feeds it directly (None when unlinked)."""
+    links = [ln for ln in socket.links if not ln.is_muted]
+    if not links:
+        return None
+    node = links[0].from_node
+    if node.bl_idname == "ShaderNodeVectorMath" and node.operation == "MULTIPLY" and node.inputs[1].is_linked \
+            and node.inputs[1].links[0].from_node.bl_idname == "ShaderNodeGroup" \
+            and node.inputs[1].links[0].from_node.node_tree is not None \
+            and node.inputs[1].links[0].from_node.node_tree.get(CORRECTION_PROP) and node.inputs[0].is_linked:
+        return node.inputs[0].links[0].from_node
+    return node

@@ -15,7 +15,7 @@ import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from blender_addon import baker, nodes, preferences, wiring  # noqa: E402
+from blender_addon import baker, nodes, oblique, preferences, wiring  # noqa: E402
 from exporters import bake, image_input, inference, maps  # noqa: E402
 from tests.addon_scene import (  # noqa: E402
     image_pixels,
@@ -46,7 +46,9 @@ def reference_maps(albedo_png, tmp_path_factory) -> Path:
 
 
 def group_node(mat):
-    found = [n for n in mat.node_tree.nodes if n.bl_idname == "ShaderNodeGroup"]
+    """The mixture group node (the grazing-light correction's group node beside it is not counted)."""
+    found = [n for n in mat.node_tree.nodes if n.bl_idname == "ShaderNodeGroup" and not n.node_tree.get(
+        oblique.CORRECTION_PROP)]
     assert len(found) == 1
     return found[0]
 
@@ -68,10 +70,15 @@ def test_bake_svm_packed_wired_and_renders(addon, albedo_png, reference_maps):
     assert gnode.inputs["IOR"].default_value == pytest.approx(1.4)
     principled = tree.nodes["Principled BSDF"]  # the coat takes the user's roughness (0.5, Blender's default)
     assert gnode.inputs["Roughness"].default_value == pytest.approx(principled.inputs["Roughness"].default_value)
+    grazing = next(n for n in tree.nodes if n.bl_idname == "ShaderNodeGroup" and n.node_tree.get(
+        oblique.CORRECTION_PROP))  # the grazing-light correction reads the albedo, as the live group its colour
+    assert grazing.inputs["Color"].links[0].from_node == tex and wiring.is_added(grazing)
     uv = next(n for n in tree.nodes if n.bl_idname == "ShaderNodeUVMap")
     for k in range(1, K + 1):
         for kind in nodes.KINDS:
-            src = gnode.inputs[nodes.socket_name(k, kind)].links[0].from_node
+            sock = gnode.inputs[nodes.socket_name(k, kind)]
+            src = oblique.map_node(sock)
+            assert (sock.links[0].from_node != src) == (kind in ("Weight", "Radius"))  # through the correction
             assert src.bl_idname == "ShaderNodeTexImage" and src.interpolation == "Closest"
             assert src.inputs["Vector"].links[0].from_node == uv  # same UVs as the albedo
             image = src.image
@@ -99,7 +106,7 @@ def test_bake_osl_and_files_beside_blend(addon, albedo_png, tmp_path):
     assert gnode.node_tree["spectral_skin_sss_backend"] == "OSL"
     assert not bpy.context.scene.cycles.shading_system  # the scene's shading system is the user's to change
     bpy.context.scene.cycles.shading_system = True
-    image = gnode.inputs["k1 Radius"].links[0].from_node.image
+    image = oblique.map_node(gnode.inputs["k1 Radius"]).image
     assert image.packed_file is None and Path(bpy.path.abspath(image.filepath)) == folder / "albedo_k1_radius.exr"
     px = render_small()
     assert np.all(np.isfinite(px)) and px[16, 16, :3].max() > 0.0
@@ -246,7 +253,7 @@ def test_udim_albedo_packed_maps_and_a_missing_tile(addon, tmp_path):
     obj, mat, tex = skin_object(tmp_path / "skin.1001.png")
     tex.image.source = "TILED"
     assert run_invert(obj, backend="SVM") == {"FINISHED"}
-    image = group_node(mat).inputs["k2 Radius"].links[0].from_node.image
+    image = oblique.map_node(group_node(mat).inputs["k2 Radius"]).image
     assert image.source == "TILED" and len(image.packed_files) == 2 and image.name == "skin.<UDIM>_k2_radius.exr"
     px = render_small()
     assert np.all(np.isfinite(px)) and px[16, 16, :3].max() > 0.0

@@ -255,7 +255,9 @@ def test_rewiring_keeps_one_set_of_nodes_and_remove_still_restores(tmp_path, add
     assert invert(obj) == {"FINISHED"}
     count = len(mat.node_tree.nodes)
     assert invert(obj, mode="BAKE", exact=True) == {"FINISHED"}  # baked maps replace the live group
-    assert len([n for n in mat.node_tree.nodes if n.bl_idname == "ShaderNodeGroup"]) == 1
+    groups = sorted(n.node_tree.get("spectral_skin_sss_backend") for n in mat.node_tree.nodes
+                    if n.bl_idname == "ShaderNodeGroup")
+    assert groups == ["GRAZING", "SVM"]  # the mixture and the grazing-light correction of its maps
     assert wiring.wired_group_node(mat).node_tree.get("spectral_skin_sss_backend") == "SVM"
     assert invert(obj) == {"FINISHED"}  # and the live group the maps
     assert len(mat.node_tree.nodes) == count

@@ -29,7 +29,7 @@ from mathutils import Vector
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from blender_addon import nodes, probe  # noqa: E402
+from blender_addon import nodes, oblique, probe, wiring  # noqa: E402
 from exporters import cycles  # noqa: E402
 from tests.addon_scene import (  # noqa: E402
     image_pixels,
@@ -263,8 +263,8 @@ def test_invert_takes_the_scene_unit_scale(addon, tmp_path):
         assert run_invert(obj, backend="SVM", storage="FILES", output_dir=str(out)) == {"FINISHED"}
         (record,) = out.glob("*_maps.json")  # the second image is "albedo.png.001": its stem differs
         assert json.loads(record.read_text())["unit_scale_m_per_blender_unit"] == pytest.approx(scale, rel=1e-6)
-        gnode = next(n for n in mat.node_tree.nodes if n.bl_idname == "ShaderNodeGroup")
-        radii[scale] = image_pixels(gnode.inputs["k1 Radius"].links[0].from_node.image)[..., :3]
+        gnode = wiring.wired_group_node(mat)
+        radii[scale] = image_pixels(oblique.map_node(gnode.inputs["k1 Radius"]).image)[..., :3]
     ratio = radii[0.01] / radii[1.0]
     print(f"\nk1 radius at unit scale 0.01 / at 1.0: {ratio.min():.6f} .. {ratio.max():.6f}")
     np.testing.assert_allclose(ratio, 100.0, rtol=1e-3)  # fast-path radius maps are half floats (2^-11 each)

@@ -18,6 +18,7 @@ times s_c of its channel).  ``--check-seed`` measures the correction fitted on o
 from __future__ import annotations
 
 import argparse
+import json
 import sys
 from pathlib import Path
 
@@ -39,6 +40,31 @@ RAMPS: tuple[tuple[float, float], ...] = tuple((e0, e1) for e0 in np.arange(0.0,
 NORMAL_WIDTH_OFF = 0.2
 #: Smallest radius slope (s stays >= 1 + this at grazing: positive).
 RADIUS_SLOPE_MIN = -0.8
+
+
+def cached_runs(cache: Path, names, thetas, photons: int = 10000, seed: int = 0) -> dict:
+    """The walks of ``names`` x ``thetas`` already in ``cache`` ((tone, theta) -> walk); the others are left out."""
+    out = {}
+    for n in names:
+        for t in thetas:
+            path = cache / f"{n}_{t:g}_{photons}_s{seed}.npz"
+            if path.is_file():
+                with np.load(path) as f:
+                    out[(n, float(t))] = {k: f[k] for k in f.files}
+    return out
+
+
+def bodies(render: dict) -> dict[tuple[str, float], dict[str, np.ndarray]]:
+    """(tone, view angle) -> the block's rendered body reflectance (render less coat: training.validate.
+    oblique_render.slab), per variant rendered ("shipped", "corrected")."""
+    coat = np.asarray(render["coat"])
+    out = {}
+    for name, r in render.items():
+        if not isinstance(r, dict):
+            continue
+        for i, theta in enumerate(render["views_deg"]):
+            out[(name, float(theta))] = {k: np.asarray(r[k])[i] - coat[i] for k in ("shipped", "corrected") if k in r}
+    return out
 
 
 def tone_colours(tones, decoder: Path) -> np.ndarray:
@@ -71,11 +97,14 @@ def r50_ratio(r: dict[str, np.ndarray]) -> np.ndarray:
     return t / m
 
 
-def targets(r: dict[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
-    """Weight and radius factors (3,) that make the mixture's channels match the truth's in one walk."""
+def targets(r: dict[str, np.ndarray], body: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Weight and radius factors (3,) that make the mixture's channels match the truth's in one walk: the weights
+    bring ``body`` (the live group's rendered body colour at that angle; None: the walked mixture's colour) to the
+    truth's colour, the radii the mixture's r50 to the truth's."""
     ratio = r50_ratio(r)
     ch = channel_of_samples()
-    return rgb(r["truth_R"]) / rgb(r["mix_R"]), np.array([np.nanmean(ratio[ch == c]) for c in range(3)])
+    base = rgb(r["mix_R"]) if body is None else body
+    return rgb(r["truth_R"]) / base, np.array([np.nanmean(ratio[ch == c]) for c in range(3)])
 
 
 def _slopes(h: np.ndarray, target: np.ndarray) -> np.ndarray:
@@ -83,7 +112,7 @@ def _slopes(h: np.ndarray, target: np.ndarray) -> np.ndarray:
     return (h @ (target - 1.0)) / max(float(h @ h), 1e-300)
 
 
-def fit(runs: dict, names: list[str], colours: np.ndarray) -> oc.ObliqueCorrection:
+def fit(runs: dict, names: list[str], colours: np.ndarray, rendered: dict | None = None) -> oc.ObliqueCorrection:
     """The correction fitted to ``runs`` ((tone, theta) -> walk) of the tones ``names`` with painted ``colours``.
     Per tone, the slopes are least squares over its oblique angles walked (theta > 0); the ramps shared by the
     tones are the grid's best: the weights' by the summed Delta E76 of the corrected colours against the truth's
@@ -91,11 +120,12 @@ def fit(runs: dict, names: list[str], colours: np.ndarray) -> oc.ObliqueCorrecti
     right at normal incidence (within ``NORMAL_WIDTH_OFF``)."""
     per_tone = {}
     for n in names:
-        thetas = sorted(t for (m, t) in runs if m == n and t > 0.0)
+        thetas = sorted(t for (m, t) in runs if m == n and t > 0.0 and (rendered is None or (n, t) in rendered))
         walks = [runs[(n, t)] for t in thetas]
-        per_tone[n] = {"mu": np.cos(np.radians(thetas)), "q": np.array([targets(r) for r in walks]),  # (A, 2, 3)
-                       "mix": np.array([rgb(r["mix_R"]) for r in walks]),
-                       "lab": linear_srgb_to_lab(np.array([rgb(r["truth_R"]) for r in walks]))}
+        base = [_base(runs[(n, t)], rendered, (n, t)) for t in thetas]
+        per_tone[n] = {"mu": np.cos(np.radians(thetas)),
+                       "q": np.array([targets(r, b) for r, b in zip(walks, base, strict=True)]),  # (A, 2, 3)
+                       "mix": np.array(base), "lab": linear_srgb_to_lab(np.array([rgb(r["truth_R"]) for r in walks]))}
 
     def slopes(t: dict, ramp, which: int) -> np.ndarray:
         return _slopes(oc.angle_shape(t["mu"], ramp), t["q"][:, which])
@@ -121,23 +151,33 @@ def fit(runs: dict, names: list[str], colours: np.ndarray) -> oc.ObliqueCorrecti
     order = np.argsort(y)
     walked = sorted({t for (_, t) in runs if t > 0.0})
     src = (f"training.validate.oblique_fit on {len(names)} tones ({', '.join(names)}) at "
-           f"{', '.join(f'{t:g}' for t in walked)} degrees")
+           f"{', '.join(f'{t:g}' for t in walked)} degrees; the weights bring "
+           + ("the live group's Cycles render (block under a white world, training.validate.oblique_render)"
+              if rendered is not None else "the walked mixture")
+           + " to the two-layer truth, the radii the mixture's r50")
     return oc.ObliqueCorrection(y[order], a[order], np.maximum(b[order], RADIUS_SLOPE_MIN), ramp_w, ramp_r, src)
 
 
-def evaluate(runs: dict, names: list[str], colours: np.ndarray, corr: oc.ObliqueCorrection) -> list[dict]:
-    """Per (tone, theta): Delta E76 and visible / NIR r50 error of the mixture as shipped and corrected."""
+def _base(walk: dict, rendered: dict | None, key: tuple[str, float]) -> np.ndarray:
+    """The colour the weights act on: the rendered body's (``rendered[key]``) or the walked mixture's."""
+    return rgb(walk["mix_R"]) if rendered is None else rendered[key]
+
+
+def evaluate(runs: dict, names: list[str], colours: np.ndarray, corr: oc.ObliqueCorrection,
+             rendered: dict | None = None) -> list[dict]:
+    """Per (tone, theta): Delta E76 and visible / NIR r50 error of the mixture as shipped and corrected (the colour:
+    of the rendered body times f where ``rendered`` holds it, else of the walked mixture times f)."""
     nm = np.asarray(oblique.SAMPLE_NM)
     vis = (nm >= 400.0) & (nm < 700.0)
     nir = nm >= 700.0
     ch = channel_of_samples()
     rows = []
     for n, colour in zip(names, colours, strict=True):
-        for theta in sorted(t for (m, t) in runs if m == n):
+        for theta in sorted(t for (m, t) in runs if m == n and (rendered is None or (n, t) in rendered)):
             r = runs[(n, theta)]
             f, s = oc.factors(corr, colour, np.cos(np.radians(theta)))
             lab_t = linear_srgb_to_lab(rgb(r["truth_R"]))
-            mix = rgb(r["mix_R"])
+            mix = _base(r, rendered, (n, theta))
             rel = 1.0 / r50_ratio(r)
             rel_corr = rel * np.where(ch >= 0, s[np.maximum(ch, 0)], 1.0)
             rows.append({"tone": n, "theta_deg": theta,
@@ -187,6 +227,9 @@ def main(argv: list[str]) -> int:
     p.add_argument("--cache", type=Path, default=oblique.DEFAULT_CACHE)
     p.add_argument("--model-dir", type=Path, default=SHIPPED_MODEL_DIR, help="folder with skin_decoder.onnx")
     p.add_argument("--out", type=Path, default=None, help="write the fitted correction here (JSON)")
+    p.add_argument("--render", type=Path, default=None,
+                   help="fit the weights to the live group's rendered body colour in this JSON of "
+                   "training.validate.oblique_render --shipped-only (default: to the walked mixture's colour)")
     args = p.parse_args(argv)
     decoder = args.model_dir / "skin_decoder.onnx"
     log = lambda s: print(s, file=sys.stderr, flush=True)  # noqa: E731
@@ -197,15 +240,18 @@ def main(argv: list[str]) -> int:
             extra = tuple(float(t) for t in args.extra_thetas.split(","))
             runs |= oblique.run(_tones(args.extra_tones), decoder, args.photons, args.cache, args.seed, extra, log)
         colours = tone_colours(tones, decoder)
-        corr = fit(runs, list(tones.names), colours)
-        rows = evaluate(runs, list(tones.names), colours, corr)
+        rendered = None
+        if args.render is not None:
+            rendered = {k: v["shipped"] for k, v in bodies(json.loads(args.render.read_text())["render"]).items()}
+        corr = fit(runs, list(tones.names), colours, rendered)
+        rows = evaluate(runs, list(tones.names), colours, corr, rendered)
         print(f"weight ramp {corr.weight_ramp}, radius ramp {corr.radius_ramp}\n")
         print(markdown(rows))
         if args.check_seed is not None:
             check = _tones(args.check_tones)
             held = oblique.run(check, decoder, args.photons, args.cache, args.check_seed, log=log)
             print(f"seed {args.check_seed} (not fitted):\n")
-            print(markdown(evaluate(held, list(check.names), tone_colours(check, decoder), corr)))
+            print(markdown(evaluate(held, list(check.names), tone_colours(check, decoder), corr, rendered)))
     except (OSError, ValueError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

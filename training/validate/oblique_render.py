@@ -35,6 +35,9 @@ MODEL = ROOT / "blender_addon" / "models" / "skin_inversion.onnx"
 #: The block's unit scale (m per BU) and the view angles rendered (degrees).
 UNIT_SCALE_M = 0.01
 VIEW_DEG: tuple[float, ...] = oblique.THETAS_DEG
+#: Seeds of walks not fitted (``training.validate.oblique --seed``): the renders are compared with their truth too,
+#: where they are cached.
+HELD_OUT_SEEDS: tuple[int, ...] = (1, 2)
 #: Tones rendered on the block.
 SLAB_TONES: tuple[str, ...] = ("R01", "R05", "R07", "R08", "R09", "R10")
 
@@ -65,55 +68,56 @@ def _slab_node(group, colour) -> object:
     return node
 
 
-def slab(colours: dict[str, np.ndarray], samples: int = 128, resolution: int = 12) -> dict:
-    """Rendered linear RGB of the block seen from each of ``VIEW_DEG``: {"coat": (A, 3), tone: {"shipped":
-    (A, 3), "corrected": (A, 3), "stderr": (A, 3)}} (the coat: the group painted black), and the seconds."""
+def slab(colours: dict[str, np.ndarray], samples: int = 128, resolution: int = 12, views=VIEW_DEG, seed: int = 5,
+         corrected: bool = True) -> dict:
+    """Rendered linear RGB of the block seen from each of ``views`` (degrees): {"coat": (A, 3), tone: {"shipped":
+    (A, 3), "corrected": (A, 3) (with ``corrected``), "stderr": (A, 3)}} (the coat: the group painted black; the
+    live group without the grazing-light correction is "shipped"), and the seconds."""
     from blender_addon import probe
 
-    scene = probe.new_scene(samples=samples, resolution=resolution, seed=5)
-    shipped, corrected = live_groups()
-    out: dict = {}
+    scene = probe.new_scene(samples=samples, resolution=resolution, seed=seed)
+    shipped, with_correction = live_groups()
+    out: dict = {"views_deg": list(views)}
     start = time.perf_counter()
 
-    def views(group, colour) -> tuple[np.ndarray, np.ndarray]:
+    def render(group, colour) -> tuple[np.ndarray, np.ndarray]:
         _slab_node(group, colour)
         got = []
-        for theta in VIEW_DEG:
+        for theta in views:
             probe.view_from(scene, float(np.cos(np.radians(theta))))
             got.append(probe.render_mean(scene)[:2])
         return np.array([g[0] for g in got]), np.array([g[1] for g in got])
 
-    out["coat"] = views(shipped, (0.0, 0.0, 0.0))[0].tolist()
+    out["coat"] = render(shipped, (0.0, 0.0, 0.0))[0].tolist()
     for name, colour in colours.items():
-        s, err = views(shipped, colour)
-        c, _ = views(corrected, colour)
-        out[name] = {"colour": list(map(float, colour)), "shipped": s.tolist(), "corrected": c.tolist(),
-                     "stderr": err.tolist()}
+        s, err = render(shipped, colour)
+        out[name] = {"colour": list(map(float, colour)), "shipped": s.tolist(), "stderr": err.tolist()}
+        if corrected:
+            out[name]["corrected"] = render(with_correction, colour)[0].tolist()
     out["seconds"] = time.perf_counter() - start
     return out
 
 
 def compare(render: dict, runs: dict) -> list[dict]:
-    """Per (tone, angle): the rendered body reflectance (render less coat) as shipped and corrected, and the Monte
-    Carlo's truth and mixture (linear sRGB), with Delta E76 of each against the truth."""
-    coat = np.asarray(render["coat"])
+    """Per (tone, angle) walked and rendered: the rendered body reflectance (render less coat) as shipped and
+    corrected, and the Monte Carlo's truth and mixture (linear sRGB), with Delta E76 of each against the truth."""
     rows = []
-    for name, r in render.items():
-        if name in ("coat", "seconds"):
+    for (name, theta), body in oblique_fit.bodies(render).items():
+        if (name, theta) not in runs:
             continue
-        for i, theta in enumerate(VIEW_DEG):
-            walk = runs[(name, theta)]
-            truth, mix = oblique_fit.rgb(walk["truth_R"]), oblique_fit.rgb(walk["mix_R"])
-            body = {k: np.asarray(r[k])[i] - coat[i] for k in ("shipped", "corrected")}
-            lab_t = linear_srgb_to_lab(truth)
+        walk = runs[(name, theta)]
+        truth, mix = oblique_fit.rgb(walk["truth_R"]), oblique_fit.rgb(walk["mix_R"])
+        lab_t = linear_srgb_to_lab(truth)
 
-            def de(v: np.ndarray, lab_t=lab_t) -> float:
-                return float(np.linalg.norm(linear_srgb_to_lab(np.clip(v, 1e-6, None)) - lab_t))
+        def de(v: np.ndarray, lab_t=lab_t) -> float:
+            return float(np.linalg.norm(linear_srgb_to_lab(np.clip(v, 1e-6, None)) - lab_t))
 
-            rows.append({"tone": name, "theta_deg": theta, "truth": truth.tolist(), "mc_mix": mix.tolist(),
-                         "render_shipped": body["shipped"].tolist(), "render_corrected": body["corrected"].tolist(),
-                         "dE76_mc_mix": de(mix), "dE76_render_shipped": de(body["shipped"]),
-                         "dE76_render_corrected": de(body["corrected"])})
+        row = {"tone": name, "theta_deg": theta, "truth": truth.tolist(), "mc_mix": mix.tolist(),
+               "dE76_mc_mix": de(mix)}
+        for k, v in body.items():
+            row[f"render_{k}"] = v.tolist()
+            row[f"dE76_render_{k}"] = de(v)
+        rows.append(row)
     return rows
 
 
@@ -144,7 +148,51 @@ def head(tmp: Path, samples: int = 32, size: int = 96, tone: str = "dark") -> di
     for label, group in (("shipped", shipped), ("corrected", corrected)):
         node.node_tree = group
         out[label] = openpbr_check._render_linear(scene, tmp / f"head_{label}.exr")
+    out["facing"] = _facing(scene, parts, tmp / "head_facing.exr")
     return out
+
+
+def _facing(scene, parts, path: Path) -> np.ndarray:
+    """(H, W) the mean of 1 - |N . I| (Layer Weight's Facing, what the correction reads) over each pixel of the
+    head (0 where the camera sees no head): an emission-only render, no world, no denoising."""
+    from training import demo_render, openpbr_check
+
+    bpy = _bpy()
+    mat = bpy.data.materials.new("Facing")
+    tree = mat.node_tree
+    tree.nodes.remove(tree.nodes["Principled BSDF"])
+    layer = tree.nodes.new("ShaderNodeLayerWeight")
+    layer.inputs["Blend"].default_value = 0.5
+    emission = tree.nodes.new("ShaderNodeEmission")
+    tree.links.new(layer.outputs["Facing"], emission.inputs["Color"])
+    tree.links.new(emission.outputs[0], tree.nodes["Material Output"].inputs["Surface"])
+    demo_render._assign(parts, mat)
+    saved = (scene.cycles.samples, scene.world)
+    scene.cycles.samples, scene.world = 16, None
+    try:
+        return openpbr_check._render_linear(scene, path)[..., 0]
+    finally:
+        scene.cycles.samples, scene.world = saved
+
+
+#: Bands of the head's pixels by the facing angle (degrees from the view) that :func:`rim_numbers` reports.
+FACING_BANDS: tuple[tuple[float, float], ...] = ((0.0, 45.0), (45.0, 70.0), (70.0, 90.0))
+
+
+def rim_numbers(heads: dict) -> list[dict]:
+    """Per band of ``FACING_BANDS``: the head's pixels, their mean linear colour as shipped and corrected and the
+    Delta E76 between the two means."""
+    facing = heads["facing"]
+    rows = []
+    for lo, hi in FACING_BANDS:
+        f_lo, f_hi = 1.0 - np.cos(np.radians(lo)), 1.0 - np.cos(np.radians(hi))
+        mask = (facing > max(f_lo, 1e-4)) & (facing <= f_hi) if lo == 0.0 else (facing > f_lo) & (facing <= f_hi)
+        means = {k: heads[k][mask].mean(axis=0) for k in ("shipped", "corrected")}
+        rows.append({"band_deg": [lo, hi], "pixels": int(mask.sum()),
+                     **{k: v.tolist() for k, v in means.items()},
+                     "dE76": float(np.linalg.norm(linear_srgb_to_lab(means["shipped"])
+                                                  - linear_srgb_to_lab(means["corrected"])))})
+    return rows
 
 
 def figure(rows: list[dict], heads: dict, path: Path) -> Path:
@@ -185,11 +233,11 @@ def figure(rows: list[dict], heads: dict, path: Path) -> Path:
     for k, label in enumerate(("shipped", "corrected", "difference")):
         a = fig.add_axes([0.57 + 0.14 * k, 0.1, 0.13, 0.8])
         if label == "difference":
-            a.imshow(np.clip((heads["shipped"] - heads["corrected"]) * 8.0 + 0.5, 0, 1)[::-1], interpolation="nearest")
-            a.set_title("shipped − corrected (×8, grey = 0)", fontsize=8)
+            a.imshow(np.clip((heads["corrected"] - heads["shipped"]) * 20.0 + 0.5, 0, 1), interpolation="nearest")
+            a.set_title("corrected − shipped (×20, grey = 0)", fontsize=8)
         else:
-            a.imshow(srgb_encode(np.clip(heads[label], 0, 1))[::-1], interpolation="nearest")
-            a.set_title(f"dark head, live group {label}", fontsize=8)
+            a.imshow(srgb_encode(np.clip(heads[label] * 3.0, 0, 1)), interpolation="nearest")
+            a.set_title(f"dark head, live group {label} (×3)", fontsize=8)
         a.axis("off")
     fig.savefig(path, dpi=110)
     plt.close(fig)
@@ -199,31 +247,48 @@ def figure(rows: list[dict], heads: dict, path: Path) -> Path:
 def main(argv: list[str]) -> int:
     p = argparse.ArgumentParser(prog="python -m training.validate.oblique_render", description=__doc__.splitlines()[0])
     p.add_argument("--out", type=Path, required=True, help="folder for oblique_render.json and the figure")
-    p.add_argument("--samples", type=int, default=128, help="Cycles samples per pixel of the block")
+    p.add_argument("--samples", type=int, default=256, help="Cycles samples per pixel of the block")
+    p.add_argument("--resolution", type=int, default=16, help="pixels across the block's view")
+    p.add_argument("--seed", type=int, default=5, help="Cycles seed of the block")
+    p.add_argument("--views", default=",".join(f"{t:g}" for t in VIEW_DEG), help="view angles, degrees")
     p.add_argument("--head-samples", type=int, default=32)
     p.add_argument("--tones", default=",".join(SLAB_TONES))
+    p.add_argument("--shipped-only", action="store_true",
+                   help="render the block without the correction only (what oblique_fit --render reads); no head")
+    p.add_argument("--name", default="oblique_render", help="stem of the JSON and of the figure (fig_<stem>.png)")
     p.add_argument("--cache", type=Path, default=oblique.DEFAULT_CACHE, help="the oblique walks (10,000 photons)")
     args = p.parse_args(argv)
     decoder = SHIPPED_MODEL_DIR / "skin_decoder.onnx"
     try:
         tones = oblique_fit._tones(args.tones)
+        views = tuple(float(v) for v in args.views.split(","))
         runs = oblique.run(tones, decoder, 10000, args.cache, 0, log=lambda s: print(s, file=sys.stderr))
     except (OSError, ValueError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
+    runs |= oblique_fit.cached_runs(args.cache, tones.names, views)
     colours = dict(zip(tones.names, oblique_fit.tone_colours(tones, decoder), strict=True))
     args.out.mkdir(parents=True, exist_ok=True)
-    render = slab(colours, args.samples)
+    render = slab(colours, args.samples, args.resolution, views, args.seed, corrected=not args.shipped_only)
     rows = compare(render, runs)
-    with tempfile.TemporaryDirectory(prefix="oblique_head_") as tmp:
-        heads = head(Path(tmp), args.head_samples)
-    (args.out / "oblique_render.json").write_text(json.dumps({"samples": args.samples, "rows": rows,
-                                                              "coat": render["coat"],
-                                                              "slab_seconds": render["seconds"]}, indent=1))
-    figure(rows, heads, args.out / "fig_oblique_render.png")
+    held_out = {f"rows_truth_seed{s}": compare(render, oblique_fit.cached_runs(args.cache, tones.names, views, seed=s))
+                for s in HELD_OUT_SEEDS}
+    (args.out / f"{args.name}.json").write_text(json.dumps(
+        {"samples": args.samples, "resolution": args.resolution, "seed": args.seed, "render": render, "rows": rows,
+         **held_out}, indent=1))
+    if not args.shipped_only:
+        with tempfile.TemporaryDirectory(prefix="oblique_head_") as tmp:
+            heads = head(Path(tmp), args.head_samples)
+        figure([r for r in rows if r["theta_deg"] in VIEW_DEG], heads, args.out / f"fig_{args.name}.png")
+        result = json.loads((args.out / f"{args.name}.json").read_text())
+        result["head"] = {"samples": args.head_samples, "bands": rim_numbers(heads)}
+        (args.out / f"{args.name}.json").write_text(json.dumps(result, indent=1))
+        for band in result["head"]["bands"]:
+            print(f"head, facing {band['band_deg']}: {band['pixels']} px, dE76 shipped vs corrected "
+                  f"{band['dE76']:.2f}")
     for r in rows:
-        print(f"{r['tone']} {r['theta_deg']:g}: dE76 MC mix {r['dE76_mc_mix']:.2f}, "
-              f"render {r['dE76_render_shipped']:.2f} -> corrected {r['dE76_render_corrected']:.2f}")
+        print(f"{r['tone']} {r['theta_deg']:g}: dE76 MC mix {r['dE76_mc_mix']:.2f}, render "
+              + " -> ".join(f"{r[f'dE76_render_{k}']:.2f}" for k in ("shipped", "corrected") if f"render_{k}" in r))
     return 0
 
 
