@@ -18,9 +18,9 @@ from pathlib import Path
 from training.bench.live import run_script
 
 ROOT = Path(__file__).resolve().parents[2]
-RESOLUTION = 96
-SAMPLES = 16
-ROUNDS = 5
+RESOLUTION = 128
+SAMPLES = 32
+ROUNDS = 6
 
 _CHILD = """
 import json, resource, sys, time
