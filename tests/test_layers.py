@@ -34,6 +34,7 @@ LAYERS: tuple[str, ...] = (
     "training.ablations",
     "training.demo_render",
     "training.openpbr_check",
+    "training.oblique_render",
     "training.bench",
     "training.commands",
     "training.__main__",

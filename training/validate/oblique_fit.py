@@ -55,8 +55,8 @@ def cached_runs(cache: Path, names, thetas, photons: int = 10000, seed: int = 0)
 
 
 def bodies(render: dict) -> dict[tuple[str, float], dict[str, np.ndarray]]:
-    """(tone, view angle) -> the block's rendered body reflectance (render less coat: training.validate.
-    oblique_render.slab), per variant rendered ("shipped", "corrected")."""
+    """(tone, view angle) -> the block's rendered body reflectance (render less coat: training.oblique_render.slab),
+    per variant rendered ("shipped", "corrected")."""
     coat = np.asarray(render["coat"])
     out = {}
     for name, r in render.items():
@@ -152,7 +152,7 @@ def fit(runs: dict, names: list[str], colours: np.ndarray, rendered: dict | None
     walked = sorted({t for (_, t) in runs if t > 0.0})
     src = (f"training.validate.oblique_fit on {len(names)} tones ({', '.join(names)}) at "
            f"{', '.join(f'{t:g}' for t in walked)} degrees; the weights bring "
-           + ("the live group's Cycles render (block under a white world, training.validate.oblique_render)"
+           + ("the live group's Cycles render (block under a white world, training.oblique_render)"
               if rendered is not None else "the walked mixture")
            + " to the two-layer truth, the radii the mixture's r50")
     return oc.ObliqueCorrection(y[order], a[order], np.maximum(b[order], RADIUS_SLOPE_MIN), ramp_w, ramp_r, src)
@@ -229,7 +229,7 @@ def main(argv: list[str]) -> int:
     p.add_argument("--out", type=Path, default=None, help="write the fitted correction here (JSON)")
     p.add_argument("--render", type=Path, default=None,
                    help="fit the weights to the live group's rendered body colour in this JSON of "
-                   "training.validate.oblique_render --shipped-only (default: to the walked mixture's colour)")
+                   "training.oblique_render --shipped-only (default: to the walked mixture's colour)")
     args = p.parse_args(argv)
     decoder = args.model_dir / "skin_decoder.onnx"
     log = lambda s: print(s, file=sys.stderr, flush=True)  # noqa: E731

@@ -11,7 +11,7 @@ grazing-light correction (exporters.oblique_correction).
 * :func:`head` — the demo head (training.demo_subject) painted the demo's dark tone, lit from behind and grazing
   (the demo's lights): the live group without and with the correction, and their difference.
 
-``python -m training.validate.oblique_render --out docs/validation`` writes ``oblique_render.json`` and
+``python -m training.oblique_render --out docs/validation`` writes ``oblique_render.json`` and
 ``fig_oblique_render.png``.
 """
 
@@ -30,7 +30,7 @@ from exporters.colorimetry import linear_srgb_to_lab
 from training.paths import SHIPPED_MODEL_DIR
 from training.validate import oblique, oblique_fit
 
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).resolve().parents[1]
 MODEL = ROOT / "blender_addon" / "models" / "skin_inversion.onnx"
 #: The block's unit scale (m per BU) and the view angles rendered (degrees).
 UNIT_SCALE_M = 0.01
@@ -245,7 +245,7 @@ def figure(rows: list[dict], heads: dict, path: Path) -> Path:
 
 
 def main(argv: list[str]) -> int:
-    p = argparse.ArgumentParser(prog="python -m training.validate.oblique_render", description=__doc__.splitlines()[0])
+    p = argparse.ArgumentParser(prog="python -m training.oblique_render", description=__doc__.splitlines()[0])
     p.add_argument("--out", type=Path, required=True, help="folder for oblique_render.json and the figure")
     p.add_argument("--samples", type=int, default=256, help="Cycles samples per pixel of the block")
     p.add_argument("--resolution", type=int, default=16, help="pixels across the block's view")
