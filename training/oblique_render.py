@@ -38,6 +38,10 @@ VIEW_DEG: tuple[float, ...] = oblique.THETAS_DEG
 #: Seeds of walks not fitted (``training.validate.oblique --seed``): the renders are compared with their truth too,
 #: where they are cached.
 HELD_OUT_SEEDS: tuple[int, ...] = (1, 2)
+#: The thin slab: thickness (mm), tones; the emitting plane that lights it (side and height, BU).
+THIN_MM = 2.0
+THIN_TONES: tuple[str, ...] = ("R01", "R05", "R08", "R09")
+SKY_SIDE_BU, SKY_HEIGHT_BU = 4000.0, 2.0
 #: Tones rendered on the block.
 SLAB_TONES: tuple[str, ...] = ("R01", "R05", "R07", "R08", "R09", "R10")
 
@@ -68,14 +72,76 @@ def _slab_node(group, colour) -> object:
     return node
 
 
+def thin_scene(scene, thickness_bu: float) -> None:
+    """Make the probe's block a slab ``thickness_bu`` thick (its top face where the block's was) lit from above only:
+    the world black, a square emitting plane of radiance 1 and side ``SKY_SIDE_BU`` ``SKY_HEIGHT_BU`` above it
+    (reaching 89.9 degrees from the normal), invisible to the camera.  Seen from angle theta the slab's radiance
+    is then its reflectance of a beam arriving at theta, what crosses the slab being lost below."""
+    import mathutils
+
+    from blender_addon import probe
+
+    bpy = _bpy()
+    block = bpy.data.objects["ProbeSlab"]
+    mesh = probe.cube_mesh("ThinSlab", 1.0)
+    mesh.transform(mathutils.Matrix.Diagonal((probe.HALF_SIZE_BU, probe.HALF_SIZE_BU, thickness_bu / 2.0, 1.0)))
+    block.data = mesh
+    block.location = (0.0, 0.0, -thickness_bu / 2.0)
+    scene.world.node_tree.nodes["Background"].inputs["Strength"].default_value = 0.0
+    sky_mesh = bpy.data.meshes.new("Sky")
+    h = SKY_SIDE_BU / 2.0
+    sky_mesh.from_pydata([(-h, -h, 0.0), (h, -h, 0.0), (h, h, 0.0), (-h, h, 0.0)], [], [(0, 3, 2, 1)])
+    sky = bpy.data.objects.new("Sky", sky_mesh)
+    sky.location = (0.0, 0.0, SKY_HEIGHT_BU)
+    sky.visible_camera = False
+    mat = bpy.data.materials.new("Sky")
+    tree = mat.node_tree
+    tree.nodes.remove(tree.nodes["Principled BSDF"])
+    emission = tree.nodes.new("ShaderNodeEmission")
+    emission.inputs["Strength"].default_value = 1.0
+    tree.links.new(emission.outputs[0], tree.nodes["Material Output"].inputs["Surface"])
+    sky_mesh.materials.append(mat)
+    scene.collection.objects.link(sky)
+
+
+def thin_walks(tones, thetas, thickness_cm: float, photons: int, cache: Path, seed: int = 0) -> dict:
+    """(tone, theta) -> {"truth_R", "mix_R", "truth_T", "mix_T"} (W,): the two-layer skin of total thickness
+    ``thickness_cm`` (the epidermis over dermis of the rest) and the mixture's components as homogeneous slabs of
+    that thickness, under a beam at theta (training.validate.oblique's walk, its wavelengths), cached per walk."""
+    cache.mkdir(parents=True, exist_ok=True)
+    decoder = SHIPPED_MODEL_DIR / "skin_decoder.onnx"
+    out = {}
+    for name, tone in zip(tones.names, tones.values, strict=True):
+        for theta in thetas:
+            path = cache / f"{name}_{theta:g}_{thickness_cm * 10:g}mm_{photons}_s{seed}.npz"
+            if not path.is_file():
+                m = oblique.tone_media(tone, decoder, oblique.columns())
+                truth = oblique._walk(m["mua"], m["mus"], m["g"], np.array([float(tone[2]), thickness_cm - tone[2]]),
+                                      photons, theta, seed)
+                comp = oblique._walk(m["mix_mua"], m["mix_mus"], m["mix_g"], np.array([thickness_cm]), photons, theta,
+                                     seed + 1)
+                w = m["weight"]
+                res = {"truth_R": truth["R_d"], "truth_T": truth["T_d"],
+                       "mix_R": np.sum(w * comp["R_d"].reshape(w.shape), axis=0),
+                       "mix_T": np.sum(w * comp["T_d"].reshape(w.shape), axis=0)}
+                tmp = path.with_suffix(".part.npz")
+                np.savez_compressed(tmp, **res)
+                tmp.replace(path)
+            with np.load(path) as f:
+                out[(name, float(theta))] = {k: f[k] for k in f.files}
+    return out
+
+
 def slab(colours: dict[str, np.ndarray], samples: int = 128, resolution: int = 12, views=VIEW_DEG, seed: int = 5,
-         corrected: bool = True) -> dict:
+         corrected: bool = True, thickness_bu: float | None = None) -> dict:
     """Rendered linear RGB of the block seen from each of ``views`` (degrees): {"coat": (A, 3), tone: {"shipped":
     (A, 3), "corrected": (A, 3) (with ``corrected``), "stderr": (A, 3)}} (the coat: the group painted black; the
     live group without the grazing-light correction is "shipped"), and the seconds."""
     from blender_addon import probe
 
     scene = probe.new_scene(samples=samples, resolution=resolution, seed=seed)
+    if thickness_bu is not None:
+        thin_scene(scene, thickness_bu)
     shipped, with_correction = live_groups()
     out: dict = {"views_deg": list(views)}
     start = time.perf_counter()
@@ -257,8 +323,14 @@ def main(argv: list[str]) -> int:
                    help="render the block without the correction only (what oblique_fit --render reads); no head")
     p.add_argument("--name", default="oblique_render", help="stem of the JSON and of the figure (fig_<stem>.png)")
     p.add_argument("--cache", type=Path, default=oblique.DEFAULT_CACHE, help="the oblique walks (10,000 photons)")
+    p.add_argument("--thin-mm", type=float, default=None,
+                   help="render a slab this thick (mm) lit from above only, against the Monte Carlo of that slab "
+                   f"(walked here into CACHE/thin; tones {','.join(THIN_TONES)} unless --tones is given)")
+    p.add_argument("--photons", type=int, default=10000, help="photons per wavelength of the thin slab's walks")
     args = p.parse_args(argv)
     decoder = SHIPPED_MODEL_DIR / "skin_decoder.onnx"
+    if args.thin_mm is not None:
+        return _thin(args, decoder)
     try:
         tones = oblique_fit._tones(args.tones)
         views = tuple(float(v) for v in args.views.split(","))
@@ -289,6 +361,34 @@ def main(argv: list[str]) -> int:
     for r in rows:
         print(f"{r['tone']} {r['theta_deg']:g}: dE76 MC mix {r['dE76_mc_mix']:.2f}, render "
               + " -> ".join(f"{r[f'dE76_render_{k}']:.2f}" for k in ("shipped", "corrected") if f"render_{k}" in r))
+    return 0
+
+
+def _thin(args, decoder: Path) -> int:
+    """``--thin-mm``: the thin slab's walks, renders and comparison (``<name>_thin.json``)."""
+    try:
+        if not 0.2 <= args.thin_mm <= 20.0:
+            raise ValueError("--thin-mm must lie in [0.2, 20] (the epidermis is up to 0.15 mm thick)")
+        tones = oblique_fit._tones(args.tones if args.tones != ",".join(SLAB_TONES) else ",".join(THIN_TONES))
+        views = tuple(float(v) for v in args.views.split(","))
+        runs = thin_walks(tones, views, args.thin_mm / 10.0, args.photons, args.cache / "thin")
+    except (OSError, ValueError) as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    colours = dict(zip(tones.names, oblique_fit.tone_colours(tones, decoder), strict=True))
+    render = slab(colours, args.samples, args.resolution, views, args.seed, thickness_bu=args.thin_mm / 10.0)
+    rows = compare(render, runs)
+    for r in rows:
+        walk = runs[(r["tone"], r["theta_deg"])]
+        r["truth_T"], r["mc_mix_T"] = (oblique_fit.rgb(walk[k]).tolist() for k in ("truth_T", "mix_T"))
+    args.out.mkdir(parents=True, exist_ok=True)
+    (args.out / f"{args.name}_thin.json").write_text(json.dumps(
+        {"thickness_mm": args.thin_mm, "photons": args.photons, "samples": args.samples, "seed": args.seed,
+         "render": render, "rows": rows}, indent=1))
+    for r in rows:
+        print(f"{r['tone']} {r['theta_deg']:g}: dE76 MC mix {r['dE76_mc_mix']:.2f}, render "
+              f"{r['dE76_render_shipped']:.2f} -> {r['dE76_render_corrected']:.2f}; truth R "
+              f"{np.round(r['truth'], 4).tolist()} T {np.round(r['truth_T'], 4).tolist()}")
     return 0
 
 
