@@ -57,3 +57,30 @@ def test_reweighted_weights_match_the_truth_where_the_components_allow():
     mix = np.sum(w2 * r_k, axis=0)
     assert mix[0] == pytest.approx(0.45) and mix[2] == pytest.approx(0.6)  # reachable: matched
     assert 0.2 <= mix[1] < np.sum(w * r_k, axis=0)[1]  # below every component: moved towards the truth
+
+
+def test_the_correction_fit_recovers_a_known_angular_darkening():
+    """Walks made up so that the truth is the mixture darkened by 10 % x smoothstep(0.2, 0.8, 1 - mu) in every
+    wavelength for a dark tone, and equal to it for a light tone (the same profiles): the fit finds that ramp, those
+    slopes and no radius change, and the corrected colour matches the truth."""
+    from exporters import oblique_correction as oc
+    from training.validate import oblique_fit
+
+    n_w, n_b = len(oblique.SAMPLE_NM), len(oblique.R_EDGES_CM) - 1
+    hist = np.exp(-np.arange(n_b) / 40.0)[None].repeat(n_w, 0).astype(np.float32)
+    mix = np.linspace(0.05, 0.4, n_w)
+    runs = {}
+    for name, depth in (("dark", 0.1), ("light", 0.0)):
+        for theta in (0.0, 45.0, 60.0, 70.0, 85.0):
+            h = oc.angle_shape(np.cos(np.radians(theta)), (0.2, 0.8))
+            runs[(name, theta)] = {"truth_R": mix * (1 - depth * h), "mix_R": mix, "truth_hist_r": hist,
+                                   "mix_hist_r": hist}
+    colours = np.array([[0.08, 0.04, 0.03], [0.5, 0.35, 0.28]])
+    corr = oblique_fit.fit(runs, ["dark", "light"], colours)
+    assert corr.weight_ramp == pytest.approx((0.2, 0.8))
+    assert corr.weight_slope[0] == pytest.approx([-0.1] * 3, abs=1e-9)  # the darker colour is the first knot
+    assert corr.weight_slope[1] == pytest.approx([0.0] * 3, abs=1e-9)
+    assert np.all(corr.radius_slope == 0.0)
+    rows = oblique_fit.evaluate(runs, ["dark", "light"], colours, corr)
+    assert max(r["dE76_corrected"] for r in rows) < 1e-6
+    assert max(r["dE76_shipped"] for r in rows) > 1.0
