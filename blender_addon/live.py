@@ -15,7 +15,8 @@ Interface (docs/contracts.md §5):
   ``Translucency`` (scales every mean free path: 1 is the physical skin) and the Principled BSDF's
   ``Subsurface Weight`` (0: a diffuse body of the painted colour under the coat; 1: the skin; a mask blends),
   ``Alpha`` and ``Emission Color`` / ``Strength`` (blender_addon.nodes.ARTIST_INPUTS);
-* outputs ``Cycles`` (the mixture with its specular coat, for a Material Output of target Cycles: wiring.py),
+* outputs ``Cycles`` (the mixture with its specular coat, for a Material Output of target Cycles: wiring.py; the
+  components' weights and radii times the grazing-light factors of blender_addon.oblique),
   ``EEVEE`` (one Principled BSDF with the group's Subsurface Weight, Alpha and Emission at the colour (body at
   the painted colour, as in Cycles: :data:`PRINCIPLED_BASE_SHARE`) and the mixture's effective radius
   sum_k w_k r_k per channel, for a Material Output of target EEVEE: EEVEE and Material Preview) and
