@@ -187,18 +187,15 @@ def fit_cost(samples: np.ndarray, rmse: np.ndarray, cpu_s: np.ndarray) -> dict:
 
 
 def measure(modes: tuple[str, ...] = ("principled", "live"), samples: tuple[int, ...] = SAMPLES,
-            resolution: int = RESOLUTION, rounds: int = ROUNDS,
-            variants: dict[str, str] | None = None) -> dict[str, dict]:
+            resolution: int = RESOLUTION, rounds: int = ROUNDS) -> dict[str, dict]:
     """Per mode: the RMSE and CPU time per sample count and the fit (:func:`fit_cost`).  The renders are
     deterministic (fixed seeds), so repeated rounds (modes in alternating order) only re-time them: each render's
-    CPU time is the least over the rounds, the one least disturbed by other work on the machine.  ``variants``:
-    code run on the material before rendering, per mode (default :data:`VARIANTS`; a mode named ``live_*`` starts
-    from the live group)."""
+    CPU time is the least over the rounds, the one least disturbed by other work on the machine."""
     renders: dict[str, list[dict]] = {}
     with tempfile.TemporaryDirectory(prefix="bench_cost_") as tmp:
         for round_ in range(rounds):
             for mode in modes if round_ % 2 == 0 else modes[::-1]:
-                for r in run_script(_child_script(mode, samples, resolution, Path(tmp), variants)):
+                for r in run_script(_child_script(mode, samples, resolution, Path(tmp))):
                     same = [q for q in renders.setdefault(mode, []) if q["samples"] == r["samples"]
                             and q["seed"] == r["seed"]]
                     if same:
@@ -208,13 +205,11 @@ def measure(modes: tuple[str, ...] = ("principled", "live"), samples: tuple[int,
         return {mode: _fit_renders(renders[mode], samples) for mode in modes}
 
 
-def _child_script(mode: str, samples: tuple[int, ...], resolution: int, tmp: Path,
-                  variants: dict[str, str] | None = None) -> str:
+def _child_script(mode: str, samples: tuple[int, ...], resolution: int, tmp: Path) -> str:
     base = mode if mode in ("principled", "live", "bake") else "live" if mode.startswith("live_") else "plain"
-    variant = (VARIANTS if variants is None else variants).get(mode, "")
     return _CHILD.format(root=str(ROOT), resolution=resolution, texture=TEXTURE,
                          texture_path=str(tmp / "skin.png"), mode=base, radius=SKIN_RADIUS_MM,
-                         variant=variant, samples=tuple(samples), seeds=SEEDS,
+                         variant=VARIANTS.get(mode, ""), samples=tuple(samples), seeds=SEEDS,
                          out=str(tmp)).replace("{mode}_", f"{mode}_")
 
 
