@@ -174,3 +174,19 @@ def test_shipped_edit_table_meets_the_colour_and_radius_limits(model):
     combined = edit_table.check(model, texels, table, rgb, np.array(COMBINED_EDITS), DECODER)
     assert combined["de_mean"] <= 1.0 and combined["de_max"] <= 2.0
     assert combined["radius_rel_mean"] <= 0.10 and combined["radius_share_over_10pct"] <= 0.01
+
+
+def test_edit_table_file_round_trip(tmp_path):
+    """The file stores the values within half a quantum (exporters.edit_table.encode_values) and a saved table loads
+    back to the same values; values the int16 steps cannot hold are refused."""
+    from exporters import edit_table
+
+    table = edit_table.load(edit_table.default_path(MODEL))
+    rng = np.random.default_rng(3)
+    values = rng.uniform(-3.9, 3.9, table.values.shape).astype(np.float32)
+    back = edit_table.decode_values(edit_table.encode_values(values))
+    assert np.abs(back - values).max() <= 0.5 / edit_table.QUANTUM + 1e-6
+    saved = edit_table.save(table, tmp_path / "edits.npz")
+    np.testing.assert_array_equal(edit_table.load(saved).values, table.values)
+    with pytest.raises(ValueError):
+        edit_table.encode_values(np.full((2, 2), 4.5))
