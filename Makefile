@@ -66,8 +66,13 @@ test: $(STAMP) $(MITSUBA_STAMP) $(BLENDER_OLDEST_STAMP) $(BLENDER_NEWEST_STAMP)
 lint: $(STAMP)
 	$(PY) -m ruff check exporters training blender_addon tests
 
+# Then the skin edits: the medium head as painted, tanned, flushed and pale, back-lit, and a keyframed flush
+# (Blood 1 -> 2.5 -> 1 over 24 frames at 80 px, 8 samples) as a strip; both figures into docs/figures/.
 demo: $(STAMP)
 	$(PY) -m training demo
+	$(PY) -m training.demo_render --edits-row --out demo/out/edits --render-size 160 --samples 16 \
+		--texture-size 256 --figure docs/figures/skin_edits_row.png
+	$(PY) -m training.demo_render --flush-strip --out demo/out/flush --figure docs/figures/skin_edits_flush_strip.png
 
 # Blender extension zip (dist/) for linux-x64 (onnxruntime wheels for Python 3.11 and 3.13: one zip for Blender
 # 4.2 to 5.3), built and validated by Blender's own extension tool from the bpy wheel;

@@ -1,17 +1,17 @@
 """The live group's skin edits: inputs **Melanin**, **Blood** and **Oxygenation** (exporters.skin_edits) in nodes.
 
-The edit table (exporters.edit_table) is packed into three small float images (one per control: its levels' slice
-atlases, as exporters.live_table's, stacked with a zero atlas for the neutral level).  For the painted colour c the
-nodes compute, as exporters.edit_table.shift and edited_colour:
+The edit table (exporters.edit_table) is packed into six small float images (per control, one of the colour shift
+and one of the radius correction: its levels' slice atlases, every slice in one row, stacked with a zero atlas for
+the neutral level).  For the painted colour c the nodes compute, as exporters.edit_table.shift and edited_colour:
 
 * control coordinates s = (log2 clamp(Melanin), log2 clamp(Blood), clamp(Oxygenation)); per control the two
   levels around s, read by trilinear lookups at c and interpolated linearly (the hat weights of
   exporters.edit_table.shift); the shift D is their sum over the controls;
 * the edited colour c exp(D_RGB) (what the rest of the group reads instead of c: the table's lookup, the EEVEE
-  colour) and the radius factor exp(D_A) (every component's radius is multiplied by it).
+  colour) and the radius factor exp(D_radius) per channel (every component's radius is multiplied by it).
 
 At neutral inputs each control reads its zero atlas with weight exactly 1 (its neighbour with weight exactly 0), so
-D = 0, c exp(0) = c and r x exp(0) = r: the group renders its unedited result bit for bit.  Each input takes a value
+D = 0, c exp(0) = c and r exp(0) = r: the group renders its unedited result bit for bit.  Each input takes a value
 or any node (a painted mask through a Mix node, an attribute, a driver); its keyframes animate it.
 """
 
@@ -22,9 +22,10 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import bpy
+import numpy as np
 
 from . import wiring
-from .core import edit_table, live_table, maps, skin_edits
+from .core import edit_table, live_table, maps, skin_edits, texel_table
 
 #: Custom property on the edit images and the group: the SHA-256 of the edit table they were made from.
 EDIT_TABLE_PROP = wiring.EDIT_TABLE_PROP
@@ -53,28 +54,29 @@ def table_for_model(model_path: str, texel_sha256: str) -> edit_table.EditTable 
 
 
 def ensure_images(table: edit_table.EditTable) -> dict[str, bpy.types.Image]:
-    """The edit table's images (one per control, its levels' atlases stacked), packed, one set per file (reused
-    when images of this table exist)."""
+    """The edit table's images (per control, its colour shift and its radius correction, the levels' atlases
+    stacked), packed, one set per file (reused when images of this table exist)."""
     atlases = None
     images = {}
     for j in range(len(skin_edits.CONTROLS)):
-        name = edit_table.image_name(j)
-        full = f"{IMAGE_PREFIX} {name}"
-        image = bpy.data.images.get(full)
-        if image is not None and image.get(EDIT_TABLE_PROP) == table.sha256:
+        for kind in edit_table.KINDS:
+            name = edit_table.image_name(j, kind)
+            full = f"{IMAGE_PREFIX} {name}"
+            image = bpy.data.images.get(full)
+            if image is not None and image.get(EDIT_TABLE_PROP) == table.sha256:
+                images[name] = image
+                continue
+            atlases = atlases if atlases is not None else table.atlases()
+            pixels = atlases[name]
+            if image is not None and image.users == 0:
+                bpy.data.images.remove(image)
+            image = bpy.data.images.new(full, pixels.shape[1], pixels.shape[0], alpha=True, float_buffer=True)
+            image.colorspace_settings.name = "Non-Color"
+            image.alpha_mode = "CHANNEL_PACKED"
+            image.pixels.foreach_set(pixels.ravel())
+            image.pack()
+            image[EDIT_TABLE_PROP] = table.sha256
             images[name] = image
-            continue
-        atlases = atlases if atlases is not None else table.atlases()
-        pixels = atlases[name]
-        if image is not None and image.users == 0:
-            bpy.data.images.remove(image)
-        image = bpy.data.images.new(full, pixels.shape[1], pixels.shape[0], alpha=True, float_buffer=True)
-        image.colorspace_settings.name = "Non-Color"
-        image.alpha_mode = "CHANNEL_PACKED"  # A holds the log-radius correction, not coverage
-        image.pixels.foreach_set(pixels.ravel())
-        image.pack()
-        image[EDIT_TABLE_PROP] = table.sha256
-        images[name] = image
     return images
 
 
@@ -88,7 +90,8 @@ def add_inputs(group: bpy.types.NodeTree) -> None:
 
 @dataclass
 class EditBranch:
-    """What the edit nodes give the group: the edited ``colour`` and the ``radius_factor`` exp(D_A)."""
+    """What the edit nodes give the group: the edited ``colour`` and the ``radius_factor`` exp(D_radius) (a vector:
+    one factor per channel)."""
 
     colour: bpy.types.NodeSocket
     radius_factor: bpy.types.NodeSocket
@@ -113,7 +116,7 @@ def ensure_edit_group(table: edit_table.EditTable, images: dict[str, bpy.types.I
     group.interface.new_socket("Color", in_out="INPUT", socket_type="NodeSocketColor")
     add_inputs(group)
     group.interface.new_socket("Color", in_out="OUTPUT", socket_type="NodeSocketColor")
-    group.interface.new_socket("Radius Factor", in_out="OUTPUT", socket_type="NodeSocketFloat")
+    group.interface.new_socket("Radius Factor", in_out="OUTPUT", socket_type="NodeSocketVector")
     gin = group.nodes.new("NodeGroupInput")
     gout = group.nodes.new("NodeGroupOutput")
     gin.location, gout.location = (-1900.0, 0.0), (4400.0, 0.0)
@@ -139,87 +142,104 @@ def _coordinate(b, gin, j: int, stage: int):
     return x if name == "oxygenation" else b.math("LOGARITHM", stage + 2, x, 2.0)
 
 
-def add_edit_branch(b, gin, table: edit_table.EditTable, images: dict[str, bpy.types.Image]) -> EditBranch:
-    """The edit nodes (module docstring) on the group's Color input; ``b`` the group's builder (blender_addon.live)."""
+def _vec(b, op: str, stage: int, *args) -> bpy.types.NodeSocket:
+    """A Vector Math node ``op`` of sockets, numbers (the same in every component) or 3-tuples; its output."""
+    node = b.node("ShaderNodeVectorMath", stage, operation=op)
+    for i, value in enumerate(args):
+        if isinstance(value, bpy.types.NodeSocket):
+            b.group.links.new(value, node.inputs[i])
+        else:
+            node.inputs[i].default_value = tuple(float(v) for v in np.broadcast_to(value, 3))
+    return node.outputs["Value"] if op == "DOT_PRODUCT" else node.outputs["Vector"]
+
+
+def _grid_vector(b, colour, layout) -> tuple:
+    """Grid coordinates of the painted colour (clamped to [0, 1], sRGB encoded as exporters.colorimetry does, in
+    skin space: exporters.texel_table), clamped to the grid, as the vector (x1, x2, x0), and x0."""
     from . import live
 
+    clamped = _vec(b, "MINIMUM", 30, _vec(b, "MAXIMUM", 30, colour, 0.0), 1.0)
+    gamma = b.node("ShaderNodeGamma", 31)
+    b.group.links.new(clamped, gamma.inputs["Color"])
+    gamma.inputs["Gamma"].default_value = 1.0 / 2.4
+    curve = _vec(b, "MULTIPLY_ADD", 32, gamma.outputs[0], 1.055, -0.055)
+    linear = _vec(b, "MULTIPLY", 31, clamped, live._SRGB_SLOPE)
+    above = _vec(b, "MINIMUM", 32, _vec(b, "FLOOR", 31, _vec(b, "MULTIPLY", 30, clamped, 1.0 / live._SRGB_KNEE)), 1.0)
+    encoded = _vec(b, "MULTIPLY_ADD", 34, above, _vec(b, "SUBTRACT", 33, curve, linear), linear)
+    order = (1, 2, 0)
+    comb = b.node("ShaderNodeCombineXYZ", 36)
+    for slot, d in enumerate(order):
+        b.group.links.new(_vec(b, "DOT_PRODUCT", 35, encoded, texel_table.COORDS[d] / layout.step), comb.inputs[slot])
+    shifted = _vec(b, "ADD", 37, comb.outputs[0], [-layout.origin[d] / layout.step for d in order])
+    x = _vec(b, "MINIMUM", 39, _vec(b, "MAXIMUM", 38, shifted, 0.0), [layout.shape[d] - 1.0 for d in order])
+    sep = b.node("ShaderNodeSeparateXYZ", 40)
+    b.group.links.new(x, sep.inputs[0])
+    return x, sep.outputs[2]
+
+
+def add_edit_branch(b, gin, table: edit_table.EditTable, images: dict[str, bpy.types.Image]) -> EditBranch:
+    """The edit nodes (module docstring) on the group's Color input; ``b`` the group's builder (blender_addon.live).
+    Every control image has one row of slice tiles (:func:`exporters.edit_table.EditTable.layout`), its levels
+    stacked bottom to top: the four texels a control reads (slices s, s + 1; levels l, l + 1) lie at fixed offsets
+    from one UV."""
     layout = table.layout()
+    width, height = layout.size
+    tall = float(edit_table.STACKED * height)
+    tile_u = layout.tile[0] / width
     colour = gin.outputs["Color"]
-    e = [live._srgb_encode(b, b.math("ADD", 30, _channel(b, colour, c), 0.0, clamp=True), 31) for c in range(3)]
-    coords = [b.math("MULTIPLY", 36, b.math("ADD", 35, b.math("ADD", 35, e[0], e[1]), e[2]), 1.0 / 3.0),
-              b.math("SUBTRACT", 36, e[0], e[1]), b.math("SUBTRACT", 36, e[1], e[2])]
-    x = [b.math("MINIMUM", 39, b.math("MAXIMUM", 38, b.math("MULTIPLY_ADD", 37, coord, 1.0 / layout.step,
-                                                                        -layout.origin[d] / layout.step), 0.0),
-                layout.shape[d] - 1.0) for d, coord in enumerate(coords)]
-    s = b.math("MINIMUM", 41, b.math("FLOOR", 40, x[0]), layout.shape[0] - 2.0)
-    frac = b.math("SUBTRACT", 42, x[0], s)
-    bases = [_stacked_uv(b, layout, slice_index, x[1], x[2], 42)
-             for slice_index in (s, b.math("ADD", 42, s, 1.0))]
-    shift_rgb, shift_a = None, None
+    x, x0 = _grid_vector(b, colour, layout)
+    border = live_table.BORDER + 0.5
+    base = _vec(b, "MULTIPLY_ADD", 41, x, (1.0 / width, 1.0 / tall, 0.0), (border / width, border / tall, 0.0))
+    s = b.math("MINIMUM", 42, b.math("FLOOR", 41, x0), layout.shape[0] - 2.0)
+    frac = b.math("SUBTRACT", 43, x0, s)
+    slice_u = b.math("MULTIPLY", 43, s, tile_u)
+    shifts = {kind: None for kind in edit_table.KINDS}
     for j, name in enumerate(skin_edits.CONTROLS):
         levels = edit_table.LEVELS[name]
         h = edit_table.SPACING[name]
         t = b.math("MULTIPLY_ADD", 47, _coordinate(b, gin, j, 44), 1.0 / h, -levels[0] / h)
         lower = b.math("MINIMUM", 49, b.math("FLOOR", 48, t), edit_table.STACKED - 2.0)
         fraction = b.math("SUBTRACT", 50, t, lower)
-        found = []
-        for step in (0.0, 1.0):  # the two levels around the control's value
-            uvs = []
-            for u, v in bases:
-                offset = b.math("MULTIPLY_ADD", 51, lower, 1.0 / edit_table.STACKED, v)
-                uv = b.node("ShaderNodeCombineXYZ", 52)
-                b.link(u, uv.inputs[0])
-                b.link(b.math("ADD", 51, offset, step / edit_table.STACKED) if step else offset, uv.inputs[1])
-                uvs.append(uv.outputs[0])
-            found.append(live._lookup(b, images[edit_table.image_name(j)], uvs, frac, 53))
-        rgb = b.mix("RGBA", 55, fraction, found[0][0], found[1][0])
-        alpha = b.mix("FLOAT", 55, fraction, found[0][1], found[1][1])
-        if shift_rgb is None:
-            shift_rgb, shift_a = rgb, alpha
-        else:
-            add = b.node("ShaderNodeVectorMath", 56, operation="ADD")
-            b.link(shift_rgb, add.inputs[0])
-            b.link(rgb, add.inputs[1])
-            shift_rgb = add.outputs[0]
-            shift_a = b.math("ADD", 56, shift_a, alpha)
-    sep = b.node("ShaderNodeSeparateColor", 55)
-    b.link(shift_rgb, sep.inputs[0])
-    factor = b.node("ShaderNodeCombineColor", 57)
+        corner = b.node("ShaderNodeCombineXYZ", 51)
+        b.link(slice_u, corner.inputs[0])
+        b.link(b.math("MULTIPLY", 50, lower, 1.0 / edit_table.STACKED), corner.inputs[1])
+        uv = _vec(b, "ADD", 52, base, corner.outputs[0])
+        up = _vec(b, "ADD", 53, uv, (0.0, 1.0 / edit_table.STACKED, 0.0))
+        uvs = [[uv, _vec(b, "ADD", 53, uv, (tile_u, 0.0, 0.0))], [up, _vec(b, "ADD", 54, up, (tile_u, 0.0, 0.0))]]
+        for kind in edit_table.KINDS:
+            image = images[edit_table.image_name(j, kind)]
+            found = [_bilinear_pair(b, image, pair, frac, 55) for pair in uvs]  # levels l and l + 1
+            value = b.mix("RGBA", 57, fraction, found[0], found[1])
+            shifts[kind] = value if shifts[kind] is None else _vec(b, "ADD", 58, shifts[kind], value)
+    factor = {kind: _exp(b, shifts[kind], 59) for kind in edit_table.KINDS}
+    edited = _vec(b, "MULTIPLY", 62, colour, factor["colour"])
+    return EditBranch(colour=edited, radius_factor=factor["radius"])
+
+
+def _bilinear_pair(b, image: bpy.types.Image, uvs, frac, stage: int) -> bpy.types.NodeSocket:
+    """Trilinear RGB of one level: bilinear lookups at ``uvs`` (slices s, s + 1) mixed by ``frac``."""
+    colours = []
+    for uv in uvs:
+        tex = b.node("ShaderNodeTexImage", stage, image=image, interpolation="Linear", extension="EXTEND")
+        tex.label = image.name
+        b.group.links.new(uv, tex.inputs["Vector"])
+        colours.append(tex.outputs["Color"])
+    return b.mix("RGBA", stage + 1, frac, colours[0], colours[1])
+
+
+def _exp(b, vector, stage: int) -> bpy.types.NodeSocket:
+    """exp of each component of ``vector``."""
+    sep = b.node("ShaderNodeSeparateXYZ", stage)
+    b.group.links.new(vector, sep.inputs[0])
+    comb = b.node("ShaderNodeCombineXYZ", stage + 2)
     for c in range(3):
-        b.link(b.math("EXPONENT", 56, sep.outputs[c]), factor.inputs[c])
-    edited = b.node("ShaderNodeVectorMath", 58, operation="MULTIPLY")
-    b.link(colour, edited.inputs[0])
-    b.link(factor.outputs[0], edited.inputs[1])
-    return EditBranch(colour=edited.outputs[0], radius_factor=b.math("EXPONENT", 56, shift_a))
-
-
-def _stacked_uv(b, layout, slice_index, x1, x2, stage: int):
-    """(u, v) of grid point (slice, x1, x2) in the lowest atlas of a control's image (edit_table.STACKED atlases
-    stacked bottom to top): level k lies at v + k / STACKED (the slice atlas of exporters.live_table)."""
-    width, height = layout.size
-    tile_w, tile_h = layout.tile
-    border = live_table.BORDER + 0.5
-    row = b.math("FLOOR", stage + 1, b.math("DIVIDE", stage, b.math("ADD", stage, slice_index, 0.5),
-                                            float(layout.columns)))
-    col = b.math("MULTIPLY_ADD", stage + 2, row, -float(layout.columns), slice_index)
-    px = b.math("MULTIPLY_ADD", stage + 3, col, float(tile_w), b.math("ADD", stage + 2, x1, border))
-    py = b.math("MULTIPLY_ADD", stage + 3, row, float(tile_h), b.math("ADD", stage + 2, x2, border))
-    return (b.math("DIVIDE", stage + 4, px, float(width)),
-            b.math("DIVIDE", stage + 4, py, float(edit_table.STACKED * height)))
-
-
-def _channel(b, colour, c: int):
-    sep = b.node("ShaderNodeSeparateColor", 30)
-    b.link(colour, sep.inputs[0])
-    return sep.outputs[c]
+        b.link(b.math("EXPONENT", stage + 1, sep.outputs[c]), comb.inputs[c])
+    return comb.outputs[0]
 
 
 def scale_radius(b, radius, factor) -> bpy.types.NodeSocket:
-    """``radius`` (vector) times the scalar ``factor``."""
-    node = b.node("ShaderNodeVectorMath", 22, operation="SCALE")
-    b.link(radius, node.inputs[0])
-    b.link(factor, node.inputs["Scale"])
-    return node.outputs[0]
+    """``radius`` (vector) times ``factor`` (vector) per channel."""
+    return _vec(b, "MULTIPLY", 22, radius, factor)
 
 
 def live_node(material: bpy.types.Material) -> bpy.types.Node | None:

@@ -8,24 +8,25 @@ What the live group computes for a painted colour c and controls (m, b, o):
    level 0 left out: w_i = max(0, 1 - |s_j - level_i| / h)); at neutral every weight is exactly 0.  At most two
    adjacent levels weigh: the nodes read just those two (linear interpolation between them, the neutral level
    holding zero);
-3. the shift D(c, s) = sum_j sum_i w_ji T_ji(c), where T_ji(c) (RGBA) is trilinear in a coarse grid over skin
+3. the shift D(c, s) = sum_j sum_i w_ji T_ji(c), where T_ji(c) (6 channels) is trilinear in a coarse grid over skin
    space (the grid, box and projection of exporters.texel_table / exporters.live_table: colours outside the box take
    the nearest skin colour's shift, so the answer is continuous) holding at level i of control j:
-   RGB = ln(C_edited / C_painted) per channel (exporters.skin_edits.colour_ratio), A = the log-radius correction
-   (below);
-4. edited colour c' = c exp(D_RGB) (the lookups clamp it to [0, 1]): the media are the texel table's at c' (the
-   inversion of the edited colour) with every radius times exp(D_A).  A is the mean over channels of
-   ln(r_exact / r_table(c')): how much the edited tone's effective radius sum_k w_k r_k
-   (exporters.skin_edits.edited_records) differs from that of the tone the inversion finds for c' (melanin sits in
-   the epidermis and blood in the dermis, so tones of one colour can differ in depth).
+   channels 0-2 = ln(C_edited / C_painted) per channel (exporters.skin_edits.colour_ratio), channels 3-5 = the
+   log-radius correction per channel (below);
+4. edited colour c' = c exp(D_0..2) (the lookups clamp it to [0, 1]): the media are the texel table's at c' (the
+   inversion of the edited colour) with every component's radius in channel ch times exp(D_3+ch).  The correction
+   of channel ch is ln(r_exact / r_table(c')) of that channel's effective radius sum_k w_k r_k: how much the edited
+   tone's (exporters.skin_edits.edited_records) differs from that of the tone the inversion finds for c' (melanin
+   sits in the epidermis and blood in the dermis, so tones of one colour can differ in depth, and differently in
+   red light, which reaches the dermis, than in blue, which the epidermis absorbs).
 
 The controls combine additively in log space (step 3): measured against the exact answer by
 ``python -m training edit-table --check`` (docs/research/skin_model.md).  At neutral the shift is exactly 0 and
 c' = c bit for bit.
 
-File (``.npz``): ``values`` float32 (n0, n1, n2, 3 controls, levels, 4), NaN-free (nodes outside the RGB cube
-filled by exporters.live_table.fill_outside_cube), the grid, and a JSON header with the SHA-256 of the model,
-decoder and texel table it was made from.
+File (``.npz``): ``steps`` int16 (n0, n1, n2, 3 controls, levels, 6), the values (:func:`encode_values`; NaN-free:
+nodes outside the RGB cube filled by exporters.live_table.fill_outside_cube), the grid, and a JSON header with the
+SHA-256 of the model, decoder and texel table it was made from.
 """
 
 from __future__ import annotations
@@ -43,16 +44,17 @@ from . import inference, live_table, skin_edits, texel_records, texel_table
 from .cli_io import atomic_file
 from .maps import sha256_file
 
-FORMAT = "spectral_skin_sss edit table v1"
+FORMAT = "spectral_skin_sss edit table v2"
 #: Grid step in skin space: coarser than the texel table's (the shifts vary slowly with the colour).
-DEFAULT_STEP: float = 0.04
+DEFAULT_STEP: float = 0.03
 #: Levels of each control coordinate (log2 m, log2 b, o), equally spaced, 0 (neutral) left out.
-LEVELS: dict[str, tuple[float, ...]] = {"melanin": (-2.0, -1.0, 1.0, 2.0), "blood": (-2.0, -1.0, 1.0, 2.0),
-                                        "oxygenation": (-0.5, -0.25, 0.25, 0.5)}
+LEVELS: dict[str, tuple[float, ...]] = {
+    "melanin": (-2.0, -1.5, -1.0, -0.5, 0.5, 1.0, 1.5, 2.0), "blood": (-2.0, -1.5, -1.0, -0.5, 0.5, 1.0, 1.5, 2.0),
+    "oxygenation": (-0.5, -0.375, -0.25, -0.125, 0.125, 0.25, 0.375, 0.5)}
 #: Spacing h of each control's levels.
-SPACING: dict[str, float] = {"melanin": 1.0, "blood": 1.0, "oxygenation": 0.25}
-#: Channels per level: ln colour ratio (R, G, B) and log-radius correction.
-CHANNELS = 4
+SPACING: dict[str, float] = {"melanin": 0.5, "blood": 0.5, "oxygenation": 0.125}
+#: Channels per level: ln colour ratio (R, G, B) and log-radius correction (R, G, B).
+CHANNELS = 6
 
 
 class EditTableError(ValueError):
@@ -73,27 +75,31 @@ class EditTable:
     def shape(self) -> tuple[int, int, int]:
         return tuple(self.values.shape[:3])
 
-    def layout(self, columns: int | None = None) -> live_table.AtlasLayout:
-        """The slice-atlas layout of the grid (exporters.live_table), about square."""
+    def layout(self) -> live_table.AtlasLayout:
+        """The slice-atlas layout of the grid (exporters.live_table): every slice in one row, so that the nodes
+        reach slice s + 1 by a fixed offset."""
         n0, n1, n2 = self.shape
-        best = columns or min(range(1, n0 + 1), key=lambda c: abs(c * (n1 + 2) - (-(-n0 // c)) * (n2 + 2)))
         return live_table.AtlasLayout(shape=(n0, n1, n2), origin=tuple(float(o) for o in self.origin),
-                                      step=float(self.step), columns=best)
+                                      step=float(self.step), columns=n0)
 
     def atlases(self) -> dict[str, np.ndarray]:
-        """Image name (the control's, :func:`image_name`) -> its levels' atlases stacked bottom to top in the order
-        of :func:`stacked_levels`, the neutral level (all zero) in the middle: (STACKED x height, width, 4)
-        float32."""
+        """Image name (:func:`image_name`) -> one control's colour or radius channels at its levels, the atlases
+        stacked bottom to top in the order of :func:`stacked_levels` (the neutral level, all zero, in the middle):
+        (STACKED x height, width, 4) float32, alpha 1."""
         layout = self.layout()
         out = {}
         for j in range(len(skin_edits.CONTROLS)):
-            grids = stacked_levels(self.values[:, :, :, j])
-            out[image_name(j)] = np.concatenate([live_table.atlas_of(g, layout) for g in grids], axis=0)
+            for kind, channels in KINDS.items():
+                grids = stacked_levels(self.values[:, :, :, j, :, channels])
+                rgb = np.concatenate([live_table.atlas_of(g, layout) for g in grids], axis=0)
+                out[image_name(j, kind)] = np.concatenate([rgb, np.ones_like(rgb[..., :1])], axis=-1)
         return out
 
 
 #: Atlases stacked per control image: the levels below neutral, neutral (zero), the levels above.
-STACKED = 5
+STACKED = len(LEVELS["melanin"]) + 1
+#: The two images of each control: which channels of a level each holds.
+KINDS: dict[str, slice] = {"colour": slice(0, 3), "radius": slice(3, 6)}
 
 
 def stacked_levels(values: np.ndarray) -> list[np.ndarray]:
@@ -104,8 +110,9 @@ def stacked_levels(values: np.ndarray) -> list[np.ndarray]:
     return [*grids[:half], np.zeros_like(grids[0]), *grids[half:]]
 
 
-def image_name(control: int) -> str:
-    return skin_edits.CONTROLS[control].title()
+def image_name(control: int, kind: str) -> str:
+    """``"Melanin Colour"``, ``"Melanin Radius"``, ...: a control's image of one kind (:data:`KINDS`)."""
+    return f"{skin_edits.CONTROLS[control].title()} {kind.title()}"
 
 
 def control_coords(edits: np.ndarray) -> np.ndarray:
@@ -158,9 +165,10 @@ def approx_records(texels: texel_table.TexelTable, table: EditTable, rgb: np.nda
     d = shift(table, rgb, edits)
     rec = table_records(texels, edited_colour(rgb, d), targets, extended)
     if "radius_m" in rec:
-        rec["radius_m"] = rec["radius_m"] * np.exp(d[:, 3])[:, None, None]
+        factor = np.exp(d[:, None, 3:6])
+        rec["radius_m"] = rec["radius_m"] * factor
         if "sigma_t_cm" in rec:
-            rec["sigma_t_cm"] = rec["sigma_t_cm"] / np.exp(d[:, 3])[:, None, None]
+            rec["sigma_t_cm"] = rec["sigma_t_cm"] / factor
     return rec
 
 
@@ -170,11 +178,10 @@ def effective_radius(rec: dict[str, np.ndarray]) -> np.ndarray:
 
 
 def log_radius_ratio(exact: np.ndarray, base: np.ndarray) -> np.ndarray:
-    """(N,): mean over channels of ln(exact / base) of effective radii (N, 3), over the channels where both are
-    positive (0 where none is: a black channel has no radius to correct)."""
+    """(N, 3): ln(exact / base) of effective radii (N, 3) per channel, 0 where either is not positive (a black
+    channel has no radius to correct)."""
     ok = (exact > 0.0) & (base > 0.0)
-    logs = np.where(ok, np.log(np.where(ok, exact, 1.0) / np.where(ok, base, 1.0)), 0.0)
-    return logs.sum(axis=1) / np.maximum(ok.sum(axis=1), 1)
+    return np.where(ok, np.log(np.where(ok, exact, 1.0) / np.where(ok, base, 1.0)), 0.0)
 
 
 def build(model: inference.InversionSession, texels: texel_table.TexelTable,
@@ -230,9 +237,28 @@ def save(table: EditTable, path: str | os.PathLike, overwrite: bool = False) -> 
     if path.exists() and not overwrite:
         raise FileExistsError(f"{path} exists; pass --overwrite to replace it")
     with atomic_file(path) as f:
-        np.savez_compressed(f, values=table.values, origin=table.origin, step=np.float64(table.step),
+        np.savez_compressed(f, steps=encode_values(table.values), origin=table.origin, step=np.float64(table.step),
                             meta=np.array(json.dumps(table.meta)))
     return path
+
+
+#: The file stores the values in steps of 1 / QUANTUM (ln units: 1.2e-4 at most off, 0.012 % of a ratio) as int16
+#: differences along the first grid axis: the shifts vary smoothly, so the differences are small and compress to
+#: a third of the float32 values, which keeps the add-on's model folder small.
+QUANTUM = 4096.0
+
+
+def encode_values(values: np.ndarray) -> np.ndarray:
+    """int16 differences along axis 0 of ``values`` rounded to steps of 1 / QUANTUM (ValueError beyond +-4)."""
+    q = np.rint(np.asarray(values, np.float64) * QUANTUM)
+    if not np.all(np.abs(q) < 32767 / 2):
+        raise ValueError("edit table values beyond +-4 cannot be stored; check the build")
+    return np.diff(q, axis=0, prepend=0.0).astype(np.int16)
+
+
+def decode_values(steps: np.ndarray) -> np.ndarray:
+    """The float32 values of :func:`encode_values`' output."""
+    return (np.cumsum(steps.astype(np.int64), axis=0) / QUANTUM).astype(np.float32)
 
 
 def load(path: str | os.PathLike) -> EditTable:
@@ -242,7 +268,7 @@ def load(path: str | os.PathLike) -> EditTable:
         raise EditTableError(f"no edit table at {path}: build it with python -m training edit-table")
     try:
         with np.load(path, allow_pickle=False) as data:
-            values, origin, step = data["values"], data["origin"], float(data["step"])
+            values, origin, step = decode_values(data["steps"]), data["origin"], float(data["step"])
             meta = json.loads(str(data["meta"]))
     except (OSError, KeyError, ValueError) as exc:
         raise EditTableError(f"{path} is not an edit table ({exc}); rebuild it with python -m training edit-table"

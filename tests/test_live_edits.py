@@ -104,7 +104,7 @@ def test_edited_media_equal_the_reference_and_the_fast_bake(tmp_path, addon):
         k, kind = name.split()[1], name.split()[2]
         ref = reference[f"{k} {kind}"]
         if kind == "Radius":
-            ref = ref * np.exp(d[:, 3:4])
+            ref = ref * np.exp(d[:, 3:6])  # the radius correction per channel
         rendered = _render(scene, tree, gnode, emission, name)
         np.testing.assert_allclose(rendered, ref, rtol=5e-4, atol=1e-7, err_msg=name)
         baked = maps.read_exr(tmp_path / "bake" / f"edited_{k}_{kind.lower()}.exr")[0][0].astype(np.float64)
@@ -150,7 +150,7 @@ def test_operator_wires_the_edit_inputs_and_presets_set_them(tmp_path, addon):
     node = live_edits.live_node(mat)
     assert node is not None and [node.inputs[n].default_value for n in EDIT] == [1.0, 1.0, 0.0]
     images = [i for i in bpy.data.images if i.name.startswith(live_edits.IMAGE_PREFIX)]
-    assert len(images) == 3 and all(i.packed_file is not None for i in images)
+    assert len(images) == 6 and all(i.packed_file is not None for i in images)
     assert sum(i.size[0] * i.size[1] * 16 for i in images) <= 8e6  # the images the edits add: at most 8 MB
     mask = mat.node_tree.nodes.new("ShaderNodeValue")  # an input fed by a node is left as it is
     mat.node_tree.links.new(mask.outputs[0], node.inputs["Oxygenation"])

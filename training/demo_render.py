@@ -49,6 +49,8 @@ WORLD_GREY = 0.04
 #: Default size of each render (pixels, square) and Cycles samples per pixel (then OpenImageDenoise): the
 #: whole ``make demo`` stays within 3 minutes on 2 cores (docs/user/demo.md).
 RENDER_SIZE, SAMPLES = 256, 16
+#: Frames per row of the flush strip.
+STRIP_ROW = 8
 
 
 def write_image(path: Path, codes: np.ndarray) -> Path:
@@ -429,9 +431,9 @@ def edits_row(out: Path, texture_size: int = 512, render_size: int = RENDER_SIZE
 def flush_strip(out: Path, texture_size: int = 256, render_size: int = 80, samples: int = 8, tone: str = "medium",
                 frames: int = 24, peak: float = 2.5, figure: Path | None = None) -> dict:
     """A flush as an animation: the live group's Blood input keyframed 1 -> ``peak`` -> 1 over ``frames`` frames
-    (Bezier keys at the first, middle and last frame), every frame rendered, side by side in one strip
-    (``out``/flush_strip.png, and ``figure`` when given).  Returns the Blood value and the left ear's mean colour
-    per frame."""
+    (Bezier keys at the first, middle and last frame), every frame rendered, side by side in a strip of rows of
+    STRIP_ROW frames, left to right, top to bottom (``out``/flush_strip.png, and ``figure`` when given).  Returns
+    the Blood value and the left ear's mean colour per frame."""
 
     sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
     from blender_addon import live_edits
@@ -448,7 +450,9 @@ def flush_strip(out: Path, texture_size: int = 256, render_size: int = 80, sampl
         tile = _render(scene, out / f"flush_{frame:02d}.png")
         ear_means.append(tile[ear].mean(axis=0).tolist())
         tiles.append(tile)
-    strip = np.concatenate(tiles, axis=1)
+    rows = [np.concatenate(tiles[i:i + STRIP_ROW], axis=1) for i in range(0, len(tiles), STRIP_ROW)]
+    rows[-1] = np.pad(rows[-1], ((0, 0), (0, rows[0].shape[1] - rows[-1].shape[1]), (0, 0)))
+    strip = np.concatenate(rows, axis=0)
     codes = np.clip(np.rint(strip * 255.0), 0, 255).astype(np.uint8)
     for path in (out / "flush_strip.png", *([figure] if figure else [])):
         write_image(path, codes)

@@ -49,6 +49,7 @@ BENCH_MODULES = [
     "training.bench.live",
     "training.bench.render_cost",
     "training.bench.oblique",
+    "training.bench.edit_cost",
     "training.bench.eevee",
     "training.bench.memory",
     "training.bench.runtime",

@@ -63,6 +63,11 @@ FIGURES: dict[str, Figure] = {
     "live_render_time_vs_principled": Figure("live", "live group (default)", "ratio", r"time ([\d.]+)x"),
     "live_noise_time_vs_principled": Figure("render_cost", "live group (default) vs Principled", "ratio",
                                             r"time to equal noise ([\d.]+)x"),
+    **{f"edits_{mode}_time_equal_samples": Figure("edit_cost", label, "ratio", r"time at equal samples ([\d.]+)x")
+       for mode, label in (("neutral", "at neutral"), ("tan", "at preset tan"), ("flush", "at preset flush"),
+                           ("pallor", "at preset pallor"))},
+    "edit_images_mb": Figure("edit_cost", "edit table in Blender", "ours", r"images ([\d.]+) MB"),
+    "edit_operator_s": Figure("edit_cost", "edit table in Blender", "ours", r"operator ([\d.]+) s"),
     "eevee_first_render_vs_principled": Figure("eevee", "EEVEE first render", "ratio", r"first render ([\d.]+)x"),
     "onnx_vs_torch_inference": Figure("train", "skin_inversion.onnx inference", "ratio", r"([\d.]+)x"),
 }

@@ -1,7 +1,7 @@
 """``python -m training edit-table``: build the skin-edit table (exporters.edit_table), or check it.
 
     python -m training edit-table [--model M] [--decoder D] [--table T]
-        [--out blender_addon/models/skin_inversion_edits.npz] [--step 0.04] [--threads N] [--overwrite] [--check]
+        [--out blender_addon/models/skin_inversion_edits.npz] [--step 0.03] [--threads N] [--overwrite] [--check]
 
 ``--check`` measures the live group's answer (the tables) against the exact one (the network, the decoder and the
 collapse) on the colours of the representative tones R01-R09 (training/skin/tones.csv, through the decoder) under

@@ -1,0 +1,124 @@
+"""Benchmark of the skin edits' cost: the live group with its Melanin, Blood and Oxygenation inputs against the same
+group built without them, side by side.
+
+Renders: the demo head (training.demo_render, ``RESOLUTION`` squared px, Cycles CPU on one thread, denoiser off,
+``SAMPLES`` samples) with the medium tone's albedo texture through Invert Skin Albedo's default (the live group with
+the edit inputs).  One Blender process renders, ``ROUNDS`` times in turn, the live group of the same table built
+without the edit nodes (blender_addon.live.build_live_group without an edit table: the unedited group) and the
+group with the edit inputs at neutral and under the presets tan, flush and pallor (exporters.skin_edits.PRESETS),
+swapping the material's group between renders.  Each render's CPU time (getrusage, scene sync included) is kept;
+the ratio is that of the medians: on a shared machine every material meets the same disturbance in turn, and the
+median is robust to the renders that other work slowed.  Equal samples, so an edited row also carries the change
+of the physics (an edit changes how far light walks in the tone), not only the nodes' cost.  Images: the bytes the
+edit table's images take in Blender (float RGBA, 16 bytes a pixel).  Operator: Invert Skin Albedo on a 4096²
+albedo with the edit table shipped (training.bench.live's set-up).
+"""
+
+from __future__ import annotations
+
+import statistics
+import tempfile
+from pathlib import Path
+
+from training.bench import live as live_bench
+
+ROOT = Path(__file__).resolve().parents[2]
+RESOLUTION = 128
+SAMPLES = 16
+ROUNDS = 8
+TEXTURE = 256
+PRESETS = ("tan", "flush", "pallor")
+MODES = ("plain", "neutral", *PRESETS)
+#: Bytes a pixel of a float RGBA image takes in Blender.
+FLOAT_RGBA_BYTES = 16
+
+_CHILD = """
+import json, resource, sys
+sys.path.insert(0, {root!r})
+import bpy
+import blender_addon
+from blender_addon import live, live_edits, preferences
+from exporters.skin_edits import NEUTRAL, PRESETS
+from training import demo_render
+from training.demo_subject import TONES, skin_albedo_texture
+scene, parts = demo_render._scene({resolution}, {samples})
+scene.cycles.use_denoising = False
+scene.cycles.use_adaptive_sampling = False
+scene.render.threads_mode, scene.render.threads = "FIXED", 1
+image = bpy.data.images.load(str(demo_render.write_image({texture_path!r},
+                                  skin_albedo_texture({texture}, seed=0, base=TONES["medium"]))))
+mat = demo_render._material("skin", image, "principled")
+demo_render._assign(parts, mat)
+blender_addon.register()
+demo_render._invert(parts[0], mat)
+node = live_edits.live_node(mat)
+edited = node.node_tree
+table = live.table_for_model(preferences.DEFAULT_MODEL)
+layout, images = live.ensure_images(table)
+plain = live.build_live_group(table, layout, images)
+values = {{"neutral": NEUTRAL, **{{p: tuple(PRESETS[p].row()) for p in {presets!r}}}}}
+times = {{mode: [] for mode in {modes!r}}}
+for _ in range({rounds}):
+    for mode in {modes!r}:
+        node.node_tree = plain if mode == "plain" else edited
+        for name, value in zip(("Melanin", "Blood", "Oxygenation"), values.get(mode, NEUTRAL)):
+            if name in node.inputs:
+                node.inputs[name].default_value = float(value)
+        r0 = resource.getrusage(resource.RUSAGE_SELF)
+        bpy.ops.render.render(write_still=False)
+        r1 = resource.getrusage(resource.RUSAGE_SELF)
+        times[mode].append((r1.ru_utime - r0.ru_utime) + (r1.ru_stime - r0.ru_stime))
+print("RESULT" + json.dumps(times))
+"""
+
+
+def measure(rounds: int = ROUNDS, samples: int = SAMPLES, resolution: int = RESOLUTION) -> dict[str, list[float]]:
+    """CPU seconds of each render, per mode (:data:`MODES`), the modes in turn in one process."""
+    with tempfile.TemporaryDirectory(prefix="bench_edit_") as tmp:
+        return live_bench.run_script(_CHILD.format(root=str(ROOT), resolution=resolution, samples=samples,
+                                                   texture=TEXTURE, texture_path=str(Path(tmp) / "skin.png"),
+                                                   presets=PRESETS, modes=MODES, rounds=rounds))
+
+
+def image_megabytes() -> float:
+    """MB (1e6 bytes) of the shipped edit table's images as Blender holds them."""
+    from exporters import edit_table
+    from training.paths import SHIPPED_EDIT_TABLE
+
+    atlases = edit_table.load(SHIPPED_EDIT_TABLE).atlases()
+    return sum(a.shape[0] * a.shape[1] * FLOAT_RGBA_BYTES for a in atlases.values()) / 1e6
+
+
+def _label(mode: str) -> str:
+    return "at neutral (1, 1, 0)" if mode == "neutral" else f"at preset {mode}"
+
+
+def benchmarks(quick: bool) -> list[dict]:
+    rounds = 3 if quick else ROUNDS
+    times = measure(rounds)
+    ref = statistics.median(times["plain"])
+    rows = []
+    for mode in MODES[1:]:
+        ours = statistics.median(times[mode])
+        spread = f"{min(times[mode]):.2f}-{max(times[mode]):.2f}"
+        rows.append({"workload": f"edit cost, demo head {RESOLUTION}² px, Cycles CPU 1 thread, no denoiser, {SAMPLES} "
+                                 f"spp, {rounds} rounds in turn in one process: live group with the edit inputs "
+                                 f"{_label(mode)} vs the live group without edit nodes",
+                     "ours": f"median {ours:.2f} CPU-s per render ({spread})",
+                     "anchor": f"median {ref:.2f} CPU-s per render ({min(times['plain']):.2f}-"
+                               f"{max(times['plain']):.2f})",
+                     "ratio": f"time at equal samples {ours / ref:.2f}x",
+                     "error": "-",
+                     "notes": "CPU s from getrusage around each render (scene sync included); ratio of medians; an "
+                              "edit also changes the light's walk (the physics)"})
+    size = 2048 if quick else live_bench.SIZE
+    setup = live_bench.measure(size, ("live",))["live"]
+    rows.append({"workload": f"edit table in Blender: images the edit inputs add; Invert Skin Albedo on a {size}² "
+                             "8-bit albedo with the edit table shipped",
+                 "ours": f"images {image_megabytes():.2f} MB; operator {setup['operator_s']:.2f} s wall "
+                         f"({setup['operator_cpu_s']:.2f} CPU-s)",
+                 "anchor": "limits: images 8 MB, operator 2 s",
+                 "ratio": "-", "error": "-",
+                 "notes": "float RGBA images, 16 bytes a pixel; operator wall and process CPU time in a fresh "
+                          "process (training.bench.live; CPU time counts every thread, the inference's too)"})
+    return rows
