@@ -49,7 +49,7 @@ GROUP_NAME = "Spectral Skin SSS Live"
 #: Custom properties: on the group and the images, the SHA-256 of the table they were made from.
 TABLE_PROP = "spectral_skin_sss_table"
 #: Layout version of the live group (bump when the generated nodes change).
-LIVE_VERSION = 5
+LIVE_VERSION = 6
 IMAGE_PREFIX = "Spectral Skin SSS Table"
 #: sRGB encoding (IEC 61966-2-1): linear segment below this value, slope 12.92 there.
 _SRGB_KNEE, _SRGB_SLOPE = 0.0031308, 12.92

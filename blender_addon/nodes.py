@@ -216,12 +216,23 @@ def _fresh_group(name: str, k_count: int, backend: str):
     return group, gin, gout
 
 
-def build_svm_group(k_count: int = 3, name: str = GROUP_NAME) -> bpy.types.NodeTree:
-    """Build (or rebuild) the SVM node group with ``k_count`` components; returns the node tree."""
+#: How the SVM group splits each component into closures (module docstring): "nested" (the default: up to three
+#: closures per component over nested channel sets, all three channels, the two of largest weight, the largest) or
+#: "per_channel" (three single-channel closures per component: the earlier design, kept for comparison).
+SVM_DESIGNS = ("nested", "per_channel")
+
+
+def build_svm_group(k_count: int = 3, name: str = GROUP_NAME, design: str = "nested") -> bpy.types.NodeTree:
+    """Build (or rebuild) the SVM node group with ``k_count`` components and closure ``design``
+    (:data:`SVM_DESIGNS`); returns the node tree."""
     if not 1 <= k_count <= 7:  # 3K closures + coat + margin must stay below Cycles' MAX_CLOSURE = 64
         raise ValueError("k_count must be in 1..7")
+    if design not in SVM_DESIGNS:
+        raise ValueError(f"design must be one of {SVM_DESIGNS}, not {design!r}")
     group, gin, gout = _fresh_group(name, k_count, "SVM")
-    mixture = _svm_mixture(group, gin, k_count, _body_scale(group, gin))
+    group["spectral_skin_sss_design"] = design
+    build = _svm_mixture if design == "nested" else _svm_mixture_per_channel
+    mixture = build(group, gin, k_count, _body_scale(group, gin))
     surface = _add_shader(group, principled_specular(group, gin), mixture, 1050.0, 700.0)
     surface = _add_shader(group, surface, gin.outputs["Body"], 1150.0, 700.0)
     group.links.new(_outer_layers(group, gin, surface), gout.inputs["BSSRDF"])
@@ -230,17 +241,91 @@ def build_svm_group(k_count: int = 3, name: str = GROUP_NAME) -> bpy.types.NodeT
 
 def _svm_mixture(group: bpy.types.NodeTree, gin: bpy.types.Node, k_count: int,
                  scale: bpy.types.NodeSocket) -> bpy.types.NodeSocket:
+    """The nested closures of every component (module docstring), each scaled by its share of w_kc x ``scale``
+    (the coat's body weight) and summed; returns the sum.
+
+    With lo <= mid <= hi the component's weights sorted over channels, w_c = lo + (mid - lo) [w_c >= mid] +
+    (hi - mid) [w_c >= hi] exactly (ties included: mid is one of the three weights, picked by min/max, never
+    computed).  So closure 1 carries all channels at weight lo, closure 2 the channels with w_c >= mid at mid - lo,
+    closure 3 those with w_c >= hi at hi - mid; a channel left out has Color 0 (no weight, no walk) but keeps its
+    radius, so Cycles still counts it in the closure's pick weight (closure/bssrdf.h: sample_weight is the mean
+    weight times the number of channels with a radius), which keeps every closure's pick weight the sum of its
+    channels' weights.  A closure of weight 0 is skipped by Cycles."""
+    total = None
+    for k in range(1, k_count + 1):
+        y0 = -(k - 1) * 1500.0
+        seps = _separated(group, gin, k, y0)
+        w = [seps["Weight"].outputs[c] for c in range(3)]
+        lo = _math(group, "MINIMUM", _math(group, "MINIMUM", w[0], w[1], x=-850.0, y=y0), w[2], x=-800.0, y=y0)
+        hi = _math(group, "MAXIMUM", _math(group, "MAXIMUM", w[0], w[1], x=-850.0, y=y0 - 50.0), w[2], x=-800.0,
+                   y=y0 - 50.0)
+        mid = _math(group, "MAXIMUM", _math(group, "MINIMUM", w[0], w[1], x=-850.0, y=y0 - 100.0),
+                    _math(group, "MINIMUM", _math(group, "MAXIMUM", w[0], w[1], x=-900.0, y=y0 - 150.0), w[2],
+                          x=-850.0, y=y0 - 150.0), x=-800.0, y=y0 - 100.0)
+        levels = ((None, lo), (mid, _math(group, "SUBTRACT", mid, lo, x=-750.0, y=y0 - 100.0)),
+                  (hi, _math(group, "SUBTRACT", hi, mid, x=-750.0, y=y0 - 50.0)))
+        for j, (threshold, share) in enumerate(levels):
+            y = y0 - j * 450.0
+            colour = gin.outputs[socket_name(k, "Color")] if threshold is None \
+                else _masked(group, seps["Color"], w, threshold, y).outputs[0]
+            sss = _closure(group, gin, colour, gin.outputs[socket_name(k, "Radius")], k, y)
+            sss.label = f"k{k} " + ("RGB", "two largest weights", "largest weight")[j]
+            weight = _math(group, "MULTIPLY", share, scale, x=-300.0, y=y + 100.0)
+            for part in _weighted(group, sss.outputs["BSSRDF"], weight, y):
+                total = part if total is None else _add_shader(group, total, part, 50.0 + 20.0 * k, y)
+    return total
+
+
+def _separated(group: bpy.types.NodeTree, gin: bpy.types.Node, k: int, y0: float) -> dict[str, bpy.types.Node]:
+    """Separate Color nodes of component k's Color, Radius and Weight inputs, by kind."""
+    seps = {}
+    for j, kind in enumerate(("Color", "Radius", "Weight")):
+        sep = group.nodes.new("ShaderNodeSeparateColor")
+        sep.location = (-950.0, y0 - j * 200.0)
+        group.links.new(gin.outputs[socket_name(k, kind)], sep.inputs[0])
+        seps[kind] = sep
+    return seps
+
+
+def _masked(group: bpy.types.NodeTree, colour: bpy.types.Node, weights: list, threshold: bpy.types.NodeSocket,
+            y: float) -> bpy.types.Node:
+    """Combine Color of ``colour``'s channels (a Separate Color node) where the channel's weight is >= ``threshold``,
+    0 elsewhere."""
+    comb = group.nodes.new("ShaderNodeCombineColor")
+    comb.location = (-600.0, y)
+    for c in range(3):
+        below = _math(group, "LESS_THAN", weights[c], threshold, x=-700.0, y=y - 40.0 * c)
+        keep = _math(group, "SUBTRACT", 1.0, below, x=-650.0, y=y - 40.0 * c)
+        group.links.new(_math(group, "MULTIPLY", colour.outputs[c], keep, x=-600.0, y=y - 40.0 * c),
+                        comb.inputs[c])
+    return comb
+
+
+def _closure(group: bpy.types.NodeTree, gin: bpy.types.Node, colour: bpy.types.NodeSocket,
+             radius: bpy.types.NodeSocket, k: int, y: float) -> bpy.types.Node:
+    """Subsurface Scattering node of component k (RANDOM_WALK, smooth entry at the group's IOR) of ``colour`` and
+    ``radius``."""
+    sss = group.nodes.new("ShaderNodeSubsurfaceScattering")
+    sss.location = (-450.0, y)
+    sss.falloff = "RANDOM_WALK"
+    sss.inputs["Scale"].default_value = 1.0
+    sss.inputs["Roughness"].default_value = ENTRY_ROUGHNESS
+    group.links.new(colour, sss.inputs["Color"])
+    group.links.new(radius, sss.inputs["Radius"])
+    group.links.new(gin.outputs[socket_name(k, "Anisotropy")], sss.inputs["Anisotropy"])
+    group.links.new(gin.outputs["IOR"], sss.inputs["IOR"])
+    group.links.new(gin.outputs["Normal"], sss.inputs["Normal"])
+    return sss
+
+
+def _svm_mixture_per_channel(group: bpy.types.NodeTree, gin: bpy.types.Node, k_count: int,
+                             scale: bpy.types.NodeSocket) -> bpy.types.NodeSocket:
     """The 3K single-channel closures, each scaled by w_kc x ``scale`` (the coat's body weight) and summed
     (module docstring); returns the sum."""
     total = None
     for k in range(1, k_count + 1):
         y0 = -(k - 1) * 1500.0
-        seps = {}
-        for j, kind in enumerate(("Color", "Radius", "Weight")):
-            sep = group.nodes.new("ShaderNodeSeparateColor")
-            sep.location = (-950.0, y0 - j * 200.0)
-            group.links.new(gin.outputs[socket_name(k, kind)], sep.inputs[0])
-            seps[kind] = sep
+        seps = _separated(group, gin, k, y0)
         for c in range(3):
             y = y0 - c * 450.0
             sss = _channel_closure(group, gin, seps, k, c, y)
@@ -271,17 +356,8 @@ def _channel_closure(group, gin, seps: dict, k: int, c: int, y: float) -> bpy.ty
     """Subsurface Scattering node of component k, channel c (smooth entry at the group's IOR)."""
     col = _single_channel(group, seps["Color"], c, -700.0, y)
     rad = _single_channel(group, seps["Radius"], c, -700.0, y - 150.0)
-    sss = group.nodes.new("ShaderNodeSubsurfaceScattering")
-    sss.location = (-450.0, y)
+    sss = _closure(group, gin, col.outputs[0], rad.outputs[0], k, y)
     sss.label = f"k{k} {CHANNELS[c]}"
-    sss.falloff = "RANDOM_WALK"
-    sss.inputs["Scale"].default_value = 1.0
-    sss.inputs["Roughness"].default_value = ENTRY_ROUGHNESS
-    group.links.new(col.outputs[0], sss.inputs["Color"])
-    group.links.new(rad.outputs[0], sss.inputs["Radius"])
-    group.links.new(gin.outputs[socket_name(k, "Anisotropy")], sss.inputs["Anisotropy"])
-    group.links.new(gin.outputs["IOR"], sss.inputs["IOR"])
-    group.links.new(gin.outputs["Normal"], sss.inputs["Normal"])
     return sss
 
 
@@ -416,7 +492,7 @@ def build_osl_group(k_count: int = 3, name: str = GROUP_NAME_OSL) -> bpy.types.N
 
 
 #: Custom property marking the group layout version (bump when the generated nodes change).
-GROUP_VERSION = 5  # 2: specular coat, Normal input; 3: specular inputs; 4: Principled coat; 5: Body input
+GROUP_VERSION = 6  # 2: coat, Normal; 3: specular inputs; 4: Principled coat; 5: Body input; 6: nested closures
 
 
 def ensure_group(k_count: int, backend: str) -> bpy.types.NodeTree:

@@ -19,6 +19,7 @@ process's user + system time around bpy.ops.render.render (getrusage), robust to
 
 from __future__ import annotations
 
+import shutil
 import tempfile
 from pathlib import Path
 
@@ -42,7 +43,11 @@ import bpy, numpy as np
 import blender_addon
 from training import demo_render
 from training.demo_subject import TONES, skin_albedo_texture
-scene, parts = demo_render._scene({resolution}, 1)
+if {scene!r} == "head":
+    scene, parts = demo_render._scene({resolution}, 1)
+else:
+    from training.bench import backlit
+    scene, parts = backlit.build({scene!r}, {resolution})
 scene.cycles.use_denoising = False
 scene.cycles.use_adaptive_sampling = False
 scene.render.threads_mode, scene.render.threads = "FIXED", 1
@@ -86,7 +91,7 @@ live_node = next(n for n in mat.node_tree.nodes
                  if n.type == "GROUP" and n.node_tree.name.startswith("Spectral Skin SSS Live"))
 """
 _ONE_COMPONENT = """
-mixture = next(n for n in live_node.node_tree.nodes if n.type == "GROUP")
+mixture = next(n for n in live_node.node_tree.nodes if n.type == "GROUP" and "k1 Weight" in n.inputs)
 for k in range(2, 10):
     sock = mixture.inputs.get(f"k{k} Weight")
     if sock is not None:
@@ -95,7 +100,7 @@ for k in range(2, 10):
         sock.default_value = (0.0, 0.0, 0.0, 1.0)
 """
 _MIXTURE = """
-mixture = next(n for n in live_node.node_tree.nodes if n.type == "GROUP")
+mixture = next(n for n in live_node.node_tree.nodes if n.type == "GROUP" and "k1 Weight" in n.inputs)
 tree = mixture.node_tree
 gin = next(n for n in tree.nodes if n.type == "GROUP_INPUT")
 """
@@ -112,6 +117,17 @@ tree.links.new(glossy.outputs[0], coat.inputs[2])
 for link in list(spec.outputs[0].links):
     tree.links.new(coat.outputs[0], link.to_socket)
 tree.nodes.remove(spec)
+"""
+_PER_CHANNEL = """
+from blender_addon import nodes as mixture_nodes
+k_count = sum(1 for s in mixture.inputs if s.name.startswith("k") and s.name.endswith(" Weight"))
+mixture.node_tree = mixture_nodes.build_svm_group(k_count, "per-channel mixture", design="per_channel")
+"""
+_OSL = """
+from blender_addon import nodes as mixture_nodes
+k_count = sum(1 for s in mixture.inputs if s.name.startswith("k") and s.name.endswith(" Weight"))
+mixture.node_tree = mixture_nodes.build_osl_group(k_count, "OSL mixture")
+scene.cycles.shading_system = True
 """
 _DOUBLED = """
 for node in tree.nodes:
@@ -161,6 +177,8 @@ VARIANTS = {
     "live_fresnel_coat": _LIVE_GROUP + _MIXTURE + _FRESNEL_COAT,
     "live_doubled": _LIVE_GROUP + _MIXTURE + _DOUBLED,
     "live_k1": _LIVE_GROUP + _ONE_COMPONENT,
+    "live_per_channel": _LIVE_GROUP + _MIXTURE + _PER_CHANNEL,
+    "live_osl": _LIVE_GROUP + _MIXTURE + _OSL,
     "sss_rgb": _SSS.replace("{channels}", "(None,)").replace("{radius!r}", repr(SKIN_RADIUS_MM)),
     "sss_split": _SSS.replace("{channels}", "(0, 1, 2)").replace("{radius!r}", repr(SKIN_RADIUS_MM)),
 }
@@ -187,7 +205,8 @@ def fit_cost(samples: np.ndarray, rmse: np.ndarray, cpu_s: np.ndarray) -> dict:
 
 
 def measure(modes: tuple[str, ...] = ("principled", "live"), samples: tuple[int, ...] = SAMPLES,
-            resolution: int = RESOLUTION, rounds: int = ROUNDS) -> dict[str, dict]:
+            resolution: int = RESOLUTION, rounds: int = ROUNDS, scene: str = "head",
+            keep: Path | None = None) -> dict[str, dict]:
     """Per mode: the RMSE and CPU time per sample count and the fit (:func:`fit_cost`).  The renders are
     deterministic (fixed seeds), so repeated rounds (modes in alternating order) only re-time them: each render's
     CPU time is the least over the rounds, the one least disturbed by other work on the machine."""
@@ -195,19 +214,24 @@ def measure(modes: tuple[str, ...] = ("principled", "live"), samples: tuple[int,
     with tempfile.TemporaryDirectory(prefix="bench_cost_") as tmp:
         for round_ in range(rounds):
             for mode in modes if round_ % 2 == 0 else modes[::-1]:
-                for r in run_script(_child_script(mode, samples, resolution, Path(tmp))):
+                for r in run_script(_child_script(mode, samples, resolution, Path(tmp), scene)):
                     same = [q for q in renders.setdefault(mode, []) if q["samples"] == r["samples"]
                             and q["seed"] == r["seed"]]
                     if same:
                         same[0]["cpu_s"] = min(same[0]["cpu_s"], r["cpu_s"])
                     else:
                         renders[mode].append(r)
+        if keep is not None:
+            keep.mkdir(parents=True, exist_ok=True)
+            for mode in modes:
+                for r in renders[mode]:
+                    shutil.copy(r["path"], keep / f"{scene}_{Path(r['path']).name}")
         return {mode: _fit_renders(renders[mode], samples) for mode in modes}
 
 
-def _child_script(mode: str, samples: tuple[int, ...], resolution: int, tmp: Path) -> str:
+def _child_script(mode: str, samples: tuple[int, ...], resolution: int, tmp: Path, scene: str = "head") -> str:
     base = mode if mode in ("principled", "live", "bake") else "live" if mode.startswith("live_") else "plain"
-    return _CHILD.format(root=str(ROOT), resolution=resolution, texture=TEXTURE,
+    return _CHILD.format(root=str(ROOT), resolution=resolution, texture=TEXTURE, scene=scene,
                          texture_path=str(tmp / "skin.png"), mode=base, radius=SKIN_RADIUS_MM,
                          variant=VARIANTS.get(mode, ""), samples=tuple(samples), seeds=SEEDS,
                          out=str(tmp)).replace("{mode}_", f"{mode}_")
