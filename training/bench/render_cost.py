@@ -250,9 +250,13 @@ def _fit_renders(renders: list[dict], samples: tuple[int, ...]) -> dict:
 
 
 #: The rows: (mode, label, anchor mode) — the live group and the baked maps against Principled Random Walk (Skin),
-#: and the diagnostic split of one RGB random-walk closure into three single-channel closures.
+#: and diagnostics: the split of one RGB random-walk closure into three single-channel closures, the live group with
+#: the earlier single-channel closures and with the OSL group's K RGB closures (the least noise a mixture of K
+#: closures can have), and variants of the coat.
 ROWS = (("live", "live group (default)", "principled"),
         ("bake", "baked maps (Bake, packed)", "principled"),
+        ("live_per_channel", "live group with single-channel closures (the earlier design; diagnostic)", "principled"),
+        ("live_per_channel", "live group with single-channel closures (the earlier design; diagnostic)", "live"),
         ("sss_split", "3 single-channel random-walk closures (diagnostic)", "sss_rgb"),
         ("live_no_coat", "live group with Specular IOR Level 0: no coat (diagnostic, colour differs)", "live"),
         ("live_fresnel_coat", "live group with the coat as F x white Multiscatter GGX, F the Fresnel node's "
@@ -260,11 +264,23 @@ ROWS = (("live", "live group (default)", "principled"),
         ("live_doubled", "live group with every subsurface closure reached twice (its second Mix Shader at Fac "
                          "0.001; diagnostic)", "live"),
         ("live_k1", "live group with components 2..K weighted 0: 3 closures (diagnostic, colour differs)", "live"))
-MODES = ("principled", "live", "bake", "sss_rgb", "sss_split", "live_no_coat", "live_k1", "live_fresnel_coat",
-         "live_doubled")
+MODES = ("principled", "live", "bake", "live_per_channel", "sss_rgb", "sss_split", "live_no_coat", "live_k1",
+         "live_fresnel_coat", "live_doubled")
+#: The back-lit scenes (training.bench.backlit): their rows and modes.
+BACKLIT_ROWS = (("live", "live group (default)", "principled"),
+                ("live_per_channel", "live group with single-channel closures (the earlier design; diagnostic)",
+                 "principled"),
+                ("live_osl", "live group with the OSL mixture: K RGB closures (OSL; diagnostic of the noise)",
+                 "principled"),
+                ("live", "live group (default)", "live_per_channel"))
+BACKLIT_MODES = ("principled", "live", "live_per_channel", "live_osl")
 LABELS = {"principled": "Principled BSDF, Random Walk (Skin), skin radius",
           "sss_rgb": "1 RGB random-walk Subsurface Scattering closure",
-          "live": "the live group (default)"}
+          "live": "the live group (default)",
+          "live_per_channel": "the live group with single-channel closures"}
+#: Where the 32-sample renders of the back-lit scenes go (one PNG per scene: Principled, the live group, the live
+#: group with single-channel closures), to look for coloured speckle.
+FIGURE = ROOT / "docs" / "figures" / "render_cost_{scene}.png"
 
 
 def _describe(fit: dict) -> str:
@@ -274,23 +290,52 @@ def _describe(fit: dict) -> str:
             f"CPU {fit['a'] * 1000:.0f} ms/sample (+{fit['t0']:.2f} s per render)")
 
 
+def _ratio(ours: dict, ref: dict) -> str:
+    relative = ours["c"] / ref["c"] * ref["rows"][0]["mean"] / ours["rows"][0]["mean"]
+    time = ours["a"] / ref["a"]
+    return (f"time to equal noise {ours['cost'] / ref['cost']:.2f}x (noise at equal samples "
+            f"{ours['c'] / ref['c']:.2f}x, relative to the image mean {relative:.2f}x; time per sample "
+            f"{time:.2f}x); time to equal noise relative to the image mean {time * relative ** 2:.2f}x")
+
+
+def _row(scene: str, samples, rounds: int, label: str, anchor: str, ours: dict, ref: dict) -> dict:
+    where = "demo head" if scene == "head" else f"{scene.replace('_', ' ').replace('backlit', 'back-lit')} scene"
+    return {"workload": f"render cost, {where} {RESOLUTION}² px, Cycles CPU 1 thread, no denoiser, {samples} spp x 2 "
+                        f"seeds, least CPU time of {rounds} rounds: {label} vs {LABELS[anchor]}",
+            "ours": _describe(ours),
+            "anchor": _describe(ref),
+            "ratio": _ratio(ours, ref),
+            "error": "-",
+            "notes": "RMSE: linear RGB, all pixels, from two seeds (mean((A-B)^2)/2 = MSE against the "
+                     "infinite-sample reference); CPU s from getrusage around the render; time to equal "
+                     "noise = a c^2 (per-render sync excluded); fresh process per material"}
+
+
+def speckle_figure(renders: Path, scene: str, samples: int, path: Path) -> Path:
+    """Side by side (Principled, the live group, the live group with single-channel closures) the ``samples``-sample
+    renders (seed 1) of ``scene`` kept in ``renders``, sRGB-encoded, each pixel 3 x 3: a PNG at ``path``."""
+    from training import demo_render
+
+    images = []
+    for mode in ("principled", "live", "live_per_channel"):
+        rgb = np.clip(_read_exr(str(renders / f"{scene}_{mode}_{samples}_1.exr")), 0.0, 1.0)
+        images.append(np.where(rgb <= 0.0031308, 12.92 * rgb, 1.055 * rgb ** (1.0 / 2.4) - 0.055))
+    row = np.repeat(np.repeat(np.concatenate(images, axis=1), 3, axis=0), 3, axis=1)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    return demo_render.write_image(path, np.round(row * 255.0).astype(np.uint8))
+
+
 def benchmarks(quick: bool) -> list[dict]:
     samples = SAMPLES[:2] if quick else SAMPLES
-    res = measure(MODES, samples, rounds=1 if quick else ROUNDS)
-    rows = []
-    for mode, label, anchor in ROWS:
-        ours, ref = res[mode], res[anchor]
-        relative = ours["c"] / ref["c"] * ref["rows"][0]["mean"] / ours["rows"][0]["mean"]
-        rows.append({"workload": f"render cost, demo head {RESOLUTION}² px, Cycles CPU 1 thread, no denoiser, "
-                                 f"{samples} spp x 2 seeds, least CPU time of {1 if quick else ROUNDS} rounds: "
-                                 f"{label} vs {LABELS[anchor]}",
-                     "ours": _describe(ours),
-                     "anchor": _describe(ref),
-                     "ratio": f"time to equal noise {ours['cost'] / ref['cost']:.2f}x (noise at equal samples "
-                              f"{ours['c'] / ref['c']:.2f}x, relative to the image mean "
-                              f"{relative:.2f}x; time per sample {ours['a'] / ref['a']:.2f}x)",
-                     "error": "-",
-                     "notes": "RMSE: linear RGB, all pixels, from two seeds (mean((A-B)^2)/2 = MSE against the "
-                              "infinite-sample reference); CPU s from getrusage around the render; time to equal "
-                              "noise = a c^2 (per-render sync excluded); fresh process per material"})
+    rounds = 1 if quick else ROUNDS
+    res = measure(MODES, samples, rounds=rounds)
+    rows = [_row("head", samples, rounds, label, anchor, res[mode], res[anchor]) for mode, label, anchor in ROWS]
+    from training.bench import backlit
+
+    with tempfile.TemporaryDirectory(prefix="bench_cost_keep_") as keep:
+        for scene in backlit.SCENES:
+            res = measure(BACKLIT_MODES, samples, rounds=rounds, scene=scene, keep=Path(keep))
+            rows += [_row(scene, samples, rounds, label, anchor, res[mode], res[anchor])
+                     for mode, label, anchor in BACKLIT_ROWS]
+            speckle_figure(Path(keep), scene, samples[-1], Path(str(FIGURE).format(scene=scene)))
     return rows
