@@ -22,11 +22,26 @@ the sum over k is the mixture: E[pixel_c] = sum_k w_kc RW_kc.  Only the pick pro
 to avg(w A), not to w) differ from a literal "pick k with probability w_k", which changes the variance,
 never the mean.  Per-channel weights need the closure weight to differ from A per channel:
 
-* SVM (works on every Cycles device): the Subsurface Scattering node ties its weight to its Color, so each
-  component is split into three single-channel closures (Color and Radius non-zero only in channel c;
-  the other channels have radius 0 and weight 0, so Cycles drops them), each scaled by w_kc with a Mix
-  Shader (Fac = w_kc, other input empty) and summed with Add Shaders: 3K closures (Cycles allows 64).
-  Splitting also lets every channel walk alone, which is what the per-channel medium means anyway.
+* SVM (works on every Cycles device): the Subsurface Scattering node ties its weight to its Color (weight =
+  Color x mix weight, albedo = Color), so one closure can only carry its channels at one scalar weight.  Each
+  component is therefore split over **nested channel sets**: with lo <= mid <= hi its weights w_kc sorted over
+  channels, one RGB closure of weight lo, one over the channels with w_kc >= mid (the others' Color 0) of weight
+  mid - lo and one over the channels with w_kc = hi of weight hi - mid; per channel these add up to w_kc exactly
+  (ties give a closure of weight 0, which Cycles skips).  Each closure is scaled with a Mix Shader (Fac = its
+  weight, other input empty) and the closures are summed with Add Shaders: at most 3K closures (Cycles allows 64).
+  Why nested sets and not three single-channel closures per component (``build_svm_group(design="per_channel")``,
+  the earlier design): a single-channel closure carries one channel per path, so each channel sees only the paths
+  that picked it and the random walk's per-channel MIS is lost, which shows as coloured speckle where subsurface
+  light dominates; an RGB closure carries all three channels in every path.  The table's weights do not sum to the
+  same per channel (they carry the painted colour: R > G > B for skin), so the RGB closure holds the blue weight
+  and most of the green, and only the red surplus walks alone.  A channel left out of a closure keeps its radius,
+  so Cycles counts it in the closure's pick weight (the mean weight times the number of channels with a radius,
+  closure/bssrdf.h) with weight 0: the pick weight stays the sum of the channels' weights.  Why not a Principled
+  BSDF per component, whose Coat Tint would give exact per-channel weights to one RGB closure: its subsurface
+  closure enters at the Principled's specular index (1 when Specular IOR Level is 0, else with a specular lobe of
+  the entry's roughness on top), while the bake's tables assume a smooth entry at the tissue's index; at index 1
+  the cosine-averaged reflectance rises by 1-70 % (exporters.reflectance_tables), beyond what a redesign of the
+  closures may change.
 * OSL (CPU and OptiX only): one ``(w_k * A_k) * bssrdf("random_walk", N, r_k, A_k, ...)`` per component;
   the factor A_k is required because the kernel divides by the albedo (as Blender's own
   node_subsurface_scattering.osl does).
