@@ -60,7 +60,7 @@ the cosine-weighted mean of F (exporters.cycles.DIFFUSE_FRESNEL_POLY).  Why this
   lobe (F at the shading normal, albedo 1) reflects up to 3x more at grazing angles than the Principled layer
   (its microfacet Fresnel and shadowing): 0.42 against 0.14 of a white world at cos 0.15 (roughness 0.5),
   which on the demo head's backlit rim made a highlight 1.3-2.5x Principled's: 1.49x the noise and 2.4x the
-  time to equal noise of the group with the Principled coat (training.bench.render_cost).
+  time to equal noise of the group with the Principled coat (training.bench.render_cost, variant "live_fresnel_coat").
 * **The maps already hold the body reflectance behind the boundary.**  A bake targets the model's
   reflectance, which excludes the specular part and includes the Fresnel losses of entering and leaving
   (exporters.collapse step 1).  Weighting the mixture by 1 - F alone would take those losses twice and
@@ -77,7 +77,7 @@ the cosine-weighted mean of F (exporters.cycles.DIFFUSE_FRESNEL_POLY).  Why this
   further Mix Shaders.  A Mix Shader clamps its Fac to 1, so each closure has a second Mix Shader of Fac
   max(w_kc x scale - 1, 0): Cycles skips it while that Fac is 0, which it is unless a weight exceeds 1 / scale
   (0.95 face-on at IOR 1.4; the shipped fast-path table's largest weight is 0.82).  (Reaching a closure twice
-  costs nothing measurable either: 1.03x time to equal noise, training.bench.render_cost.)
+  costs nothing measurable either: 1.03x time to equal noise, training.bench.render_cost, variant "live_doubled".)
 * **Why not OSL's ``layer()``** on the OSL path: SVM has no equivalent, and both paths must render the same
   (tests/test_cycles_mixture.py compares them); the OSL script computes the weighted body and the same
   Principled coat node sits beside it.
