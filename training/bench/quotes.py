@@ -62,11 +62,20 @@ FIGURES: dict[str, Figure] = {
     "bake_4k_fast_s": Figure("runtime", "bake 4096x4096 8-bit sRGB PNG", "ours", r"([\d.]+) s wall"),
     "live_memory_vs_principled": Figure("live", "live group (default)", "ratio", r"process memory ([\d.]+)x"),
     "baked_memory_vs_principled": Figure("live", "baked maps", "ratio", r"process memory ([\d.]+)x"),
+    "live_operator_s": Figure("live", "live group (default)", "ours", r"operator ([\d.]+) s"),
     "live_render_time_vs_principled": Figure("live", "live group (default)", "ratio", r"time ([\d.]+)x"),
     "live_noise_time_vs_principled": Figure("render_cost", "live group (default) vs Principled", "ratio",
                                             r"time to equal noise ([\d.]+)x", _HEAD),
     "live_noise_vs_principled": Figure("render_cost", "live group (default) vs Principled", "ratio",
                                        r"noise at equal samples ([\d.]+)x", _HEAD),
+    "live_relative_noise_time_vs_principled": Figure("render_cost", "live group (default) vs Principled", "ratio",
+                                                     r"time to equal noise relative to the image mean ([\d.]+)x",
+                                                     _HEAD),
+    **{f"{scene}_nested_vs_per_channel_noise_time": Figure("render_cost", "live group (default) vs the live group "
+                                                          "with single-channel closures", "ratio",
+                                                          r"time to equal noise ([\d.]+)x", also)
+       for scene, also in (("head", _HEAD), ("backlit_head", "back-lit head scene"),
+                           ("backlit_plate", "back-lit plate scene"))},
     "live_time_per_sample_vs_principled": Figure("render_cost", "live group (default) vs Principled", "ratio",
                                                  r"time per sample ([\d.]+)x", _HEAD),
     "per_channel_noise_time_vs_principled": Figure("render_cost", "single-channel closures (the earlier design; "
