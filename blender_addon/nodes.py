@@ -22,11 +22,26 @@ the sum over k is the mixture: E[pixel_c] = sum_k w_kc RW_kc.  Only the pick pro
 to avg(w A), not to w) differ from a literal "pick k with probability w_k", which changes the variance,
 never the mean.  Per-channel weights need the closure weight to differ from A per channel:
 
-* SVM (works on every Cycles device): the Subsurface Scattering node ties its weight to its Color, so each
-  component is split into three single-channel closures (Color and Radius non-zero only in channel c;
-  the other channels have radius 0 and weight 0, so Cycles drops them), each scaled by w_kc with a Mix
-  Shader (Fac = w_kc, other input empty) and summed with Add Shaders: 3K closures (Cycles allows 64).
-  Splitting also lets every channel walk alone, which is what the per-channel medium means anyway.
+* SVM (works on every Cycles device): the Subsurface Scattering node ties its weight to its Color (weight =
+  Color x mix weight, albedo = Color), so one closure can only carry its channels at one scalar weight.  Each
+  component is therefore split over **nested channel sets**: with lo <= mid <= hi its weights w_kc sorted over
+  channels, one RGB closure of weight lo, one over the channels with w_kc >= mid (the others' Color 0) of weight
+  mid - lo and one over the channels with w_kc = hi of weight hi - mid; per channel these add up to w_kc exactly
+  (ties give a closure of weight 0, which Cycles skips).  Each closure is scaled with a Mix Shader (Fac = its
+  weight, other input empty) and the closures are summed with Add Shaders: at most 3K closures (Cycles allows 64).
+  Why nested sets and not three single-channel closures per component (``build_svm_group(design="per_channel")``,
+  the earlier design): a single-channel closure carries one channel per path, so each channel sees only the paths
+  that picked it and the random walk's per-channel MIS is lost, which shows as coloured speckle where subsurface
+  light dominates; an RGB closure carries all three channels in every path.  The table's weights do not sum to the
+  same per channel (they carry the painted colour: R > G > B for skin), so the RGB closure holds the blue weight
+  and most of the green, and only the red surplus walks alone.  A channel left out of a closure keeps its radius,
+  so Cycles counts it in the closure's pick weight (the mean weight times the number of channels with a radius,
+  closure/bssrdf.h) with weight 0: the pick weight stays the sum of the channels' weights.  Why not a Principled
+  BSDF per component, whose Coat Tint would give exact per-channel weights to one RGB closure: its subsurface
+  closure enters at the Principled's specular index (1 when Specular IOR Level is 0, else with a specular lobe of
+  the entry's roughness on top), while the bake's tables assume a smooth entry at the tissue's index; at index 1
+  the cosine-averaged reflectance rises by 1-70 % (exporters.reflectance_tables), beyond what a redesign of the
+  closures may change.
 * OSL (CPU and OptiX only): one ``(w_k * A_k) * bssrdf("random_walk", N, r_k, A_k, ...)`` per component;
   the factor A_k is required because the kernel divides by the albedo (as Blender's own
   node_subsurface_scattering.osl does).
@@ -45,7 +60,7 @@ the cosine-weighted mean of F (exporters.cycles.DIFFUSE_FRESNEL_POLY).  Why this
   lobe (F at the shading normal, albedo 1) reflects up to 3x more at grazing angles than the Principled layer
   (its microfacet Fresnel and shadowing): 0.42 against 0.14 of a white world at cos 0.15 (roughness 0.5),
   which on the demo head's backlit rim made a highlight 1.3-2.5x Principled's: 1.49x the noise and 2.4x the
-  time to equal noise of the group with the Principled coat (training.bench.render_cost).
+  time to equal noise of the group with the Principled coat (training.bench.render_cost, variant "live_fresnel_coat").
 * **The maps already hold the body reflectance behind the boundary.**  A bake targets the model's
   reflectance, which excludes the specular part and includes the Fresnel losses of entering and leaving
   (exporters.collapse step 1).  Weighting the mixture by 1 - F alone would take those losses twice and
@@ -62,7 +77,7 @@ the cosine-weighted mean of F (exporters.cycles.DIFFUSE_FRESNEL_POLY).  Why this
   further Mix Shaders.  A Mix Shader clamps its Fac to 1, so each closure has a second Mix Shader of Fac
   max(w_kc x scale - 1, 0): Cycles skips it while that Fac is 0, which it is unless a weight exceeds 1 / scale
   (0.95 face-on at IOR 1.4; the shipped fast-path table's largest weight is 0.82).  (Reaching a closure twice
-  costs nothing measurable either: 1.03x time to equal noise, training.bench.render_cost.)
+  costs nothing measurable either: 1.03x time to equal noise, training.bench.render_cost, variant "live_doubled".)
 * **Why not OSL's ``layer()``** on the OSL path: SVM has no equivalent, and both paths must render the same
   (tests/test_cycles_mixture.py compares them); the OSL script computes the weighted body and the same
   Principled coat node sits beside it.
@@ -216,12 +231,23 @@ def _fresh_group(name: str, k_count: int, backend: str):
     return group, gin, gout
 
 
-def build_svm_group(k_count: int = 3, name: str = GROUP_NAME) -> bpy.types.NodeTree:
-    """Build (or rebuild) the SVM node group with ``k_count`` components; returns the node tree."""
+#: How the SVM group splits each component into closures (module docstring): "nested" (the default: up to three
+#: closures per component over nested channel sets, all three channels, the two of largest weight, the largest) or
+#: "per_channel" (three single-channel closures per component: the earlier design, kept for comparison).
+SVM_DESIGNS = ("nested", "per_channel")
+
+
+def build_svm_group(k_count: int = 3, name: str = GROUP_NAME, design: str = "nested") -> bpy.types.NodeTree:
+    """Build (or rebuild) the SVM node group with ``k_count`` components and closure ``design``
+    (:data:`SVM_DESIGNS`); returns the node tree."""
     if not 1 <= k_count <= 7:  # 3K closures + coat + margin must stay below Cycles' MAX_CLOSURE = 64
         raise ValueError("k_count must be in 1..7")
+    if design not in SVM_DESIGNS:
+        raise ValueError(f"design must be one of {SVM_DESIGNS}, not {design!r}")
     group, gin, gout = _fresh_group(name, k_count, "SVM")
-    mixture = _svm_mixture(group, gin, k_count, _body_scale(group, gin))
+    group["spectral_skin_sss_design"] = design
+    build = _svm_mixture if design == "nested" else _svm_mixture_per_channel
+    mixture = build(group, gin, k_count, _body_scale(group, gin))
     surface = _add_shader(group, principled_specular(group, gin), mixture, 1050.0, 700.0)
     surface = _add_shader(group, surface, gin.outputs["Body"], 1150.0, 700.0)
     group.links.new(_outer_layers(group, gin, surface), gout.inputs["BSSRDF"])
@@ -230,17 +256,91 @@ def build_svm_group(k_count: int = 3, name: str = GROUP_NAME) -> bpy.types.NodeT
 
 def _svm_mixture(group: bpy.types.NodeTree, gin: bpy.types.Node, k_count: int,
                  scale: bpy.types.NodeSocket) -> bpy.types.NodeSocket:
+    """The nested closures of every component (module docstring), each scaled by its share of w_kc x ``scale``
+    (the coat's body weight) and summed; returns the sum.
+
+    With lo <= mid <= hi the component's weights sorted over channels, w_c = lo + (mid - lo) [w_c >= mid] +
+    (hi - mid) [w_c >= hi] exactly (ties included: mid is one of the three weights, picked by min/max, never
+    computed).  So closure 1 carries all channels at weight lo, closure 2 the channels with w_c >= mid at mid - lo,
+    closure 3 those with w_c >= hi at hi - mid; a channel left out has Color 0 (no weight, no walk) but keeps its
+    radius, so Cycles still counts it in the closure's pick weight (closure/bssrdf.h: sample_weight is the mean
+    weight times the number of channels with a radius), which keeps every closure's pick weight the sum of its
+    channels' weights.  A closure of weight 0 is skipped by Cycles."""
+    total = None
+    for k in range(1, k_count + 1):
+        y0 = -(k - 1) * 1500.0
+        seps = _separated(group, gin, k, y0)
+        w = [seps["Weight"].outputs[c] for c in range(3)]
+        lo = _math(group, "MINIMUM", _math(group, "MINIMUM", w[0], w[1], x=-850.0, y=y0), w[2], x=-800.0, y=y0)
+        hi = _math(group, "MAXIMUM", _math(group, "MAXIMUM", w[0], w[1], x=-850.0, y=y0 - 50.0), w[2], x=-800.0,
+                   y=y0 - 50.0)
+        mid = _math(group, "MAXIMUM", _math(group, "MINIMUM", w[0], w[1], x=-850.0, y=y0 - 100.0),
+                    _math(group, "MINIMUM", _math(group, "MAXIMUM", w[0], w[1], x=-900.0, y=y0 - 150.0), w[2],
+                          x=-850.0, y=y0 - 150.0), x=-800.0, y=y0 - 100.0)
+        levels = ((None, lo), (mid, _math(group, "SUBTRACT", mid, lo, x=-750.0, y=y0 - 100.0)),
+                  (hi, _math(group, "SUBTRACT", hi, mid, x=-750.0, y=y0 - 50.0)))
+        for j, (threshold, share) in enumerate(levels):
+            y = y0 - j * 450.0
+            colour = gin.outputs[socket_name(k, "Color")] if threshold is None \
+                else _masked(group, seps["Color"], w, threshold, y).outputs[0]
+            sss = _closure(group, gin, colour, gin.outputs[socket_name(k, "Radius")], k, y)
+            sss.label = f"k{k} " + ("RGB", "two largest weights", "largest weight")[j]
+            weight = _math(group, "MULTIPLY", share, scale, x=-300.0, y=y + 100.0)
+            for part in _weighted(group, sss.outputs["BSSRDF"], weight, y):
+                total = part if total is None else _add_shader(group, total, part, 50.0 + 20.0 * k, y)
+    return total
+
+
+def _separated(group: bpy.types.NodeTree, gin: bpy.types.Node, k: int, y0: float) -> dict[str, bpy.types.Node]:
+    """Separate Color nodes of component k's Color, Radius and Weight inputs, by kind."""
+    seps = {}
+    for j, kind in enumerate(("Color", "Radius", "Weight")):
+        sep = group.nodes.new("ShaderNodeSeparateColor")
+        sep.location = (-950.0, y0 - j * 200.0)
+        group.links.new(gin.outputs[socket_name(k, kind)], sep.inputs[0])
+        seps[kind] = sep
+    return seps
+
+
+def _masked(group: bpy.types.NodeTree, colour: bpy.types.Node, weights: list, threshold: bpy.types.NodeSocket,
+            y: float) -> bpy.types.Node:
+    """Combine Color of ``colour``'s channels (a Separate Color node) where the channel's weight is >= ``threshold``,
+    0 elsewhere."""
+    comb = group.nodes.new("ShaderNodeCombineColor")
+    comb.location = (-600.0, y)
+    for c in range(3):
+        below = _math(group, "LESS_THAN", weights[c], threshold, x=-700.0, y=y - 40.0 * c)
+        keep = _math(group, "SUBTRACT", 1.0, below, x=-650.0, y=y - 40.0 * c)
+        group.links.new(_math(group, "MULTIPLY", colour.outputs[c], keep, x=-600.0, y=y - 40.0 * c),
+                        comb.inputs[c])
+    return comb
+
+
+def _closure(group: bpy.types.NodeTree, gin: bpy.types.Node, colour: bpy.types.NodeSocket,
+             radius: bpy.types.NodeSocket, k: int, y: float) -> bpy.types.Node:
+    """Subsurface Scattering node of component k (RANDOM_WALK, smooth entry at the group's IOR) of ``colour`` and
+    ``radius``."""
+    sss = group.nodes.new("ShaderNodeSubsurfaceScattering")
+    sss.location = (-450.0, y)
+    sss.falloff = "RANDOM_WALK"
+    sss.inputs["Scale"].default_value = 1.0
+    sss.inputs["Roughness"].default_value = ENTRY_ROUGHNESS
+    group.links.new(colour, sss.inputs["Color"])
+    group.links.new(radius, sss.inputs["Radius"])
+    group.links.new(gin.outputs[socket_name(k, "Anisotropy")], sss.inputs["Anisotropy"])
+    group.links.new(gin.outputs["IOR"], sss.inputs["IOR"])
+    group.links.new(gin.outputs["Normal"], sss.inputs["Normal"])
+    return sss
+
+
+def _svm_mixture_per_channel(group: bpy.types.NodeTree, gin: bpy.types.Node, k_count: int,
+                             scale: bpy.types.NodeSocket) -> bpy.types.NodeSocket:
     """The 3K single-channel closures, each scaled by w_kc x ``scale`` (the coat's body weight) and summed
     (module docstring); returns the sum."""
     total = None
     for k in range(1, k_count + 1):
         y0 = -(k - 1) * 1500.0
-        seps = {}
-        for j, kind in enumerate(("Color", "Radius", "Weight")):
-            sep = group.nodes.new("ShaderNodeSeparateColor")
-            sep.location = (-950.0, y0 - j * 200.0)
-            group.links.new(gin.outputs[socket_name(k, kind)], sep.inputs[0])
-            seps[kind] = sep
+        seps = _separated(group, gin, k, y0)
         for c in range(3):
             y = y0 - c * 450.0
             sss = _channel_closure(group, gin, seps, k, c, y)
@@ -271,17 +371,8 @@ def _channel_closure(group, gin, seps: dict, k: int, c: int, y: float) -> bpy.ty
     """Subsurface Scattering node of component k, channel c (smooth entry at the group's IOR)."""
     col = _single_channel(group, seps["Color"], c, -700.0, y)
     rad = _single_channel(group, seps["Radius"], c, -700.0, y - 150.0)
-    sss = group.nodes.new("ShaderNodeSubsurfaceScattering")
-    sss.location = (-450.0, y)
+    sss = _closure(group, gin, col.outputs[0], rad.outputs[0], k, y)
     sss.label = f"k{k} {CHANNELS[c]}"
-    sss.falloff = "RANDOM_WALK"
-    sss.inputs["Scale"].default_value = 1.0
-    sss.inputs["Roughness"].default_value = ENTRY_ROUGHNESS
-    group.links.new(col.outputs[0], sss.inputs["Color"])
-    group.links.new(rad.outputs[0], sss.inputs["Radius"])
-    group.links.new(gin.outputs[socket_name(k, "Anisotropy")], sss.inputs["Anisotropy"])
-    group.links.new(gin.outputs["IOR"], sss.inputs["IOR"])
-    group.links.new(gin.outputs["Normal"], sss.inputs["Normal"])
     return sss
 
 
@@ -416,7 +507,7 @@ def build_osl_group(k_count: int = 3, name: str = GROUP_NAME_OSL) -> bpy.types.N
 
 
 #: Custom property marking the group layout version (bump when the generated nodes change).
-GROUP_VERSION = 5  # 2: specular coat, Normal input; 3: specular inputs; 4: Principled coat; 5: Body input
+GROUP_VERSION = 6
 
 
 def ensure_group(k_count: int, backend: str) -> bpy.types.NodeTree:

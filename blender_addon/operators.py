@@ -39,7 +39,8 @@ MODES = [
 ]
 #: Shading paths, numbered as when "Auto" was item 0, so that a scene saved then keeps its choice.
 _BACKENDS = [
-    ("SVM", "SVM nodes", "3K single-channel Subsurface Scattering nodes: every Cycles device (the default)", 1),
+    ("SVM", "SVM nodes", "Up to 3K Subsurface Scattering nodes (per component: RGB, then the channels of larger "
+                         "weight): every Cycles device (the default)", 1),
     ("OSL", "OSL", "One OSL Script node with K bssrdf closures: CPU and OptiX only, and only where the scene has "
                    "Open Shading Language turned on (this operator never turns it on)", 2),
 ]
@@ -252,7 +253,7 @@ class SPECTRAL_SKIN_OT_add_mixture(bpy.types.Operator):
     components: bpy.props.IntProperty(name="Components (K)", default=3, min=1, max=7)
     backend: bpy.props.EnumProperty(
         name="Backend",
-        items=[("SVM", "SVM (all devices)", "3K single-channel Subsurface Scattering nodes"),
+        items=[("SVM", "SVM (all devices)", "Up to 3K Subsurface Scattering nodes over nested channel sets"),
                ("OSL", "OSL (CPU/OptiX)", "One OSL Script node with K bssrdf closures")],
         default="SVM",
     )

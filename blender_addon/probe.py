@@ -59,6 +59,8 @@ def new_scene(samples: int = 256, resolution: int = 16, seed: int = 1) -> bpy.ty
     scene.view_settings.gamma = 1.0
 
     world = bpy.data.worlds.new("ProbeWorld")
+    if world.node_tree is None:  # Blender 4.x: a new world has no nodes until use_nodes is set
+        world.use_nodes = True
     scene.world = world
     background = world.node_tree.nodes["Background"]
     background.inputs["Color"].default_value = (1.0, 1.0, 1.0, 1.0)
@@ -98,6 +100,8 @@ def cube_mesh(name: str, half: float) -> bpy.types.Mesh:
 def slab_material(name: str = "ProbeMaterial") -> bpy.types.Material:
     """An empty material (only a Material Output) assigned to the probe slab."""
     mat = bpy.data.materials.new(name)
+    if mat.node_tree is None:  # Blender 4.x: a new material has no nodes until use_nodes is set
+        mat.use_nodes = True
     tree = mat.node_tree
     for node in list(tree.nodes):
         tree.nodes.remove(node)

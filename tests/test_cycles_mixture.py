@@ -18,6 +18,7 @@ from pathlib import Path
 import bpy
 import iadpython
 import numpy as np
+import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
@@ -39,13 +40,13 @@ def component(alpha, sigma_t, g, weight) -> dict:
     return {"Color": cin.color, "Radius": cin.radius, "Weight": weight, "Anisotropy": float(cin.g[0])}
 
 
-def render_group(weights, backend="SVM"):
+def render_group(weights, backend="SVM", design="nested"):
     scene = probe.new_scene(samples=SAMPLES, resolution=16, seed=5)
     if backend == "OSL":
         scene.cycles.shading_system = True
         group = nodes.build_osl_group(2)
     else:
-        group = nodes.build_svm_group(2)
+        group = nodes.build_svm_group(2, design=design)
     mat = probe.slab_material()
     gnode = nodes.wire_into_material(mat, group)
     nodes.set_constant_inputs(gnode, [component(*m, w) for m, w in zip(MEDIA, weights, strict=True)])
@@ -87,6 +88,27 @@ def test_mixture_is_weighted_sum_svm_and_osl():
     assert ok_svm, rel_svm
     assert ok_osl, rel_osl
     assert ok_pair, rel_pair
+
+
+def test_nested_closures_render_as_single_channel_closures():
+    """The nested closures (three channel sets per component) render the per-channel weights exactly: as the
+    single-channel design renders them, for weights with a tie at the top, a tie at the bottom, one channel at
+    0 and every order of channels, with the weight sums over components unequal per channel (the painted gain)."""
+    weights = [np.array([0.3, 0.3, 0.1]), np.array([0.2, 0.0, 0.2])]
+    nested, e_nested, t_nested, _ = render_group(weights)
+    single, e_single, t_single, _ = render_group(weights, design="per_channel")
+    ok, rel = close(nested, e_nested, single, e_single)
+    print(f"\nnested {np.round(nested, 4)} ({t_nested:.1f}s) vs single-channel {np.round(single, 4)} "
+          f"({t_single:.1f}s): rel={np.round(rel * 100, 2)}%")
+    assert ok, rel
+    for order in ([0.5, 0.1, 0.3], [0.1, 0.3, 0.5], [0.3, 0.5, 0.1]):
+        w = [np.array(order), np.array(order[::-1]) * 0.5]
+        mixed, err, _, _ = render_group(w)
+        expect = render_group(w, design="per_channel")
+        ok, rel = close(mixed, err, expect[0], expect[1])
+        assert ok, (order, rel)
+    with pytest.raises(ValueError, match="design"):
+        nodes.build_svm_group(2, design="one closure")
 
 
 def test_wiring_keeps_user_nodes_and_records_previous_surface():

@@ -50,6 +50,7 @@ BENCH_MODULES = [
     "training.bench.render_cost",
     "training.bench.oblique",
     "training.bench.edit_cost",
+    "training.bench.mixture_design",
     "training.bench.eevee",
     "training.bench.memory",
     "training.bench.runtime",

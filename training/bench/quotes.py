@@ -26,16 +26,18 @@ RESULTS_JSON = ROOT / "bench" / "results.json"
 
 @dataclass(frozen=True)
 class Figure:
-    """Where one quoted number lives in the results: ``module``'s section, the row whose workload contains
-    ``row``, the cell of ``column``, and ``pattern`` (its first group is the number)."""
+    """Where one quoted number lives in the results: ``module``'s section, the first row whose workload contains
+    ``row`` (and ``also``, when given), the cell of ``column``, and ``pattern`` (its first group is the number)."""
 
     module: str
     row: str
     column: str
     pattern: str
+    also: str = ""
 
 
 _WALK = "simulate-layers end to end"
+_HEAD = "render cost, demo head "
 _PAPER = "`paper` build: "
 #: Every benchmark figure a page may quote, by name.
 FIGURES: dict[str, Figure] = {
@@ -60,9 +62,40 @@ FIGURES: dict[str, Figure] = {
     "bake_4k_fast_s": Figure("runtime", "bake 4096x4096 8-bit sRGB PNG", "ours", r"([\d.]+) s wall"),
     "live_memory_vs_principled": Figure("live", "live group (default)", "ratio", r"process memory ([\d.]+)x"),
     "baked_memory_vs_principled": Figure("live", "baked maps", "ratio", r"process memory ([\d.]+)x"),
+    "live_operator_s": Figure("live", "live group (default)", "ours", r"operator ([\d.]+) s"),
     "live_render_time_vs_principled": Figure("live", "live group (default)", "ratio", r"time ([\d.]+)x"),
     "live_noise_time_vs_principled": Figure("render_cost", "live group (default) vs Principled", "ratio",
-                                            r"time to equal noise ([\d.]+)x"),
+                                            r"time to equal noise ([\d.]+)x", _HEAD),
+    "live_noise_vs_principled": Figure("render_cost", "live group (default) vs Principled", "ratio",
+                                       r"noise at equal samples ([\d.]+)x", _HEAD),
+    "live_relative_noise_time_vs_principled": Figure("render_cost", "live group (default) vs Principled", "ratio",
+                                                     r"time to equal noise relative to the image mean ([\d.]+)x",
+                                                     _HEAD),
+    **{f"{scene}_nested_vs_per_channel_noise_time": Figure("render_cost", "live group (default) vs the live group "
+                                                          "with single-channel closures", "ratio",
+                                                          r"time to equal noise ([\d.]+)x", also)
+       for scene, also in (("head", _HEAD), ("backlit_head", "back-lit head scene"),
+                           ("backlit_plate", "back-lit plate scene"))},
+    "live_time_per_sample_vs_principled": Figure("render_cost", "live group (default) vs Principled", "ratio",
+                                                 r"time per sample ([\d.]+)x", _HEAD),
+    "per_channel_noise_time_vs_principled": Figure("render_cost", "single-channel closures (the earlier design; "
+                                                   "diagnostic) vs Principled", "ratio",
+                                                   r"time to equal noise ([\d.]+)x", _HEAD),
+    "per_channel_noise_vs_principled": Figure("render_cost", "single-channel closures (the earlier design; "
+                                              "diagnostic) vs Principled", "ratio",
+                                              r"noise at equal samples ([\d.]+)x", _HEAD),
+    **{f"{scene}_{what}": Figure("render_cost", f"{design} vs Principled", "ratio", pattern, scene.replace("_", " ")
+                                 .replace("backlit", "back-lit") + " scene")
+       for scene in ("backlit_head", "backlit_plate")
+       for design, prefix in (("live group (default)", ""), ("single-channel closures (the earlier design; diagnostic)",
+                                                              "per_channel_"), ("K RGB closures (OSL; diagnostic of "
+                                                                                "the noise)", "osl_"))
+       for what, pattern in ((prefix + "noise_time", r"time to equal noise ([\d.]+)x"),
+                             (prefix + "noise", r"noise at equal samples ([\d.]+)x"),
+                             (prefix + "relative_noise", r"relative to the image mean ([\d.]+)x"),
+                             (prefix + "relative_noise_time", r"time to equal noise relative to the image mean "
+                                                              r"([\d.]+)x"),
+                             (prefix + "time_per_sample", r"time per sample ([\d.]+)x"))},
     **{f"edits_{mode}_time_equal_samples": Figure("edit_cost", label, "ratio", r"time at equal samples ([\d.]+)x")
        for mode, label in (("neutral", "at neutral"), ("tan", "at preset tan"), ("flush", "at preset flush"),
                            ("pallor", "at preset pallor"))},
@@ -92,7 +125,8 @@ def figure_text(results: dict, key: str) -> str:
     section = results["sections"].get(module)
     if section is None:
         raise KeyError(f"{key}: no section {module} in the results")
-    row = next((r for r in section["rows"] if fig.row in r.get("workload", "")), None)
+    row = next((r for r in section["rows"] if fig.row in r.get("workload", "") and fig.also in r.get("workload", "")),
+               None)
     if row is None:
         raise KeyError(f"{key}: no row with {fig.row!r} in {module}")
     found = re.search(fig.pattern, row.get(fig.column, ""))

@@ -19,6 +19,7 @@ process's user + system time around bpy.ops.render.render (getrusage), robust to
 
 from __future__ import annotations
 
+import shutil
 import tempfile
 from pathlib import Path
 
@@ -42,7 +43,11 @@ import bpy, numpy as np
 import blender_addon
 from training import demo_render
 from training.demo_subject import TONES, skin_albedo_texture
-scene, parts = demo_render._scene({resolution}, 1)
+if {scene!r} == "head":
+    scene, parts = demo_render._scene({resolution}, 1)
+else:
+    from training.bench import backlit
+    scene, parts = backlit.build({scene!r}, {resolution})
 scene.cycles.use_denoising = False
 scene.cycles.use_adaptive_sampling = False
 scene.render.threads_mode, scene.render.threads = "FIXED", 1
@@ -86,7 +91,7 @@ live_node = next(n for n in mat.node_tree.nodes
                  if n.type == "GROUP" and n.node_tree.name.startswith("Spectral Skin SSS Live"))
 """
 _ONE_COMPONENT = """
-mixture = next(n for n in live_node.node_tree.nodes if n.type == "GROUP")
+mixture = next(n for n in live_node.node_tree.nodes if n.type == "GROUP" and "k1 Weight" in n.inputs)
 for k in range(2, 10):
     sock = mixture.inputs.get(f"k{k} Weight")
     if sock is not None:
@@ -95,7 +100,7 @@ for k in range(2, 10):
         sock.default_value = (0.0, 0.0, 0.0, 1.0)
 """
 _MIXTURE = """
-mixture = next(n for n in live_node.node_tree.nodes if n.type == "GROUP")
+mixture = next(n for n in live_node.node_tree.nodes if n.type == "GROUP" and "k1 Weight" in n.inputs)
 tree = mixture.node_tree
 gin = next(n for n in tree.nodes if n.type == "GROUP_INPUT")
 """
@@ -112,6 +117,17 @@ tree.links.new(glossy.outputs[0], coat.inputs[2])
 for link in list(spec.outputs[0].links):
     tree.links.new(coat.outputs[0], link.to_socket)
 tree.nodes.remove(spec)
+"""
+_PER_CHANNEL = """
+from blender_addon import nodes as mixture_nodes
+k_count = sum(1 for s in mixture.inputs if s.name.startswith("k") and s.name.endswith(" Weight"))
+mixture.node_tree = mixture_nodes.build_svm_group(k_count, "per-channel mixture", design="per_channel")
+"""
+_OSL = """
+from blender_addon import nodes as mixture_nodes
+k_count = sum(1 for s in mixture.inputs if s.name.startswith("k") and s.name.endswith(" Weight"))
+mixture.node_tree = mixture_nodes.build_osl_group(k_count, "OSL mixture")
+scene.cycles.shading_system = True
 """
 _DOUBLED = """
 for node in tree.nodes:
@@ -161,6 +177,8 @@ VARIANTS = {
     "live_fresnel_coat": _LIVE_GROUP + _MIXTURE + _FRESNEL_COAT,
     "live_doubled": _LIVE_GROUP + _MIXTURE + _DOUBLED,
     "live_k1": _LIVE_GROUP + _ONE_COMPONENT,
+    "live_per_channel": _LIVE_GROUP + _MIXTURE + _PER_CHANNEL,
+    "live_osl": _LIVE_GROUP + _MIXTURE + _OSL,
     "sss_rgb": _SSS.replace("{channels}", "(None,)").replace("{radius!r}", repr(SKIN_RADIUS_MM)),
     "sss_split": _SSS.replace("{channels}", "(0, 1, 2)").replace("{radius!r}", repr(SKIN_RADIUS_MM)),
 }
@@ -187,7 +205,8 @@ def fit_cost(samples: np.ndarray, rmse: np.ndarray, cpu_s: np.ndarray) -> dict:
 
 
 def measure(modes: tuple[str, ...] = ("principled", "live"), samples: tuple[int, ...] = SAMPLES,
-            resolution: int = RESOLUTION, rounds: int = ROUNDS) -> dict[str, dict]:
+            resolution: int = RESOLUTION, rounds: int = ROUNDS, scene: str = "head",
+            keep: Path | None = None) -> dict[str, dict]:
     """Per mode: the RMSE and CPU time per sample count and the fit (:func:`fit_cost`).  The renders are
     deterministic (fixed seeds), so repeated rounds (modes in alternating order) only re-time them: each render's
     CPU time is the least over the rounds, the one least disturbed by other work on the machine."""
@@ -195,19 +214,24 @@ def measure(modes: tuple[str, ...] = ("principled", "live"), samples: tuple[int,
     with tempfile.TemporaryDirectory(prefix="bench_cost_") as tmp:
         for round_ in range(rounds):
             for mode in modes if round_ % 2 == 0 else modes[::-1]:
-                for r in run_script(_child_script(mode, samples, resolution, Path(tmp))):
+                for r in run_script(_child_script(mode, samples, resolution, Path(tmp), scene)):
                     same = [q for q in renders.setdefault(mode, []) if q["samples"] == r["samples"]
                             and q["seed"] == r["seed"]]
                     if same:
                         same[0]["cpu_s"] = min(same[0]["cpu_s"], r["cpu_s"])
                     else:
                         renders[mode].append(r)
+        if keep is not None:
+            keep.mkdir(parents=True, exist_ok=True)
+            for mode in modes:
+                for r in renders[mode]:
+                    shutil.copy(r["path"], keep / f"{scene}_{Path(r['path']).name}")
         return {mode: _fit_renders(renders[mode], samples) for mode in modes}
 
 
-def _child_script(mode: str, samples: tuple[int, ...], resolution: int, tmp: Path) -> str:
+def _child_script(mode: str, samples: tuple[int, ...], resolution: int, tmp: Path, scene: str = "head") -> str:
     base = mode if mode in ("principled", "live", "bake") else "live" if mode.startswith("live_") else "plain"
-    return _CHILD.format(root=str(ROOT), resolution=resolution, texture=TEXTURE,
+    return _CHILD.format(root=str(ROOT), resolution=resolution, texture=TEXTURE, scene=scene,
                          texture_path=str(tmp / "skin.png"), mode=base, radius=SKIN_RADIUS_MM,
                          variant=VARIANTS.get(mode, ""), samples=tuple(samples), seeds=SEEDS,
                          out=str(tmp)).replace("{mode}_", f"{mode}_")
@@ -226,21 +250,30 @@ def _fit_renders(renders: list[dict], samples: tuple[int, ...]) -> dict:
 
 
 #: The rows: (mode, label, anchor mode) — the live group and the baked maps against Principled Random Walk (Skin),
-#: and the diagnostic split of one RGB random-walk closure into three single-channel closures.
+#: and diagnostics: the live group with the earlier single-channel closures, and the split of one RGB random-walk
+#: closure into three single-channel closures.  The coat's diagnostics (VARIANTS "live_no_coat", "live_fresnel_coat",
+#: "live_doubled", "live_k1") run with measure() when asked; they are not part of the default rows.
 ROWS = (("live", "live group (default)", "principled"),
         ("bake", "baked maps (Bake, packed)", "principled"),
-        ("sss_split", "3 single-channel random-walk closures (diagnostic)", "sss_rgb"),
-        ("live_no_coat", "live group with Specular IOR Level 0: no coat (diagnostic, colour differs)", "live"),
-        ("live_fresnel_coat", "live group with the coat as F x white Multiscatter GGX, F the Fresnel node's "
-                              "(diagnostic)", "live"),
-        ("live_doubled", "live group with every subsurface closure reached twice (its second Mix Shader at Fac "
-                         "0.001; diagnostic)", "live"),
-        ("live_k1", "live group with components 2..K weighted 0: 3 closures (diagnostic, colour differs)", "live"))
-MODES = ("principled", "live", "bake", "sss_rgb", "sss_split", "live_no_coat", "live_k1", "live_fresnel_coat",
-         "live_doubled")
+        ("live_per_channel", "live group with single-channel closures (the earlier design; diagnostic)", "principled"),
+        ("live", "live group (default)", "live_per_channel"),
+        ("sss_split", "3 single-channel random-walk closures (diagnostic)", "sss_rgb"))
+MODES = ("principled", "live", "bake", "live_per_channel", "sss_rgb", "sss_split")
+#: The back-lit scenes (training.bench.backlit): their rows and modes.
+BACKLIT_ROWS = (("live", "live group (default)", "principled"),
+                ("live_per_channel", "live group with single-channel closures (the earlier design; diagnostic)",
+                 "principled"),
+                ("live_osl", "live group with the OSL mixture: K RGB closures (OSL; diagnostic of the noise)",
+                 "principled"),
+                ("live", "live group (default)", "live_per_channel"))
+BACKLIT_MODES = ("principled", "live", "live_per_channel", "live_osl")
 LABELS = {"principled": "Principled BSDF, Random Walk (Skin), skin radius",
           "sss_rgb": "1 RGB random-walk Subsurface Scattering closure",
-          "live": "the live group (default)"}
+          "live": "the live group (default)",
+          "live_per_channel": "the live group with single-channel closures"}
+#: Where the 32-sample renders of the back-lit scenes go (one PNG per scene: Principled, the live group, the live
+#: group with single-channel closures), to look for coloured speckle.
+FIGURE = ROOT / "docs" / "figures" / "render_cost_{scene}.png"
 
 
 def _describe(fit: dict) -> str:
@@ -250,23 +283,52 @@ def _describe(fit: dict) -> str:
             f"CPU {fit['a'] * 1000:.0f} ms/sample (+{fit['t0']:.2f} s per render)")
 
 
+def _ratio(ours: dict, ref: dict) -> str:
+    relative = ours["c"] / ref["c"] * ref["rows"][0]["mean"] / ours["rows"][0]["mean"]
+    time = ours["a"] / ref["a"]
+    return (f"time to equal noise {ours['cost'] / ref['cost']:.2f}x (noise at equal samples "
+            f"{ours['c'] / ref['c']:.2f}x, relative to the image mean {relative:.2f}x; time per sample "
+            f"{time:.2f}x); time to equal noise relative to the image mean {time * relative ** 2:.2f}x")
+
+
+def _row(scene: str, samples, rounds: int, label: str, anchor: str, ours: dict, ref: dict) -> dict:
+    where = "demo head" if scene == "head" else f"{scene.replace('_', ' ').replace('backlit', 'back-lit')} scene"
+    return {"workload": f"render cost, {where} {RESOLUTION}² px, Cycles CPU 1 thread, no denoiser, {samples} spp x 2 "
+                        f"seeds, least CPU time of {rounds} rounds: {label} vs {LABELS[anchor]}",
+            "ours": _describe(ours),
+            "anchor": _describe(ref),
+            "ratio": _ratio(ours, ref),
+            "error": "-",
+            "notes": "RMSE: linear RGB, all pixels, from two seeds (mean((A-B)^2)/2 = MSE against the "
+                     "infinite-sample reference); CPU s from getrusage around the render; time to equal "
+                     "noise = a c^2 (per-render sync excluded); fresh process per material"}
+
+
+def speckle_figure(renders: Path, scene: str, samples: int, path: Path) -> Path:
+    """Side by side (Principled, the live group, the live group with single-channel closures) the ``samples``-sample
+    renders (seed 1) of ``scene`` kept in ``renders``, sRGB-encoded, each pixel 3 x 3: a PNG at ``path``."""
+    from training import demo_render
+
+    images = []
+    for mode in ("principled", "live", "live_per_channel"):
+        rgb = np.clip(_read_exr(str(renders / f"{scene}_{mode}_{samples}_1.exr")), 0.0, 1.0)
+        images.append(np.where(rgb <= 0.0031308, 12.92 * rgb, 1.055 * rgb ** (1.0 / 2.4) - 0.055))
+    row = np.repeat(np.repeat(np.concatenate(images, axis=1), 3, axis=0), 3, axis=1)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    return demo_render.write_image(path, np.round(row * 255.0).astype(np.uint8))
+
+
 def benchmarks(quick: bool) -> list[dict]:
     samples = SAMPLES[:2] if quick else SAMPLES
-    res = measure(MODES, samples, rounds=1 if quick else ROUNDS)
-    rows = []
-    for mode, label, anchor in ROWS:
-        ours, ref = res[mode], res[anchor]
-        relative = ours["c"] / ref["c"] * ref["rows"][0]["mean"] / ours["rows"][0]["mean"]
-        rows.append({"workload": f"render cost, demo head {RESOLUTION}² px, Cycles CPU 1 thread, no denoiser, "
-                                 f"{samples} spp x 2 seeds, least CPU time of {1 if quick else ROUNDS} rounds: "
-                                 f"{label} vs {LABELS[anchor]}",
-                     "ours": _describe(ours),
-                     "anchor": _describe(ref),
-                     "ratio": f"time to equal noise {ours['cost'] / ref['cost']:.2f}x (noise at equal samples "
-                              f"{ours['c'] / ref['c']:.2f}x, relative to the image mean "
-                              f"{relative:.2f}x; time per sample {ours['a'] / ref['a']:.2f}x)",
-                     "error": "-",
-                     "notes": "RMSE: linear RGB, all pixels, from two seeds (mean((A-B)^2)/2 = MSE against the "
-                              "infinite-sample reference); CPU s from getrusage around the render; time to equal "
-                              "noise = a c^2 (per-render sync excluded); fresh process per material"})
+    rounds = 1 if quick else ROUNDS
+    res = measure(MODES, samples, rounds=rounds)
+    rows = [_row("head", samples, rounds, label, anchor, res[mode], res[anchor]) for mode, label, anchor in ROWS]
+    from training.bench import backlit
+
+    with tempfile.TemporaryDirectory(prefix="bench_cost_keep_") as keep:
+        for scene in backlit.SCENES:
+            res = measure(BACKLIT_MODES, samples, rounds=rounds, scene=scene, keep=Path(keep))
+            rows += [_row(scene, samples, rounds, label, anchor, res[mode], res[anchor])
+                     for mode, label, anchor in BACKLIT_ROWS]
+            speckle_figure(Path(keep), scene, samples[-1], Path(str(FIGURE).format(scene=scene)))
     return rows
