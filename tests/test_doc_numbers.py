@@ -55,6 +55,20 @@ def test_a_stale_or_unknown_quote_is_named():
     assert problems[3] == "line 5: bench:paper_total_cpu_h follows no number"
 
 
+
+def test_refresh_rewrites_stale_numbers_as_the_page_rounds_them():
+    results = {"sections": {"training.bench.paper_cost": {"stamp": "", "rows": [
+        {"workload": "`paper` build: total (dataset, ...)", "ours": "31.46 CPU-h (15 h wall on 2 idle cores)"}]}}}
+    page = ("stale: ~63 CPU-h<!-- bench:paper_total_cpu_h --> and 63.0<!-- bench:paper_total_cpu_h -->\n"
+            "kept: 31<!-- bench:paper_total_cpu_h -->, unknown 5<!-- bench:no_such_figure -->\n"
+            "an example in code: `63<!-- bench:paper_total_cpu_h -->`")
+    text, changes = quotes.refreshed(page, results)
+    assert text == ("stale: ~31 CPU-h<!-- bench:paper_total_cpu_h --> and 31.5<!-- bench:paper_total_cpu_h -->\n"
+                    "kept: 31<!-- bench:paper_total_cpu_h -->, unknown 5<!-- bench:no_such_figure -->\n"
+                    "an example in code: `63<!-- bench:paper_total_cpu_h -->`")
+    assert changes == ["line 1: paper_total_cpu_h 63 -> 31", "line 1: paper_total_cpu_h 63.0 -> 31.5"]
+    assert [p for p in quotes.stale_quotes(text, results) if "no_such_figure" not in p] == []
+
 @pytest.mark.parametrize(("quoted", "measured", "same"), [
     ("31", "31", True), ("2.0", "2.03", True), ("2.03", "2.03", True), ("2.1", "2.03", False),
     ("450", "450", True), ("620", "450", False), ("44,299", "44,299", True), ("0.85", "0.849", True),

@@ -10,7 +10,8 @@ whose group is the number as the table prints it.  :func:`stale_quotes` lists ev
 the bench's (rounded to as many decimals as the page gives); ``tests/test_doc_numbers.py`` runs it on the README
 and every page of ``docs/``, and ``docs/conf.py`` turns each finding into a warning, so ``make docs`` (warnings
 are errors) fails on a stale number.  When a benchmark is re-run and a number moves, the pages that quote it fail
-until they say the new number.
+until they say the new number: ``python -m training.bench.quotes --refresh README.md docs/...`` rewrites the
+marked numbers (:func:`refreshed`); the sentences around them still need a reader.
 """
 
 from __future__ import annotations
@@ -178,3 +179,52 @@ def stale_quotes(text: str, results: dict) -> list[str]:
         if not agrees(match.group("value"), measured):
             problems.append(f"line {line}: quotes {match.group('value')} for {key}, the bench shows {measured}")
     return problems
+
+
+def refreshed(text: str, results: dict) -> tuple[str, list[str]]:
+    """``text`` with every marked number replaced by the bench's, rounded as the page rounds it, and one line per
+    change (``line N: KEY X -> Y``).  Markers inside code, and markers the bench cannot answer, are left as they are
+    (:func:`stale_quotes` names those)."""
+    masked = _CODE.sub(lambda m: re.sub(r"[^\n]", " ", m.group(0)), text)
+    pieces, changes, last = [], [], 0
+    for match in MARKER.finditer(masked):
+        key, quoted = match.group("key"), match.group("value")
+        try:
+            measured = figure_text(results, key) if key in FIGURES else None
+        except KeyError:
+            measured = None
+        if measured is None or agrees(quoted, measured):
+            continue
+        digits = _decimals(quoted)
+        value = f"{round(_number(measured), digits):,.{digits}f}" if "," in quoted else \
+            f"{round(_number(measured), digits):.{digits}f}"
+        pieces += [text[last:match.start("value")], value]
+        last = match.end("value")
+        changes.append(f"line {text.count(chr(10), 0, match.start()) + 1}: {key} {quoted} -> {value}")
+    return "".join(pieces) + text[last:], changes
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``python -m training.bench.quotes [--refresh] PAGE ...``: name the stale quotes of the pages, or rewrite
+    them to the numbers of bench/results.json (after a bench run)."""
+    import argparse
+
+    parser = argparse.ArgumentParser(prog="python -m training.bench.quotes", description=main.__doc__)
+    parser.add_argument("pages", nargs="+", type=Path)
+    parser.add_argument("--refresh", action="store_true", help="rewrite the quoted numbers in place")
+    args = parser.parse_args(argv)
+    results, stale = load_results(), 0
+    for page in args.pages:
+        text = page.read_text()
+        if args.refresh:
+            text, changes = refreshed(text, results)
+            if changes:
+                page.write_text(text)
+        for line in (changes if args.refresh else []) + stale_quotes(text, results):
+            print(f"{page}: {line}")
+        stale += len(stale_quotes(text, results))
+    return 1 if stale else 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
