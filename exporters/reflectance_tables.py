@@ -145,10 +145,11 @@ def _cycles_table(ior: float) -> np.ndarray:
     t = _load()
     mu0 = np.sqrt(1.0 - 1.0 / ior**2)
     x = np.linspace(mu0, 1.0, 2049)
-    table = np.empty(t["directional"].shape[:2])
-    for gi, directional in enumerate(t["directional"]):  # one g row at a time: (U, X) work arrays, not (G, U, X)
-        y = 2.0 * x * _natural_spline(t["mu"], directional, x)
-        table[gi] = ior**2 * np.sum(0.5 * (y[..., 1:] + y[..., :-1]) * np.diff(x), axis=-1)  # trapezoid rule
+    # The spline and the trapezoid rule are linear in the stored values: integrate the spline of each unit vector
+    # once (one weight per stored cosine), then the table is a matrix product instead of (G, U, 2049) spline work.
+    basis = 2.0 * x * _natural_spline(t["mu"], np.eye(t["mu"].size), x)  # (n_mu, X)
+    weights = np.sum(0.5 * (basis[:, 1:] + basis[:, :-1]) * np.diff(x), axis=-1)  # trapezoid rule, (n_mu,)
+    table = ior**2 * (t["directional"] @ weights)
     table.setflags(write=False)
     return table
 
