@@ -215,14 +215,15 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     results, stale = load_results(), 0
     for page in args.pages:
-        text = page.read_text()
+        text, changes = page.read_text(), []
         if args.refresh:
             text, changes = refreshed(text, results)
             if changes:
                 page.write_text(text)
-        for line in (changes if args.refresh else []) + stale_quotes(text, results):
+        problems = stale_quotes(text, results)
+        for line in changes + problems:
             print(f"{page}: {line}")
-        stale += len(stale_quotes(text, results))
+        stale += len(problems)
     return 1 if stale else 0
 
 
