@@ -11,7 +11,10 @@ the neutral level).  For the painted colour c the nodes compute, as exporters.ed
   colour) and the radius factor exp(D_radius) per channel (every component's radius is multiplied by it).
 
 At neutral inputs each control reads its zero atlas with weight exactly 1 (its neighbour with weight exactly 0), so
-D = 0, c exp(0) = c and r exp(0) = r: the group renders its unedited result bit for bit.  Each input takes a value
+D = 0, c exp(0) = c and r exp(0) = r: the group renders its unedited result bit for bit.  Each control's shift is
+also switched to exactly 0 where its coordinate is neutral (the same value): an unlinked control at its neutral
+value then folds to a constant 0 when Cycles compiles the shader, which drops that control's texture lookups (a
+neutral group evaluates none of the edit nodes).  Each input takes a value
 or any node (a painted mask through a Mix node, an attribute, a driver); its keyframes animate it.
 """
 
@@ -197,7 +200,8 @@ def add_edit_branch(b, gin, table: edit_table.EditTable, images: dict[str, bpy.t
     for j, name in enumerate(skin_edits.CONTROLS):
         levels = edit_table.LEVELS[name]
         h = edit_table.SPACING[name]
-        t = b.math("MULTIPLY_ADD", 47, _coordinate(b, gin, j, 44), 1.0 / h, -levels[0] / h)
+        coordinate = _coordinate(b, gin, j, 44)
+        t = b.math("MULTIPLY_ADD", 47, coordinate, 1.0 / h, -levels[0] / h)
         lower = b.math("MINIMUM", 49, b.math("FLOOR", 48, t), edit_table.STACKED - 2.0)
         fraction = b.math("SUBTRACT", 50, t, lower)
         corner = b.node("ShaderNodeCombineXYZ", 51)
@@ -209,11 +213,21 @@ def add_edit_branch(b, gin, table: edit_table.EditTable, images: dict[str, bpy.t
         for kind in edit_table.KINDS:
             image = images[edit_table.image_name(j, kind)]
             found = [_bilinear_pair(b, image, pair, frac, 55) for pair in uvs]  # levels l and l + 1
-            value = b.mix("RGBA", 57, fraction, found[0], found[1])
+            value = _unless_neutral(b, coordinate, b.mix("RGBA", 57, fraction, found[0], found[1]), 58)
             shifts[kind] = value if shifts[kind] is None else _vec(b, "ADD", 58, shifts[kind], value)
     factor = {kind: _exp(b, shifts[kind], 59) for kind in edit_table.KINDS}
     edited = _vec(b, "MULTIPLY", 62, colour, factor["colour"])
     return EditBranch(colour=edited, radius_factor=factor["radius"])
+
+
+def _unless_neutral(b, coordinate, value, stage: int) -> bpy.types.NodeSocket:
+    """``value`` (a control's shift) where the control coordinate is not the neutral 0, exactly 0 where it is: a Mix
+    of factor 1 - [coordinate == 0] from 0 to ``value``.  Where the coordinate is 0 the shift read from the zero
+    atlas is 0 already, so the result is the same everywhere; but when the control's input is unlinked Cycles folds
+    the factor to a constant (0 at the neutral value, 1 elsewhere) and the Mix to one of its inputs, so a neutral
+    control's texture lookups are dropped from the compiled shader."""
+    neutral = b.math("COMPARE", stage, coordinate, 0.0, 0.0)
+    return b.mix("RGBA", stage + 1, b.math("SUBTRACT", stage, 1.0, neutral), (0.0, 0.0, 0.0, 1.0), value)
 
 
 def _bilinear_pair(b, image: bpy.types.Image, uvs, frac, stage: int) -> bpy.types.NodeSocket:
