@@ -7,6 +7,7 @@ Invert Skin Albedo wires a group with the inputs and the panel's presets set the
 
 from __future__ import annotations
 
+import re
 import sys
 from pathlib import Path
 
@@ -140,6 +141,46 @@ def test_neutral_inputs_render_the_unedited_group_bit_for_bit_and_keyframes_anim
     blood.default_value = 2.0
     np.testing.assert_array_equal(animated, _render(scene, tree, gnode, emission, name))
     assert not np.array_equal(animated, before[name])
+
+
+def _cycles_memory_mb(scene, tree, gnode) -> float:
+    """Render the group's Cycles output; the memory Cycles reports when done (MB: its images, BVH and buffers)."""
+    output = next(n for n in tree.nodes if n.bl_idname == "ShaderNodeOutputMaterial" and n.is_active_output)
+    tree.links.new(gnode.outputs["Cycles"], output.inputs["Surface"])
+    stats = []
+
+    def keep(text):
+        stats.append(text)
+
+    bpy.app.handlers.render_stats.append(keep)
+    try:
+        _render_row(scene)
+    finally:
+        bpy.app.handlers.render_stats.remove(keep)
+    found = [re.findall(r"Mem: *([0-9.]+)M", text) for text in stats]
+    return float([f for f in found if f][-1][0])
+
+
+def test_neutral_controls_read_no_edit_image(tmp_path, addon):
+    """A control at its neutral value adds exactly 0 in nodes Cycles can fold: with the inputs unlinked at neutral the
+    compiled shader holds none of the six edit images (Cycles' memory is the group's without edit nodes), and an
+    edit of one control holds only that control's two."""
+    scene, tree, gnode, _ = _strip(tmp_path)
+    table, edits = _tables()
+    layout, images = live.ensure_images(table)
+    edit_images = live_edits.ensure_images(edits)
+    mb_each = next(iter(edit_images.values())).size[0] * next(iter(edit_images.values())).size[1] * 16 / 2**20
+    assert mb_each > 1.0  # each image is visible at Cycles' 1 MB resolution of its memory statistic
+    _use(tree, gnode, live.build_live_group(table, layout, images))
+    plain = _cycles_memory_mb(scene, tree, gnode)
+    _use(tree, gnode, live.build_live_group(table, layout, images, (edits, edit_images)))
+    assert _cycles_memory_mb(scene, tree, gnode) == plain
+    gnode.inputs["Melanin"].default_value = 1.5
+    one = _cycles_memory_mb(scene, tree, gnode)
+    assert 2 * mb_each - 1.0 <= one - plain <= 2 * mb_each + 1.0
+    for name, value in EDIT.items():
+        gnode.inputs[name].default_value = value
+    assert _cycles_memory_mb(scene, tree, gnode) - plain >= 6 * mb_each - 1.0
 
 
 def test_operator_wires_the_edit_inputs_and_presets_set_them(tmp_path, addon):
