@@ -142,26 +142,42 @@ def ensure_images(table: texel_table.TexelTable) -> tuple[live_table.AtlasLayout
 
 # -- the group -------------------------------------------------------------------------------------------------
 class _Builder:
-    """Places nodes in a group left to right (x by stage, y by a running counter)."""
+    """Places nodes in a group left to right (x by stage, y by a running counter).
+
+    Blender updates the whole tree after each property it sets from Python, so a set costs time growing with the
+    tree: the builder sets no value a node already holds, and the locations all at once (:meth:`place`, which the
+    caller calls when done: ``foreach_set`` updates nothing)."""
 
     def __init__(self, group: bpy.types.NodeTree) -> None:
         self.group = group
         self.rows: dict[int, int] = {}
+        self.locations: list[tuple[int, float, float]] = []
 
     def node(self, kind: str, stage: int, **props) -> bpy.types.Node:
+        index = len(self.group.nodes)
         node = self.group.nodes.new(kind)
         row = self.rows.get(stage, 0)
         self.rows[stage] = row + 1
-        node.location = (-1600.0 + 220.0 * stage, 600.0 - 160.0 * row)
+        self.locations.append((index, -1600.0 + 220.0 * stage, 600.0 - 160.0 * row))
         for key, value in props.items():
-            setattr(node, key, value)
+            if getattr(node, key) != value:
+                setattr(node, key, value)
         return node
+
+    def place(self) -> None:
+        """Move the nodes made to their locations (one call for the whole tree)."""
+        tree_nodes = self.group.nodes
+        xy = np.empty(2 * len(tree_nodes), np.float32)
+        tree_nodes.foreach_get("location", xy)
+        for index, x, y in self.locations:
+            xy[2 * index:2 * index + 2] = x, y
+        tree_nodes.foreach_set("location", xy)
 
     def link(self, value, socket: bpy.types.NodeSocket) -> None:
         if isinstance(value, bpy.types.NodeSocket):
             self.group.links.new(value, socket)
         else:
-            socket.default_value = value
+            set_default(socket, value)
 
     def math(self, op: str, stage: int, a, b=None, c=None, clamp: bool = False) -> bpy.types.NodeSocket:
         node = self.node("ShaderNodeMath", stage, operation=op, use_clamp=clamp)
@@ -177,7 +193,7 @@ class _Builder:
             if isinstance(value, bpy.types.NodeSocket):
                 self.group.links.new(value, node.inputs[i])
             elif value is not None:
-                node.inputs[i].default_value = (float(value),) * 3
+                set_default(node.inputs[i], (float(value),) * 3)
         return node.outputs["Vector"]
 
     def mix(self, data_type: str, stage: int, fac, a, b) -> bpy.types.NodeSocket:
@@ -187,6 +203,13 @@ class _Builder:
         self.link(a, sockets[1])
         self.link(b, sockets[2])
         return next(s for s in node.outputs if s.enabled)
+
+
+def set_default(socket: bpy.types.NodeSocket, value) -> None:
+    """``socket.default_value = value`` unless it holds that value already (as stored: float32)."""
+    current = np.asarray(socket.default_value, np.float32)
+    if current.shape != np.shape(value) or not np.array_equal(current, np.asarray(value, np.float32)):
+        socket.default_value = value
 
 
 def _srgb_encode(b: _Builder, c: bpy.types.NodeSocket, stage: int) -> bpy.types.NodeSocket:
@@ -345,6 +368,7 @@ def build_live_group(table: texel_table.TexelTable, layout: live_table.AtlasLayo
     b.link(_alpha_emission(b, gin, mixture.outputs["BSSRDF"]), gout.inputs["Cycles"])
     b.link(_eevee_surface(b, gin, effective, table.options.ior, edited), gout.inputs["EEVEE"])
     b.link(outside, gout.inputs["Outside"])
+    b.place()
     return group
 
 

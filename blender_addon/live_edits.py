@@ -120,7 +120,9 @@ def ensure_edit_group(table: edit_table.EditTable, images: dict[str, bpy.types.I
     gin = group.nodes.new("NodeGroupInput")
     gout = group.nodes.new("NodeGroupOutput")
     gin.location, gout.location = (-1900.0, 0.0), (4400.0, 0.0)
-    branch = add_edit_branch(live._Builder(group), gin, table, images)
+    builder = live._Builder(group)
+    branch = add_edit_branch(builder, gin, table, images)
+    builder.place()
     group.links.new(branch.colour, gout.inputs["Color"])
     group.links.new(branch.radius_factor, gout.inputs["Radius Factor"])
     return group
