@@ -332,6 +332,27 @@ def test_operator_default_wires_the_live_group_and_keeps_the_artists_nodes(tmp_p
     assert len([i for i in bpy.data.images if i.name.startswith(live.IMAGE_PREFIX)]) == 9
 
 
+def test_operator_reports_what_the_file_holds_now(tmp_path, addon):
+    """The operator's report (its outside-colour share read beside the node building) is that of the file as it is
+    when the operator runs: a file rewritten since an earlier report is read again."""
+    codes = np.empty((4, 4, 3), np.uint8)
+    codes[...] = (224, 172, 150)
+    codes[:2, :] = (20, 40, 230)  # half of the texels: blue, no skin colour
+    png = write_image(tmp_path / "albedo.png", codes, "uint8")
+    for name in ("Skin A", "Skin B"):  # B: the same file through another image
+        obj, _, tex = skin_object(png, name=name)
+        with bpy.context.temp_override(object=obj, active_object=obj):
+            report = live.apply(bpy.context, preferences.DEFAULT_MODEL, 1.0)
+        assert f"50.00 % of the texels of '{tex.image.name}' lie outside" in report, report
+    write_image(png, np.broadcast_to(np.array([224, 172, 150], np.uint8), (8, 8, 3)).copy(), "uint8")
+    obj, _, tex = skin_object(png, name="Skin C")
+    with bpy.context.temp_override(object=obj, active_object=obj):
+        report = live.apply(bpy.context, preferences.DEFAULT_MODEL, 1.0)
+    assert f"every texel of '{tex.image.name}' is a skin colour of the table" in report, report
+    assert report.endswith(live.outside_report(live.table_for_model(preferences.DEFAULT_MODEL), tex.image,
+                                               "FROM_IMAGE"))
+
+
 def test_operator_refuses_a_material_without_principled_and_changes_nothing(addon):
     obj, mat, _ = skin_object(None)
     tree = mat.node_tree
