@@ -513,8 +513,11 @@ def ensure_live_group(table: texel_table.TexelTable, edits=None, grazing: bool =
         nodes.ensure_group(table.k, "SVM")  # the groups that need no images, built while the atlases are made
         if grazing:
             oblique.ensure_group()
+        edit_images = None
+        if edits is not None:  # the edit atlases come first: the edit group is built while the table's are made
+            edit_images = (edits, live_edits.ensure_images(edits, atlases.get("edits")))
+            live_edits.ensure_edit_group(*edit_images)
         layout, images = ensure_images(table, atlases.get("live"))
-        edit_images = (edits, live_edits.ensure_images(edits, atlases.get("edits"))) if edits is not None else None
     return build_live_group(table, layout, images, edit_images, grazing)
 
 
@@ -522,10 +525,10 @@ def _start_atlases(pool: Executor, table: texel_table.TexelTable, edits) -> dict
     """The atlases the file lacks (the table's, the edit table's), made on ``pool`` (numpy only, no Blender data):
     name -> the function that waits for them."""
     started: dict[str, Future] = {}
-    if len(_found_images(table)) < len(_image_names(table)):
-        started["live"] = pool.submit(lambda: live_table.atlases(table)[1])
     if edits is not None and not live_edits.has_images(edits):
         started["edits"] = pool.submit(edits.atlases)
+    if len(_found_images(table)) < len(_image_names(table)):
+        started["live"] = pool.submit(lambda: live_table.atlases(table)[1])
     return {name: future.result for name, future in started.items()}
 
 
