@@ -33,7 +33,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 import blender_addon  # noqa: E402
-from blender_addon import live, preferences, probe  # noqa: E402
+from blender_addon import live, live_edits, preferences, probe  # noqa: E402
 from exporters import live_table  # noqa: E402
 from exporters.colorimetry import delta_e76, linear_srgb_to_lab, srgb_decode, srgb_encode  # noqa: E402
 from tests.addon_scene import run_invert, skin_object, snapshot, write_image  # noqa: E402
@@ -351,6 +351,19 @@ def test_operator_reports_what_the_file_holds_now(tmp_path, addon):
     assert f"every texel of '{tex.image.name}' is a skin colour of the table" in report, report
     assert report.endswith(live.outside_report(live.table_for_model(preferences.DEFAULT_MODEL), tex.image,
                                                "FROM_IMAGE"))
+
+
+def test_the_built_groups_lay_their_nodes_out_apart(addon):
+    """The builder places the nodes it makes (all at once, after building): no two nodes of the live group or of
+    the edit group share a location, none is left where Blender puts a new node."""
+    table = live.table_for_model(preferences.DEFAULT_MODEL)
+    edits = live_edits.table_for_model(preferences.DEFAULT_MODEL, table.sha256)
+    group = live.ensure_live_group(table, edits)
+    edit_group = next(n.node_tree for n in group.nodes if n.bl_idname == "ShaderNodeGroup"
+                      and n.node_tree.name.startswith(live_edits.EDIT_GROUP_NAME))
+    for tree in (group, edit_group):
+        spots = [tuple(n.location) for n in tree.nodes]
+        assert len(set(spots)) == len(spots) and (0.0, 0.0) not in spots, tree.name
 
 
 def test_operator_refuses_a_material_without_principled_and_changes_nothing(addon):
