@@ -405,8 +405,8 @@ def _open_image(path: str | os.PathLike):
     return inp
 
 
-#: Texels a sampled read decodes per call (:func:`sample_texels`): few calls, so a reading thread rarely waits for
-#: Python's lock, and a few MB per block.
+#: Texels a sampled read decodes per call (:func:`sample_texels`): a few calls per image (a thread that reads waits
+#: for Python's lock between calls), a few MB per block.
 SAMPLE_BLOCK_TEXELS = 1 << 20
 
 
@@ -416,7 +416,7 @@ def sample_texels(path: str | os.PathLike, limit: int) -> tuple[np.ndarray, bool
     floats).  Grey images are repeated to RGB.  For a quick statistic (the live group's outside-domain report), not
     a bake: no checks beyond readability (ImageError).  The file is read in blocks of rows
     (:data:`SAMPLE_BLOCK_TEXELS`), 8- and 16-bit files as stored (converted once sampled): PNG and JPEG decode
-    sequentially, so skipping rows would not save their decoding, and OpenImageIO reads without Python's lock."""
+    sequentially, so skipping rows would not save their decoding."""
     inp = _open_image(path)
     try:
         spec = inp.spec()
