@@ -37,6 +37,8 @@ The group's math follows exporters.live_table step by step; ``exporters.live_tab
 from __future__ import annotations
 
 import os
+from collections.abc import Callable
+from concurrent.futures import Executor, Future, ThreadPoolExecutor
 from pathlib import Path
 
 import bpy
@@ -83,7 +85,7 @@ def table_for_model(model_path: str) -> texel_table.TexelTable:
     if not os.path.isfile(model_path):
         raise LiveInputError(f"model not found at {model_path}: train/export it or set the path in preferences")
     table = _load_table(path)
-    if table.model_sha256 != maps.sha256_file(model_path):
+    if table.model_sha256 != file_sha256(model_path):
         raise LiveInputError(f"the table {path.name} was made from another model than {Path(model_path).name}: "
                              f"rebuild it (python -m training texel-table --model {model_path} --out {path} "
                              "--overwrite) or choose Bake")
@@ -107,24 +109,60 @@ def _load_table(path: Path) -> texel_table.TexelTable:
 _TABLES: dict[tuple, texel_table.TexelTable] = {}
 
 
+def file_key(path: str | os.PathLike) -> tuple | None:
+    """(path, size, modification time in ns) of a file, None when there is none: a version of the file."""
+    try:
+        stat = os.stat(path)
+    except OSError:
+        return None
+    return str(path), stat.st_size, stat.st_mtime_ns
+
+
+def file_sha256(path: str | os.PathLike) -> str:
+    """SHA-256 of a file (exporters.maps.sha256_file), computed once per file version for this session."""
+    key = file_key(path)
+    if key is None or key not in _HASHES:
+        digest = maps.sha256_file(path)  # OSError when missing
+        if key is None:
+            return digest
+        _HASHES[key] = digest
+    return _HASHES[key]
+
+
+_HASHES: dict[tuple, str] = {}
+
+
 # -- images ----------------------------------------------------------------------------------------------------
 def image_name(name: str) -> str:
     return f"{IMAGE_PREFIX} {name}"
 
 
-def ensure_images(table: texel_table.TexelTable) -> tuple[live_table.AtlasLayout, dict[str, bpy.types.Image]]:
-    """The table's atlas images, packed, one set per file: reused when images of this table exist, else made."""
-    layout = live_table.layout_of(table)
-    width, height = layout.size
-    names = [f"k{k} {kind}" for k in range(1, table.k + 1) for kind in live_table.IMAGE_KINDS]
+def _image_names(table: texel_table.TexelTable) -> list[str]:
+    return [f"k{k} {kind}" for k in range(1, table.k + 1) for kind in live_table.IMAGE_KINDS]
+
+
+def _found_images(table: texel_table.TexelTable) -> dict[str, bpy.types.Image]:
+    """The images of ``table`` this file holds already (by name, made from this table, of its size)."""
+    width, height = live_table.layout_of(table).size
     found = {}
-    for name in names:
+    for name in _image_names(table):
         image = bpy.data.images.get(image_name(name))
         if image is not None and image.get(TABLE_PROP) == table.sha256 and tuple(image.size) == (width, height):
             found[name] = image
+    return found
+
+
+def ensure_images(table: texel_table.TexelTable, atlases: Callable[[], dict[str, np.ndarray]] | None = None
+                  ) -> tuple[live_table.AtlasLayout, dict[str, bpy.types.Image]]:
+    """The table's atlas images, packed, one set per file: reused when images of this table exist, else made
+    (``atlases``: gives the table's atlases, made elsewhere meanwhile; default: made here)."""
+    layout = live_table.layout_of(table)
+    width, height = layout.size
+    names = _image_names(table)
+    found = _found_images(table)
     if len(found) == len(names):
         return layout, found
-    _, atlases = live_table.atlases(table)
+    atlases = atlases() if atlases is not None else live_table.atlases(table)[1]
     images = {}
     for name in names:
         old = bpy.data.images.get(image_name(name))
@@ -142,26 +180,42 @@ def ensure_images(table: texel_table.TexelTable) -> tuple[live_table.AtlasLayout
 
 # -- the group -------------------------------------------------------------------------------------------------
 class _Builder:
-    """Places nodes in a group left to right (x by stage, y by a running counter)."""
+    """Places nodes in a group left to right (x by stage, y by a running counter).
+
+    Blender updates the whole tree after each property it sets from Python, so a set costs time growing with the
+    tree: the builder sets no value a node already holds, and the locations all at once (:meth:`place`, which the
+    caller calls when done: ``foreach_set`` updates nothing)."""
 
     def __init__(self, group: bpy.types.NodeTree) -> None:
         self.group = group
         self.rows: dict[int, int] = {}
+        self.locations: list[tuple[int, float, float]] = []
 
     def node(self, kind: str, stage: int, **props) -> bpy.types.Node:
+        index = len(self.group.nodes)
         node = self.group.nodes.new(kind)
         row = self.rows.get(stage, 0)
         self.rows[stage] = row + 1
-        node.location = (-1600.0 + 220.0 * stage, 600.0 - 160.0 * row)
+        self.locations.append((index, -1600.0 + 220.0 * stage, 600.0 - 160.0 * row))
         for key, value in props.items():
-            setattr(node, key, value)
+            if getattr(node, key) != value:
+                setattr(node, key, value)
         return node
+
+    def place(self) -> None:
+        """Move the nodes made to their locations (one call for the whole tree)."""
+        tree_nodes = self.group.nodes
+        xy = np.empty(2 * len(tree_nodes), np.float32)
+        tree_nodes.foreach_get("location", xy)
+        for index, x, y in self.locations:
+            xy[2 * index:2 * index + 2] = x, y
+        tree_nodes.foreach_set("location", xy)
 
     def link(self, value, socket: bpy.types.NodeSocket) -> None:
         if isinstance(value, bpy.types.NodeSocket):
             self.group.links.new(value, socket)
         else:
-            socket.default_value = value
+            set_default(socket, value)
 
     def math(self, op: str, stage: int, a, b=None, c=None, clamp: bool = False) -> bpy.types.NodeSocket:
         node = self.node("ShaderNodeMath", stage, operation=op, use_clamp=clamp)
@@ -177,7 +231,7 @@ class _Builder:
             if isinstance(value, bpy.types.NodeSocket):
                 self.group.links.new(value, node.inputs[i])
             elif value is not None:
-                node.inputs[i].default_value = (float(value),) * 3
+                set_default(node.inputs[i], (float(value),) * 3)
         return node.outputs["Vector"]
 
     def mix(self, data_type: str, stage: int, fac, a, b) -> bpy.types.NodeSocket:
@@ -187,6 +241,13 @@ class _Builder:
         self.link(a, sockets[1])
         self.link(b, sockets[2])
         return next(s for s in node.outputs if s.enabled)
+
+
+def set_default(socket: bpy.types.NodeSocket, value) -> None:
+    """``socket.default_value = value`` unless it holds that value already (as stored: float32)."""
+    current = np.asarray(socket.default_value, np.float32)
+    if current.shape != np.shape(value) or not np.array_equal(current, np.asarray(value, np.float32)):
+        socket.default_value = value
 
 
 def _srgb_encode(b: _Builder, c: bpy.types.NodeSocket, stage: int) -> bpy.types.NodeSocket:
@@ -345,6 +406,7 @@ def build_live_group(table: texel_table.TexelTable, layout: live_table.AtlasLayo
     b.link(_alpha_emission(b, gin, mixture.outputs["BSSRDF"]), gout.inputs["Cycles"])
     b.link(_eevee_surface(b, gin, effective, table.options.ior, edited), gout.inputs["EEVEE"])
     b.link(outside, gout.inputs["Outside"])
+    b.place()
     return group
 
 
@@ -446,9 +508,28 @@ def ensure_live_group(table: texel_table.TexelTable, edits=None, grazing: bool =
                 and group.get(live_edits.EDIT_TABLE_PROP) == edit_sha
                 and group.get(GRAZING_PROP, False) == grazing):
             return group
-    layout, images = ensure_images(table)
-    edit_images = (edits, live_edits.ensure_images(edits)) if edits is not None else None
+    with ThreadPoolExecutor(max_workers=1, thread_name_prefix="spectral-skin-atlases") as pool:
+        atlases = _start_atlases(pool, table, edits)
+        nodes.ensure_group(table.k, "SVM")  # the groups that need no images, built while the atlases are made
+        if grazing:
+            oblique.ensure_group()
+        edit_images = None
+        if edits is not None:  # the edit atlases come first: the edit group is built while the table's are made
+            edit_images = (edits, live_edits.ensure_images(edits, atlases.get("edits")))
+            live_edits.ensure_edit_group(*edit_images)
+        layout, images = ensure_images(table, atlases.get("live"))
     return build_live_group(table, layout, images, edit_images, grazing)
+
+
+def _start_atlases(pool: Executor, table: texel_table.TexelTable, edits) -> dict[str, Callable[[], dict]]:
+    """The atlases the file lacks (the table's, the edit table's), made on ``pool`` (numpy only, no Blender data):
+    name -> the function that waits for them."""
+    started: dict[str, Future] = {}
+    if edits is not None and not live_edits.has_images(edits):
+        started["edits"] = pool.submit(edits.atlases)
+    if len(_found_images(table)) < len(_image_names(table)):
+        started["live"] = pool.submit(lambda: live_table.atlases(table)[1])
+    return {name: future.result for name, future in started.items()}
 
 
 # -- wiring ----------------------------------------------------------------------------------------------------
@@ -492,18 +573,32 @@ def image_colours(image: bpy.types.Image, colorspace: str, limit: int = OUTSIDE_
     are read directly (a few rows, never the whole float buffer) where OpenImageIO's Python module is there;
     packed and generated images, and every image in a Blender without that module (4.2), from Blender's own
     pixel buffer (a tiled image's first tile only)."""
+    return _decoded([read() for read in _texel_sources(image, limit)[0]], colorspace)
+
+
+def _texel_sources(image: bpy.types.Image, limit: int) -> tuple[list[Callable[[], tuple[np.ndarray, bool]]],
+                                                                   tuple | None]:
+    """What :func:`image_colours` reads: one function per part giving (values as stored (N, 3), whether the image
+    stores floats), none of which touches Blender data (Blender's pixel buffer is copied here), and the versions of
+    the files read (:func:`file_key`; None when a part is no file)."""
     try:
         image_input.openimageio()
     except image_input.ImageError:
-        return _decoded([(_pixels(image, limit), image.is_float)], colorspace)
-    if image.source == "TILED":
-        paths = [_file_of(image, tile.number) for tile in image.tiles]
-        parts = [image_input.sample_texels(p, limit // len(paths)) for p in paths if os.path.isfile(p)]
-    elif image.source == "FILE" and image.packed_file is None and os.path.isfile(_file_of(image)):
-        parts = [image_input.sample_texels(_file_of(image), limit)]
+        paths = None
     else:
-        parts = [(_pixels(image, limit), image.is_float)]
-    return _decoded(parts, colorspace)
+        if image.source == "TILED":
+            paths = [p for p in (_file_of(image, tile.number) for tile in image.tiles) if os.path.isfile(p)]
+            share = limit // max(len(image.tiles), 1)
+        elif image.source == "FILE" and image.packed_file is None and os.path.isfile(_file_of(image)):
+            paths, share = [_file_of(image)], limit
+        else:
+            paths = None
+    if paths is None:
+        pixels = (_pixels(image, limit), image.is_float)
+        return [lambda: pixels], None
+    keys = tuple(file_key(p) for p in paths)
+    return ([lambda path=p: image_input.sample_texels(path, share) for p in paths],
+            (keys, share) if None not in keys else None)
 
 
 def _decoded(parts: list[tuple[np.ndarray, bool]], colorspace: str) -> np.ndarray:
@@ -557,33 +652,71 @@ def apply(context: bpy.types.Context, model_path: str, unit_scale_m: float, colo
         return (f"up to date: '{material.name}' already renders through the live group (Unit Scale {unit_scale_m:g} m "
                 "per Blender unit)")
     _, colour, _ = colour_source(material)
-    before = _state(material)
-    try:
-        group = ensure_live_group(table, edits)
-        gnode = wire_live(material, group, unit_scale_m)
-        gnode.inputs["Principled Convention"].default_value = float(principled_convention)
-    except BaseException:
-        _restore(material, before)
-        raise
-    report = f"live group wired into '{material.name}' (K={table.k}; no maps baked)"
     image_node = colour.node if colour is not None and colour.node.bl_idname == "ShaderNodeTexImage" else None
-    if image_node is not None and image_node.image is not None:
-        report += "; " + outside_report(table, image_node.image, colorspace)
+    image = image_node.image if image_node is not None else None
+    before = _state(material)
+    with ThreadPoolExecutor(max_workers=1, thread_name_prefix="spectral-skin-outside") as pool:
+        outside = outside_check(table, image, colorspace, pool) if image is not None else None
+        try:
+            group = ensure_live_group(table, edits)
+            gnode = wire_live(material, group, unit_scale_m)
+            gnode.inputs["Principled Convention"].default_value = float(principled_convention)
+        except BaseException:
+            _restore(material, before)
+            raise
+        report = f"live group wired into '{material.name}' (K={table.k}; no maps baked)"
+        if outside is not None:
+            report += "; " + outside()
     gnode.select = True
     return report
 
 
 def outside_report(table: texel_table.TexelTable, image: bpy.types.Image, colorspace: str) -> str:
     """How much of ``image`` lies outside the table's domain of skin colours (it renders as painted all the same)."""
+    return outside_check(table, image, colorspace)()
+
+
+def outside_check(table: texel_table.TexelTable, image: bpy.types.Image, colorspace: str,
+                  pool: Executor | None = None) -> Callable[[], str]:
+    """:func:`outside_report`, started: the files are read and the colours located on ``pool`` (no Blender data is
+    touched there), so that the operator builds its nodes meanwhile; returns the function that waits for the
+    report.  A file version checked before (path, size, modification time: :func:`file_key`) with this table and
+    colour space is not read again."""
     from .baker import _image_colorspace  # the bake's reading of Blender's colour-space setting
 
-    rgb = image_colours(image, _image_colorspace(image, colorspace))
-    if len(rgb) == 0:
-        return f"image '{image.name}' has no pixels to check"
-    share = live_table.outside_fraction(table, rgb)
+    name, used = image.name, _image_colorspace(image, colorspace)
+    sources, files = _texel_sources(image, OUTSIDE_SAMPLE)
+    key = (files, used, table.sha256) if files is not None else None
+    if key in _OUTSIDE:
+        return lambda: _outside_text(name, _OUTSIDE[key])
+
+    def share() -> float | None:
+        rgb = _decoded([read() for read in sources], used)
+        return live_table.outside_fraction(table, rgb) if len(rgb) else None
+
+    future = pool.submit(share) if pool is not None else None
+
+    def report() -> str:
+        value = future.result() if future is not None else share()
+        if key is not None:
+            if len(_OUTSIDE) >= 64:
+                _OUTSIDE.clear()
+            _OUTSIDE[key] = value
+        return _outside_text(name, value)
+
+    return report
+
+
+#: The share outside the skin colours (None: no pixels) per (file versions, colour space, table SHA-256).
+_OUTSIDE: dict[tuple, float | None] = {}
+
+
+def _outside_text(name: str, share: float | None) -> str:
+    if share is None:
+        return f"image '{name}' has no pixels to check"
     if share == 0.0:
-        return f"every texel of '{image.name}' is a skin colour of the table"
-    return (f"{100 * share:.2f} % of the texels of '{image.name}' lie outside the table's skin colours (make-up, "
+        return f"every texel of '{name}' is a skin colour of the table"
+    return (f"{100 * share:.2f} % of the texels of '{name}' lie outside the table's skin colours (make-up, "
             "ink, paint: they render as painted, with the translucency of the nearest skin colour; "
             "docs/user/non_skin_colours.md)")
 

@@ -21,6 +21,7 @@ or any node (a painted mask through a Mix node, an attribute, a driver); its key
 from __future__ import annotations
 
 import os
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -28,7 +29,7 @@ import bpy
 import numpy as np
 
 from . import wiring
-from .core import edit_table, live_table, maps, skin_edits, texel_table
+from .core import edit_table, live_table, skin_edits, texel_table
 
 #: Custom property on the edit images and the group: the SHA-256 of the edit table they were made from.
 EDIT_TABLE_PROP = wiring.EDIT_TABLE_PROP
@@ -45,20 +46,45 @@ INPUTS = tuple(
 def table_for_model(model_path: str, texel_sha256: str) -> edit_table.EditTable | None:
     """The edit table beside ``model_path`` made from that model and the texel table of SHA-256 ``texel_sha256``, or
     None (the group is then built without the edit inputs)."""
+    from .live import file_key, file_sha256
+
     path = edit_table.default_path(model_path)
-    try:
-        table = edit_table.load(path)
-    except edit_table.EditTableError:
+    key = file_key(path)
+    if key is None:
         return None
-    if table.meta.get("model_sha256") != maps.sha256_file(model_path) or \
+    if key not in _TABLES:  # loaded once per file version for this session
+        try:
+            table = edit_table.load(path)
+        except edit_table.EditTableError:
+            return None
+        _TABLES.clear()
+        _TABLES[key] = table
+    table = _TABLES[key]
+    if table.meta.get("model_sha256") != file_sha256(model_path) or \
             table.meta.get("texel_table_sha256") != texel_sha256:
         return None
     return table
 
 
-def ensure_images(table: edit_table.EditTable) -> dict[str, bpy.types.Image]:
+def has_images(table: edit_table.EditTable) -> bool:
+    """Whether the file holds every image of the edit table ``table``."""
+    for j in range(len(skin_edits.CONTROLS)):
+        for kind in edit_table.KINDS:
+            image = bpy.data.images.get(f"{IMAGE_PREFIX} {edit_table.image_name(j, kind)}")
+            if image is None or image.get(EDIT_TABLE_PROP) != table.sha256:
+                return False
+    return True
+
+
+_TABLES: dict[tuple, edit_table.EditTable] = {}
+
+
+def ensure_images(table: edit_table.EditTable, atlases: Callable[[], dict[str, np.ndarray]] | None = None
+                  ) -> dict[str, bpy.types.Image]:
     """The edit table's images (per control, its colour shift and its radius correction, the levels' atlases
-    stacked), packed, one set per file (reused when images of this table exist)."""
+    stacked), packed, one set per file (reused when images of this table exist; ``atlases``: gives the table's
+    atlases, made elsewhere meanwhile; default: made here)."""
+    make = atlases if atlases is not None else table.atlases
     atlases = None
     images = {}
     for j in range(len(skin_edits.CONTROLS)):
@@ -69,7 +95,7 @@ def ensure_images(table: edit_table.EditTable) -> dict[str, bpy.types.Image]:
             if image is not None and image.get(EDIT_TABLE_PROP) == table.sha256:
                 images[name] = image
                 continue
-            atlases = atlases if atlases is not None else table.atlases()
+            atlases = atlases if atlases is not None else make()
             pixels = atlases[name]
             if image is not None and image.users == 0:
                 bpy.data.images.remove(image)
@@ -123,7 +149,9 @@ def ensure_edit_group(table: edit_table.EditTable, images: dict[str, bpy.types.I
     gin = group.nodes.new("NodeGroupInput")
     gout = group.nodes.new("NodeGroupOutput")
     gin.location, gout.location = (-1900.0, 0.0), (4400.0, 0.0)
-    branch = add_edit_branch(live._Builder(group), gin, table, images)
+    builder = live._Builder(group)
+    branch = add_edit_branch(builder, gin, table, images)
+    builder.place()
     group.links.new(branch.colour, gout.inputs["Color"])
     group.links.new(branch.radius_factor, gout.inputs["Radius Factor"])
     return group

@@ -405,21 +405,37 @@ def _open_image(path: str | os.PathLike):
     return inp
 
 
+#: Texels a sampled read decodes per call (:func:`sample_texels`): a few calls per image (a thread that reads waits
+#: for Python's lock between calls), a few MB per block.
+SAMPLE_BLOCK_TEXELS = 1 << 20
+
+
 def sample_texels(path: str | os.PathLike, limit: int) -> tuple[np.ndarray, bool]:
     """About ``limit`` texels of an image file, on an even grid of rows and columns, without holding the whole
     image: (values (N, 3) float64 as stored, integers scaled to [0, 1] and not decoded; whether the file stores
     floats).  Grey images are repeated to RGB.  For a quick statistic (the live group's outside-domain report), not
-    a bake: no checks beyond readability (ImageError)."""
+    a bake: no checks beyond readability (ImageError).  The file is read in blocks of rows
+    (:data:`SAMPLE_BLOCK_TEXELS`), 8- and 16-bit files as stored (converted once sampled): PNG and JPEG decode
+    sequentially, so skipping rows would not save their decoding."""
     inp = _open_image(path)
     try:
         spec = inp.spec()
         stride = max(1, int(np.ceil(np.sqrt(spec.width * spec.height / max(limit, 1)))))
-        rows = [inp.read_scanline(y, 0, "float") for y in range(spec.y, spec.y + spec.height, stride)]
-        is_float = str(spec.format) in ("half", "float", "double")
+        fmt = str(spec.format)
+        read_as = fmt if fmt in ("uint8", "uint16") else "float"
+        block = stride * max(1, SAMPLE_BLOCK_TEXELS // max(spec.width * stride, 1))
+        end = spec.y + spec.height
+        parts = []
+        for y in range(spec.y, end, block):
+            px = inp.read_scanlines(0, 0, y, min(y + block, end), 0, 0, spec.nchannels, read_as)
+            if px is None:
+                raise ImageError(f"cannot read pixels of {path}")
+            parts.append(np.asarray(px).reshape(-1, spec.width, spec.nchannels)[::stride, ::stride])
+        is_float = fmt in ("half", "float", "double")
     finally:
         inp.close()
-    if any(r is None for r in rows):
-        raise ImageError(f"cannot read pixels of {path}")
-    px = np.concatenate([np.asarray(r, np.float64).reshape(spec.width, -1)[::stride] for r in rows])
+    px = np.concatenate(parts).reshape(-1, spec.nchannels).astype(np.float64)
+    if read_as in _INT_MAX:
+        px /= _INT_MAX[read_as]
     rgb = px[:, :3] if px.shape[1] >= 3 else np.repeat(px[:, :1], 3, axis=1)
     return np.nan_to_num(rgb, nan=0.0, posinf=1.0, neginf=0.0), is_float

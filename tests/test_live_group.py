@@ -33,7 +33,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 import blender_addon  # noqa: E402
-from blender_addon import live, preferences, probe  # noqa: E402
+from blender_addon import live, live_edits, preferences, probe  # noqa: E402
 from exporters import live_table  # noqa: E402
 from exporters.colorimetry import delta_e76, linear_srgb_to_lab, srgb_decode, srgb_encode  # noqa: E402
 from tests.addon_scene import run_invert, skin_object, snapshot, write_image  # noqa: E402
@@ -330,6 +330,40 @@ def test_operator_default_wires_the_live_group_and_keeps_the_artists_nodes(tmp_p
               and n.node_tree.get("spectral_skin_sss_backend") == "LIVE"}
     assert len(groups) == 1
     assert len([i for i in bpy.data.images if i.name.startswith(live.IMAGE_PREFIX)]) == 9
+
+
+def test_operator_reports_what_the_file_holds_now(tmp_path, addon):
+    """The operator's report (its outside-colour share read beside the node building) is that of the file as it is
+    when the operator runs: a file rewritten since an earlier report is read again."""
+    codes = np.empty((4, 4, 3), np.uint8)
+    codes[...] = (224, 172, 150)
+    codes[:2, :] = (20, 40, 230)  # half of the texels: blue, no skin colour
+    png = write_image(tmp_path / "albedo.png", codes, "uint8")
+    for name in ("Skin A", "Skin B"):  # B: the same file through another image
+        obj, _, tex = skin_object(png, name=name)
+        with bpy.context.temp_override(object=obj, active_object=obj):
+            report = live.apply(bpy.context, preferences.DEFAULT_MODEL, 1.0)
+        assert f"50.00 % of the texels of '{tex.image.name}' lie outside" in report, report
+    write_image(png, np.broadcast_to(np.array([224, 172, 150], np.uint8), (8, 8, 3)).copy(), "uint8")
+    obj, _, tex = skin_object(png, name="Skin C")
+    with bpy.context.temp_override(object=obj, active_object=obj):
+        report = live.apply(bpy.context, preferences.DEFAULT_MODEL, 1.0)
+    assert f"every texel of '{tex.image.name}' is a skin colour of the table" in report, report
+    assert report.endswith(live.outside_report(live.table_for_model(preferences.DEFAULT_MODEL), tex.image,
+                                               "FROM_IMAGE"))
+
+
+def test_the_built_groups_lay_their_nodes_out_apart(addon):
+    """The builder places the nodes it makes (all at once, after building): no two nodes of the live group or of
+    the edit group share a location, none is left where Blender puts a new node."""
+    table = live.table_for_model(preferences.DEFAULT_MODEL)
+    edits = live_edits.table_for_model(preferences.DEFAULT_MODEL, table.sha256)
+    group = live.ensure_live_group(table, edits)
+    edit_group = next(n.node_tree for n in group.nodes if n.bl_idname == "ShaderNodeGroup"
+                      and n.node_tree.name.startswith(live_edits.EDIT_GROUP_NAME))
+    for tree in (group, edit_group):
+        spots = [tuple(n.location) for n in tree.nodes]
+        assert len(set(spots)) == len(spots) and (0.0, 0.0) not in spots, tree.name
 
 
 def test_operator_refuses_a_material_without_principled_and_changes_nothing(addon):

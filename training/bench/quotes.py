@@ -64,6 +64,8 @@ FIGURES: dict[str, Figure] = {
     "live_memory_vs_principled": Figure("live", "live group (default)", "ratio", r"process memory ([\d.]+)x"),
     "baked_memory_vs_principled": Figure("live", "baked maps", "ratio", r"process memory ([\d.]+)x"),
     "live_operator_s": Figure("live", "live group (default)", "ours", r"operator ([\d.]+) s"),
+    "live_operator_thread_s": Figure("live", "live group (default)", "ours", r"CPU ([\d.]+) s on the calling thread"),
+    "live_operator_cpu_s": Figure("live", "live group (default)", "ours", r"calling thread, ([\d.]+) s in all"),
     "live_render_time_vs_principled": Figure("live", "live group (default)", "ratio", r"time ([\d.]+)x"),
     "live_noise_time_vs_principled": Figure("render_cost", "live group (default) vs Principled", "ratio",
                                             r"time to equal noise ([\d.]+)x", _HEAD),
