@@ -64,7 +64,8 @@ test: $(STAMP) $(MITSUBA_STAMP) $(BLENDER_OLDEST_STAMP) $(BLENDER_NEWEST_STAMP)
 	$(PY) -m pytest -q -n 2 --dist loadfile tests
 
 # The full physics validation that make test samples (pytest marker `validation`, docs/dev/testing.md): Mitsuba
-# against our renderer at the medium tone too (make test runs the lightest and the darkest).
+# against our renderer, and Cycles' render of a bake against its colour, at the medium tone too (make test runs the
+# lightest and the darkest).
 validate: $(STAMP) $(MITSUBA_STAMP)
 	$(PY) -m pytest -q -n 2 --dist loadfile -m validation tests
 
