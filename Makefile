@@ -17,7 +17,7 @@ BLENDER_NEWEST := .venv-blender53
 BLENDER_OLDEST_STAMP := $(BLENDER_OLDEST)/.installed-bpy-4.2.23
 BLENDER_NEWEST_STAMP := $(BLENDER_NEWEST)/.installed-bpy-5.3.0
 
-.PHONY: install mitsuba blender-envs demo extension test lint bench docs clean
+.PHONY: install mitsuba blender-envs demo extension test validate lint bench docs clean
 
 install: $(STAMP)
 
@@ -62,6 +62,12 @@ $(BLENDER_NEWEST_STAMP):
 # Two workers (pytest-xdist), one per core, each taking whole test files (module fixtures are built once).
 test: $(STAMP) $(MITSUBA_STAMP) $(BLENDER_OLDEST_STAMP) $(BLENDER_NEWEST_STAMP)
 	$(PY) -m pytest -q -n 2 --dist loadfile tests
+
+# The full physics validation that make test samples (pytest marker `validation`, docs/dev/testing.md): Mitsuba
+# against our renderer, and Cycles' render of a bake against its colour, at the medium tone too (make test runs the
+# lightest and the darkest).
+validate: $(STAMP) $(MITSUBA_STAMP)
+	$(PY) -m pytest -q -n 2 --dist loadfile -m validation tests
 
 lint: $(STAMP)
 	$(PY) -m ruff check exporters training blender_addon tests

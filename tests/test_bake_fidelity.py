@@ -8,7 +8,7 @@ computed here from the ONNX model alone: its ``reflectance`` spectrum (376 sampl
 (exporters.colorimetry.spectrum_to_linear_srgb), i.e. what a viewer of the spectral skin sees; by default
 (the painted colour) it is the albedo itself, in every view as on average (tests/test_bake_painted_colour.py
 checks the view from straight above against a Diffuse BSDF).  Tolerance 3 % per channel, for the SVM and
-the OSL node groups.  1 Blender unit = 5 mm, so the slab is
+the OSL node groups (the medium tone in the opt-in ``make validate``).  1 Blender unit = 5 mm, so the slab is
 semi-infinite for every component and Cycles' float32 walk resolves the shortest mean free path.
 
 The group layers a specular coat over the mixture (blender_addon/nodes.py): the render is the model's colour
@@ -79,7 +79,10 @@ def render_tone(tmp_path: Path, tone: str, backend: str, own_colour: bool):
         blender_addon.unregister()
 
 
-CASES = [(tone, backend, True) for backend in ("SVM", "OSL") for tone in TONES] + [("dark", "OSL", False)]
+#: The lightest and the darkest tone in make test; the medium one (between them, the same code path) in the opt-in
+#: full validation (make validate).
+CASES = [(tone, backend, True) if tone != "medium" else pytest.param(tone, backend, True, marks=pytest.mark.validation)
+         for backend in ("SVM", "OSL") for tone in TONES] + [("dark", "OSL", False)]
 
 
 @pytest.mark.slow
