@@ -269,7 +269,7 @@ def _svm_mixture(group: bpy.types.NodeTree, gin: bpy.types.Node, k_count: int,
     total = None
     for k in range(1, k_count + 1):
         y0 = -(k - 1) * 1500.0
-        seps = _separated(group, gin, k, y0)
+        seps = _separated(group, gin, k, y0, ("Weight",))
         w = [seps["Weight"].outputs[c] for c in range(3)]
         lo = _math(group, "MINIMUM", _math(group, "MINIMUM", w[0], w[1], x=-850.0, y=y0), w[2], x=-800.0, y=y0)
         hi = _math(group, "MAXIMUM", _math(group, "MAXIMUM", w[0], w[1], x=-850.0, y=y0 - 50.0), w[2], x=-800.0,
@@ -282,7 +282,8 @@ def _svm_mixture(group: bpy.types.NodeTree, gin: bpy.types.Node, k_count: int,
         for j, (threshold, share) in enumerate(levels):
             y = y0 - j * 450.0
             colour = gin.outputs[socket_name(k, "Color")] if threshold is None \
-                else _masked(group, seps["Color"], w, threshold, y).outputs[0]
+                else _masked(group, gin.outputs[socket_name(k, "Color")], gin.outputs[socket_name(k, "Weight")],
+                             threshold, y)
             sss = _closure(group, gin, colour, gin.outputs[socket_name(k, "Radius")], k, y)
             sss.label = f"k{k} " + ("RGB", "two largest weights", "largest weight")[j]
             weight = _math(group, "MULTIPLY", share, scale, x=-300.0, y=y + 100.0)
@@ -291,10 +292,11 @@ def _svm_mixture(group: bpy.types.NodeTree, gin: bpy.types.Node, k_count: int,
     return total
 
 
-def _separated(group: bpy.types.NodeTree, gin: bpy.types.Node, k: int, y0: float) -> dict[str, bpy.types.Node]:
-    """Separate Color nodes of component k's Color, Radius and Weight inputs, by kind."""
+def _separated(group: bpy.types.NodeTree, gin: bpy.types.Node, k: int, y0: float,
+               kinds: tuple[str, ...] = ("Color", "Radius", "Weight")) -> dict[str, bpy.types.Node]:
+    """Separate Color nodes of component k's inputs ``kinds``, by kind."""
     seps = {}
-    for j, kind in enumerate(("Color", "Radius", "Weight")):
+    for j, kind in enumerate(kinds):
         sep = group.nodes.new("ShaderNodeSeparateColor")
         sep.location = (-950.0, y0 - j * 200.0)
         group.links.new(gin.outputs[socket_name(k, kind)], sep.inputs[0])
@@ -302,18 +304,31 @@ def _separated(group: bpy.types.NodeTree, gin: bpy.types.Node, k: int, y0: float
     return seps
 
 
-def _masked(group: bpy.types.NodeTree, colour: bpy.types.Node, weights: list, threshold: bpy.types.NodeSocket,
-            y: float) -> bpy.types.Node:
-    """Combine Color of ``colour``'s channels (a Separate Color node) where the channel's weight is >= ``threshold``,
-    0 elsewhere."""
-    comb = group.nodes.new("ShaderNodeCombineColor")
-    comb.location = (-600.0, y)
-    for c in range(3):
-        below = _math(group, "LESS_THAN", weights[c], threshold, x=-700.0, y=y - 40.0 * c)
-        keep = _math(group, "SUBTRACT", 1.0, below, x=-650.0, y=y - 40.0 * c)
-        group.links.new(_math(group, "MULTIPLY", colour.outputs[c], keep, x=-600.0, y=y - 40.0 * c),
-                        comb.inputs[c])
-    return comb
+def _vec(group: bpy.types.NodeTree, operation: str, a, b=None, x: float = 0.0, y: float = 0.0) -> bpy.types.NodeSocket:
+    """A Vector Math node ``operation`` of inputs a, b (sockets, or numbers for all three components); returns its
+    vector output."""
+    node = group.nodes.new("ShaderNodeVectorMath")
+    node.operation = operation
+    node.location = (x, y)
+    for i, value in enumerate((a, b)):
+        if isinstance(value, bpy.types.NodeSocket):
+            group.links.new(value, node.inputs[i])
+        elif value is not None:
+            node.inputs[i].default_value = (float(value),) * 3
+    return node.outputs["Vector"]
+
+
+def _masked(group: bpy.types.NodeTree, colour: bpy.types.NodeSocket, weight: bpy.types.NodeSocket,
+            threshold: bpy.types.NodeSocket, y: float) -> bpy.types.NodeSocket:
+    """``colour`` (RGB) where the channel's ``weight`` is >= ``threshold`` (a scalar, one of the weights), 0
+    elsewhere: colour x floor(min(weight / threshold, 1)), four vector nodes in place of a comparison per channel
+    (each node costs every shading point its time).  A weight equal to the threshold divides to 1 exactly; a smaller
+    one to below 1 (a weight within one rounding step of the threshold may count as equal: a closure of a weight
+    that differs by 1e-7 relative).  A threshold of 0 (Cycles' safe divide: 0) masks every channel, and is only
+    used by a closure of weight 0, which Cycles skips."""
+    ratio = _vec(group, "DIVIDE", weight, threshold, x=-700.0, y=y)
+    step = _vec(group, "FLOOR", _vec(group, "MINIMUM", ratio, 1.0, x=-650.0, y=y), x=-600.0, y=y)
+    return _vec(group, "MULTIPLY", colour, step, x=-550.0, y=y)
 
 
 def _closure(group: bpy.types.NodeTree, gin: bpy.types.Node, colour: bpy.types.NodeSocket,
@@ -352,13 +367,12 @@ def _svm_mixture_per_channel(group: bpy.types.NodeTree, gin: bpy.types.Node, k_c
 
 def _weighted(group: bpy.types.NodeTree, closure: bpy.types.NodeSocket, weight: bpy.types.NodeSocket,
               y: float) -> list[bpy.types.NodeSocket]:
-    """``closure`` x ``weight`` for any weight >= 0: Mix Shaders of Fac min(weight, 1) and max(weight - 1, 0)
-    (a Mix Shader clamps its Fac to [0, 1]; Cycles sums a closure reached along both and skips the second
-    while its Fac is 0, i.e. unless the weight exceeds 1)."""
+    """``closure`` x ``weight`` for any weight >= 0: Mix Shaders of Fac weight and weight - 1, which the Mix
+    Shader clamps to [0, 1] itself (svm_node_mix_closure), i.e. min(weight, 1) and max(weight - 1, 0) with no node
+    of their own; Cycles sums a closure reached along both and skips the second while its Fac is 0, i.e. unless
+    the weight exceeds 1."""
     parts = []
-    for i, fac in enumerate((_math(group, "MINIMUM", weight, 1.0, x=-250.0, y=y + 50.0),
-                             _math(group, "MAXIMUM", _math(group, "SUBTRACT", weight, 1.0, x=-250.0, y=y - 50.0),
-                                   0.0, x=-200.0, y=y - 50.0))):
+    for i, fac in enumerate((weight, _math(group, "SUBTRACT", weight, 1.0, x=-250.0, y=y - 50.0))):
         mix = group.nodes.new("ShaderNodeMixShader")
         mix.location = (-150.0, y - 100.0 * i)
         group.links.new(fac, mix.inputs["Fac"])

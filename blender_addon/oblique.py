@@ -5,9 +5,17 @@ the nodes follow operation for operation).
 Inputs ``Color`` (the painted colour, linear; clamped to [0, 1] here) and ``Normal`` (unlinked: the shading
 normal); outputs ``Weight`` and ``Radius`` (the factors f and s per channel R, G, B).  1 - mu = 1 - |N . I| is
 Layer Weight's Facing (Blend 0.5); h a Map Range (Smooth Step) of it; Y the luminance of the colour; the slopes
-a_c(Y), b_c(Y) piecewise linear between the knots (a sum of clamped ramps, one Map Range per knot interval);
-f = 1 + a h_w, s = 1 + b h_r.  Where h = 0 (face-on views) both are 1 exactly.  The live group
-(blender_addon.live) multiplies its components' weights and radii by them before the mixture group.
+a_c(Y), b_c(Y) one Vector Curves node each (fed (Y, Y, Y); per channel the piecewise linear curve through the knots,
+vector handles, constant beyond the first and the last knot); f = 1 + a h_w, s = 1 + b h_r.  Where h = 0 (face-on
+views) both are 1 exactly.  The live group (blender_addon.live) multiplies its components' weights and radii by
+them before the mixture group.
+
+Why curves and not a Map Range per knot interval (a sum of clamped ramps, exact): the group is evaluated at every
+shading point, and its node count is a cost Principled does not pay (docs/user/live_group.md, render cost); nine
+nodes replace thirty-six.  Blender and Cycles evaluate a curve through tables (Blender: 257 entries over the clip
+range, here the knots' range; Cycles: 256 entries sampled from it), linear between entries, so the slopes differ
+from the knots' piecewise linear ones only next to a knot, by at most a quarter of a table step times the change
+of slope there: :data:`CURVE_ERROR` bounds it for the shipped correction.
 """
 
 from __future__ import annotations
@@ -22,6 +30,12 @@ from .core import colorimetry, oblique_correction
 GROUP_NAME = "Spectral Skin SSS Grazing"
 #: Custom property on the group: the SHA-256 of the correction (its JSON) the nodes were built from.
 CORRECTION_PROP = "spectral_skin_sss_oblique"
+#: Custom property on the group: how its nodes compute the correction (a group of another version is rebuilt).
+VERSION_PROP = "spectral_skin_sss_grazing_version"
+GRAZING_VERSION = 2
+#: Largest difference of a slope a_c or b_c between the curves' tables and the knots' piecewise linear function
+#: (both tables' interpolation, measured in Cycles by tests/test_oblique_correction.py).
+CURVE_ERROR = 5e-3
 
 
 def correction_sha(corr: oblique_correction.ObliqueCorrection) -> str:
@@ -33,7 +47,8 @@ def ensure_group(corr: oblique_correction.ObliqueCorrection | None = None) -> bp
     corr = corr or oblique_correction.shipped()
     sha = correction_sha(corr)
     for group in bpy.data.node_groups:
-        if group.name.startswith(GROUP_NAME) and group.get(CORRECTION_PROP) == sha:
+        if (group.name.startswith(GROUP_NAME) and group.get(CORRECTION_PROP) == sha
+                and group.get(VERSION_PROP) == GRAZING_VERSION):
             return group
     return build_group(corr)
 
@@ -55,26 +70,33 @@ def _map_range(tree, value, lo: float, hi: float, x: float, y: float, interpolat
     return node.outputs["Result"]
 
 
-def _piecewise(tree, ramps: list, values: np.ndarray, x: float, y: float):
-    """values[0] + sum_i (values[i+1] - values[i]) ramps[i]: the piecewise linear interpolation of ``values``
-    (N, 3) between the knots whose clamped ramps are ``ramps``, as a vector socket."""
-    out = None
-    for i, t in enumerate(ramps):
-        node = _node(tree, "ShaderNodeVectorMath", x + 160.0 * i, y, operation="MULTIPLY_ADD")
-        tree.links.new(t, node.inputs[0])
-        node.inputs[1].default_value = tuple(float(v) for v in values[i + 1] - values[i])
-        if out is None:
-            node.inputs[2].default_value = tuple(float(v) for v in values[0])
-        else:
-            tree.links.new(out, node.inputs[2])
-        out = node.outputs["Vector"]
-    return out
+def _slope_curves(tree, lum, knots: np.ndarray, values: np.ndarray, x: float, y: float):
+    """A Vector Curves node of the luminance socket ``lum``: per channel the piecewise linear curve through
+    (knots[i], values[i, c]) (vector handles), constant beyond the ends; its output vector socket."""
+    node = _node(tree, "ShaderNodeVectorCurve", x, y)
+    tree.links.new(lum, node.inputs["Vector"])
+    mapping = node.mapping
+    mapping.use_clip = False
+    mapping.clip_min_x, mapping.clip_max_x = float(knots[0]), float(knots[-1])
+    mapping.extend = "HORIZONTAL"
+    for c, curve in enumerate(mapping.curves[:3]):
+        points = curve.points
+        while len(points) > 2:
+            points.remove(points[-1])
+        while len(points) < len(knots):
+            points.new(float(knots[-1]), 0.0)
+        for point, xk, yk in zip(points, knots, values[:, c], strict=True):
+            point.location = (float(xk), float(yk))
+            point.handle_type = "VECTOR"
+    mapping.update()
+    return node.outputs["Vector"]
 
 
 def build_group(corr: oblique_correction.ObliqueCorrection) -> bpy.types.NodeTree:
     """A new group of ``corr`` (module docstring)."""
     tree = bpy.data.node_groups.new(GROUP_NAME, "ShaderNodeTree")
     tree[CORRECTION_PROP] = correction_sha(corr)
+    tree[VERSION_PROP] = GRAZING_VERSION
     tree["spectral_skin_sss_backend"] = "GRAZING"  # an add-on group: Remove Skin SSS purges it when unused
     iface = tree.interface
     iface.new_socket("Color", in_out="INPUT", socket_type="NodeSocketColor").default_value = (0.6, 0.4, 0.3, 1.0)
@@ -82,7 +104,7 @@ def build_group(corr: oblique_correction.ObliqueCorrection) -> bpy.types.NodeTre
     iface.new_socket("Weight", in_out="OUTPUT", socket_type="NodeSocketVector")
     iface.new_socket("Radius", in_out="OUTPUT", socket_type="NodeSocketVector")
     gin = _node(tree, "NodeGroupInput", -900.0, 0.0)
-    gout = _node(tree, "NodeGroupOutput", 160.0 * len(corr.luminance) + 400.0, 0.0)
+    gout = _node(tree, "NodeGroupOutput", 300.0, 0.0)
     layer = _node(tree, "ShaderNodeLayerWeight", -700.0, 300.0, name="Facing")
     layer.inputs["Blend"].default_value = 0.5
     tree.links.new(gin.outputs["Normal"], layer.inputs["Normal"])
@@ -93,14 +115,12 @@ def build_group(corr: oblique_correction.ObliqueCorrection) -> bpy.types.NodeTre
     tree.links.new(clamp.outputs[2], dot.inputs[0])
     dot.inputs[1].default_value = tuple(float(v) for v in colorimetry.SRGB_LUMINANCE)
     lum = dot.outputs["Value"]
-    ramps = [_map_range(tree, lum, lo, hi, -500.0, -100.0 - 120.0 * i)
-             for i, (lo, hi) in enumerate(zip(corr.luminance[:-1], corr.luminance[1:], strict=True))]
     for row, (slope, ramp, name) in enumerate(((corr.weight_slope, corr.weight_ramp, "Weight"),
                                                (corr.radius_slope, corr.radius_ramp, "Radius"))):
         y = 300.0 - 400.0 * row
         h = _map_range(tree, layer.outputs["Facing"], *ramp, -300.0, y + 150.0, interpolation="SMOOTHSTEP")
-        a = _piecewise(tree, ramps, slope, -300.0, y)
-        out = _node(tree, "ShaderNodeVectorMath", 160.0 * len(ramps) - 100.0, y, operation="MULTIPLY_ADD")
+        a = _slope_curves(tree, lum, corr.luminance, slope, -300.0, y)
+        out = _node(tree, "ShaderNodeVectorMath", 0.0, y, operation="MULTIPLY_ADD")
         tree.links.new(a, out.inputs[0])
         tree.links.new(h, out.inputs[1])
         out.inputs[2].default_value = (1.0, 1.0, 1.0)

@@ -84,7 +84,24 @@ def test_the_grazing_nodes_compute_the_reference_factors_in_cycles():
                 _emission_material(name, colour)
                 probe.view_from(scene, mu)
                 got = probe.render_mean(scene)[0]
-                assert got == pytest.approx(want, abs=2e-4), (colour, theta, name)
+                assert got == pytest.approx(want, abs=oblique.CURVE_ERROR), (colour, theta, name)
+
+
+def test_the_slope_curves_follow_the_knots_within_the_stated_bound():
+    """The Vector Curves of the Grazing group (Blender's evaluation) against the piecewise linear slopes of the
+    reference, on a dense grid of luminances and at the knots (where the tables cut the corners most); the bound is
+    what the Cycles render above uses."""
+    corr = oc.shipped()
+    group = oblique.ensure_group()
+    curves = sorted((n for n in group.nodes if n.bl_idname == "ShaderNodeVectorCurve"), key=lambda n: -n.location.y)
+    assert len(curves) == 2 and len(group.nodes) <= 12
+    ys = np.concatenate([np.linspace(0.0, 1.0, 2001), corr.luminance])
+    for node, values in zip(curves, (corr.weight_slope, corr.radius_slope), strict=True):
+        mapping = node.mapping
+        for c in range(3):
+            got = np.array([mapping.evaluate(mapping.curves[c], float(y)) for y in ys])
+            want = np.interp(ys, corr.luminance, values[:, c])
+            assert np.abs(got - want).max() < oblique.CURVE_ERROR, (node.name, c)
 
 
 def _live_renders(colour, mu: float, samples: int = 32) -> dict[str, np.ndarray]:
