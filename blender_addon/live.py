@@ -29,7 +29,7 @@ colour per channel in the reflectance domain (exporters.painted_gain, step 5 of 
 radii kept, so a gradient leaving the skin colours changes its translucency continuously.
 
 The images are shared by every material of the file (one set per table, tagged with the table's SHA-256) and
-packed into the .blend (8.0 MB with the shipped table), so the file renders anywhere, render farms included.
+packed into the .blend (7.6 MB with the shipped table), so the file renders anywhere, render farms included.
 The group's math follows exporters.live_table step by step; ``exporters.live_table.lookup`` and
 ``exporters.live_table.group_media`` are its reference.
 """
@@ -40,6 +40,7 @@ import os
 from collections.abc import Callable
 from concurrent.futures import Executor, Future, ThreadPoolExecutor
 from pathlib import Path
+from typing import NamedTuple
 
 import bpy
 import numpy as np
@@ -52,7 +53,7 @@ GROUP_NAME = "Spectral Skin SSS Live"
 #: Custom properties: on the group and the images, the SHA-256 of the table they were made from.
 TABLE_PROP = "spectral_skin_sss_table"
 #: Layout version of the live group (bump when the generated nodes change).
-LIVE_VERSION = 7
+LIVE_VERSION = 8
 IMAGE_PREFIX = "Spectral Skin SSS Table"
 #: Custom property on the group: whether it holds the grazing-light correction (blender_addon.oblique).
 GRAZING_PROP = "spectral_skin_sss_grazing"
@@ -142,13 +143,17 @@ def _image_names(table: texel_table.TexelTable) -> list[str]:
 
 
 def _found_images(table: texel_table.TexelTable) -> dict[str, bpy.types.Image]:
-    """The images of ``table`` this file holds already (by name, made from this table, of its size)."""
+    """The images of ``table`` this file holds already (by name, or the name with Blender's ".001" suffix where an
+    older live group still holds an image of another layout under the name; made from this table, of its size)."""
     width, height = live_table.layout_of(table).size
     found = {}
     for name in _image_names(table):
-        image = bpy.data.images.get(image_name(name))
-        if image is not None and image.get(TABLE_PROP) == table.sha256 and tuple(image.size) == (width, height):
-            found[name] = image
+        base = image_name(name)
+        for image in bpy.data.images:
+            if (image.name == base or image.name.startswith(base + ".")) and image.get(TABLE_PROP) == table.sha256 \
+                    and tuple(image.size) == (width, height):
+                found[name] = image
+                break
     return found
 
 
@@ -225,14 +230,15 @@ class _Builder:
         return node.outputs[0]
 
     def vec(self, op: str, stage: int, a, b=None, c=None) -> bpy.types.NodeSocket:
-        """A Vector Math node ``op`` of a, b, c (sockets, or numbers for constant vectors); its output."""
+        """A Vector Math node ``op`` of a, b, c (sockets, numbers (the same in every component) or 3-tuples); its
+        output (the Value of a dot product, else the Vector)."""
         node = self.node("ShaderNodeVectorMath", stage, operation=op)
         for i, value in enumerate((a, b, c)):
             if isinstance(value, bpy.types.NodeSocket):
                 self.group.links.new(value, node.inputs[i])
             elif value is not None:
-                set_default(node.inputs[i], (float(value),) * 3)
-        return node.outputs["Vector"]
+                set_default(node.inputs[i], tuple(float(v) for v in np.broadcast_to(value, 3)))
+        return node.outputs["Value"] if op == "DOT_PRODUCT" else node.outputs["Vector"]
 
     def mix(self, data_type: str, stage: int, fac, a, b) -> bpy.types.NodeSocket:
         node = self.node("ShaderNodeMix", stage, data_type=data_type, clamp_factor=False)
@@ -250,50 +256,63 @@ def set_default(socket: bpy.types.NodeSocket, value) -> None:
         socket.default_value = value
 
 
-def _srgb_encode(b: _Builder, c: bpy.types.NodeSocket, stage: int) -> bpy.types.NodeSocket:
-    """e = sRGB encoding of ``c`` (clamped to [0, 1]), piecewise as exporters.colorimetry.srgb_encode."""
-    lin = b.math("MULTIPLY", stage + 1, c, _SRGB_SLOPE)
-    curve = b.math("MULTIPLY_ADD", stage + 2, b.math("POWER", stage + 1, c, 1.0 / 2.4), 1.055, -0.055)
-    low = b.math("LESS_THAN", stage + 1, c, _SRGB_KNEE)
-    return b.math("MULTIPLY_ADD", stage + 3, low, b.math("SUBTRACT", stage + 2, lin, curve), curve)
+class GridPoint(NamedTuple):
+    """Where a colour lies in a table's grid (:func:`grid_vector`): ``x`` the grid coordinates clamped to the grid as
+    the vector (x1, x2, x0) (the atlas' u, v axes first), ``x0`` its slice coordinate, ``raw`` the coordinates before
+    the clamp and ``painted`` the colour clamped to [0, 1] (vector sockets, ``x0`` a float socket)."""
+
+    x: bpy.types.NodeSocket
+    x0: bpy.types.NodeSocket
+    raw: bpy.types.NodeSocket
+    painted: bpy.types.NodeSocket
+
+
+def grid_vector(b: _Builder, colour: bpy.types.NodeSocket, layout: live_table.AtlasLayout) -> GridPoint:
+    """Grid point of ``colour`` (linear RGB): clamped to [0, 1], sRGB encoded piecewise as
+    exporters.colorimetry.srgb_encode (the power by a Gamma node, the knee by floor(min(c / knee, 1)): 1 from the
+    knee up), in skin space (exporters.texel_table.COORDS), on the grid of ``layout``.  Vector nodes throughout:
+    every node costs each shading point its time."""
+    clamped = b.vec("MINIMUM", 1, b.vec("MAXIMUM", 0, colour, 0.0), 1.0)
+    gamma = b.node("ShaderNodeGamma", 2)
+    b.group.links.new(clamped, gamma.inputs["Color"])
+    set_default(gamma.inputs["Gamma"], 1.0 / 2.4)
+    curve = b.vec("MULTIPLY_ADD", 3, gamma.outputs[0], 1.055, -0.055)
+    linear = b.vec("MULTIPLY", 2, clamped, _SRGB_SLOPE)
+    above = b.vec("MINIMUM", 3, b.vec("FLOOR", 2, b.vec("MULTIPLY", 2, clamped, 1.0 / _SRGB_KNEE)), 1.0)
+    encoded = b.vec("MULTIPLY_ADD", 5, above, b.vec("SUBTRACT", 4, curve, linear), linear)
+    order = (1, 2, 0)
+    comb = b.node("ShaderNodeCombineXYZ", 7)
+    for slot, d in enumerate(order):
+        b.group.links.new(b.vec("DOT_PRODUCT", 6, encoded, texel_table.COORDS[d] / layout.step), comb.inputs[slot])
+    raw = b.vec("ADD", 8, comb.outputs[0], [-layout.origin[d] / layout.step for d in order])
+    x = b.vec("MINIMUM", 9, b.vec("MAXIMUM", 8, raw, 0.0), [layout.shape[d] - 1.0 for d in order])
+    sep = b.node("ShaderNodeSeparateXYZ", 10)
+    b.group.links.new(x, sep.inputs[0])
+    return GridPoint(x=x, x0=sep.outputs[2], raw=raw, painted=clamped)
 
 
 def _grid_coords(b: _Builder, gin: bpy.types.Node, layout: live_table.AtlasLayout, colour=None):
-    """Clamped grid coordinates x0, x1, x2 of the input colour (or ``colour``: the edited one), its distance from
-    the box (skin space) and the painted colour (that colour clamped to [0, 1], a vector)."""
-    sep = b.node("ShaderNodeSeparateColor", 0)
-    b.link(_convention(b, gin, 1.0, PRINCIPLED_BASE_SHARE_CYCLES, colour), sep.inputs[0])
-    clamped = [b.math("ADD", 1, sep.outputs[i], 0.0, clamp=True) for i in range(3)]
-    painted = b.node("ShaderNodeCombineXYZ", 2)
-    for i in range(3):
-        b.link(clamped[i], painted.inputs[i])
-    e = [_srgb_encode(b, clamped[i], 1) for i in range(3)]
-    coords = [b.math("MULTIPLY", 6, b.math("ADD", 5, b.math("ADD", 5, e[0], e[1]), e[2]), 1.0 / 3.0),
-              b.math("SUBTRACT", 6, e[0], e[1]), b.math("SUBTRACT", 6, e[1], e[2])]
-    grid, outside = [], None
-    for d, coord in enumerate(coords):
-        raw = b.math("MULTIPLY_ADD", 7, coord, 1.0 / layout.step, -layout.origin[d] / layout.step)
-        x = b.math("MINIMUM", 9, b.math("MAXIMUM", 8, raw, 0.0), layout.shape[d] - 1.0)
-        gap = b.math("ABSOLUTE", 11, b.math("SUBTRACT", 10, raw, x))
-        outside = gap if outside is None else b.math("ADD", 12, outside, gap)
-        grid.append(x)
-    return grid, b.math("MULTIPLY", 13, outside, layout.step), painted.outputs[0]
+    """The grid point (:class:`GridPoint`) of the input colour (or ``colour``: the edited one) with the Principled
+    convention's gain, and its distance from the box (skin space)."""
+    point = grid_vector(b, _convention(b, gin, 1.0, PRINCIPLED_BASE_SHARE_CYCLES, colour), layout)
+    gap = b.vec("ABSOLUTE", 11, b.vec("SUBTRACT", 10, point.raw, point.x))
+    return point, b.vec("DOT_PRODUCT", 12, gap, layout.step)
 
 
-def _slice_uv(b: _Builder, layout: live_table.AtlasLayout, s, x1, x2, stage: int) -> bpy.types.NodeSocket:
-    """UV (vector) of grid point (slice s, x1, x2) in the atlas (exporters.live_table layout)."""
+def _slice_uvs(b: _Builder, layout: live_table.AtlasLayout, point: GridPoint, stage: int) -> tuple:
+    """UVs (vectors) of the grid point's slices s and s + 1 in the one-row atlas of ``layout``
+    (exporters.live_table), and the fraction of x0 between them."""
+    if layout.rows != 1:
+        raise ValueError("the live group reads one-row atlases (exporters.live_table.layout_of)")
     width, height = layout.size
-    tile_w, tile_h = layout.tile
-    row = b.math("FLOOR", stage + 1, b.math("DIVIDE", stage, b.math("ADD", stage, s, 0.5), float(layout.columns)))
-    col = b.math("MULTIPLY_ADD", stage + 2, row, -float(layout.columns), s)
-    px = b.math("MULTIPLY_ADD", stage + 3, col, float(tile_w), b.math("ADD", stage + 2, x1,
-                                                                      live_table.BORDER + 0.5))
-    py = b.math("MULTIPLY_ADD", stage + 3, row, float(tile_h), b.math("ADD", stage + 2, x2,
-                                                                      live_table.BORDER + 0.5))
-    comb = b.node("ShaderNodeCombineXYZ", stage + 5)
-    b.link(b.math("DIVIDE", stage + 4, px, float(width)), comb.inputs[0])
-    b.link(b.math("DIVIDE", stage + 4, py, float(height)), comb.inputs[1])
-    return comb.outputs[0]
+    tile_u = layout.tile[0] / width
+    border = live_table.BORDER + 0.5
+    s = b.math("MINIMUM", stage + 1, b.math("FLOOR", stage, point.x0), layout.shape[0] - 2.0)
+    frac = b.math("SUBTRACT", stage + 2, point.x0, s)
+    base = b.vec("MULTIPLY_ADD", stage, point.x, (1.0 / width, 1.0 / height, 0.0),
+                 (border / width, border / height, 0.0))
+    uv = b.vec("MULTIPLY_ADD", stage + 2, s, (tile_u, 0.0, 0.0), base)
+    return (uv, b.vec("ADD", stage + 3, uv, (tile_u, 0.0, 0.0))), frac
 
 
 def _lookup(b: _Builder, image: bpy.types.Image, uvs, frac, stage: int):
@@ -365,15 +384,14 @@ def build_live_group(table: texel_table.TexelTable, layout: live_table.AtlasLayo
         group[live_edits.EDIT_TABLE_PROP] = edits[0].sha256
         branch = live_edits.edit_node(b, gin, *edits)
     edited = branch.colour if branch is not None else None
-    (x0, x1, x2), outside, painted = _grid_coords(b, gin, layout, edited)
+    point, outside = _grid_coords(b, gin, layout, edited)
+    painted = point.painted
     factors = None
     if grazing:
         factors = b.node("ShaderNodeGroup", 26, node_tree=oblique.ensure_group(), name="Grazing")
         b.link(painted, factors.inputs["Color"])
         b.link(gin.outputs["Normal"], factors.inputs["Normal"])
-    s = b.math("MINIMUM", 11, b.math("FLOOR", 10, x0), layout.shape[0] - 2.0)
-    frac = b.math("SUBTRACT", 12, x0, s)
-    uvs = (_slice_uv(b, layout, s, x1, x2, 12), _slice_uv(b, layout, b.math("ADD", 12, s, 1.0), x1, x2, 12))
+    uvs, frac = _slice_uvs(b, layout, point, 12)
     mixture = b.node("ShaderNodeGroup", 34, node_tree=nodes.ensure_group(table.k, "SVM"))
     unit = b.math("DIVIDE", 19, gin.outputs["Unit Scale"], b.math("MAXIMUM", 18, gin.outputs["Translucency"],
                                                                    TRANSLUCENCY_MIN))

@@ -29,7 +29,7 @@ import bpy
 import numpy as np
 
 from . import wiring
-from .core import edit_table, live_table, skin_edits, texel_table
+from .core import edit_table, live_table, skin_edits
 
 #: Custom property on the edit images and the group: the SHA-256 of the edit table they were made from.
 EDIT_TABLE_PROP = wiring.EDIT_TABLE_PROP
@@ -173,41 +173,6 @@ def _coordinate(b, gin, j: int, stage: int):
     return x if name == "oxygenation" else b.math("LOGARITHM", stage + 2, x, 2.0)
 
 
-def _vec(b, op: str, stage: int, *args) -> bpy.types.NodeSocket:
-    """A Vector Math node ``op`` of sockets, numbers (the same in every component) or 3-tuples; its output."""
-    node = b.node("ShaderNodeVectorMath", stage, operation=op)
-    for i, value in enumerate(args):
-        if isinstance(value, bpy.types.NodeSocket):
-            b.group.links.new(value, node.inputs[i])
-        else:
-            node.inputs[i].default_value = tuple(float(v) for v in np.broadcast_to(value, 3))
-    return node.outputs["Value"] if op == "DOT_PRODUCT" else node.outputs["Vector"]
-
-
-def _grid_vector(b, colour, layout) -> tuple:
-    """Grid coordinates of the painted colour (clamped to [0, 1], sRGB encoded as exporters.colorimetry does, in
-    skin space: exporters.texel_table), clamped to the grid, as the vector (x1, x2, x0), and x0."""
-    from . import live
-
-    clamped = _vec(b, "MINIMUM", 30, _vec(b, "MAXIMUM", 30, colour, 0.0), 1.0)
-    gamma = b.node("ShaderNodeGamma", 31)
-    b.group.links.new(clamped, gamma.inputs["Color"])
-    gamma.inputs["Gamma"].default_value = 1.0 / 2.4
-    curve = _vec(b, "MULTIPLY_ADD", 32, gamma.outputs[0], 1.055, -0.055)
-    linear = _vec(b, "MULTIPLY", 31, clamped, live._SRGB_SLOPE)
-    above = _vec(b, "MINIMUM", 32, _vec(b, "FLOOR", 31, _vec(b, "MULTIPLY", 30, clamped, 1.0 / live._SRGB_KNEE)), 1.0)
-    encoded = _vec(b, "MULTIPLY_ADD", 34, above, _vec(b, "SUBTRACT", 33, curve, linear), linear)
-    order = (1, 2, 0)
-    comb = b.node("ShaderNodeCombineXYZ", 36)
-    for slot, d in enumerate(order):
-        b.group.links.new(_vec(b, "DOT_PRODUCT", 35, encoded, texel_table.COORDS[d] / layout.step), comb.inputs[slot])
-    shifted = _vec(b, "ADD", 37, comb.outputs[0], [-layout.origin[d] / layout.step for d in order])
-    x = _vec(b, "MINIMUM", 39, _vec(b, "MAXIMUM", 38, shifted, 0.0), [layout.shape[d] - 1.0 for d in order])
-    sep = b.node("ShaderNodeSeparateXYZ", 40)
-    b.group.links.new(x, sep.inputs[0])
-    return x, sep.outputs[2]
-
-
 def add_edit_branch(b, gin, table: edit_table.EditTable, images: dict[str, bpy.types.Image]) -> EditBranch:
     """The edit nodes (module docstring) on the group's Color input; ``b`` the group's builder (blender_addon.live).
     Every control image has one row of slice tiles (:func:`exporters.edit_table.EditTable.layout`), its levels
@@ -217,10 +182,12 @@ def add_edit_branch(b, gin, table: edit_table.EditTable, images: dict[str, bpy.t
     width, height = layout.size
     tall = float(edit_table.STACKED * height)
     tile_u = layout.tile[0] / width
+    from . import live
+
     colour = gin.outputs["Color"]
-    x, x0 = _grid_vector(b, colour, layout)
+    x, x0 = live.grid_vector(b, colour, layout)[:2]
     border = live_table.BORDER + 0.5
-    base = _vec(b, "MULTIPLY_ADD", 41, x, (1.0 / width, 1.0 / tall, 0.0), (border / width, border / tall, 0.0))
+    base = b.vec("MULTIPLY_ADD", 41, x, (1.0 / width, 1.0 / tall, 0.0), (border / width, border / tall, 0.0))
     s = b.math("MINIMUM", 42, b.math("FLOOR", 41, x0), layout.shape[0] - 2.0)
     frac = b.math("SUBTRACT", 43, x0, s)
     slice_u = b.math("MULTIPLY", 43, s, tile_u)
@@ -235,16 +202,16 @@ def add_edit_branch(b, gin, table: edit_table.EditTable, images: dict[str, bpy.t
         corner = b.node("ShaderNodeCombineXYZ", 51)
         b.link(slice_u, corner.inputs[0])
         b.link(b.math("MULTIPLY", 50, lower, 1.0 / edit_table.STACKED), corner.inputs[1])
-        uv = _vec(b, "ADD", 52, base, corner.outputs[0])
-        up = _vec(b, "ADD", 53, uv, (0.0, 1.0 / edit_table.STACKED, 0.0))
-        uvs = [[uv, _vec(b, "ADD", 53, uv, (tile_u, 0.0, 0.0))], [up, _vec(b, "ADD", 54, up, (tile_u, 0.0, 0.0))]]
+        uv = b.vec("ADD", 52, base, corner.outputs[0])
+        up = b.vec("ADD", 53, uv, (0.0, 1.0 / edit_table.STACKED, 0.0))
+        uvs = [[uv, b.vec("ADD", 53, uv, (tile_u, 0.0, 0.0))], [up, b.vec("ADD", 54, up, (tile_u, 0.0, 0.0))]]
         for kind in edit_table.KINDS:
             image = images[edit_table.image_name(j, kind)]
             found = [_bilinear_pair(b, image, pair, frac, 55) for pair in uvs]  # levels l and l + 1
             value = _unless_neutral(b, coordinate, b.mix("RGBA", 57, fraction, found[0], found[1]), 58)
-            shifts[kind] = value if shifts[kind] is None else _vec(b, "ADD", 58, shifts[kind], value)
+            shifts[kind] = value if shifts[kind] is None else b.vec("ADD", 58, shifts[kind], value)
     factor = {kind: _exp(b, shifts[kind], 59) for kind in edit_table.KINDS}
-    edited = _vec(b, "MULTIPLY", 62, colour, factor["colour"])
+    edited = b.vec("MULTIPLY", 62, colour, factor["colour"])
     return EditBranch(colour=edited, radius_factor=factor["radius"])
 
 
@@ -281,7 +248,7 @@ def _exp(b, vector, stage: int) -> bpy.types.NodeSocket:
 
 def scale_radius(b, radius, factor) -> bpy.types.NodeSocket:
     """``radius`` (vector) times ``factor`` (vector) per channel."""
-    return _vec(b, "MULTIPLY", 22, radius, factor)
+    return b.vec("MULTIPLY", 22, radius, factor)
 
 
 def live_node(material: bpy.types.Material) -> bpy.types.Node | None:

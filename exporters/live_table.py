@@ -10,8 +10,8 @@ What the nodes compute, for a linear colour ``rgb`` (any node's output):
 2. skin space (l, c1, c2) = COORDS @ e, then grid coordinates x_d = (coord_d - origin_d) / step;
 3. **outside the table's box** each x_d is clamped to [0, n_d - 1]: the colour is projected onto the nearest
    point of the box in skin space (the box is axis-aligned, so the clamp is the Euclidean projection).  The
-   answer is continuous in the colour and finite for every input, NaN included (Cycles' clamp maps NaN to
-   the lower bound);
+   answer is continuous in the colour and finite for every input, NaN included (Cycles' vector maximum of NaN
+   and 0 is 0, so a NaN channel reads as 0);
 4. trilinear interpolation of the table's channels, where nodes outside the RGB cube (NaN in the table)
    were filled by :func:`fill_outside_cube` (means of filled neighbours, layer by layer): inside cells whose
    corners all lie in the cube the values are exactly the fast bake's; in the few cells that straddle the
@@ -34,7 +34,9 @@ What the nodes compute, for a linear colour ``rgb`` (any node's output):
 Image layout ("slice atlas"): the grid is cut into its n0 slices of constant l; slice s is a tile of
 (n1 + 2) x (n2 + 2) pixels (x1 along the width, x2 along the height) with a one-pixel border repeating the
 tile's edge, so bilinear filtering at a clamped coordinate never reads the next tile.  Tiles sit in
-``columns`` columns, row 0 at the bottom (Blender's pixel order).  A pixel's centre is at
+``columns`` columns, row 0 at the bottom (Blender's pixel order); the live group's atlases hold every slice in one
+row (:func:`layout_of`), so that the nodes reach slice s + 1 by a fixed offset of the UV (a few vector nodes
+instead of a row and column per slice: every node costs each shading point its time).  A pixel's centre is at
 u = (px + 0.5) / width, as Cycles' and the GPU's bilinear filters assume.  The third axis is interpolated by
 two lookups (slices s and s + 1) mixed with the fraction of x0.
 
@@ -42,7 +44,7 @@ Images (float32 RGBA, Non-Color, alpha channel-packed), for each component k: ``
 reflectance rho of the Subsurface Color, exporters.painted_gain.body_reflectance: step 5 works on it, and the
 nodes turn it back into a colour; A the anisotropy g), ``k{k} Log Radius`` (RGB natural log of the radius in metres),
 ``k{k} Weight`` (RGB the weight).  With the shipped table (67 x 31 x 22 nodes, K = 3): nine images of
-231 x 240 pixels, 8.0 MB (7.6 MiB) in all (:func:`atlas_bytes`), whatever the textures and however many materials
+2211 x 24 pixels, 7.6 MB (7.3 MiB) in all (:func:`atlas_bytes`), whatever the textures and however many materials
 share them.
 """
 
@@ -86,13 +88,12 @@ class AtlasLayout:
 
 
 def layout_of(table: TexelTable) -> AtlasLayout:
-    """The atlas layout of ``table``: about square images."""
+    """The atlas layout of ``table``: every slice in one row (module docstring)."""
     n0, n1, n2 = table.shape
-    best = min(range(1, n0 + 1), key=lambda c: abs(c * (n1 + 2) - (-(-n0 // c)) * (n2 + 2)))
     if not np.allclose(table.step, table.step[0]):
         raise ValueError("the live table needs the same step on every axis")
     return AtlasLayout(shape=(n0, n1, n2), origin=tuple(float(o) for o in table.origin), step=float(table.step[0]),
-                       columns=best)
+                       columns=n0)
 
 
 def fill_outside_cube(values: np.ndarray) -> np.ndarray:
