@@ -45,9 +45,9 @@ from typing import NamedTuple
 import bpy
 import numpy as np
 
-from . import live_edits, nodes, oblique, wiring
+from . import curves, live_edits, nodes, oblique, wiring
 from .core import bake as core_bake
-from .core import colorimetry, image_input, live_table, maps, painted_gain, texel_table
+from .core import colorimetry, cycles, image_input, live_table, maps, painted_gain, texel_table
 
 GROUP_NAME = "Spectral Skin SSS Live"
 #: Custom properties: on the group and the images, the SHA-256 of the table they were made from.
@@ -197,15 +197,22 @@ class _Builder:
         self.locations: list[tuple[int, float, float]] = []
 
     def node(self, kind: str, stage: int, **props) -> bpy.types.Node:
-        index = len(self.group.nodes)
+        self._locate(len(self.group.nodes), stage)
         node = self.group.nodes.new(kind)
-        row = self.rows.get(stage, 0)
-        self.rows[stage] = row + 1
-        self.locations.append((index, -1600.0 + 220.0 * stage, 600.0 - 160.0 * row))
         for key, value in props.items():
             if getattr(node, key) != value:
                 setattr(node, key, value)
         return node
+
+    def curve(self, stage: int, socket: bpy.types.NodeSocket, xs: np.ndarray, ys: np.ndarray) -> bpy.types.NodeSocket:
+        """A Vector Curves node of ``socket`` through (xs, ys) (blender_addon.curves.vector_curve); its output."""
+        self._locate(len(self.group.nodes), stage)
+        return curves.vector_curve(self.group, socket, xs, ys)
+
+    def _locate(self, index: int, stage: int) -> None:
+        row = self.rows.get(stage, 0)
+        self.rows[stage] = row + 1
+        self.locations.append((index, -1600.0 + 220.0 * stage, 600.0 - 160.0 * row))
 
     def place(self) -> None:
         """Move the nodes made to their locations (one call for the whole tree)."""
@@ -328,17 +335,13 @@ def _lookup(b: _Builder, image: bpy.types.Image, uvs, frac, stage: int):
             b.mix("FLOAT", stage + 1, frac, alphas[0], alphas[1]))
 
 
-def _radius(b: _Builder, log_radius, metres_per_unit, stage: int) -> bpy.types.NodeSocket:
-    """Radius in Blender units: exp(log r / m - ln(metres per unit)) per channel (``metres_per_unit``: the Unit
-    Scale over the Translucency)."""
-    sep = b.node("ShaderNodeSeparateColor", stage)
-    b.link(log_radius, sep.inputs[0])
-    log_unit = b.math("LOGARITHM", stage, metres_per_unit, float(np.e))
-    comb = b.node("ShaderNodeCombineColor", stage + 3)
-    for c in range(3):
-        b.link(b.math("EXPONENT", stage + 2, b.math("SUBTRACT", stage + 1, sep.outputs[c], log_unit)),
-               comb.inputs[c])
-    return comb.outputs[0]
+def _radius(b: _Builder, log_radius, metres_per_unit, log_range: tuple[float, float],
+            stage: int) -> bpy.types.NodeSocket:
+    """Radius in Blender units: exp(log r) per channel (a curve through exp over ``log_range``, the table's log radii:
+    blender_addon.curves, within 2e-4 relative) divided by ``metres_per_unit`` (the Unit Scale over the
+    Translucency)."""
+    metres = b.curve(stage, log_radius, *curves.smooth_points(np.exp, *log_range))
+    return b.vec("DIVIDE", stage + 1, metres, metres_per_unit)
 
 
 def _new_group(k_count: int, table_sha: str) -> tuple[bpy.types.NodeTree, bpy.types.Node, bpy.types.Node]:
@@ -398,11 +401,14 @@ def build_live_group(table: texel_table.TexelTable, layout: live_table.AtlasLayo
     unit.node.name = "Translucency"
     weight_share = b.math("ADD", 24, gin.outputs["Subsurface Weight"], 0.0, clamp=True)
     media, effective = [], None
+    log_range, anisotropy = _table_ranges(table)
     for k in range(1, table.k + 1):
         rho, g = _lookup(b, images[f"k{k} Color"], uvs, frac, 18)  # the colour's body reflectance
+        if anisotropy[k - 1] is not None:  # the same at every node: a value, which Cycles folds
+            g = anisotropy[k - 1]
         log_r, _ = _lookup(b, images[f"k{k} Log Radius"], uvs, frac, 18)
         weight, _ = _lookup(b, images[f"k{k} Weight"], uvs, frac, 18)
-        radius = _radius(b, log_r, unit, 20)
+        radius = _radius(b, log_r, unit, log_range, 20)
         if branch is not None:
             radius = live_edits.scale_radius(b, radius, branch.radius_factor)
         media.append((rho, weight))
@@ -428,6 +434,20 @@ def build_live_group(table: texel_table.TexelTable, layout: live_table.AtlasLayo
     return group
 
 
+def _table_ranges(table: texel_table.TexelTable) -> tuple[tuple[float, float], list[float | None]]:
+    """The range (min, max) of the table's log radii (natural log of metres, over every component and channel) and,
+    per component, its anisotropy where it is the same at every node of the table (else None)."""
+    names = texel_table.channel_names(table.k)
+    values = table.values
+    log_r = values[..., [i for i, n in enumerate(names) if n.startswith("log_radius_m_")]]
+    anisotropy = []
+    for k in range(1, table.k + 1):
+        g = values[..., names.index(f"anisotropy_k{k}")]
+        g = np.clip(g[np.isfinite(g)], cycles.G_MIN, cycles.RECOMMENDED_G_MAX)  # as exporters.live_table.grid_values
+        anisotropy.append(float(g[0]) if g.size and np.all(g == g[0]) else None)
+    return (float(np.nanmin(log_r)), float(np.nanmax(log_r))), anisotropy
+
+
 def _grazing(b: _Builder, value: bpy.types.NodeSocket, factors: bpy.types.Node | None,
              which: str) -> bpy.types.NodeSocket:
     """``value`` (a component's weight or radius, RGB) times its grazing-light factor (the output ``which`` of the
@@ -437,17 +457,11 @@ def _grazing(b: _Builder, value: bpy.types.NodeSocket, factors: bpy.types.Node |
     return b.vec("MULTIPLY", 30, value, factors.outputs[which])
 
 
-def _horner(b: _Builder, coeffs: tuple[float, ...], x, stage: int) -> bpy.types.NodeSocket:
-    """sum_i coeffs[i] x^i per component of the vector ``x`` (exporters.painted_gain._horner)."""
-    out = b.vec("MULTIPLY_ADD", stage, coeffs[-1], x, coeffs[-2])
-    for c in reversed(coeffs[:-2]):
-        out = b.vec("MULTIPLY_ADD", stage, out, x, c)
-    return out
-
-
 def _painted_media(b: _Builder, painted, media: list, fit: painted_gain.BodyFit, stage: int) -> list[tuple]:
     """Each component's (colour, weight) from its looked-up (body reflectance rho, weight), brought to the
-    ``painted`` colour: exporters.painted_gain.painted_media with nodes, operation for operation."""
+    ``painted`` colour: exporters.painted_gain.painted_media with nodes, operation for operation, the inverse fit
+    (exporters.painted_gain.body_colour) a curve through it over [low, 1] (blender_addon.curves: within 1e-4)."""
+    body_points = curves.smooth_points(lambda rho: painted_gain.body_colour(rho, fit), fit.low, 1.0)
     total = None
     for rho, weight in media:
         term = b.vec("MULTIPLY", stage, weight, rho)
@@ -458,7 +472,7 @@ def _painted_media(b: _Builder, painted, media: list, fit: painted_gain.BodyFit,
         scaled = b.vec("MULTIPLY", stage + 4, weight, gain)
         r_new = b.vec("MAXIMUM", stage + 6, rho, b.vec("MINIMUM", stage + 5, b.vec("MULTIPLY", stage + 4, scaled, rho),
                                                         fit.reach))
-        colour = _horner(b, fit.inverse, b.vec("MAXIMUM", stage + 7, r_new, fit.low), stage + 8)
+        colour = b.curve(stage + 8, r_new, *body_points)
         out.append((colour, b.vec("MINIMUM", stage + 9, scaled, 1.0)))
     return out
 

@@ -12,10 +12,9 @@ them before the mixture group.
 
 Why curves and not a Map Range per knot interval (a sum of clamped ramps, exact): the group is evaluated at every
 shading point, and its node count is a cost Principled does not pay (docs/user/live_group.md, render cost); nine
-nodes replace thirty-six.  Blender and Cycles evaluate a curve through tables (Blender: 257 entries over the clip
-range, here the knots' range; Cycles: 256 entries sampled from it), linear between entries, so the slopes differ
-from the knots' piecewise linear ones only next to a knot, by at most a quarter of a table step times the change
-of slope there: :data:`CURVE_ERROR` bounds it for the shipped correction.
+nodes replace thirty-six.  The curves' tables (blender_addon.curves) cut the corners at the knots by up to a
+quarter of a table step times the change of slope there: :data:`CURVE_ERROR` bounds it for the shipped
+correction.
 """
 
 from __future__ import annotations
@@ -23,8 +22,8 @@ from __future__ import annotations
 import hashlib
 
 import bpy
-import numpy as np
 
+from . import curves
 from .core import colorimetry, oblique_correction
 
 GROUP_NAME = "Spectral Skin SSS Grazing"
@@ -70,28 +69,6 @@ def _map_range(tree, value, lo: float, hi: float, x: float, y: float, interpolat
     return node.outputs["Result"]
 
 
-def _slope_curves(tree, lum, knots: np.ndarray, values: np.ndarray, x: float, y: float):
-    """A Vector Curves node of the luminance socket ``lum``: per channel the piecewise linear curve through
-    (knots[i], values[i, c]) (vector handles), constant beyond the ends; its output vector socket."""
-    node = _node(tree, "ShaderNodeVectorCurve", x, y)
-    tree.links.new(lum, node.inputs["Vector"])
-    mapping = node.mapping
-    mapping.use_clip = False
-    mapping.clip_min_x, mapping.clip_max_x = float(knots[0]), float(knots[-1])
-    mapping.extend = "HORIZONTAL"
-    for c, curve in enumerate(mapping.curves[:3]):
-        points = curve.points
-        while len(points) > 2:
-            points.remove(points[-1])
-        while len(points) < len(knots):
-            points.new(float(knots[-1]), 0.0)
-        for point, xk, yk in zip(points, knots, values[:, c], strict=True):
-            point.location = (float(xk), float(yk))
-            point.handle_type = "VECTOR"
-    mapping.update()
-    return node.outputs["Vector"]
-
-
 def build_group(corr: oblique_correction.ObliqueCorrection) -> bpy.types.NodeTree:
     """A new group of ``corr`` (module docstring)."""
     tree = bpy.data.node_groups.new(GROUP_NAME, "ShaderNodeTree")
@@ -119,7 +96,7 @@ def build_group(corr: oblique_correction.ObliqueCorrection) -> bpy.types.NodeTre
                                                (corr.radius_slope, corr.radius_ramp, "Radius"))):
         y = 300.0 - 400.0 * row
         h = _map_range(tree, layer.outputs["Facing"], *ramp, -300.0, y + 150.0, interpolation="SMOOTHSTEP")
-        a = _slope_curves(tree, lum, corr.luminance, slope, -300.0, y)
+        a = curves.vector_curve(tree, lum, corr.luminance, slope, (-300.0, y))
         out = _node(tree, "ShaderNodeVectorMath", 0.0, y, operation="MULTIPLY_ADD")
         tree.links.new(a, out.inputs[0])
         tree.links.new(h, out.inputs[1])

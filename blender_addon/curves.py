@@ -1,0 +1,58 @@
+"""Piecewise linear functions as Vector Curves nodes: one node where Math nodes would need a chain.
+
+Every node of a shader group costs each shading point its time (docs/user/live_group.md, render cost), so a smooth
+function of a value the group computes (the exponential of a log radius, the inverse of the body reflectance, the
+grazing correction's slopes) is evaluated as a curve: a Vector Curves node whose three curves (R, G, B) are the
+piecewise linear interpolation (vector handles) through given points, constant beyond the first and the last.
+
+How exact: Blender tabulates each curve at 257 points over its clip range (set here to the points' range) and
+Cycles samples that table at 256 points (RAMP_TABLE_SIZE), both interpolated linearly.  Through points that lie
+closer than the tables' step the curve follows the function to within about f'' h^2 / 4 (h the range over 256); at
+a kink (the slopes' knots) the tables cut the corner by up to a quarter of a step times the change of slope.
+"""
+
+from __future__ import annotations
+
+import bpy
+import numpy as np
+
+#: Points of a curve tabulating a smooth function: as many as Blender's own table holds.
+SMOOTH_POINTS = 257
+
+
+def vector_curve(tree: bpy.types.NodeTree, socket: bpy.types.NodeSocket, xs: np.ndarray, ys: np.ndarray,
+                 location: tuple[float, float] = (0.0, 0.0)) -> bpy.types.NodeSocket:
+    """A Vector Curves node in ``tree`` of ``socket`` (a vector, or a float read as (v, v, v)) through the points
+    (xs[i], ys[i, c]) for channel c (``ys`` (N, 3), or (N,) for the same curve in every channel; ``xs`` (N,)
+    increasing); returns its vector output."""
+    xs = np.asarray(xs, np.float64)
+    ys = np.broadcast_to(np.asarray(ys, np.float64).reshape(len(xs), -1), (len(xs), 3))
+    if len(xs) < 2 or np.any(np.diff(xs) <= 0.0) or not (np.all(np.isfinite(xs)) and np.all(np.isfinite(ys))):
+        raise ValueError("a curve needs two or more finite points with increasing x")
+    node = tree.nodes.new("ShaderNodeVectorCurve")
+    node.location = location
+    tree.links.new(socket, node.inputs["Vector"])
+    mapping = node.mapping
+    mapping.use_clip = False
+    mapping.clip_min_x, mapping.clip_max_x = float(xs[0]), float(xs[-1])
+    mapping.extend = "HORIZONTAL"
+    for c, curve in enumerate(mapping.curves[:3]):
+        points = curve.points
+        while len(points) > len(xs):
+            points.remove(points[-1])
+        while len(points) < len(xs):
+            points.new(float(xs[-1]), float(ys[-1, c]))
+        points.foreach_set("location", np.stack([xs, ys[:, c]], axis=1).astype(np.float32).ravel())
+        for point in points:
+            point.handle_type = "VECTOR"
+    mapping.update()
+    return node.outputs["Vector"]
+
+
+def smooth_points(function, lo: float, hi: float) -> tuple[np.ndarray, np.ndarray]:
+    """:data:`SMOOTH_POINTS` points (xs, function(xs)) evenly over [lo, hi] (a range of zero width is widened by
+    1e-6 on each side)."""
+    if not hi > lo:
+        lo, hi = lo - 1e-6, hi + 1e-6
+    xs = np.linspace(lo, hi, SMOOTH_POINTS)
+    return xs, np.asarray(function(xs), np.float64)
