@@ -468,3 +468,21 @@ def test_principled_base_share_is_what_eevee_renders(eevee_renders):
     print(f"\nEEVEE Principled base share {np.round(share, 4).tolist()}, by luminance "
           f"{np.round(by_luminance, 4).tolist()}; live.PRINCIPLED_BASE_SHARE {live.PRINCIPLED_BASE_SHARE}")
     assert np.all(np.abs(by_luminance - live.PRINCIPLED_BASE_SHARE) <= 0.015), by_luminance
+
+
+def test_images_of_an_older_layout_still_in_use_are_kept_and_the_new_ones_reused(addon):
+    """A file whose older live group still reads images of another layout under the images' names: the new images
+    get Blender's suffixed names, the old ones stay for the group that uses them, and a second call finds the new
+    ones instead of making more."""
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    table = live.table_for_model(preferences.DEFAULT_MODEL)
+    old = bpy.data.images.new(live.image_name("k1 Color"), 8, 8, float_buffer=True)
+    old[live.TABLE_PROP] = table.sha256
+    older_group = bpy.data.node_groups.new("older live group", "ShaderNodeTree")
+    older_group.nodes.new("ShaderNodeTexImage").image = old
+    _, first = live.ensure_images(table)
+    assert first["k1 Color"] != old and first["k1 Color"].name.startswith(live.image_name("k1 Color") + ".")
+    assert tuple(old.size) == (8, 8) and old.users > 0
+    count = len(bpy.data.images)
+    _, again = live.ensure_images(table)
+    assert again == first and len(bpy.data.images) == count
