@@ -486,3 +486,26 @@ def test_images_of_an_older_layout_still_in_use_are_kept_and_the_new_ones_reused
     count = len(bpy.data.images)
     _, again = live.ensure_images(table)
     assert again == first and len(bpy.data.images) == count
+
+
+def test_non_finite_colours_read_from_an_image_render_finite(addon):
+    """NaN, +Inf and -Inf texels (a float image, as an EXR can hold them) fed to the live group render finite: the
+    group's clamp reads NaN as 0 and +Inf as 1 (exporters.live_table, step 3)."""
+    scene = probe.new_scene(samples=8, resolution=4, seed=1)
+    table = live.table_for_model(preferences.DEFAULT_MODEL)
+    for texel in ((np.nan, 0.3, 0.2), (np.inf, 0.3, 0.2), (-np.inf, np.nan, np.inf)):
+        image = bpy.data.images.new("non-finite", 2, 2, float_buffer=True)
+        image.colorspace_settings.name = "Non-Color"
+        image.pixels.foreach_set(np.tile(np.array([*texel, 1.0], np.float32), 4))
+        mat = probe.slab_material("non-finite colour")
+        tree = mat.node_tree
+        tex = tree.nodes.new("ShaderNodeTexImage")
+        tex.image = image
+        tex.interpolation = "Closest"
+        node = tree.nodes.new("ShaderNodeGroup")
+        node.node_tree = live.ensure_live_group(table)
+        node.inputs["Unit Scale"].default_value = 0.01
+        tree.links.new(tex.outputs["Color"], node.inputs["Color"])
+        tree.links.new(node.outputs["Cycles"], probe.material_output(mat).inputs["Surface"])
+        mean = probe.render_mean(scene)[0]
+        assert np.all(np.isfinite(mean)) and np.all(mean >= 0.0), (texel, mean)
