@@ -276,17 +276,18 @@ class GridPoint(NamedTuple):
 
 def grid_vector(b: _Builder, colour: bpy.types.NodeSocket, layout: live_table.AtlasLayout) -> GridPoint:
     """Grid point of ``colour`` (linear RGB): clamped to [0, 1], sRGB encoded piecewise as
-    exporters.colorimetry.srgb_encode (the power by a Gamma node, the knee by floor(min(c / knee, 1)): 1 from the
-    knee up), in skin space (exporters.texel_table.COORDS), on the grid of ``layout``.  Vector nodes throughout:
-    every node costs each shading point its time."""
+    exporters.colorimetry.srgb_encode, in skin space (exporters.texel_table.COORDS), on the grid of ``layout``.
+    Vector nodes throughout: every node costs each shading point its time.  The encoding is
+    max(1.055 c^(1/2.4) - 0.055, min(12.92 c, 12.92 knee)) (the power by a Gamma node): below the knee the line lies
+    above the power curve and under its cap, from the knee up the power curve lies above the cap, so this is the
+    piecewise encoding except within 3e-7 above the knee, where the two pieces differ by 4e-6."""
     clamped = b.vec("MINIMUM", 1, b.vec("MAXIMUM", 0, colour, 0.0), 1.0)
     gamma = b.node("ShaderNodeGamma", 2)
     b.group.links.new(clamped, gamma.inputs["Color"])
     set_default(gamma.inputs["Gamma"], 1.0 / 2.4)
     curve = b.vec("MULTIPLY_ADD", 3, gamma.outputs[0], 1.055, -0.055)
     linear = b.vec("MULTIPLY", 2, clamped, _SRGB_SLOPE)
-    above = b.vec("MINIMUM", 3, b.vec("FLOOR", 2, b.vec("MULTIPLY", 2, clamped, 1.0 / _SRGB_KNEE)), 1.0)
-    encoded = b.vec("MULTIPLY_ADD", 5, above, b.vec("SUBTRACT", 4, curve, linear), linear)
+    encoded = b.vec("MAXIMUM", 5, curve, b.vec("MINIMUM", 4, linear, _SRGB_SLOPE * _SRGB_KNEE))
     order = (1, 2, 0)
     comb = b.node("ShaderNodeCombineXYZ", 7)
     for slot, d in enumerate(order):
@@ -335,13 +336,21 @@ def _lookup(b: _Builder, image: bpy.types.Image, uvs, frac, stage: int):
             b.mix("FLOAT", stage + 1, frac, alphas[0], alphas[1]))
 
 
-def _radius(b: _Builder, log_radius, metres_per_unit, log_range: tuple[float, float],
-            stage: int) -> bpy.types.NodeSocket:
-    """Radius in Blender units: exp(log r) per channel (a curve through exp over ``log_range``, the table's log radii:
-    blender_addon.curves, within 2e-4 relative) divided by ``metres_per_unit`` (the Unit Scale over the
-    Translucency)."""
-    metres = b.curve(stage, log_radius, *curves.smooth_points(np.exp, *log_range))
-    return b.vec("DIVIDE", stage + 1, metres, metres_per_unit)
+def _metres(b: _Builder, log_radius, log_range: tuple[float, float], stage: int) -> bpy.types.NodeSocket:
+    """exp(log r) per channel: the radius in metres, a curve through exp over ``log_range`` (the table's log radii:
+    blender_addon.curves, within 2e-4 relative)."""
+    return b.curve(stage, log_radius, *curves.smooth_points(np.exp, *log_range))
+
+
+def _per_unit(b: _Builder, metres_per_unit, *factors) -> bpy.types.NodeSocket:
+    """The product of the vector ``factors`` (None: left out) over ``metres_per_unit`` (the Unit Scale over the
+    Translucency): what turns a radius in metres into Blender units with its factors (an edit's, the grazing-light
+    correction's), computed once for every component."""
+    product = None
+    for factor in factors:
+        if factor is not None:
+            product = factor if product is None else b.vec("MULTIPLY", 19, product, factor)
+    return b.vec("DIVIDE", 20, product if product is not None else 1.0, metres_per_unit)
 
 
 def _new_group(k_count: int, table_sha: str) -> tuple[bpy.types.NodeTree, bpy.types.Node, bpy.types.Node]:
@@ -401,23 +410,24 @@ def build_live_group(table: texel_table.TexelTable, layout: live_table.AtlasLayo
     unit.node.name = "Translucency"
     weight_share = b.math("ADD", 24, gin.outputs["Subsurface Weight"], 0.0, clamp=True)
     media, effective = [], None
-    log_range, anisotropy = _table_ranges(table)
+    log_range, anisotropy, rho_max = _table_ranges(table)
+    edit_factor = branch.radius_factor if branch is not None else None
+    per_unit = _per_unit(b, unit, edit_factor)  # the radius' scale: the EEVEE output's
+    per_unit_cycles = _per_unit(b, unit, edit_factor, factors.outputs["Radius"] if factors is not None else None)
     for k in range(1, table.k + 1):
         rho, g = _lookup(b, images[f"k{k} Color"], uvs, frac, 18)  # the colour's body reflectance
         if anisotropy[k - 1] is not None:  # the same at every node: a value, which Cycles folds
             g = anisotropy[k - 1]
         log_r, _ = _lookup(b, images[f"k{k} Log Radius"], uvs, frac, 18)
         weight, _ = _lookup(b, images[f"k{k} Weight"], uvs, frac, 18)
-        radius = _radius(b, log_r, unit, log_range, 20)
-        if branch is not None:
-            radius = live_edits.scale_radius(b, radius, branch.radius_factor)
+        metres = _metres(b, log_r, log_range, 20)
         media.append((rho, weight))
-        b.link(_grazing(b, radius, factors, "Radius"), mixture.inputs[nodes.socket_name(k, "Radius")])
+        b.link(b.vec("MULTIPLY", 21, metres, per_unit_cycles), mixture.inputs[nodes.socket_name(k, "Radius")])
         b.link(g, mixture.inputs[nodes.socket_name(k, "Anisotropy")])
-        term = b.vec("MULTIPLY", 24, weight, radius)
+        term = b.vec("MULTIPLY", 24, weight, b.vec("MULTIPLY", 21, metres, per_unit))
         effective = term if effective is None else b.vec("ADD", 25, effective, term)
     fit = painted_gain.body_fit(table.options.ior)
-    for k, (colour, weight) in enumerate(_painted_media(b, painted, media, fit, 23), start=1):
+    for k, (colour, weight) in enumerate(_painted_media(b, painted, media, fit, rho_max, 23), start=1):
         b.link(colour, mixture.inputs[nodes.socket_name(k, "Color")])
         scaled = b.node("ShaderNodeVectorMath", 33, operation="SCALE", name=f"Subsurface Weight k{k}")
         b.link(_grazing(b, weight, factors, "Weight"), scaled.inputs[0])
@@ -434,45 +444,54 @@ def build_live_group(table: texel_table.TexelTable, layout: live_table.AtlasLayo
     return group
 
 
-def _table_ranges(table: texel_table.TexelTable) -> tuple[tuple[float, float], list[float | None]]:
-    """The range (min, max) of the table's log radii (natural log of metres, over every component and channel) and,
-    per component, its anisotropy where it is the same at every node of the table (else None)."""
+def _table_ranges(table: texel_table.TexelTable) -> tuple[tuple[float, float], list[float | None], float]:
+    """The range (min, max) of the table's log radii (natural log of metres, over every component and channel); per
+    component, its anisotropy where it is the same at every node of the table (else None); and the largest body
+    reflectance of its colours (exporters.live_table.grid_values: the colour clipped to [0, 1])."""
     names = texel_table.channel_names(table.k)
     values = table.values
     log_r = values[..., [i for i, n in enumerate(names) if n.startswith("log_radius_m_")]]
+    colours = values[..., [i for i, n in enumerate(names) if n.startswith("color_")]]
+    rho_max = float(painted_gain.body_reflectance(np.clip(np.nanmax(colours), 0.0, 1.0), table.options.ior))
     anisotropy = []
     for k in range(1, table.k + 1):
         g = values[..., names.index(f"anisotropy_k{k}")]
         g = np.clip(g[np.isfinite(g)], cycles.G_MIN, cycles.RECOMMENDED_G_MAX)  # as exporters.live_table.grid_values
         anisotropy.append(float(g[0]) if g.size and np.all(g == g[0]) else None)
-    return (float(np.nanmin(log_r)), float(np.nanmax(log_r))), anisotropy
+    return (float(np.nanmin(log_r)), float(np.nanmax(log_r))), anisotropy, rho_max
 
 
 def _grazing(b: _Builder, value: bpy.types.NodeSocket, factors: bpy.types.Node | None,
              which: str) -> bpy.types.NodeSocket:
-    """``value`` (a component's weight or radius, RGB) times its grazing-light factor (the output ``which`` of the
-    Grazing group node ``factors``; unchanged without one)."""
+    """``value`` (a component's weight, RGB) times its grazing-light factor (the output ``which`` of the Grazing group
+    node ``factors``; unchanged without one).  The radii take theirs in :func:`_per_unit`."""
     if factors is None:
         return value
     return b.vec("MULTIPLY", 30, value, factors.outputs[which])
 
 
-def _painted_media(b: _Builder, painted, media: list, fit: painted_gain.BodyFit, stage: int) -> list[tuple]:
+def _painted_media(b: _Builder, painted, media: list, fit: painted_gain.BodyFit, rho_max: float,
+                   stage: int) -> list[tuple]:
     """Each component's (colour, weight) from its looked-up (body reflectance rho, weight), brought to the
-    ``painted`` colour: exporters.painted_gain.painted_media with nodes, operation for operation, the inverse fit
-    (exporters.painted_gain.body_colour) a curve through it over [low, 1] (blender_addon.curves: within 1e-4)."""
-    body_points = curves.smooth_points(lambda rho: painted_gain.body_colour(rho, fit), fit.low, 1.0)
+    ``painted`` colour: exporters.painted_gain.painted_media with nodes, the inverse fit
+    (exporters.painted_gain.body_colour) a curve through it (blender_addon.curves: within 1e-4) over [low, reach]
+    when the table's rho never exceeds ``reach`` (``rho_max``: the curve's end is then the cap at reach), else over
+    [low, 1] after a minimum with reach."""
+    capped = rho_max <= fit.reach  # then max(rho, min(x, reach)) = min(max(rho, x), reach): the curve's cap
+    body_points = curves.smooth_points(lambda rho: painted_gain.body_colour(rho, fit), fit.low,
+                                       fit.reach if capped else 1.0)
     total = None
     for rho, weight in media:
-        term = b.vec("MULTIPLY", stage, weight, rho)
-        total = term if total is None else b.vec("ADD", stage + 1, total, term)
+        total = b.vec("MULTIPLY", stage, weight, rho) if total is None \
+            else b.vec("MULTIPLY_ADD", stage + 1, weight, rho, total)
     gain = b.vec("DIVIDE", stage + 3, painted, b.vec("MAXIMUM", stage + 2, total, painted_gain.GAIN_FLOOR))
     out = []
     for rho, weight in media:
         scaled = b.vec("MULTIPLY", stage + 4, weight, gain)
-        r_new = b.vec("MAXIMUM", stage + 6, rho, b.vec("MINIMUM", stage + 5, b.vec("MULTIPLY", stage + 4, scaled, rho),
-                                                        fit.reach))
-        colour = b.curve(stage + 8, r_new, *body_points)
+        candidate = b.vec("MULTIPLY", stage + 4, scaled, rho)
+        if not capped:
+            candidate = b.vec("MINIMUM", stage + 5, candidate, fit.reach)
+        colour = b.curve(stage + 8, b.vec("MAXIMUM", stage + 6, rho, candidate), *body_points)
         out.append((colour, b.vec("MINIMUM", stage + 9, scaled, 1.0)))
     return out
 

@@ -246,11 +246,6 @@ def _exp(b, vector, stage: int) -> bpy.types.NodeSocket:
     return comb.outputs[0]
 
 
-def scale_radius(b, radius, factor) -> bpy.types.NodeSocket:
-    """``radius`` (vector) times ``factor`` (vector) per channel."""
-    return b.vec("MULTIPLY", 22, radius, factor)
-
-
 def live_node(material: bpy.types.Material) -> bpy.types.Node | None:
     """The live group node feeding ``material``'s output that has the edit inputs, or None."""
     if material is None or material.node_tree is None:

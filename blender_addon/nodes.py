@@ -259,7 +259,8 @@ def _svm_mixture(group: bpy.types.NodeTree, gin: bpy.types.Node, k_count: int,
     """The nested closures of every component (module docstring), each scaled by its share of w_kc x ``scale``
     (the coat's body weight) and summed; returns the sum.
 
-    With lo <= mid <= hi the component's weights sorted over channels, w_c = lo + (mid - lo) [w_c >= mid] +
+    With lo <= mid <= hi the component's weights times ``scale`` (one vector node before the sort; the scale is
+    positive, so the order is the weights'), sorted over channels, w_c = lo + (mid - lo) [w_c >= mid] +
     (hi - mid) [w_c >= hi] exactly (ties included: mid is one of the three weights, picked by min/max, never
     computed).  So closure 1 carries all channels at weight lo, closure 2 the channels with w_c >= mid at mid - lo,
     closure 3 those with w_c >= hi at hi - mid; a channel left out has Color 0 (no weight, no walk) but keeps its
@@ -269,8 +270,12 @@ def _svm_mixture(group: bpy.types.NodeTree, gin: bpy.types.Node, k_count: int,
     total = None
     for k in range(1, k_count + 1):
         y0 = -(k - 1) * 1500.0
-        seps = _separated(group, gin, k, y0, ("Weight",))
-        w = [seps["Weight"].outputs[c] for c in range(3)]
+        scaled = _vec(group, "SCALE", gin.outputs[socket_name(k, "Weight")], x=-1050.0, y=y0 - 400.0)
+        group.links.new(scale, scaled.node.inputs["Scale"])  # the coat's body weight, > 0: the order is kept
+        sep = group.nodes.new("ShaderNodeSeparateColor")
+        sep.location = (-950.0, y0 - 400.0)
+        group.links.new(scaled, sep.inputs[0])
+        w = [sep.outputs[c] for c in range(3)]
         lo = _math(group, "MINIMUM", _math(group, "MINIMUM", w[0], w[1], x=-850.0, y=y0), w[2], x=-800.0, y=y0)
         hi = _math(group, "MAXIMUM", _math(group, "MAXIMUM", w[0], w[1], x=-850.0, y=y0 - 50.0), w[2], x=-800.0,
                    y=y0 - 50.0)
@@ -282,12 +287,10 @@ def _svm_mixture(group: bpy.types.NodeTree, gin: bpy.types.Node, k_count: int,
         for j, (threshold, share) in enumerate(levels):
             y = y0 - j * 450.0
             colour = gin.outputs[socket_name(k, "Color")] if threshold is None \
-                else _masked(group, gin.outputs[socket_name(k, "Color")], gin.outputs[socket_name(k, "Weight")],
-                             threshold, y)
+                else _masked(group, gin.outputs[socket_name(k, "Color")], scaled, threshold, y, top=j == 2)
             sss = _closure(group, gin, colour, gin.outputs[socket_name(k, "Radius")], k, y)
             sss.label = f"k{k} " + ("RGB", "two largest weights", "largest weight")[j]
-            weight = _math(group, "MULTIPLY", share, scale, x=-300.0, y=y + 100.0)
-            for part in _weighted(group, sss.outputs["BSSRDF"], weight, y):
+            for part in _weighted(group, sss.outputs["BSSRDF"], share, y):
                 total = part if total is None else _add_shader(group, total, part, 50.0 + 20.0 * k, y)
     return total
 
@@ -319,16 +322,18 @@ def _vec(group: bpy.types.NodeTree, operation: str, a, b=None, x: float = 0.0, y
 
 
 def _masked(group: bpy.types.NodeTree, colour: bpy.types.NodeSocket, weight: bpy.types.NodeSocket,
-            threshold: bpy.types.NodeSocket, y: float) -> bpy.types.NodeSocket:
+            threshold: bpy.types.NodeSocket, y: float, top: bool = False) -> bpy.types.NodeSocket:
     """``colour`` (RGB) where the channel's ``weight`` is >= ``threshold`` (a scalar, one of the weights), 0
-    elsewhere: colour x floor(min(weight / threshold, 1)), four vector nodes in place of a comparison per channel
-    (each node costs every shading point its time).  A weight equal to the threshold divides to 1 exactly; a smaller
-    one to below 1 (a weight within one rounding step of the threshold may count as equal: a closure of a weight
-    that differs by 1e-7 relative).  A threshold of 0 (Cycles' safe divide: 0) masks every channel, and is only
-    used by a closure of weight 0, which Cycles skips."""
+    elsewhere: colour x floor(min(weight / threshold, 1)), vector nodes in place of a comparison per channel (each
+    node costs every shading point its time); ``top``: the threshold is the largest weight, so the ratio is at most
+    1 and needs no minimum.  A weight equal to the threshold divides to 1 exactly; a smaller one to below 1 (a
+    weight within one rounding step of the threshold may count as equal: a closure of a weight that differs by 1e-7
+    relative).  A threshold of 0 (Cycles' safe divide: 0) masks every channel, and is only used by a closure of
+    weight 0, which Cycles skips."""
     ratio = _vec(group, "DIVIDE", weight, threshold, x=-700.0, y=y)
-    step = _vec(group, "FLOOR", _vec(group, "MINIMUM", ratio, 1.0, x=-650.0, y=y), x=-600.0, y=y)
-    return _vec(group, "MULTIPLY", colour, step, x=-550.0, y=y)
+    if not top:
+        ratio = _vec(group, "MINIMUM", ratio, 1.0, x=-650.0, y=y)
+    return _vec(group, "MULTIPLY", colour, _vec(group, "FLOOR", ratio, x=-600.0, y=y), x=-550.0, y=y)
 
 
 def _closure(group: bpy.types.NodeTree, gin: bpy.types.Node, colour: bpy.types.NodeSocket,
