@@ -9,6 +9,9 @@ How exact: Blender tabulates each curve at 257 points over its clip range (set h
 Cycles samples that table at 256 points (RAMP_TABLE_SIZE), both interpolated linearly.  Through points that lie
 closer than the tables' step the curve follows the function to within about f'' h^2 / 4 (h the range over 256); at
 a kink (the slopes' knots) the tables cut the corner by up to a quarter of a step times the change of slope.
+Rendered in Blender 4.2, 5.0 and 5.3 the exponential over the shipped table's log radii comes out within 4e-5
+relative; only where the curve's input is a constant (a plain colour, no texture), which Cycles folds when it
+compiles the shader, Blender 4.2 evaluates it less exactly (within 2.4e-3 relative).
 """
 
 from __future__ import annotations
