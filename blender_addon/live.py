@@ -47,7 +47,7 @@ import numpy as np
 
 from . import curves, live_edits, nodes, oblique, wiring
 from .core import bake as core_bake
-from .core import colorimetry, cycles, image_input, live_table, maps, painted_gain, texel_table
+from .core import colorimetry, image_input, live_table, maps, painted_gain, texel_table
 
 GROUP_NAME = "Spectral Skin SSS Live"
 #: Custom properties: on the group and the images, the SHA-256 of the table they were made from.
@@ -410,24 +410,24 @@ def build_live_group(table: texel_table.TexelTable, layout: live_table.AtlasLayo
     unit.node.name = "Translucency"
     weight_share = b.math("ADD", 24, gin.outputs["Subsurface Weight"], 0.0, clamp=True)
     media, effective = [], None
-    log_range, anisotropy, rho_max = _table_ranges(table)
+    ranges = live_table.atlas_ranges(table)
     edit_factor = branch.radius_factor if branch is not None else None
     per_unit = _per_unit(b, unit, edit_factor)  # the radius' scale: the EEVEE output's
     per_unit_cycles = _per_unit(b, unit, edit_factor, factors.outputs["Radius"] if factors is not None else None)
     for k in range(1, table.k + 1):
         rho, g = _lookup(b, images[f"k{k} Color"], uvs, frac, 18)  # the colour's body reflectance
-        if anisotropy[k - 1] is not None:  # the same at every node: a value, which Cycles folds
-            g = anisotropy[k - 1]
+        if ranges.anisotropy[k - 1] is not None:  # the same at every node: a value, which Cycles folds
+            g = ranges.anisotropy[k - 1]
         log_r, _ = _lookup(b, images[f"k{k} Log Radius"], uvs, frac, 18)
         weight, _ = _lookup(b, images[f"k{k} Weight"], uvs, frac, 18)
-        metres = _metres(b, log_r, log_range, 20)
+        metres = _metres(b, log_r, ranges.log_radius, 20)
         media.append((rho, weight))
         b.link(b.vec("MULTIPLY", 21, metres, per_unit_cycles), mixture.inputs[nodes.socket_name(k, "Radius")])
         b.link(g, mixture.inputs[nodes.socket_name(k, "Anisotropy")])
         term = b.vec("MULTIPLY", 24, weight, b.vec("MULTIPLY", 21, metres, per_unit))
         effective = term if effective is None else b.vec("ADD", 25, effective, term)
     fit = painted_gain.body_fit(table.options.ior)
-    for k, (colour, weight) in enumerate(_painted_media(b, painted, media, fit, rho_max, 23), start=1):
+    for k, (colour, weight) in enumerate(_painted_media(b, painted, media, fit, ranges.rho_max, 23), start=1):
         b.link(colour, mixture.inputs[nodes.socket_name(k, "Color")])
         scaled = b.node("ShaderNodeVectorMath", 33, operation="SCALE", name=f"Subsurface Weight k{k}")
         b.link(_grazing(b, weight, factors, "Weight"), scaled.inputs[0])
@@ -442,23 +442,6 @@ def build_live_group(table: texel_table.TexelTable, layout: live_table.AtlasLayo
     b.link(outside, gout.inputs["Outside"])
     b.place()
     return group
-
-
-def _table_ranges(table: texel_table.TexelTable) -> tuple[tuple[float, float], list[float | None], float]:
-    """The range (min, max) of the table's log radii (natural log of metres, over every component and channel); per
-    component, its anisotropy where it is the same at every node of the table (else None); and the largest body
-    reflectance of its colours (exporters.live_table.grid_values: the colour clipped to [0, 1])."""
-    names = texel_table.channel_names(table.k)
-    values = table.values
-    log_r = values[..., [i for i, n in enumerate(names) if n.startswith("log_radius_m_")]]
-    colours = values[..., [i for i, n in enumerate(names) if n.startswith("color_")]]
-    rho_max = float(painted_gain.body_reflectance(np.clip(np.nanmax(colours), 0.0, 1.0), table.options.ior))
-    anisotropy = []
-    for k in range(1, table.k + 1):
-        g = values[..., names.index(f"anisotropy_k{k}")]
-        g = np.clip(g[np.isfinite(g)], cycles.G_MIN, cycles.RECOMMENDED_G_MAX)  # as exporters.live_table.grid_values
-        anisotropy.append(float(g[0]) if g.size and np.all(g == g[0]) else None)
-    return (float(np.nanmin(log_r)), float(np.nanmax(log_r))), anisotropy, rho_max
 
 
 def _grazing(b: _Builder, value: bpy.types.NodeSocket, factors: bpy.types.Node | None,

@@ -295,11 +295,10 @@ def _svm_mixture(group: bpy.types.NodeTree, gin: bpy.types.Node, k_count: int,
     return total
 
 
-def _separated(group: bpy.types.NodeTree, gin: bpy.types.Node, k: int, y0: float,
-               kinds: tuple[str, ...] = ("Color", "Radius", "Weight")) -> dict[str, bpy.types.Node]:
-    """Separate Color nodes of component k's inputs ``kinds``, by kind."""
+def _separated(group: bpy.types.NodeTree, gin: bpy.types.Node, k: int, y0: float) -> dict[str, bpy.types.Node]:
+    """Separate Color nodes of component k's Color, Radius and Weight inputs, by kind."""
     seps = {}
-    for j, kind in enumerate(kinds):
+    for j, kind in enumerate(("Color", "Radius", "Weight")):
         sep = group.nodes.new("ShaderNodeSeparateColor")
         sep.location = (-950.0, y0 - j * 200.0)
         group.links.new(gin.outputs[socket_name(k, kind)], sep.inputs[0])

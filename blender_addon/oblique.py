@@ -11,10 +11,10 @@ views) both are 1 exactly.  The live group (blender_addon.live) multiplies its c
 them before the mixture group.
 
 Why curves and not a Map Range per knot interval (a sum of clamped ramps, exact): the group is evaluated at every
-shading point, and its node count is a cost Principled does not pay (docs/user/live_group.md, render cost); nine
-nodes replace thirty-six.  The curves' tables (blender_addon.curves) cut the corners at the knots by up to a
-quarter of a table step times the change of slope there: :data:`CURVE_ERROR` bounds it for the shipped
-correction.
+shading point, and its node count is a cost Principled does not pay (docs/user/live_group.md, render cost); the
+group holds eleven nodes where it held thirty-six.  The curves' tables (blender_addon.curves) cut the corners at
+the knots by up to a quarter of a table step times the change of slope there: :data:`CURVE_ERROR` bounds it for
+the shipped correction.
 """
 
 from __future__ import annotations

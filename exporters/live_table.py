@@ -150,11 +150,43 @@ def grid_values(table: TexelTable) -> dict[str, np.ndarray]:
             grid = np.stack([filled[..., i] if i is not None else ones for i in _channels(table, k, kind)], axis=-1)
             if kind == "Color":  # the body reflectance of the colour (exporters.painted_gain): what the nodes use
                 grid[..., :3] = painted_gain.body_reflectance(grid[..., :3], table.options.ior)
-                grid[..., 3] = np.clip(grid[..., 3], cycles.G_MIN, cycles.RECOMMENDED_G_MAX)
+                grid[..., 3] = _atlas_anisotropy(grid[..., 3])
             elif kind == "Weight":
                 grid[..., :3] = np.maximum(grid[..., :3], 0.0)
             out[f"k{k} {kind}"] = grid
     return out
+
+
+def _atlas_anisotropy(g: np.ndarray) -> np.ndarray:
+    """The anisotropy as the atlases hold it: clipped to the range a bake clips it to."""
+    return np.clip(g, cycles.G_MIN, cycles.RECOMMENDED_G_MAX)
+
+
+@dataclass(frozen=True)
+class AtlasRanges:
+    """What the atlases of a table hold (:func:`grid_values`), as the live group's nodes need it: ``log_radius``
+    the range (min, max) of the log radii (natural log of metres, every component and channel); ``anisotropy`` per
+    component its value where it is the same at every node (else None); ``rho_max`` the largest body reflectance."""
+
+    log_radius: tuple[float, float]
+    anisotropy: tuple[float | None, ...]
+    rho_max: float
+
+
+def atlas_ranges(table: TexelTable) -> AtlasRanges:
+    """:class:`AtlasRanges` of ``table`` from its valid nodes, without filling its grid: the filled nodes are means
+    of valid ones (:func:`fill_outside_cube`), so they add no value outside these ranges."""
+    names = channel_names(table.k)
+    values = table.values
+    log_r = values[..., [i for i, n in enumerate(names) if n.startswith("log_radius_m_")]]
+    colours = values[..., [i for i, n in enumerate(names) if n.startswith("color_")]]
+    anisotropy = []
+    for k in range(1, table.k + 1):
+        g = values[..., names.index(f"anisotropy_k{k}")]
+        g = _atlas_anisotropy(g[np.isfinite(g)])
+        anisotropy.append(float(g[0]) if g.size and np.all(g == g[0]) else None)
+    return AtlasRanges(log_radius=(float(np.nanmin(log_r)), float(np.nanmax(log_r))), anisotropy=tuple(anisotropy),
+                       rho_max=float(painted_gain.body_reflectance(np.nanmax(colours), table.options.ior)))
 
 
 def atlas_of(grid: np.ndarray, layout: AtlasLayout) -> np.ndarray:

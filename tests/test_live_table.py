@@ -67,3 +67,19 @@ def test_outside_fraction_and_budget(table):
     assert live_table.outside_fraction(table, np.zeros((0, 3))) == 0.0
     layout = live_table.layout_of(table)
     assert live_table.atlas_bytes(layout, 3 * table.k) <= 16 * 2 ** 20
+
+
+def test_atlas_ranges_are_those_of_the_filled_grids(table):
+    """The ranges the live group's curves and constants use, found from the table's valid nodes, hold every value
+    of the filled grids the atlases are made of."""
+    ranges = live_table.atlas_ranges(table)
+    grids = live_table.grid_values(table)
+    log_r = np.stack([grids[f"k{k} Log Radius"][..., :3] for k in range(1, table.k + 1)])
+    assert ranges.log_radius == pytest.approx((log_r.min(), log_r.max()), abs=1e-12)
+    rho = np.stack([grids[f"k{k} Color"][..., :3] for k in range(1, table.k + 1)])
+    assert ranges.rho_max == pytest.approx(rho.max(), abs=1e-12)
+    for k, g in enumerate(ranges.anisotropy, start=1):
+        alpha = grids[f"k{k} Color"][..., 3]
+        assert (g is not None) == bool(np.all(alpha == alpha.flat[0]))
+        if g is not None:
+            assert np.all(alpha == g)
