@@ -53,7 +53,7 @@ GROUP_NAME = "Spectral Skin SSS Live"
 #: Custom properties: on the group and the images, the SHA-256 of the table they were made from.
 TABLE_PROP = "spectral_skin_sss_table"
 #: Layout version of the live group (bump when the generated nodes change).
-LIVE_VERSION = 8
+LIVE_VERSION = 9
 IMAGE_PREFIX = "Spectral Skin SSS Table"
 #: Custom property on the group: whether it holds the grazing-light correction (blender_addon.oblique).
 GRAZING_PROP = "spectral_skin_sss_grazing"
@@ -264,46 +264,79 @@ def set_default(socket: bpy.types.NodeSocket, value) -> None:
 
 
 class GridPoint(NamedTuple):
-    """Where a colour lies in a table's grid (:func:`grid_vector`): ``x`` the grid coordinates clamped to the grid as
-    the vector (x1, x2, x0) (the atlas' u, v axes first), ``x0`` its slice coordinate, ``raw`` the coordinates before
-    the clamp and ``painted`` the colour clamped to [0, 1] (vector sockets, ``x0`` a float socket)."""
+    """Where a colour lies in a table's grid (:func:`grid_vector`): ``uv`` the UV of its texel in the first slice of a
+    one-row atlas, the grid coordinates clamped to the grid (its z the slice coordinate x0), ``x0`` that slice
+    coordinate, ``coords`` the grid coordinates (x1, x2, x0) before the clamp and less the grid's origin (the atlas'
+    u, v axes first) and ``painted`` the colour clamped to [0, 1] (vector sockets, ``x0`` a float socket)."""
 
-    x: bpy.types.NodeSocket
+    uv: bpy.types.NodeSocket
     x0: bpy.types.NodeSocket
-    raw: bpy.types.NodeSocket
+    coords: bpy.types.NodeSocket
     painted: bpy.types.NodeSocket
 
 
-def grid_vector(b: _Builder, colour: bpy.types.NodeSocket, layout: live_table.AtlasLayout) -> GridPoint:
+def _map_range(b: _Builder, stage: int, value: bpy.types.NodeSocket, low, high, to_low,
+               to_high) -> bpy.types.NodeSocket:
+    """A vector Map Range (linear, clamped) of ``value`` from [low, high] to [to_low, to_high] (3-tuples): one node
+    for an affine map per component and the clamp to its range."""
+    node = b.node("ShaderNodeMapRange", stage, data_type="FLOAT_VECTOR", clamp=True)
+    b.group.links.new(value, node.inputs["Vector"])
+    for name, bound in (("From_Min_FLOAT3", low), ("From_Max_FLOAT3", high), ("To_Min_FLOAT3", to_low),
+                        ("To_Max_FLOAT3", to_high)):
+        set_default(next(s for s in node.inputs if s.identifier == name), tuple(float(v) for v in bound))
+    return next(s for s in node.outputs if s.identifier == "Vector")
+
+
+def grid_vector(b: _Builder, colour: bpy.types.NodeSocket, layout: live_table.AtlasLayout,
+                size: tuple[float, float], clamped: bpy.types.NodeSocket | None = None) -> GridPoint:
     """Grid point of ``colour`` (linear RGB): clamped to [0, 1], sRGB encoded piecewise as
-    exporters.colorimetry.srgb_encode, in skin space (exporters.texel_table.COORDS), on the grid of ``layout``.
-    Vector nodes throughout: every node costs each shading point its time.  The encoding is
-    max(1.055 c^(1/2.4) - 0.055, min(12.92 c, 12.92 knee)) (the power by a Gamma node): below the knee the line lies
-    above the power curve and under its cap, from the knee up the power curve lies above the cap, so this is the
-    piecewise encoding except within 3e-7 above the knee, where the two pieces differ by 4e-6."""
-    clamped = b.vec("MINIMUM", 1, b.vec("MAXIMUM", 0, colour, 0.0), 1.0)
+    exporters.colorimetry.srgb_encode, in skin space (exporters.texel_table.COORDS), on the grid of ``layout``, and
+    its texel in an atlas of ``size`` (width, height) px whose slices of ``layout`` lie in one row from the bottom
+    left, ``live_table.BORDER`` px in.  Every node costs each shading point its time, so: the clamp is a Mix node's
+    (factor 0, result clamped: NaN reads as 0, +Inf as 1); the encoding is max(1.055 c^(1/2.4) - 0.055,
+    min(12.92 c, 12.92 knee)) (the power by a Gamma node, the capped line by a Map Range): below the knee the line
+    lies above the power curve and under its cap, from the knee up the power curve lies above the cap, so this is
+    the piecewise encoding except within 3e-7 above the knee, where the two pieces differ by 4e-6; one Map Range
+    takes the grid coordinates to the atlas' UV and clamps them to the grid.  ``clamped``: the colour clamped to
+    [0, 1] already (the grazing-light group's), read instead of clamping it here."""
+    if clamped is None:
+        mix = b.node("ShaderNodeMix", 1, data_type="RGBA", clamp_result=True, clamp_factor=False)
+        sockets = [s for s in mix.inputs if s.enabled]
+        set_default(sockets[0], 0.0)
+        b.group.links.new(colour, sockets[1])
+        clamped = next(s for s in mix.outputs if s.enabled)
     gamma = b.node("ShaderNodeGamma", 2)
     b.group.links.new(clamped, gamma.inputs["Color"])
     set_default(gamma.inputs["Gamma"], 1.0 / 2.4)
     curve = b.vec("MULTIPLY_ADD", 3, gamma.outputs[0], 1.055, -0.055)
-    linear = b.vec("MULTIPLY", 2, clamped, _SRGB_SLOPE)
-    encoded = b.vec("MAXIMUM", 5, curve, b.vec("MINIMUM", 4, linear, _SRGB_SLOPE * _SRGB_KNEE))
+    cap = _SRGB_SLOPE * _SRGB_KNEE
+    line = _map_range(b, 3, clamped, (0.0,) * 3, (_SRGB_KNEE,) * 3, (0.0,) * 3, (cap,) * 3)
+    encoded = b.vec("MAXIMUM", 5, curve, line)
     order = (1, 2, 0)
     comb = b.node("ShaderNodeCombineXYZ", 7)
     for slot, d in enumerate(order):
         b.group.links.new(b.vec("DOT_PRODUCT", 6, encoded, texel_table.COORDS[d] / layout.step), comb.inputs[slot])
-    raw = b.vec("ADD", 8, comb.outputs[0], [-layout.origin[d] / layout.step for d in order])
-    x = b.vec("MINIMUM", 9, b.vec("MAXIMUM", 8, raw, 0.0), [layout.shape[d] - 1.0 for d in order])
-    sep = b.node("ShaderNodeSeparateXYZ", 10)
-    b.group.links.new(x, sep.inputs[0])
-    return GridPoint(x=x, x0=sep.outputs[2], raw=raw, painted=clamped)
+    origin = np.array([layout.origin[d] / layout.step for d in order])
+    extent = np.array([layout.shape[d] - 1.0 for d in order])
+    border = live_table.BORDER + 0.5
+    width, height = size
+    to_low = (border / width, border / height, 0.0)
+    to_high = ((extent[0] + border) / width, (extent[1] + border) / height, extent[2])
+    uv = _map_range(b, 8, comb.outputs[0], origin, origin + extent, to_low, to_high)
+    sep = b.node("ShaderNodeSeparateXYZ", 9)
+    b.group.links.new(uv, sep.inputs[0])
+    return GridPoint(uv=uv, x0=sep.outputs[2], coords=comb.outputs[0], painted=clamped)
 
 
-def _grid_coords(b: _Builder, gin: bpy.types.Node, layout: live_table.AtlasLayout, colour=None):
-    """The grid point (:class:`GridPoint`) of the input colour (or ``colour``: the edited one) with the Principled
-    convention's gain, and its distance from the box (skin space)."""
-    point = grid_vector(b, _convention(b, gin, 1.0, PRINCIPLED_BASE_SHARE_CYCLES, colour), layout)
-    gap = b.vec("ABSOLUTE", 11, b.vec("SUBTRACT", 10, point.raw, point.x))
+def _grid_coords(b: _Builder, layout: live_table.AtlasLayout, colour: bpy.types.NodeSocket,
+                 clamped: bpy.types.NodeSocket | None = None):
+    """The grid point (:class:`GridPoint`) of ``colour`` (the input colour with the Principled convention's gain;
+    ``clamped``: the same clamped to [0, 1], when made elsewhere), and its distance from the box (skin space)."""
+    point = grid_vector(b, colour, layout, layout.size, clamped)
+    order = (1, 2, 0)
+    raw = b.vec("SUBTRACT", 10, point.coords, [layout.origin[d] / layout.step for d in order])
+    x = b.vec("MINIMUM", 11, b.vec("MAXIMUM", 10, raw, 0.0), [layout.shape[d] - 1.0 for d in order])
+    gap = b.vec("ABSOLUTE", 11, b.vec("SUBTRACT", 11, raw, x))
     return point, b.vec("DOT_PRODUCT", 12, gap, layout.step)
 
 
@@ -312,14 +345,10 @@ def _slice_uvs(b: _Builder, layout: live_table.AtlasLayout, point: GridPoint, st
     (exporters.live_table), and the fraction of x0 between them."""
     if layout.rows != 1:
         raise ValueError("the live group reads one-row atlases (exporters.live_table.layout_of)")
-    width, height = layout.size
-    tile_u = layout.tile[0] / width
-    border = live_table.BORDER + 0.5
+    tile_u = layout.tile[0] / layout.size[0]
     s = b.math("MINIMUM", stage + 1, b.math("FLOOR", stage, point.x0), layout.shape[0] - 2.0)
     frac = b.math("SUBTRACT", stage + 2, point.x0, s)
-    base = b.vec("MULTIPLY_ADD", stage, point.x, (1.0 / width, 1.0 / height, 0.0),
-                 (border / width, border / height, 0.0))
-    uv = b.vec("MULTIPLY_ADD", stage + 2, s, (tile_u, 0.0, 0.0), base)
+    uv = b.vec("MULTIPLY_ADD", stage + 2, s, (tile_u, 0.0, 0.0), point.uv)
     return (uv, b.vec("ADD", stage + 3, uv, (tile_u, 0.0, 0.0))), frac
 
 
@@ -332,7 +361,7 @@ def _lookup(b: _Builder, image: bpy.types.Image, uvs, frac, stage: int):
         b.link(uv, tex.inputs["Vector"])
         colours.append(tex.outputs["Color"])
         alphas.append(tex.outputs["Alpha"])
-    return (b.mix("RGBA", stage + 1, frac, colours[0], colours[1]),
+    return (b.mix("VECTOR", stage + 1, frac, colours[0], colours[1]),
             b.mix("FLOAT", stage + 1, frac, alphas[0], alphas[1]))
 
 
@@ -396,13 +425,15 @@ def build_live_group(table: texel_table.TexelTable, layout: live_table.AtlasLayo
         group[live_edits.EDIT_TABLE_PROP] = edits[0].sha256
         branch = live_edits.edit_node(b, gin, *edits)
     edited = branch.colour if branch is not None else None
-    point, outside = _grid_coords(b, gin, layout, edited)
-    painted = point.painted
-    factors = None
+    colour = _convention(b, gin, 1.0, PRINCIPLED_BASE_SHARE_CYCLES, edited)
+    factors = clamped = None
     if grazing:
         factors = b.node("ShaderNodeGroup", 26, node_tree=oblique.ensure_group(), name="Grazing")
-        b.link(painted, factors.inputs["Color"])
+        b.link(colour, factors.inputs["Color"])
         b.link(gin.outputs["Normal"], factors.inputs["Normal"])
+        clamped = factors.outputs["Color"]
+    point, outside = _grid_coords(b, layout, colour, clamped)
+    painted = point.painted
     uvs, frac = _slice_uvs(b, layout, point, 12)
     mixture = b.node("ShaderNodeGroup", 34, node_tree=nodes.ensure_group(table.k, "SVM"))
     unit = b.math("DIVIDE", 19, gin.outputs["Unit Scale"], b.math("MAXIMUM", 18, gin.outputs["Translucency"],
@@ -467,7 +498,7 @@ def _painted_media(b: _Builder, painted, media: list, fit: painted_gain.BodyFit,
     for rho, weight in media:
         total = b.vec("MULTIPLY", stage, weight, rho) if total is None \
             else b.vec("MULTIPLY_ADD", stage + 1, weight, rho, total)
-    gain = b.vec("DIVIDE", stage + 3, painted, b.vec("MAXIMUM", stage + 2, total, painted_gain.GAIN_FLOOR))
+    gain = b.vec("DIVIDE", stage + 3, painted, total)  # Cycles' divide: 0 where total is 0, as painted_gain's
     out = []
     for rho, weight in media:
         scaled = b.vec("MULTIPLY", stage + 4, weight, gain)

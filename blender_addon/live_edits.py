@@ -8,10 +8,14 @@ the neutral level).  For the painted colour c the nodes compute, as exporters.ed
   levels around s, read by trilinear lookups at c and interpolated linearly (the hat weights of
   exporters.edit_table.shift); the shift D is their sum over the controls;
 * the edited colour c exp(D_RGB) (what the rest of the group reads instead of c: the table's lookup, the EEVEE
-  colour) and the radius factor exp(D_radius) per channel (every component's radius is multiplied by it).
+  colour) and the radius factor exp(D_radius) per channel (every component's radius is multiplied by it); each
+  exponential is 1 plus a curve through exp(x) - 1 over the table's range of shifts (blender_addon.curves: one node
+  where a Separate, three Math nodes and a Combine were), the curve switched off (its factor 0: it passes D = 0
+  through) where every control is neutral.
 
 At neutral inputs each control reads its zero atlas with weight exactly 1 (its neighbour with weight exactly 0), so
-D = 0, c exp(0) = c and r exp(0) = r: the group renders its unedited result bit for bit.  Each control's shift is
+D = 0, the curves pass it through, c (1 + 0) = c and r (1 + 0) = r: the group renders its unedited result bit for
+bit.  Each control's shift is
 also switched to exactly 0 where its coordinate is neutral (the same value): an unlinked control at its neutral
 value then folds to a constant 0 when Cycles compiles the shader, which drops that control's texture lookups (a
 neutral group evaluates none of the edit nodes).  Each input takes a value
@@ -28,8 +32,8 @@ from pathlib import Path
 import bpy
 import numpy as np
 
-from . import wiring
-from .core import edit_table, live_table, skin_edits
+from . import curves, wiring
+from .core import edit_table, skin_edits
 
 #: Custom property on the edit images and the group: the SHA-256 of the edit table they were made from.
 EDIT_TABLE_PROP = wiring.EDIT_TABLE_PROP
@@ -185,17 +189,18 @@ def add_edit_branch(b, gin, table: edit_table.EditTable, images: dict[str, bpy.t
     from . import live
 
     colour = gin.outputs["Color"]
-    x, x0 = live.grid_vector(b, colour, layout)[:2]
-    border = live_table.BORDER + 0.5
-    base = b.vec("MULTIPLY_ADD", 41, x, (1.0 / width, 1.0 / tall, 0.0), (border / width, border / tall, 0.0))
+    base, x0 = live.grid_vector(b, colour, layout, (width, tall))[:2]
     s = b.math("MINIMUM", 42, b.math("FLOOR", 41, x0), layout.shape[0] - 2.0)
     frac = b.math("SUBTRACT", 43, x0, s)
     slice_u = b.math("MULTIPLY", 43, s, tile_u)
     shifts = {kind: None for kind in edit_table.KINDS}
+    still = None  # 1 where every control is neutral, else 0
     for j, name in enumerate(skin_edits.CONTROLS):
         levels = edit_table.LEVELS[name]
         h = edit_table.SPACING[name]
         coordinate = _coordinate(b, gin, j, 44)
+        neutral = b.math("COMPARE", 58, coordinate, 0.0, 0.0)
+        still = neutral if still is None else b.math("MULTIPLY", 59, still, neutral)
         t = b.math("MULTIPLY_ADD", 47, coordinate, 1.0 / h, -levels[0] / h)
         lower = b.math("MINIMUM", 49, b.math("FLOOR", 48, t), edit_table.STACKED - 2.0)
         fraction = b.math("SUBTRACT", 50, t, lower)
@@ -208,20 +213,21 @@ def add_edit_branch(b, gin, table: edit_table.EditTable, images: dict[str, bpy.t
         for kind in edit_table.KINDS:
             image = images[edit_table.image_name(j, kind)]
             found = [_bilinear_pair(b, image, pair, frac, 55) for pair in uvs]  # levels l and l + 1
-            value = _unless_neutral(b, coordinate, b.mix("RGBA", 57, fraction, found[0], found[1]), 58)
+            value = _unless_neutral(b, neutral, b.mix("VECTOR", 57, fraction, found[0], found[1]), 58)
             shifts[kind] = value if shifts[kind] is None else b.vec("ADD", 58, shifts[kind], value)
-    factor = {kind: _exp(b, shifts[kind], 59) for kind in edit_table.KINDS}
-    edited = b.vec("MULTIPLY", 62, colour, factor["colour"])
+    active = b.math("SUBTRACT", 60, 1.0, still)
+    bounds = table.shift_bounds()
+    factor = {kind: _exp(b, shifts[kind], active, bounds[kind], 61) for kind in edit_table.KINDS}
+    edited = b.vec("MULTIPLY", 63, colour, factor["colour"])
     return EditBranch(colour=edited, radius_factor=factor["radius"])
 
 
-def _unless_neutral(b, coordinate, value, stage: int) -> bpy.types.NodeSocket:
-    """``value`` (a control's shift) where the control coordinate is not the neutral 0, exactly 0 where it is: a Mix
-    of factor 1 - [coordinate == 0] from 0 to ``value``.  Where the coordinate is 0 the shift read from the zero
-    atlas is 0 already, so the result is the same everywhere; but when the control's input is unlinked Cycles folds
-    the factor to a constant (0 at the neutral value, 1 elsewhere) and the Mix to one of its inputs, so a neutral
-    control's texture lookups are dropped from the compiled shader."""
-    neutral = b.math("COMPARE", stage, coordinate, 0.0, 0.0)
+def _unless_neutral(b, neutral, value, stage: int) -> bpy.types.NodeSocket:
+    """``value`` (a control's shift) where the control is not neutral, exactly 0 where it is (``neutral``: 1 where
+    its coordinate is the neutral 0, else 0): a Mix of factor 1 - neutral from 0 to ``value``.  Where the coordinate
+    is 0 the shift read from the zero atlas is 0 already, so the result is the same everywhere; but when the
+    control's input is unlinked Cycles folds the factor to a constant (0 at the neutral value, 1 elsewhere) and the
+    Mix to one of its inputs, so a neutral control's texture lookups are dropped from the compiled shader."""
     return b.mix("RGBA", stage + 1, b.math("SUBTRACT", stage, 1.0, neutral), (0.0, 0.0, 0.0, 1.0), value)
 
 
@@ -233,17 +239,17 @@ def _bilinear_pair(b, image: bpy.types.Image, uvs, frac, stage: int) -> bpy.type
         tex.label = image.name
         b.group.links.new(uv, tex.inputs["Vector"])
         colours.append(tex.outputs["Color"])
-    return b.mix("RGBA", stage + 1, frac, colours[0], colours[1])
+    return b.mix("VECTOR", stage + 1, frac, colours[0], colours[1])
 
 
-def _exp(b, vector, stage: int) -> bpy.types.NodeSocket:
-    """exp of each component of ``vector``."""
-    sep = b.node("ShaderNodeSeparateXYZ", stage)
-    b.group.links.new(vector, sep.inputs[0])
-    comb = b.node("ShaderNodeCombineXYZ", stage + 2)
-    for c in range(3):
-        b.link(b.math("EXPONENT", stage + 1, sep.outputs[c]), comb.inputs[c])
-    return comb.outputs[0]
+def _exp(b, vector, active, bounds: tuple[float, float], stage: int) -> bpy.types.NodeSocket:
+    """exp of each component of ``vector`` (within ``bounds``): 1 + a curve through exp(x) - 1
+    (blender_addon.curves) whose factor is ``active`` (0 where every control is neutral).  Where the factor is 0
+    the curve passes its input through, the shift D = 0, so the result is 1 exactly; at neutral unlinked controls
+    Cycles folds all of it to the constant 1 (the group renders its unedited result bit for bit)."""
+    curve = b.curve(stage, vector, *curves.smooth_points(np.expm1, *bounds))
+    b.link(active, curve.node.inputs["Fac"])
+    return b.vec("ADD", stage + 1, curve, 1.0)
 
 
 def live_node(material: bpy.types.Material) -> bpy.types.Node | None:

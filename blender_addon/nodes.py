@@ -74,10 +74,16 @@ the cosine-weighted mean of F (exporters.cycles.DIFFUSE_FRESNEL_POLY).  Why this
   BSSRDF (one colour, radius, anisotropy); K x 3 of them would add the specular 3 times (sum over k, c of
   w_kc = 3) and would weight the mixture by 1 - (specular albedo), the double loss above.
 * **The body weight sits in each closure's own Mix Shader** (Fac w_kc x scale), so the summed mixture needs no
-  further Mix Shaders.  A Mix Shader clamps its Fac to 1, so each closure has a second Mix Shader of Fac
-  max(w_kc x scale - 1, 0): Cycles skips it while that Fac is 0, which it is unless a weight exceeds 1 / scale
-  (0.95 face-on at IOR 1.4; the shipped fast-path table's largest weight is 0.82).  (Reaching a closure twice
-  costs nothing measurable either: 1.03x time to equal noise, training.bench.render_cost, variant "live_doubled".)
+  further Mix Shaders.  A Mix Shader clamps its Fac to 1, so the part of a weight above 1 goes to a copy of the
+  closure (same inputs; :data:`OVERFLOW_ROUGHNESS` keeps Cycles from merging the two) in a Mix Shader of Fac
+  w_kc x scale - 1, and every copy sits behind one Mix Shader whose Fac is 1 where any component's largest
+  weight exceeds 1, else 0.  A weight exceeds 1 only where the body weight and the grazing-light factor lift a
+  large weight (the body weight alone is at most 1 / (1 - F_dr), 1.08 at IOR 1.4; the shipped fast-path table's
+  largest weight is 0.82).  SVM evaluates the nodes that feed only one side of a Mix Shader inside that side and
+  jumps over them while its Fac is 0 (svm.cpp, generate_multi_closure), so a shading point pays one Mix Shader
+  per closure and the gate's three nodes; a closure reached along two Mix Shaders would pay both and the sum of
+  their weights at every shading point (ShaderGraph::transform_multi_closure): about 7 % of the demo head's
+  time per sample (training.bench.render_cost).
 * **Why not OSL's ``layer()``** on the OSL path: SVM has no equivalent, and both paths must render the same
   (tests/test_cycles_mixture.py compares them); the OSL script computes the weighted body and the same
   Principled coat node sits beside it.
@@ -123,6 +129,11 @@ DEFAULT_IOR = reflectance_tables.CYCLES_IOR
 GROUP_IOR_MIN = 1.0
 #: Roughness of the subsurface closures' refractive entry: smooth, as the bake's Cycles tables assume.
 ENTRY_ROUGHNESS = 0.0
+#: Entry roughness of the closures that carry the part of a weight above 1 (nodes._svm_mixture): smooth as well
+#: (Cycles' GGX alpha 1e-6 tilts the entry by about 1e-6 rad), but not equal to :data:`ENTRY_ROUGHNESS`, so that
+#: Cycles does not merge them with the closures of the same inputs (ShaderGraph::deduplicate_nodes), which would
+#: bring their weights back out of the gate that skips them.
+OVERFLOW_ROUGHNESS = 1e-6
 #: rms facet slope of facial skin, Beckmann m: Weyrich et al. 2006 ("Analysis of human faces using a
 #: measurement-based skin reflectance model", ACM TOG 25(3):1013) fit a Torrance-Sparrow lobe per face region,
 #: m between about 0.3 and 0.45; 0.4 is used for a whole face (training/realskin takes 0.35 for the smoother
@@ -231,6 +242,8 @@ def _fresh_group(name: str, k_count: int, backend: str):
     return group, gin, gout
 
 
+#: Gain of the difference of a weight from the smallest in the middle closure's channel mask (nodes._masked).
+MASK_GAIN = 1e6
 #: How the SVM group splits each component into closures (module docstring): "nested" (the default: up to three
 #: closures per component over nested channel sets, all three channels, the two of largest weight, the largest) or
 #: "per_channel" (three single-channel closures per component: the earlier design, kept for comparison).
@@ -267,7 +280,7 @@ def _svm_mixture(group: bpy.types.NodeTree, gin: bpy.types.Node, k_count: int,
     radius, so Cycles still counts it in the closure's pick weight (closure/bssrdf.h: sample_weight is the mean
     weight times the number of channels with a radius), which keeps every closure's pick weight the sum of its
     channels' weights.  A closure of weight 0 is skipped by Cycles."""
-    total = None
+    total, overflow, highest = None, None, None
     for k in range(1, k_count + 1):
         y0 = -(k - 1) * 1500.0
         scaled = _vec(group, "SCALE", gin.outputs[socket_name(k, "Weight")], x=-1050.0, y=y0 - 400.0)
@@ -287,12 +300,31 @@ def _svm_mixture(group: bpy.types.NodeTree, gin: bpy.types.Node, k_count: int,
         for j, (threshold, share) in enumerate(levels):
             y = y0 - j * 450.0
             colour = gin.outputs[socket_name(k, "Color")] if threshold is None \
-                else _masked(group, gin.outputs[socket_name(k, "Color")], scaled, threshold, y, top=j == 2)
+                else _masked(group, gin.outputs[socket_name(k, "Color")], scaled, lo if j == 1 else hi, y,
+                             top=j == 2)
             sss = _closure(group, gin, colour, gin.outputs[socket_name(k, "Radius")], k, y)
             sss.label = f"k{k} " + ("RGB", "two largest weights", "largest weight")[j]
-            for part in _weighted(group, sss.outputs["BSSRDF"], share, y):
-                total = part if total is None else _add_shader(group, total, part, 50.0 + 20.0 * k, y)
-    return total
+            part = _mix_shader(group, share, sss.outputs["BSSRDF"], -150.0, y)
+            total = part if total is None else _add_shader(group, total, part, 50.0 + 20.0 * k, y)
+            spill = _closure(group, gin, colour, gin.outputs[socket_name(k, "Radius")], k, y - 200.0,
+                             roughness=OVERFLOW_ROUGHNESS)
+            spill.label = sss.label + " (weight above 1)"
+            part = _mix_shader(group, _math(group, "SUBTRACT", share, 1.0, x=-250.0, y=y - 250.0),
+                               spill.outputs["BSSRDF"], -150.0, y - 250.0)
+            overflow = part if overflow is None else _add_shader(group, overflow, part, 50.0 + 20.0 * k, y - 250.0)
+        highest = hi if highest is None else _math(group, "MAXIMUM", highest, hi, x=-700.0, y=y0 - 50.0)
+    gate = _math(group, "GREATER_THAN", highest, 1.0, x=-600.0, y=300.0)
+    return _add_shader(group, total, _mix_shader(group, gate, overflow, 0.0, 300.0), 150.0, 300.0)
+
+
+def _mix_shader(group: bpy.types.NodeTree, fac: bpy.types.NodeSocket, closure: bpy.types.NodeSocket, x: float,
+                y: float) -> bpy.types.NodeSocket:
+    """``closure`` x ``fac`` (a Mix Shader of an empty first input; it clamps Fac to [0, 1] itself)."""
+    mix = group.nodes.new("ShaderNodeMixShader")
+    mix.location = (x, y)
+    group.links.new(fac, mix.inputs["Fac"])
+    group.links.new(closure, mix.inputs[2])
+    return mix.outputs[0]
 
 
 def _separated(group: bpy.types.NodeTree, gin: bpy.types.Node, k: int, y0: float) -> dict[str, bpy.types.Node]:
@@ -322,28 +354,31 @@ def _vec(group: bpy.types.NodeTree, operation: str, a, b=None, x: float = 0.0, y
 
 def _masked(group: bpy.types.NodeTree, colour: bpy.types.NodeSocket, weight: bpy.types.NodeSocket,
             threshold: bpy.types.NodeSocket, y: float, top: bool = False) -> bpy.types.NodeSocket:
-    """``colour`` (RGB) where the channel's ``weight`` is >= ``threshold`` (a scalar, one of the weights), 0
-    elsewhere: colour x floor(min(weight / threshold, 1)), vector nodes in place of a comparison per channel (each
-    node costs every shading point its time); ``top``: the threshold is the largest weight, so the ratio is at most
-    1 and needs no minimum.  A weight equal to the threshold divides to 1 exactly; a smaller one to below 1 (a
-    weight within one rounding step of the threshold may count as equal: a closure of a weight that differs by 1e-7
-    relative).  A threshold of 0 (Cycles' safe divide: 0) masks every channel, and is only used by a closure of
-    weight 0, which Cycles skips."""
-    ratio = _vec(group, "DIVIDE", weight, threshold, x=-700.0, y=y)
-    if not top:
-        ratio = _vec(group, "MINIMUM", ratio, 1.0, x=-650.0, y=y)
-    return _vec(group, "MULTIPLY", colour, _vec(group, "FLOOR", ratio, x=-600.0, y=y), x=-550.0, y=y)
+    """``colour`` (RGB, in [0, 1]) where the channel's ``weight`` is >= ``threshold`` (a scalar, one of the weights),
+    0 elsewhere, in vector nodes (each node costs every shading point its time).  The largest weight (``top``):
+    colour x floor(weight / threshold), the ratio at most 1, exactly 1 at the largest.  The middle one: used only
+    while it exceeds the smallest (else its closure has weight 0, which Cycles skips), so the channels it takes are
+    those above the smallest, min(colour, (weight - smallest) x :data:`MASK_GAIN`): 0 at the smallest exactly (it is
+    one of the weights, picked by min/max, so the difference is exactly 0), the colour wherever a weight exceeds it
+    by 1 / MASK_GAIN, and in between (a weight within 1e-6 of the smallest) a part of the colour on a closure whose
+    weight, at most that difference, is below 1e-6.  A threshold of 0 (Cycles' safe divide: 0) masks every channel,
+    and is only used by a closure of weight 0."""
+    if top:
+        ratio = _vec(group, "DIVIDE", weight, threshold, x=-700.0, y=y)
+        return _vec(group, "MULTIPLY", colour, _vec(group, "FLOOR", ratio, x=-600.0, y=y), x=-550.0, y=y)
+    above = _vec(group, "SUBTRACT", weight, threshold, x=-700.0, y=y)
+    return _vec(group, "MINIMUM", colour, _vec(group, "MULTIPLY", above, MASK_GAIN, x=-600.0, y=y), x=-550.0, y=y)
 
 
 def _closure(group: bpy.types.NodeTree, gin: bpy.types.Node, colour: bpy.types.NodeSocket,
-             radius: bpy.types.NodeSocket, k: int, y: float) -> bpy.types.Node:
+             radius: bpy.types.NodeSocket, k: int, y: float, roughness: float = ENTRY_ROUGHNESS) -> bpy.types.Node:
     """Subsurface Scattering node of component k (RANDOM_WALK, smooth entry at the group's IOR) of ``colour`` and
     ``radius``."""
     sss = group.nodes.new("ShaderNodeSubsurfaceScattering")
     sss.location = (-450.0, y)
     sss.falloff = "RANDOM_WALK"
     sss.inputs["Scale"].default_value = 1.0
-    sss.inputs["Roughness"].default_value = ENTRY_ROUGHNESS
+    sss.inputs["Roughness"].default_value = roughness
     group.links.new(colour, sss.inputs["Color"])
     group.links.new(radius, sss.inputs["Radius"])
     group.links.new(gin.outputs[socket_name(k, "Anisotropy")], sss.inputs["Anisotropy"])
@@ -525,7 +560,7 @@ def build_osl_group(k_count: int = 3, name: str = GROUP_NAME_OSL) -> bpy.types.N
 
 
 #: Custom property marking the group layout version (bump when the generated nodes change).
-GROUP_VERSION = 6
+GROUP_VERSION = 7
 
 
 def ensure_group(k_count: int, backend: str) -> bpy.types.NodeTree:

@@ -3,7 +3,8 @@ mixture's weights and radii that grow with the view's facing angle (exporters.ob
 the nodes follow operation for operation).
 
 Inputs ``Color`` (the painted colour, linear; clamped to [0, 1] here) and ``Normal`` (unlinked: the shading
-normal); outputs ``Weight`` and ``Radius`` (the factors f and s per channel R, G, B).  1 - mu = 1 - |N . I| is
+normal); outputs ``Weight`` and ``Radius`` (the factors f and s per channel R, G, B) and ``Color`` (the colour
+clamped to [0, 1], which the live group reads instead of clamping it again).  1 - mu = 1 - |N . I| is
 Layer Weight's Facing (Blend 0.5); h a Map Range (Smooth Step) of it; Y the luminance of the colour; the slopes
 a_c(Y), b_c(Y) one Vector Curves node each (fed (Y, Y, Y); per channel the piecewise linear curve through the knots,
 vector handles, constant beyond the first and the last knot); f = 1 + a h_w, s = 1 + b h_r.  Where h = 0 (face-on
@@ -31,7 +32,7 @@ GROUP_NAME = "Spectral Skin SSS Grazing"
 CORRECTION_PROP = "spectral_skin_sss_oblique"
 #: Custom property on the group: how its nodes compute the correction (a group of another version is rebuilt).
 VERSION_PROP = "spectral_skin_sss_grazing_version"
-GRAZING_VERSION = 2
+GRAZING_VERSION = 3
 #: Largest difference of a slope a_c or b_c between the curves' tables and the knots' piecewise linear function
 #: (both tables' interpolation, measured in Cycles by tests/test_oblique_correction.py).
 CURVE_ERROR = 5e-3
@@ -80,6 +81,7 @@ def build_group(corr: oblique_correction.ObliqueCorrection) -> bpy.types.NodeTre
     iface.new_socket("Normal", in_out="INPUT", socket_type="NodeSocketVector").hide_value = True
     iface.new_socket("Weight", in_out="OUTPUT", socket_type="NodeSocketVector")
     iface.new_socket("Radius", in_out="OUTPUT", socket_type="NodeSocketVector")
+    iface.new_socket("Color", in_out="OUTPUT", socket_type="NodeSocketColor")
     gin = _node(tree, "NodeGroupInput", -900.0, 0.0)
     gout = _node(tree, "NodeGroupOutput", 300.0, 0.0)
     layer = _node(tree, "ShaderNodeLayerWeight", -700.0, 300.0, name="Facing")
@@ -90,6 +92,7 @@ def build_group(corr: oblique_correction.ObliqueCorrection) -> bpy.types.NodeTre
     clamp.inputs["Factor"].default_value = 0.0
     tree.links.new(gin.outputs["Color"], clamp.inputs[6])  # A: the colour, clamped to [0, 1] on the way out
     tree.links.new(clamp.outputs[2], dot.inputs[0])
+    tree.links.new(clamp.outputs[2], gout.inputs["Color"])
     dot.inputs[1].default_value = tuple(float(v) for v in colorimetry.SRGB_LUMINANCE)
     lum = dot.outputs["Value"]
     for row, (slope, ramp, name) in enumerate(((corr.weight_slope, corr.weight_ramp, "Weight"),

@@ -82,6 +82,19 @@ class EditTable:
         return live_table.AtlasLayout(shape=(n0, n1, n2), origin=tuple(float(o) for o in self.origin),
                                       step=float(self.step), columns=n0)
 
+    def shift_bounds(self) -> dict[str, tuple[float, float]]:
+        """Per image kind (:data:`KINDS`): the range of the shift D the lookups can give, every channel and every
+        combination of controls (the sum over controls of each one's range over its levels, 0 included)."""
+        out = {}
+        for kind, channels in KINDS.items():
+            lo = hi = 0.0
+            for j in range(self.values.shape[3]):
+                values = self.values[:, :, :, j, :, channels]
+                lo += min(0.0, float(np.nanmin(values)))
+                hi += max(0.0, float(np.nanmax(values)))
+            out[kind] = (lo, hi)
+        return out
+
     def atlases(self) -> dict[str, np.ndarray]:
         """Image name (:func:`image_name`) -> one control's colour or radius channels at its levels, the atlases
         stacked bottom to top in the order of :func:`stacked_levels` (the neutral level, all zero, in the middle):

@@ -35,8 +35,6 @@ from . import collapse, cycles, painted, reflectance_tables
 FIT_COLOUR_MIN: float = 0.3
 #: Degree of the inverse fit A(rho): within 5e-4 of A over [FIT_COLOUR_MIN, top] (tests/test_painted_gain.py).
 INVERSE_DEGREE: int = 6
-#: Smallest predicted body reflectance the gain divides by (keeps G finite for black).
-GAIN_FLOOR: float = 1e-6
 
 
 @dataclass(frozen=True)
@@ -99,7 +97,8 @@ def painted_media(rho: np.ndarray, weight: np.ndarray, rgb: np.ndarray, fit: Bod
     docstring; NaN is 0, +Inf 1, as in the nodes).  Returns new arrays (float64)."""
     rho, weight = np.asarray(rho, np.float64), np.asarray(weight, np.float64)
     target = painted_target(rgb)
-    gain = target / np.maximum(np.sum(weight * rho, axis=1), GAIN_FLOOR)  # (N, 3)
+    total = np.sum(weight * rho, axis=1)  # (N, 3)
+    gain = np.divide(target, total, out=np.zeros_like(target), where=total > 0.0)  # 0 where 0: Cycles' divide
     scaled = weight * gain[:, None, :]
     rho_new = np.maximum(rho, np.minimum(scaled * rho, fit.reach))
     return body_colour(rho_new, fit), np.minimum(scaled, 1.0)

@@ -95,5 +95,8 @@ def test_add_mixture_operator_keeps_user_nodes(enabled):
     group_nodes = [n for n in mat.node_tree.nodes if n.bl_idname == "ShaderNodeGroup"]
     assert len(group_nodes) == 1 and group_nodes[0].node_tree.name == nodes.GROUP_NAME
     assert group_nodes[0].node_tree["spectral_skin_sss_k"] == 2
-    assert sum(n.bl_idname == "ShaderNodeSubsurfaceScattering" for n in group_nodes[0].node_tree.nodes) == 6
+    closures = [n for n in group_nodes[0].node_tree.nodes if n.bl_idname == "ShaderNodeSubsurfaceScattering"]
+    roughness = sorted(round(n.inputs["Roughness"].default_value, 9) for n in closures)
+    # three nested closures per component, and a copy of each for the part of its weight above 1
+    assert roughness == [nodes.ENTRY_ROUGHNESS] * 6 + [round(nodes.OVERFLOW_ROUGHNESS, 9)] * 6
     assert mat[nodes.PREVIOUS_SURFACE_PROP] == "Principled BSDF"

@@ -2,7 +2,8 @@
 
 ``bench/results.json`` is the JSON form of ``bench/results.md`` (both written by ``python -m training bench``); a
 page quotes a figure with a ``<!-- bench:NAME -->`` marker after the number (training.bench.quotes), and every
-such number must be what the results show, rounded as the page rounds it.
+such number must be what the results show, rounded as the page rounds it.  CHANGELOG.md quotes no markers: each
+entry keeps the numbers it was written with.
 """
 
 from __future__ import annotations
@@ -15,7 +16,7 @@ import pytest
 from training.bench import collect, quotes
 
 ROOT = Path(__file__).resolve().parents[1]
-PAGES = [ROOT / "README.md", ROOT / "CHANGELOG.md", *sorted((ROOT / "docs").rglob("*.md"))]
+PAGES = [ROOT / "README.md", *sorted((ROOT / "docs").rglob("*.md"))]
 
 
 def test_results_json_is_the_markdown_tables():

@@ -157,6 +157,25 @@ def test_edits_move_colours_outside_the_skin_box_continuously():
         assert steps.max() < 0.05
 
 
+def test_shift_bounds_hold_every_shift_the_lookups_give():
+    """The live group tabulates exp over EditTable.shift_bounds: every shift of random colours (in and outside the
+    skin box) under random edits spanning each control's range and under the ranges' corners lies inside them."""
+    from exporters import edit_table
+
+    table = edit_table.load(edit_table.default_path(MODEL))
+    bounds = table.shift_bounds()
+    rng = np.random.default_rng(4)
+    rgb = np.concatenate([rng.random((3000, 3)) * 1.2, np.array(SKIN)])
+    lows, highs = zip(*(skin_edits.CONTROL_RANGES[name] for name in skin_edits.CONTROLS), strict=True)
+    edits = rng.uniform(lows, highs, (len(rgb), 3))
+    extremes = np.array([[a, b, c] for a in lows + highs for b in lows + highs for c in lows + highs][::7])
+    d = np.concatenate([edit_table.shift(table, rgb, edits)]
+                       + [edit_table.shift(table, rgb[:300], e) for e in extremes])
+    for kind, channels in edit_table.KINDS.items():
+        lo, hi = bounds[kind]
+        assert lo <= d[:, channels].min() and d[:, channels].max() <= hi, kind
+
+
 def test_shipped_edit_table_meets_the_colour_and_radius_limits(model):
     """The live group's answer (exporters.edit_table, whose nodes tests/test_live_edits.py matches in Cycles) against
     the exact one on the nine representative tones: each control across its range within ΔE76 1.0 mean / 2.0 max

@@ -104,6 +104,7 @@ FIGURES: dict[str, Figure] = {
                            ("pallor", "at preset pallor"))},
     "edit_images_mb": Figure("edit_cost", "edit table in Blender", "ours", r"images ([\d.]+) MB"),
     "edit_operator_s": Figure("edit_cost", "edit table in Blender", "ours", r"operator ([\d.]+) s"),
+    "grazing_cost": Figure("oblique", "grazing-light correction vs without", "ratio", r"time ([\d.]+)x"),
     "eevee_first_render_vs_principled": Figure("eevee", "EEVEE first render", "ratio", r"first render ([\d.]+)x"),
     "onnx_vs_torch_inference": Figure("train", "skin_inversion.onnx inference", "ratio", r"([\d.]+)x"),
 }

@@ -132,10 +132,12 @@ scene.cycles.shading_system = True
 _DOUBLED = """
 for node in tree.nodes:
     fac = node.inputs["Fac"] if node.type == "MIX_SHADER" else None
-    if fac is not None and fac.links and fac.links[0].from_node.type == "MATH" \
-            and fac.links[0].from_node.operation == "MAXIMUM":
+    source = fac.links[0].from_node if fac is not None and fac.links else None
+    spill = source is not None and source.type == "MATH" and source.operation == "SUBTRACT" \
+        and not source.inputs[1].links  # w - 1: a copy's share
+    if spill or (source is not None and source.type == "MATH" and source.operation == "GREATER_THAN"):
         tree.links.remove(fac.links[0])
-        fac.default_value = 1e-3
+        fac.default_value = 1.0 if source.operation == "GREATER_THAN" else 1e-3
 """
 _SSS = """
 tree = mat.node_tree
@@ -171,7 +173,8 @@ tree.links.new(total, tree.nodes["Material Output"].inputs["Surface"])
 #: mixture group splits each of its components.  On the live material: the coat switched off (Specular IOR Level
 #: 0), every component but the first weighted 0 (Cycles skips zero-weight closures: 3 closures instead of 3K), the
 #: coat as the Fresnel node's F over a white Multiscatter GGX lobe instead of the Principled specular layer, and
-#: every closure's second Mix Shader (the part of a weight above 1) at Fac 0.001, so Cycles emits each closure twice.
+#: every closure's copy for the part of a weight above 1 at Fac 0.001 behind an open gate, so Cycles emits each closure
+#: twice.
 VARIANTS = {
     "live_no_coat": _LIVE_GROUP + "live_node.inputs['Specular IOR Level'].default_value = 0.0\n",
     "live_fresnel_coat": _LIVE_GROUP + _MIXTURE + _FRESNEL_COAT,
