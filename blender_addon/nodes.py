@@ -129,6 +129,20 @@ DEFAULT_IOR = reflectance_tables.CYCLES_IOR
 GROUP_IOR_MIN = 1.0
 #: Roughness of the subsurface closures' refractive entry: smooth, as the bake's Cycles tables assume.
 ENTRY_ROUGHNESS = 0.0
+#: The Subsurface Scattering method of Blender 5.3 on that scales the radius as earlier Blenders' Random Walk did.
+LEGACY_RANDOM_WALK = "RANDOM_WALK_LEGACY"
+
+
+def random_walk_method() -> str:
+    """The Subsurface Scattering method (``falloff``) whose radius the media conversion targets: Cycles divides a
+    Random Walk radius by 4 pi (exporters.cycles.RADIUS_TO_D), as the bake's tables and every test assume.  Blender
+    5.3's "RANDOM_WALK" takes the radius as the mean free path itself (Cycles commit e5f4164, "Removing legacy
+    scaling of the subsurface radius to match MaterialX": 4 pi = 12.6x the translucency of the same radius) and
+    keeps the old scaling as :data:`LEGACY_RANDOM_WALK`, to which it versions files of earlier Blenders; so that is
+    the method where Blender has it, "RANDOM_WALK" elsewhere.  OSL's ``bssrdf()`` takes the same name in lower
+    case."""
+    items = bpy.types.ShaderNodeSubsurfaceScattering.bl_rna.properties["falloff"].enum_items
+    return LEGACY_RANDOM_WALK if LEGACY_RANDOM_WALK in items else "RANDOM_WALK"
 #: Entry roughness of the closures that carry the part of a weight above 1 (nodes._svm_mixture): smooth as well
 #: (Cycles' GGX alpha 1e-6 tilts the entry by about 1e-6 rad), but not equal to :data:`ENTRY_ROUGHNESS`, so that
 #: Cycles does not merge them with the closures of the same inputs (ShaderGraph::deduplicate_nodes), which would
@@ -372,11 +386,12 @@ def _masked(group: bpy.types.NodeTree, colour: bpy.types.NodeSocket, weight: bpy
 
 def _closure(group: bpy.types.NodeTree, gin: bpy.types.Node, colour: bpy.types.NodeSocket,
              radius: bpy.types.NodeSocket, k: int, y: float, roughness: float = ENTRY_ROUGHNESS) -> bpy.types.Node:
-    """Subsurface Scattering node of component k (RANDOM_WALK, smooth entry at the group's IOR) of ``colour`` and
+    """Subsurface Scattering node of component k (:func:`random_walk_method`, smooth entry at the group's IOR) of
+    ``colour`` and
     ``radius``."""
     sss = group.nodes.new("ShaderNodeSubsurfaceScattering")
     sss.location = (-450.0, y)
-    sss.falloff = "RANDOM_WALK"
+    sss.falloff = random_walk_method()
     sss.inputs["Scale"].default_value = 1.0
     sss.inputs["Roughness"].default_value = roughness
     group.links.new(colour, sss.inputs["Color"])
@@ -545,7 +560,7 @@ def build_osl_group(k_count: int = 3, name: str = GROUP_NAME_OSL) -> bpy.types.N
     if not 1 <= k_count <= 16:
         raise ValueError("k_count must be in 1..16")
     group, gin, gout = _fresh_group(name, k_count, "OSL")
-    source = osl.mixture_source(k_count, ENTRY_ROUGHNESS)
+    source = osl.mixture_source(k_count, ENTRY_ROUGHNESS, random_walk_method().lower())
     script = osl.script_node(group.nodes, source, f"spectral_skin_sss_k{k_count}.osl")
     for k in range(1, k_count + 1):
         for kind in KINDS:
@@ -560,7 +575,7 @@ def build_osl_group(k_count: int = 3, name: str = GROUP_NAME_OSL) -> bpy.types.N
 
 
 #: Custom property marking the group layout version (bump when the generated nodes change).
-GROUP_VERSION = 7
+GROUP_VERSION = 8
 
 
 def ensure_group(k_count: int, backend: str) -> bpy.types.NodeTree:

@@ -74,16 +74,18 @@ def _load_package_from(folder: str, name: str) -> bool:
 def ensure_oslquery() -> None:
     """Make Cycles' Script-node compilation work in the pip bpy module: ``oslquery`` loaded from the bundled
     ``site-packages`` when it is not importable (no-op in a Blender binary, and where there is none: Cycles 4.2
-    compiles without it)."""
-    if importlib.util.find_spec("oslquery") is not None and "oslquery" not in sys.modules:
+    compiles without it).  Once ``oslquery`` is loaded (by Cycles, or here with its types) nothing is done again:
+    loading Blender's OpenImageIO a second time, after ``oslquery`` imported it, fails (pybind11: "type already
+    registered"): in Blender 5.3, whose ``oslquery`` is importable, every OSL group after the first would fail."""
+    if "oslquery" in sys.modules or importlib.util.find_spec("oslquery") is not None:
         return
     site_packages = _bundled_site_packages()
-    if "oslquery" not in sys.modules and not any(_load_package_from(p, "oslquery") for p in site_packages):
+    if not any(_load_package_from(p, "oslquery") for p in site_packages):
         return
     _register_bundled_oiio_types(site_packages)
 
 
-def mixture_source(k_count: int, entry_roughness: float) -> str:
+def mixture_source(k_count: int, entry_roughness: float, method: str = "random_walk") -> str:
     """OSL shader: the body below the specular coat, the mixture of K random-walk media (blender_addon/nodes.py)::
 
         (1 - F)/(1 - F_dr(ior)) * sum_k (w_k * A_k) * bssrdf(...)
@@ -96,7 +98,8 @@ def mixture_source(k_count: int, entry_roughness: float) -> str:
     (``fresnel_dielectric_cos`` of node_fresnel.h, 1/IOR on back faces) at ``coat_ior`` (the coat's index: the group's
     IOR with its Specular IOR Level; the closures keep ``ior``), F_dr the same polynomial as the SVM
     group (exporters.cycles.DIFFUSE_FRESNEL_POLY); the closures' entry has roughness ``entry_roughness`` (the
-    group's nodes.ENTRY_ROUGHNESS: smooth).  A zero ``Normal`` (an unlinked group input on some paths) falls back
+    group's nodes.ENTRY_ROUGHNESS: smooth) and ``method`` is the bssrdf() method (nodes.random_walk_method, in
+    lower case).  A zero ``Normal`` (an unlinked group input on some paths) falls back
     to N, as Cycles' closures do.
     """
     params = []
@@ -106,7 +109,7 @@ def mixture_source(k_count: int, entry_roughness: float) -> str:
         params += [f"    color {c} = 0.0,", f"    color {r} = 0.0,", f"    color {w} = {1.0 / k_count!r},",
                    f"    float {g} = 0.0,"]
         terms.append(
-            f"    mixture += ({w} * {c}) * bssrdf(\"random_walk\", Nn, vector({r}), {c},\n"
+            f"    mixture += ({w} * {c}) * bssrdf(\"{method}\", Nn, vector({r}), {c},\n"
             f"        \"ior\", ior, \"anisotropy\", {g}, \"roughness\", {float(entry_roughness)!r});"
         )
     fresnel = cycles.DIFFUSE_FRESNEL_POLY

@@ -29,6 +29,7 @@ import bpy
 import numpy as np
 
 from .core import reflectance_tables
+from .nodes import random_walk_method
 
 IOR_MIN = reflectance_tables.IOR_MIN
 
@@ -118,13 +119,14 @@ def material_output(mat: bpy.types.Material) -> bpy.types.Node:
 
 def add_sss_node(tree: bpy.types.NodeTree, color: Sequence[float], radius: Sequence[float], g: float,
                  ior: float = IOR_MIN, roughness: float = 0.0) -> bpy.types.Node:
-    """A Subsurface Scattering node (RANDOM_WALK, Scale 1) with constant inputs.
+    """A Subsurface Scattering node (the random walk of blender_addon.nodes.random_walk_method, Scale 1) with
+    constant inputs.
 
     Sockets are set *before* the method is (re)assigned: in Blender 5.0 unavailable sockets are not
     found by name.
     """
     node = tree.nodes.new("ShaderNodeSubsurfaceScattering")
-    node.falloff = "RANDOM_WALK"
+    node.falloff = random_walk_method()
     node.inputs["Color"].default_value = (*map(float, color), 1.0)
     node.inputs["Scale"].default_value = 1.0
     node.inputs["Radius"].default_value = tuple(map(float, radius))

@@ -29,17 +29,17 @@ EXTENSION = "bl_ext.user_default.spectral_skin_sss"
 SKIN_LINEAR = (0.55, 0.32, 0.25)
 
 
-def render_centre(scene) -> list[float]:
-    """Render the scene (Cycles CPU, 16 x 16, 8 samples) and return the mean linear RGB of its centre 6 x 6
-    pixels (all on the sphere)."""
+def render_centre(scene, samples: int = 8, folder: str | None = None) -> list[float]:
+    """Render the scene (Cycles CPU, 16 x 16, ``samples`` samples) and return the mean linear RGB of its centre 6 x 6
+    pixels (all on the sphere); the render is written in ``folder`` (default: the script's work folder)."""
     scene.render.engine = "CYCLES"
     scene.cycles.device = "CPU"
-    scene.cycles.samples = 8
+    scene.cycles.samples = samples
     scene.cycles.use_denoising = False
     scene.render.resolution_x = scene.render.resolution_y = 16
     scene.render.resolution_percentage = 100
     scene.render.image_settings.file_format = "OPEN_EXR"
-    scene.render.filepath = os.path.join(sys.argv[2], f"render_{time.monotonic_ns()}.exr")
+    scene.render.filepath = os.path.join(folder or sys.argv[2], f"render_{time.monotonic_ns()}.exr")
     bpy.ops.render.render(write_still=True)
     image = bpy.data.images.load(scene.render.filepath)
     px = np.empty(16 * 16 * 4, np.float32)
@@ -62,7 +62,8 @@ def skin_scene():
         bpy.data.objects.remove(obj)
     scene = bpy.context.scene
     world = bpy.data.worlds.new("World")
-    world.use_nodes = True
+    if bpy.app.version < (5, 0):  # node trees are always there from 5.0 on (use_nodes is deprecated)
+        world.use_nodes = True
     world.node_tree.nodes["Background"].inputs["Color"].default_value = (1.0, 1.0, 1.0, 1.0)
     scene.world = world
     bpy.ops.mesh.primitive_uv_sphere_add(radius=1.0)
@@ -75,11 +76,44 @@ def skin_scene():
     return obj
 
 
+#: Samples of the thin-disk probe: its centre's mean then moves by about 1 % (blue; red 0.3 %) from seed to seed.
+THIN_SAMPLES = 1024
+
+
+def thin_disk_centre(backend: str, wire, folder: str | None = None) -> list[float]:
+    """The mixture group of ``backend`` ("SVM" or "OSL"; one component, :func:`set_component`'s medium) on the
+    sphere flattened to a disk 0.06 thick facing the camera, the white world behind it: how much light its
+    translucency lets through, which the closures' radius sets (on the round sphere the colour hardly depends on
+    it).  ``wire(material, backend)`` puts the group into the material and returns its node; ``folder``: as
+    :func:`render_centre`'s."""
+    obj = skin_scene()
+    obj.scale = (1.0, 0.03, 1.0)
+    material = bpy.data.materials.new(f"Thin{backend}")
+    if bpy.app.version < (5, 0):
+        material.use_nodes = True
+    obj.data.materials.append(material)
+    set_component(wire(material, backend))
+    bpy.context.scene.cycles.shading_system = backend == "OSL"
+    try:
+        return render_centre(bpy.context.scene, THIN_SAMPLES, folder)
+    finally:
+        bpy.context.scene.cycles.shading_system = False
+
+
+def _wire_by_operator(material, backend: str):
+    """The installed add-on's Add Mixture operator on the active object: its group node."""
+    obj = bpy.context.active_object
+    with bpy.context.temp_override(object=obj, active_object=obj):
+        bpy.ops.spectral_skin.add_mixture(components=1, backend=backend)
+    return next(n for n in material.node_tree.nodes if n.bl_idname == "ShaderNodeGroup")
+
+
 def textured_material(obj, name: str, image):
     """A new material on ``obj``: ``image`` in an Image Texture node (active) feeding its Principled BSDF's Base
     Color."""
     material = bpy.data.materials.new(name)
-    material.use_nodes = True
+    if bpy.app.version < (5, 0):
+        material.use_nodes = True
     obj.data.materials.append(material)
     tex = material.node_tree.nodes.new("ShaderNodeTexImage")
     tex.image = image
@@ -172,7 +206,8 @@ def main() -> dict:
     # OSL on request: the Script node compiles (Cycles 4.2 has no oslquery) and renders once OSL is turned on.
     obj = skin_scene()
     material = bpy.data.materials.new("SkinOSL")
-    material.use_nodes = True
+    if bpy.app.version < (5, 0):
+        material.use_nodes = True
     obj.data.materials.append(material)
     with bpy.context.temp_override(object=obj, active_object=obj):
         out["add_osl"] = sorted(bpy.ops.spectral_skin.add_mixture(components=1, backend="OSL"))
@@ -185,6 +220,11 @@ def main() -> dict:
     t0 = time.perf_counter()
     out["osl_centre"] = render_centre(bpy.context.scene)
     out["osl_render_s"] = round(time.perf_counter() - t0, 2)
+
+    # Translucency: a thin disk lit from behind, whose brightness the closures' radius sets (the caller compares it
+    # with Blender 5.0's; Blender 5.3's "Random Walk" takes radii 4 pi times longer than earlier ones').
+    for backend in ("SVM", "OSL"):
+        out[f"thin_{backend.lower()}"] = thin_disk_centre(backend, _wire_by_operator)
     return out
 
 
