@@ -59,7 +59,9 @@ from . import collapse, cycles, reflectance_tables
 #: Index of refraction of the specular layer (OpenPBR specular_ior) and of the walk's entry: the tissue's.
 SPECULAR_IOR: float = reflectance_tables.CYCLES_IOR
 #: Subsurface Scale that makes Cycles' Principled BSDF walk OpenPBR's mean free path: Cycles divides Radius x Scale
-#: by 4 pi (closure/bssrdf.h bssrdf_setup_radius, exporters.cycles.RADIUS_TO_D) before taking sigma_t = 1 / d.
+#: by 4 pi (closure/bssrdf.h bssrdf_setup_radius, exporters.cycles.RADIUS_TO_D) before taking sigma_t = 1 / d, in
+#: Blender up to 5.2 and with Random Walk (Legacy) in 5.3 (whose plain Random Walk takes the radius as OpenPBR does:
+#: Scale 1 there).
 CYCLES_RADIUS_SCALE: float = 4.0 * np.pi
 #: Light a random walk returns face-on under a clear coat of the specular layer's IOR, over what it returns under
 #: the specular layer alone (exporters.reflectance_tables.normal_reflectance, entry refraction at the tissue's

@@ -58,6 +58,7 @@ def image_node(tree, path: Path, coords=None):
 def principled_material(name: str, maps_dir: Path, stem: str, roughness: float, ior: float, coords=None):
     """A material whose Principled BSDF reads the OpenPBR maps ``<stem>_openpbr_*.exr`` of ``maps_dir`` (module
     docstring); ``coords``: a function (tree) -> the texture coordinate socket (None: the UV map)."""
+    from blender_addon.nodes import random_walk_method
     from exporters import openpbr
 
     bpy = _bpy()
@@ -69,7 +70,7 @@ def principled_material(name: str, maps_dir: Path, stem: str, roughness: float, 
     def read(kind: str):
         return image_node(tree, maps_dir / f"{stem}_openpbr_{kind}.exr", vec).outputs["Color"]
 
-    bsdf.subsurface_method = "RANDOM_WALK"
+    bsdf.subsurface_method = random_walk_method()  # the radius divided by 4 pi: CYCLES_RADIUS_SCALE's convention
     tree.links.new(read("subsurface_color"), bsdf.inputs["Base Color"])
     tree.links.new(read("subsurface_weight"), bsdf.inputs["Subsurface Weight"])
     tree.links.new(read("subsurface_radius_scale"), bsdf.inputs["Subsurface Radius"])
