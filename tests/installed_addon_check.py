@@ -100,6 +100,61 @@ def thin_disk_centre(backend: str, wire, folder: str | None = None) -> list[floa
         bpy.context.scene.cycles.shading_system = False
 
 
+#: Colours (linear) whose live-group media the check reads back: skin, pure blue, white, a deep red, negative and
+#: above 1 (outside the table's box: projected and brought to the painted colour).
+PROBE_COLOURS = ((0.45, 0.28, 0.20), (0.0, 0.0, 1.0), (1.0, 1.0, 1.0), (0.9, 0.02, 0.01), (-0.5, 0.2, 0.1),
+                 (5.0, 3.0, 2.0))
+
+
+def live_media(addon: str, folder: str | None = None) -> dict[str, list]:
+    """The live group's media for :data:`PROBE_COLOURS` as this Blender's nodes compute them: each mixture input
+    (``k{k} Color|Radius|Weight``) read back as emission, one column per colour, face-on (no grazing factor).
+    ``addon``: the add-on's package ("blender_addon", or the installed extension's); ``folder``: as
+    :func:`render_centre`'s."""
+    live = importlib.import_module(f"{addon}.live")
+    preferences = importlib.import_module(f"{addon}.preferences")
+    probe = importlib.import_module(f"{addon}.probe")
+    scene = probe.new_scene(samples=1, resolution=len(PROBE_COLOURS), seed=3)
+    scene.render.resolution_y = 2
+    scene.cycles.filter_width = 0.01  # one column per colour, nothing blended
+    image = bpy.data.images.new("probe colours", len(PROBE_COLOURS), 1, float_buffer=True)
+    image.colorspace_settings.name = "Non-Color"
+    image.pixels.foreach_set(np.array([(*c, 1.0) for c in PROBE_COLOURS], np.float32).ravel())
+    material = probe.slab_material("LiveMedia")
+    tree = material.node_tree
+    mapping = tree.nodes.new("ShaderNodeMapping")
+    mapping.inputs["Location"].default_value = (0.5, 0.5, 0.0)  # the view's x, y in [-0.5, 0.5] onto [0, 1]
+    tree.links.new(tree.nodes.new("ShaderNodeTexCoord").outputs["Object"], mapping.inputs["Vector"])
+    texture = tree.nodes.new("ShaderNodeTexImage")
+    texture.image, texture.interpolation, texture.extension = image, "Closest", "EXTEND"
+    tree.links.new(mapping.outputs["Vector"], texture.inputs["Vector"])
+    group = live.ensure_live_group(live.table_for_model(preferences.DEFAULT_MODEL))
+    mixture = next(n for n in group.nodes if n.bl_idname == "ShaderNodeGroup" and "k1 Color" in n.inputs)
+    gout = next(n for n in group.nodes if n.bl_idname == "NodeGroupOutput")
+    gnode = tree.nodes.new("ShaderNodeGroup")
+    gnode.node_tree = group
+    tree.links.new(texture.outputs["Color"], gnode.inputs["Color"])
+    emission = tree.nodes.new("ShaderNodeEmission")
+    tree.links.new(emission.outputs[0], probe.material_output(material).inputs["Surface"])
+    out = {}
+    for k in range(1, group["spectral_skin_sss_k"] + 1):
+        for kind in ("Color", "Radius", "Weight"):
+            name = f"k{k} {kind}"
+            group.interface.new_socket(f"Check {name}", in_out="OUTPUT", socket_type="NodeSocketColor")
+            group.links.new(mixture.inputs[name].links[0].from_socket, gout.inputs[f"Check {name}"])
+            tree.links.new(gnode.outputs[f"Check {name}"], emission.inputs["Color"])
+            scene.render.filepath = os.path.join(folder or sys.argv[2], f"media_{time.monotonic_ns()}.exr")
+            scene.render.image_settings.file_format = "OPEN_EXR"
+            bpy.ops.render.render(write_still=True)
+            rendered = bpy.data.images.load(scene.render.filepath)
+            width, height = rendered.size
+            px = np.empty(width * height * rendered.channels, np.float32)
+            rendered.pixels.foreach_get(px)
+            bpy.data.images.remove(rendered)
+            out[name] = px.reshape(height, width, -1)[0, :, :3].astype(float).tolist()
+    return out
+
+
 def _wire_by_operator(material, backend: str):
     """The installed add-on's Add Mixture operator on the active object: its group node."""
     obj = bpy.context.active_object
@@ -225,6 +280,9 @@ def main() -> dict:
     # with Blender 5.0's; Blender 5.3's "Random Walk" takes radii 4 pi times longer than earlier ones').
     for backend in ("SVM", "OSL"):
         out[f"thin_{backend.lower()}"] = thin_disk_centre(backend, _wire_by_operator)
+
+    # The live group's node math: its media for colours in and out of the skin box (the caller compares with 5.0's).
+    out["live_media"] = live_media(f"{EXTENSION}.blender_addon")
     return out
 
 

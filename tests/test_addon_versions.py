@@ -43,9 +43,25 @@ def thin_disk_in_blender_50(tmp_path_factory) -> dict[str, np.ndarray]:
         bpy.ops.wm.read_factory_settings(use_empty=True)
 
 
+@pytest.fixture(scope="module")
+def live_media_in_blender_50(tmp_path_factory) -> dict[str, np.ndarray]:
+    """The version check's read-back of the live group's media, here, in the project's own Blender 5.0.1 (whose
+    media tests/test_live_group.py compares with exporters.live_table.group_media within 2e-4)."""
+    import bpy
+
+    from tests import installed_addon_check as check
+
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    try:
+        media = check.live_media("blender_addon", str(tmp_path_factory.mktemp("live_media")))
+        return {name: np.array(value) for name, value in media.items()}
+    finally:
+        bpy.ops.wm.read_factory_settings(use_empty=True)
+
+
 @pytest.mark.parametrize("case,python,version,py_version", BLENDERS, ids=IDS)
 def test_installs_bakes_renders_and_exits_cleanly(case, python, version, py_version, ext_zip, tmp_path,
-                                                  thin_disk_in_blender_50):
+                                                  thin_disk_in_blender_50, live_media_in_blender_50):
     # The script is left to exit by itself with the add-on still enabled: a hang is a timeout, a crash a signal.
     out = run_check(python, CHECK, ext_zip, tmp_path, timeout=240)
     assert out["blender"].startswith(version) and out["python"] == py_version, out
@@ -80,6 +96,9 @@ def test_installs_bakes_renders_and_exits_cleanly(case, python, version, py_vers
     # 5 % (two renders' noise: about 3 % at 3 sigma).  Blender 5.3's plain "Random Walk" takes radii 4 pi times longer.
     for backend, reference in thin_disk_in_blender_50.items():
         np.testing.assert_allclose(out[f"thin_{backend.lower()}"], reference, rtol=0.05, err_msg=backend)
+    # The live group's nodes compute the same media in every version (its curves, Map Ranges, clamps and mixes).
+    for name, reference in live_media_in_blender_50.items():
+        np.testing.assert_allclose(out["live_media"][name], reference, rtol=2e-4, atol=1e-6, err_msg=name)
 
 
 @pytest.mark.parametrize("case,python,version,py_version", BLENDERS, ids=IDS)
