@@ -106,6 +106,21 @@ PROBE_COLOURS = ((0.45, 0.28, 0.20), (0.0, 0.0, 1.0), (1.0, 1.0, 1.0), (0.9, 0.0
                  (5.0, 3.0, 2.0))
 
 
+def media_probe(material, colour, group, probe) -> tuple:
+    """A node of the live ``group`` in ``material``, fed ``colour`` (a socket), and an Emission node feeding the
+    material's output, through which a value inside the group is read back (``probe``: the add-on's probe module).
+    Returns (the group node, the group's mixture node, its Group Output, the Emission node)."""
+    tree = material.node_tree
+    mixture = next(n for n in group.nodes if n.bl_idname == "ShaderNodeGroup" and "k1 Color" in n.inputs)
+    gout = next(n for n in group.nodes if n.bl_idname == "NodeGroupOutput")
+    gnode = tree.nodes.new("ShaderNodeGroup")
+    gnode.node_tree = group
+    tree.links.new(colour, gnode.inputs["Color"])
+    emission = tree.nodes.new("ShaderNodeEmission")
+    tree.links.new(emission.outputs[0], probe.material_output(material).inputs["Surface"])
+    return gnode, mixture, gout, emission
+
+
 def live_media(addon: str, folder: str | None = None) -> dict[str, list]:
     """The live group's media for :data:`PROBE_COLOURS` as this Blender's nodes compute them: each mixture input
     (``k{k} Color|Radius|Weight``) read back as emission, one column per colour, face-on (no grazing factor).
@@ -129,13 +144,7 @@ def live_media(addon: str, folder: str | None = None) -> dict[str, list]:
     texture.image, texture.interpolation, texture.extension = image, "Closest", "EXTEND"
     tree.links.new(mapping.outputs["Vector"], texture.inputs["Vector"])
     group = live.ensure_live_group(live.table_for_model(preferences.DEFAULT_MODEL))
-    mixture = next(n for n in group.nodes if n.bl_idname == "ShaderNodeGroup" and "k1 Color" in n.inputs)
-    gout = next(n for n in group.nodes if n.bl_idname == "NodeGroupOutput")
-    gnode = tree.nodes.new("ShaderNodeGroup")
-    gnode.node_tree = group
-    tree.links.new(texture.outputs["Color"], gnode.inputs["Color"])
-    emission = tree.nodes.new("ShaderNodeEmission")
-    tree.links.new(emission.outputs[0], probe.material_output(material).inputs["Surface"])
+    gnode, mixture, gout, emission = media_probe(material, texture.outputs["Color"], group, probe)
     out = {}
     for k in range(1, group["spectral_skin_sss_k"] + 1):
         for kind in ("Color", "Radius", "Weight"):

@@ -37,6 +37,7 @@ from blender_addon import live, live_edits, preferences, probe  # noqa: E402
 from exporters import live_table  # noqa: E402
 from exporters.colorimetry import delta_e76, linear_srgb_to_lab, srgb_decode, srgb_encode  # noqa: E402
 from tests.addon_scene import run_invert, skin_object, snapshot, write_image  # noqa: E402
+from tests.installed_addon_check import media_probe  # noqa: E402
 from tests.test_bake_painted_colour import _scene, box_material, painted_codes, render_stripes, stripes_texture  # noqa: E402,I001
 
 PAINTED_SAMPLES = 256
@@ -193,15 +194,9 @@ def test_outside_colours_get_the_reference_media_continuously(tmp_path, addon):
     scene, mat, _ = _probe_strip(colours, tmp_path)
     table = live.table_for_model(preferences.DEFAULT_MODEL)
     group = live.ensure_live_group(table)
-    mixture = next(n for n in group.nodes if n.bl_idname == "ShaderNodeGroup" and "k1 Color" in n.inputs)
-    gout = next(n for n in group.nodes if n.bl_idname == "NodeGroupOutput")
     tree = mat.node_tree
     tex = next(n for n in tree.nodes if n.bl_idname == "ShaderNodeTexImage")
-    gnode = tree.nodes.new("ShaderNodeGroup")
-    gnode.node_tree = group
-    tree.links.new(tex.outputs["Color"], gnode.inputs["Color"])
-    emission = tree.nodes.new("ShaderNodeEmission")
-    tree.links.new(emission.outputs[0], probe.material_output(mat).inputs["Surface"])
+    gnode, mixture, gout, emission = media_probe(mat, tex.outputs["Color"], group, probe)
     reference = live_table.group_media(table, colours)
     path = slice(10, None)
     for k in range(1, table.k + 1):
