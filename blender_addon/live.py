@@ -266,8 +266,9 @@ def set_default(socket: bpy.types.NodeSocket, value) -> None:
 class GridPoint(NamedTuple):
     """Where a colour lies in a table's grid (:func:`grid_vector`): ``uv`` the UV of its texel in the first slice of a
     one-row atlas, the grid coordinates clamped to the grid (its z the slice coordinate x0), ``x0`` that slice
-    coordinate, ``coords`` the grid coordinates (x1, x2, x0) before the clamp and less the grid's origin (the atlas'
-    u, v axes first) and ``painted`` the colour clamped to [0, 1] (vector sockets, ``x0`` a float socket)."""
+    coordinate, ``coords`` the grid coordinates (x1, x2, x0) before the grid's origin is subtracted and before the
+    clamp (the atlas' u, v axes first) and ``painted`` the colour clamped to [0, 1] (vector sockets, ``x0`` a float
+    socket)."""
 
     uv: bpy.types.NodeSocket
     x0: bpy.types.NodeSocket
@@ -285,6 +286,18 @@ def _map_range(b: _Builder, stage: int, value: bpy.types.NodeSocket, low, high, 
                         ("To_Max_FLOAT3", to_high)):
         set_default(next(s for s in node.inputs if s.identifier == name), tuple(float(v) for v in bound))
     return next(s for s in node.outputs if s.identifier == "Vector")
+
+
+#: The skin-space axes (exporters.texel_table.COORDS) in the order of the grid vector: the atlas' u, v axes, then the
+#: slice axis.
+_GRID_ORDER = (1, 2, 0)
+
+
+def _grid_frame(layout: live_table.AtlasLayout) -> tuple[np.ndarray, np.ndarray]:
+    """The grid's origin over its step and its largest index along the axes of the grid vector (:data:`_GRID_ORDER`):
+    a colour's grid coordinates less the first lie in [0, the second] inside the table's box."""
+    return (np.array([layout.origin[d] / layout.step for d in _GRID_ORDER]),
+            np.array([layout.shape[d] - 1.0 for d in _GRID_ORDER]))
 
 
 def grid_vector(b: _Builder, colour: bpy.types.NodeSocket, layout: live_table.AtlasLayout,
@@ -312,12 +325,10 @@ def grid_vector(b: _Builder, colour: bpy.types.NodeSocket, layout: live_table.At
     cap = _SRGB_SLOPE * _SRGB_KNEE
     line = _map_range(b, 3, clamped, (0.0,) * 3, (_SRGB_KNEE,) * 3, (0.0,) * 3, (cap,) * 3)
     encoded = b.vec("MAXIMUM", 5, curve, line)
-    order = (1, 2, 0)
     comb = b.node("ShaderNodeCombineXYZ", 7)
-    for slot, d in enumerate(order):
+    for slot, d in enumerate(_GRID_ORDER):
         b.group.links.new(b.vec("DOT_PRODUCT", 6, encoded, texel_table.COORDS[d] / layout.step), comb.inputs[slot])
-    origin = np.array([layout.origin[d] / layout.step for d in order])
-    extent = np.array([layout.shape[d] - 1.0 for d in order])
+    origin, extent = _grid_frame(layout)
     border = live_table.BORDER + 0.5
     width, height = size
     to_low = (border / width, border / height, 0.0)
@@ -333,9 +344,9 @@ def _grid_coords(b: _Builder, layout: live_table.AtlasLayout, colour: bpy.types.
     """The grid point (:class:`GridPoint`) of ``colour`` (the input colour with the Principled convention's gain;
     ``clamped``: the same clamped to [0, 1], when made elsewhere), and its distance from the box (skin space)."""
     point = grid_vector(b, colour, layout, layout.size, clamped)
-    order = (1, 2, 0)
-    raw = b.vec("SUBTRACT", 10, point.coords, [layout.origin[d] / layout.step for d in order])
-    x = b.vec("MINIMUM", 11, b.vec("MAXIMUM", 10, raw, 0.0), [layout.shape[d] - 1.0 for d in order])
+    origin, extent = _grid_frame(layout)
+    raw = b.vec("SUBTRACT", 10, point.coords, origin)
+    x = b.vec("MINIMUM", 11, b.vec("MAXIMUM", 10, raw, 0.0), extent)
     gap = b.vec("ABSOLUTE", 11, b.vec("SUBTRACT", 11, raw, x))
     return point, b.vec("DOT_PRODUCT", 12, gap, layout.step)
 

@@ -131,18 +131,6 @@ GROUP_IOR_MIN = 1.0
 ENTRY_ROUGHNESS = 0.0
 #: The Subsurface Scattering method of Blender 5.3 on that scales the radius as earlier Blenders' Random Walk did.
 LEGACY_RANDOM_WALK = "RANDOM_WALK_LEGACY"
-
-
-def random_walk_method() -> str:
-    """The Subsurface Scattering method (``falloff``) whose radius the media conversion targets: Cycles divides a
-    Random Walk radius by 4 pi (exporters.cycles.RADIUS_TO_D), as the bake's tables and every test assume.  Blender
-    5.3's "RANDOM_WALK" takes the radius as the mean free path itself (Cycles commit e5f4164, "Removing legacy
-    scaling of the subsurface radius to match MaterialX": 4 pi = 12.6x the translucency of the same radius) and
-    keeps the old scaling as :data:`LEGACY_RANDOM_WALK`, to which it versions files of earlier Blenders; so that is
-    the method where Blender has it, "RANDOM_WALK" elsewhere.  OSL's ``bssrdf()`` takes the same name in lower
-    case."""
-    items = bpy.types.ShaderNodeSubsurfaceScattering.bl_rna.properties["falloff"].enum_items
-    return LEGACY_RANDOM_WALK if LEGACY_RANDOM_WALK in items else "RANDOM_WALK"
 #: Entry roughness of the closures that carry the part of a weight above 1 (nodes._svm_mixture): smooth as well
 #: (Cycles' GGX alpha 1e-6 tilts the entry by about 1e-6 rad), but not equal to :data:`ENTRY_ROUGHNESS`, so that
 #: Cycles does not merge them with the closures of the same inputs (ShaderGraph::deduplicate_nodes), which would
@@ -157,6 +145,18 @@ SKIN_FACET_SLOPE = 0.4
 #: Roughness socket is perceptual: GGX alpha = Roughness^2, and GGX alpha matches Beckmann m (Walter et al.
 #: 2007), so Roughness = sqrt(m) = 0.63 (typing 0.4 into the socket would mean m = 0.16, a wet look).
 SKIN_ROUGHNESS = math.sqrt(SKIN_FACET_SLOPE)
+
+
+def random_walk_method() -> str:
+    """The Subsurface Scattering method (``falloff``) whose radius the media conversion targets: Cycles divides a
+    Random Walk radius by 4 pi (exporters.cycles.RADIUS_TO_D), as the bake's tables and every test assume.  Blender
+    5.3's "RANDOM_WALK" takes the radius as the mean free path itself (Cycles commit e5f4164, "Removing legacy
+    scaling of the subsurface radius to match MaterialX": 4 pi = 12.6x the translucency of the same radius) and
+    keeps the old scaling as :data:`LEGACY_RANDOM_WALK`, to which it versions files of earlier Blenders; so that is
+    the method where Blender has it, "RANDOM_WALK" elsewhere.  OSL's ``bssrdf()`` takes the same name in lower
+    case."""
+    items = bpy.types.ShaderNodeSubsurfaceScattering.bl_rna.properties["falloff"].enum_items
+    return LEGACY_RANDOM_WALK if LEGACY_RANDOM_WALK in items else "RANDOM_WALK"
 
 
 #: The Principled BSDF's specular inputs the mixture takes (name: socket type, Blender's default).  The defaults
@@ -387,8 +387,7 @@ def _masked(group: bpy.types.NodeTree, colour: bpy.types.NodeSocket, weight: bpy
 def _closure(group: bpy.types.NodeTree, gin: bpy.types.Node, colour: bpy.types.NodeSocket,
              radius: bpy.types.NodeSocket, k: int, y: float, roughness: float = ENTRY_ROUGHNESS) -> bpy.types.Node:
     """Subsurface Scattering node of component k (:func:`random_walk_method`, smooth entry at the group's IOR) of
-    ``colour`` and
-    ``radius``."""
+    ``colour`` and ``radius``."""
     sss = group.nodes.new("ShaderNodeSubsurfaceScattering")
     sss.location = (-450.0, y)
     sss.falloff = random_walk_method()
@@ -425,14 +424,8 @@ def _weighted(group: bpy.types.NodeTree, closure: bpy.types.NodeSocket, weight: 
     Shader clamps to [0, 1] itself (svm_node_mix_closure), i.e. min(weight, 1) and max(weight - 1, 0) with no node
     of their own; Cycles sums a closure reached along both and skips the second while its Fac is 0, i.e. unless
     the weight exceeds 1."""
-    parts = []
-    for i, fac in enumerate((weight, _math(group, "SUBTRACT", weight, 1.0, x=-250.0, y=y - 50.0))):
-        mix = group.nodes.new("ShaderNodeMixShader")
-        mix.location = (-150.0, y - 100.0 * i)
-        group.links.new(fac, mix.inputs["Fac"])
-        group.links.new(closure, mix.inputs[2])
-        parts.append(mix.outputs[0])
-    return parts
+    return [_mix_shader(group, fac, closure, -150.0, y - 100.0 * i)
+            for i, fac in enumerate((weight, _math(group, "SUBTRACT", weight, 1.0, x=-250.0, y=y - 50.0)))]
 
 
 def _channel_closure(group, gin, seps: dict, k: int, c: int, y: float) -> bpy.types.Node:

@@ -38,14 +38,21 @@ def render_centre(scene, samples: int = 8, folder: str | None = None) -> list[fl
     scene.cycles.use_denoising = False
     scene.render.resolution_x = scene.render.resolution_y = 16
     scene.render.resolution_percentage = 100
+    return render_pixels(scene, folder)[5:11, 5:11].mean(axis=(0, 1)).astype(float).tolist()
+
+
+def render_pixels(scene, folder: str | None = None) -> np.ndarray:
+    """Render the scene as it is set up; its linear RGB (height, width, 3), bottom row first, read back from an EXR
+    written in ``folder`` (default: the script's work folder)."""
     scene.render.image_settings.file_format = "OPEN_EXR"
     scene.render.filepath = os.path.join(folder or sys.argv[2], f"render_{time.monotonic_ns()}.exr")
     bpy.ops.render.render(write_still=True)
     image = bpy.data.images.load(scene.render.filepath)
-    px = np.empty(16 * 16 * 4, np.float32)
+    width, height = image.size
+    px = np.empty(width * height * image.channels, np.float32)
     image.pixels.foreach_get(px)
     bpy.data.images.remove(image)
-    return px.reshape(16, 16, 4)[5:11, 5:11, :3].mean(axis=(0, 1)).astype(float).tolist()
+    return px.reshape(height, width, -1)[..., :3]
 
 
 def set_component(gnode) -> None:
@@ -152,15 +159,7 @@ def live_media(addon: str, folder: str | None = None) -> dict[str, list]:
             group.interface.new_socket(f"Check {name}", in_out="OUTPUT", socket_type="NodeSocketColor")
             group.links.new(mixture.inputs[name].links[0].from_socket, gout.inputs[f"Check {name}"])
             tree.links.new(gnode.outputs[f"Check {name}"], emission.inputs["Color"])
-            scene.render.filepath = os.path.join(folder or sys.argv[2], f"media_{time.monotonic_ns()}.exr")
-            scene.render.image_settings.file_format = "OPEN_EXR"
-            bpy.ops.render.render(write_still=True)
-            rendered = bpy.data.images.load(scene.render.filepath)
-            width, height = rendered.size
-            px = np.empty(width * height * rendered.channels, np.float32)
-            rendered.pixels.foreach_get(px)
-            bpy.data.images.remove(rendered)
-            out[name] = px.reshape(height, width, -1)[0, :, :3].astype(float).tolist()
+            out[name] = render_pixels(scene, folder)[0].astype(float).tolist()
     return out
 
 

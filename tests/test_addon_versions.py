@@ -22,10 +22,12 @@ CHECK = ROOT / "tests" / "installed_addon_check.py"
 
 
 @pytest.fixture(scope="module")
-def thin_disk_in_blender_50(tmp_path_factory) -> dict[str, np.ndarray]:
-    """The version check's thin back-lit disk rendered here, in the project's own Blender 5.0.1 with the project's
-    add-on: the translucency the media were made for (Cycles' Random Walk dividing the radius by 4 pi, the convention
-    of exporters.cycles and of the tests against adding-doubling)."""
+def blender_50(tmp_path_factory) -> dict:
+    """The version check's thin back-lit disk (per backend) and its read-back of the live group's media, rendered here
+    in the project's own Blender 5.0.1 with the project's add-on: the translucency the media were made for (Cycles'
+    Random Walk dividing the radius by 4 pi, the convention of exporters.cycles and of the tests against
+    adding-doubling) and the media tests/test_live_group.py compares with exporters.live_table.group_media within
+    2e-4."""
     import bpy
 
     from blender_addon import nodes
@@ -35,33 +37,19 @@ def thin_disk_in_blender_50(tmp_path_factory) -> dict[str, np.ndarray]:
         group = nodes.build_osl_group(1) if backend == "OSL" else nodes.build_svm_group(1)
         return nodes.wire_into_material(material, group)
 
+    folder = str(tmp_path_factory.mktemp("blender_50"))
     bpy.ops.wm.read_factory_settings(use_empty=True)
     try:
-        folder = str(tmp_path_factory.mktemp("thin_disk"))
-        return {backend: np.array(check.thin_disk_centre(backend, wire, folder)) for backend in ("SVM", "OSL")}
+        thin = {backend: np.array(check.thin_disk_centre(backend, wire, folder)) for backend in ("SVM", "OSL")}
+        media = {name: np.array(value) for name, value in check.live_media("blender_addon", folder).items()}
     finally:
         bpy.ops.wm.read_factory_settings(use_empty=True)
-
-
-@pytest.fixture(scope="module")
-def live_media_in_blender_50(tmp_path_factory) -> dict[str, np.ndarray]:
-    """The version check's read-back of the live group's media, here, in the project's own Blender 5.0.1 (whose
-    media tests/test_live_group.py compares with exporters.live_table.group_media within 2e-4)."""
-    import bpy
-
-    from tests import installed_addon_check as check
-
-    bpy.ops.wm.read_factory_settings(use_empty=True)
-    try:
-        media = check.live_media("blender_addon", str(tmp_path_factory.mktemp("live_media")))
-        return {name: np.array(value) for name, value in media.items()}
-    finally:
-        bpy.ops.wm.read_factory_settings(use_empty=True)
+    return {"thin": thin, "live_media": media}
 
 
 @pytest.mark.parametrize("case,python,version,py_version", BLENDERS, ids=IDS)
 def test_installs_bakes_renders_and_exits_cleanly(case, python, version, py_version, ext_zip, tmp_path,
-                                                  thin_disk_in_blender_50, live_media_in_blender_50):
+                                                  blender_50):
     # The script is left to exit by itself with the add-on still enabled: a hang is a timeout, a crash a signal.
     out = run_check(python, CHECK, ext_zip, tmp_path, timeout=240)
     assert out["blender"].startswith(version) and out["python"] == py_version, out
@@ -94,10 +82,10 @@ def test_installs_bakes_renders_and_exits_cleanly(case, python, version, py_vers
         assert r > g > b > 0.05, (key, out[key])
     # The same translucency as in Blender 5.0: a thin back-lit disk lets through what it lets through there, within
     # 5 % (two renders' noise: about 3 % at 3 sigma).  Blender 5.3's plain "Random Walk" takes radii 4 pi times longer.
-    for backend, reference in thin_disk_in_blender_50.items():
+    for backend, reference in blender_50["thin"].items():
         np.testing.assert_allclose(out[f"thin_{backend.lower()}"], reference, rtol=0.05, err_msg=backend)
     # The live group's nodes compute the same media in every version (its curves, Map Ranges, clamps and mixes).
-    for name, reference in live_media_in_blender_50.items():
+    for name, reference in blender_50["live_media"].items():
         np.testing.assert_allclose(out["live_media"][name], reference, rtol=2e-4, atol=1e-6, err_msg=name)
 
 
