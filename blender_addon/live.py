@@ -53,12 +53,14 @@ GROUP_NAME = "Spectral Skin SSS Live"
 #: Custom properties: on the group and the images, the SHA-256 of the table they were made from.
 TABLE_PROP = "spectral_skin_sss_table"
 #: Layout version of the live group (bump when the generated nodes change).
-LIVE_VERSION = 10
+LIVE_VERSION = 11
 IMAGE_PREFIX = "Spectral Skin SSS Table"
 #: Custom property on the group: whether it holds the grazing-light correction (blender_addon.oblique).
 GRAZING_PROP = "spectral_skin_sss_grazing"
 #: sRGB encoding (IEC 61966-2-1): linear segment below this value, slope 12.92 there.
 _SRGB_KNEE, _SRGB_SLOPE = 0.0031308, 12.92
+#: sRGB's power segment 1.055 c^(1/2.4) - 0.055: its scale and offset (IEC 61966-2-1).
+_SRGB_SCALE, _SRGB_OFFSET = 1.055, 0.055
 #: The share of the light the Principled BSDF's specular layer leaves to its base colour in EEVEE, at skin's IOR 1.4
 #: and Roughness 0.5, straight above under a white world: a Principled BSDF rendered in EEVEE keeps 0.965-0.968 of
 #: three skin colours by luminance (tests/test_live_group.py, which holds this value within 0.015 of it).  The
@@ -266,7 +268,7 @@ def set_default(socket: bpy.types.NodeSocket, value) -> None:
 class GridPoint(NamedTuple):
     """Where a colour lies in a table's grid (:func:`grid_vector`): ``uv`` the UV of its texel in the first slice of a
     one-row atlas, the grid coordinates clamped to the grid (its z the slice coordinate x0), ``x0`` that slice
-    coordinate, ``coords`` the grid coordinates (x1, x2, x0) before the grid's origin is subtracted and before the
+    coordinate, ``coords`` the grid coordinates (x1, x2, x0) plus the origin of :func:`_grid_frame`, before the
     clamp (the atlas' u, v axes first) and ``painted`` the colour clamped to [0, 1] (vector sockets, ``x0`` a float
     socket)."""
 
@@ -294,9 +296,12 @@ _GRID_ORDER = (1, 2, 0)
 
 
 def _grid_frame(layout: live_table.AtlasLayout) -> tuple[np.ndarray, np.ndarray]:
-    """The grid's origin over its step and its largest index along the axes of the grid vector (:data:`_GRID_ORDER`):
-    a colour's grid coordinates less the first lie in [0, the second] inside the table's box."""
-    return (np.array([layout.origin[d] / layout.step for d in _GRID_ORDER]),
+    """Where the grid lies in the coordinates :func:`grid_vector` combines, along the axes of the grid vector
+    (:data:`_GRID_ORDER`), and its largest index: a colour's coordinates less the first lie in [0, the second] inside
+    the table's box.  The nodes take skin space (exporters.texel_table.COORDS) of e' = (e + 0.055) / 1.055 times 1.055
+    over the step, which is the grid coordinate plus 0.055 COORDS.sum(axis=1) / step: the origin carries that offset."""
+    offset = _SRGB_OFFSET * texel_table.COORDS.sum(axis=1) / layout.step
+    return (np.array([layout.origin[d] / layout.step + offset[d] for d in _GRID_ORDER]),
             np.array([layout.shape[d] - 1.0 for d in _GRID_ORDER]))
 
 
@@ -307,10 +312,12 @@ def grid_vector(b: _Builder, colour: bpy.types.NodeSocket, layout: live_table.At
     its texel in an atlas of ``size`` (width, height) px whose slices of ``layout`` lie in one row from the bottom
     left, ``live_table.BORDER`` px in.  Every node costs each shading point its time, so: the clamp is a Mix node's
     (factor 0, result clamped: NaN reads as 0, +Inf as 1); the encoding is max(1.055 c^(1/2.4) - 0.055,
-    min(12.92 c, 12.92 knee)) (the power by a Gamma node, the capped line by a Map Range): below the knee the line
-    lies above the power curve and under its cap, from the knee up the power curve lies above the cap, so this is
-    the piecewise encoding except within 3e-7 above the knee, where the two pieces differ by 4e-6; one Map Range
-    takes the grid coordinates to the atlas' UV and clamps them to the grid.  ``clamped``: the colour clamped to
+    min(12.92 c, 12.92 knee)) (below the knee the line lies above the power curve and under its cap, from the knee up
+    the power curve lies above the cap, so this is the piecewise encoding except within 3e-7 above the knee, where
+    the two pieces differ by 4e-6), computed as 1.055 e' - 0.055 with e' = max(c^(1/2.4), (min(12.92 c, 12.92 knee) +
+    0.055) / 1.055): the power by a Gamma node, the capped line by a Map Range, and the factor and offset go to the
+    skin-space dot products and the grid's origin (:func:`_grid_frame`); one Map Range takes the grid coordinates to
+    the atlas' UV and clamps them to the grid.  ``clamped``: the colour clamped to
     [0, 1] already (the grazing-light group's), read instead of clamping it here."""
     if clamped is None:
         mix = b.node("ShaderNodeMix", 1, data_type="RGBA", clamp_result=True, clamp_factor=False)
@@ -321,13 +328,13 @@ def grid_vector(b: _Builder, colour: bpy.types.NodeSocket, layout: live_table.At
     gamma = b.node("ShaderNodeGamma", 2)
     b.group.links.new(clamped, gamma.inputs["Color"])
     set_default(gamma.inputs["Gamma"], 1.0 / 2.4)
-    curve = b.vec("MULTIPLY_ADD", 3, gamma.outputs[0], 1.055, -0.055)
-    cap = _SRGB_SLOPE * _SRGB_KNEE
-    line = _map_range(b, 3, clamped, (0.0,) * 3, (_SRGB_KNEE,) * 3, (0.0,) * 3, (cap,) * 3)
-    encoded = b.vec("MAXIMUM", 5, curve, line)
+    line = _map_range(b, 3, clamped, (0.0,) * 3, (_SRGB_KNEE,) * 3, (_SRGB_OFFSET / _SRGB_SCALE,) * 3,
+                      ((_SRGB_SLOPE * _SRGB_KNEE + _SRGB_OFFSET) / _SRGB_SCALE,) * 3)
+    encoded = b.vec("MAXIMUM", 5, gamma.outputs[0], line)  # e' = (e + 0.055) / 1.055
     comb = b.node("ShaderNodeCombineXYZ", 7)
     for slot, d in enumerate(_GRID_ORDER):
-        b.group.links.new(b.vec("DOT_PRODUCT", 6, encoded, texel_table.COORDS[d] / layout.step), comb.inputs[slot])
+        weights = _SRGB_SCALE * texel_table.COORDS[d] / layout.step
+        b.group.links.new(b.vec("DOT_PRODUCT", 6, encoded, weights), comb.inputs[slot])
     origin, extent = _grid_frame(layout)
     border = live_table.BORDER + 0.5
     width, height = size
@@ -471,10 +478,8 @@ def build_live_group(table: texel_table.TexelTable, layout: live_table.AtlasLayo
     fit = painted_gain.body_fit(table.options.ior)
     for k, (colour, weight) in enumerate(_painted_media(b, painted, media, fit, ranges.rho_max, 23), start=1):
         b.link(colour, mixture.inputs[nodes.socket_name(k, "Color")])
-        scaled = b.node("ShaderNodeVectorMath", 33, operation="SCALE", name=f"Subsurface Weight k{k}")
-        b.link(_grazing(b, weight, factors, "Weight"), scaled.inputs[0])
-        b.link(weight_share, scaled.inputs["Scale"])
-        b.link(scaled.outputs[0], mixture.inputs[nodes.socket_name(k, "Weight")])
+        b.link(weight, mixture.inputs[nodes.socket_name(k, "Weight")])
+    b.link(_weight_scale(b, weight_share, factors), mixture.inputs["Weight Scale"])
     b.link(_diffuse_body(b, gin, painted, weight_share), mixture.inputs["Body"])
     mixture.inputs["IOR"].default_value = table.options.ior
     for name in ("Roughness", "Normal", *nodes.SPECULAR_INPUTS):
@@ -486,13 +491,16 @@ def build_live_group(table: texel_table.TexelTable, layout: live_table.AtlasLayo
     return group
 
 
-def _grazing(b: _Builder, value: bpy.types.NodeSocket, factors: bpy.types.Node | None,
-             which: str) -> bpy.types.NodeSocket:
-    """``value`` (a component's weight, RGB) times its grazing-light factor (the output ``which`` of the Grazing group
-    node ``factors``; unchanged without one).  The radii take theirs in :func:`_per_unit`."""
+def _weight_scale(b: _Builder, weight_share, factors: bpy.types.Node | None) -> bpy.types.NodeSocket:
+    """The mixture's Weight Scale: the Subsurface Weight ``weight_share`` times the grazing-light weight factors (the
+    Grazing group node ``factors``; without one the share alone), one node for every component (the mixture
+    multiplies each component's weights by it).  The radii take their factors in :func:`_per_unit`."""
     if factors is None:
-        return value
-    return b.vec("MULTIPLY", 30, value, factors.outputs[which])
+        return weight_share
+    scale = b.node("ShaderNodeVectorMath", 30, operation="SCALE", name="Subsurface Weight")
+    b.link(factors.outputs["Weight"], scale.inputs[0])
+    b.link(weight_share, scale.inputs["Scale"])
+    return scale.outputs[0]
 
 
 def _painted_media(b: _Builder, painted, media: list, fit: painted_gain.BodyFit, rho_max: float,

@@ -9,17 +9,16 @@ the neutral level).  For the painted colour c the nodes compute, as exporters.ed
   exporters.edit_table.shift); the shift D is their sum over the controls;
 * the edited colour c exp(D_RGB) (what the rest of the group reads instead of c: the table's lookup, the EEVEE
   colour) and the radius factor exp(D_radius) per channel (every component's radius is multiplied by it); each
-  exponential is 1 plus a curve through exp(x) - 1 over the table's range of shifts (blender_addon.curves: one node
-  where a Separate, three Math nodes and a Combine were), the curve switched off (its factor 0: it passes D = 0
-  through) where every control is neutral.
+  exponential is a curve through exp over the table's range of shifts (blender_addon.curves: one node where a
+  Separate, three Math nodes and a Combine would be), behind a Mix that gives exactly 1 where every control is
+  neutral.
 
-At neutral inputs each control reads its zero atlas with weight exactly 1 (its neighbour with weight exactly 0), so
-D = 0, the curves pass it through, c (1 + 0) = c and r (1 + 0) = r: the group renders its unedited result bit for
-bit.  Each control's shift is
-also switched to exactly 0 where its coordinate is neutral (the same value): an unlinked control at its neutral
-value then folds to a constant 0 when Cycles compiles the shader, which drops that control's texture lookups (a
-neutral group evaluates none of the edit nodes).  Each input takes a value
-or any node (a painted mask through a Mix node, an attribute, a driver); its keyframes animate it.
+At neutral inputs each control reads its zero atlas with weight exactly 1 (its neighbour with weight exactly 0), so D =
+0 and the Mixes give exactly 1: c 1 = c and r 1 = r, the group renders its unedited result bit for bit. Each control's
+shift is also switched to exactly 0 where its coordinate is neutral (the same value): an unlinked control at its neutral
+value then folds to a constant 0 when Cycles compiles the shader, which drops that control's texture lookups (a neutral
+group evaluates none of the edit nodes).  Each input takes a value or any node (a painted mask through a Mix node, an
+attribute, a driver); its keyframes animate it.
 """
 
 from __future__ import annotations
@@ -204,6 +203,8 @@ def add_edit_branch(b, gin, table: edit_table.EditTable, images: dict[str, bpy.t
         t = b.math("MULTIPLY_ADD", 47, coordinate, 1.0 / h, -levels[0] / h)
         lower = b.math("MINIMUM", 49, b.math("FLOOR", 48, t), edit_table.STACKED - 2.0)
         fraction = b.math("SUBTRACT", 50, t, lower)
+        zero = float(edit_table.STACKED // 2)  # the neutral level's place in the stack (edit_table.stacked_levels)
+        at_zero = (b.math("COMPARE", 50, lower, zero, 0.5), b.math("COMPARE", 50, lower, zero - 1.0, 0.5))
         corner = b.node("ShaderNodeCombineXYZ", 51)
         b.link(slice_u, corner.inputs[0])
         b.link(b.math("MULTIPLY", 50, lower, 1.0 / edit_table.STACKED), corner.inputs[1])
@@ -212,8 +213,9 @@ def add_edit_branch(b, gin, table: edit_table.EditTable, images: dict[str, bpy.t
         uvs = [[uv, b.vec("ADD", 53, uv, (tile_u, 0.0, 0.0))], [up, b.vec("ADD", 54, up, (tile_u, 0.0, 0.0))]]
         for kind in edit_table.KINDS:
             image = images[edit_table.image_name(j, kind)]
-            found = [_bilinear_pair(b, image, pair, frac, 55) for pair in uvs]  # levels l and l + 1
-            value = _unless_neutral(b, neutral, b.mix("VECTOR", 57, fraction, found[0], found[1]), 58)
+            found = [_unless_zero(b, zero_level, _bilinear_pair(b, image, pair, frac, 55), 57)
+                     for pair, zero_level in zip(uvs, at_zero, strict=True)]  # levels l and l + 1
+            value = b.mix("VECTOR", 58, fraction, found[0], found[1])
             shifts[kind] = value if shifts[kind] is None else b.vec("ADD", 58, shifts[kind], value)
     active = b.math("SUBTRACT", 60, 1.0, still)
     bounds = table.shift_bounds()
@@ -222,13 +224,14 @@ def add_edit_branch(b, gin, table: edit_table.EditTable, images: dict[str, bpy.t
     return EditBranch(colour=edited, radius_factor=factor["radius"])
 
 
-def _unless_neutral(b, neutral, value, stage: int) -> bpy.types.NodeSocket:
-    """``value`` (a control's shift) where the control is not neutral, exactly 0 where it is (``neutral``: 1 where
-    its coordinate is the neutral 0, else 0): a Mix of factor 1 - neutral from 0 to ``value``.  Where the coordinate
-    is 0 the shift read from the zero atlas is 0 already, so the result is the same everywhere; but when the
-    control's input is unlinked Cycles folds the factor to a constant (0 at the neutral value, 1 elsewhere) and the
-    Mix to one of its inputs, so a neutral control's texture lookups are dropped from the compiled shader."""
-    return b.mix("RGBA", stage + 1, b.math("SUBTRACT", stage, 1.0, neutral), (0.0, 0.0, 0.0, 1.0), value)
+def _unless_zero(b, zero_level, value, stage: int) -> bpy.types.NodeSocket:
+    """``value`` (a level's shift, read from the control's image) where the level is not the neutral one, exactly 0
+    where it is (``zero_level``: 1 there, else 0): a Mix of that factor from ``value`` to 0.  The neutral level's
+    atlas holds zeros, so the result is the same everywhere; but when the control's input is unlinked Cycles folds
+    the factor to a constant and the Mix to one of its inputs, so the lookups of the neutral level are dropped from
+    the compiled shader: a neutral control keeps none of its lookups (the other level has weight 0 there, a Mix of
+    constant factor 0), and a control within one level of neutral keeps those of one level."""
+    return b.mix("RGBA", stage, zero_level, value, (0.0, 0.0, 0.0, 1.0))
 
 
 def _bilinear_pair(b, image: bpy.types.Image, uvs, frac, stage: int) -> bpy.types.NodeSocket:
@@ -243,13 +246,13 @@ def _bilinear_pair(b, image: bpy.types.Image, uvs, frac, stage: int) -> bpy.type
 
 
 def _exp(b, vector, active, bounds: tuple[float, float], stage: int) -> bpy.types.NodeSocket:
-    """exp of each component of ``vector`` (within ``bounds``): 1 + a curve through exp(x) - 1
-    (blender_addon.curves) whose factor is ``active`` (0 where every control is neutral).  Where the factor is 0
-    the curve passes its input through, the shift D = 0, so the result is 1 exactly; at neutral unlinked controls
-    Cycles folds all of it to the constant 1 (the group renders its unedited result bit for bit)."""
-    curve = b.curve(stage, vector, *curves.smooth_points(np.expm1, *bounds))
-    b.link(active, curve.node.inputs["Fac"])
-    return b.vec("ADD", stage + 1, curve, 1.0)
+    """exp of each component of ``vector`` (within ``bounds``): a curve through exp (blender_addon.curves) behind a
+    Mix of factor ``active`` (0 where every control is neutral) from 1.  Where the factor is 0 the result is 1
+    exactly; Cycles folds a Mix of constant factor to one of its inputs, so at neutral unlinked controls all of it
+    is the constant 1 (the group renders its unedited result bit for bit) and with edits of constant value the
+    curve alone is evaluated."""
+    curve = b.curve(stage, vector, *curves.smooth_points(np.exp, *bounds))
+    return b.mix("RGBA", stage + 1, active, (1.0, 1.0, 1.0, 1.0), curve)
 
 
 def live_node(material: bpy.types.Material) -> bpy.types.Node | None:

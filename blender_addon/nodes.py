@@ -1,14 +1,15 @@
 """The node group **Spectral Skin SSS Mixture** (docs/contracts.md §5) and its wiring into a user's material.
 
-Inputs, for each component k = 1..K (the baked maps of docs/contracts.md §4, ``--target cycles``):
-``k{k} Color`` (Subsurface Color, RGB), ``k{k} Radius`` (RANDOM_WALK radius in Blender units, RGB),
-``k{k} Weight`` (RGB, summing to 1 over k per channel), ``k{k} Anisotropy`` (one g in [0, 0.9]);
-then ``IOR`` (the tissue index: the specular coat's Fresnel and the closures' refractive entry, which the
-bake's tables assume), ``Roughness`` (the coat's specular roughness, Blender's perceptual roughness, GGX
-alpha = Roughness^2) and ``Normal`` (normal/bump map; unlinked: the shading normal), which feeds the coat,
-its Fresnel weight and every subsurface closure; then the Principled BSDF's specular inputs (below) and
-``Body`` (a shader added beside the mixture under the coat's clear coat and sheen: the live group's diffuse body
-where Subsurface Weight is below 1; unlinked, nothing).  Output: ``BSSRDF`` (the whole surface shader: coat plus
+Inputs, for each component k = 1..K (the baked maps of docs/contracts.md §4, ``--target cycles``): ``k{k} Color``
+(Subsurface Color, RGB), ``k{k} Radius`` (RANDOM_WALK radius in Blender units, RGB), ``k{k} Weight`` (RGB, summing to 1
+over k per channel), ``k{k} Anisotropy`` (one g in [0, 0.9]); then ``Weight Scale`` (RGB, default 1: a factor on every
+component's weight, per channel, computed once for all of them: the live group's Subsurface Weight and the grazing-light
+correction's weight factors), ``IOR`` (the tissue index: the specular coat's Fresnel and the closures' refractive entry,
+which the bake's tables assume), ``Roughness`` (the coat's specular roughness, Blender's perceptual roughness, GGX alpha
+= Roughness^2) and ``Normal`` (normal/bump map; unlinked: the shading normal), which feeds the coat, its Fresnel weight
+and every subsurface closure; then the Principled BSDF's specular inputs (below) and ``Body`` (a shader added beside the
+mixture under the coat's clear coat and sheen: the live group's diffuse body where Subsurface Weight is below 1;
+unlinked, nothing).  Output: ``BSSRDF`` (the whole surface shader: coat plus
 mixture; the name is kept for files wired before the coat existed).
 
 Why a sum of closures weighted by w_k *is* "pick component k with probability w_k, then walk in medium k"
@@ -49,10 +50,11 @@ never the mean.  Per-channel weights need the closure weight to differ from A pe
 The specular coat (skin's surface reflection: highlights, pores and wrinkles through the normal map)::
 
     shader = Principled BSDF(black base; Roughness, IOR, Normal, Specular IOR Level, Specular Tint)
-             + sum over k, c of min(w_kc (1 - F(cos)) / (1 - F_dr), 1) x closure_kc
+             + sum over k, c of w_kc s_c (1 - F(cos)) / (1 - F_dr) x closure_kc
 
-with F the Fresnel reflectance of the view direction at the shading normal (Cycles' Fresnel node) and F_dr
-the cosine-weighted mean of F (exporters.cycles.DIFFUSE_FRESNEL_POLY).  Why this layering and not another:
+with s_c the Weight Scale, F the Fresnel reflectance of the view direction at the shading normal (Cycles'
+Fresnel node) and F_dr the cosine-weighted mean of F (exporters.cycles.DIFFUSE_FRESNEL_POLY).  Why this layering
+and not another:
 
 * **The coat is the artist's specular.**  A Principled BSDF whose base is black keeps only its dielectric
   specular layer (the black diffuse closure has weight 0 and is dropped), so highlights, rim light and
@@ -97,7 +99,7 @@ becomes (1 + sqrt F0) / (1 - sqrt F0); the closures keep the tissue's IOR, which
 **Specular Tint** colours the coat's lobe (both paths: the coat is the same Principled node, and the body
 weight takes F of the coat's index); over either
 path a **clear coat** (Coat Weight x F(Coat IOR) of a white Multiscatter GGX lobe of Coat Roughness, mixed over
-the skin, which keeps the rest) and a **Sheen** BSDF (colour Sheen Weight x Sheen Tint, added on top) follow the
+the skin, which keeps the rest) and a **Sheen** BSDF (colour Sheen Tint, weighted Sheen Weight, added on top) follow the
 Principled BSDF's layering; the coat's tint and the sheen's share of the light below it are not modelled.  At
 their defaults none of them changes the render or adds a closure.
 
@@ -201,6 +203,7 @@ def _new_interface(group: bpy.types.NodeTree, k_count: int) -> None:
                 sock.default_value = (1.0 / k_count,) * 3 + (1.0,)
             else:
                 sock.default_value = (0.0, 0.0, 0.0, 1.0)
+    iface.new_socket("Weight Scale", in_out="INPUT", socket_type="NodeSocketColor").default_value = (1.0,) * 4
     ior = iface.new_socket("IOR", in_out="INPUT", socket_type="NodeSocketFloat")
     ior.min_value, ior.max_value, ior.default_value = GROUP_IOR_MIN, reflectance_tables.IOR_MAX, DEFAULT_IOR
     rough = iface.new_socket("Roughness", in_out="INPUT", socket_type="NodeSocketFloat")
@@ -274,7 +277,9 @@ def build_svm_group(k_count: int = 3, name: str = GROUP_NAME, design: str = "nes
     group, gin, gout = _fresh_group(name, k_count, "SVM")
     group["spectral_skin_sss_design"] = design
     build = _svm_mixture if design == "nested" else _svm_mixture_per_channel
-    mixture = build(group, gin, k_count, _body_scale(group, gin))
+    scale = _vec(group, "SCALE", gin.outputs["Weight Scale"], x=-1150.0, y=500.0)
+    group.links.new(_body_scale(group, gin), scale.node.inputs["Scale"])
+    mixture = build(group, gin, k_count, scale)
     surface = _add_shader(group, principled_specular(group, gin), mixture, 1050.0, 700.0)
     surface = _add_shader(group, surface, gin.outputs["Body"], 1150.0, 700.0)
     group.links.new(_outer_layers(group, gin, surface), gout.inputs["BSSRDF"])
@@ -284,10 +289,10 @@ def build_svm_group(k_count: int = 3, name: str = GROUP_NAME, design: str = "nes
 def _svm_mixture(group: bpy.types.NodeTree, gin: bpy.types.Node, k_count: int,
                  scale: bpy.types.NodeSocket) -> bpy.types.NodeSocket:
     """The nested closures of every component (module docstring), each scaled by its share of w_kc x ``scale``
-    (the coat's body weight) and summed; returns the sum.
+    (per channel: the Weight Scale times the coat's body weight) and summed; returns the sum.
 
-    With lo <= mid <= hi the component's weights times ``scale`` (one vector node before the sort; the scale is
-    positive, so the order is the weights'), sorted over channels, w_c = lo + (mid - lo) [w_c >= mid] +
+    With lo <= mid <= hi the component's weights times ``scale`` (one vector node before the sort), sorted over
+    channels, w_c = lo + (mid - lo) [w_c >= mid] +
     (hi - mid) [w_c >= hi] exactly (ties included: mid is one of the three weights, picked by min/max, never
     computed).  So closure 1 carries all channels at weight lo, closure 2 the channels with w_c >= mid at mid - lo,
     closure 3 those with w_c >= hi at hi - mid; a channel left out has Color 0 (no weight, no walk) but keeps its
@@ -297,8 +302,7 @@ def _svm_mixture(group: bpy.types.NodeTree, gin: bpy.types.Node, k_count: int,
     total, overflow, highest = None, None, None
     for k in range(1, k_count + 1):
         y0 = -(k - 1) * 1500.0
-        scaled = _vec(group, "SCALE", gin.outputs[socket_name(k, "Weight")], x=-1050.0, y=y0 - 400.0)
-        group.links.new(scale, scaled.node.inputs["Scale"])  # the coat's body weight, > 0: the order is kept
+        scaled = _vec(group, "MULTIPLY", gin.outputs[socket_name(k, "Weight")], scale, x=-1050.0, y=y0 - 400.0)
         sep = group.nodes.new("ShaderNodeSeparateColor")
         sep.location = (-950.0, y0 - 400.0)
         group.links.new(scaled, sep.inputs[0])
@@ -403,16 +407,19 @@ def _closure(group: bpy.types.NodeTree, gin: bpy.types.Node, colour: bpy.types.N
 
 def _svm_mixture_per_channel(group: bpy.types.NodeTree, gin: bpy.types.Node, k_count: int,
                              scale: bpy.types.NodeSocket) -> bpy.types.NodeSocket:
-    """The 3K single-channel closures, each scaled by w_kc x ``scale`` (the coat's body weight) and summed
-    (module docstring); returns the sum."""
+    """The 3K single-channel closures, each scaled by w_kc x ``scale`` (per channel: the Weight Scale times the coat's
+    body weight) and summed (module docstring); returns the sum."""
     total = None
+    factor = group.nodes.new("ShaderNodeSeparateColor")
+    factor.location = (-1050.0, 500.0)
+    group.links.new(scale, factor.inputs[0])
     for k in range(1, k_count + 1):
         y0 = -(k - 1) * 1500.0
         seps = _separated(group, gin, k, y0)
         for c in range(3):
             y = y0 - c * 450.0
             sss = _channel_closure(group, gin, seps, k, c, y)
-            weight = _math(group, "MULTIPLY", seps["Weight"].outputs[c], scale, x=-300.0, y=y + 100.0)
+            weight = _math(group, "MULTIPLY", seps["Weight"].outputs[c], factor.outputs[c], x=-300.0, y=y + 100.0)
             for part in _weighted(group, sss.outputs["BSSRDF"], weight, y):
                 total = part if total is None else _add_shader(group, total, part, 50.0 + 20.0 * k, y)
     return total
@@ -514,7 +521,8 @@ def _outer_layers(group: bpy.types.NodeTree, gin: bpy.types.Node,
                   surface: bpy.types.NodeSocket) -> bpy.types.NodeSocket:
     """The Principled BSDF's clear coat and sheen over ``surface``: Coat Weight x F(Coat IOR) of a white
     Multiscatter GGX lobe (Coat Roughness) mixed over it (the skin below keeps 1 - that), then a Sheen BSDF of
-    colour Sheen Weight x Sheen Tint added.  Zero weights add no closure."""
+    colour Sheen Tint weighted Sheen Weight (a Mix Shader: in [0, 1], the Principled BSDF's range) added.  Zero
+    weights add no closure: Cycles folds a Mix Shader of constant factor 0 away with what feeds it."""
     fresnel = group.nodes.new("ShaderNodeFresnel")
     fresnel.location = (1150.0, 1300.0)
     group.links.new(gin.outputs["Coat IOR"], fresnel.inputs["IOR"])
@@ -532,16 +540,12 @@ def _outer_layers(group: bpy.types.NodeTree, gin: bpy.types.Node,
     group.links.new(surface, coat.inputs[1])
     group.links.new(glossy.outputs[0], coat.inputs[2])
     sheen = group.nodes.new("ShaderNodeBsdfSheen")
-    sheen.location = (1350.0, 1100.0)
-    tint = group.nodes.new("ShaderNodeVectorMath")
-    tint.operation = "SCALE"
-    tint.location = (1250.0, 1150.0)
-    group.links.new(gin.outputs["Sheen Tint"], tint.inputs[0])
-    group.links.new(gin.outputs["Sheen Weight"], tint.inputs["Scale"])
-    group.links.new(tint.outputs[0], sheen.inputs["Color"])
+    sheen.location = (1250.0, 1100.0)
+    group.links.new(gin.outputs["Sheen Tint"], sheen.inputs["Color"])
     group.links.new(gin.outputs["Sheen Roughness"], sheen.inputs["Roughness"])
     group.links.new(gin.outputs["Normal"], sheen.inputs["Normal"])
-    return _add_shader(group, coat.outputs[0], sheen.outputs[0], 1550.0, 900.0)
+    weighted = _mix_shader(group, gin.outputs["Sheen Weight"], sheen.outputs[0], 1400.0, 1100.0)
+    return _add_shader(group, coat.outputs[0], weighted, 1550.0, 900.0)
 
 
 def build_osl_group(k_count: int = 3, name: str = GROUP_NAME_OSL) -> bpy.types.NodeTree:
@@ -558,7 +562,7 @@ def build_osl_group(k_count: int = 3, name: str = GROUP_NAME_OSL) -> bpy.types.N
     for k in range(1, k_count + 1):
         for kind in KINDS:
             group.links.new(gin.outputs[socket_name(k, kind)], script.inputs[osl.param_name(k, kind)])
-    for name, param in (("IOR", "ior"), ("Normal", "Normal")):
+    for name, param in (("Weight Scale", "weight_scale"), ("IOR", "ior"), ("Normal", "Normal")):
         group.links.new(gin.outputs[name], script.inputs[param])
     group.links.new(_level_ior(group, gin.outputs["IOR"], gin.outputs["Specular IOR Level"]), script.inputs["coat_ior"])
     surface = _add_shader(group, principled_specular(group, gin), script.outputs["BSSRDF"], 1050.0, 700.0)
@@ -568,7 +572,7 @@ def build_osl_group(k_count: int = 3, name: str = GROUP_NAME_OSL) -> bpy.types.N
 
 
 #: Custom property marking the group layout version (bump when the generated nodes change).
-GROUP_VERSION = 8
+GROUP_VERSION = 9
 
 
 def ensure_group(k_count: int, backend: str) -> bpy.types.NodeTree:

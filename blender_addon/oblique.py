@@ -32,7 +32,7 @@ GROUP_NAME = "Spectral Skin SSS Grazing"
 CORRECTION_PROP = "spectral_skin_sss_oblique"
 #: Custom property on the group: how its nodes compute the correction (a group of another version is rebuilt).
 VERSION_PROP = "spectral_skin_sss_grazing_version"
-GRAZING_VERSION = 3
+GRAZING_VERSION = 4
 #: Largest difference of a slope a_c or b_c between the curves' tables and the knots' piecewise linear function
 #: (both tables' interpolation, measured in Cycles by tests/test_oblique_correction.py).
 CURVE_ERROR = 5e-3
@@ -62,12 +62,16 @@ def _node(tree, kind: str, x: float, y: float, **props):
 
 
 def _map_range(tree, value, lo: float, hi: float, x: float, y: float, interpolation: str = "LINEAR"):
-    """Map Range (clamped) of ``value`` from [lo, hi] to [0, 1]; its Result socket."""
-    node = _node(tree, "ShaderNodeMapRange", x, y, data_type="FLOAT", interpolation_type=interpolation, clamp=True)
-    tree.links.new(value, node.inputs["Value"])
-    node.inputs["From Min"].default_value, node.inputs["From Max"].default_value = float(lo), float(hi)
-    node.inputs["To Min"].default_value, node.inputs["To Max"].default_value = 0.0, 1.0
-    return node.outputs["Result"]
+    """Vector Map Range (clamped) of ``value`` (a float, read as (v, v, v)) from [lo, hi] to [0, 1] in every
+    component; its Vector socket (a vector, so that the Vector Math fed by it converts nothing)."""
+    node = _node(tree, "ShaderNodeMapRange", x, y, data_type="FLOAT_VECTOR", interpolation_type=interpolation,
+                 clamp=True)
+    sockets = {s.identifier: s for s in node.inputs}
+    tree.links.new(value, sockets["Vector"])
+    for name, bound in (("From_Min_FLOAT3", lo), ("From_Max_FLOAT3", hi), ("To_Min_FLOAT3", 0.0),
+                        ("To_Max_FLOAT3", 1.0)):
+        sockets[name].default_value = (float(bound),) * 3
+    return next(s for s in node.outputs if s.identifier == "Vector")
 
 
 def build_group(corr: oblique_correction.ObliqueCorrection) -> bpy.types.NodeTree:
@@ -109,11 +113,11 @@ def build_group(corr: oblique_correction.ObliqueCorrection) -> bpy.types.NodeTre
 
 
 def wire_baked(material: bpy.types.Material, gnode: bpy.types.Node) -> bpy.types.Node | None:
-    """Put the correction between a baked material's maps and its mixture group node ``gnode``
-    (blender_addon.baker): each ``k Weight`` and ``k Radius`` map multiplied by the Grazing group's factor, the
-    group fed the colour that fed the artist's Principled BSDF's Base Color (the baked albedo) and the mixture's
-    Normal.  The new nodes are tagged (Remove Skin SSS removes them).  Returns the Grazing node, or None when the
-    material has no Principled BSDF behind the group (nothing is changed then)."""
+    """Put the correction between a baked material's maps and its mixture group node ``gnode`` (blender_addon.baker):
+    the Grazing group's weight factors into its Weight Scale (once for every component) and each ``k Radius`` map
+    multiplied by its radius factors, the group fed the colour that fed the artist's Principled BSDF's Base Color (the
+    baked albedo) and the mixture's Normal.  The new nodes are tagged (Remove Skin SSS removes them).  Returns the
+    Grazing node, or None when the material has no Principled BSDF behind the group (nothing is changed then)."""
     from . import nodes, wiring
 
     tree = material.node_tree
@@ -132,16 +136,17 @@ def wire_baked(material: bpy.types.Material, gnode: bpy.types.Node) -> bpy.types
     normal = nodes._feeding_socket(gnode.inputs["Normal"])
     if normal is not None:
         tree.links.new(normal, grazing.inputs["Normal"])
+    tree.links.new(grazing.outputs["Weight"], gnode.inputs["Weight Scale"])
     for socket in gnode.inputs:
-        kind = socket.name.rpartition(" ")[2]
-        feed = nodes._feeding_socket(socket) if socket.name.startswith("k") and kind in ("Weight", "Radius") else None
+        feed = nodes._feeding_socket(socket) if socket.name.startswith("k") and socket.name.endswith(" Radius") \
+            else None
         if feed is None:
             continue
         scale = wiring.tag(tree.nodes.new("ShaderNodeVectorMath"))
         scale.operation, scale.parent = "MULTIPLY", gnode.parent
         scale.location = (gnode.location.x - 200.0, feed.node.location.y)
         tree.links.new(feed, scale.inputs[0])
-        tree.links.new(grazing.outputs[kind], scale.inputs[1])
+        tree.links.new(grazing.outputs["Radius"], scale.inputs[1])
         tree.links.new(scale.outputs["Vector"], socket)
     return grazing
 

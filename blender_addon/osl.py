@@ -88,7 +88,7 @@ def ensure_oslquery() -> None:
 def mixture_source(k_count: int, entry_roughness: float, method: str = "random_walk") -> str:
     """OSL shader: the body below the specular coat, the mixture of K random-walk media (blender_addon/nodes.py)::
 
-        (1 - F)/(1 - F_dr(ior)) * sum_k (w_k * A_k) * bssrdf(...)
+        (1 - F)/(1 - F_dr(ior)) * sum_k (weight_scale * w_k * A_k) * bssrdf(...)
 
     The coat itself (a Principled BSDF's specular layer) is a node beside the script in the group, shared with
     the SVM group (nodes.principled_specular).
@@ -109,7 +109,7 @@ def mixture_source(k_count: int, entry_roughness: float, method: str = "random_w
         params += [f"    color {c} = 0.0,", f"    color {r} = 0.0,", f"    color {w} = {1.0 / k_count!r},",
                    f"    float {g} = 0.0,"]
         terms.append(
-            f"    mixture += ({w} * {c}) * bssrdf(\"{method}\", Nn, vector({r}), {c},\n"
+            f"    mixture += (weight_scale * {w} * {c}) * bssrdf(\"{method}\", Nn, vector({r}), {c},\n"
             f"        \"ior\", ior, \"anisotropy\", {g}, \"roughness\", {float(entry_roughness)!r});"
         )
     fresnel = cycles.DIFFUSE_FRESNEL_POLY
@@ -123,6 +123,7 @@ def mixture_source(k_count: int, entry_roughness: float, method: str = "random_w
             "",
             f"shader spectral_skin_sss_k{k_count}(",
             *params,
+            "    color weight_scale = 1.0,",
             f"    float ior = {constants.N_TISSUE!r},",
             f"    float coat_ior = {constants.N_TISSUE!r},",
             "    normal Normal = N,",

@@ -73,12 +73,13 @@ def test_bake_svm_packed_wired_and_renders(addon, albedo_png, reference_maps):
     grazing = next(n for n in tree.nodes if n.bl_idname == "ShaderNodeGroup" and n.node_tree.get(
         oblique.CORRECTION_PROP))  # the grazing-light correction reads the albedo, as the live group its colour
     assert grazing.inputs["Color"].links[0].from_node == tex and wiring.is_added(grazing)
+    assert gnode.inputs["Weight Scale"].links[0].from_node == grazing  # the weight factors, once for every k
     uv = next(n for n in tree.nodes if n.bl_idname == "ShaderNodeUVMap")
     for k in range(1, K + 1):
         for kind in nodes.KINDS:
             sock = gnode.inputs[nodes.socket_name(k, kind)]
             src = oblique.map_node(sock)
-            assert (sock.links[0].from_node != src) == (kind in ("Weight", "Radius"))  # through the correction
+            assert (sock.links[0].from_node != src) == (kind == "Radius")  # through the correction
             assert src.bl_idname == "ShaderNodeTexImage" and src.interpolation == "Closest"
             assert src.inputs["Vector"].links[0].from_node == uv  # same UVs as the albedo
             image = src.image

@@ -77,9 +77,8 @@ def test_defaults_render_bit_for_bit_without_the_new_inputs(tmp_path, addon):
     gin = next(n for n in group.nodes if n.bl_idname == "NodeGroupInput")
     gout = next(n for n in group.nodes if n.bl_idname == "NodeGroupOutput")
     mixture = next(n for n in group.nodes if n.bl_idname == "ShaderNodeGroup" and "k1 Color" in n.inputs)
-    for k in range(1, group["spectral_skin_sss_k"] + 1):  # weights straight from the painted gain
-        group.links.new(group.nodes[f"Subsurface Weight k{k}"].inputs[0].links[0].from_socket,
-                        mixture.inputs[f"k{k} Weight"])
+    group.links.new(group.nodes["Subsurface Weight"].inputs[0].links[0].from_socket,  # the grazing factors alone
+                    mixture.inputs["Weight Scale"])
     group.links.remove(mixture.inputs["Body"].links[0])  # no diffuse body
     group.links.new(mixture.outputs["BSSRDF"], gout.inputs["Cycles"])  # no Emission, no Alpha
     for link in list(group.nodes["Translucency"].outputs[0].links):  # radii from the Unit Scale itself
