@@ -483,15 +483,18 @@ def principled_specular(group: bpy.types.NodeTree, gin: bpy.types.Node) -> bpy.t
 
 
 def _body_scale(group: bpy.types.NodeTree, gin: bpy.types.Node) -> bpy.types.NodeSocket:
-    """(1 - F)/(1 - F_dr) of the coat's index (module docstring): the weight of the mixture below the coat."""
+    """(1 - F)/(1 - F_dr) of the coat's index (module docstring): the weight of the mixture below the coat, as
+    F (-1 / (1 - F_dr)) + 1 / (1 - F_dr): one node at each shading point (F_dr depends on the index alone, so
+    Cycles folds its nodes to constants when the index is one)."""
     coat_ior = _level_ior(group, gin.outputs["IOR"], gin.outputs["Specular IOR Level"])
     fresnel = group.nodes.new("ShaderNodeFresnel")
     fresnel.location = (-650.0, 700.0)
     group.links.new(coat_ior, fresnel.inputs["IOR"])
     group.links.new(gin.outputs["Normal"], fresnel.inputs["Normal"])
-    return _math(group, "DIVIDE", _math(group, "SUBTRACT", 1.0, fresnel.outputs["Fac"], x=-450.0, y=700.0),
-                 _math(group, "SUBTRACT", 1.0, _diffuse_fresnel(group, coat_ior), x=150.0, y=900.0),
-                 x=300.0, y=800.0)
+    inverse = _math(group, "DIVIDE", 1.0, _math(group, "SUBTRACT", 1.0, _diffuse_fresnel(group, coat_ior), x=150.0,
+                                                y=900.0), x=200.0, y=850.0)
+    return _math(group, "MULTIPLY_ADD", fresnel.outputs["Fac"], _math(group, "MULTIPLY", inverse, -1.0, x=250.0,
+                                                                      y=850.0), inverse, x=300.0, y=800.0)
 
 
 def _add_shader(group: bpy.types.NodeTree, a: bpy.types.NodeSocket, b: bpy.types.NodeSocket, x: float,
@@ -572,7 +575,7 @@ def build_osl_group(k_count: int = 3, name: str = GROUP_NAME_OSL) -> bpy.types.N
 
 
 #: Custom property marking the group layout version (bump when the generated nodes change).
-GROUP_VERSION = 9
+GROUP_VERSION = 10
 
 
 def ensure_group(k_count: int, backend: str) -> bpy.types.NodeTree:
