@@ -1,21 +1,21 @@
 """The grazing-light correction in nodes: the node group **Spectral Skin SSS Grazing**, per-channel factors on the
 mixture's weights and radii that grow with the view's facing angle (exporters.oblique_correction, whose ``factors``
-the nodes follow operation for operation).
+the nodes follow).
 
 Inputs ``Color`` (the painted colour, linear; clamped to [0, 1] here) and ``Normal`` (unlinked: the shading
 normal); outputs ``Weight`` and ``Radius`` (the factors f and s per channel R, G, B) and ``Color`` (the colour
-clamped to [0, 1], which the live group reads instead of clamping it again).  1 - mu = 1 - |N . I| is
-Layer Weight's Facing (Blend 0.5); h a Map Range (Smooth Step) of it; Y the luminance of the colour; the slopes
-a_c(Y), b_c(Y) one Vector Curves node each (fed (Y, Y, Y); per channel the piecewise linear curve through the knots,
-vector handles, constant beyond the first and the last knot); f = 1 + a h_w, s = 1 + b h_r.  Where h = 0 (face-on
-views) both are 1 exactly.  The live group (blender_addon.live) multiplies its components' weights and radii by
-them before the mixture group.
+clamped to [0, 1], which the live group reads instead of clamping it again).  1 - mu = 1 - |N . I| is Layer
+Weight's Facing (Blend 0.5) and Y the luminance of the colour; f - 1 = a(Y) h_w(mu) and s - 1 = b(Y) h_r(mu) are
+read, bilinearly, from two small float images over (Y, 1 - mu) (exporters.oblique_correction.tables, packed in the
+file: ``Spectral Skin SSS Grazing Weight`` and ``... Radius``), at one UV for both, and 1 is added.  Where h = 0
+(face-on views) the images hold 0 exactly, so both factors are 1 exactly.  The live group (blender_addon.live)
+multiplies its components' weights and radii by them before the mixture group.
 
-Why curves and not a Map Range per knot interval (a sum of clamped ramps, exact): the group is evaluated at every
-shading point, and its node count is a cost Principled does not pay (docs/user/live_group.md, render cost); the
-group holds eleven nodes where it held thirty-six.  The curves' tables (blender_addon.curves) cut the corners at
-the knots by up to a quarter of a table step times the change of slope there: :data:`CURVE_ERROR` bounds it for
-the shipped correction.
+Why images and not nodes: the group is evaluated at every shading point, and its node count is a cost Principled
+does not pay (docs/user/live_group.md, render cost); two texture lookups replace the two smooth steps, the two
+slope curves and the two multiply-adds (and the conversions between them) that computed the same.  The images'
+bilinear filter cuts the slopes' corners at the knots by up to a quarter of a texel times the change of slope, and
+the smooth step's curvature over a texel adds a little: :data:`TABLE_ERROR` bounds both for the shipped correction.
 """
 
 from __future__ import annotations
@@ -24,18 +24,18 @@ import hashlib
 
 import bpy
 
-from . import curves
+from . import wiring
 from .core import colorimetry, oblique_correction
 
 GROUP_NAME = "Spectral Skin SSS Grazing"
 #: Custom property on the group: the SHA-256 of the correction (its JSON) the nodes were built from.
-CORRECTION_PROP = "spectral_skin_sss_oblique"
+CORRECTION_PROP = wiring.OBLIQUE_PROP
 #: Custom property on the group: how its nodes compute the correction (a group of another version is rebuilt).
 VERSION_PROP = "spectral_skin_sss_grazing_version"
-GRAZING_VERSION = 4
-#: Largest difference of a slope a_c or b_c between the curves' tables and the knots' piecewise linear function
-#: (both tables' interpolation, measured in Cycles by tests/test_oblique_correction.py).
-CURVE_ERROR = 5e-3
+GRAZING_VERSION = 5
+#: Largest difference of a factor f_c or s_c between the nodes (the images' bilinear filter) and the reference
+#: (exporters.oblique_correction.factors), measured in Cycles by tests/test_oblique_correction.py.
+TABLE_ERROR = 2e-3
 
 
 def correction_sha(corr: oblique_correction.ObliqueCorrection) -> str:
@@ -61,21 +61,34 @@ def _node(tree, kind: str, x: float, y: float, **props):
     return node
 
 
-def _map_range(tree, value, lo: float, hi: float, x: float, y: float, interpolation: str = "LINEAR"):
-    """Vector Map Range (clamped) of ``value`` (a float, read as (v, v, v)) from [lo, hi] to [0, 1] in every
-    component; its Vector socket (a vector, so that the Vector Math fed by it converts nothing)."""
-    node = _node(tree, "ShaderNodeMapRange", x, y, data_type="FLOAT_VECTOR", interpolation_type=interpolation,
-                 clamp=True)
-    sockets = {s.identifier: s for s in node.inputs}
-    tree.links.new(value, sockets["Vector"])
-    for name, bound in (("From_Min_FLOAT3", lo), ("From_Max_FLOAT3", hi), ("To_Min_FLOAT3", 0.0),
-                        ("To_Max_FLOAT3", 1.0)):
-        sockets[name].default_value = (float(bound),) * 3
-    return next(s for s in node.outputs if s.identifier == "Vector")
+def ensure_images(corr: oblique_correction.ObliqueCorrection) -> dict[str, bpy.types.Image]:
+    """The correction's two tables (exporters.oblique_correction.tables) as packed float images, ``"Weight"`` and
+    ``"Radius"``, reused when images of this correction exist (tagged: Remove Skin SSS removes them when unused)."""
+    sha = correction_sha(corr)
+    images, tables = {}, None
+    for name in ("Weight", "Radius"):
+        full = f"{GROUP_NAME} {name}"
+        image = bpy.data.images.get(full)
+        if image is not None and image.get(CORRECTION_PROP) == sha:
+            images[name] = image
+            continue
+        tables = tables if tables is not None else oblique_correction.tables(corr)
+        pixels = tables[name]
+        if image is not None and image.users == 0:
+            bpy.data.images.remove(image)
+        image = bpy.data.images.new(full, pixels.shape[1], pixels.shape[0], alpha=True, float_buffer=True)
+        image.colorspace_settings.name = "Non-Color"
+        image.alpha_mode = "CHANNEL_PACKED"
+        image.pixels.foreach_set(pixels.ravel())
+        image.pack()
+        image[CORRECTION_PROP] = sha
+        images[name] = image
+    return images
 
 
 def build_group(corr: oblique_correction.ObliqueCorrection) -> bpy.types.NodeTree:
     """A new group of ``corr`` (module docstring)."""
+    images = ensure_images(corr)
     tree = bpy.data.node_groups.new(GROUP_NAME, "ShaderNodeTree")
     tree[CORRECTION_PROP] = correction_sha(corr)
     tree[VERSION_PROP] = GRAZING_VERSION
@@ -98,18 +111,36 @@ def build_group(corr: oblique_correction.ObliqueCorrection) -> bpy.types.NodeTre
     tree.links.new(clamp.outputs[2], dot.inputs[0])
     tree.links.new(clamp.outputs[2], gout.inputs["Color"])
     dot.inputs[1].default_value = tuple(float(v) for v in colorimetry.SRGB_LUMINANCE)
-    lum = dot.outputs["Value"]
-    for row, (slope, ramp, name) in enumerate(((corr.weight_slope, corr.weight_ramp, "Weight"),
-                                               (corr.radius_slope, corr.radius_ramp, "Radius"))):
+    point = _node(tree, "ShaderNodeCombineXYZ", -500.0, 100.0)
+    tree.links.new(dot.outputs["Value"], point.inputs["X"])
+    tree.links.new(layer.outputs["Facing"], point.inputs["Y"])
+    uv = _node(tree, "ShaderNodeVectorMath", -350.0, 100.0, operation="MULTIPLY_ADD")
+    tree.links.new(point.outputs[0], uv.inputs[0])
+    scale, offset = _texel_map(corr)
+    uv.inputs[1].default_value, uv.inputs[2].default_value = scale, offset
+    for row, name in enumerate(("Weight", "Radius")):
         y = 300.0 - 400.0 * row
-        h = _map_range(tree, layer.outputs["Facing"], *ramp, -300.0, y + 150.0, interpolation="SMOOTHSTEP")
-        a = curves.vector_curve(tree, lum, corr.luminance, slope, (-300.0, y))
-        out = _node(tree, "ShaderNodeVectorMath", 0.0, y, operation="MULTIPLY_ADD")
-        tree.links.new(a, out.inputs[0])
-        tree.links.new(h, out.inputs[1])
-        out.inputs[2].default_value = (1.0, 1.0, 1.0)
+        tex = _node(tree, "ShaderNodeTexImage", -200.0, y, image=images[name], interpolation="Linear",
+                    extension="EXTEND")
+        tree.links.new(uv.outputs["Vector"], tex.inputs["Vector"])
+        out = _node(tree, "ShaderNodeVectorMath", 50.0, y, operation="ADD")
+        tree.links.new(tex.outputs["Color"], out.inputs[0])
+        out.inputs[1].default_value = (1.0, 1.0, 1.0)
         tree.links.new(out.outputs["Vector"], gout.inputs[name])
     return tree
+
+
+def _texel_map(corr: oblique_correction.ObliqueCorrection) -> tuple[tuple[float, ...], tuple[float, ...]]:
+    """Scale and offset taking (luminance, facing, 0) to the UV of the tables' texels (Blender's pixel centres at
+    (i + 0.5) / n): the first and last of exporters.oblique_correction.table_axes land on the first and last texel
+    centres, beyond them the image's Extend repeats the edge."""
+    (n_lum, n_facing), (lum, facing) = oblique_correction.TABLE_SIZE, oblique_correction.table_axes(corr)
+    scale, offset = [], []
+    for n, axis in ((n_lum, lum), (n_facing, facing)):
+        step = (n - 1.0) / n / (axis[-1] - axis[0])
+        scale.append(step)
+        offset.append(0.5 / n - axis[0] * step)
+    return (*scale, 0.0), (*offset, 0.0)
 
 
 def wire_baked(material: bpy.types.Material, gnode: bpy.types.Node) -> bpy.types.Node | None:
@@ -118,7 +149,7 @@ def wire_baked(material: bpy.types.Material, gnode: bpy.types.Node) -> bpy.types
     multiplied by its radius factors, the group fed the colour that fed the artist's Principled BSDF's Base Color (the
     baked albedo) and the mixture's Normal.  The new nodes are tagged (Remove Skin SSS removes them).  Returns the
     Grazing node, or None when the material has no Principled BSDF behind the group (nothing is changed then)."""
-    from . import nodes, wiring
+    from . import nodes
 
     tree = material.node_tree
     source = tree.nodes.get(material.get(nodes.PREVIOUS_SURFACE_PROP, ""))

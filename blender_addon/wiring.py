@@ -47,7 +47,9 @@ _LEGACY_OUTPUT_LABEL = "EEVEE (Spectral Skin SSS Live)"
 _GROUP_TAG = "spectral_skin_sss_backend"
 #: Custom property on the skin-edit group and its images (blender_addon.live_edits): the edit table's SHA-256.
 EDIT_TABLE_PROP = "spectral_skin_sss_edit_table"
-_IMAGE_TAGS = ("spectral_skin_sss_table", "spectral_skin_sss_bake_key", EDIT_TABLE_PROP)
+#: Custom property on the grazing-light group and its images (blender_addon.oblique): the correction's SHA-256.
+OBLIQUE_PROP = "spectral_skin_sss_oblique"
+_IMAGE_TAGS = ("spectral_skin_sss_table", "spectral_skin_sss_bake_key", EDIT_TABLE_PROP, OBLIQUE_PROP)
 #: Material properties the add-on sets (removed by :func:`unwire`).
 _MATERIAL_PROPS = (PREVIOUS_SURFACE_PROP, REPLACED_LINKS_PROP)
 

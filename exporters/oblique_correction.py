@@ -106,3 +106,35 @@ def factors(corr: ObliqueCorrection, colour: np.ndarray, mu: np.ndarray) -> tupl
     a, b = slopes(corr, colour)
     mu = np.asarray(mu, dtype=np.float64)[..., None]
     return 1.0 + a * angle_shape(mu, corr.weight_ramp), 1.0 + b * angle_shape(mu, corr.radius_ramp)
+
+
+#: Texels (luminances, facings) of the tables the live group reads the correction from (:func:`tables`): the
+#: slopes' corners over a luminance step (the larger part) and the smooth step's curvature over a facing step keep
+#: the shipped correction's bilinear interpolation within 9e-4 of :func:`factors` (tests/test_oblique_correction.py);
+#: 0.5 MB a table.
+TABLE_SIZE: tuple[int, int] = (1024, 32)
+
+
+def table_axes(corr: ObliqueCorrection, size: tuple[int, int] = TABLE_SIZE) -> tuple[np.ndarray, np.ndarray]:
+    """Luminances (``size[0]``, the tables' columns) and facings 1 - mu (``size[1]``, their rows) at the texel
+    centres of :func:`tables`: from the first knot to the last, and from the earlier ramp's start to the later
+    one's end (beyond them the factors are constant)."""
+    facing = (min(corr.weight_ramp[0], corr.radius_ramp[0]), max(corr.weight_ramp[1], corr.radius_ramp[1]))
+    return (np.linspace(corr.luminance[0], corr.luminance[-1], size[0]), np.linspace(*facing, size[1]))
+
+
+def tables(corr: ObliqueCorrection, size: tuple[int, int] = TABLE_SIZE) -> dict[str, np.ndarray]:
+    """The correction as two small images, ``"Weight"`` and ``"Radius"``: (rows, columns, 4) float32, RGB
+    f_c - 1 = a_c(Y) h_w and s_c - 1 = b_c(Y) h_r at the texel centres of :func:`table_axes` (luminance along the
+    width, facing along the height, row 0 at the bottom), alpha 1.  Where h = 0 (face-on views) they hold 0
+    exactly, so bilinear filtering gives 0 exactly there too."""
+    lum, facing = table_axes(corr, size)
+    colour = np.repeat(lum[:, None], 3, axis=1) / np.sum(SRGB_LUMINANCE)  # grey of luminance Y
+    a, b = slopes(corr, colour)  # (columns, 3)
+    out = {}
+    for name, slope, ramp in (("Weight", a, corr.weight_ramp), ("Radius", b, corr.radius_ramp)):
+        h = angle_shape(1.0 - facing, ramp)  # (rows,)
+        image = np.ones((size[1], size[0], 4), np.float32)
+        image[..., :3] = h[:, None, None] * slope[None, :, :]
+        out[name] = image
+    return out

@@ -84,24 +84,36 @@ def test_the_grazing_nodes_compute_the_reference_factors_in_cycles():
                 _emission_material(name, colour)
                 probe.view_from(scene, mu)
                 got = probe.render_mean(scene)[0]
-                assert got == pytest.approx(want, abs=oblique.CURVE_ERROR), (colour, theta, name)
+                assert got == pytest.approx(want, abs=oblique.TABLE_ERROR), (colour, theta, name)
 
 
-def test_the_slope_curves_follow_the_knots_within_the_stated_bound():
-    """The Vector Curves of the Grazing group (Blender's evaluation) against the piecewise linear slopes of the
-    reference, on a dense grid of luminances and at the knots (where the tables cut the corners most); the bound is
-    what the Cycles render above uses."""
+def test_the_tables_follow_the_reference_factors_within_the_stated_bound():
+    """The Grazing group's images, interpolated bilinearly at their UVs as Cycles does, against the reference factors
+    on a dense grid of luminances (the knots included, where the filter cuts the corners most) and facings; the
+    bound is what the Cycles render above uses.  Face-on, the images hold 0 exactly."""
     corr = oc.shipped()
     group = oblique.ensure_group()
-    curves = sorted((n for n in group.nodes if n.bl_idname == "ShaderNodeVectorCurve"), key=lambda n: -n.location.y)
-    assert len(curves) == 2 and len(group.nodes) <= 12
-    ys = np.concatenate([np.linspace(0.0, 1.0, 2001), corr.luminance])
-    for node, values in zip(curves, (corr.weight_slope, corr.radius_slope), strict=True):
-        mapping = node.mapping
-        for c in range(3):
-            got = np.array([mapping.evaluate(mapping.curves[c], float(y)) for y in ys])
-            want = np.interp(ys, corr.luminance, values[:, c])
-            assert np.abs(got - want).max() < oblique.CURVE_ERROR, (node.name, c)
+    assert len(group.nodes) <= 12
+    images = {n.image.name.rpartition(" ")[2]: n.image for n in group.nodes if n.bl_idname == "ShaderNodeTexImage"}
+    scale, offset = oblique._texel_map(corr)
+    lum = np.concatenate([np.linspace(0.0, 0.5, 1001), corr.luminance])
+    facing = np.linspace(0.0, 1.0, 401)
+    y, f = np.meshgrid(lum, facing, indexing="ij")
+    want_f, want_s = oc.factors(corr, np.repeat(y[..., None], 3, axis=-1), 1.0 - f)
+    for name, want in (("Weight", want_f), ("Radius", want_s)):
+        image = images[name]
+        cols, rows = image.size
+        pixels = np.empty(cols * rows * 4, np.float32)
+        image.pixels.foreach_get(pixels)
+        pixels = pixels.reshape(rows, cols, 4)[..., :3].astype(np.float64)  # row 0 at the bottom, as the UV's v
+        u = np.clip((y * scale[0] + offset[0]) * cols - 0.5, 0.0, cols - 1.0)  # Extend: the edge texel beyond
+        v = np.clip((f * scale[1] + offset[1]) * rows - 0.5, 0.0, rows - 1.0)
+        i0, j0 = np.minimum(u.astype(int), cols - 2), np.minimum(v.astype(int), rows - 2)
+        tu, tv = (u - i0)[..., None], (v - j0)[..., None]
+        got = 1.0 + ((1 - tv) * ((1 - tu) * pixels[j0, i0] + tu * pixels[j0, i0 + 1])
+                     + tv * ((1 - tu) * pixels[j0 + 1, i0] + tu * pixels[j0 + 1, i0 + 1]))
+        assert np.abs(got - want).max() < oblique.TABLE_ERROR, name
+        assert np.all(pixels[0] == 0.0), name  # face-on and up to the earlier ramp's start: exactly 0
 
 
 def _live_renders(colour, mu: float, samples: int = 32) -> dict[str, np.ndarray]:
