@@ -191,7 +191,6 @@ def add_edit_branch(b, gin, table: edit_table.EditTable, images: dict[str, bpy.t
     base, x0 = live.grid_vector(b, colour, layout, (width, tall))[:2]
     s = b.math("MINIMUM", 42, b.math("FLOOR", 41, x0), layout.shape[0] - 2.0)
     frac = b.math("SUBTRACT", 43, x0, s)
-    slice_u = b.math("MULTIPLY", 43, s, tile_u)
     shifts = {kind: None for kind in edit_table.KINDS}
     still = None  # 1 where every control is neutral, else 0
     for j, name in enumerate(skin_edits.CONTROLS):
@@ -205,10 +204,10 @@ def add_edit_branch(b, gin, table: edit_table.EditTable, images: dict[str, bpy.t
         fraction = b.math("SUBTRACT", 50, t, lower)
         zero = float(edit_table.STACKED // 2)  # the neutral level's place in the stack (edit_table.stacked_levels)
         at_zero = (b.math("COMPARE", 50, lower, zero, 0.5), b.math("COMPARE", 50, lower, zero - 1.0, 0.5))
-        corner = b.node("ShaderNodeCombineXYZ", 51)
-        b.link(slice_u, corner.inputs[0])
-        b.link(b.math("MULTIPLY", 50, lower, 1.0 / edit_table.STACKED), corner.inputs[1])
-        uv = b.vec("ADD", 52, base, corner.outputs[0])
+        corner = b.node("ShaderNodeCombineXYZ", 51)  # (slice, level): their offsets in the image, scaled below
+        b.link(s, corner.inputs[0])
+        b.link(lower, corner.inputs[1])
+        uv = b.vec("MULTIPLY_ADD", 52, corner.outputs[0], (tile_u, 1.0 / edit_table.STACKED, 0.0), base)
         up = b.vec("ADD", 53, uv, (0.0, 1.0 / edit_table.STACKED, 0.0))
         uvs = [[uv, b.vec("ADD", 53, uv, (tile_u, 0.0, 0.0))], [up, b.vec("ADD", 54, up, (tile_u, 0.0, 0.0))]]
         for kind in edit_table.KINDS:
