@@ -389,15 +389,19 @@ def _metres(b: _Builder, log_radius, log_range: tuple[float, float], stage: int)
     return b.curve(stage, log_radius, *curves.smooth_points(np.exp, *log_range))
 
 
-def _per_unit(b: _Builder, metres_per_unit, *factors) -> bpy.types.NodeSocket:
-    """The product of the vector ``factors`` (None: left out) over ``metres_per_unit`` (the Unit Scale over the
-    Translucency): what turns a radius in metres into Blender units with its factors (an edit's, the grazing-light
-    correction's), computed once for every component."""
+def _per_unit(b: _Builder, units_per_metre, *factors) -> bpy.types.NodeSocket:
+    """The product of the vector ``factors`` (None: left out) scaled by ``units_per_metre`` (the Translucency over
+    the Unit Scale): what turns a radius in metres into Blender units with its factors (an edit's, the grazing-light
+    correction's), computed once for every component (a Scale, which Cycles drops where the scale is a constant 1:
+    Unit Scale 1, Translucency 1)."""
     product = None
     for factor in factors:
         if factor is not None:
             product = factor if product is None else b.vec("MULTIPLY", 19, product, factor)
-    return b.vec("DIVIDE", 20, product if product is not None else 1.0, metres_per_unit)
+    scale = b.node("ShaderNodeVectorMath", 20, operation="SCALE")
+    b.link(product if product is not None else (1.0, 1.0, 1.0), scale.inputs[0])
+    b.link(units_per_metre, scale.inputs["Scale"])
+    return scale.outputs[0]
 
 
 def _new_group(k_count: int, table_sha: str) -> tuple[bpy.types.NodeTree, bpy.types.Node, bpy.types.Node]:
@@ -454,8 +458,8 @@ def build_live_group(table: texel_table.TexelTable, layout: live_table.AtlasLayo
     painted = point.painted
     uvs, frac = _slice_uvs(b, layout, point, 12)
     mixture = b.node("ShaderNodeGroup", 34, node_tree=nodes.ensure_group(table.k, "SVM"))
-    unit = b.math("DIVIDE", 19, gin.outputs["Unit Scale"], b.math("MAXIMUM", 18, gin.outputs["Translucency"],
-                                                                   TRANSLUCENCY_MIN))
+    unit = b.math("DIVIDE", 19, b.math("MAXIMUM", 18, gin.outputs["Translucency"], TRANSLUCENCY_MIN),
+                  gin.outputs["Unit Scale"])  # Blender units per metre of radius
     unit.node.name = "Translucency"
     weight_share = b.math("ADD", 24, gin.outputs["Subsurface Weight"], 0.0, clamp=True)
     media, effective = [], None

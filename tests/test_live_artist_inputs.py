@@ -81,8 +81,12 @@ def test_defaults_render_bit_for_bit_without_the_new_inputs(tmp_path, addon):
                     mixture.inputs["Weight Scale"])
     group.links.remove(mixture.inputs["Body"].links[0])  # no diffuse body
     group.links.new(mixture.outputs["BSSRDF"], gout.inputs["Cycles"])  # no Emission, no Alpha
-    for link in list(group.nodes["Translucency"].outputs[0].links):  # radii from the Unit Scale itself
-        group.links.new(gin.outputs["Unit Scale"], link.to_socket)
+    per_metre = group.nodes.new("ShaderNodeMath")  # radii from the Unit Scale itself: 1 / Unit Scale
+    per_metre.operation = "DIVIDE"
+    per_metre.inputs[0].default_value = 1.0
+    group.links.new(gin.outputs["Unit Scale"], per_metre.inputs[1])
+    for link in list(group.nodes["Translucency"].outputs[0].links):
+        group.links.new(per_metre.outputs[0], link.to_socket)
     without = _render(scene, tmp_path, "without")
     np.testing.assert_array_equal(with_inputs, without)
 
