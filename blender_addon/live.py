@@ -29,7 +29,7 @@ colour per channel in the reflectance domain (exporters.painted_gain, step 5 of 
 radii kept, so a gradient leaving the skin colours changes its translucency continuously.
 
 The images are shared by every material of the file (one set per table, tagged with the table's SHA-256) and
-packed into the .blend (7.6 MB with the shipped table), so the file renders anywhere, render farms included.
+packed into the .blend (7.8 MB with the shipped table), so the file renders anywhere, render farms included.
 The group's math follows exporters.live_table step by step; ``exporters.live_table.lookup`` and
 ``exporters.live_table.group_media`` are its reference.
 """
@@ -364,7 +364,7 @@ def _slice_uvs(b: _Builder, layout: live_table.AtlasLayout, point: GridPoint, st
     if layout.rows != 1:
         raise ValueError("the live group reads one-row atlases (exporters.live_table.layout_of)")
     tile_u = layout.tile[0] / layout.size[0]
-    s = b.math("MINIMUM", stage + 1, b.math("FLOOR", stage, point.x0), layout.shape[0] - 2.0)
+    s = b.math("FLOOR", stage, point.x0)  # up to n0 - 1 (x0 is clamped): the atlas' copy of the last slice follows
     frac = b.math("SUBTRACT", stage + 2, point.x0, s)
     uv = b.vec("MULTIPLY_ADD", stage + 2, s, (tile_u, 0.0, 0.0), point.uv)
     return (uv, b.vec("ADD", stage + 3, uv, (tile_u, 0.0, 0.0))), frac

@@ -189,7 +189,7 @@ def add_edit_branch(b, gin, table: edit_table.EditTable, images: dict[str, bpy.t
 
     colour = gin.outputs["Color"]
     base, x0 = live.grid_vector(b, colour, layout, (width, tall))[:2]
-    s = b.math("MINIMUM", 42, b.math("FLOOR", 41, x0), layout.shape[0] - 2.0)
+    s = b.math("FLOOR", 41, x0)  # up to n0 - 1 (x0 is clamped): the image's copy of the last slice follows
     frac = b.math("SUBTRACT", 43, x0, s)
     shifts = {kind: None for kind in edit_table.KINDS}
     still = None  # 1 where every control is neutral, else 0

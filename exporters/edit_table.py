@@ -77,10 +77,10 @@ class EditTable:
 
     def layout(self) -> live_table.AtlasLayout:
         """The slice-atlas layout of the grid (exporters.live_table): every slice in one row, so that the nodes
-        reach slice s + 1 by a fixed offset."""
+        reach slice s + 1 by a fixed offset, then a copy of the last slice (s + 1 exists for every s they read)."""
         n0, n1, n2 = self.shape
         return live_table.AtlasLayout(shape=(n0, n1, n2), origin=tuple(float(o) for o in self.origin),
-                                      step=float(self.step), columns=n0)
+                                      step=float(self.step), columns=n0 + 1)
 
     def shift_bounds(self) -> dict[str, tuple[float, float]]:
         """Per image kind (:data:`KINDS`): the range of the shift D the lookups can give, every channel and every

@@ -36,7 +36,8 @@ Image layout ("slice atlas"): the grid is cut into its n0 slices of constant l; 
 tile's edge, so bilinear filtering at a clamped coordinate never reads the next tile.  Tiles sit in
 ``columns`` columns, row 0 at the bottom (Blender's pixel order); the live group's atlases hold every slice in one
 row (:func:`layout_of`), so that the nodes reach slice s + 1 by a fixed offset of the UV (a few vector nodes
-instead of a row and column per slice: every node costs each shading point its time).  A pixel's centre is at
+instead of a row and column per slice: every node costs each shading point its time), and a copy of the last slice
+after it, so that s = floor(x0) needs no clamp (at x0 = n0 - 1 the fraction is 0).  A pixel's centre is at
 u = (px + 0.5) / width, as Cycles' and the GPU's bilinear filters assume.  The third axis is interpolated by
 two lookups (slices s and s + 1) mixed with the fraction of x0.
 
@@ -44,7 +45,7 @@ Images (float32 RGBA, Non-Color, alpha channel-packed), for each component k: ``
 reflectance rho of the Subsurface Color, exporters.painted_gain.body_reflectance: step 5 works on it, and the
 nodes turn it back into a colour; A the anisotropy g), ``k{k} Log Radius`` (RGB natural log of the radius in metres),
 ``k{k} Weight`` (RGB the weight).  With the shipped table (67 x 31 x 22 nodes, K = 3): nine images of
-2211 x 24 pixels, 7.6 MB (7.3 MiB) in all (:func:`atlas_bytes`), whatever the textures and however many materials
+2244 x 24 pixels, 7.8 MB (7.4 MiB) in all (:func:`atlas_bytes`), whatever the textures and however many materials
 share them.
 """
 
@@ -88,12 +89,13 @@ class AtlasLayout:
 
 
 def layout_of(table: TexelTable) -> AtlasLayout:
-    """The atlas layout of ``table``: every slice in one row (module docstring)."""
+    """The atlas layout of ``table``: every slice in one row, then a copy of the last slice (module docstring: the
+    nodes read slices s and s + 1 for s = floor(x0) up to n0 - 1, where the fraction is 0, with no clamp of s)."""
     n0, n1, n2 = table.shape
     if not np.allclose(table.step, table.step[0]):
         raise ValueError("the live table needs the same step on every axis")
     return AtlasLayout(shape=(n0, n1, n2), origin=tuple(float(o) for o in table.origin), step=float(table.step[0]),
-                       columns=n0)
+                       columns=n0 + 1)
 
 
 def fill_outside_cube(values: np.ndarray) -> np.ndarray:
