@@ -26,7 +26,7 @@ ROOT = Path(__file__).resolve().parents[2]
 RESOLUTION = 64
 TAA_SAMPLES = 4
 TEXTURE = 256
-ROUNDS = 2
+ROUNDS = 4
 
 _CHILD = """
 import json, sys, time
