@@ -164,24 +164,14 @@ def ensure_images(table: texel_table.TexelTable, atlases: Callable[[], dict[str,
     """The table's atlas images, packed, one set per file: reused when images of this table exist, else made
     (``atlases``: gives the table's atlases, made elsewhere meanwhile; default: made here)."""
     layout = live_table.layout_of(table)
-    width, height = layout.size
     names = _image_names(table)
     found = _found_images(table)
     if len(found) == len(names):
         return layout, found
     atlases = atlases() if atlases is not None else live_table.atlases(table)[1]
     images = {}
-    for name in names:
-        old = bpy.data.images.get(image_name(name))
-        if old is not None and old.users == 0:
-            bpy.data.images.remove(old)
-        image = bpy.data.images.new(image_name(name), width, height, alpha=True, float_buffer=True)
-        image.colorspace_settings.name = "Non-Color"
-        image.alpha_mode = "CHANNEL_PACKED"  # A holds the anisotropy, not coverage
-        image.pixels.foreach_set(atlases[name].ravel())
-        image.pack()
-        image[TABLE_PROP] = table.sha256
-        images[name] = image
+    for name in names:  # A holds the anisotropy, not coverage
+        images[name] = wiring.packed_table_image(image_name(name), atlases[name], TABLE_PROP, table.sha256)
     return layout, images
 
 

@@ -99,16 +99,7 @@ def ensure_images(table: edit_table.EditTable, atlases: Callable[[], dict[str, n
                 images[name] = image
                 continue
             atlases = atlases if atlases is not None else make()
-            pixels = atlases[name]
-            if image is not None and image.users == 0:
-                bpy.data.images.remove(image)
-            image = bpy.data.images.new(full, pixels.shape[1], pixels.shape[0], alpha=True, float_buffer=True)
-            image.colorspace_settings.name = "Non-Color"
-            image.alpha_mode = "CHANNEL_PACKED"
-            image.pixels.foreach_set(pixels.ravel())
-            image.pack()
-            image[EDIT_TABLE_PROP] = table.sha256
-            images[name] = image
+            images[name] = wiring.packed_table_image(full, atlases[name], EDIT_TABLE_PROP, table.sha256)
     return images
 
 

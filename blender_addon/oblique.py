@@ -73,16 +73,7 @@ def ensure_images(corr: oblique_correction.ObliqueCorrection) -> dict[str, bpy.t
             images[name] = image
             continue
         tables = tables if tables is not None else oblique_correction.tables(corr)
-        pixels = tables[name]
-        if image is not None and image.users == 0:
-            bpy.data.images.remove(image)
-        image = bpy.data.images.new(full, pixels.shape[1], pixels.shape[0], alpha=True, float_buffer=True)
-        image.colorspace_settings.name = "Non-Color"
-        image.alpha_mode = "CHANNEL_PACKED"
-        image.pixels.foreach_set(pixels.ravel())
-        image.pack()
-        image[CORRECTION_PROP] = sha
-        images[name] = image
+        images[name] = wiring.packed_table_image(full, tables[name], CORRECTION_PROP, sha)
     return images
 
 

@@ -30,6 +30,7 @@ import json
 import os
 
 import bpy
+import numpy as np
 
 #: Custom property on every node the add-on adds to a material.
 ADDED_PROP = "spectral_skin_sss_added"
@@ -218,3 +219,20 @@ def purge_unused() -> tuple[int, int]:
     for image in images:
         bpy.data.images.remove(image)
     return groups, len(images)
+
+
+def packed_table_image(name: str, pixels: np.ndarray, tag_prop: str, tag_value: str) -> bpy.types.Image:
+    """A new packed float RGBA image ``name`` holding ``pixels`` (shape (height, width, 4), rows bottom to top, data:
+    Non-Color, alpha a fourth channel of data), tagged ``image[tag_prop] = tag_value`` so that :func:`purge_unused`
+    removes it when no material uses it; an unused image of that name is removed first (one in use is kept and the
+    new image gets Blender's next free name)."""
+    old = bpy.data.images.get(name)
+    if old is not None and old.users == 0:
+        bpy.data.images.remove(old)
+    image = bpy.data.images.new(name, pixels.shape[1], pixels.shape[0], alpha=True, float_buffer=True)
+    image.colorspace_settings.name = "Non-Color"
+    image.alpha_mode = "CHANNEL_PACKED"
+    image.pixels.foreach_set(pixels.ravel())
+    image.pack()
+    image[tag_prop] = tag_value
+    return image
