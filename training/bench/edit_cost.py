@@ -4,15 +4,15 @@ group built without them, side by side.
 Renders: the demo head (training.demo_render, ``RESOLUTION`` squared px, Cycles CPU on one thread, denoiser off,
 ``SAMPLES`` samples) with the medium tone's albedo texture through Invert Skin Albedo's default (the live group with
 the edit inputs).  One Blender process renders, ``ROUNDS`` times in turn, the live group of the same table built
-without the edit nodes (blender_addon.live.build_live_group without an edit table: the unedited group) and the
-group with the edit inputs at neutral and under the presets tan, flush and pallor (exporters.skin_edits.PRESETS),
-swapping the material's group between renders; each round starts one material later than the one before, so that no
-material always follows the swap from the other group.  Each render's CPU time (getrusage, scene sync included) is kept;
-the ratio is that of the medians: on a shared machine every material meets the same disturbance in turn, and the
-median is robust to the renders that other work slowed.  Equal samples, so an edited row also carries the change
-of the physics (an edit changes how far light walks in the tone), not only the nodes' cost.  Images: the bytes the
-edit table's images take in Blender (float RGBA, 16 bytes a pixel).  Operator: Invert Skin Albedo on a 4096²
-albedo with the edit table shipped (training.bench.live's set-up).
+without the edit nodes (blender_addon.live.build_live_group without an edit table: the unedited group) and the group
+with the edit inputs at neutral and under the presets tan, flush and pallor (exporters.skin_edits.PRESETS), swapping
+the material's group between renders; each round starts one material later than the one before, so that no material
+always follows the swap from the other group.  Each render's CPU time (getrusage, scene sync included) is kept; the
+ratio is that of the medians: on a shared machine every material meets the same disturbance in turn, and the median
+is robust to the renders that other work slowed.  Equal samples, so an edited row also carries the change of the
+physics (an edit changes how far light walks in the tone), not only the nodes' cost.  Images: the bytes the edit
+table's images take in Blender (float RGBA, 16 bytes a pixel).  Operator: Invert Skin Albedo on a 4096² albedo with
+the edit table shipped (training.bench.live's set-up).
 """
 
 from __future__ import annotations
@@ -58,9 +58,10 @@ table = live.table_for_model(preferences.DEFAULT_MODEL)
 layout, images = live.ensure_images(table)
 plain = live.build_live_group(table, layout, images)
 values = {{"neutral": NEUTRAL, **{{p: tuple(PRESETS[p].row()) for p in {presets!r}}}}}
-times = {{mode: [] for mode in {modes!r}}}
+modes = {modes!r}
+times = {{mode: [] for mode in modes}}
 for r in range({rounds}):
-    for mode in {modes!r}[r % {n}:] + {modes!r}[:r % {n}]:
+    for mode in modes[r % len(modes):] + modes[:r % len(modes)]:  # each round one material later
         node.node_tree = plain if mode == "plain" else edited
         for name, value in zip(("Melanin", "Blood", "Oxygenation"), values.get(mode, NEUTRAL)):
             if name in node.inputs:
@@ -78,8 +79,7 @@ def measure(rounds: int = ROUNDS, samples: int = SAMPLES, resolution: int = RESO
     with tempfile.TemporaryDirectory(prefix="bench_edit_") as tmp:
         return live_bench.run_script(_CHILD.format(root=str(ROOT), resolution=resolution, samples=samples,
                                                    texture=TEXTURE, texture_path=str(Path(tmp) / "skin.png"),
-                                                   presets=PRESETS, modes=MODES, rounds=rounds,
-                                                   n=len(MODES)))
+                                                   presets=PRESETS, modes=MODES, rounds=rounds))
 
 
 def image_megabytes() -> float:
