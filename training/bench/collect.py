@@ -48,6 +48,7 @@ BENCH_MODULES = [
     "training.bench.addon",
     "training.bench.live",
     "training.bench.render_cost",
+    "training.bench.instructions",
     "training.bench.oblique",
     "training.bench.edit_cost",
     "training.bench.mixture_design",

@@ -232,12 +232,15 @@ def measure(modes: tuple[str, ...] = ("principled", "live"), samples: tuple[int,
         return {mode: _fit_renders(renders[mode], samples) for mode in modes}
 
 
-def _child_script(mode: str, samples: tuple[int, ...], resolution: int, tmp: Path, scene: str = "head") -> str:
+def _child_script(mode: str, samples: tuple[int, ...], resolution: int, tmp: Path, scene: str = "head",
+                  seeds: tuple[int, ...] = SEEDS, variant: str | None = None) -> str:
+    """The child's script rendering ``mode`` (a material mode or a key of :data:`VARIANTS`; ``variant``: the code
+    that changes the material, instead of the mode's) at each of ``samples`` and ``seeds``, in ``tmp``."""
     base = mode if mode in ("principled", "live", "bake") else "live" if mode.startswith("live_") else "plain"
     return _CHILD.format(root=str(ROOT), resolution=resolution, texture=TEXTURE, scene=scene,
                          texture_path=str(tmp / "skin.png"), mode=base, radius=SKIN_RADIUS_MM,
-                         variant=VARIANTS.get(mode, ""), samples=tuple(samples), seeds=SEEDS,
-                         out=str(tmp)).replace("{mode}_", f"{mode}_")
+                         variant=VARIANTS.get(mode, "") if variant is None else variant, samples=tuple(samples),
+                         seeds=tuple(seeds), out=str(tmp)).replace("{mode}_", f"{mode}_")
 
 
 def _fit_renders(renders: list[dict], samples: tuple[int, ...]) -> dict:
