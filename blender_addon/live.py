@@ -53,7 +53,7 @@ GROUP_NAME = "Spectral Skin SSS Live"
 #: Custom properties: on the group and the images, the SHA-256 of the table they were made from.
 TABLE_PROP = "spectral_skin_sss_table"
 #: Layout version of the live group (bump when the generated nodes change).
-LIVE_VERSION = 12
+LIVE_VERSION = 13
 IMAGE_PREFIX = "Spectral Skin SSS Table"
 #: Custom property on the group: whether it holds the grazing-light correction (blender_addon.oblique).
 GRAZING_PROP = "spectral_skin_sss_grazing"
@@ -503,10 +503,10 @@ def _painted_media(b: _Builder, painted, media: list, fit: painted_gain.BodyFit,
     ``painted`` colour: exporters.painted_gain.painted_media with nodes, the inverse fit
     (exporters.painted_gain.body_colour) a curve through it (blender_addon.curves: within 1e-4) over [low, reach]
     when the table's rho never exceeds ``reach`` (``rho_max``: the curve's end is then the cap at reach), else over
-    [low, 1] after a minimum with reach.  With 1 / G = Q / P (one node for every component), the weight min(w G, 1)
-    and the lift max(w G, 1) of rho (max(rho, w G rho) = rho max(w G, 1)) are one Map Range of w each, from
-    [0, 1 / G] to [0, 1] and from [1 / G, :data:`_GAIN_REACH` / G] to [1, _GAIN_REACH], clamped; where G = 0 both
-    ranges are empty and give 0 and 1."""
+    [low, 1] after a minimum with reach.  The gain G = P / Q is one node for every component (Cycles' divide: 0 where
+    Q is 0); per component the scaled weight w G, the weight min(w G, 1) and the lifted reflectance
+    max(rho, w G rho) are vector nodes with at most one constant: a Map Range would do two of them in one node but
+    loads its four bounds and its steps at every shading point (training.bench.instructions counts the dispatches)."""
     capped = rho_max <= fit.reach  # then max(rho, min(x, reach)) = min(max(rho, x), reach): the curve's cap
     body_points = curves.smooth_points(lambda rho: painted_gain.body_colour(rho, fit), fit.low,
                                        fit.reach if capped else 1.0)
@@ -514,35 +514,16 @@ def _painted_media(b: _Builder, painted, media: list, fit: painted_gain.BodyFit,
     for rho, weight in media:
         total = b.vec("MULTIPLY", stage, weight, rho) if total is None \
             else b.vec("MULTIPLY_ADD", stage + 1, weight, rho, total)
-    inverse = b.vec("DIVIDE", stage + 3, total, painted)  # 1 / G; Cycles' divide: 0 where the colour is 0
-    far = b.vec("MULTIPLY", stage + 4, inverse, _GAIN_REACH)
+    gain = b.vec("DIVIDE", stage + 3, painted, total)  # G; Cycles' divide: 0 where the media render black
     out = []
     for rho, weight in media:
-        lift = _vector_map_range(b, stage + 5, weight, inverse, far, 1.0, _GAIN_REACH)  # max(w G, 1)
-        lifted = b.vec("MULTIPLY", stage + 6, rho, lift)
+        scaled = b.vec("MULTIPLY", stage + 4, weight, gain)
+        lifted = b.vec("MAXIMUM", stage + 6, rho, b.vec("MULTIPLY", stage + 5, scaled, rho))
         if not capped:
             lifted = b.vec("MINIMUM", stage + 7, lifted, fit.reach)
         colour = b.curve(stage + 8, lifted, *body_points)
-        out.append((colour, _vector_map_range(b, stage + 9, weight, 0.0, inverse, 0.0, 1.0)))  # min(w G, 1)
+        out.append((colour, b.vec("MINIMUM", stage + 9, scaled, 1.0)))
     return out
-
-
-#: The largest factor w G by which :func:`_painted_media` lifts a body reflectance: the lift ends at the fit's reach
-#: first for every reflectance above reach / 1e6 (the shipped table's smallest is 0.46).
-_GAIN_REACH = 1e6
-
-
-def _vector_map_range(b: _Builder, stage: int, value, low, high, to_low: float, to_high: float):
-    """A vector Map Range (linear, clamped) of ``value`` from [low, high] (sockets or numbers) to [to_low, to_high]:
-    to_low + (value - low) (to_high - to_low) / (high - low) clamped to that range; to_low where high = low (Cycles'
-    safe divide)."""
-    node = b.node("ShaderNodeMapRange", stage, data_type="FLOAT_VECTOR", clamp=True)
-    sockets = {s.identifier: s for s in node.inputs}
-    b.link(value, sockets["Vector"])
-    for name, bound in (("From_Min_FLOAT3", low), ("From_Max_FLOAT3", high), ("To_Min_FLOAT3", to_low),
-                        ("To_Max_FLOAT3", to_high)):
-        b.link(bound if isinstance(bound, bpy.types.NodeSocket) else (float(bound),) * 3, sockets[name])
-    return next(s for s in node.outputs if s.identifier == "Vector")
 
 
 def _diffuse_body(b: _Builder, gin: bpy.types.Node, painted, weight_share) -> bpy.types.NodeSocket:
