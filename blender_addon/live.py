@@ -53,7 +53,7 @@ GROUP_NAME = "Spectral Skin SSS Live"
 #: Custom properties: on the group and the images, the SHA-256 of the table they were made from.
 TABLE_PROP = "spectral_skin_sss_table"
 #: Layout version of the live group (bump when the generated nodes change).
-LIVE_VERSION = 13
+LIVE_VERSION = 14
 IMAGE_PREFIX = "Spectral Skin SSS Table"
 #: Custom property on the group: whether it holds the grazing-light correction (blender_addon.oblique).
 GRAZING_PROP = "spectral_skin_sss_grazing"
@@ -458,9 +458,9 @@ def build_live_group(table: texel_table.TexelTable, layout: live_table.AtlasLayo
     per_unit = _per_unit(b, unit, edit_factor)  # the radius' scale: the EEVEE output's
     per_unit_cycles = _per_unit(b, unit, edit_factor, factors.outputs["Radius"] if factors is not None else None)
     for k in range(1, table.k + 1):
-        rho, g = _lookup(b, images[f"k{k} Color"], uvs, frac, 18)  # the colour's body reflectance
-        if ranges.anisotropy[k - 1] is not None:  # the same at every node: a value, which Cycles folds
-            g = ranges.anisotropy[k - 1]
+        # the colour's body reflectance, and the anisotropy from the same reads: linked, it costs one mix per
+        # component, where a constant is written to the stack by each of the component's three closures
+        rho, g = _lookup(b, images[f"k{k} Color"], uvs, frac, 18)
         log_r, _ = _lookup(b, images[f"k{k} Log Radius"], uvs, frac, 18)
         weight, _ = _lookup(b, images[f"k{k} Weight"], uvs, frac, 18)
         metres = _metres(b, log_r, ranges.log_radius, 20)

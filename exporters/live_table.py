@@ -167,11 +167,10 @@ def _atlas_anisotropy(g: np.ndarray) -> np.ndarray:
 @dataclass(frozen=True)
 class AtlasRanges:
     """What the atlases of a table hold (:func:`grid_values`), as the live group's nodes need it: ``log_radius``
-    the range (min, max) of the log radii (natural log of metres, every component and channel); ``anisotropy`` per
-    component its value where it is the same at every node (else None); ``rho_max`` the largest body reflectance."""
+    the range (min, max) of the log radii (natural log of metres, every component and channel); ``rho_max`` the
+    largest body reflectance."""
 
     log_radius: tuple[float, float]
-    anisotropy: tuple[float | None, ...]
     rho_max: float
 
 
@@ -182,12 +181,7 @@ def atlas_ranges(table: TexelTable) -> AtlasRanges:
     values = table.values
     log_r = values[..., [i for i, n in enumerate(names) if n.startswith("log_radius_m_")]]
     colours = values[..., [i for i, n in enumerate(names) if n.startswith("color_")]]
-    anisotropy = []
-    for k in range(1, table.k + 1):
-        g = values[..., names.index(f"anisotropy_k{k}")]
-        g = _atlas_anisotropy(g[np.isfinite(g)])
-        anisotropy.append(float(g[0]) if g.size and np.all(g == g[0]) else None)
-    return AtlasRanges(log_radius=(float(np.nanmin(log_r)), float(np.nanmax(log_r))), anisotropy=tuple(anisotropy),
+    return AtlasRanges(log_radius=(float(np.nanmin(log_r)), float(np.nanmax(log_r))),
                        rho_max=float(painted_gain.body_reflectance(np.nanmax(colours), table.options.ior)))
 
 

@@ -78,8 +78,3 @@ def test_atlas_ranges_are_those_of_the_filled_grids(table):
     assert ranges.log_radius == pytest.approx((log_r.min(), log_r.max()), abs=1e-12)
     rho = np.stack([grids[f"k{k} Color"][..., :3] for k in range(1, table.k + 1)])
     assert ranges.rho_max == pytest.approx(rho.max(), abs=1e-12)
-    for k, g in enumerate(ranges.anisotropy, start=1):
-        alpha = grids[f"k{k} Color"][..., 3]
-        assert (g is not None) == bool(np.all(alpha == alpha.flat[0]))
-        if g is not None:
-            assert np.all(alpha == g)
