@@ -21,17 +21,16 @@ and reads from its output, per material:
 
 Materials: Principled BSDF Random Walk (Skin) (the anchor of :mod:`training.bench.render_cost`), the Bake mode's
 maps, the live group (Invert Skin Albedo's default, edit inputs at neutral) and the live group under the pallor preset
-(exporters.skin_edits.PRESETS, the preset with the most edit lookups per shading point).  Instructions are not time:
-a walk's ray casts wait on memory where the node loop does not, so the live group's instruction ratio is larger than
-its time ratio; what the counts give is a change's effect without the machine's noise.  Needs ``valgrind`` on the
-PATH (about 100 s per material, two at a time); without it the rows say so.
+(exporters.skin_edits.PRESETS, whose timed cost sat highest against the target on the quiet machine).
+Instructions are not time: a walk's ray casts wait on memory where the node loop does not, so the live group's
+instruction ratio is larger than its time ratio; what the counts give is a change's effect without the machine's
+noise.  Needs ``valgrind`` on the PATH (about 100 s per material, two at a time); without it the rows say so.
 """
 
 from __future__ import annotations
 
 import os
 import shutil
-import subprocess
 import sys
 import tempfile
 from concurrent.futures import ThreadPoolExecutor
@@ -39,8 +38,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from training.bench import render_cost
+from training.bench.live import run_script
 
-ROOT = Path(__file__).resolve().parents[2]
 RESOLUTION = render_cost.RESOLUTION
 SAMPLES = 4
 #: Callgrind's counting: only inside this function (and what it calls), Cycles' CPU path-tracing work.
@@ -139,13 +138,10 @@ def _run(name: str, mode: str, variant: str | None, tmp: Path) -> Counts:
     tmp.mkdir(parents=True, exist_ok=True)
     script = render_cost._child_script(mode, (SAMPLES,), RESOLUTION, tmp, seeds=(1,), variant=variant)
     out = tmp / "callgrind.out"
-    env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")]))
-    done = subprocess.run(["valgrind", "--tool=callgrind", "--dump-instr=yes", "--collect-atstart=no",
-                           f"--toggle-collect={COUNTED}", f"--callgrind-out-file={out}", sys.executable, "-c", script],
-                          capture_output=True, text=True, env=env, timeout=3600)
-    line = next((ln for ln in done.stdout.splitlines() if ln.startswith("RESULT")), None)
-    if line is None or not out.is_file():
-        raise RuntimeError(f"callgrind run of {name} failed:\n{done.stdout[-2000:]}\n{done.stderr[-2000:]}")
+    run_script(script, ("valgrind", "--tool=callgrind", "--dump-instr=yes", "--collect-atstart=no",
+                        f"--toggle-collect={COUNTED}", f"--callgrind-out-file={out}"))
+    if not out.is_file():
+        raise RuntimeError(f"callgrind wrote no output for {name} ({out})")
     return parse(out)
 
 

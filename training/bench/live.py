@@ -103,11 +103,13 @@ def skin_albedo(path: Path, size: int) -> Path:
     return path
 
 
-def run_script(script: str):
-    """Run ``script`` in a fresh Python process with the repository on its path; returns the JSON value its
-    ``RESULT`` line carries (RuntimeError with the process's output when there is none)."""
+def run_script(script: str, prefix: tuple[str, ...] = ()):
+    """Run ``script`` in a fresh Python process with the repository on its path (``prefix``: a command the process
+    runs under, e.g. a profiler's); returns the JSON value its ``RESULT`` line carries (RuntimeError with the
+    process's output when there is none)."""
     env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")]))
-    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, env=env, timeout=1800)
+    done = subprocess.run([*prefix, sys.executable, "-c", script], capture_output=True, text=True, env=env,
+                          timeout=1800)
     line = next((ln for ln in done.stdout.splitlines() if ln.startswith("RESULT")), None)
     if line is None:
         raise RuntimeError(f"benchmark subprocess failed:\n{done.stdout[-3000:]}\n{done.stderr[-3000:]}")
