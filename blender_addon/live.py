@@ -53,7 +53,7 @@ GROUP_NAME = "Spectral Skin SSS Live"
 #: Custom properties: on the group and the images, the SHA-256 of the table they were made from.
 TABLE_PROP = "spectral_skin_sss_table"
 #: Layout version of the live group (bump when the generated nodes change).
-LIVE_VERSION = 14
+LIVE_VERSION = 15
 IMAGE_PREFIX = "Spectral Skin SSS Table"
 #: Custom property on the group: whether it holds the grazing-light correction (blender_addon.oblique).
 GRAZING_PROP = "spectral_skin_sss_grazing"
@@ -187,6 +187,8 @@ class _Builder:
         self.group = group
         self.rows: dict[int, int] = {}
         self.locations: list[tuple[int, float, float]] = []
+        #: A zero vector computed at each shading point (blender_addon.nodes.computed_zero), once the group has one.
+        self.zero: bpy.types.NodeSocket | None = None
 
     def node(self, kind: str, stage: int, **props) -> bpy.types.Node:
         self._locate(len(self.group.nodes), stage)
@@ -238,6 +240,13 @@ class _Builder:
             elif value is not None:
                 set_default(node.inputs[i], tuple(float(v) for v in np.broadcast_to(value, 3)))
         return node.outputs["Value"] if op == "DOT_PRODUCT" else node.outputs["Vector"]
+
+    def product(self, stage: int, factor, value: bpy.types.NodeSocket) -> bpy.types.NodeSocket:
+        """``factor`` x ``value`` per channel as a Mix node from the group's computed zero (blender_addon.nodes.product:
+        half the instructions of a Vector Math Multiply); for products of values computed at each shading point (a
+        Vector Math Multiply by a constant 1 is folded away by Cycles, a Mix is not)."""
+        self._locate(len(self.group.nodes), stage)
+        return nodes.product(self.group, factor, value, self.zero)
 
     def mix(self, data_type: str, stage: int, fac, a, b) -> bpy.types.NodeSocket:
         node = self.node("ShaderNodeMix", stage, data_type=data_type, clamp_factor=False)
@@ -321,7 +330,7 @@ def grid_vector(b: _Builder, colour: bpy.types.NodeSocket, layout: live_table.At
     line = _map_range(b, 3, clamped, (0.0,) * 3, (_SRGB_KNEE,) * 3, (_SRGB_OFFSET / _SRGB_SCALE,) * 3,
                       ((_SRGB_SLOPE * _SRGB_KNEE + _SRGB_OFFSET) / _SRGB_SCALE,) * 3)
     encoded = b.vec("MAXIMUM", 5, gamma.outputs[0], line)  # e' = (e + 0.055) / 1.055
-    comb = b.node("ShaderNodeCombineXYZ", 7)
+    comb = b.node("ShaderNodeCombineColor", 7)  # one SVM node where a Combine XYZ runs three
     for slot, d in enumerate(_GRID_ORDER):
         weights = _SRGB_SCALE * texel_table.COORDS[d] / layout.step
         b.group.links.new(b.vec("DOT_PRODUCT", 6, encoded, weights), comb.inputs[slot])
@@ -331,7 +340,7 @@ def grid_vector(b: _Builder, colour: bpy.types.NodeSocket, layout: live_table.At
     to_low = (border / width, border / height, 0.0)
     to_high = ((extent[0] + border) / width, (extent[1] + border) / height, extent[2])
     uv = _map_range(b, 8, comb.outputs[0], origin, origin + extent, to_low, to_high)
-    sep = b.node("ShaderNodeSeparateXYZ", 9)
+    sep = b.node("ShaderNodeSeparateColor", 9)
     b.group.links.new(uv, sep.inputs[0])
     return GridPoint(uv=uv, x0=sep.outputs[2], coords=comb.outputs[0], painted=clamped)
 
@@ -445,6 +454,7 @@ def build_live_group(table: texel_table.TexelTable, layout: live_table.AtlasLayo
         b.link(gin.outputs["Normal"], factors.inputs["Normal"])
         clamped = factors.outputs["Color"]
     point, outside = _grid_coords(b, layout, colour, clamped)
+    b.zero = nodes.computed_zero(group, point.x0).vector  # x0 is clamped to the grid: finite
     painted = point.painted
     uvs, frac = _slice_uvs(b, layout, point, 12)
     mixture = b.node("ShaderNodeGroup", 34, node_tree=nodes.ensure_group(table.k, "SVM"))
@@ -465,7 +475,8 @@ def build_live_group(table: texel_table.TexelTable, layout: live_table.AtlasLayo
         weight, _ = _lookup(b, images[f"k{k} Weight"], uvs, frac, 18)
         metres = _metres(b, log_r, ranges.log_radius, 20)
         media.append((rho, weight))
-        b.link(b.vec("MULTIPLY", 21, metres, per_unit_cycles), mixture.inputs[nodes.socket_name(k, "Radius")])
+        radius = b.product(21, per_unit_cycles, metres) if grazing else b.vec("MULTIPLY", 21, metres, per_unit_cycles)
+        b.link(radius, mixture.inputs[nodes.socket_name(k, "Radius")])
         b.link(g, mixture.inputs[nodes.socket_name(k, "Anisotropy")])
         term = b.vec("MULTIPLY", 24, weight, b.vec("MULTIPLY", 21, metres, per_unit))
         effective = term if effective is None else b.vec("ADD", 25, effective, term)
@@ -505,20 +516,21 @@ def _painted_media(b: _Builder, painted, media: list, fit: painted_gain.BodyFit,
     when the table's rho never exceeds ``reach`` (``rho_max``: the curve's end is then the cap at reach), else over
     [low, 1] after a minimum with reach.  The gain G = P / Q is one node for every component (Cycles' divide: 0 where
     Q is 0); per component the scaled weight w G, the weight min(w G, 1) and the lifted reflectance
-    max(rho, w G rho) are vector nodes with at most one constant: a Map Range would do two of them in one node but
-    loads its four bounds and its steps at every shading point (training.bench.instructions counts the dispatches)."""
+    max(rho, w G rho) are vector nodes with at most one constant, the products Mix nodes from the group's computed zero
+    (:meth:`_Builder.product`): a Map Range would do two of them in one node but loads its four bounds and its steps
+    at every shading point (training.bench.instructions counts the dispatches)."""
     capped = rho_max <= fit.reach  # then max(rho, min(x, reach)) = min(max(rho, x), reach): the curve's cap
     body_points = curves.smooth_points(lambda rho: painted_gain.body_colour(rho, fit), fit.low,
                                        fit.reach if capped else 1.0)
     total = None
     for rho, weight in media:
-        total = b.vec("MULTIPLY", stage, weight, rho) if total is None \
+        total = b.product(stage, weight, rho) if total is None \
             else b.vec("MULTIPLY_ADD", stage + 1, weight, rho, total)
     gain = b.vec("DIVIDE", stage + 3, painted, total)  # G; Cycles' divide: 0 where the media render black
     out = []
     for rho, weight in media:
-        scaled = b.vec("MULTIPLY", stage + 4, weight, gain)
-        lifted = b.vec("MAXIMUM", stage + 6, rho, b.vec("MULTIPLY", stage + 5, scaled, rho))
+        scaled = b.product(stage + 4, weight, gain)
+        lifted = b.vec("MAXIMUM", stage + 6, rho, b.product(stage + 5, scaled, rho))
         if not capped:
             lifted = b.vec("MINIMUM", stage + 7, lifted, fit.reach)
         colour = b.curve(stage + 8, lifted, *body_points)

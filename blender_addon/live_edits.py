@@ -195,7 +195,7 @@ def add_edit_branch(b, gin, table: edit_table.EditTable, images: dict[str, bpy.t
         fraction = b.math("SUBTRACT", 50, t, lower)
         zero = float(edit_table.STACKED // 2)  # the neutral level's place in the stack (edit_table.stacked_levels)
         at_zero = (b.math("COMPARE", 50, lower, zero, 0.5), b.math("COMPARE", 50, lower, zero - 1.0, 0.5))
-        corner = b.node("ShaderNodeCombineXYZ", 51)  # (slice, level): their offsets in the image, scaled below
+        corner = b.node("ShaderNodeCombineColor", 51)  # (slice, level): their offsets in the image, scaled below
         b.link(s, corner.inputs[0])
         b.link(lower, corner.inputs[1])
         uv = b.vec("MULTIPLY_ADD", 52, corner.outputs[0], (tile_u, 1.0 / edit_table.STACKED, 0.0), base)

@@ -110,6 +110,7 @@ tests/test_cycles_mixture.py; the coat's highlight, normal map and wiring in tes
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import bpy
 
@@ -277,17 +278,18 @@ def build_svm_group(k_count: int = 3, name: str = GROUP_NAME, design: str = "nes
     group, gin, gout = _fresh_group(name, k_count, "SVM")
     group["spectral_skin_sss_design"] = design
     build = _svm_mixture if design == "nested" else _svm_mixture_per_channel
-    scale = _vec(group, "SCALE", gin.outputs["Weight Scale"], x=-1150.0, y=500.0)
-    group.links.new(_body_scale(group, gin), scale.node.inputs["Scale"])
-    mixture = build(group, gin, k_count, scale)
+    body, fresnel = _body_scale(group, gin)
+    zero = computed_zero(group, fresnel)
+    scale = product(group, body, gin.outputs["Weight Scale"], zero.vector, x=-1150.0, y=500.0)
+    mixture = build(group, gin, k_count, scale, zero)
     surface = _add_shader(group, principled_specular(group, gin), mixture, 1050.0, 700.0)
     surface = _add_shader(group, surface, gin.outputs["Body"], 1150.0, 700.0)
     group.links.new(_outer_layers(group, gin, surface), gout.inputs["BSSRDF"])
     return group
 
 
-def _svm_mixture(group: bpy.types.NodeTree, gin: bpy.types.Node, k_count: int,
-                 scale: bpy.types.NodeSocket) -> bpy.types.NodeSocket:
+def _svm_mixture(group: bpy.types.NodeTree, gin: bpy.types.Node, k_count: int, scale: bpy.types.NodeSocket,
+                 zero: Zero) -> bpy.types.NodeSocket:
     """The nested closures of every component (module docstring), each scaled by its share of w_kc x ``scale``
     (per channel: the Weight Scale times the coat's body weight) and summed; returns the sum.
 
@@ -298,27 +300,19 @@ def _svm_mixture(group: bpy.types.NodeTree, gin: bpy.types.Node, k_count: int,
     closure 3 those with w_c >= hi at hi - mid; a channel left out has Color 0 (no weight, no walk) but keeps its
     radius, so Cycles still counts it in the closure's pick weight (closure/bssrdf.h: sample_weight is the mean
     weight times the number of channels with a radius), which keeps every closure's pick weight the sum of its
-    channels' weights.  A closure of weight 0 is skipped by Cycles.  The sort runs for three components at once
-    (:func:`_sorted_levels`)."""
+    channels' weights (a masked channel without its radius would lower the pick weight of the masked closures: 1.23x
+    the demo head's noise at equal samples).  A closure of weight 0 is skipped by Cycles."""
     total, overflow, highest = None, None, None
-    scaled, separated = [], []
     for k in range(1, k_count + 1):
         y0 = -(k - 1) * 1500.0
-        scaled.append(_vec(group, "MULTIPLY", gin.outputs[socket_name(k, "Weight")], scale, x=-1050.0,
-                           y=y0 - 400.0))
-        sep = group.nodes.new("ShaderNodeSeparateColor")
-        sep.location = (-950.0, y0 - 400.0)
-        group.links.new(scaled[-1], sep.inputs[0])
-        separated.append(sep)
-    for k, (lo, mid, hi, mid_share, hi_share) in enumerate(_sorted_levels(group, separated), start=1):
-        y0 = -(k - 1) * 1500.0
-        levels = ((None, lo), (mid, mid_share), (hi, hi_share))
-        for j, (threshold, share) in enumerate(levels):
+        scaled = product(group, gin.outputs[socket_name(k, "Weight")], scale, zero.vector, x=-1050.0, y=y0 - 400.0)
+        lo, hi, mid_share, hi_share = _sorted_levels(group, scaled, y0)
+        for j, share in enumerate((lo, mid_share, hi_share)):
             y = y0 - j * 450.0
-            colour = gin.outputs[socket_name(k, "Color")] if threshold is None \
-                else _masked(group, gin.outputs[socket_name(k, "Color")], scaled[k - 1], lo if j == 1 else hi, y,
+            colour = gin.outputs[socket_name(k, "Color")] if j == 0 \
+                else _masked(group, gin.outputs[socket_name(k, "Color")], scaled, lo if j == 1 else hi, zero, y,
                              top=j == 2)
-            sss = _closure(group, gin, colour, gin.outputs[socket_name(k, "Radius")], k, y)
+            sss = _closure(group, gin, colour, gin.outputs[socket_name(k, "Radius")], k, y, zero.value)
             sss.label = f"k{k} " + ("RGB", "two largest weights", "largest weight")[j]
             part = _mix_shader(group, share, sss.outputs["BSSRDF"], -150.0, y)
             total = part if total is None else _add_shader(group, total, part, 50.0 + 20.0 * k, y)
@@ -333,42 +327,71 @@ def _svm_mixture(group: bpy.types.NodeTree, gin: bpy.types.Node, k_count: int,
     return _add_shader(group, total, _mix_shader(group, gate, overflow, 0.0, 300.0), 150.0, 300.0)
 
 
-def _sorted_levels(group: bpy.types.NodeTree, separated: list[bpy.types.Node]) -> list[tuple]:
-    """Per component, from its Separate Color node of the scaled weights: (lo, mid, hi, mid - lo, hi - mid) as float
-    sockets, lo <= mid <= hi the weights sorted over channels (mid = max(min(w_R, w_G), min(max(w_R, w_G), w_B))).
+def _sorted_levels(group: bpy.types.NodeTree, scaled: bpy.types.NodeSocket, y: float) -> tuple:
+    """(lo, hi, mid - lo, hi - mid) as float sockets: lo <= mid <= hi the channels of ``scaled`` (a component's
+    weights) sorted, mid = max(min(w_R, w_G), min(max(w_R, w_G), w_B)), so that each is one of the weights exactly.
+    Scalar Math nodes on one Separate Color: a Math node runs in about half the instructions of a Vector Math node,
+    so eight of them per component cost less than sorting three components at once in vector nodes (a Combine per
+    channel, eight vector nodes and four Separates: ``training.bench.instructions``)."""
+    sep = group.nodes.new("ShaderNodeSeparateColor")
+    sep.location = (-950.0, y - 400.0)
+    group.links.new(scaled, sep.inputs[0])
+    red, green, blue = sep.outputs
+    low_rg = _math(group, "MINIMUM", red, green, x=-850.0, y=y - 350.0)
+    high_rg = _math(group, "MAXIMUM", red, green, x=-850.0, y=y - 450.0)
+    lo = _math(group, "MINIMUM", low_rg, blue, x=-750.0, y=y - 300.0)
+    hi = _math(group, "MAXIMUM", high_rg, blue, x=-750.0, y=y - 400.0)
+    mid = _math(group, "MAXIMUM", low_rg, _math(group, "MINIMUM", high_rg, blue, x=-750.0, y=y - 500.0), x=-650.0,
+                y=y - 500.0)
+    return (lo, hi, _math(group, "SUBTRACT", mid, lo, x=-550.0, y=y - 450.0),
+            _math(group, "SUBTRACT", hi, mid, x=-550.0, y=y - 550.0))
 
-    Computed for three components at a time in vector nodes: a Combine XYZ per channel holds that channel's weight
-    of each component, and every min, max and difference then runs for the three at once.  Per component the values
-    are those the scalar sort gives (the same operations on the same floats).  Every node costs each shading point
-    its evaluation and the loads of its unlinked inputs: for three components this runs 11 fewer dispatches of the
-    shader VM per evaluation than a Math node per component and operation (``training.bench.instructions``)."""
-    out = []
-    for start in range(0, len(separated), 3):
-        chunk = separated[start:start + 3]
-        x, y = -900.0, -start * 1500.0 + 600.0
-        channel = []
-        for c in range(3):
-            combine = group.nodes.new("ShaderNodeCombineXYZ")
-            combine.location = (x - 150.0, y - 150.0 * c)
-            for i, sep in enumerate(chunk):
-                group.links.new(sep.outputs[c], combine.inputs[i])
-            channel.append(combine.outputs[0])
-        low_rg = _vec(group, "MINIMUM", channel[0], channel[1], x=x, y=y)
-        high_rg = _vec(group, "MAXIMUM", channel[0], channel[1], x=x, y=y - 150.0)
-        lo = _vec(group, "MINIMUM", low_rg, channel[2], x=x + 150.0, y=y)
-        hi = _vec(group, "MAXIMUM", high_rg, channel[2], x=x + 150.0, y=y - 150.0)
-        mid = _vec(group, "MAXIMUM", low_rg, _vec(group, "MINIMUM", high_rg, channel[2], x=x + 150.0, y=y - 300.0),
-                   x=x + 300.0, y=y - 300.0)
-        values = (lo, mid, hi, _vec(group, "SUBTRACT", mid, lo, x=x + 450.0, y=y - 300.0),
-                  _vec(group, "SUBTRACT", hi, mid, x=x + 450.0, y=y - 150.0))
-        splits = []
-        for n, value in enumerate(values):
-            split = group.nodes.new("ShaderNodeSeparateXYZ")
-            split.location = (x + 600.0, y - 150.0 * n)
-            group.links.new(value, split.inputs[0])
-            splits.append(split)
-        out.extend(tuple(split.outputs[i] for split in splits) for i in range(len(chunk)))
-    return out
+
+class Zero(NamedTuple):
+    """A zero computed at each shading point (:func:`computed_zero`), as a float and as a vector."""
+
+    value: bpy.types.NodeSocket
+    vector: bpy.types.NodeSocket
+
+
+def computed_zero(tree: bpy.types.NodeTree, finite: bpy.types.NodeSocket) -> Zero:
+    """0 computed from ``finite`` (a float that is finite at every shading point) as finite - finite, for the nodes
+    that would otherwise hold 0 as an unlinked input.  Why: Cycles' SVM compiler gives each unlinked input of every
+    node it compiles a node of its own that writes the value to the stack at each shading point (a vector costs about
+    25 instructions there), and folds a node whose inputs are all constant; a difference of a linked value with
+    itself is not folded, so every node linked to it reads one zero from the stack."""
+    value = _math(tree, "SUBTRACT", finite, finite, x=-550.0, y=650.0)
+    vector = tree.nodes.new("ShaderNodeCombineColor")
+    vector.location = (-450.0, 650.0)
+    for socket in vector.inputs:
+        tree.links.new(value, socket)
+    return Zero(value=value, vector=vector.outputs[0])
+
+
+def product(tree: bpy.types.NodeTree, factor, value: bpy.types.NodeSocket, zero: bpy.types.NodeSocket | None,
+            x: float = 0.0, y: float = 0.0) -> bpy.types.NodeSocket:
+    """``factor`` x ``value`` per channel (``factor`` a vector socket, or a float socket or number for every channel)
+    as a Mix node (vector; non-uniform for a vector factor; factor unclamped) from ``zero`` (a vector socket that is
+    0, or None: the constant 0) to ``value``: 0 (1 - t) + v t is v t exactly for finite t.  A Vector Math Multiply
+    or Scale runs in about twice the instructions of a Mix in Cycles' SVM and writes its unused inputs (its Scale) to
+    the stack at each shading point (``training.bench.instructions``)."""
+    mix = tree.nodes.new("ShaderNodeMix")
+    mix.location = (x, y)
+    mix.data_type = "VECTOR"
+    mix.clamp_factor = False
+    uniform = not (isinstance(factor, bpy.types.NodeSocket) and factor.type in ("VECTOR", "RGBA"))
+    mix.factor_mode = "UNIFORM" if uniform else "NON_UNIFORM"
+    fac, a, b = (s for s in mix.inputs if s.enabled)
+    if isinstance(factor, bpy.types.NodeSocket):
+        tree.links.new(factor, fac)
+    else:
+        fac.default_value = float(factor)
+    if zero is not None:
+        tree.links.new(zero, a)
+    else:
+        a.default_value = (0.0, 0.0, 0.0)
+    tree.links.new(value, b)
+    return next(s for s in mix.outputs if s.enabled)
 
 
 def _mix_shader(group: bpy.types.NodeTree, fac: bpy.types.NodeSocket, closure: bpy.types.NodeSocket, x: float,
@@ -407,32 +430,37 @@ def _vec(group: bpy.types.NodeTree, operation: str, a, b=None, x: float = 0.0, y
 
 
 def _masked(group: bpy.types.NodeTree, colour: bpy.types.NodeSocket, weight: bpy.types.NodeSocket,
-            threshold: bpy.types.NodeSocket, y: float, top: bool = False) -> bpy.types.NodeSocket:
+            threshold: bpy.types.NodeSocket, zero: Zero, y: float, top: bool = False) -> bpy.types.NodeSocket:
     """``colour`` (RGB, in [0, 1]) where the channel's ``weight`` is >= ``threshold`` (a scalar, one of the weights),
-    0 elsewhere, in vector nodes (each node costs every shading point its time).  The largest weight (``top``):
-    colour x floor(weight / threshold), the ratio at most 1, exactly 1 at the largest.  The middle one: used only
-    while it exceeds the smallest (else its closure has weight 0, which Cycles skips), so the channels it takes are
-    those above the smallest, min(colour, (weight - smallest) x :data:`MASK_GAIN`): 0 at the smallest exactly (it is
-    one of the weights, picked by min/max, so the difference is exactly 0), the colour wherever a weight exceeds it
-    by 1 / MASK_GAIN, and in between (a weight within 1e-6 of the smallest) a part of the colour on a closure whose
-    weight, at most that difference, is below 1e-6.  A threshold of 0 (Cycles' safe divide: 0) masks every channel,
-    and is only used by a closure of weight 0."""
+    0 elsewhere.  The largest weight (``top``): colour x floor(weight / threshold), the ratio at most 1, exactly 1 at
+    the largest.  The middle one: used only while it exceeds the smallest (else its closure has weight 0, which
+    Cycles skips), so the channels it takes are those above the smallest, min(colour, (weight - smallest) x
+    :data:`MASK_GAIN`): 0 at the smallest exactly (it is one of the weights, picked by min/max, so the difference is
+    exactly 0), the colour wherever a weight exceeds it by 1 / MASK_GAIN, and in between (a weight within 1e-6 of the
+    smallest) a part of the colour on a closure whose weight, at most that difference, is below 1e-6.  A threshold of
+    0 (Cycles' safe divide: 0) masks every channel, and is only used by a closure of weight 0.  Products are Mix
+    nodes from ``zero`` (:func:`product`)."""
     if top:
         ratio = _vec(group, "DIVIDE", weight, threshold, x=-700.0, y=y)
-        return _vec(group, "MULTIPLY", colour, _vec(group, "FLOOR", ratio, x=-600.0, y=y), x=-550.0, y=y)
+        return product(group, _vec(group, "FLOOR", ratio, x=-600.0, y=y), colour, zero.vector, x=-550.0, y=y)
     above = _vec(group, "SUBTRACT", weight, threshold, x=-700.0, y=y)
-    return _vec(group, "MINIMUM", colour, _vec(group, "MULTIPLY", above, MASK_GAIN, x=-600.0, y=y), x=-550.0, y=y)
+    return _vec(group, "MINIMUM", colour, product(group, MASK_GAIN, above, zero.vector, x=-600.0, y=y), x=-550.0, y=y)
 
 
 def _closure(group: bpy.types.NodeTree, gin: bpy.types.Node, colour: bpy.types.NodeSocket,
-             radius: bpy.types.NodeSocket, k: int, y: float, roughness: float = ENTRY_ROUGHNESS) -> bpy.types.Node:
+             radius: bpy.types.NodeSocket, k: int, y: float, smooth: bpy.types.NodeSocket | None = None,
+             roughness: float = ENTRY_ROUGHNESS) -> bpy.types.Node:
     """Subsurface Scattering node of component k (:func:`random_walk_method`, smooth entry at the group's IOR) of
-    ``colour`` and ``radius``."""
+    ``colour`` and ``radius``; its entry Roughness ``smooth`` (a socket that is :data:`ENTRY_ROUGHNESS`, 0: the
+    node reads it where it would write a constant at each shading point, :func:`computed_zero`) or else
+    ``roughness``."""
     sss = group.nodes.new("ShaderNodeSubsurfaceScattering")
     sss.location = (-450.0, y)
     sss.falloff = random_walk_method()
     sss.inputs["Scale"].default_value = 1.0
     sss.inputs["Roughness"].default_value = roughness
+    if smooth is not None:
+        group.links.new(smooth, sss.inputs["Roughness"])
     group.links.new(colour, sss.inputs["Color"])
     group.links.new(radius, sss.inputs["Radius"])
     group.links.new(gin.outputs[socket_name(k, "Anisotropy")], sss.inputs["Anisotropy"])
@@ -442,7 +470,7 @@ def _closure(group: bpy.types.NodeTree, gin: bpy.types.Node, colour: bpy.types.N
 
 
 def _svm_mixture_per_channel(group: bpy.types.NodeTree, gin: bpy.types.Node, k_count: int,
-                             scale: bpy.types.NodeSocket) -> bpy.types.NodeSocket:
+                             scale: bpy.types.NodeSocket, zero: Zero) -> bpy.types.NodeSocket:
     """The 3K single-channel closures, each scaled by w_kc x ``scale`` (per channel: the Weight Scale times the coat's
     body weight) and summed (module docstring); returns the sum."""
     total = None
@@ -454,7 +482,7 @@ def _svm_mixture_per_channel(group: bpy.types.NodeTree, gin: bpy.types.Node, k_c
         seps = _separated(group, gin, k, y0)
         for c in range(3):
             y = y0 - c * 450.0
-            sss = _channel_closure(group, gin, seps, k, c, y)
+            sss = _channel_closure(group, gin, seps, k, c, y, zero)
             weight = _math(group, "MULTIPLY", seps["Weight"].outputs[c], factor.outputs[c], x=-300.0, y=y + 100.0)
             for part in _weighted(group, sss.outputs["BSSRDF"], weight, y):
                 total = part if total is None else _add_shader(group, total, part, 50.0 + 20.0 * k, y)
@@ -471,11 +499,11 @@ def _weighted(group: bpy.types.NodeTree, closure: bpy.types.NodeSocket, weight: 
             for i, fac in enumerate((weight, _math(group, "SUBTRACT", weight, 1.0, x=-250.0, y=y - 50.0)))]
 
 
-def _channel_closure(group, gin, seps: dict, k: int, c: int, y: float) -> bpy.types.Node:
+def _channel_closure(group, gin, seps: dict, k: int, c: int, y: float, zero: Zero) -> bpy.types.Node:
     """Subsurface Scattering node of component k, channel c (smooth entry at the group's IOR)."""
     col = _single_channel(group, seps["Color"], c, -700.0, y)
     rad = _single_channel(group, seps["Radius"], c, -700.0, y - 150.0)
-    sss = _closure(group, gin, col.outputs[0], rad.outputs[0], k, y)
+    sss = _closure(group, gin, col.outputs[0], rad.outputs[0], k, y, zero.value)
     sss.label = f"k{k} {CHANNELS[c]}"
     return sss
 
@@ -518,10 +546,11 @@ def principled_specular(group: bpy.types.NodeTree, gin: bpy.types.Node) -> bpy.t
     return spec.outputs["BSDF"]
 
 
-def _body_scale(group: bpy.types.NodeTree, gin: bpy.types.Node) -> bpy.types.NodeSocket:
+def _body_scale(group: bpy.types.NodeTree,
+                gin: bpy.types.Node) -> tuple[bpy.types.NodeSocket, bpy.types.NodeSocket]:
     """(1 - F)/(1 - F_dr) of the coat's index (module docstring): the weight of the mixture below the coat, as
     F (-1 / (1 - F_dr)) + 1 / (1 - F_dr): one node at each shading point (F_dr depends on the index alone, so
-    Cycles folds its nodes to constants when the index is one)."""
+    Cycles folds its nodes to constants when the index is one), and the Fresnel node's F (in [0, 1])."""
     coat_ior = _level_ior(group, gin.outputs["IOR"], gin.outputs["Specular IOR Level"])
     fresnel = group.nodes.new("ShaderNodeFresnel")
     fresnel.location = (-650.0, 700.0)
@@ -529,8 +558,9 @@ def _body_scale(group: bpy.types.NodeTree, gin: bpy.types.Node) -> bpy.types.Nod
     group.links.new(gin.outputs["Normal"], fresnel.inputs["Normal"])
     inverse = _math(group, "DIVIDE", 1.0, _math(group, "SUBTRACT", 1.0, _diffuse_fresnel(group, coat_ior), x=150.0,
                                                 y=900.0), x=200.0, y=850.0)
-    return _math(group, "MULTIPLY_ADD", fresnel.outputs["Fac"], _math(group, "MULTIPLY", inverse, -1.0, x=250.0,
+    body = _math(group, "MULTIPLY_ADD", fresnel.outputs["Fac"], _math(group, "MULTIPLY", inverse, -1.0, x=250.0,
                                                                       y=850.0), inverse, x=300.0, y=800.0)
+    return body, fresnel.outputs["Fac"]
 
 
 def _add_shader(group: bpy.types.NodeTree, a: bpy.types.NodeSocket, b: bpy.types.NodeSocket, x: float,
@@ -611,7 +641,7 @@ def build_osl_group(k_count: int = 3, name: str = GROUP_NAME_OSL) -> bpy.types.N
 
 
 #: Custom property marking the group layout version (bump when the generated nodes change).
-GROUP_VERSION = 11
+GROUP_VERSION = 12
 
 
 def ensure_group(k_count: int, backend: str) -> bpy.types.NodeTree:

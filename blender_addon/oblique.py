@@ -5,17 +5,18 @@ the nodes follow).
 Inputs ``Color`` (the painted colour, linear; clamped to [0, 1] here) and ``Normal`` (unlinked: the shading
 normal); outputs ``Weight`` and ``Radius`` (the factors f and s per channel R, G, B) and ``Color`` (the colour
 clamped to [0, 1], which the live group reads instead of clamping it again).  1 - mu = 1 - |N . I| is Layer
-Weight's Facing (Blend 0.5) and Y the luminance of the colour; f - 1 = a(Y) h_w(mu) and s - 1 = b(Y) h_r(mu) are
+Weight's Facing (Blend 0.5) and Y the luminance of the colour; f = 1 + a(Y) h_w(mu) and s = 1 + b(Y) h_r(mu) are
 read, bilinearly, from two small float images over (Y, 1 - mu) (exporters.oblique_correction.tables, packed in the
-file: ``Spectral Skin SSS Grazing Weight`` and ``... Radius``), at one UV for both, and 1 is added.  Where h = 0
-(face-on views) the images hold 0 exactly, so both factors are 1 exactly.  The live group (blender_addon.live)
+file: ``Spectral Skin SSS Grazing Weight`` and ``... Radius``, holding f and s), at one UV for both.  Where h = 0
+(face-on views) the images hold 1 exactly, so both factors are 1 exactly.  The live group (blender_addon.live)
 multiplies its components' weights and radii by them before the mixture group.
 
 Why images and not nodes: the group is evaluated at every shading point, and its node count is a cost Principled
-does not pay (docs/user/live_group.md, render cost); two texture lookups replace the two smooth steps, the two
-slope curves and the two multiply-adds (and the conversions between them) that computed the same.  The images'
-bilinear filter cuts the slopes' corners at the knots by up to a quarter of a texel times the change of slope, and
-the smooth step's curvature over a texel adds a little: :data:`TABLE_ERROR` bounds both for the shipped correction.
+does not pay (docs/user/live_group.md, render cost); two texture lookups replace the two smooth steps, the two slope
+curves and the two multiply-adds (and the conversions between them) that computed the same, and the images hold the
+factors themselves, so no node follows the lookups.  The images' bilinear filter cuts the slopes' corners at the
+knots by up to a quarter of a texel times the change of slope, and the smooth step's curvature over a texel adds a
+little: :data:`TABLE_ERROR` bounds both for the shipped correction.
 """
 
 from __future__ import annotations
@@ -32,7 +33,7 @@ GROUP_NAME = "Spectral Skin SSS Grazing"
 CORRECTION_PROP = wiring.OBLIQUE_PROP
 #: Custom property on the group: how its nodes compute the correction (a group of another version is rebuilt).
 VERSION_PROP = "spectral_skin_sss_grazing_version"
-GRAZING_VERSION = 5
+GRAZING_VERSION = 6
 #: Largest difference of a factor f_c or s_c between the nodes (the images' bilinear filter) and the reference
 #: (exporters.oblique_correction.factors), measured in Cycles by tests/test_oblique_correction.py.
 TABLE_ERROR = 2e-3
@@ -102,9 +103,10 @@ def build_group(corr: oblique_correction.ObliqueCorrection) -> bpy.types.NodeTre
     tree.links.new(clamp.outputs[2], dot.inputs[0])
     tree.links.new(clamp.outputs[2], gout.inputs["Color"])
     dot.inputs[1].default_value = tuple(float(v) for v in colorimetry.SRGB_LUMINANCE)
-    point = _node(tree, "ShaderNodeCombineXYZ", -500.0, 100.0)
-    tree.links.new(dot.outputs["Value"], point.inputs["X"])
-    tree.links.new(layer.outputs["Facing"], point.inputs["Y"])
+    point = _node(tree, "ShaderNodeCombineColor", -500.0, 100.0)  # one SVM node where a Combine XYZ runs three
+    tree.links.new(dot.outputs["Value"], point.inputs[0])
+    tree.links.new(layer.outputs["Facing"], point.inputs[1])
+    point.inputs[2].default_value = 0.0
     uv = _node(tree, "ShaderNodeVectorMath", -350.0, 100.0, operation="MULTIPLY_ADD")
     tree.links.new(point.outputs[0], uv.inputs[0])
     scale, offset = _texel_map(corr)
@@ -114,10 +116,7 @@ def build_group(corr: oblique_correction.ObliqueCorrection) -> bpy.types.NodeTre
         tex = _node(tree, "ShaderNodeTexImage", -200.0, y, image=images[name], interpolation="Linear",
                     extension="EXTEND")
         tree.links.new(uv.outputs["Vector"], tex.inputs["Vector"])
-        out = _node(tree, "ShaderNodeVectorMath", 50.0, y, operation="ADD")
-        tree.links.new(tex.outputs["Color"], out.inputs[0])
-        out.inputs[1].default_value = (1.0, 1.0, 1.0)
-        tree.links.new(out.outputs["Vector"], gout.inputs[name])
+        tree.links.new(tex.outputs["Color"], gout.inputs[name])
     return tree
 
 

@@ -124,10 +124,11 @@ def table_axes(corr: ObliqueCorrection, size: tuple[int, int] = TABLE_SIZE) -> t
 
 
 def tables(corr: ObliqueCorrection, size: tuple[int, int] = TABLE_SIZE) -> dict[str, np.ndarray]:
-    """The correction as two small images, ``"Weight"`` and ``"Radius"``: (rows, columns, 4) float32, RGB
-    f_c - 1 = a_c(Y) h_w and s_c - 1 = b_c(Y) h_r at the texel centres of :func:`table_axes` (luminance along the
-    width, facing along the height, row 0 at the bottom), alpha 1.  Where h = 0 (face-on views) they hold 0
-    exactly, so bilinear filtering gives 0 exactly there too."""
+    """The correction as two small images, ``"Weight"`` and ``"Radius"``: (rows, columns, 4) float32, RGB the factors
+    f_c = 1 + a_c(Y) h_w and s_c = 1 + b_c(Y) h_r at the texel centres of :func:`table_axes` (luminance along the
+    width, facing along the height, row 0 at the bottom), alpha 1.  Where h = 0 (face-on views) they hold 1
+    exactly, so bilinear filtering gives 1 exactly there too (the shader reads the factors with no node after the
+    lookup)."""
     lum, facing = table_axes(corr, size)
     colour = np.repeat(lum[:, None], 3, axis=1) / np.sum(SRGB_LUMINANCE)  # grey of luminance Y
     a, b = slopes(corr, colour)  # (columns, 3)
@@ -135,6 +136,6 @@ def tables(corr: ObliqueCorrection, size: tuple[int, int] = TABLE_SIZE) -> dict[
     for name, slope, ramp in (("Weight", a, corr.weight_ramp), ("Radius", b, corr.radius_ramp)):
         h = angle_shape(1.0 - facing, ramp)  # (rows,)
         image = np.ones((size[1], size[0], 4), np.float32)
-        image[..., :3] = h[:, None, None] * slope[None, :, :]
+        image[..., :3] = 1.0 + h[:, None, None] * slope[None, :, :]
         out[name] = image
     return out

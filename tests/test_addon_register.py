@@ -99,4 +99,9 @@ def test_add_mixture_operator_keeps_user_nodes(enabled):
     roughness = sorted(round(n.inputs["Roughness"].default_value, 9) for n in closures)
     # three nested closures per component, and a copy of each for the part of its weight above 1
     assert roughness == [nodes.ENTRY_ROUGHNESS] * 6 + [round(nodes.OVERFLOW_ROUGHNESS, 9)] * 6
+    # the open closures read their smooth entry from the group's computed zero, the copies hold theirs
+    linked = [n.inputs["Roughness"].is_linked for n in closures]
+    assert sorted(linked) == [False] * 6 + [True] * 6
+    assert all(n.inputs["Roughness"].links[0].from_node.operation == "SUBTRACT" for n in closures
+               if n.inputs["Roughness"].is_linked)
     assert mat[nodes.PREVIOUS_SURFACE_PROP] == "Principled BSDF"

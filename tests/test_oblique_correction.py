@@ -90,7 +90,7 @@ def test_the_grazing_nodes_compute_the_reference_factors_in_cycles():
 def test_the_tables_follow_the_reference_factors_within_the_stated_bound():
     """The Grazing group's images, interpolated bilinearly at their UVs as Cycles does, against the reference factors
     on a dense grid of luminances (the knots included, where the filter cuts the corners most) and facings; the
-    bound is what the Cycles render above uses.  Face-on, the images hold 0 exactly."""
+    bound is what the Cycles render above uses.  Face-on, the images hold 1 exactly."""
     corr = oc.shipped()
     group = oblique.ensure_group()
     assert len(group.nodes) <= 12
@@ -110,10 +110,10 @@ def test_the_tables_follow_the_reference_factors_within_the_stated_bound():
         v = np.clip((f * scale[1] + offset[1]) * rows - 0.5, 0.0, rows - 1.0)
         i0, j0 = np.minimum(u.astype(int), cols - 2), np.minimum(v.astype(int), rows - 2)
         tu, tv = (u - i0)[..., None], (v - j0)[..., None]
-        got = 1.0 + ((1 - tv) * ((1 - tu) * pixels[j0, i0] + tu * pixels[j0, i0 + 1])
-                     + tv * ((1 - tu) * pixels[j0 + 1, i0] + tu * pixels[j0 + 1, i0 + 1]))
+        got = ((1 - tv) * ((1 - tu) * pixels[j0, i0] + tu * pixels[j0, i0 + 1])
+               + tv * ((1 - tu) * pixels[j0 + 1, i0] + tu * pixels[j0 + 1, i0 + 1]))
         assert np.abs(got - want).max() < oblique.TABLE_ERROR, name
-        assert np.all(pixels[0] == 0.0), name  # face-on and up to the earlier ramp's start: exactly 0
+        assert np.all(pixels[0] == 1.0), name  # face-on and up to the earlier ramp's start: exactly 1
 
 
 def _live_renders(colour, mu: float, samples: int = 32) -> dict[str, np.ndarray]:
