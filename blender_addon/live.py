@@ -53,7 +53,7 @@ GROUP_NAME = "Spectral Skin SSS Live"
 #: Custom properties: on the group and the images, the SHA-256 of the table they were made from.
 TABLE_PROP = "spectral_skin_sss_table"
 #: Layout version of the live group (bump when the generated nodes change).
-LIVE_VERSION = 15
+LIVE_VERSION = 16
 IMAGE_PREFIX = "Spectral Skin SSS Table"
 #: Custom property on the group: whether it holds the grazing-light correction (blender_addon.oblique).
 GRAZING_PROP = "spectral_skin_sss_grazing"
@@ -267,9 +267,9 @@ def set_default(socket: bpy.types.NodeSocket, value) -> None:
 class GridPoint(NamedTuple):
     """Where a colour lies in a table's grid (:func:`grid_vector`): ``uv`` the UV of its texel in the first slice of a
     one-row atlas, the grid coordinates clamped to the grid (its z the slice coordinate x0), ``x0`` that slice
-    coordinate, ``coords`` the grid coordinates (x1, x2, x0) plus the origin of :func:`_grid_frame`, before the
-    clamp (the atlas' u, v axes first) and ``painted`` the colour clamped to [0, 1] (vector sockets, ``x0`` a float
-    socket)."""
+    coordinate, ``coords`` the grid coordinates (x1, x2, x0) plus the origin of :func:`_grid_frame`, each over its
+    factor of :func:`_skin_axes`, before the clamp (the atlas' u, v axes first) and ``painted`` the colour clamped to
+    [0, 1] (vector sockets, ``x0`` a float socket)."""
 
     uv: bpy.types.NodeSocket
     x0: bpy.types.NodeSocket
@@ -304,6 +304,23 @@ def _grid_frame(layout: live_table.AtlasLayout) -> tuple[np.ndarray, np.ndarray]
             np.array([layout.shape[d] - 1.0 for d in _GRID_ORDER]))
 
 
+def _skin_axes(layout: live_table.AtlasLayout) -> tuple[list[list[tuple[int, float]]], np.ndarray]:
+    """Per axis of the grid vector (:data:`_GRID_ORDER`): the channels of e' = (e + 0.055) / 1.055 and their signs
+    (+1, -1; the first +1) whose sum the nodes form, and the factor alpha taking that sum to the grid coordinate
+    (plus the origin of :func:`_grid_frame`): 1.055 m / step, m the row's one magnitude (exporters.texel_table.COORDS:
+    the mean of R, G, B; R - G; G - B).  ValueError for a row of other coefficients."""
+    terms, alpha = [], []
+    for d in _GRID_ORDER:
+        row = texel_table.COORDS[d]
+        channels = np.flatnonzero(row)
+        magnitude = abs(float(row[channels[0]]))
+        if row[channels[0]] < 0.0 or not np.all(np.abs(row[channels]) == magnitude):
+            raise ValueError(f"skin-space row {row} is not a sum of channels with signs: grid_vector cannot form it")
+        terms.append([(int(j), float(np.sign(row[j]))) for j in channels])
+        alpha.append(_SRGB_SCALE * magnitude / layout.step)
+    return terms, np.array(alpha)
+
+
 def grid_vector(b: _Builder, colour: bpy.types.NodeSocket, layout: live_table.AtlasLayout,
                 size: tuple[float, float], clamped: bpy.types.NodeSocket | None = None) -> GridPoint:
     """Grid point of ``colour`` (linear RGB): clamped to [0, 1], sRGB encoded piecewise as
@@ -315,9 +332,10 @@ def grid_vector(b: _Builder, colour: bpy.types.NodeSocket, layout: live_table.At
     the power curve lies above the cap, so this is the piecewise encoding except within 3e-7 above the knee, where
     the two pieces differ by 4e-6), computed as 1.055 e' - 0.055 with e' = max(c^(1/2.4), (min(12.92 c, 12.92 knee) +
     0.055) / 1.055): the power by a Gamma node, the capped line by a Map Range, and the factor and offset go to the
-    skin-space dot products and the grid's origin (:func:`_grid_frame`); one Map Range takes the grid coordinates to
-    the atlas' UV and clamps them to the grid.  ``clamped``: the colour clamped to
-    [0, 1] already (the grazing-light group's), read instead of clamping it here."""
+    grid's frame (:func:`_grid_frame`); the skin-space coordinates are sums and differences of e''s channels in Math
+    nodes (:func:`_skin_axes`: a Math node runs in a fifth of the instructions of a Vector Math dot product), their
+    factors in the frame too; one Map Range takes them to the atlas' UV and clamps them to the grid.  ``clamped``: the
+    colour clamped to [0, 1] already (the grazing-light group's), read instead of clamping it here."""
     if clamped is None:
         mix = b.node("ShaderNodeMix", 1, data_type="RGBA", clamp_result=True, clamp_factor=False)
         sockets = [s for s in mix.inputs if s.enabled]
@@ -329,17 +347,22 @@ def grid_vector(b: _Builder, colour: bpy.types.NodeSocket, layout: live_table.At
     set_default(gamma.inputs["Gamma"], 1.0 / 2.4)
     line = _map_range(b, 3, clamped, (0.0,) * 3, (_SRGB_KNEE,) * 3, (_SRGB_OFFSET / _SRGB_SCALE,) * 3,
                       ((_SRGB_SLOPE * _SRGB_KNEE + _SRGB_OFFSET) / _SRGB_SCALE,) * 3)
-    encoded = b.vec("MAXIMUM", 5, gamma.outputs[0], line)  # e' = (e + 0.055) / 1.055
+    encoded = b.node("ShaderNodeSeparateColor", 6)
+    b.group.links.new(b.vec("MAXIMUM", 5, gamma.outputs[0], line), encoded.inputs[0])  # e' = (e + 0.055) / 1.055
     comb = b.node("ShaderNodeCombineColor", 7)  # one SVM node where a Combine XYZ runs three
-    for slot, d in enumerate(_GRID_ORDER):
-        weights = _SRGB_SCALE * texel_table.COORDS[d] / layout.step
-        b.group.links.new(b.vec("DOT_PRODUCT", 6, encoded, weights), comb.inputs[slot])
+    terms, alpha = _skin_axes(layout)
+    for slot, row in enumerate(terms):
+        (first, _), *rest = row
+        total = encoded.outputs[first]
+        for channel, sign in rest:
+            total = b.math("ADD" if sign > 0 else "SUBTRACT", 6, total, encoded.outputs[channel])
+        b.group.links.new(total, comb.inputs[slot])
     origin, extent = _grid_frame(layout)
     border = live_table.BORDER + 0.5
     width, height = size
     to_low = (border / width, border / height, 0.0)
     to_high = ((extent[0] + border) / width, (extent[1] + border) / height, extent[2])
-    uv = _map_range(b, 8, comb.outputs[0], origin, origin + extent, to_low, to_high)
+    uv = _map_range(b, 8, comb.outputs[0], origin / alpha, (origin + extent) / alpha, to_low, to_high)
     sep = b.node("ShaderNodeSeparateColor", 9)
     b.group.links.new(uv, sep.inputs[0])
     return GridPoint(uv=uv, x0=sep.outputs[2], coords=comb.outputs[0], painted=clamped)
@@ -351,10 +374,11 @@ def _grid_coords(b: _Builder, layout: live_table.AtlasLayout, colour: bpy.types.
     ``clamped``: the same clamped to [0, 1], when made elsewhere), and its distance from the box (skin space)."""
     point = grid_vector(b, colour, layout, layout.size, clamped)
     origin, extent = _grid_frame(layout)
-    raw = b.vec("SUBTRACT", 10, point.coords, origin)
-    x = b.vec("MINIMUM", 11, b.vec("MAXIMUM", 10, raw, 0.0), extent)
+    alpha = _skin_axes(layout)[1]
+    raw = b.vec("SUBTRACT", 10, point.coords, origin / alpha)
+    x = b.vec("MINIMUM", 11, b.vec("MAXIMUM", 10, raw, 0.0), extent / alpha)
     gap = b.vec("ABSOLUTE", 11, b.vec("SUBTRACT", 11, raw, x))
-    return point, b.vec("DOT_PRODUCT", 12, gap, layout.step)
+    return point, b.vec("DOT_PRODUCT", 12, gap, alpha * layout.step)
 
 
 def _slice_uvs(b: _Builder, layout: live_table.AtlasLayout, point: GridPoint, stage: int) -> tuple:

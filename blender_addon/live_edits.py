@@ -199,12 +199,12 @@ def add_edit_branch(b, gin, table: edit_table.EditTable, images: dict[str, bpy.t
         b.link(s, corner.inputs[0])
         b.link(lower, corner.inputs[1])
         uv = b.vec("MULTIPLY_ADD", 52, corner.outputs[0], (tile_u, 1.0 / edit_table.STACKED, 0.0), base)
-        up = b.vec("ADD", 53, uv, (0.0, 1.0 / edit_table.STACKED, 0.0))
-        uvs = [[uv, b.vec("ADD", 53, uv, (tile_u, 0.0, 0.0))], [up, b.vec("ADD", 54, up, (tile_u, 0.0, 0.0))]]
+        up = 1.0 / edit_table.STACKED
+        offsets = [[(0.0, 0.0), (tile_u, 0.0)], [(0.0, up), (tile_u, up)]]  # (slice, level) from the corner's texel
         for kind in edit_table.KINDS:
             image = images[edit_table.image_name(j, kind)]
-            found = [_unless_zero(b, zero_level, _bilinear_pair(b, image, pair, frac, 55), 57)
-                     for pair, zero_level in zip(uvs, at_zero, strict=True)]  # levels l and l + 1
+            found = [_unless_zero(b, zero_level, _bilinear_pair(b, image, uv, pair, frac, 55), 57)
+                     for pair, zero_level in zip(offsets, at_zero, strict=True)]  # levels l and l + 1
             value = b.mix("VECTOR", 58, fraction, found[0], found[1])
             shifts[kind] = value if shifts[kind] is None else b.vec("ADD", 58, shifts[kind], value)
     active = b.math("SUBTRACT", 60, 1.0, still)
@@ -224,12 +224,17 @@ def _unless_zero(b, zero_level, value, stage: int) -> bpy.types.NodeSocket:
     return b.mix("RGBA", stage, zero_level, value, (0.0, 0.0, 0.0, 1.0))
 
 
-def _bilinear_pair(b, image: bpy.types.Image, uvs, frac, stage: int) -> bpy.types.NodeSocket:
-    """Trilinear RGB of one level: bilinear lookups at ``uvs`` (slices s, s + 1) mixed by ``frac``."""
+def _bilinear_pair(b, image: bpy.types.Image, uv: bpy.types.NodeSocket, offsets, frac,
+                   stage: int) -> bpy.types.NodeSocket:
+    """Trilinear RGB of one level: bilinear lookups at ``uv`` plus each of ``offsets`` (two (du, dv): slices s, s + 1)
+    mixed by ``frac``.  The offsets are the image nodes' own texture mapping (a translation, which Cycles applies as
+    x 1 + t, exactly the sum a vector node would form): one small SVM node per lookup where an Add shared by the two
+    kinds' lookups ran a Vector Math node and wrote its two constants at each shading point."""
     colours = []
-    for uv in uvs:
+    for du, dv in offsets:
         tex = b.node("ShaderNodeTexImage", stage, image=image, interpolation="Linear", extension="EXTEND")
         tex.label = image.name
+        tex.texture_mapping.translation = (du, dv, 0.0)
         b.group.links.new(uv, tex.inputs["Vector"])
         colours.append(tex.outputs["Color"])
     return b.mix("VECTOR", stage + 1, frac, colours[0], colours[1])
