@@ -1,9 +1,14 @@
-"""Piecewise linear functions as Vector Curves nodes: one node where Math nodes would need a chain.
+"""Piecewise linear functions as RGB Curves nodes: one node where Math nodes would need a chain.
 
 Every node of a shader group costs each shading point its time (docs/user/live_group.md, render cost), so a smooth
-function of a value the group computes (the exponential of a log radius, the inverse of the body reflectance, the
-grazing correction's slopes) is evaluated as a curve: a Vector Curves node whose three curves (R, G, B) are the
-piecewise linear interpolation (vector handles) through given points, constant beyond the first and the last.
+function of a value the group computes (the exponential of a log radius, the inverse of the body reflectance, an
+edit's exponential) is evaluated as a curve: an RGB Curves node whose three curves (R, G, B) are the piecewise
+linear interpolation (vector handles) through given points, constant beyond the first and the last, and whose
+combined curve C (applied first) is the identity over the points' range.  Why RGB Curves and not Vector Curves,
+which Cycles' SVM evaluates with the same node: Cycles' OSL shader for Vector Curves looks every channel up at the
+input's first component (node_vector_curves.osl, Cycles 5.0 and later: ``rgb_ramp_lookup(ramp, c[0], ...)`` for
+all three), so under OSL the green and blue channels came out as functions of the red input (the live group's
+radii and colours: 4.5 % greener than under SVM on the demo head); RGB Curves looks each channel up at its own.
 
 How exact: Blender tabulates each curve at 257 points over its clip range (set here to the points' range) and
 Cycles samples that table at 256 points (RAMP_TABLE_SIZE), both interpolated linearly.  Through points that lie
@@ -23,33 +28,35 @@ import numpy as np
 SMOOTH_POINTS = 257
 
 
-def vector_curve(tree: bpy.types.NodeTree, socket: bpy.types.NodeSocket, xs: np.ndarray, ys: np.ndarray,
-                 location: tuple[float, float] = (0.0, 0.0)) -> bpy.types.NodeSocket:
-    """A Vector Curves node in ``tree`` of ``socket`` (a vector, or a float read as (v, v, v)) through the points
-    (xs[i], ys[i, c]) for channel c (``ys`` (N, 3), or (N,) for the same curve in every channel; ``xs`` (N,)
-    increasing); returns its vector output."""
+def channel_curves(tree: bpy.types.NodeTree, socket: bpy.types.NodeSocket, xs: np.ndarray, ys: np.ndarray,
+                   location: tuple[float, float] = (0.0, 0.0)) -> bpy.types.NodeSocket:
+    """An RGB Curves node in ``tree`` of ``socket`` (a vector or colour, or a float read as (v, v, v)) through the
+    points (xs[i], ys[i, c]) for channel c (``ys`` (N, 3), or (N,) for the same curve in every channel; ``xs`` (N,)
+    increasing), its combined curve the identity; returns its colour output (linked to a vector input it is read
+    as is)."""
     xs = np.asarray(xs, np.float64)
     ys = np.broadcast_to(np.asarray(ys, np.float64).reshape(len(xs), -1), (len(xs), 3))
     if len(xs) < 2 or np.any(np.diff(xs) <= 0.0) or not (np.all(np.isfinite(xs)) and np.all(np.isfinite(ys))):
         raise ValueError("a curve needs two or more finite points with increasing x")
-    node = tree.nodes.new("ShaderNodeVectorCurve")
+    node = tree.nodes.new("ShaderNodeRGBCurve")
     node.location = location
-    tree.links.new(socket, node.inputs["Vector"])
+    tree.links.new(socket, node.inputs["Color"])
     mapping = node.mapping
     mapping.use_clip = False
     mapping.clip_min_x, mapping.clip_max_x = float(xs[0]), float(xs[-1])
     mapping.extend = "HORIZONTAL"
-    for c, curve in enumerate(mapping.curves[:3]):
-        points = curve.points
-        while len(points) > len(xs):
+    ends = np.array([xs[0], xs[-1]])
+    for curve, (cx, cy) in zip(mapping.curves, [(xs, ys[:, c]) for c in range(3)] + [(ends, ends)], strict=True):
+        points = curve.points  # curves R, G, B and the combined curve C (Blender applies C, then R, G or B)
+        while len(points) > len(cx):
             points.remove(points[-1])
-        while len(points) < len(xs):
-            points.new(float(xs[-1]), float(ys[-1, c]))
-        points.foreach_set("location", np.stack([xs, ys[:, c]], axis=1).astype(np.float32).ravel())
+        while len(points) < len(cx):
+            points.new(float(cx[-1]), float(cy[-1]))
+        points.foreach_set("location", np.stack([cx, cy], axis=1).astype(np.float32).ravel())
         for point in points:
             point.handle_type = "VECTOR"
     mapping.update()
-    return node.outputs["Vector"]
+    return node.outputs["Color"]
 
 
 def smooth_points(function, lo: float, hi: float) -> tuple[np.ndarray, np.ndarray]:

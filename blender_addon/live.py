@@ -53,7 +53,7 @@ GROUP_NAME = "Spectral Skin SSS Live"
 #: Custom properties: on the group and the images, the SHA-256 of the table they were made from.
 TABLE_PROP = "spectral_skin_sss_table"
 #: Layout version of the live group (bump when the generated nodes change).
-LIVE_VERSION = 16
+LIVE_VERSION = 17
 IMAGE_PREFIX = "Spectral Skin SSS Table"
 #: Custom property on the group: whether it holds the grazing-light correction (blender_addon.oblique).
 GRAZING_PROP = "spectral_skin_sss_grazing"
@@ -199,9 +199,9 @@ class _Builder:
         return node
 
     def curve(self, stage: int, socket: bpy.types.NodeSocket, xs: np.ndarray, ys: np.ndarray) -> bpy.types.NodeSocket:
-        """A Vector Curves node of ``socket`` through (xs, ys) (blender_addon.curves.vector_curve); its output."""
+        """An RGB Curves node of ``socket`` through (xs, ys) (blender_addon.curves.channel_curves); its output."""
         self._locate(len(self.group.nodes), stage)
-        return curves.vector_curve(self.group, socket, xs, ys)
+        return curves.channel_curves(self.group, socket, xs, ys)
 
     def _locate(self, index: int, stage: int) -> None:
         row = self.rows.get(stage, 0)
