@@ -333,7 +333,7 @@ def grid_vector(b: _Builder, colour: bpy.types.NodeSocket, layout: live_table.At
     the two pieces differ by 4e-6), computed as 1.055 e' - 0.055 with e' = max(c^(1/2.4), (min(12.92 c, 12.92 knee) +
     0.055) / 1.055): the power by a Gamma node, the capped line by a Map Range, and the factor and offset go to the
     grid's frame (:func:`_grid_frame`); the skin-space coordinates are sums and differences of e''s channels in Math
-    nodes (:func:`_skin_axes`: a Math node runs in a fifth of the instructions of a Vector Math dot product), their
+    nodes (:func:`_skin_axes`: a Math node runs in a third of the instructions of a Vector Math dot product), their
     factors in the frame too; one Map Range takes them to the atlas' UV and clamps them to the grid.  ``clamped``: the
     colour clamped to [0, 1] already (the grazing-light group's), read instead of clamping it here."""
     if clamped is None:

@@ -330,9 +330,9 @@ def _svm_mixture(group: bpy.types.NodeTree, gin: bpy.types.Node, k_count: int, s
 def _sorted_levels(group: bpy.types.NodeTree, scaled: bpy.types.NodeSocket, y: float) -> tuple:
     """(lo, hi, mid - lo, hi - mid) as float sockets: lo <= mid <= hi the channels of ``scaled`` (a component's
     weights) sorted, mid = max(min(w_R, w_G), min(max(w_R, w_G), w_B)), so that each is one of the weights exactly.
-    Scalar Math nodes on one Separate Color: a Math node runs in about half the instructions of a Vector Math node,
-    so eight of them per component cost less than sorting three components at once in vector nodes (a Combine per
-    channel, eight vector nodes and four Separates: ``training.bench.instructions``)."""
+    Scalar Math nodes on one Separate Color: a Math node runs in about a third of the instructions of a Vector Math
+    node, so eight of them per component cost less than sorting three components at once in vector nodes (a Combine
+    per channel, eight vector nodes and four Separates: ``training.bench.instructions``)."""
     sep = group.nodes.new("ShaderNodeSeparateColor")
     sep.location = (-950.0, y - 400.0)
     group.links.new(scaled, sep.inputs[0])
@@ -368,11 +368,11 @@ def computed_zero(tree: bpy.types.NodeTree, finite: bpy.types.NodeSocket) -> Zer
     return Zero(value=value, vector=vector.outputs[0])
 
 
-def product(tree: bpy.types.NodeTree, factor, value: bpy.types.NodeSocket, zero: bpy.types.NodeSocket | None,
+def product(tree: bpy.types.NodeTree, factor, value: bpy.types.NodeSocket, zero: bpy.types.NodeSocket,
             x: float = 0.0, y: float = 0.0) -> bpy.types.NodeSocket:
     """``factor`` x ``value`` per channel (``factor`` a vector socket, or a float socket or number for every channel)
     as a Mix node (vector; non-uniform for a vector factor; factor unclamped) from ``zero`` (a vector socket that is
-    0, or None: the constant 0) to ``value``: 0 (1 - t) + v t is v t exactly for finite t.  A Vector Math Multiply
+    0: :func:`computed_zero`) to ``value``: 0 (1 - t) + v t is v t exactly for finite t.  A Vector Math Multiply
     or Scale runs in about twice the instructions of a Mix in Cycles' SVM and writes its unused inputs (its Scale) to
     the stack at each shading point (``training.bench.instructions``)."""
     mix = tree.nodes.new("ShaderNodeMix")
@@ -386,10 +386,7 @@ def product(tree: bpy.types.NodeTree, factor, value: bpy.types.NodeSocket, zero:
         tree.links.new(factor, fac)
     else:
         fac.default_value = float(factor)
-    if zero is not None:
-        tree.links.new(zero, a)
-    else:
-        a.default_value = (0.0, 0.0, 0.0)
+    tree.links.new(zero, a)
     tree.links.new(value, b)
     return next(s for s in mix.outputs if s.enabled)
 

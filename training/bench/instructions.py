@@ -158,7 +158,7 @@ def _per_evaluation(c: Counts) -> float:
 
 def _describe(c: Counts, samples: int) -> str:
     return (f"{c.total / samples:,.0f} instructions per camera sample (shading {c.shading / samples:,.0f}, walks "
-            f"{c.walks / samples:,.0f}); {c.dispatches / max(c.evaluations, 1):.1f} SVM dispatches per shading "
+            f"{c.walks / samples:,.0f}); {_per_evaluation(c):.1f} SVM dispatches per shading "
             f"evaluation ({c.evaluations:,} evaluations)")
 
 
