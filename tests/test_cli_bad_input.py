@@ -390,14 +390,15 @@ def test_second_process_then_ctrl_c(tmp_path):
     """A dataset run holds its folder: a second run on it exits 2 naming the first's PID; Ctrl-C ends the first
     with one line saying what was kept and how to resume (exit 130)."""
     out = tmp_path / "d"
-    # the direct estimator: the ci build then takes minutes, so the first run is still walking when the test
-    # interrupts it (the reweighted ci build ends in ~30 s, sooner than a loaded machine may start the second
-    # process), and it returns to Python after each tone's walk (a larger preset's walk batches can outlast the
-    # time the test gives Ctrl-C on a loaded machine; on a shared 2-core machine running the suite's other worker a
-    # tone's walk took over 60 s, so the test waits up to 180 s)
+    # the direct estimator on one walking thread: the ci build then takes over 3 minutes (98 s on two idle
+    # cores), so the first run is still walking when the test interrupts it, however long a loaded machine
+    # takes to start the second process (the reweighted ci build ends in ~30 s); it returns to Python after each
+    # tone's walk (a larger preset's walk batches can outlast the time the test gives Ctrl-C on a loaded machine;
+    # on a shared 2-core machine running the suite's other worker a tone's walk took over 60 s, so the test
+    # waits up to 180 s)
     direct = ["--preset", "ci", "--method", "direct", "--out", str(out)]
-    first = subprocess.Popen(_command(["dataset", *direct, "--no-progress"]),
-                             env=_env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=ROOT)
+    first = subprocess.Popen(_command(["dataset", *direct, "--no-progress"]), env={**_env(), "NUMBA_NUM_THREADS": "1"},
+                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=ROOT)
     try:
         deadline = time.monotonic() + 90
         while not (out / ".lock").exists() and time.monotonic() < deadline and first.poll() is None:
@@ -407,6 +408,7 @@ def test_second_process_then_ctrl_c(tmp_path):
                                 text=True, timeout=120, env=_env(), cwd=ROOT)
         assert_one_line(second.returncode, second.stderr, "in use by process")
         assert str(first.pid) in second.stderr
+        assert first.poll() is None, "the first run ended before the test could interrupt it"
         first.send_signal(signal.SIGINT)
         _, err = first.communicate(timeout=180)
     finally:

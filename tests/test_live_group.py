@@ -50,6 +50,8 @@ PATH_STEPS = 500
 
 @pytest.fixture
 def addon():
+    """The add-on registered in an empty factory scene (Unit Scale 1): no scene another test file left behind."""
+    bpy.ops.wm.read_factory_settings(use_empty=True)
     blender_addon.register()
     yield
     blender_addon.unregister()
