@@ -2,17 +2,17 @@
 group built without them, side by side.
 
 Renders: the demo head (training.demo_render, ``RESOLUTION`` squared px, Cycles CPU on one thread, denoiser off,
-``SAMPLES`` samples) with the medium tone's albedo texture through Invert Skin Albedo's default (the live group with
-the edit inputs).  One Blender process renders, ``ROUNDS`` times in turn, the live group of the same table built
-without the edit nodes (blender_addon.live.build_live_group without an edit table: the unedited group) and the group
-with the edit inputs at neutral and under the presets tan, flush and pallor (exporters.skin_edits.PRESETS), swapping
-the material's group between renders; each round starts one material later than the one before, so that no material
-always follows the swap from the other group.  Each render's CPU time (getrusage, scene sync included) is kept; the
-ratio is that of the medians: on a shared machine every material meets the same disturbance in turn, and the median
-is robust to the renders that other work slowed.  Equal samples, so an edited row also carries the change of the
-physics (an edit changes how far light walks in the tone), not only the nodes' cost.  Images: the bytes the edit
-table's images take in Blender (float RGBA, 16 bytes a pixel).  Operator: Invert Skin Albedo on a 4096² albedo with
-the edit table shipped (training.bench.live's set-up).
+``SAMPLES`` samples) with the medium tone's albedo texture through Invert Skin Albedo's default (the live group with the
+edit inputs).  One Blender process renders, ``ROUNDS`` times in turn, the live group of the same table built without the
+edit nodes (blender_addon.live.build_live_group without an edit table: the unedited group) and the group with the edit
+inputs at neutral and under the presets tan, flush and pallor (exporters.skin_edits.PRESETS), swapping the material's
+group between renders; each round starts one material later than the one before, so that no material always follows the
+swap from the other group.  Each render's CPU time (training.bench.render_clock, scene sync included) is kept; the ratio
+is that of the medians: on a shared machine every material meets the same disturbance in turn, and the median is robust
+to the renders that other work slowed.  Equal samples, so an edited row also carries the change of the physics (an edit
+changes how far light walks in the tone), not only the nodes' cost.  Images: the bytes the edit table's images take in
+Blender (float RGBA, 16 bytes a pixel).  Operator: Invert Skin Albedo on a 4096² albedo with the edit table shipped
+(training.bench.live's set-up).
 """
 
 from __future__ import annotations
@@ -34,7 +34,7 @@ MODES = ("plain", "neutral", *PRESETS)
 FLOAT_RGBA_BYTES = 16
 
 _CHILD = """
-import json, resource, sys
+import json, sys
 sys.path.insert(0, {root!r})
 import bpy
 import blender_addon
@@ -42,6 +42,7 @@ from blender_addon import live, live_edits, preferences
 from exporters.skin_edits import NEUTRAL, PRESETS
 from training import demo_render
 from training.demo_subject import TONES, skin_albedo_texture
+from training.bench.render_clock import RenderClock
 scene, parts = demo_render._scene({resolution}, {samples})
 scene.cycles.use_denoising = False
 scene.cycles.use_adaptive_sampling = False
@@ -66,10 +67,9 @@ for r in range({rounds}):
         for name, value in zip(("Melanin", "Blood", "Oxygenation"), values.get(mode, NEUTRAL)):
             if name in node.inputs:
                 node.inputs[name].default_value = float(value)
-        r0 = resource.getrusage(resource.RUSAGE_SELF)
+        clock = RenderClock()
         bpy.ops.render.render(write_still=False)
-        r1 = resource.getrusage(resource.RUSAGE_SELF)
-        times[mode].append((r1.ru_utime - r0.ru_utime) + (r1.ru_stime - r0.ru_stime))
+        times[mode].append(clock.seconds())
 print("RESULT" + json.dumps(times))
 """
 
@@ -111,8 +111,8 @@ def benchmarks(quick: bool) -> list[dict]:
                                f"{max(times['plain']):.2f})",
                      "ratio": f"time at equal samples {ours / ref:.2f}x",
                      "error": "-",
-                     "notes": "CPU s from getrusage around each render (scene sync included); ratio of medians; an "
-                              "edit also changes the light's walk (the physics)"})
+                     "notes": "CPU s of each render's threads (training.bench.render_clock, scene sync "
+                              "included); ratio of medians; an edit also changes the light's walk (the physics)"})
     size = 2048 if quick else live_bench.SIZE
     setup = live_bench.measure(size, ("live",))["live"]
     rows.append({"workload": f"edit table in Blender: images the edit inputs add; Invert Skin Albedo on a {size}² "

@@ -20,8 +20,8 @@ and reads from its output, per material:
 * **evaluations**: how often a shader was evaluated (the calls of ``svm_eval_nodes``).
 
 Materials: Principled BSDF Random Walk (Skin) (the anchor of :mod:`training.bench.render_cost`), the Bake mode's
-maps, the live group (Invert Skin Albedo's default, edit inputs at neutral) and the live group under the pallor preset
-(exporters.skin_edits.PRESETS, whose timed cost sat highest against the target on the quiet machine).
+maps, the live group (Invert Skin Albedo's default, edit inputs at neutral) and the live group under each preset of
+exporters.skin_edits.PRESETS (:data:`PRESETS`: an edit's cost against the group at neutral).
 Instructions are not time: a walk's ray casts wait on memory where the node loop does not, so the live group's
 instruction ratio is larger than its time ratio; what the counts give is a change's effect without the machine's
 noise.  Needs ``valgrind`` on the PATH (about 100 s per material, two at a time); without it the rows say so.
@@ -47,17 +47,20 @@ COUNTED = "ccl::PathTraceWorkCPU::render_samples_full_pipeline*"
 #: The functions (a part of their names, as Callgrind writes them) whose inclusive counts are reported.
 SHADING = "ccl::svm_eval_nodes<"
 WALKS = "ccl::integrator_intersect_subsurface("
-#: The live group's edit inputs set to the pallor preset (after Invert Skin Albedo), as the child's variant code.
-_PALLOR = """
+#: The live group's edit inputs set to a preset of exporters.skin_edits.PRESETS (after Invert Skin Albedo), as the
+#: child's variant code; ``{preset}`` is the preset's name.
+_PRESET = """
 from blender_addon import live_edits
 from exporters.skin_edits import PRESETS
 node = live_edits.live_node(mat)
-for (name, *_), value in zip(live_edits.INPUTS, PRESETS["pallor"].row(), strict=True):
+for (name, *_), value in zip(live_edits.INPUTS, PRESETS[{preset!r}].row(), strict=True):
     node.inputs[name].default_value = float(value)
 """
+#: The presets counted against the live group at neutral.
+PRESETS = ("tan", "flush", "pallor")
 #: Materials: (name, render_cost mode, variant code or None for the mode's own).
 MATERIALS = (("principled", "principled", None), ("bake", "bake", None), ("live", "live", None),
-             ("live_pallor", "live_pallor", _PALLOR))
+             *((f"live_{p}", f"live_{p}", _PRESET.format(preset=p)) for p in PRESETS))
 
 
 @dataclass
@@ -179,7 +182,8 @@ def _row(label: str, anchor_label: str, ours: Counts, ref: Counts, samples: int)
 #: The rows: (material, label, anchor material, anchor label).
 ROWS = (("live", "live group (default)", "principled", "Principled BSDF, Random Walk (Skin), skin radius"),
         ("bake", "baked maps (Bake, packed)", "principled", "Principled BSDF, Random Walk (Skin), skin radius"),
-        ("live_pallor", "live group under the pallor preset", "live", "the live group (edit inputs at neutral)"))
+        *((f"live_{p}", f"live group under the {p} preset", "live", "the live group (edit inputs at neutral)")
+          for p in PRESETS))
 
 
 def benchmarks(quick: bool) -> list[dict]:

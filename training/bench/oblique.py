@@ -1,13 +1,13 @@
 """Benchmark of the grazing-light correction's render cost: the live group with it against the live group without.
 
-Scene: the demo head (training.demo_render: back light behind the ear and key light, metres), ``RESOLUTION`` squared
-px, Cycles CPU on one thread, denoiser off, the demo's dark tone (where the correction acts; its nodes run for every
-colour).  One process wires the live group (Invert Skin Albedo) and renders ``ROUNDS`` rounds; in each round the
-group without the correction and the group with it (the same material, its group node's tree swapped) render
-``SAMPLES`` samples, in alternating order.  CPU time is the process's user + system time around the render
-(getrusage), robust to the machine being shared; each variant keeps its least time over the rounds.  The renders'
-noise is compared too (the same seed: the correction moves the weights, which changes Cycles' closure picks only
-where it acts), as the RMS difference between the variants over the head.
+Scene: the demo head (training.demo_render: back light behind the ear and key light, metres), ``RESOLUTION`` squared px,
+Cycles CPU on one thread, denoiser off, the demo's dark tone (where the correction acts; its nodes run for every
+colour).  One process wires the live group (Invert Skin Albedo) and renders ``ROUNDS`` rounds; in each round the group
+without the correction and the group with it (the same material, its group node's tree swapped) render ``SAMPLES``
+samples, in alternating order.  CPU time is the render's (training.bench.render_clock: without the thread that waits for
+it by spinning), robust to the machine being shared; each variant keeps its least time over the rounds.  The renders'
+noise is compared too (the same seed: the correction moves the weights, which changes Cycles' closure picks only where
+it acts), as the RMS difference between the variants over the head.
 """
 
 from __future__ import annotations
@@ -23,13 +23,14 @@ SAMPLES = 32
 ROUNDS = 6
 
 _CHILD = """
-import json, resource, sys, time
+import json, sys
 sys.path.insert(0, {root!r})
 import bpy, numpy as np
 import blender_addon
 from blender_addon import live
 from training import demo_render
 from training.demo_subject import TONES, skin_albedo_texture
+from training.bench.render_clock import RenderClock
 scene, parts = demo_render._scene({resolution}, {samples})
 scene.cycles.use_denoising = False
 scene.cycles.use_adaptive_sampling = False
@@ -51,10 +52,9 @@ for r in range({rounds}):
     for name in (("without", "with") if r % 2 == 0 else ("with", "without")):
         node.node_tree = variants[name]
         scene.render.filepath = f"{out}/{{name}}.exr"
-        r0 = resource.getrusage(resource.RUSAGE_SELF)
+        clock = RenderClock()
         bpy.ops.render.render(write_still=True)
-        r1 = resource.getrusage(resource.RUSAGE_SELF)
-        times[name].append((r1.ru_utime - r0.ru_utime) + (r1.ru_stime - r0.ru_stime))
+        times[name].append(clock.seconds())
 def pixels(name):
     img = bpy.data.images.load(f"{out}/{{name}}.exr")
     px = np.empty(img.size[0] * img.size[1] * 4, np.float32)

@@ -106,12 +106,13 @@ FIGURES: dict[str, Figure] = {
     "edit_operator_s": Figure("edit_cost", "edit table in Blender", "ours", r"operator ([\d.]+) s"),
     **{f"counted_{name}_{part}": Figure("instructions", row, "ratio", rf"{label} ([\d.]+)x")
        for name, row in (("live", "live group (default) vs Principled"), ("bake", "baked maps"),
-                         ("pallor", "pallor preset"))
+                         ("tan", "tan preset"), ("flush", "flush preset"), ("pallor", "pallor preset"))
        for part, label in (("instructions", "instructions"), ("shading", "shading"), ("walks", "walks"))},
     **{f"counted_{name}_dispatches": Figure("instructions", row, column, r"([\d.]+) SVM dispatches")
        for name, row, column in (("live", "live group (default) vs Principled", "ours"),
                                  ("principled", "live group (default) vs Principled", "anchor"),
-                                 ("bake", "baked maps", "ours"), ("pallor", "pallor preset", "ours"))},
+                                 ("bake", "baked maps", "ours"), ("tan", "tan preset", "ours"),
+                                 ("flush", "flush preset", "ours"), ("pallor", "pallor preset", "ours"))},
     "grazing_cost": Figure("oblique", "grazing-light correction vs without", "ratio", r"time ([\d.]+)x"),
     "eevee_first_render_vs_principled": Figure("eevee", "EEVEE first render", "ratio", r"first render ([\d.]+)x"),
     "onnx_vs_torch_inference": Figure("train", "skin_inversion.onnx inference", "ratio", r"([\d.]+)x"),

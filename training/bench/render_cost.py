@@ -14,7 +14,8 @@ renders share no bias to cancel: each material is its own reference).  RMSE is t
 pixel.  The fit RMSE(N) = c / sqrt(N) (least squares in log space, slope fixed at -1/2) and CPU seconds
 t(N) = t0 + a N (least squares) give the time to reach an RMSE e as a (c / e)^2 (the per-render sync t0
 excluded), so the ratio live / Principled is (a_live c_live^2) / (a_P c_P^2), whatever e.  CPU time is the
-process's user + system time around bpy.ops.render.render (getrusage), robust to the machine being shared.
+render's (training.bench.render_clock: the process's user + system time around bpy.ops.render.render less that of
+the scheduler thread that waits for the render by spinning), robust to the machine being shared.
 """
 
 from __future__ import annotations
@@ -37,12 +38,13 @@ TEXTURE = 256
 SKIN_RADIUS_MM = (3.67, 1.37, 0.68)
 
 _CHILD = """
-import json, resource, sys, time
+import json, sys, time
 sys.path.insert(0, {root!r})
 import bpy, numpy as np
 import blender_addon
 from training import demo_render
 from training.demo_subject import TONES, skin_albedo_texture
+from training.bench.render_clock import RenderClock
 if {scene!r} == "head":
     scene, parts = demo_render._scene({resolution}, 1)
 else:
@@ -75,12 +77,11 @@ for samples in {samples!r}:
     for seed in {seeds!r}:
         scene.cycles.samples, scene.cycles.seed = samples, seed
         scene.render.filepath = f"{out}/{{mode}}_{{samples}}_{{seed}}.exr"
-        r0 = resource.getrusage(resource.RUSAGE_SELF)
+        clock = RenderClock()
         t0 = time.perf_counter()
         bpy.ops.render.render(write_still=True)
         wall = time.perf_counter() - t0
-        r1 = resource.getrusage(resource.RUSAGE_SELF)
-        cpu = (r1.ru_utime - r0.ru_utime) + (r1.ru_stime - r0.ru_stime)
+        cpu = clock.seconds()
         renders.append({{"samples": samples, "seed": seed, "cpu_s": cpu, "wall_s": wall,
                          "path": scene.render.filepath}})
 print("RESULT" + json.dumps(renders))
@@ -306,8 +307,8 @@ def _row(scene: str, samples, rounds: int, label: str, anchor: str, ours: dict, 
             "ratio": _ratio(ours, ref),
             "error": "-",
             "notes": "RMSE: linear RGB, all pixels, from two seeds (mean((A-B)^2)/2 = MSE against the "
-                     "infinite-sample reference); CPU s from getrusage around the render; time to equal "
-                     "noise = a c^2 (per-render sync excluded); fresh process per material"}
+                     "infinite-sample reference); CPU s of the render's threads (training.bench.render_clock); "
+                     "time to equal noise = a c^2 (per-render sync excluded); fresh process per material"}
 
 
 def speckle_figure(renders: Path, scene: str, samples: int, path: Path) -> Path:
