@@ -386,6 +386,20 @@ def test_read_only_folder(world, capsys, argv):
     assert snapshot(world["base"]) == before
 
 
+#: Run as ``python -c _AS_FROM_A_TERMINAL ARGS``: Ctrl-C back to its default and unblocked, then ``python ARGS`` in
+#: the same process (exec keeps both, and Python then turns Ctrl-C into KeyboardInterrupt as under a terminal).
+_AS_FROM_A_TERMINAL = ("import os, signal, sys; signal.signal(signal.SIGINT, signal.SIG_DFL); "
+                       "signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT}); "
+                       "os.execv(sys.executable, [sys.executable, *sys.argv[1:]])")
+_SIGINT_BIT = 1 << (signal.SIGINT - 1)
+
+
+def _signal_masks(pid: int) -> dict[str, int]:
+    """The ignored and the blocked signals of process ``pid`` (/proc/PID/status, bit n - 1 for signal n)."""
+    fields = dict(line.split(":", 1) for line in Path(f"/proc/{pid}/status").read_text().splitlines() if ":" in line)
+    return {name: int(fields[name].strip(), 16) for name in ("SigIgn", "SigBlk")}
+
+
 def test_second_process_then_ctrl_c(tmp_path):
     """A dataset run holds its folder: a second run on it exits 2 naming the first's PID; Ctrl-C ends the first
     with one line saying what was kept and how to resume (exit 130)."""
@@ -396,8 +410,12 @@ def test_second_process_then_ctrl_c(tmp_path):
     # tone's walk (a larger preset's walk batches can outlast the time the test gives Ctrl-C on a loaded machine;
     # on a shared 2-core machine running the suite's other worker a tone's walk took over 60 s, so the test
     # waits up to 180 s)
+    # the first run starts as from a terminal, Ctrl-C neither ignored nor blocked: a child inherits both from the
+    # process that starts it, and under `make test` a worker that had run other files started the dataset run with
+    # Ctrl-C ignored (it walked on to the end; started from a process that ignores SIGINT the test fails the same way)
     direct = ["--preset", "ci", "--method", "direct", "--out", str(out)]
-    first = subprocess.Popen(_command(["dataset", *direct, "--no-progress"]), env={**_env(), "NUMBA_NUM_THREADS": "1"},
+    first = subprocess.Popen([sys.executable, "-c", _AS_FROM_A_TERMINAL, "-m", "training", "dataset", *direct,
+                              "--no-progress"], env={**_env(), "NUMBA_NUM_THREADS": "1"},
                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=ROOT)
     try:
         deadline = time.monotonic() + 90
@@ -409,6 +427,8 @@ def test_second_process_then_ctrl_c(tmp_path):
         assert_one_line(second.returncode, second.stderr, "in use by process")
         assert str(first.pid) in second.stderr
         assert first.poll() is None, "the first run ended before the test could interrupt it"
+        masks = _signal_masks(first.pid)
+        assert not (masks["SigIgn"] | masks["SigBlk"]) & _SIGINT_BIT, f"Ctrl-C ignored or blocked in the run: {masks}"
         first.send_signal(signal.SIGINT)
         _, err = first.communicate(timeout=180)
     finally:
