@@ -411,8 +411,8 @@ def test_second_process_then_ctrl_c(tmp_path):
     # on a shared 2-core machine running the suite's other worker a tone's walk took over 60 s, so the test
     # waits up to 180 s)
     # the first run starts as from a terminal, Ctrl-C neither ignored nor blocked: a child inherits both from the
-    # process that starts it, and under `make test` a worker that had run other files started the dataset run with
-    # Ctrl-C ignored (it walked on to the end; started from a process that ignores SIGINT the test fails the same way)
+    # process that starts it, and a suite started in the background (`nohup make test &`: a shell starts background
+    # jobs with SIGINT ignored) passed the dataset run an ignored Ctrl-C, so it walked on to the end
     direct = ["--preset", "ci", "--method", "direct", "--out", str(out)]
     first = subprocess.Popen([sys.executable, "-c", _AS_FROM_A_TERMINAL, "-m", "training", "dataset", *direct,
                               "--no-progress"], env={**_env(), "NUMBA_NUM_THREADS": "1"},
