@@ -7,16 +7,18 @@ edit inputs).  One Blender process renders, ``ROUNDS`` times in turn, the live g
 edit nodes (blender_addon.live.build_live_group without an edit table: the unedited group) and the group with the edit
 inputs at neutral and under the presets tan, flush and pallor (exporters.skin_edits.PRESETS), swapping the material's
 group between renders; each round starts one material later than the one before, so that no material always follows the
-swap from the other group.  Each render's CPU time (training.bench.render_clock, scene sync included) is kept; the ratio
-is that of the medians: on a shared machine every material meets the same disturbance in turn, and the median is robust
-to the renders that other work slowed.  Equal samples, so an edited row also carries the change of the physics (an edit
-changes how far light walks in the tone), not only the nodes' cost.  Images: the bytes the edit table's images take in
-Blender (float RGBA, 16 bytes a pixel).  Operator: Invert Skin Albedo on a 4096² albedo with the edit table shipped
-(training.bench.live's set-up).
+swap from the other group.  Each render's CPU time (training.bench.render_clock, scene sync included) is kept.  The
+ratio is paired: each render against the unedited group's render of the same round (a few seconds apart, so that a
+slow spell of the shared machine slows both), the median of the rounds' ratios, with a 95 % bootstrap interval of that
+median (:func:`paired_ratio`; the ratio of the medians of all renders moved by 10 % between runs).  Equal samples,
+so an edited row also carries the change of the physics (an edit changes how far light walks in the tone), not only
+the nodes' cost.  Images: the bytes the edit table's images take in Blender (float RGBA, 16 bytes a pixel).
+Operator: Invert Skin Albedo on a 4096² albedo with the edit table shipped (training.bench.live's set-up).
 """
 
 from __future__ import annotations
 
+import random
 import statistics
 import tempfile
 from pathlib import Path
@@ -26,7 +28,9 @@ from training.bench import live as live_bench
 ROOT = Path(__file__).resolve().parents[2]
 RESOLUTION = 128
 SAMPLES = 16
-ROUNDS = 10
+ROUNDS = 40
+#: Bootstrap resamples of the paired ratios' median, and their seed.
+BOOTSTRAP, SEED = 2000, 0
 TEXTURE = 256
 PRESETS = ("tan", "flush", "pallor")
 MODES = ("plain", "neutral", *PRESETS)
@@ -91,6 +95,15 @@ def image_megabytes() -> float:
     return sum(a.shape[0] * a.shape[1] * FLOAT_RGBA_BYTES for a in atlases.values()) / 1e6
 
 
+def paired_ratio(ours: list[float], anchor: list[float]) -> tuple[float, float, float]:
+    """Median of the rounds' ratios ours[i] / anchor[i] (renders of the same round) and the 2.5 and 97.5 percentiles of
+    that median over :data:`BOOTSTRAP` resamples of the rounds (fixed seed)."""
+    ratios = [a / b for a, b in zip(ours, anchor, strict=True)]
+    rng = random.Random(SEED)
+    medians = sorted(statistics.median(rng.choices(ratios, k=len(ratios))) for _ in range(BOOTSTRAP))
+    return statistics.median(ratios), medians[int(0.025 * BOOTSTRAP)], medians[int(0.975 * BOOTSTRAP) - 1]
+
+
 def _label(mode: str) -> str:
     return "at neutral (1, 1, 0)" if mode == "neutral" else f"at preset {mode}"
 
@@ -102,6 +115,7 @@ def benchmarks(quick: bool) -> list[dict]:
     rows = []
     for mode in MODES[1:]:
         ours = statistics.median(times[mode])
+        ratio, low, high = paired_ratio(times[mode], times["plain"])
         spread = f"{min(times[mode]):.2f}-{max(times[mode]):.2f}"
         rows.append({"workload": f"edit cost, demo head {RESOLUTION}² px, Cycles CPU 1 thread, no denoiser, {SAMPLES} "
                                  f"spp, {rounds} rounds in turn in one process: live group with the edit inputs "
@@ -109,10 +123,12 @@ def benchmarks(quick: bool) -> list[dict]:
                      "ours": f"median {ours:.2f} CPU-s per render ({spread})",
                      "anchor": f"median {ref:.2f} CPU-s per render ({min(times['plain']):.2f}-"
                                f"{max(times['plain']):.2f})",
-                     "ratio": f"time at equal samples {ours / ref:.2f}x",
-                     "error": "-",
+                     "ratio": f"time at equal samples {ratio:.3f}x (95 % interval {low:.3f}-{high:.3f})",
+                     "error": f"ratio of the medians {ours / ref:.3f}x",
                      "notes": "CPU s of each render's threads (training.bench.render_clock, scene sync "
-                              "included); ratio of medians; an edit also changes the light's walk (the physics)"})
+                              "included); paired: median of each round's ratio to the unedited group's render "
+                              "of the same round, bootstrap interval of that median; an edit also changes the "
+                              "light's walk (the physics)"})
     size = 2048 if quick else live_bench.SIZE
     setup = live_bench.measure(size, ("live",))["live"]
     rows.append({"workload": f"edit table in Blender: images the edit inputs add; Invert Skin Albedo on a {size}² "

@@ -63,6 +63,10 @@ FIGURES: dict[str, Figure] = {
     "bake_4k_fast_s": Figure("runtime", "bake 4096x4096 8-bit sRGB PNG", "ours", r"([\d.]+) s wall"),
     "live_memory_vs_principled": Figure("live", "live group (default)", "ratio", r"process memory ([\d.]+)x"),
     "baked_memory_vs_principled": Figure("live", "baked maps", "ratio", r"process memory ([\d.]+)x"),
+    **{f"{name}_{part}_peak_mb": Figure("live", row, column, rf"{what} ([\d,]+) MB")
+       for name, row in (("live", "live group (default)"), ("baked", "baked maps"))
+       for part, column, what in (("process", "ours", "process peak"), ("cycles", "ours", "Cycles' own peak"),
+                                  ("principled_cycles", "anchor", "Cycles' own peak"))},
     "live_operator_s": Figure("live", "live group (default)", "ours", r"operator ([\d.]+) s"),
     "live_operator_thread_s": Figure("live", "live group (default)", "ours", r"CPU ([\d.]+) s on the calling thread"),
     "live_operator_cpu_s": Figure("live", "live group (default)", "ours", r"calling thread, ([\d.]+) s in all"),
@@ -81,6 +85,8 @@ FIGURES: dict[str, Figure] = {
                            ("backlit_plate", "back-lit plate scene"))},
     "live_time_per_sample_vs_principled": Figure("render_cost", "live group (default) vs Principled", "ratio",
                                                  r"time per sample ([\d.]+)x", _HEAD),
+    "baked_time_per_sample_vs_principled": Figure("render_cost", "baked maps (Bake, packed) vs Principled", "ratio",
+                                                  r"time per sample ([\d.]+)x", _HEAD),
     "per_channel_noise_time_vs_principled": Figure("render_cost", "single-channel closures (the earlier design; "
                                                    "diagnostic) vs Principled", "ratio",
                                                    r"time to equal noise ([\d.]+)x", _HEAD),
@@ -104,6 +110,7 @@ FIGURES: dict[str, Figure] = {
                            ("pallor", "at preset pallor"))},
     "edit_images_mb": Figure("edit_cost", "edit table in Blender", "ours", r"images ([\d.]+) MB"),
     "edit_operator_s": Figure("edit_cost", "edit table in Blender", "ours", r"operator ([\d.]+) s"),
+    "edit_operator_cpu_s": Figure("edit_cost", "edit table in Blender", "ours", r"\(([\d.]+) CPU-s\)"),
     **{f"counted_{name}_{part}": Figure("instructions", row, "ratio", rf"{label} ([\d.]+)x")
        for name, row in (("live", "live group (default) vs Principled"), ("bake", "baked maps"),
                          ("tan", "tan preset"), ("flush", "flush preset"), ("pallor", "pallor preset"))
