@@ -8,29 +8,27 @@ edit nodes (blender_addon.live.build_live_group without an edit table: the unedi
 inputs at neutral and under the presets tan, flush and pallor (exporters.skin_edits.PRESETS), swapping the material's
 group between renders; each round starts one material later than the one before, so that no material always follows the
 swap from the other group.  Each render's CPU time (training.bench.render_clock, scene sync included) is kept.  The
-ratio is paired: each render against the unedited group's render of the same round (a few seconds apart, so that a
-slow spell of the shared machine slows both), the median of the rounds' ratios, with a 95 % bootstrap interval of that
-median (:func:`paired_ratio`; the ratio of the medians of all renders moved by 10 % between runs).  Equal samples,
-so an edited row also carries the change of the physics (an edit changes how far light walks in the tone), not only
-the nodes' cost.  Images: the bytes the edit table's images take in Blender (float RGBA, 16 bytes a pixel).
-Operator: Invert Skin Albedo on a 4096² albedo with the edit table shipped (training.bench.live's set-up).
+ratio is paired: each render against the unedited group's render of the same round, the median of the rounds'
+ratios with a 95 % bootstrap interval (training.bench.render_clock.paired_ratio; the ratio of the medians of all
+renders moved by 10 % between runs).  Equal samples, so an edited row also carries the change of the physics (an
+edit changes how far light walks in the tone), not only the nodes' cost.  Images: the bytes the edit table's images
+take in Blender (float RGBA, 16 bytes a pixel).  Operator: Invert Skin Albedo on a 4096² albedo with the edit table
+shipped (training.bench.live's set-up).
 """
 
 from __future__ import annotations
 
-import random
 import statistics
 import tempfile
 from pathlib import Path
 
 from training.bench import live as live_bench
+from training.bench.render_clock import paired_ratio
 
 ROOT = Path(__file__).resolve().parents[2]
 RESOLUTION = 128
 SAMPLES = 16
 ROUNDS = 40
-#: Bootstrap resamples of the paired ratios' median, and their seed.
-BOOTSTRAP, SEED = 2000, 0
 TEXTURE = 256
 PRESETS = ("tan", "flush", "pallor")
 MODES = ("plain", "neutral", *PRESETS)
@@ -93,15 +91,6 @@ def image_megabytes() -> float:
 
     atlases = edit_table.load(SHIPPED_EDIT_TABLE).atlases()
     return sum(a.shape[0] * a.shape[1] * FLOAT_RGBA_BYTES for a in atlases.values()) / 1e6
-
-
-def paired_ratio(ours: list[float], anchor: list[float]) -> tuple[float, float, float]:
-    """Median of the rounds' ratios ours[i] / anchor[i] (renders of the same round) and the 2.5 and 97.5 percentiles of
-    that median over :data:`BOOTSTRAP` resamples of the rounds (fixed seed)."""
-    ratios = [a / b for a, b in zip(ours, anchor, strict=True)]
-    rng = random.Random(SEED)
-    medians = sorted(statistics.median(rng.choices(ratios, k=len(ratios))) for _ in range(BOOTSTRAP))
-    return statistics.median(ratios), medians[int(0.025 * BOOTSTRAP)], medians[int(0.975 * BOOTSTRAP) - 1]
 
 
 def _label(mode: str) -> str:

@@ -85,6 +85,17 @@ FIGURES: dict[str, Figure] = {
                            ("backlit_plate", "back-lit plate scene"))},
     "live_time_per_sample_vs_principled": Figure("render_cost", "live group (default) vs Principled", "ratio",
                                                  r"time per sample ([\d.]+)x", _HEAD),
+    **{f"{scene}_paired_{what}": Figure("render_cost", "time per sample paired in one process", "ratio", pattern,
+                                         also)
+       for scene, also in (("head", _HEAD), ("backlit_head", "back-lit head scene"),
+                           ("backlit_plate", "back-lit plate scene"))
+       for what, pattern in (("time_per_sample", r"paired time per sample ([\d.]+)x"),
+                             ("time_per_sample_low", r"interval ([\d.]+)-"),
+                             ("time_per_sample_high", r"interval [\d.]+-([\d.]+)\)"),
+                             ("noise", r"noise at equal samples ([\d.]+)x"),
+                             ("noise_time", r"time to equal noise ([\d.]+)x"),
+                             ("noise_time_low", r"time to equal noise [\d.]+x \(([\d.]+)-"),
+                             ("noise_time_high", r"time to equal noise [\d.]+x \([\d.]+-([\d.]+)\)"))},
     "baked_time_per_sample_vs_principled": Figure("render_cost", "baked maps (Bake, packed) vs Principled", "ratio",
                                                   r"time per sample ([\d.]+)x", _HEAD),
     "per_channel_noise_time_vs_principled": Figure("render_cost", "single-channel closures (the earlier design; "

@@ -15,10 +15,14 @@ time only in 10 ms ticks, statistically split); where /proc has no tasks the clo
 from __future__ import annotations
 
 import os
+import random
 import resource
+import statistics
 from pathlib import Path
 
 _TASKS = Path("/proc/self/task")
+#: Bootstrap resamples of a paired ratio's median (:func:`paired_ratio`), and their seed.
+BOOTSTRAP, SEED = 2000, 0
 
 
 def _process_s() -> float:
@@ -59,3 +63,14 @@ class RenderClock:
         process = _process_s() - self._process
         waiting = sum(now[tid] - before for tid, before in self._threads.items() if tid in now)
         return max(process - waiting, 0.0)
+
+
+def paired_ratio(ours: list[float], anchor: list[float]) -> tuple[float, float, float]:
+    """Median of the rounds' ratios ours[i] / anchor[i] and the 2.5 and 97.5 percentiles of that median over
+    :data:`BOOTSTRAP` resamples of the rounds (fixed seed).  Renders of one round ran seconds apart in one process and
+    met the same spell of other work on the machine, which the ratio cancels; the interval holds the spread of the
+    rounds of one run, not the machine's drift between runs."""
+    ratios = [a / b for a, b in zip(ours, anchor, strict=True)]
+    rng = random.Random(SEED)
+    medians = sorted(statistics.median(rng.choices(ratios, k=len(ratios))) for _ in range(BOOTSTRAP))
+    return statistics.median(ratios), medians[int(0.025 * BOOTSTRAP)], medians[int(0.975 * BOOTSTRAP) - 1]

@@ -16,17 +16,28 @@ t(N) = t0 + a N (least squares) give the time to reach an RMSE e as a (c / e)^2 
 excluded), so the ratio live / Principled is (a_live c_live^2) / (a_P c_P^2), whatever e.  CPU time is the
 render's (training.bench.render_clock: the process's user + system time around bpy.ops.render.render less that of
 the scheduler thread that waits for the render by spinning), robust to the machine being shared.
+
+Paired timing (:func:`paired_time_per_sample`, one row per scene): the fresh processes above time each material
+minutes apart, so the machine's other work moves their time ratio by 10-30 % from run to run.  One process holds
+both Principled and the live group and swaps them on the objects, ``PAIRED_ROUNDS`` rounds in alternating order;
+in each round each material renders at the two sample counts of ``PAIRED_SAMPLES``, the difference of the two
+times over the difference of the samples being its time per sample (sync and compilation cancel).  The row gives
+the median of the rounds' ratios with a bootstrap interval (training.bench.render_clock.paired_ratio) and, times the
+square of the noise ratio at equal samples, the time to equal noise; that noise comes from ten seeds' renders in
+the same process (:func:`noise_constant`), where the rows above take two seeds.
 """
 
 from __future__ import annotations
 
 import shutil
+import statistics
 import tempfile
 from pathlib import Path
 
 import numpy as np
 
 from training.bench.live import run_script
+from training.bench.render_clock import paired_ratio
 
 ROOT = Path(__file__).resolve().parents[2]
 RESOLUTION = 128
@@ -36,8 +47,18 @@ SEEDS = (1, 2)
 TEXTURE = 256
 #: Skin mean free paths (R, G, B) in mm (Jensen et al. 2001, skin 1): the Principled anchor's Subsurface Radius.
 SKIN_RADIUS_MM = (3.67, 1.37, 0.68)
+#: The paired timing (:func:`paired_time_per_sample`): rounds, and the two sample counts each material renders per
+#: round (the difference of their times is the samples' own).
+PAIRED_ROUNDS = 20
+PAIRED_SAMPLES = (8, 40)
+#: The paired row's noise: renders at NOISE_SAMPLES samples with each of NOISE_SEEDS (the two seeds of the rows
+#: above moved the noise ratio by up to 4 % between seed pairs: five pairs gave 0.856-0.912 on the demo head).
+NOISE_SAMPLES = 32
+NOISE_SEEDS = tuple(range(1, 11))
 
-_CHILD = """
+#: Both children's start: the scene (``scene``: "head" or a scene of training.bench.backlit) on one render thread,
+#: denoiser and adaptive sampling off, and the medium tone's albedo texture loaded as ``image``.
+_SETUP = """
 import json, sys, time
 sys.path.insert(0, {root!r})
 import bpy, numpy as np
@@ -55,7 +76,9 @@ scene.cycles.use_adaptive_sampling = False
 scene.render.threads_mode, scene.render.threads = "FIXED", 1
 image = bpy.data.images.load(str(demo_render.write_image({texture_path!r},
                                   skin_albedo_texture({texture}, seed=0, base=TONES["medium"]))))
-mode = {mode!r}
+"""
+
+_CHILD = _SETUP + """mode = {mode!r}
 mat = demo_render._material("skin", image, "principled_skin" if mode == "principled" else "principled")
 if mode == "principled":
     p = mat.node_tree.nodes["Principled BSDF"]
@@ -85,6 +108,43 @@ for samples in {samples!r}:
         renders.append({{"samples": samples, "seed": seed, "cpu_s": cpu, "wall_s": wall,
                          "path": scene.render.filepath}})
 print("RESULT" + json.dumps(renders))
+"""
+
+#: The paired timing's child: both materials in one process, swapped on the scene's objects round by round (the
+#: order alternating), each rendered at every sample count of ``samples`` per round; prints the render clock's
+#: seconds per round, material and sample count.
+_PAIRED_CHILD = _SETUP + """principled = demo_render._material("skin", image, "principled_skin")
+node = principled.node_tree.nodes["Principled BSDF"]
+node.inputs["Subsurface Radius"].default_value = {radius!r}
+node.inputs["Subsurface Scale"].default_value = 0.001
+live = demo_render._material("skin live", image, "principled")
+demo_render._assign(parts, live)
+blender_addon.register()
+demo_render._invert(parts[0], live)
+materials = {{"principled": principled, "live": live}}
+times = {{mode: [] for mode in materials}}
+for r in range({rounds}):
+    for mode in ("principled", "live") if r % 2 == 0 else ("live", "principled"):
+        demo_render._assign(parts, materials[mode])
+        seconds = {{}}
+        for samples in {samples!r}:
+            scene.cycles.samples = samples
+            clock = RenderClock()
+            bpy.ops.render.render(write_still=False)
+            seconds[samples] = clock.seconds()
+        times[mode].append(seconds)
+scene.render.image_settings.file_format = "OPEN_EXR"
+scene.render.image_settings.color_depth = "32"
+scene.cycles.samples = {noise_samples}
+noise = {{mode: [] for mode in materials}}
+for mode, material in materials.items():
+    demo_render._assign(parts, material)
+    for seed in {noise_seeds!r}:
+        scene.cycles.seed = seed
+        scene.render.filepath = f"{out}/{{mode}}_{{seed}}.exr"
+        bpy.ops.render.render(write_still=True)
+        noise[mode].append(scene.render.filepath)
+print("RESULT" + json.dumps({{"times": times, "noise": noise}}))
 """
 
 _LIVE_GROUP = """
@@ -233,6 +293,33 @@ def measure(modes: tuple[str, ...] = ("principled", "live"), samples: tuple[int,
         return {mode: _fit_renders(renders[mode], samples) for mode in modes}
 
 
+def paired_time_per_sample(scene: str = "head", rounds: int = PAIRED_ROUNDS, samples: tuple[int, int] = PAIRED_SAMPLES,
+                           resolution: int = RESOLUTION, seeds: tuple[int, ...] = NOISE_SEEDS) -> dict:
+    """Principled ("principled") and the live group ("live") in one process (:data:`_PAIRED_CHILD`): per material,
+    ``"per_sample"``, the seconds per sample in each round, (t(high) - t(low)) / (high - low) of the round's renders
+    at ``samples`` = (low, high), so what each render spends besides its samples (scene sync, shader compilation)
+    cancels; ``"c"``, the noise constant of RMSE = c / sqrt(N) from :data:`NOISE_SAMPLES`-sample renders at every
+    seed of ``seeds`` (:func:`noise_constant`); ``"seeds"``, their number."""
+    low, high = samples
+    with tempfile.TemporaryDirectory(prefix="bench_paired_") as tmp:
+        result = run_script(_PAIRED_CHILD.format(root=str(ROOT), scene=scene, resolution=resolution, texture=TEXTURE,
+                                                 texture_path=str(Path(tmp) / "skin.png"), radius=SKIN_RADIUS_MM,
+                                                 rounds=rounds, samples=(low, high), noise_samples=NOISE_SAMPLES,
+                                                 noise_seeds=tuple(seeds), out=tmp))
+        return {mode: {"per_sample": [(r[str(high)] - r[str(low)]) / (high - low) for r in result["times"][mode]],
+                       "c": noise_constant([_read_exr(path) for path in result["noise"][mode]], NOISE_SAMPLES),
+                       "seeds": len(seeds)}
+                for mode in result["times"]}
+
+
+def noise_constant(images: list[np.ndarray], samples: int) -> float:
+    """c of RMSE = c / sqrt(N) from independent renders (H, W, 3) of one scene at ``samples`` samples (different
+    seeds): the per-pixel variance over the renders (unbiased), averaged over pixels and channels, is the MSE of one
+    render against the infinite-sample reference."""
+    stack = np.stack(images)
+    return float(np.sqrt(np.mean(stack.var(axis=0, ddof=1)) * samples))
+
+
 def _child_script(mode: str, samples: tuple[int, ...], resolution: int, tmp: Path, scene: str = "head",
                   seeds: tuple[int, ...] = SEEDS, variant: str | None = None) -> str:
     """The child's script rendering ``mode`` (a material mode or a key of :data:`VARIANTS`; ``variant``: the code
@@ -299,9 +386,8 @@ def _ratio(ours: dict, ref: dict) -> str:
 
 
 def _row(scene: str, samples, rounds: int, label: str, anchor: str, ours: dict, ref: dict) -> dict:
-    where = "demo head" if scene == "head" else f"{scene.replace('_', ' ').replace('backlit', 'back-lit')} scene"
-    return {"workload": f"render cost, {where} {RESOLUTION}² px, Cycles CPU 1 thread, no denoiser, {samples} spp x 2 "
-                        f"seeds, least CPU time of {rounds} rounds: {label} vs {LABELS[anchor]}",
+    return {"workload": f"render cost, {_where(scene)} {RESOLUTION}² px, Cycles CPU 1 thread, no denoiser, {samples} "
+                        f"spp x 2 seeds, least CPU time of {rounds} rounds: {label} vs {LABELS[anchor]}",
             "ours": _describe(ours),
             "anchor": _describe(ref),
             "ratio": _ratio(ours, ref),
@@ -325,11 +411,48 @@ def speckle_figure(renders: Path, scene: str, samples: int, path: Path) -> Path:
     return demo_render.write_image(path, np.round(row * 255.0).astype(np.uint8))
 
 
+def _where(scene: str) -> str:
+    return "demo head" if scene == "head" else f"{scene.replace('_', ' ').replace('backlit', 'back-lit')} scene"
+
+
+def _paired_row(scene: str, rounds: int, paired: dict) -> dict:
+    """The paired timing's row (:func:`paired_time_per_sample`): the live group's time per sample against
+    Principled's (median of the rounds' ratios, bootstrap interval) and, times the square of the noise ratio at equal
+    samples from the same process's seeded renders, its time to equal noise."""
+    live, ref = paired["live"], paired["principled"]
+    ratio, low, high = paired_ratio(live["per_sample"], ref["per_sample"])
+    noise = live["c"] / ref["c"]
+    low_n, high_n = PAIRED_SAMPLES
+
+    def describe(m: dict) -> str:
+        values = m["per_sample"]
+        return f"median {1000 * statistics.median(values):.0f} ms/sample ({1000 * min(values):.0f}-" \
+               f"{1000 * max(values):.0f}); noise c = {m['c']:.4f}"
+
+    return {"workload": f"render cost, {_where(scene)} {RESOLUTION}² px, Cycles CPU 1 thread, no denoiser, time per "
+                        f"sample paired in one process ({rounds} rounds, each material at {low_n} and {high_n} spp "
+                        f"per round; noise from {live['seeds']} seeds at {NOISE_SAMPLES} spp): live group "
+                        f"(default) vs {LABELS['principled']}",
+            "ours": describe(live),
+            "anchor": describe(ref),
+            "ratio": f"paired time per sample {ratio:.2f}x (95 % interval {low:.2f}-{high:.2f}); noise at equal "
+                     f"samples {noise:.3f}x; time to equal noise {ratio * noise ** 2:.2f}x "
+                     f"({low * noise ** 2:.2f}-{high * noise ** 2:.2f})",
+            "error": "-",
+            "notes": "time per sample = (t(high) - t(low)) / (high - low) of each material's renders in a round "
+                     "(render clock; per-render sync cancels); the two materials swapped on the objects in one "
+                     "process, order alternating; median of the rounds' ratios and its bootstrap interval "
+                     "(training.bench.render_clock.paired_ratio: the spread of one run's rounds, not the drift "
+                     "between runs); noise: per-pixel variance over the seeds' renders, linear RGB, all pixels"}
+
+
 def benchmarks(quick: bool) -> list[dict]:
     samples = SAMPLES[:2] if quick else SAMPLES
     rounds = 1 if quick else ROUNDS
+    paired_rounds = 4 if quick else PAIRED_ROUNDS
     res = measure(MODES, samples, rounds=rounds)
     rows = [_row("head", samples, rounds, label, anchor, res[mode], res[anchor]) for mode, label, anchor in ROWS]
+    rows.append(_paired_row("head", paired_rounds, paired_time_per_sample("head", paired_rounds)))
     from training.bench import backlit
 
     with tempfile.TemporaryDirectory(prefix="bench_cost_keep_") as keep:
@@ -337,5 +460,6 @@ def benchmarks(quick: bool) -> list[dict]:
             res = measure(BACKLIT_MODES, samples, rounds=rounds, scene=scene, keep=Path(keep))
             rows += [_row(scene, samples, rounds, label, anchor, res[mode], res[anchor])
                      for mode, label, anchor in BACKLIT_ROWS]
+            rows.append(_paired_row(scene, paired_rounds, paired_time_per_sample(scene, paired_rounds)))
             speckle_figure(Path(keep), scene, samples[-1], Path(str(FIGURE).format(scene=scene)))
     return rows
