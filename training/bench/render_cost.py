@@ -24,7 +24,7 @@ in each round each material renders at the two sample counts of ``PAIRED_SAMPLES
 times over the difference of the samples being its time per sample (sync and compilation cancel).  The row gives
 the median of the rounds' ratios with a bootstrap interval (training.bench.render_clock.paired_ratio) and, times the
 square of the noise ratio at equal samples, the time to equal noise; that noise comes from ten seeds' renders in
-the same process (:func:`noise_constant`), where the rows above take two seeds.
+the same process (:func:`noise_rmse` over all of them), where the rows above take two seeds.
 """
 
 from __future__ import annotations
@@ -256,9 +256,11 @@ def _read_exr(path: str) -> np.ndarray:
     return np.asarray(buf.get_pixels(oiio.FLOAT), np.float64)[..., :3]
 
 
-def noise_rmse(a: np.ndarray, b: np.ndarray) -> float:
-    """RMSE of one render against the infinite-sample reference, from two independent renders a, b (H, W, 3)."""
-    return float(np.sqrt(np.mean((a - b) ** 2) / 2.0))
+def noise_rmse(*renders: np.ndarray) -> float:
+    """RMSE of one render against the infinite-sample reference, from two or more independent renders (H, W, 3) of
+    one scene at equal samples (different seeds): the per-pixel variance over the renders (unbiased; for two renders
+    A, B it is (A - B)^2 / 2), averaged over pixels and channels, is one render's mean squared error."""
+    return float(np.sqrt(np.mean(np.stack(renders).var(axis=0, ddof=1))))
 
 
 def fit_cost(samples: np.ndarray, rmse: np.ndarray, cpu_s: np.ndarray) -> dict:
@@ -299,7 +301,7 @@ def paired_time_per_sample(scene: str = "head", rounds: int = PAIRED_ROUNDS, sam
     ``"per_sample"``, the seconds per sample in each round, (t(high) - t(low)) / (high - low) of the round's renders
     at ``samples`` = (low, high), so what each render spends besides its samples (scene sync, shader compilation)
     cancels; ``"c"``, the noise constant of RMSE = c / sqrt(N) from :data:`NOISE_SAMPLES`-sample renders at every
-    seed of ``seeds`` (:func:`noise_constant`); ``"seeds"``, their number."""
+    seed of ``seeds`` (:func:`noise_rmse` times sqrt(N)); ``"seeds"``, their number."""
     low, high = samples
     with tempfile.TemporaryDirectory(prefix="bench_paired_") as tmp:
         result = run_script(_PAIRED_CHILD.format(root=str(ROOT), scene=scene, resolution=resolution, texture=TEXTURE,
@@ -307,17 +309,9 @@ def paired_time_per_sample(scene: str = "head", rounds: int = PAIRED_ROUNDS, sam
                                                  rounds=rounds, samples=(low, high), noise_samples=NOISE_SAMPLES,
                                                  noise_seeds=tuple(seeds), out=tmp))
         return {mode: {"per_sample": [(r[str(high)] - r[str(low)]) / (high - low) for r in result["times"][mode]],
-                       "c": noise_constant([_read_exr(path) for path in result["noise"][mode]], NOISE_SAMPLES),
+                       "c": noise_rmse(*(_read_exr(path) for path in result["noise"][mode])) * NOISE_SAMPLES ** 0.5,
                        "seeds": len(seeds)}
                 for mode in result["times"]}
-
-
-def noise_constant(images: list[np.ndarray], samples: int) -> float:
-    """c of RMSE = c / sqrt(N) from independent renders (H, W, 3) of one scene at ``samples`` samples (different
-    seeds): the per-pixel variance over the renders (unbiased), averaged over pixels and channels, is the MSE of one
-    render against the infinite-sample reference."""
-    stack = np.stack(images)
-    return float(np.sqrt(np.mean(stack.var(axis=0, ddof=1)) * samples))
 
 
 def _child_script(mode: str, samples: tuple[int, ...], resolution: int, tmp: Path, scene: str = "head",
