@@ -3,17 +3,18 @@ group built without them, side by side.
 
 Renders: the demo head (training.demo_render, ``RESOLUTION`` squared px, Cycles CPU on one thread, denoiser off,
 ``SAMPLES`` samples) with the medium tone's albedo texture through Invert Skin Albedo's default (the live group with the
-edit inputs).  One Blender process renders, ``ROUNDS`` times in turn, the live group of the same table built without the
+edit inputs). One Blender process renders, ``ROUNDS`` times in turn, the live group of the same table built without the
 edit nodes (blender_addon.live.build_live_group without an edit table: the unedited group) and the group with the edit
-inputs at neutral and under the presets tan, flush and pallor (exporters.skin_edits.PRESETS), swapping the material's
-group between renders; each round starts one material later than the one before, so that no material always follows the
-swap from the other group.  Each render's CPU time (training.bench.render_clock, scene sync included) is kept.  The
-ratio is paired: each render against the unedited group's render of the same round, the median of the rounds'
-ratios with a 95 % bootstrap interval (training.bench.render_clock.paired_ratio; the ratio of the medians of all
-renders moved by 10 % between runs).  Equal samples, so an edited row also carries the change of the physics (an
-edit changes how far light walks in the tone), not only the nodes' cost.  Images: the bytes the edit table's images
-take in Blender (float RGBA, 16 bytes a pixel).  Operator: Invert Skin Albedo on a 4096² albedo with the edit table
-shipped (training.bench.live's set-up).
+inputs at neutral, under the presets tan, flush and pallor (exporters.skin_edits.PRESETS) and under the costliest kind
+of edit, every control between two of its table's levels (:data:`EDITS`, "three": the group reads each control's images
+at two levels), swapping the material's group between renders; each round starts one material later than the one before,
+so that no material always follows the swap from the other group. Each render's CPU time (training.bench.render_clock,
+scene sync included) is kept. The ratio is paired: each render against the unedited group's render of the same round,
+the median of the rounds' ratios with a 95 % bootstrap interval (training.bench.render_clock.paired_ratio; the ratio of
+the medians of all renders moved by 10 % between runs). Equal samples, so an edited row also carries the change of the
+physics (an edit changes how far light walks in the tone), not only the nodes' cost. Images: the bytes the edit table's
+images take in Blender (float RGBA, 16 bytes a pixel). Operator: Invert Skin Albedo on a 4096² albedo with the edit
+table shipped (training.bench.live's set-up).
 """
 
 from __future__ import annotations
@@ -22,6 +23,7 @@ import statistics
 import tempfile
 from pathlib import Path
 
+from exporters import skin_edits
 from training.bench import live as live_bench
 from training.bench.render_clock import paired_ratio
 
@@ -31,7 +33,12 @@ SAMPLES = 16
 ROUNDS = 40
 TEXTURE = 256
 PRESETS = ("tan", "flush", "pallor")
-MODES = ("plain", "neutral", *PRESETS)
+#: The edits timed (Melanin, Blood, Oxygenation): the presets, and every control between two levels of the edit table
+#: (exporters.edit_table.LEVELS: log2 1.5 = 0.58 between 0.5 and 1; log2 2.5 = 1.32 between 1 and 1.5; -0.2 between
+#: -0.25 and -0.125), which reads the most images (24 lookups; flush reads 12, pallor 8).
+EDITS: dict[str, tuple[float, float, float]] = {**{p: tuple(float(v) for v in skin_edits.PRESETS[p].row())
+                                                   for p in PRESETS}, "three": (1.5, 2.5, -0.2)}
+MODES = ("plain", "neutral", *EDITS)
 #: Bytes a pixel of a float RGBA image takes in Blender.
 FLOAT_RGBA_BYTES = 16
 
@@ -41,7 +48,7 @@ sys.path.insert(0, {root!r})
 import bpy
 import blender_addon
 from blender_addon import live, live_edits, preferences
-from exporters.skin_edits import NEUTRAL, PRESETS
+from exporters.skin_edits import NEUTRAL
 from training import demo_render
 from training.demo_subject import TONES, skin_albedo_texture
 from training.bench.render_clock import RenderClock
@@ -60,7 +67,7 @@ edited = node.node_tree
 table = live.table_for_model(preferences.DEFAULT_MODEL)
 layout, images = live.ensure_images(table)
 plain = live.build_live_group(table, layout, images)
-values = {{"neutral": NEUTRAL, **{{p: tuple(PRESETS[p].row()) for p in {presets!r}}}}}
+values = {{"neutral": NEUTRAL, **{edits!r}}}
 modes = {modes!r}
 times = {{mode: [] for mode in modes}}
 for r in range({rounds}):
@@ -81,7 +88,7 @@ def measure(rounds: int = ROUNDS, samples: int = SAMPLES, resolution: int = RESO
     with tempfile.TemporaryDirectory(prefix="bench_edit_") as tmp:
         return live_bench.run_script(_CHILD.format(root=str(ROOT), resolution=resolution, samples=samples,
                                                    texture=TEXTURE, texture_path=str(Path(tmp) / "skin.png"),
-                                                   presets=PRESETS, modes=MODES, rounds=rounds))
+                                                   edits=EDITS, modes=MODES, rounds=rounds))
 
 
 def image_megabytes() -> float:
@@ -94,7 +101,11 @@ def image_megabytes() -> float:
 
 
 def _label(mode: str) -> str:
-    return "at neutral (1, 1, 0)" if mode == "neutral" else f"at preset {mode}"
+    if mode == "neutral":
+        return "at neutral (1, 1, 0)"
+    if mode == "three":
+        return "at ({:g}, {:g}, {:g}): every control between two levels".format(*EDITS[mode])
+    return f"at preset {mode}"
 
 
 def benchmarks(quick: bool) -> list[dict]:

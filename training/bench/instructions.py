@@ -20,8 +20,9 @@ and reads from its output, per material:
 * **evaluations**: how often a shader was evaluated (the calls of ``svm_eval_nodes``).
 
 Materials: Principled BSDF Random Walk (Skin) (the anchor of :mod:`training.bench.render_cost`), the Bake mode's
-maps, the live group (Invert Skin Albedo's default, edit inputs at neutral) and the live group under each preset of
-exporters.skin_edits.PRESETS (:data:`PRESETS`: an edit's cost against the group at neutral).
+maps, the live group (Invert Skin Albedo's default, edit inputs at neutral) and the live group under each edit of
+training.bench.edit_cost.EDITS (the presets tan, flush and pallor and every control between two levels: an edit's cost
+against the group at neutral).
 Instructions are not time: a walk's ray casts wait on memory where the node loop does not, so the live group's
 instruction ratio is larger than its time ratio; what the counts give is a change's effect without the machine's
 noise.  Needs ``valgrind`` on the PATH (about 100 s per material, two at a time); without it the rows say so.
@@ -37,7 +38,7 @@ from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 
-from training.bench import render_cost
+from training.bench import edit_cost, render_cost
 from training.bench.live import run_script
 
 RESOLUTION = render_cost.RESOLUTION
@@ -47,20 +48,19 @@ COUNTED = "ccl::PathTraceWorkCPU::render_samples_full_pipeline*"
 #: The functions (a part of their names, as Callgrind writes them) whose inclusive counts are reported.
 SHADING = "ccl::svm_eval_nodes<"
 WALKS = "ccl::integrator_intersect_subsurface("
-#: The live group's edit inputs set to a preset of exporters.skin_edits.PRESETS (after Invert Skin Albedo), as the
-#: child's variant code; ``{preset}`` is the preset's name.
-_PRESET = """
+#: The live group's edit inputs set to an edit (after Invert Skin Albedo), as the child's variant code; ``{edit}`` is
+#: its (Melanin, Blood, Oxygenation).
+_EDIT = """
 from blender_addon import live_edits
-from exporters.skin_edits import PRESETS
 node = live_edits.live_node(mat)
-for (name, *_), value in zip(live_edits.INPUTS, PRESETS[{preset!r}].row(), strict=True):
+for (name, *_), value in zip(live_edits.INPUTS, {edit!r}, strict=True):
     node.inputs[name].default_value = float(value)
 """
-#: The presets counted against the live group at neutral.
-PRESETS = ("tan", "flush", "pallor")
+#: The edits counted against the live group at neutral: those the edit cost bench times.
+EDITS = edit_cost.EDITS
 #: Materials: (name, render_cost mode, variant code or None for the mode's own).
 MATERIALS = (("principled", "principled", None), ("bake", "bake", None), ("live", "live", None),
-             *((f"live_{p}", f"live_{p}", _PRESET.format(preset=p)) for p in PRESETS))
+             *((f"live_{name}", f"live_{name}", _EDIT.format(edit=edit)) for name, edit in EDITS.items()))
 
 
 @dataclass
@@ -179,11 +179,16 @@ def _row(label: str, anchor_label: str, ours: Counts, ref: Counts, samples: int)
                      "instructions are not time (walks wait on memory, the node loop on its jumps)"}
 
 
+def _edit_label(name: str) -> str:
+    if name in edit_cost.PRESETS:
+        return f"live group under the {name} preset"
+    return "live group at ({:g}, {:g}, {:g}), every control between two levels".format(*EDITS[name])
+
+
 #: The rows: (material, label, anchor material, anchor label).
 ROWS = (("live", "live group (default)", "principled", "Principled BSDF, Random Walk (Skin), skin radius"),
         ("bake", "baked maps (Bake, packed)", "principled", "Principled BSDF, Random Walk (Skin), skin radius"),
-        *((f"live_{p}", f"live group under the {p} preset", "live", "the live group (edit inputs at neutral)")
-          for p in PRESETS))
+        *((f"live_{name}", _edit_label(name), "live", "the live group (edit inputs at neutral)") for name in EDITS))
 
 
 def benchmarks(quick: bool) -> list[dict]:
