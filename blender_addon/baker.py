@@ -21,7 +21,7 @@ import bpy
 import numpy as np
 
 from . import nodes, oblique, tiles, wiring
-from .core import bake, image_input, inference, maps, uv_coverage
+from .core import bake, image_input, inference, maps, skin_edits, uv_coverage
 
 AlbedoImage, IndexedAlbedo = image_input.AlbedoImage, image_input.IndexedAlbedo
 
@@ -50,7 +50,8 @@ class BakeSettings:
     the model instead of the fast-path table; ``uv_coverage``: evaluate only the texels the active mesh's UVs
     cover (the others take the maps of the most common covered colour); ``unit_scale_m``: metres per Blender
     unit for the radii (None: the scene's, :func:`scene_unit_scale`); ``openpbr``: also the OpenPBR maps, MaterialX
-    document and USD layer of ``--target openpbr`` (storage "FILES" only: other renderers read files)."""
+    document and USD layer of ``--target openpbr`` (storage "FILES" only: other renderers read files); ``edit``: the
+    skin edit (Melanin, Blood, Oxygenation: exporters.skin_edits) every texel's maps carry."""
 
     model_path: str
     filepath: str = ""
@@ -67,6 +68,7 @@ class BakeSettings:
     uv_coverage: bool = True
     unit_scale_m: float | None = None
     openpbr: bool = False
+    edit: tuple[float, float, float] = skin_edits.NEUTRAL
 
 
 def scene_unit_scale(scene: bpy.types.Scene) -> float:
@@ -251,6 +253,7 @@ class AddonBake:
                                         threads=settings.threads, chunk=settings.chunk,
                                         model_colour=settings.model_colour, overwrite=settings.overwrite,
                                         exact=settings.exact, texel_mask=mask,
+                                        edit=skin_edits.SkinEdit(*settings.edit),
                                         **({"prune_share": 0.0} if self.tiled else {}))
         try:
             if self.tiled:

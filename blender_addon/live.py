@@ -47,7 +47,7 @@ import numpy as np
 
 from . import curves, live_edits, nodes, oblique, wiring
 from .core import bake as core_bake
-from .core import colorimetry, image_input, live_table, maps, painted_gain, texel_table
+from .core import colorimetry, image_input, live_table, maps, painted_gain, skin_edits, texel_table
 
 GROUP_NAME = "Spectral Skin SSS Live"
 #: Custom properties: on the group and the images, the SHA-256 of the table they were made from.
@@ -746,10 +746,12 @@ def _pixels(image: bpy.types.Image, limit: int) -> np.ndarray:
 
 # -- the operator's live path ----------------------------------------------------------------------------------
 def apply(context: bpy.types.Context, model_path: str, unit_scale_m: float, colorspace: str = "FROM_IMAGE",
-          principled_convention: bool = False) -> str:
+          principled_convention: bool = False, edit: tuple[float, float, float] | None = None) -> str:
     """Wire the live group into the active object's active material (Invert Skin Albedo's default); returns the
-    one-line report.  Bad input raises LiveInputError before anything changes; a failure while wiring removes
-    what was made (call from an operator with UNDO for Ctrl+Z)."""
+    one-line report.  ``edit``: (Melanin, Blood, Oxygenation) set on the group node's inputs (None: left as they
+    are; LiveInputError when not neutral and the model has no edit table).  Bad input raises LiveInputError before
+    anything changes; a failure while wiring removes what was made (call from an operator with UNDO for
+    Ctrl+Z)."""
     obj = context.object
     material = obj.active_material if obj is not None else None
     if material is None or material.node_tree is None:
@@ -760,12 +762,16 @@ def apply(context: bpy.types.Context, model_path: str, unit_scale_m: float, colo
         raise LiveInputError(error)
     table = table_for_model(model_path)
     edits = live_edits.table_for_model(model_path, table.sha256)
+    if edits is None and edit is not None and not skin_edits.SkinEdit(*edit).neutral:
+        raise LiveInputError(f"no edit table beside {model_path}: the live group takes no Melanin, Blood or "
+                             "Oxygenation; build it with python -m training edit-table, or bake with the edit")
     wired = wiring.wired_group_node(material)
     if wired is not None and wiring.is_added(wired) and wired.node_tree.get(TABLE_PROP) == table.sha256 \
             and wired.node_tree.get("spectral_skin_sss_version") == LIVE_VERSION \
             and wired.node_tree.get(live_edits.EDIT_TABLE_PROP) == (edits.sha256 if edits is not None else None):
         wired.inputs["Unit Scale"].default_value = unit_scale_m
         wired.inputs["Principled Convention"].default_value = float(principled_convention)
+        live_edits.set_edit(wired, edit)
         return (f"up to date: '{material.name}' already renders through the live group (Unit Scale {unit_scale_m:g} m "
                 "per Blender unit)")
     _, colour, _ = colour_source(material)
@@ -778,6 +784,7 @@ def apply(context: bpy.types.Context, model_path: str, unit_scale_m: float, colo
             group = ensure_live_group(table, edits)
             gnode = wire_live(material, group, unit_scale_m)
             gnode.inputs["Principled Convention"].default_value = float(principled_convention)
+            live_edits.set_edit(gnode, edit)
         except BaseException:
             _restore(material, before)
             raise

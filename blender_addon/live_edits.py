@@ -103,6 +103,23 @@ def ensure_images(table: edit_table.EditTable, atlases: Callable[[], dict[str, n
     return images
 
 
+def edit_property(name: str) -> dict:
+    """Keyword arguments of a FloatProperty for the control ``name`` (Melanin, Blood, Oxygenation): its neutral
+    default, soft range and tooltip (:data:`INPUTS`), for the operator's and the panel's edit options."""
+    _, default, lo, hi, tip = next(spec for spec in INPUTS if spec[0] == name)
+    return {"name": name, "default": default, "soft_min": lo, "soft_max": hi, "description": tip}
+
+
+def set_edit(node: bpy.types.Node, edit: tuple[float, float, float] | None) -> None:
+    """Set the live group node's Melanin, Blood and Oxygenation to ``edit`` (None, or a node without the inputs:
+    nothing; inputs fed by a node are left as they are)."""
+    if edit is None or "Melanin" not in node.inputs:
+        return
+    for (name, *_), value in zip(INPUTS, edit, strict=True):
+        if not node.inputs[name].is_linked:
+            node.inputs[name].default_value = float(value)
+
+
 def add_inputs(group: bpy.types.NodeTree) -> None:
     """The Melanin, Blood and Oxygenation inputs of the group interface (neutral defaults)."""
     for name, default, lo, hi, tip in INPUTS:
@@ -264,10 +281,7 @@ def live_node(material: bpy.types.Material) -> bpy.types.Node | None:
 def apply_preset(node: bpy.types.Node, preset: str) -> None:
     """Set the node's Melanin, Blood and Oxygenation to a preset of exporters.skin_edits.PRESETS (linked inputs are
     left as they are)."""
-    edit = skin_edits.PRESETS[preset]
-    for (name, *_), value in zip(INPUTS, edit.row(), strict=True):
-        if not node.inputs[name].is_linked:
-            node.inputs[name].default_value = float(value)
+    set_edit(node, tuple(skin_edits.PRESETS[preset].row()))
 
 
 def model_has_edits(model_path: str | os.PathLike) -> bool:
@@ -298,9 +312,7 @@ class SPECTRAL_SKIN_OT_skin_edit_preset(bpy.types.Operator):
     def execute(self, context):
         node = live_node(context.material)
         if self.preset == "NEUTRAL":
-            for name, default, *_ in INPUTS:
-                if not node.inputs[name].is_linked:
-                    node.inputs[name].default_value = default
+            set_edit(node, skin_edits.NEUTRAL)
         else:
             apply_preset(node, self.preset.lower())
         self.report({"INFO"}, f"'{context.material.name}': skin edit {self.preset.lower()}")

@@ -15,8 +15,9 @@ from __future__ import annotations
 
 import bpy
 
-from . import baker, live, nodes, preferences, wiring
+from . import baker, live, live_edits, nodes, preferences, wiring
 from .core import bake as _core_bake
+from .core import skin_edits
 
 one_line = _core_bake.one_line
 
@@ -96,6 +97,9 @@ class SPECTRAL_SKIN_OT_invert_albedo(bpy.types.Operator):
         name="Only UV-covered texels", default=True,
         description="Evaluate only the texels the active mesh's UVs cover; the others get the maps of the most "
                     "common covered colour")
+    melanin: bpy.props.FloatProperty(**live_edits.edit_property("Melanin"))
+    blood: bpy.props.FloatProperty(**live_edits.edit_property("Blood"))
+    oxygenation: bpy.props.FloatProperty(**live_edits.edit_property("Oxygenation"))
 
     _bake = None
     _timer = None
@@ -107,7 +111,13 @@ class SPECTRAL_SKIN_OT_invert_albedo(bpy.types.Operator):
                                   colorspace=self.colorspace, backend=self.backend, overwrite=self.overwrite,
                                   model_colour=self.model_colour, threads=preferences.threads(context),
                                   exact=self.exact, uv_coverage=self.uv_coverage, openpbr=self.openpbr,
-                                  unit_scale_m=baker.scene_unit_scale(context.scene))
+                                  unit_scale_m=baker.scene_unit_scale(context.scene), edit=self._edit())
+
+    def _edit(self) -> tuple[float, float, float]:
+        """The skin edit asked for: (Melanin, Blood, Oxygenation).  The live mode sets a non-neutral one on the group
+        node's inputs and leaves them as they are otherwise (an edit made there stays); the bake mode's maps carry
+        it."""
+        return (self.melanin, self.blood, self.oxygenation)
 
     def _live(self, context):
         """The live group (mode LIVE): options that only a bake can honour are refused, not ignored."""
@@ -121,7 +131,8 @@ class SPECTRAL_SKIN_OT_invert_albedo(bpy.types.Operator):
             return {"CANCELLED"}
         try:
             message = live.apply(context, preferences.model_path(context), baker.scene_unit_scale(context.scene),
-                                 self.colorspace, self.principled_convention)
+                                 self.colorspace, self.principled_convention,
+                                 None if skin_edits.SkinEdit(*self._edit()).neutral else self._edit())
         except _EXPECTED as exc:
             self.report({"ERROR"}, one_line(exc))
             return {"CANCELLED"}

@@ -30,6 +30,9 @@ class SpectralSkinSettings(bpy.types.PropertyGroup):
                                   description="Every distinct colour through the network, not the fast-path table")
     uv_coverage: bpy.props.BoolProperty(name="Only UV-covered texels", default=True,
                                         description="Evaluate only the texels the active mesh's UVs cover")
+    melanin: bpy.props.FloatProperty(**live_edits.edit_property("Melanin"))
+    blood: bpy.props.FloatProperty(**live_edits.edit_property("Blood"))
+    oxygenation: bpy.props.FloatProperty(**live_edits.edit_property("Oxygenation"))
 
 
 def _draw(layout, context) -> None:
@@ -67,6 +70,9 @@ def _draw(layout, context) -> None:
         col.prop(settings, "model_colour")
         col.prop(settings, "exact")
         col.prop(settings, "uv_coverage")
+        edit = col.column(heading="Skin edit", align=True)
+        for name in ("melanin", "blood", "oxygenation"):
+            edit.prop(settings, name)
     op = layout.operator("spectral_skin.invert_albedo", icon="IMAGE_DATA")
     if settings is not None:
         op.mode, op.principled_convention = settings.mode, settings.principled_convention
@@ -76,6 +82,7 @@ def _draw(layout, context) -> None:
         op.colorspace, op.backend = settings.colorspace, shading_of(settings)
         op.overwrite, op.model_colour = settings.overwrite, settings.model_colour
         op.exact, op.uv_coverage = settings.exact, settings.uv_coverage
+        op.melanin, op.blood, op.oxygenation = settings.melanin, settings.blood, settings.oxygenation
     layout.operator("spectral_skin.add_mixture", icon="NODETREE")
     live_edits.draw_controls(layout, context)
     layout.operator("spectral_skin.remove", icon="TRASH")

@@ -21,7 +21,7 @@ sys.path.insert(0, str(ROOT))
 import blender_addon  # noqa: E402
 from blender_addon import live, live_edits, preferences, probe  # noqa: E402
 from exporters import bake, edit_table, live_table, maps, skin_edits  # noqa: E402
-from tests.addon_scene import run_invert, skin_codes, skin_object, write_image  # noqa: E402
+from tests.addon_scene import image_pixels, run_invert, skin_codes, skin_object, write_image  # noqa: E402
 from tests.test_live_group import _probe_strip, _render_row  # noqa: E402
 
 #: Skin colours light to dark, a saturated red, a colour outside the box (blue) and one above 1.
@@ -204,3 +204,35 @@ def test_operator_wires_the_edit_inputs_and_presets_set_them(tmp_path, addon):
     with bpy.context.temp_override(material=mat, object=obj, active_object=obj):
         assert bpy.ops.spectral_skin.skin_edit_preset(preset="NEUTRAL") == {"FINISHED"}
     assert [node.inputs[n].default_value for n in ("Melanin", "Blood")] == [1.0, 1.0]
+
+
+def test_the_operator_takes_an_edit_into_the_live_group_and_into_baked_maps(tmp_path, addon):
+    """Invert Skin Albedo's Melanin, Blood and Oxygenation: the live mode sets them on the group node (run again
+    with the neutral defaults it leaves an edit made there as it is); the bake mode's maps carry the edit, equal to
+    exporters.bake's with the same edit and unlike the unedited maps."""
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    png = write_image(tmp_path / "skin.png", skin_codes(), "uint8")
+    obj, mat, _ = skin_object(png)
+    assert run_invert(obj, mode="LIVE", melanin=1.5, blood=2.5) == {"FINISHED"}
+    node = live_edits.live_node(mat)
+    assert [node.inputs[n].default_value for n in EDIT] == pytest.approx([1.5, 2.5, 0.0])
+    assert run_invert(obj, mode="LIVE") == {"FINISHED"}
+    assert [node.inputs[n].default_value for n in EDIT] == pytest.approx([1.5, 2.5, 0.0])
+    baked_obj, baked_mat, _ = skin_object(png, name="Baked")
+    assert run_invert(baked_obj, mode="BAKE", melanin=1.5, blood=2.5) == {"FINISHED"}
+    edited, plain = tmp_path / "edited", tmp_path / "plain"
+    edited.mkdir()
+    plain.mkdir()
+    bake.bake(png, edited, preferences.DEFAULT_MODEL, bake.BakeOptions(threads=1, edit=skin_edits.SkinEdit(1.5, 2.5)))
+    bake.bake(png, plain, preferences.DEFAULT_MODEL, bake.BakeOptions(threads=1))
+    table = live.table_for_model(preferences.DEFAULT_MODEL)
+    change = {}
+    for k in range(1, table.k + 1):
+        for kind in ("color", "radius", "weight"):
+            name = f"skin_k{k}_{kind}.exr"
+            ref = maps.read_exr(edited / name)[0]
+            got = image_pixels(bpy.data.images[f"skin.png_k{k}_{kind}.exr"])[..., : ref.shape[2]]  # the image's name
+            np.testing.assert_allclose(got, ref, rtol=1e-6, atol=1e-7, err_msg=name)
+            unedited = maps.read_exr(plain / name)[0]
+            change[kind] = max(change.get(kind, 0.0), float(np.abs(ref - unedited).max() / np.abs(unedited).max()))
+    assert change["radius"] > 0.01 and change["weight"] > 0.01, change  # the edit changes the translucency
