@@ -7,14 +7,14 @@ edit inputs). One Blender process renders, ``ROUNDS`` times in turn, the live gr
 edit nodes (blender_addon.live.build_live_group without an edit table: the unedited group) and the group with the edit
 inputs at neutral, under the presets tan, flush and pallor (exporters.skin_edits.PRESETS) and under the costliest kind
 of edit, every control between two of its table's levels (:data:`EDITS`, "three": the group reads each control's images
-at two levels), swapping the material's group between renders; each round starts one material later than the one before,
-so that no material always follows the swap from the other group. Each render's CPU time (training.bench.render_clock,
-scene sync included) is kept. The ratio is paired: each render against the unedited group's render of the same round,
-the median of the rounds' ratios with a 95 % bootstrap interval (training.bench.render_clock.paired_ratio; the ratio of
-the medians of all renders moved by 10 % between runs). Equal samples, so an edited row also carries the change of the
-physics (an edit changes how far light walks in the tone), not only the nodes' cost. Images: the bytes the edit table's
-images take in Blender (float RGBA, 16 bytes a pixel). Operator: Invert Skin Albedo on a 4096² albedo with the edit
-table shipped (training.bench.live's set-up).
+at two levels), and the cheapest, one control on a level ("level"), swapping the material's group between renders; each
+round starts one material later than the one before, so that no material always follows the swap from the other group.
+Each render's CPU time (training.bench.render_clock, scene sync included) is kept. The ratio is paired: each render
+against the unedited group's render of the same round, the median of the rounds' ratios with a 95 % bootstrap interval
+(training.bench.render_clock.paired_ratio; the ratio of the medians of all renders moved by 10 % between runs). Equal
+samples, so an edited row also carries the change of the physics (an edit changes how far light walks in the tone), not
+only the nodes' cost. Images: the bytes the edit table's images take in Blender (float RGBA, 16 bytes a pixel).
+Operator: Invert Skin Albedo on a 4096² albedo with the edit table shipped (training.bench.live's set-up).
 """
 
 from __future__ import annotations
@@ -33,11 +33,14 @@ SAMPLES = 16
 ROUNDS = 40
 TEXTURE = 256
 PRESETS = ("tan", "flush", "pallor")
-#: The edits timed (Melanin, Blood, Oxygenation): the presets, and every control between two levels of the edit table
+#: The edits timed (Melanin, Blood, Oxygenation): the presets; every control between two levels of the edit table
 #: (exporters.edit_table.LEVELS: log2 1.5 = 0.58 between 0.5 and 1; log2 2.5 = 1.32 between 1 and 1.5; -0.2 between
-#: -0.25 and -0.125), which reads the most images (24 lookups; flush reads 12, pallor 8).
-EDITS: dict[str, tuple[float, float, float]] = {**{p: tuple(float(v) for v in skin_edits.PRESETS[p].row())
-                                                   for p in PRESETS}, "three": (1.5, 2.5, -0.2)}
+#: -0.25 and -0.125), which reads the most images (24 lookups; flush reads 12, pallor 8); and one control on a level
+#: (Melanin 2: log2 2 = 1), which reads the fewest an edit can (4: its two images at two slices), the nodes a design
+#: reading one precomputed image pair per edit would have.
+EDITS: dict[str, tuple[float, float, float]] = {
+    **{p: tuple(float(v) for v in skin_edits.PRESETS[p].row()) for p in PRESETS},
+    "three": (1.5, 2.5, -0.2), "level": (2.0, 1.0, 0.0)}
 MODES = ("plain", "neutral", *EDITS)
 #: Bytes a pixel of a float RGBA image takes in Blender.
 FLOAT_RGBA_BYTES = 16
@@ -105,6 +108,8 @@ def _label(mode: str) -> str:
         return "at neutral (1, 1, 0)"
     if mode == "three":
         return "at ({:g}, {:g}, {:g}): every control between two levels".format(*EDITS[mode])
+    if mode == "level":
+        return "at ({:g}, {:g}, {:g}): one control on a level".format(*EDITS[mode])
     return f"at preset {mode}"
 
 

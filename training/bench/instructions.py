@@ -21,8 +21,8 @@ and reads from its output, per material:
 
 Materials: Principled BSDF Random Walk (Skin) (the anchor of :mod:`training.bench.render_cost`), the Bake mode's
 maps, the live group (Invert Skin Albedo's default, edit inputs at neutral) and the live group under each edit of
-training.bench.edit_cost.EDITS (the presets tan, flush and pallor and every control between two levels: an edit's cost
-against the group at neutral).
+training.bench.edit_cost.EDITS (the presets tan, flush and pallor, every control between two levels and one control on
+a level: an edit's cost against the group at neutral).
 Instructions are not time: a walk's ray casts wait on memory where the node loop does not, so the live group's
 instruction ratio is larger than its time ratio; what the counts give is a change's effect without the machine's
 noise.  Needs ``valgrind`` on the PATH (about 100 s per material, two at a time); without it the rows say so.
@@ -182,7 +182,8 @@ def _row(label: str, anchor_label: str, ours: Counts, ref: Counts, samples: int)
 def _edit_label(name: str) -> str:
     if name in edit_cost.PRESETS:
         return f"live group under the {name} preset"
-    return "live group at ({:g}, {:g}, {:g}), every control between two levels".format(*EDITS[name])
+    what = "every control between two levels" if name == "three" else "one control on a level"
+    return f"live group at ({EDITS[name][0]:g}, {EDITS[name][1]:g}, {EDITS[name][2]:g}), {what}"
 
 
 #: The rows: (material, label, anchor material, anchor label).
