@@ -748,10 +748,10 @@ def _pixels(image: bpy.types.Image, limit: int) -> np.ndarray:
 def apply(context: bpy.types.Context, model_path: str, unit_scale_m: float, colorspace: str = "FROM_IMAGE",
           principled_convention: bool = False, edit: tuple[float, float, float] | None = None) -> str:
     """Wire the live group into the active object's active material (Invert Skin Albedo's default); returns the
-    one-line report.  ``edit``: (Melanin, Blood, Oxygenation) set on the group node's inputs (None: left as they
-    are; LiveInputError when not neutral and the model has no edit table).  Bad input raises LiveInputError before
-    anything changes; a failure while wiring removes what was made (call from an operator with UNDO for
-    Ctrl+Z)."""
+    one-line report. ``edit``: (Melanin, Blood, Oxygenation) set on the group node's inputs (None or neutral: left
+    as they are, so an edit made on the node stays; LiveInputError when the model has no edit table). Bad input
+    raises LiveInputError before anything changes; a failure while wiring removes what was made (call from an
+    operator with UNDO for Ctrl+Z)."""
     obj = context.object
     material = obj.active_material if obj is not None else None
     if material is None or material.node_tree is None:
@@ -760,9 +760,11 @@ def apply(context: bpy.types.Context, model_path: str, unit_scale_m: float, colo
     error = wiring.linked_error(material)
     if error:
         raise LiveInputError(error)
+    if edit is not None and skin_edits.SkinEdit(*edit).neutral:
+        edit = None
     table = table_for_model(model_path)
     edits = live_edits.table_for_model(model_path, table.sha256)
-    if edits is None and edit is not None and not skin_edits.SkinEdit(*edit).neutral:
+    if edits is None and edit is not None:
         raise LiveInputError(f"no edit table beside {model_path}: the live group takes no Melanin, Blood or "
                              "Oxygenation; build it with python -m training edit-table, or bake with the edit")
     wired = wiring.wired_group_node(material)

@@ -17,7 +17,6 @@ import bpy
 
 from . import baker, live, live_edits, nodes, preferences, wiring
 from .core import bake as _core_bake
-from .core import skin_edits
 
 one_line = _core_bake.one_line
 
@@ -131,8 +130,7 @@ class SPECTRAL_SKIN_OT_invert_albedo(bpy.types.Operator):
             return {"CANCELLED"}
         try:
             message = live.apply(context, preferences.model_path(context), baker.scene_unit_scale(context.scene),
-                                 self.colorspace, self.principled_convention,
-                                 None if skin_edits.SkinEdit(*self._edit()).neutral else self._edit())
+                                 self.colorspace, self.principled_convention, self._edit())
         except _EXPECTED as exc:
             self.report({"ERROR"}, one_line(exc))
             return {"CANCELLED"}

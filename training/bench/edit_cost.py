@@ -41,6 +41,8 @@ PRESETS = ("tan", "flush", "pallor")
 EDITS: dict[str, tuple[float, float, float]] = {
     **{p: tuple(float(v) for v in skin_edits.PRESETS[p].row()) for p in PRESETS},
     "three": (1.5, 2.5, -0.2), "level": (2.0, 1.0, 0.0)}
+#: What the edits besides the presets are, in the rows' labels.
+DESCRIPTIONS = {"three": "every control between two levels", "level": "one control on a level"}
 MODES = ("plain", "neutral", *EDITS)
 #: Bytes a pixel of a float RGBA image takes in Blender.
 FLOAT_RGBA_BYTES = 16
@@ -76,9 +78,7 @@ times = {{mode: [] for mode in modes}}
 for r in range({rounds}):
     for mode in modes[r % len(modes):] + modes[:r % len(modes)]:  # each round one material later
         node.node_tree = plain if mode == "plain" else edited
-        for name, value in zip(("Melanin", "Blood", "Oxygenation"), values.get(mode, NEUTRAL)):
-            if name in node.inputs:
-                node.inputs[name].default_value = float(value)
+        live_edits.set_edit(node, values.get(mode, NEUTRAL))  # the plain group has no edit inputs: nothing
         clock = RenderClock()
         bpy.ops.render.render(write_still=False)
         times[mode].append(clock.seconds())
@@ -106,10 +106,8 @@ def image_megabytes() -> float:
 def _label(mode: str) -> str:
     if mode == "neutral":
         return "at neutral (1, 1, 0)"
-    if mode == "three":
-        return "at ({:g}, {:g}, {:g}): every control between two levels".format(*EDITS[mode])
-    if mode == "level":
-        return "at ({:g}, {:g}, {:g}): one control on a level".format(*EDITS[mode])
+    if mode in DESCRIPTIONS:
+        return "at ({:g}, {:g}, {:g}): {}".format(*EDITS[mode], DESCRIPTIONS[mode])
     return f"at preset {mode}"
 
 

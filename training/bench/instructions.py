@@ -52,9 +52,7 @@ WALKS = "ccl::integrator_intersect_subsurface("
 #: its (Melanin, Blood, Oxygenation).
 _EDIT = """
 from blender_addon import live_edits
-node = live_edits.live_node(mat)
-for (name, *_), value in zip(live_edits.INPUTS, {edit!r}, strict=True):
-    node.inputs[name].default_value = float(value)
+live_edits.set_edit(live_edits.live_node(mat), {edit!r})
 """
 #: The edits counted against the live group at neutral: those the edit cost bench times.
 EDITS = edit_cost.EDITS
@@ -182,8 +180,7 @@ def _row(label: str, anchor_label: str, ours: Counts, ref: Counts, samples: int)
 def _edit_label(name: str) -> str:
     if name in edit_cost.PRESETS:
         return f"live group under the {name} preset"
-    what = "every control between two levels" if name == "three" else "one control on a level"
-    return f"live group at ({EDITS[name][0]:g}, {EDITS[name][1]:g}, {EDITS[name][2]:g}), {what}"
+    return "live group at ({:g}, {:g}, {:g}), {}".format(*EDITS[name], edit_cost.DESCRIPTIONS[name])
 
 
 #: The rows: (material, label, anchor material, anchor label).
