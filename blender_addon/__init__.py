@@ -37,6 +37,7 @@ def register(addon_name: str | None = None) -> None:
     for cls in _classes:
         bpy.utils.register_class(cls)
     panels.register_properties()
+    live_edits.register_handlers()
     atexit.unregister(unregister)
     atexit.register(unregister)
 
@@ -44,6 +45,7 @@ def register(addon_name: str | None = None) -> None:
 def unregister() -> None:
     """Unregister every class and property this add-on registered; safe to call again."""
     atexit.unregister(unregister)
+    live_edits.unregister_handlers()
     panels.unregister_properties()
     for cls in reversed(_classes):
         if getattr(cls, "is_registered", False):

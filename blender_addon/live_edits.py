@@ -19,6 +19,18 @@ shift is also switched to exactly 0 where its coordinate is neutral (the same va
 value then folds to a constant 0 when Cycles compiles the shader, which drops that control's texture lookups (a neutral
 group evaluates none of the edit nodes).  Each input takes a value or any node (a painted mask through a Mix node, an
 attribute, a driver); its keyframes animate it.
+
+**Edit caches.**  A constant edit (the three inputs unlinked) needs D at the painted colour only, for one set of
+level weights: the edit group holds :data:`CACHE_SLOTS` caches, each an image pair of one atlas (the table's shift of
+that edit at the grid's nodes, exporters.edit_table.combined_atlas of the control images: the lookups are linear, so
+reading it gives the same D), read at two slices (4 lookups where the table takes up to 24).  A cache is used where
+the node's hidden input **Edit Cache** names it and the three inputs equal the values the cache holds (Compare nodes
+in the group); then a Mix takes its shift instead of the table's.  For constant inputs the test folds when Cycles
+compiles the shader, to 1 (the table's nodes and images drop out) or to 0 (the cache's do); the test reads values,
+so a cache never gives another edit's answer: changed values, keyframes and masks render through the table, as
+without caches.  :func:`cache_edit` fills a cache (:func:`set_edit`: the operator, the presets, the API); the
+add-on's handlers cache an edit set on the node or the panel's sliders (:func:`refresh_caches`) and each frame's
+keyframed values (:func:`refresh_frame_caches`).
 """
 
 from __future__ import annotations
@@ -37,6 +49,10 @@ from .core import edit_table, skin_edits
 #: Custom property on the edit images and the group: the SHA-256 of the edit table they were made from.
 EDIT_TABLE_PROP = wiring.EDIT_TABLE_PROP
 IMAGE_PREFIX = "Spectral Skin SSS Edits"
+#: Constant edits the edit group holds precombined at once (module docstring, "Edit caches").
+CACHE_SLOTS = edit_table.CACHE_SLOTS
+#: The group input naming the cache that holds the node's edit (0: none); set by :func:`cache_edit`.
+CACHE_INPUT = "Edit Cache"
 #: The group's inputs, in order: (name, default, soft minimum, soft maximum, tooltip).
 INPUTS = tuple(
     (name.title(), skin_edits.NEUTRAL[j], *skin_edits.CONTROL_RANGES[name], tip)
@@ -95,12 +111,31 @@ def ensure_images(table: edit_table.EditTable, atlases: Callable[[], dict[str, n
             name = edit_table.image_name(j, kind)
             full = f"{IMAGE_PREFIX} {name}"
             image = bpy.data.images.get(full)
-            if image is not None and image.get(EDIT_TABLE_PROP) == table.sha256:
-                images[name] = image
-                continue
-            atlases = atlases if atlases is not None else make()
-            images[name] = wiring.packed_table_image(full, atlases[name], EDIT_TABLE_PROP, table.sha256)
+            if image is None or image.get(EDIT_TABLE_PROP) != table.sha256:
+                atlases = atlases if atlases is not None else make()
+                image = wiring.packed_table_image(full, atlases[name], EDIT_TABLE_PROP, table.sha256)
+            images[name] = _keyed(image, name)
+    for slot in range(1, CACHE_SLOTS + 1):
+        for kind in edit_table.KINDS:
+            name = cache_image_name(slot, kind)
+            full = f"{IMAGE_PREFIX} {name}"
+            image = bpy.data.images.get(full)
+            if image is None or image.get(EDIT_TABLE_PROP) != table.sha256:  # empty until an edit is cached
+                image = wiring.packed_table_image(full, np.zeros((1, 1, 4), np.float32), EDIT_TABLE_PROP,
+                                                  table.sha256)
+            images[name] = _keyed(image, name)
     return images
+
+
+#: Custom property on each edit image: its name within the edit group (:func:`exporters.edit_table.image_name`,
+#: :func:`cache_image_name`), whatever name Blender gave the image.
+IMAGE_KEY_PROP = "spectral_skin_sss_edit_image"
+
+
+def _keyed(image: bpy.types.Image, key: str) -> bpy.types.Image:
+    if image.get(IMAGE_KEY_PROP) != key:
+        image[IMAGE_KEY_PROP] = key
+    return image
 
 
 def edit_property(name: str) -> dict:
@@ -110,14 +145,186 @@ def edit_property(name: str) -> dict:
     return {"name": name, "default": default, "soft_min": lo, "soft_max": hi, "description": tip}
 
 
-def set_edit(node: bpy.types.Node, edit: tuple[float, float, float] | None) -> None:
+def set_edit(node: bpy.types.Node, edit: tuple[float, float, float] | None, cache: bool = True) -> None:
     """Set the live group node's Melanin, Blood and Oxygenation to ``edit`` (None, or a node without the inputs:
-    nothing; inputs fed by a node are left as they are)."""
+    nothing; inputs fed by a node are left as they are) and cache it (:func:`cache_edit`; ``cache`` False: leave the
+    node's cache input at 0, the edit read from the table, as a node renders whose cache is not current)."""
     if edit is None or "Melanin" not in node.inputs:
         return
     for (name, *_), value in zip(INPUTS, edit, strict=True):
         if not node.inputs[name].is_linked:
             node.inputs[name].default_value = float(value)
+    if cache:
+        cache_edit(node)
+    elif CACHE_INPUT in node.inputs:
+        _point(node, 0)
+
+
+def constant_edit(node: bpy.types.Node) -> tuple[float, float, float] | None:
+    """The live group node's (Melanin, Blood, Oxygenation) where none of the three is fed by a node, else None."""
+    if any(node.inputs[name].is_linked for name, *_ in INPUTS):
+        return None
+    return tuple(float(node.inputs[name].default_value) for name, *_ in INPUTS)
+
+
+def cache_edit(node: bpy.types.Node) -> int:
+    """Hold the live group node's edit precombined in one of its edit group's caches (module docstring, "Edit
+    caches") and point the node's cache input at it; returns that cache (1 to :data:`CACHE_SLOTS`), or 0 where the
+    edit is not cached: an input fed by a node, a neutral edit, a group without caches.  A cache of the same values
+    is reused; else a free one (no other node's edit in it), else the one filled longest ago (the nodes that used it
+    then render through the table, as before)."""
+    if node is None or CACHE_INPUT not in node.inputs or node.node_tree is None:
+        return 0
+    group = _edit_group(node.node_tree)
+    edit = constant_edit(node)
+    slot = 0
+    if group is not None and edit is not None and all(np.isfinite(edit)) \
+            and not skin_edits.neutral_rows(np.array([edit]))[0]:
+        slot = _slot_for(group, edit, node)
+    _point(node, slot)
+    return slot
+
+
+#: Custom property on the edit group: its caches, the one filled last at the end.
+_CACHE_ORDER_PROP = "spectral_skin_sss_cache_order"
+
+
+def _edit_group(live_group: bpy.types.NodeTree) -> bpy.types.NodeTree | None:
+    """The edit group (with caches) inside a live group, or None."""
+    for n in live_group.nodes:
+        tree = getattr(n, "node_tree", None)
+        if n.bl_idname == "ShaderNodeGroup" and tree is not None and tree.get(EDIT_TABLE_PROP) \
+                and _cache_node_name(1, INPUTS[0][0]) in tree.nodes:
+            return tree
+    return None
+
+
+def _cached_values(group: bpy.types.NodeTree, slot: int) -> tuple[float, ...]:
+    """The (Melanin, Blood, Oxygenation) cache ``slot`` of the edit group holds (NaN: none)."""
+    return tuple(float(group.nodes[_cache_node_name(slot, name)].inputs[1].default_value) for name, *_ in INPUTS)
+
+
+def _point(node: bpy.types.Node, slot: int) -> None:
+    socket = node.inputs[CACHE_INPUT]
+    if socket.default_value != slot:
+        socket.default_value = float(slot)
+
+
+def _slot_for(group: bpy.types.NodeTree, edit: tuple[float, ...], node: bpy.types.Node) -> int:
+    """The cache of ``group`` holding ``edit``, filled here if none does (:func:`cache_edit`)."""
+    slots = range(1, CACHE_SLOTS + 1)
+    held = {k: _cached_values(group, k) for k in slots}
+    for k, values in held.items():
+        if values == edit:
+            return k
+    others = [n for n in map(live_node, bpy.data.materials) if n is not None and n != node
+              and n.node_tree is not None and _edit_group(n.node_tree) == group]
+    used = {int(n.inputs[CACHE_INPUT].default_value) for n in others
+            if constant_edit(n) == held.get(int(n.inputs[CACHE_INPUT].default_value))}
+    order = [k for k in group.get(_CACHE_ORDER_PROP, []) if k in slots]
+    free = [k for k in slots if k not in used]
+    slot = free[0] if free else next((k for k in order if k in slots), 1)
+    _fill(group, slot, edit)
+    group[_CACHE_ORDER_PROP] = [k for k in order if k != slot] + [slot]
+    for n in others:  # nodes that pointed at the cache before: it holds other values now
+        if int(n.inputs[CACHE_INPUT].default_value) == slot:
+            _point(n, 0)
+    return slot
+
+
+def _fill(group: bpy.types.NodeTree, slot: int, edit: tuple[float, ...]) -> None:
+    """Write cache ``slot``: its images (exporters.edit_table.combined_atlas of the group's control images), then
+    the values its Compare nodes test the inputs against."""
+    images = {}
+    for n in group.nodes:
+        image = getattr(n, "image", None)
+        if n.bl_idname == "ShaderNodeTexImage" and image is not None and image.get(IMAGE_KEY_PROP):
+            images[image[IMAGE_KEY_PROP]] = image
+    for kind in edit_table.KINDS:
+        stacked = [_pixels(images[edit_table.image_name(j, kind)]) for j in range(len(skin_edits.CONTROLS))]
+        wiring.rewrite_table_image(images[cache_image_name(slot, kind)], edit_table.combined_atlas(stacked, edit))
+    for (name, *_), value in zip(INPUTS, edit, strict=True):
+        group.nodes[_cache_node_name(slot, name)].inputs[1].default_value = value
+
+
+def cache_is_current(node: bpy.types.Node) -> bool:
+    """Whether the node's cache input is what :func:`cache_edit` would set: its edit's cache, or 0 where the edit is
+    not cached (fed by a node, neutral) or its group has no caches."""
+    if CACHE_INPUT not in node.inputs or node.node_tree is None:
+        return True
+    slot = int(node.inputs[CACHE_INPUT].default_value)
+    group = _edit_group(node.node_tree)
+    edit = constant_edit(node)
+    if group is None or edit is None or not all(np.isfinite(edit)) or skin_edits.neutral_rows(np.array([edit]))[0]:
+        return slot == 0
+    return 1 <= slot <= CACHE_SLOTS and _cached_values(group, slot) == edit
+
+
+_refreshing = False
+
+
+@bpy.app.handlers.persistent
+def refresh_caches(scene=None, depsgraph=None) -> None:
+    """depsgraph_update_post handler: cache the edit of each changed material's live node whose cache input is not
+    current (an edit set in the panel or on the node), so that a constant edit renders from a cache whoever set
+    it.  Rendering never depends on it: a node whose cache is not current renders through the table."""
+    global _refreshing
+    if _refreshing or depsgraph is None:
+        return
+    changed = {u.id.original for u in depsgraph.updates if isinstance(u.id, bpy.types.Material)}
+    _refreshing = True
+    try:
+        for material in changed:
+            node = live_node(material)
+            if node is not None and not cache_is_current(node):
+                cache_edit(node)
+    finally:
+        _refreshing = False
+
+
+@bpy.app.handlers.persistent
+def refresh_frame_caches(scene=None, depsgraph=None) -> None:
+    """frame_change_post handler: cache the edit of every live node whose cache input is not current once the frame's
+    keyframed values are in (Blender evaluates the frame again when a post handler changed data, so the frame renders
+    from the cache).  Skipped while a render job runs in Blender's interface, whose frames are evaluated outside the
+    main thread: those frames read the table."""
+    global _refreshing
+    if _refreshing or bpy.app.is_job_running("RENDER"):
+        return
+    _refreshing = True
+    try:
+        for material in bpy.data.materials:
+            node = live_node(material)
+            if node is not None and not cache_is_current(node):
+                cache_edit(node)
+    finally:
+        _refreshing = False
+
+
+#: The add-on's handlers: (list of bpy.app.handlers, function).
+_HANDLERS = (("depsgraph_update_post", refresh_caches), ("frame_change_post", refresh_frame_caches))
+
+
+def register_handlers() -> None:
+    for name, function in _HANDLERS:
+        handlers = getattr(bpy.app.handlers, name)
+        if function not in handlers:
+            handlers.append(function)
+
+
+def unregister_handlers() -> None:
+    for name, function in _HANDLERS:
+        handlers = getattr(bpy.app.handlers, name)
+        while function in handlers:
+            handlers.remove(function)
+
+
+def _pixels(image: bpy.types.Image) -> np.ndarray:
+    """(height, width, 4) float32 pixels of an image."""
+    width, height = image.size
+    out = np.empty(width * height * 4, np.float32)
+    image.pixels.foreach_get(out)
+    return out.reshape(height, width, 4)
 
 
 def add_inputs(group: bpy.types.NodeTree) -> None:
@@ -126,6 +333,11 @@ def add_inputs(group: bpy.types.NodeTree) -> None:
         socket = group.interface.new_socket(name, in_out="INPUT", socket_type="NodeSocketFloat")
         socket.default_value, socket.min_value, socket.max_value = default, lo, hi
         socket.description = tip
+    socket = group.interface.new_socket(CACHE_INPUT, in_out="INPUT", socket_type="NodeSocketFloat")
+    socket.default_value, socket.min_value, socket.max_value = 0.0, 0.0, float(CACHE_SLOTS)
+    socket.hide_value = True
+    socket.description = ("Set by the add-on: which of the edit group's caches holds this node's Melanin, Blood and "
+                          "Oxygenation precombined (0: none; a cache of other values is never used)")
 
 
 @dataclass
@@ -171,7 +383,7 @@ def ensure_edit_group(table: edit_table.EditTable, images: dict[str, bpy.types.I
 def edit_node(b, gin, table: edit_table.EditTable, images: dict[str, bpy.types.Image]) -> EditBranch:
     """A node of the edit group (:func:`ensure_edit_group`) in the live group, fed by its Color and edit inputs."""
     node = b.node("ShaderNodeGroup", 1, node_tree=ensure_edit_group(table, images))
-    for name in ("Color", *(spec[0] for spec in INPUTS)):
+    for name in ("Color", *(spec[0] for spec in INPUTS), CACHE_INPUT):
         b.link(gin.outputs[name], node.inputs[name])
     return EditBranch(colour=node.outputs["Color"], radius_factor=node.outputs["Radius Factor"])
 
@@ -224,11 +436,48 @@ def add_edit_branch(b, gin, table: edit_table.EditTable, images: dict[str, bpy.t
                      for pair, zero_level in zip(offsets, at_zero, strict=True)]  # levels l and l + 1
             value = b.mix("VECTOR", 58, fraction, found[0], found[1])
             shifts[kind] = value if shifts[kind] is None else b.vec("ADD", 58, shifts[kind], value)
+    cache_uv = b.vec("MULTIPLY_ADD", 52, s, (tile_u, 0.0, 0.0), base)  # slice s of a cache's one atlas
+    for slot in range(1, CACHE_SLOTS + 1):
+        shifts = _cached(b, gin, slot, images, cache_uv, frac, tile_u, shifts)
     active = b.math("SUBTRACT", 60, 1.0, still)
     bounds = table.shift_bounds()
     factor = {kind: _exp(b, shifts[kind], active, bounds[kind], 61) for kind in edit_table.KINDS}
     edited = b.vec("MULTIPLY", 63, colour, factor["colour"])
     return EditBranch(colour=edited, radius_factor=factor["radius"])
+
+
+def _cached(b, gin, slot: int, images: dict[str, bpy.types.Image], uv, frac, tile_u: float,
+            shifts: dict) -> dict:
+    """``shifts`` where cache ``slot`` holds the node's edit, the cache's shifts where it does (module docstring,
+    "Edit caches"): a Mix per kind from the table's shift to the cache's, of factor 1 exactly where the node's cache
+    input is ``slot`` and its three controls equal the values the cache was made for (Compare nodes holding them),
+    else 0.  The cache holds one atlas (the shift of that edit at the grid's nodes): each kind's image read at
+    slices s and s + 1, its v scaled from the stacked images' (the images' texture mapping)."""
+    match = b.math("COMPARE", 56, gin.outputs[CACHE_INPUT], float(slot), 0.0)
+    for name, value in zip((spec[0] for spec in INPUTS), _EMPTY_CACHE, strict=True):
+        test = b.math("COMPARE", 56, gin.outputs[name], value, 0.0)
+        test.node.name = _cache_node_name(slot, name)
+        match = b.math("MULTIPLY", 57, match, test)
+    out = {}
+    for kind in edit_table.KINDS:
+        image = images[cache_image_name(slot, kind)]
+        found = _bilinear_pair(b, image, uv, [(0.0, 0.0), (tile_u, 0.0)], frac, 55,
+                               scale=(1.0, float(edit_table.STACKED), 1.0))
+        out[kind] = b.mix("VECTOR", 59, match, shifts[kind], found)
+    return out
+
+
+#: The values an unused cache's Compare nodes hold: never an input's (a Compare with NaN gives 0).
+_EMPTY_CACHE = (float("nan"),) * 3
+
+
+def _cache_node_name(slot: int, control: str) -> str:
+    return f"Cache {slot} {control}"
+
+
+def cache_image_name(slot: int, kind: str) -> str:
+    """``"Cache 1 Colour"``, ...: the image of one kind (:data:`exporters.edit_table.KINDS`) of cache ``slot``."""
+    return f"Cache {slot} {kind.title()}"
 
 
 def _unless_zero(b, zero_level, value, stage: int) -> bpy.types.NodeSocket:
@@ -242,7 +491,7 @@ def _unless_zero(b, zero_level, value, stage: int) -> bpy.types.NodeSocket:
 
 
 def _bilinear_pair(b, image: bpy.types.Image, uv: bpy.types.NodeSocket, offsets, frac,
-                   stage: int) -> bpy.types.NodeSocket:
+                   stage: int, scale: tuple[float, float, float] | None = None) -> bpy.types.NodeSocket:
     """Trilinear RGB of one level: bilinear lookups at ``uv`` plus each of ``offsets`` (two (du, dv): slices s, s + 1)
     mixed by ``frac``.  The offsets are the image nodes' own texture mapping (a translation, which Cycles applies as
     x 1 + t, exactly the sum a vector node would form): one small SVM node per lookup where an Add shared by the two
@@ -252,6 +501,8 @@ def _bilinear_pair(b, image: bpy.types.Image, uv: bpy.types.NodeSocket, offsets,
         tex = b.node("ShaderNodeTexImage", stage, image=image, interpolation="Linear", extension="EXTEND")
         tex.label = image.name
         tex.texture_mapping.translation = (du, dv, 0.0)
+        if scale is not None:
+            tex.texture_mapping.scale = scale
         b.group.links.new(uv, tex.inputs["Vector"])
         colours.append(tex.outputs["Color"])
     return b.mix("VECTOR", stage + 1, frac, colours[0], colours[1])
@@ -319,6 +570,20 @@ class SPECTRAL_SKIN_OT_skin_edit_preset(bpy.types.Operator):
         return {"FINISHED"}
 
 
+def cache_status(node: bpy.types.Node) -> str | None:
+    """The panel's line on how the live node's edit renders: from which cache, or from the table and why; None at
+    neutral."""
+    edit = constant_edit(node)
+    if edit is None:
+        return "Read from the edit table: an input is fed by a node"
+    if skin_edits.neutral_rows(np.array([edit]))[0]:
+        return None
+    slot = int(node.inputs[CACHE_INPUT].default_value) if CACHE_INPUT in node.inputs else 0
+    if slot and cache_is_current(node):
+        return f"Rendered from edit cache {slot}"
+    return "Read from the edit table (not cached)"
+
+
 def draw_controls(layout, context) -> None:
     """The selected material's Melanin, Blood and Oxygenation (its live group node's inputs) and the presets."""
     node = live_node(getattr(context, "material", None))
@@ -332,6 +597,9 @@ def draw_controls(layout, context) -> None:
             box.label(text=f"{name}: from node '{socket.links[0].from_node.name}'", icon="LINKED")
         else:
             box.prop(socket, "default_value", text=name)
+    status = cache_status(node)
+    if status is not None:
+        box.label(text=status, icon="INFO")
     row = box.row(align=True)
     for key, label, _ in PRESET_ITEMS:
         row.operator(SPECTRAL_SKIN_OT_skin_edit_preset.bl_idname, text=label).preset = key

@@ -236,3 +236,13 @@ def packed_table_image(name: str, pixels: np.ndarray, tag_prop: str, tag_value: 
     image.pack()
     image[tag_prop] = tag_value
     return image
+
+
+def rewrite_table_image(image: bpy.types.Image, pixels: np.ndarray) -> None:
+    """Replace the pixels of a float RGBA image of :func:`packed_table_image` with ``pixels`` (height, width, 4),
+    resized to them, and pack it again (the .blend keeps the new pixels)."""
+    height, width = pixels.shape[:2]
+    if tuple(image.size) != (width, height):
+        image.scale(width, height)
+    image.pixels.foreach_set(np.ascontiguousarray(pixels, np.float32).ravel())
+    image.pack()

@@ -55,6 +55,9 @@ LEVELS: dict[str, tuple[float, ...]] = {
 SPACING: dict[str, float] = {"melanin": 0.5, "blood": 0.5, "oxygenation": 0.125}
 #: Channels per level: ln colour ratio (R, G, B) and log-radius correction (R, G, B).
 CHANNELS = 6
+#: Constant edits the live group holds precombined at once (blender_addon.live_edits' caches): each one atlas per kind
+#: (:func:`combined_atlas`), 0.26 MB for the shipped table; three keep the edit images within 8 MB.
+CACHE_SLOTS = 3
 
 
 class EditTableError(ValueError):
@@ -153,6 +156,39 @@ def shift(table: EditTable, rgb: np.ndarray, edits: np.ndarray) -> np.ndarray:
         for i in range(table.values.shape[4]):
             if np.any(w[:, j, i] != 0.0):
                 out += w[:, j, i, None] * live_table.lookup(table.values[:, :, :, j, i], layout, rgb)
+    return out
+
+
+def stack_weights(edit) -> np.ndarray:
+    """(3, STACKED): the weight of each control's stacked atlases (:func:`stacked_levels`' order, the neutral one
+    weighing 0) under one edit (Melanin, Blood, Oxygenation): the hat weights of :func:`level_weights`."""
+    w = level_weights(control_coords(np.asarray(edit, np.float64).reshape(1, 3)))[0]
+    half = w.shape[1] // 2
+    return np.concatenate([w[:, :half], np.zeros((w.shape[0], 1)), w[:, half:]], axis=1)
+
+
+def combined_values(table: EditTable, edit) -> np.ndarray:
+    """(n0, n1, n2, 6): the shift D of one edit (Melanin, Blood, Oxygenation) at the grid's nodes, its levels and
+    controls summed with their weights.  The lookups are linear in the table, so its trilinear lookup at a colour is
+    :func:`shift` at that colour: what the live group's edit cache holds (blender_addon.live_edits)."""
+    weights = stack_weights(edit)
+    half = table.values.shape[4] // 2
+    levels = np.delete(weights, half, axis=1)  # the neutral level holds zeros
+    return np.einsum("abcjlk,jl->abck", table.values.astype(np.float64), levels)
+
+
+def combined_atlas(stacked: list[np.ndarray], edit) -> np.ndarray:
+    """One atlas (height, width, 4) of one kind: the images of each control (``stacked``: per control (STACKED x
+    height, width, 4), as :meth:`EditTable.atlases` makes them and the live group holds them) summed with the edit's
+    weights (:func:`stack_weights`); alpha 1.  Equal to the atlas of :func:`combined_values`' channels of that kind."""
+    weights = stack_weights(edit)
+    out = None
+    for j, image in enumerate(stacked):
+        blocks = np.asarray(image, np.float64).reshape(STACKED, -1, *image.shape[1:])
+        part = np.tensordot(weights[j], blocks, axes=1)
+        out = part if out is None else out + part
+    out = out.astype(np.float32)
+    out[..., 3] = 1.0
     return out
 
 

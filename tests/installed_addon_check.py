@@ -265,6 +265,19 @@ def main() -> dict:
     out["live_invert_s"] = round(time.perf_counter() - t0, 2)
     out["live_group"] = sorted(n.node_tree.name for n in material.node_tree.nodes if n.bl_idname == "ShaderNodeGroup")
     out["live_centre"] = render_centre(bpy.context.scene)
+    # A skin edit from a preset renders from its cache, as from the table (the cache input set back to 0 with the
+    # add-on's handlers off, which would cache it again).
+    live_edits = importlib.import_module(f"{EXTENSION}.blender_addon.live_edits")
+    with bpy.context.temp_override(object=obj, active_object=obj, material=material):
+        out["edit_preset"] = sorted(bpy.ops.spectral_skin.skin_edit_preset(preset="FLUSH"))
+    node = live_edits.live_node(material)
+    out["edit_cache"] = live_edits.cache_status(node)
+    out["edit_centre_cached"] = render_centre(bpy.context.scene)
+    live_edits.unregister_handlers()
+    live_edits.set_edit(node, tuple(node.inputs[name].default_value for name in ("Melanin", "Blood", "Oxygenation")),
+                        cache=False)
+    out["edit_centre_table"] = render_centre(bpy.context.scene)
+    live_edits.register_handlers()
 
     # OSL on request: the Script node compiles (Cycles 4.2 has no oslquery) and renders once OSL is turned on.
     obj = skin_scene()

@@ -138,8 +138,8 @@ def test_neutral_inputs_render_the_unedited_group_bit_for_bit_and_keyframes_anim
     scene.frame_set(11)
     animated = _render(scene, tree, gnode, emission, name)
     tree.animation_data_clear()
-    blood.default_value = 2.0
-    np.testing.assert_array_equal(animated, _render(scene, tree, gnode, emission, name))
+    blood.default_value = 2.0  # a constant edit renders from its cache: the table's answer to float rounding
+    np.testing.assert_allclose(animated, _render(scene, tree, gnode, emission, name), rtol=1e-5, atol=1e-9)
     assert not np.array_equal(animated, before[name])
 
 
@@ -164,7 +164,10 @@ def _cycles_memory_mb(scene, tree, gnode) -> float:
 def test_neutral_controls_read_no_edit_image(tmp_path, addon):
     """A control at its neutral value adds exactly 0 in nodes Cycles can fold: with the inputs unlinked at neutral the
     compiled shader holds none of the six edit images (Cycles' memory is the group's without edit nodes), and an
-    edit of one control holds only that control's two."""
+    edit of one control holds only that control's two.  (With the add-on's handler off: a constant edit would
+    otherwise render from its cache, test_a_constant_edit_renders_from_its_cache_as_from_the_table; the table's path
+    is what a node renders when its cache is not current: the add-on not running, more edits than caches.)"""
+    live_edits.unregister_handlers()
     scene, tree, gnode, _ = _strip(tmp_path)
     table, edits = _tables()
     layout, images = live.ensure_images(table)
@@ -191,8 +194,8 @@ def test_operator_wires_the_edit_inputs_and_presets_set_them(tmp_path, addon):
     node = live_edits.live_node(mat)
     assert node is not None and [node.inputs[n].default_value for n in EDIT] == [1.0, 1.0, 0.0]
     images = [i for i in bpy.data.images if i.name.startswith(live_edits.IMAGE_PREFIX)]
-    assert len(images) == 6 and all(i.packed_file is not None for i in images)
-    assert sum(i.size[0] * i.size[1] * 16 for i in images) <= 8e6  # the images the edits add: at most 8 MB
+    assert len(images) == 6 + 2 * live_edits.CACHE_SLOTS and all(i.packed_file is not None for i in images)
+    table_bytes = sum(i.size[0] * i.size[1] * 16 for i in images if " Cache " not in i.name)
     mask = mat.node_tree.nodes.new("ShaderNodeValue")  # an input fed by a node is left as it is
     mat.node_tree.links.new(mask.outputs[0], node.inputs["Oxygenation"])
     with bpy.context.temp_override(material=mat, object=obj, active_object=obj):
@@ -201,9 +204,21 @@ def test_operator_wires_the_edit_inputs_and_presets_set_them(tmp_path, addon):
     assert node.inputs["Melanin"].default_value == pytest.approx(flush.melanin)
     assert node.inputs["Blood"].default_value == pytest.approx(flush.blood)
     assert node.inputs["Oxygenation"].default_value == 0.0
+    assert node.inputs[live_edits.CACHE_INPUT].default_value == 0  # an input fed by a node: not cached
+    assert live_edits.cache_status(node) == "Read from the edit table: an input is fed by a node"
+    mat.node_tree.nodes.remove(mask)
+    with bpy.context.temp_override(material=mat, object=obj, active_object=obj):
+        assert bpy.ops.spectral_skin.skin_edit_preset(preset="FLUSH") == {"FINISHED"}
+    assert node.inputs[live_edits.CACHE_INPUT].default_value == 1
+    assert live_edits.cache_status(node) == "Rendered from edit cache 1"
+    cache = bpy.data.images[f"{live_edits.IMAGE_PREFIX} {live_edits.cache_image_name(1, 'colour')}"]
+    assert cache.size[1] * edit_table.STACKED == next(i for i in images if " Cache " not in i.name).size[1]
+    cache_bytes = 2 * live_edits.CACHE_SLOTS * cache.size[0] * cache.size[1] * 16  # every cache filled
+    assert table_bytes + cache_bytes <= 8e6  # the images the edits add: at most 8 MB
     with bpy.context.temp_override(material=mat, object=obj, active_object=obj):
         assert bpy.ops.spectral_skin.skin_edit_preset(preset="NEUTRAL") == {"FINISHED"}
     assert [node.inputs[n].default_value for n in ("Melanin", "Blood")] == [1.0, 1.0]
+    assert node.inputs[live_edits.CACHE_INPUT].default_value == 0 and live_edits.cache_status(node) is None
 
 
 def test_the_operator_takes_an_edit_into_the_live_group_and_into_baked_maps(tmp_path, addon):
@@ -236,3 +251,75 @@ def test_the_operator_takes_an_edit_into_the_live_group_and_into_baked_maps(tmp_
             unedited = maps.read_exr(plain / name)[0]
             change[kind] = max(change.get(kind, 0.0), float(np.abs(ref - unedited).max() / np.abs(unedited).max()))
     assert change["radius"] > 0.01 and change["weight"] > 0.01, change  # the edit changes the translucency
+
+
+def test_a_constant_edit_renders_from_its_cache_as_from_the_table(tmp_path, addon):
+    """set_edit holds a constant edit precombined in a cache of the edit group (live_edits.cache_edit): the media
+    rendered from the cache equal the table's answer (exporters.edit_table.shift), the compiled shader reads only the
+    cache's two small images instead of the table's six (Cycles' memory), values changed on the node without the
+    add-on render through the table again, the caches hold several edits, the oldest given up for a new one, and the
+    add-on's handlers cache an edit set on the node and each frame's keyframed values."""
+    live_edits.unregister_handlers()  # values set on the node below stay uncached, as without the add-on running
+    scene, tree, gnode, emission = _strip(tmp_path)
+    table, edits = _tables()
+    layout, images = live.ensure_images(table)
+    edit_images = live_edits.ensure_images(edits)
+    group = live.build_live_group(table, layout, images, (edits, edit_images))
+    names = _with_checks(group, table.k)
+    _use(tree, gnode, group)
+    grids = live_table.grid_values(table)
+    row = (1.5, 2.5, -0.2)  # every control between two levels
+    live_edits.set_edit(gnode, row)
+    assert gnode.inputs[live_edits.CACHE_INPUT].default_value == 1
+    d = edit_table.shift(edits, COLOURS, np.array(row))
+    reference = live_table.group_media(table, edit_table.edited_colour(COLOURS, d), grids)
+    for name in names:
+        k, kind = name.split()[1], name.split()[2]
+        ref = reference[f"{k} {kind}"] * (np.exp(d[:, 3:6]) if kind == "Radius" else 1.0)
+        np.testing.assert_allclose(_render(scene, tree, gnode, emission, name), ref, rtol=5e-4, atol=1e-7,
+                                   err_msg=f"cached {name}")
+    gnode.inputs["Melanin"].default_value = 1.25  # changed on the node: not the cache's values
+    name = names[1]  # k1 Radius
+    d = edit_table.shift(edits, COLOURS, np.array([1.25, 2.5, -0.2]))
+    ref = live_table.group_media(table, edit_table.edited_colour(COLOURS, d), grids)["k1 Radius"] * np.exp(d[:, 3:6])
+    np.testing.assert_allclose(_render(scene, tree, gnode, emission, name), ref, rtol=5e-4, atol=1e-7)
+    # memory: the cache's images only (each under Cycles' 1 MB resolution), not the table's six (> 1 MB each)
+    _use(tree, gnode, live.build_live_group(table, layout, images))
+    plain = _cycles_memory_mb(scene, tree, gnode)
+    _use(tree, gnode, group)  # the node's inputs are new: set the edit again (its cache is found, not refilled)
+    live_edits.set_edit(gnode, row)
+    assert gnode.inputs[live_edits.CACHE_INPUT].default_value == 1
+    cached = _cycles_memory_mb(scene, tree, gnode)
+    gnode.inputs["Melanin"].default_value = 1.25
+    full = _cycles_memory_mb(scene, tree, gnode)
+    assert cached - plain <= 1.0 and full - plain >= 6.0, (plain, cached, full)
+    # more materials with edits than caches: each new edit fills a free cache, then the one filled longest ago
+    live_edits.set_edit(gnode, row)
+    edit_group = live_edits._edit_group(group)
+    slots = []
+    for i, other in enumerate(((2.0, 1.0, 0.0), (0.5, 1.5, 0.1), (1.0, 0.4, 0.0))):
+        mat = bpy.data.materials.new(f"other {i}")  # with a node tree: Blender 5
+        node = mat.node_tree.nodes.new("ShaderNodeGroup")
+        node.node_tree = group
+        live_edits.set_edit(node, other)
+        slots.append(int(node.inputs[live_edits.CACHE_INPUT].default_value))
+    assert slots == [2, 3, 1]
+    assert gnode.inputs[live_edits.CACHE_INPUT].default_value == 0  # its cache was given up: it reads the table
+    assert live_edits._cached_values(edit_group, 1) == tuple(float(np.float32(v)) for v in (1.0, 0.4, 0.0))
+    # the handler: an edit set on the node (the panel's sliders, the node editor) is cached at the next update
+    live_edits.register_handlers()
+    gnode.inputs["Blood"].default_value = 0.7
+    assert not live_edits.cache_is_current(gnode)
+    assert live_edits.cache_status(gnode) == "Read from the edit table (not cached)"
+    bpy.context.view_layer.update()
+    assert live_edits.cache_is_current(gnode) and gnode.inputs[live_edits.CACHE_INPUT].default_value > 0
+    # keyframes: a frame's values are cached when the frame changes, and its render reads the cache
+    blood = gnode.inputs["Blood"]
+    blood.keyframe_insert("default_value", frame=1)
+    blood.default_value = 2.2
+    blood.keyframe_insert("default_value", frame=11)
+    scene.frame_set(6)
+    assert 0.7 < blood.default_value < 2.2 and live_edits.cache_is_current(gnode)
+    assert _cycles_memory_mb(scene, tree, gnode) - plain <= 1.0
+    live_edits.set_edit(gnode, skin_edits.NEUTRAL)
+    assert gnode.inputs[live_edits.CACHE_INPUT].default_value == 0

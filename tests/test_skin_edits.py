@@ -176,6 +176,29 @@ def test_shift_bounds_hold_every_shift_the_lookups_give():
         assert lo <= d[:, channels].min() and d[:, channels].max() <= hi, kind
 
 
+def test_a_cache_of_one_edit_gives_the_tables_shift():
+    """An edit cache (exporters.edit_table.combined_values, combined_atlas): its trilinear lookup at colours in and
+    outside the skin box equals the table's shift under that edit (edit_table.shift, summed per lookup), and the
+    atlas made from the live group's stacked control images equals the atlas of the combined values; at neutral it
+    is all zero."""
+    from exporters import edit_table, live_table
+
+    table = edit_table.load(edit_table.default_path(MODEL))
+    rgb = np.random.default_rng(5).random((500, 3)) * 1.2
+    atlases = table.atlases()
+    for edit in ((1.5, 2.5, -0.2), (0.3, 1.0, 0.45), (4.0, 0.25, -0.5), (1.0, 1.0, 0.0)):
+        combined = edit_table.combined_values(table, edit)
+        found = live_table.lookup(combined, table.layout(), rgb)
+        np.testing.assert_allclose(found, edit_table.shift(table, rgb, np.array(edit)), atol=1e-6, err_msg=edit)
+        for kind, channels in edit_table.KINDS.items():
+            stacked = [atlases[edit_table.image_name(j, kind)] for j in range(len(skin_edits.CONTROLS))]
+            atlas = edit_table.combined_atlas(stacked, edit)
+            np.testing.assert_allclose(atlas[..., :3], live_table.atlas_of(combined[..., channels], table.layout()),
+                                       atol=1e-6, err_msg=f"{edit} {kind}")
+            assert np.all(atlas[..., 3] == 1.0)
+    assert not np.any(edit_table.combined_values(table, skin_edits.NEUTRAL))
+
+
 def test_shipped_edit_table_meets_the_colour_and_radius_limits(model):
     """The live group's answer (exporters.edit_table, whose nodes tests/test_live_edits.py matches in Cycles) against
     the exact one on the nine representative tones: each control across its range within ΔE76 1.0 mean / 2.0 max

@@ -5,15 +5,17 @@ Renders: the demo head (training.demo_render, ``RESOLUTION`` squared px, Cycles 
 ``SAMPLES`` samples) with the medium tone's albedo texture through Invert Skin Albedo's default (the live group with the
 edit inputs). One Blender process renders, ``ROUNDS`` times in turn, the live group of the same table built without the
 edit nodes (blender_addon.live.build_live_group without an edit table: the unedited group) and the group with the edit
-inputs at neutral, under the presets tan, flush and pallor (exporters.skin_edits.PRESETS) and under the costliest kind
-of edit, every control between two of its table's levels (:data:`EDITS`, "three": the group reads each control's images
-at two levels), and the cheapest, one control on a level ("level"), swapping the material's group between renders; each
-round starts one material later than the one before, so that no material always follows the swap from the other group.
+inputs at neutral, under the presets tan, flush and pallor (exporters.skin_edits.PRESETS) and every control between
+two of its table's levels (:data:`EDITS`, "three"), each set as the add-on sets it (read from the edit group's cache),
+and that edit read from the table ("three_table": the most lookups an edit makes; a node whose edit is not cached),
+swapping the material's group between renders; each round starts one material later than the one before, so that no
+material always follows the swap from the other group.
 Each render's CPU time (training.bench.render_clock, scene sync included) is kept. The ratio is paired: each render
 against the unedited group's render of the same round, the median of the rounds' ratios with a 95 % bootstrap interval
 (training.bench.render_clock.paired_ratio; the ratio of the medians of all renders moved by 10 % between runs). Equal
 samples, so an edited row also carries the change of the physics (an edit changes how far light walks in the tone), not
-only the nodes' cost. Images: the bytes the edit table's images take in Blender (float RGBA, 16 bytes a pixel).
+only the nodes' cost. Images: the bytes the edit table's images and its caches, all filled, take in Blender (float
+RGBA, 16 bytes a pixel).
 Operator: Invert Skin Albedo on a 4096² albedo with the edit table shipped (training.bench.live's set-up).
 """
 
@@ -33,16 +35,19 @@ SAMPLES = 16
 ROUNDS = 40
 TEXTURE = 256
 PRESETS = ("tan", "flush", "pallor")
-#: The edits timed (Melanin, Blood, Oxygenation): the presets; every control between two levels of the edit table
-#: (exporters.edit_table.LEVELS: log2 1.5 = 0.58 between 0.5 and 1; log2 2.5 = 1.32 between 1 and 1.5; -0.2 between
-#: -0.25 and -0.125), which reads the most images (24 lookups; flush reads 12, pallor 8); and one control on a level
-#: (Melanin 2: log2 2 = 1), which reads the fewest an edit can (4: its two images at two slices), the nodes a design
-#: reading one precomputed image pair per edit would have.
+#: The edits timed (Melanin, Blood, Oxygenation): the presets and every control between two levels of the edit
+#: table (exporters.edit_table.LEVELS: log2 1.5 = 0.58 between 0.5 and 1; log2 2.5 = 1.32 between 1 and 1.5; -0.2
+#: between -0.25 and -0.125), each set as the add-on sets it (blender_addon.live_edits.set_edit: read from a cache,
+#: two images at two slices); and that edit read from the table ("three_table": 24 lookups, the most an edit makes;
+#: what a node renders whose edit is not cached: inputs fed by a mask, more constant edits than caches).
 EDITS: dict[str, tuple[float, float, float]] = {
     **{p: tuple(float(v) for v in skin_edits.PRESETS[p].row()) for p in PRESETS},
-    "three": (1.5, 2.5, -0.2), "level": (2.0, 1.0, 0.0)}
+    "three": (1.5, 2.5, -0.2), "three_table": (1.5, 2.5, -0.2)}
+#: The edits read from the table (their node's cache input left at 0).
+UNCACHED = ("three_table",)
 #: What the edits besides the presets are, in the rows' labels.
-DESCRIPTIONS = {"three": "every control between two levels", "level": "one control on a level"}
+DESCRIPTIONS = {"three": "every control between two levels, from its cache",
+                "three_table": "every control between two levels, read from the table (not cached)"}
 MODES = ("plain", "neutral", *EDITS)
 #: Bytes a pixel of a float RGBA image takes in Blender.
 FLOAT_RGBA_BYTES = 16
@@ -66,6 +71,7 @@ image = bpy.data.images.load(str(demo_render.write_image({texture_path!r},
 mat = demo_render._material("skin", image, "principled")
 demo_render._assign(parts, mat)
 blender_addon.register()
+live_edits.unregister_handlers()  # each mode's cache input as set_edit leaves it
 demo_render._invert(parts[0], mat)
 node = live_edits.live_node(mat)
 edited = node.node_tree
@@ -78,7 +84,7 @@ times = {{mode: [] for mode in modes}}
 for r in range({rounds}):
     for mode in modes[r % len(modes):] + modes[:r % len(modes)]:  # each round one material later
         node.node_tree = plain if mode == "plain" else edited
-        live_edits.set_edit(node, values.get(mode, NEUTRAL))  # the plain group has no edit inputs: nothing
+        live_edits.set_edit(node, values.get(mode, NEUTRAL), cache=mode not in {uncached!r})  # plain: nothing
         clock = RenderClock()
         bpy.ops.render.render(write_still=False)
         times[mode].append(clock.seconds())
@@ -91,7 +97,8 @@ def measure(rounds: int = ROUNDS, samples: int = SAMPLES, resolution: int = RESO
     with tempfile.TemporaryDirectory(prefix="bench_edit_") as tmp:
         return live_bench.run_script(_CHILD.format(root=str(ROOT), resolution=resolution, samples=samples,
                                                    texture=TEXTURE, texture_path=str(Path(tmp) / "skin.png"),
-                                                   edits=EDITS, modes=MODES, rounds=rounds))
+                                                   edits=EDITS, modes=MODES, rounds=rounds,
+                                                   uncached=UNCACHED))
 
 
 def image_megabytes() -> float:
@@ -100,7 +107,10 @@ def image_megabytes() -> float:
     from training.paths import SHIPPED_EDIT_TABLE
 
     atlases = edit_table.load(SHIPPED_EDIT_TABLE).atlases()
-    return sum(a.shape[0] * a.shape[1] * FLOAT_RGBA_BYTES for a in atlases.values()) / 1e6
+    table = sum(a.shape[0] * a.shape[1] * FLOAT_RGBA_BYTES for a in atlases.values())
+    one = next(iter(atlases.values()))  # a cache: one atlas of each kind
+    caches = edit_table.CACHE_SLOTS * len(edit_table.KINDS) * one.shape[0] // edit_table.STACKED * one.shape[1]
+    return (table + caches * FLOAT_RGBA_BYTES) / 1e6
 
 
 def _label(mode: str) -> str:

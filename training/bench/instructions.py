@@ -21,8 +21,8 @@ and reads from its output, per material:
 
 Materials: Principled BSDF Random Walk (Skin) (the anchor of :mod:`training.bench.render_cost`), the Bake mode's
 maps, the live group (Invert Skin Albedo's default, edit inputs at neutral) and the live group under each edit of
-training.bench.edit_cost.EDITS (the presets tan, flush and pallor, every control between two levels and one control on
-a level: an edit's cost against the group at neutral).
+training.bench.edit_cost.EDITS (the presets tan, flush and pallor and every control between two levels, each read from
+its cache as the add-on sets it, and that edit read from the table: an edit's cost against the group at neutral).
 Instructions are not time: a walk's ray casts wait on memory where the node loop does not, so the live group's
 instruction ratio is larger than its time ratio; what the counts give is a change's effect without the machine's
 noise.  Needs ``valgrind`` on the PATH (about 100 s per material, two at a time); without it the rows say so.
@@ -52,13 +52,15 @@ WALKS = "ccl::integrator_intersect_subsurface("
 #: its (Melanin, Blood, Oxygenation).
 _EDIT = """
 from blender_addon import live_edits
-live_edits.set_edit(live_edits.live_node(mat), {edit!r})
+live_edits.unregister_handlers()  # the cache input as set_edit leaves it
+live_edits.set_edit(live_edits.live_node(mat), {edit!r}, cache={cache!r})
 """
 #: The edits counted against the live group at neutral: those the edit cost bench times.
 EDITS = edit_cost.EDITS
 #: Materials: (name, render_cost mode, variant code or None for the mode's own).
 MATERIALS = (("principled", "principled", None), ("bake", "bake", None), ("live", "live", None),
-             *((f"live_{name}", f"live_{name}", _EDIT.format(edit=edit)) for name, edit in EDITS.items()))
+             *((f"live_{name}", f"live_{name}", _EDIT.format(edit=edit, cache=name not in edit_cost.UNCACHED))
+               for name, edit in EDITS.items()))
 
 
 @dataclass
