@@ -42,12 +42,40 @@ PRESETS = ("tan", "flush", "pallor")
 #: what a node renders whose edit is not cached: inputs fed by a mask, more constant edits than caches).
 EDITS: dict[str, tuple[float, float, float]] = {
     **{p: tuple(float(v) for v in skin_edits.PRESETS[p].row()) for p in PRESETS},
-    "three": (1.5, 2.5, -0.2), "three_table": (1.5, 2.5, -0.2)}
+    "three": (1.5, 2.5, -0.2), "three_table": (1.5, 2.5, -0.2),
+    "flush_masked": tuple(float(v) for v in skin_edits.PRESETS["flush"].row())}
 #: The edits read from the table (their node's cache input left at 0).
 UNCACHED = ("three_table",)
+#: The edits painted by a mask (:data:`MASK_CODE`): read from the table, as every edit fed by a node.
+MASKED = ("flush_masked",)
 #: What the edits besides the presets are, in the rows' labels.
 DESCRIPTIONS = {"three": "every control between two levels, from its cache",
-                "three_table": "every control between two levels, read from the table (not cached)"}
+                "three_table": "every control between two levels, read from the table (not cached)",
+                "flush_masked": "flush painted by a mask (the albedo's red), read from the table"}
+#: Blender code (in a bench child with the material ``mat``, its albedo image ``image`` and exporters.skin_edits'
+#: NEUTRAL imported): ``mask_edit(node, edit)`` feeds each control the edit moves with neutral + mask x (value -
+#: neutral), the mask the albedo's red channel (a per-texel value, as a painted mask is: bake.py's mask
+#: convention), through Math nodes of the material; ``unmask(node)`` removes the links again.
+MASK_CODE = """
+def mask_edit(node, edit):
+    tree = mat.node_tree
+    tex = next(n for n in tree.nodes if n.bl_idname == "ShaderNodeTexImage" and n.image == image)
+    sep = tree.nodes.new("ShaderNodeSeparateColor")
+    tree.links.new(tex.outputs["Color"], sep.inputs[0])
+    for name, value, neutral in zip(("Melanin", "Blood", "Oxygenation"), edit, NEUTRAL):
+        if value != neutral:
+            math = tree.nodes.new("ShaderNodeMath")
+            math.operation = "MULTIPLY_ADD"
+            tree.links.new(sep.outputs[0], math.inputs[0])
+            math.inputs[1].default_value, math.inputs[2].default_value = value - neutral, neutral
+            tree.links.new(math.outputs[0], node.inputs[name])
+
+
+def unmask(node):
+    for link in list(mat.node_tree.links):
+        if link.to_node == node and link.to_socket.name in ("Melanin", "Blood", "Oxygenation"):
+            mat.node_tree.links.remove(link)
+"""
 MODES = ("plain", "neutral", *EDITS)
 #: Bytes a pixel of a float RGBA image takes in Blender.
 FLOAT_RGBA_BYTES = 16
@@ -81,9 +109,14 @@ plain = live.build_live_group(table, layout, images)
 values = {{"neutral": NEUTRAL, **{edits!r}}}
 modes = {modes!r}
 times = {{mode: [] for mode in modes}}
+{mask_code}
 for r in range({rounds}):
     for mode in modes[r % len(modes):] + modes[:r % len(modes)]:  # each round one material later
         node.node_tree = plain if mode == "plain" else edited
+        if mode != "plain":
+            unmask(node)
+        if mode in {masked!r}:
+            mask_edit(node, values[mode])
         live_edits.set_edit(node, values.get(mode, NEUTRAL), cache=mode not in {uncached!r})  # plain: nothing
         clock = RenderClock()
         bpy.ops.render.render(write_still=False)
@@ -98,7 +131,7 @@ def measure(rounds: int = ROUNDS, samples: int = SAMPLES, resolution: int = RESO
         return live_bench.run_script(_CHILD.format(root=str(ROOT), resolution=resolution, samples=samples,
                                                    texture=TEXTURE, texture_path=str(Path(tmp) / "skin.png"),
                                                    edits=EDITS, modes=MODES, rounds=rounds,
-                                                   uncached=UNCACHED))
+                                                   uncached=UNCACHED, masked=MASKED, mask_code=MASK_CODE))
 
 
 def image_megabytes() -> float:

@@ -57,10 +57,20 @@ live_edits.set_edit(live_edits.live_node(mat), {edit!r}, cache={cache!r})
 """
 #: The edits counted against the live group at neutral: those the edit cost bench times.
 EDITS = edit_cost.EDITS
+
+
+def _variant(name: str, edit: tuple[float, float, float]) -> str:
+    """The child's code setting the edit ``name`` (masked ones through edit_cost.MASK_CODE)."""
+    code = _EDIT.format(edit=edit, cache=name not in edit_cost.UNCACHED)
+    if name in edit_cost.MASKED:
+        image = ("image = next(n.image for n in mat.node_tree.nodes if n.bl_idname == 'ShaderNodeTexImage' "
+                 "and n.image is not None and not n.image.name.startswith('Spectral Skin SSS'))\n")
+        code += ("from exporters.skin_edits import NEUTRAL\n" + image + edit_cost.MASK_CODE
+                 + f"mask_edit(live_edits.live_node(mat), {edit!r})\n")
+    return code
 #: Materials: (name, render_cost mode, variant code or None for the mode's own).
 MATERIALS = (("principled", "principled", None), ("bake", "bake", None), ("live", "live", None),
-             *((f"live_{name}", f"live_{name}", _EDIT.format(edit=edit, cache=name not in edit_cost.UNCACHED))
-               for name, edit in EDITS.items()))
+             *((f"live_{name}", f"live_{name}", _variant(name, edit)) for name, edit in EDITS.items()))
 
 
 @dataclass
