@@ -170,17 +170,19 @@ def constant_edit(node: bpy.types.Node) -> tuple[float, float, float] | None:
 def cache_edit(node: bpy.types.Node) -> int:
     """Hold the live group node's edit precombined in one of its edit group's caches (module docstring, "Edit
     caches") and point the node's cache input at it; returns that cache (1 to :data:`CACHE_SLOTS`), or 0 where the
-    edit is not cached: an input fed by a node, a neutral edit, a group without caches.  A cache of the same values
+    edit is not cached: an input fed by a node, a neutral edit, a group without caches, a material or group linked
+    from a library (read-only), a group missing one of its images.  A cache of the same values
     is reused; else a free one (no other node's edit in it), else the one filled longest ago (the nodes that used it
     then render through the table, as before)."""
-    if node is None or CACHE_INPUT not in node.inputs or node.node_tree is None:
+    if node is None or CACHE_INPUT not in node.inputs or node.node_tree is None or not node.id_data.is_editable:
         return 0
     group = _edit_group(node.node_tree)
     edit = constant_edit(node)
     slot = 0
     if group is not None and edit is not None and all(np.isfinite(edit)) \
             and not skin_edits.neutral_rows(np.array([edit]))[0]:
-        slot = _slot_for(group, edit, node)
+        images = _group_images(group)
+        slot = _slot_for(group, images, edit, node) if images is not None else 0
     _point(node, slot)
     return slot
 
@@ -210,7 +212,24 @@ def _point(node: bpy.types.Node, slot: int) -> None:
         socket.default_value = float(slot)
 
 
-def _slot_for(group: bpy.types.NodeTree, edit: tuple[float, ...], node: bpy.types.Node) -> int:
+def _group_images(group: bpy.types.NodeTree) -> dict[str, bpy.types.Image] | None:
+    """The edit group's images by their key (:data:`IMAGE_KEY_PROP`), or None where one is missing or one it would
+    write (a cache's) or the group is not editable (linked from a library): the edit is then not cached."""
+    images = {}
+    for n in group.nodes:
+        image = getattr(n, "image", None)
+        if n.bl_idname == "ShaderNodeTexImage" and image is not None and image.get(IMAGE_KEY_PROP):
+            images[image[IMAGE_KEY_PROP]] = image
+    wanted = [edit_table.image_name(j, kind) for j in range(len(skin_edits.CONTROLS)) for kind in edit_table.KINDS]
+    caches = [cache_image_name(slot, kind) for slot in range(1, CACHE_SLOTS + 1) for kind in edit_table.KINDS]
+    if not group.is_editable or any(key not in images for key in wanted + caches) \
+            or not all(images[key].is_editable for key in caches):
+        return None
+    return images
+
+
+def _slot_for(group: bpy.types.NodeTree, images: dict[str, bpy.types.Image], edit: tuple[float, ...],
+              node: bpy.types.Node) -> int:
     """The cache of ``group`` holding ``edit``, filled here if none does (:func:`cache_edit`)."""
     slots = range(1, CACHE_SLOTS + 1)
     held = {k: _cached_values(group, k) for k in slots}
@@ -224,22 +243,17 @@ def _slot_for(group: bpy.types.NodeTree, edit: tuple[float, ...], node: bpy.type
     order = [k for k in group.get(_CACHE_ORDER_PROP, []) if k in slots]
     free = [k for k in slots if k not in used]
     slot = free[0] if free else next((k for k in order if k in slots), 1)
-    _fill(group, slot, edit)
+    _fill(group, images, slot, edit)
     group[_CACHE_ORDER_PROP] = [k for k in order if k != slot] + [slot]
     for n in others:  # nodes that pointed at the cache before: it holds other values now
-        if int(n.inputs[CACHE_INPUT].default_value) == slot:
+        if int(n.inputs[CACHE_INPUT].default_value) == slot and n.id_data.is_editable:
             _point(n, 0)
     return slot
 
 
-def _fill(group: bpy.types.NodeTree, slot: int, edit: tuple[float, ...]) -> None:
-    """Write cache ``slot``: its images (exporters.edit_table.combined_atlas of the group's control images), then
-    the values its Compare nodes test the inputs against."""
-    images = {}
-    for n in group.nodes:
-        image = getattr(n, "image", None)
-        if n.bl_idname == "ShaderNodeTexImage" and image is not None and image.get(IMAGE_KEY_PROP):
-            images[image[IMAGE_KEY_PROP]] = image
+def _fill(group: bpy.types.NodeTree, images: dict[str, bpy.types.Image], slot: int, edit: tuple[float, ...]) -> None:
+    """Write cache ``slot``: its images (exporters.edit_table.combined_atlas of the group's control images,
+    ``images`` from :func:`_group_images`), then the values its Compare nodes test the inputs against."""
     for kind in edit_table.KINDS:
         stacked = [_pixels(images[edit_table.image_name(j, kind)]) for j in range(len(skin_edits.CONTROLS))]
         wiring.rewrite_table_image(images[cache_image_name(slot, kind)], edit_table.combined_atlas(stacked, edit))

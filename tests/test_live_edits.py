@@ -306,6 +306,16 @@ def test_a_constant_edit_renders_from_its_cache_as_from_the_table(tmp_path, addo
     assert slots == [2, 3, 1]
     assert gnode.inputs[live_edits.CACHE_INPUT].default_value == 0  # its cache was given up: it reads the table
     assert live_edits._cached_values(edit_group, 1) == tuple(float(np.float32(v)) for v in (1.0, 0.4, 0.0))
+    # a cache image gone from the group (an artist's edit of it): the edit is not cached, and nothing fails
+    readers = [n for n in edit_group.nodes if n.bl_idname == "ShaderNodeTexImage" and n.image is not None
+               and n.image.get(live_edits.IMAGE_KEY_PROP) == live_edits.cache_image_name(2, "radius")]
+    image = readers[0].image
+    for tex in readers:
+        tex.image = None
+    live_edits.set_edit(gnode, (3.0, 1.0, 0.0))
+    assert gnode.inputs[live_edits.CACHE_INPUT].default_value == 0
+    for tex in readers:
+        tex.image = image
     # the handler: an edit set on the node (the panel's sliders, the node editor) is cached at the next update
     live_edits.register_handlers()
     gnode.inputs["Blood"].default_value = 0.7
