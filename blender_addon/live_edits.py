@@ -104,38 +104,36 @@ def ensure_images(table: edit_table.EditTable, atlases: Callable[[], dict[str, n
     stacked), packed, one set per file (reused when images of this table exist; ``atlases``: gives the table's
     atlases, made elsewhere meanwhile; default: made here)."""
     make = atlases if atlases is not None else table.atlases
-    atlases = None
+    made: dict[str, np.ndarray] = {}
     images = {}
+
+    def table_atlas(name: str) -> np.ndarray:  # the table's atlases, made once and only if an image is missing
+        if not made:
+            made.update(make())
+        return made[name]
+
+    def ensure(name: str, pixels: Callable[[], np.ndarray]) -> None:
+        full = f"{IMAGE_PREFIX} {name}"
+        image = bpy.data.images.get(full)
+        if image is None or image.get(EDIT_TABLE_PROP) != table.sha256:
+            image = wiring.packed_table_image(full, pixels(), EDIT_TABLE_PROP, table.sha256)
+        if image.get(IMAGE_KEY_PROP) != name:
+            image[IMAGE_KEY_PROP] = name
+        images[name] = image
+
     for j in range(len(skin_edits.CONTROLS)):
         for kind in edit_table.KINDS:
             name = edit_table.image_name(j, kind)
-            full = f"{IMAGE_PREFIX} {name}"
-            image = bpy.data.images.get(full)
-            if image is None or image.get(EDIT_TABLE_PROP) != table.sha256:
-                atlases = atlases if atlases is not None else make()
-                image = wiring.packed_table_image(full, atlases[name], EDIT_TABLE_PROP, table.sha256)
-            images[name] = _keyed(image, name)
+            ensure(name, lambda name=name: table_atlas(name))
     for slot in range(1, CACHE_SLOTS + 1):
-        for kind in edit_table.KINDS:
-            name = cache_image_name(slot, kind)
-            full = f"{IMAGE_PREFIX} {name}"
-            image = bpy.data.images.get(full)
-            if image is None or image.get(EDIT_TABLE_PROP) != table.sha256:  # empty until an edit is cached
-                image = wiring.packed_table_image(full, np.zeros((1, 1, 4), np.float32), EDIT_TABLE_PROP,
-                                                  table.sha256)
-            images[name] = _keyed(image, name)
+        for kind in edit_table.KINDS:  # empty until an edit is cached
+            ensure(cache_image_name(slot, kind), lambda: np.zeros((1, 1, 4), np.float32))
     return images
 
 
 #: Custom property on each edit image: its name within the edit group (:func:`exporters.edit_table.image_name`,
 #: :func:`cache_image_name`), whatever name Blender gave the image.
 IMAGE_KEY_PROP = "spectral_skin_sss_edit_image"
-
-
-def _keyed(image: bpy.types.Image, key: str) -> bpy.types.Image:
-    if image.get(IMAGE_KEY_PROP) != key:
-        image[IMAGE_KEY_PROP] = key
-    return image
 
 
 def edit_property(name: str) -> dict:
@@ -167,6 +165,11 @@ def constant_edit(node: bpy.types.Node) -> tuple[float, float, float] | None:
     return tuple(float(node.inputs[name].default_value) for name, *_ in INPUTS)
 
 
+def _cacheable(edit: tuple[float, float, float] | None) -> bool:
+    """Whether ``edit`` (:func:`constant_edit`) is one a cache holds: constant, finite and not neutral."""
+    return edit is not None and all(np.isfinite(edit)) and not skin_edits.neutral_rows(np.array([edit]))[0]
+
+
 def cache_edit(node: bpy.types.Node) -> int:
     """Hold the live group node's edit precombined in one of its edit group's caches (module docstring, "Edit
     caches") and point the node's cache input at it; returns that cache (1 to :data:`CACHE_SLOTS`), or 0 where the
@@ -179,8 +182,7 @@ def cache_edit(node: bpy.types.Node) -> int:
     group = _edit_group(node.node_tree)
     edit = constant_edit(node)
     slot = 0
-    if group is not None and edit is not None and all(np.isfinite(edit)) \
-            and not skin_edits.neutral_rows(np.array([edit]))[0]:
+    if group is not None and _cacheable(edit):
         images = _group_images(group)
         slot = _slot_for(group, images, edit, node) if images is not None else 0
     _point(node, slot)
@@ -242,7 +244,7 @@ def _slot_for(group: bpy.types.NodeTree, images: dict[str, bpy.types.Image], edi
             if constant_edit(n) == held.get(int(n.inputs[CACHE_INPUT].default_value))}
     order = [k for k in group.get(_CACHE_ORDER_PROP, []) if k in slots]
     free = [k for k in slots if k not in used]
-    slot = free[0] if free else next((k for k in order if k in slots), 1)
+    slot = free[0] if free else (order[0] if order else 1)
     _fill(group, images, slot, edit)
     group[_CACHE_ORDER_PROP] = [k for k in order if k != slot] + [slot]
     for n in others:  # nodes that pointed at the cache before: it holds other values now
@@ -269,7 +271,7 @@ def cache_is_current(node: bpy.types.Node) -> bool:
     slot = int(node.inputs[CACHE_INPUT].default_value)
     group = _edit_group(node.node_tree)
     edit = constant_edit(node)
-    if group is None or edit is None or not all(np.isfinite(edit)) or skin_edits.neutral_rows(np.array([edit]))[0]:
+    if group is None or not _cacheable(edit):
         return slot == 0
     return 1 <= slot <= CACHE_SLOTS and _cached_values(group, slot) == edit
 
@@ -282,18 +284,9 @@ def refresh_caches(scene=None, depsgraph=None) -> None:
     """depsgraph_update_post handler: cache the edit of each changed material's live node whose cache input is not
     current (an edit set in the panel or on the node), so that a constant edit renders from a cache whoever set
     it.  Rendering never depends on it: a node whose cache is not current renders through the table."""
-    global _refreshing
     if _refreshing or depsgraph is None:
         return
-    changed = {u.id.original for u in depsgraph.updates if isinstance(u.id, bpy.types.Material)}
-    _refreshing = True
-    try:
-        for material in changed:
-            node = live_node(material)
-            if node is not None and not cache_is_current(node):
-                cache_edit(node)
-    finally:
-        _refreshing = False
+    _refresh({u.id.original for u in depsgraph.updates if isinstance(u.id, bpy.types.Material)})
 
 
 @bpy.app.handlers.persistent
@@ -302,12 +295,17 @@ def refresh_frame_caches(scene=None, depsgraph=None) -> None:
     keyframed values are in (Blender evaluates the frame again when a post handler changed data, so the frame renders
     from the cache).  Skipped while a render job runs in Blender's interface, whose frames are evaluated outside the
     main thread: those frames read the table."""
+    if not _refreshing and not bpy.app.is_job_running("RENDER"):
+        _refresh(bpy.data.materials)
+
+
+def _refresh(materials) -> None:
+    """Cache the edit of each of ``materials``' live nodes whose cache input is not current (the handlers' work; the
+    writes it makes do not call it again)."""
     global _refreshing
-    if _refreshing or bpy.app.is_job_running("RENDER"):
-        return
     _refreshing = True
     try:
-        for material in bpy.data.materials:
+        for material in materials:
             node = live_node(material)
             if node is not None and not cache_is_current(node):
                 cache_edit(node)

@@ -171,10 +171,8 @@ def combined_values(table: EditTable, edit) -> np.ndarray:
     """(n0, n1, n2, 6): the shift D of one edit (Melanin, Blood, Oxygenation) at the grid's nodes, its levels and
     controls summed with their weights.  The lookups are linear in the table, so its trilinear lookup at a colour is
     :func:`shift` at that colour: what the live group's edit cache holds (blender_addon.live_edits)."""
-    weights = stack_weights(edit)
-    half = table.values.shape[4] // 2
-    levels = np.delete(weights, half, axis=1)  # the neutral level holds zeros
-    return np.einsum("abcjlk,jl->abck", table.values.astype(np.float64), levels)
+    weights = level_weights(control_coords(np.asarray(edit, np.float64).reshape(1, 3)))[0]
+    return np.einsum("abcjlk,jl->abck", table.values.astype(np.float64), weights)
 
 
 def combined_atlas(stacked: list[np.ndarray], edit) -> np.ndarray:
