@@ -36,18 +36,37 @@ def channel_curves(tree: bpy.types.NodeTree, socket: bpy.types.NodeSocket, xs: n
     as is)."""
     xs = np.asarray(xs, np.float64)
     ys = np.broadcast_to(np.asarray(ys, np.float64).reshape(len(xs), -1), (len(xs), 3))
-    if len(xs) < 2 or np.any(np.diff(xs) <= 0.0) or not (np.all(np.isfinite(xs)) and np.all(np.isfinite(ys))):
-        raise ValueError("a curve needs two or more finite points with increasing x")
+    _check(xs, ys)
     node = tree.nodes.new("ShaderNodeRGBCurve")
     node.location = location
     tree.links.new(socket, node.inputs["Color"])
-    mapping = node.mapping
+    _set_points(node.mapping, [(xs, ys[:, c]) for c in range(3)] + [(xs[[0, -1]], xs[[0, -1]])])
+    return node.outputs["Color"]
+
+
+def set_float_curve(node: bpy.types.Node, xs: np.ndarray, ys: np.ndarray) -> None:
+    """Make a Float Curve node the piecewise linear function through the points (xs[i], ys[i]) (``xs`` increasing;
+    constant beyond the first and the last), of factor 1."""
+    xs, ys = np.asarray(xs, np.float64), np.asarray(ys, np.float64)
+    _check(xs, ys)
+    node.inputs["Factor"].default_value = 1.0
+    _set_points(node.mapping, [(xs, ys)])
+
+
+def _check(xs: np.ndarray, ys: np.ndarray) -> None:
+    if len(xs) < 2 or np.any(np.diff(xs) <= 0.0) or not (np.all(np.isfinite(xs)) and np.all(np.isfinite(ys))):
+        raise ValueError("a curve needs two or more finite points with increasing x")
+
+
+def _set_points(mapping: bpy.types.CurveMapping, points_of: list[tuple[np.ndarray, np.ndarray]]) -> None:
+    """Set each curve of ``mapping`` to the points (x, y) of ``points_of``, with vector handles (straight lines), the
+    clip range the first curve's x range, constant beyond it."""
+    xs = points_of[0][0]
     mapping.use_clip = False
     mapping.clip_min_x, mapping.clip_max_x = float(xs[0]), float(xs[-1])
     mapping.extend = "HORIZONTAL"
-    ends = np.array([xs[0], xs[-1]])
-    for curve, (cx, cy) in zip(mapping.curves, [(xs, ys[:, c]) for c in range(3)] + [(ends, ends)], strict=True):
-        points = curve.points  # curves R, G, B and the combined curve C (Blender applies C, then R, G or B)
+    for curve, (cx, cy) in zip(mapping.curves, points_of, strict=True):
+        points = curve.points
         while len(points) > len(cx):
             points.remove(points[-1])
         while len(points) < len(cx):
@@ -56,7 +75,6 @@ def channel_curves(tree: bpy.types.NodeTree, socket: bpy.types.NodeSocket, xs: n
         for point in points:
             point.handle_type = "VECTOR"
     mapping.update()
-    return node.outputs["Color"]
 
 
 def smooth_points(function, lo: float, hi: float) -> tuple[np.ndarray, np.ndarray]:

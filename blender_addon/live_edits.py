@@ -1,9 +1,13 @@
-"""The live group's skin edits: inputs **Melanin**, **Blood** and **Oxygenation** (exporters.skin_edits) in nodes.
+"""The live group's skin edits: inputs **Melanin**, **Blood** and **Oxygenation** (exporters.skin_edits) in nodes,
+weighed by **Edit Mask**.
 
 The edit table (exporters.edit_table) is packed into six small float images (per control, one of the colour shift
-and one of the radius correction: its levels' slice atlases, every slice in one row, stacked with a zero atlas for
-the neutral level).  For the painted colour c the nodes compute, as exporters.edit_table.shift and edited_colour:
+and one of the radius correction: its levels' slice atlases, every slice in one row, stacked; the neutral level's
+shift is 0 and not stored).  For the painted colour c the nodes compute, as exporters.edit_table.shift and
+edited_colour:
 
+* each control weighed by the Edit Mask m (clamped to [0, 1]): neutral + m (value - neutral), bake masks'
+  convention (exporters.bake.edits);
 * control coordinates s = (log2 clamp(Melanin), log2 clamp(Blood), clamp(Oxygenation)); per control the two
   levels around s, read by trilinear lookups at c and interpolated linearly (the hat weights of
   exporters.edit_table.shift); the shift D is their sum over the controls;
@@ -13,24 +17,26 @@ the neutral level).  For the painted colour c the nodes compute, as exporters.ed
   Separate, three Math nodes and a Combine would be), behind a Mix that gives exactly 1 where every control is
   neutral.
 
-At neutral inputs each control reads its zero atlas with weight exactly 1 (its neighbour with weight exactly 0), so D =
-0 and the Mixes give exactly 1: c 1 = c and r 1 = r, the group renders its unedited result bit for bit. Each control's
-shift is also switched to exactly 0 where its coordinate is neutral (the same value): an unlinked control at its neutral
-value then folds to a constant 0 when Cycles compiles the shader, which drops that control's texture lookups (a neutral
-group evaluates none of the edit nodes).  Each input takes a value or any node (a painted mask through a Mix node, an
-attribute, a driver); its keyframes animate it.
+At neutral inputs the Mixes give exactly 1: c 1 = c and r 1 = r, the group renders its unedited result bit for bit.
+Each control's shift is also switched to exactly 0 where its coordinate is neutral: an unlinked control at its
+neutral value (whatever the mask) then folds to a constant 0 when Cycles compiles the shader, which drops that
+control's texture lookups (a neutral group evaluates none of the edit nodes).  Each input takes a value or any node
+(a painted mask, an attribute, a driver); its keyframes animate it.
 
-**Edit caches.**  A constant edit (the three inputs unlinked) needs D at the painted colour only, for one set of
-level weights: the edit group holds :data:`CACHE_SLOTS` caches, each an image pair of one atlas (the table's shift of
-that edit at the grid's nodes, exporters.edit_table.combined_atlas of the control images: the lookups are linear, so
-reading it gives the same D), read at two slices (4 lookups where the table takes up to 24).  A cache is used where
-the node's hidden input **Edit Cache** names it and the three inputs equal the values the cache holds (Compare nodes
-in the group); then a Mix takes its shift instead of the table's.  For constant inputs the test folds when Cycles
-compiles the shader, to 1 (the table's nodes and images drop out) or to 0 (the cache's do); the test reads values,
-so a cache never gives another edit's answer: changed values, keyframes and masks render through the table, as
-without caches.  :func:`cache_edit` fills a cache (:func:`set_edit`: the operator, the presets, the API); the
-add-on's handlers cache an edit set on the node or the panel's sliders (:func:`refresh_caches`) and each frame's
-keyframed values (:func:`refresh_frame_caches`).
+**Edit caches.**  An edit of constant controls needs D at the painted colour only, for one set of level weights
+(or, painted by a linked Edit Mask, along one line of them): the edit group holds :data:`CACHE_SLOTS` caches of
+constant edits, each an image pair of one atlas (the table's shift of that edit at the grid's nodes,
+exporters.edit_table.combined_atlas of the control images: the lookups are linear, so reading it gives the same
+D), read at two slices (4 lookups where the table takes up to 24), and one **mask cache** (:data:`MASK_SLOT`): an
+edit's shift at :data:`MASK_POINTS` masks on its line (exporters.edit_table.MaskLine), read at two points and two
+slices (8 lookups, however many controls the edit moves).  A cache is used where the node's hidden input **Edit
+Cache** names it and its inputs equal the values the cache holds (Compare nodes in the group: the controls, and the
+mask's value for a constant edit); then a Mix takes its shift instead of the table's.  For constant inputs the test
+folds when Cycles compiles the shader, to 1 (the table's nodes and images drop out) or to 0 (the cache's do); the
+test reads values, so a cache never gives another edit's answer: changed values, keyframes and controls fed by
+nodes render through the table, as without caches.  :func:`cache_edit` fills a cache (:func:`set_edit`: the
+operator, the presets, the API); the add-on's handlers cache an edit set on the node or the panel's sliders
+(:func:`refresh_caches`) and each frame's keyframed values (:func:`refresh_frame_caches`).
 """
 
 from __future__ import annotations
@@ -53,6 +59,14 @@ IMAGE_PREFIX = "Spectral Skin SSS Edits"
 CACHE_SLOTS = edit_table.CACHE_SLOTS
 #: The group input naming the cache that holds the node's edit (0: none); set by :func:`cache_edit`.
 CACHE_INPUT = "Edit Cache"
+#: The group input weighing the edit per shading point (a painted mask), as a bake's masks weigh it.
+MASK_INPUT = "Edit Mask"
+#: The cache of an edit painted by a linked Edit Mask: the value of the Edit Cache input naming it.
+MASK_SLOT = CACHE_SLOTS + 1
+#: Points of the mask cache along its edit's line (exporters.edit_table.MaskLine).
+MASK_POINTS = edit_table.MASK_POINTS
+#: The Float Curve of the mask cache: the mask's position on its line (exporters.edit_table.MaskLine.position).
+MASK_CURVE = "Mask Cache Position"
 #: The group's inputs, in order: (name, default, soft minimum, soft maximum, tooltip).
 INPUTS = tuple(
     (name.title(), skin_edits.NEUTRAL[j], *skin_edits.CONTROL_RANGES[name], tip)
@@ -125,7 +139,7 @@ def ensure_images(table: edit_table.EditTable, atlases: Callable[[], dict[str, n
         for kind in edit_table.KINDS:
             name = edit_table.image_name(j, kind)
             ensure(name, lambda name=name: table_atlas(name))
-    for slot in range(1, CACHE_SLOTS + 1):
+    for slot in range(1, MASK_SLOT + 1):
         for kind in edit_table.KINDS:  # empty until an edit is cached
             ensure(cache_image_name(slot, kind), lambda: np.zeros((1, 1, 4), np.float32))
     return images
@@ -165,26 +179,44 @@ def constant_edit(node: bpy.types.Node) -> tuple[float, float, float] | None:
     return tuple(float(node.inputs[name].default_value) for name, *_ in INPUTS)
 
 
-def _cacheable(edit: tuple[float, float, float] | None) -> bool:
-    """Whether ``edit`` (:func:`constant_edit`) is one a cache holds: constant, finite and not neutral."""
-    return edit is not None and all(np.isfinite(edit)) and not skin_edits.neutral_rows(np.array([edit]))[0]
+def cache_key(node: bpy.types.Node) -> tuple[float, ...] | None:
+    """The values a cache holding the live group node's edit tests (module docstring, "Edit caches"): (Melanin,
+    Blood, Oxygenation, Edit Mask) for a constant edit that is not neutral, (Melanin, Blood, Oxygenation) for one
+    painted by a linked Edit Mask that the mask cache can hold (exporters.edit_table.mask_line); None for any
+    other (a control fed by a node, a neutral edit)."""
+    edit = constant_edit(node)
+    if edit is None:
+        return None
+    mask = node.inputs.get(MASK_INPUT)
+    if mask is not None and mask.is_linked:
+        return edit if edit_table.mask_line(edit) is not None else None
+    weight = float(mask.default_value) if mask is not None else 1.0
+    effective = edit_table.masked_edits(edit, [weight])[0]
+    if not (np.all(np.isfinite(effective)) and np.isfinite(weight)) or skin_edits.neutral_rows(effective[None])[0]:
+        return None
+    return (*edit, weight)
+
+
+def _slots(key: tuple[float, ...]) -> range:
+    """The caches that can hold an edit of cache key ``key`` (:func:`cache_key`)."""
+    return range(MASK_SLOT, MASK_SLOT + 1) if len(key) == len(INPUTS) else range(1, CACHE_SLOTS + 1)
 
 
 def cache_edit(node: bpy.types.Node) -> int:
     """Hold the live group node's edit precombined in one of its edit group's caches (module docstring, "Edit
-    caches") and point the node's cache input at it; returns that cache (1 to :data:`CACHE_SLOTS`), or 0 where the
-    edit is not cached: an input fed by a node, a neutral edit, a group without caches, a material or group linked
-    from a library (read-only), a group missing one of its images.  A cache of the same values
-    is reused; else a free one (no other node's edit in it), else the one filled longest ago (the nodes that used it
-    then render through the table, as before)."""
+    caches") and point the node's cache input at it; returns that cache (1 to :data:`CACHE_SLOTS` for a constant
+    edit, :data:`MASK_SLOT` for one painted by a linked Edit Mask), or 0 where the edit is not cached
+    (:func:`cache_key` None), the group has no caches, the material or group is linked from a library (read-only) or
+    the group misses one of its images.  A cache of the same values is reused; else a free one (no other node's edit
+    in it), else the one filled longest ago (the nodes that used it then render through the table, as before)."""
     if node is None or CACHE_INPUT not in node.inputs or node.node_tree is None or not node.id_data.is_editable:
         return 0
     group = _edit_group(node.node_tree)
-    edit = constant_edit(node)
+    key = cache_key(node)
     slot = 0
-    if group is not None and _cacheable(edit):
+    if group is not None and key is not None:
         images = _group_images(group)
-        slot = _slot_for(group, images, edit, node) if images is not None else 0
+        slot = _slot_for(group, images, key, node) if images is not None else 0
     _point(node, slot)
     return slot
 
@@ -198,14 +230,15 @@ def _edit_group(live_group: bpy.types.NodeTree) -> bpy.types.NodeTree | None:
     for n in live_group.nodes:
         tree = getattr(n, "node_tree", None)
         if n.bl_idname == "ShaderNodeGroup" and tree is not None and tree.get(EDIT_TABLE_PROP) \
-                and _cache_node_name(1, INPUTS[0][0]) in tree.nodes:
+                and _cache_node_name(MASK_SLOT, INPUTS[0][0]) in tree.nodes:
             return tree
     return None
 
 
 def _cached_values(group: bpy.types.NodeTree, slot: int) -> tuple[float, ...]:
-    """The (Melanin, Blood, Oxygenation) cache ``slot`` of the edit group holds (NaN: none)."""
-    return tuple(float(group.nodes[_cache_node_name(slot, name)].inputs[1].default_value) for name, *_ in INPUTS)
+    """The values cache ``slot`` of the edit group holds (:func:`cache_key`; NaN: none)."""
+    return tuple(float(group.nodes[_cache_node_name(slot, name)].inputs[1].default_value)
+                 for name in _cache_inputs(slot))
 
 
 def _point(node: bpy.types.Node, slot: int) -> None:
@@ -223,29 +256,29 @@ def _group_images(group: bpy.types.NodeTree) -> dict[str, bpy.types.Image] | Non
         if n.bl_idname == "ShaderNodeTexImage" and image is not None and image.get(IMAGE_KEY_PROP):
             images[image[IMAGE_KEY_PROP]] = image
     wanted = [edit_table.image_name(j, kind) for j in range(len(skin_edits.CONTROLS)) for kind in edit_table.KINDS]
-    caches = [cache_image_name(slot, kind) for slot in range(1, CACHE_SLOTS + 1) for kind in edit_table.KINDS]
+    caches = [cache_image_name(slot, kind) for slot in range(1, MASK_SLOT + 1) for kind in edit_table.KINDS]
     if not group.is_editable or any(key not in images for key in wanted + caches) \
             or not all(images[key].is_editable for key in caches):
         return None
     return images
 
 
-def _slot_for(group: bpy.types.NodeTree, images: dict[str, bpy.types.Image], edit: tuple[float, ...],
+def _slot_for(group: bpy.types.NodeTree, images: dict[str, bpy.types.Image], key: tuple[float, ...],
               node: bpy.types.Node) -> int:
-    """The cache of ``group`` holding ``edit``, filled here if none does (:func:`cache_edit`)."""
-    slots = range(1, CACHE_SLOTS + 1)
+    """The cache of ``group`` holding the edit of cache key ``key``, filled here if none does (:func:`cache_edit`)."""
+    slots = _slots(key)
     held = {k: _cached_values(group, k) for k in slots}
     for k, values in held.items():
-        if values == edit:
+        if values == key:
             return k
     others = [n for n in map(live_node, bpy.data.materials) if n is not None and n != node
               and n.node_tree is not None and _edit_group(n.node_tree) == group]
     used = {int(n.inputs[CACHE_INPUT].default_value) for n in others
-            if constant_edit(n) == held.get(int(n.inputs[CACHE_INPUT].default_value))}
-    order = [k for k in group.get(_CACHE_ORDER_PROP, []) if k in slots]
+            if cache_key(n) == held.get(int(n.inputs[CACHE_INPUT].default_value))}
+    order = list(group.get(_CACHE_ORDER_PROP, []))
     free = [k for k in slots if k not in used]
-    slot = free[0] if free else (order[0] if order else 1)
-    _fill(group, images, slot, edit)
+    slot = free[0] if free else next((k for k in order if k in slots), slots[0])
+    _fill(group, images, slot, key)
     group[_CACHE_ORDER_PROP] = [k for k in order if k != slot] + [slot]
     for n in others:  # nodes that pointed at the cache before: it holds other values now
         if int(n.inputs[CACHE_INPUT].default_value) == slot and n.id_data.is_editable:
@@ -253,27 +286,34 @@ def _slot_for(group: bpy.types.NodeTree, images: dict[str, bpy.types.Image], edi
     return slot
 
 
-def _fill(group: bpy.types.NodeTree, images: dict[str, bpy.types.Image], slot: int, edit: tuple[float, ...]) -> None:
-    """Write cache ``slot``: its images (exporters.edit_table.combined_atlas of the group's control images,
-    ``images`` from :func:`_group_images`), then the values its Compare nodes test the inputs against."""
+def _fill(group: bpy.types.NodeTree, images: dict[str, bpy.types.Image], slot: int, key: tuple[float, ...]) -> None:
+    """Write cache ``slot`` for the edit of cache key ``key``: its images (exporters.edit_table.combined_atlas of the
+    group's control images, ``images`` from :func:`_group_images`, for a constant edit; line_atlas for the mask
+    cache, and its curve), then the values its Compare nodes test the inputs against."""
+    line = edit_table.mask_line(key) if slot == MASK_SLOT else None
     for kind in edit_table.KINDS:
         stacked = [_pixels(images[edit_table.image_name(j, kind)]) for j in range(len(skin_edits.CONTROLS))]
-        wiring.rewrite_table_image(images[cache_image_name(slot, kind)], edit_table.combined_atlas(stacked, edit))
-    for (name, *_), value in zip(INPUTS, edit, strict=True):
+        pixels = (edit_table.line_atlas(stacked, line) if line is not None
+                  else edit_table.combined_atlas(stacked, edit_table.masked_edits(key[:3], [key[3]])[0]))
+        wiring.rewrite_table_image(images[cache_image_name(slot, kind)], pixels)
+    if line is not None:
+        xs = np.linspace(0.0, 1.0, curves.SMOOTH_POINTS)
+        curves.set_float_curve(group.nodes[MASK_CURVE], xs, line.position(xs))
+    for name, value in zip(_cache_inputs(slot), key, strict=True):
         group.nodes[_cache_node_name(slot, name)].inputs[1].default_value = value
 
 
 def cache_is_current(node: bpy.types.Node) -> bool:
     """Whether the node's cache input is what :func:`cache_edit` would set: its edit's cache, or 0 where the edit is
-    not cached (fed by a node, neutral) or its group has no caches."""
+    not cached (:func:`cache_key` None) or its group has no caches."""
     if CACHE_INPUT not in node.inputs or node.node_tree is None:
         return True
     slot = int(node.inputs[CACHE_INPUT].default_value)
     group = _edit_group(node.node_tree)
-    edit = constant_edit(node)
-    if group is None or not _cacheable(edit):
+    key = cache_key(node)
+    if group is None or key is None:
         return slot == 0
-    return 1 <= slot <= CACHE_SLOTS and _cached_values(group, slot) == edit
+    return slot in _slots(key) and _cached_values(group, slot) == key
 
 
 _refreshing = False
@@ -345,11 +385,16 @@ def add_inputs(group: bpy.types.NodeTree) -> None:
         socket = group.interface.new_socket(name, in_out="INPUT", socket_type="NodeSocketFloat")
         socket.default_value, socket.min_value, socket.max_value = default, lo, hi
         socket.description = tip
+    socket = group.interface.new_socket(MASK_INPUT, in_out="INPUT", socket_type="NodeSocketFloat")
+    socket.subtype = "FACTOR"
+    socket.default_value, socket.min_value, socket.max_value = 1.0, 0.0, 1.0
+    socket.description = ("Where the edit applies (link a painted mask, 0 to 1): each control becomes neutral + mask x "
+                          "(its value - neutral), as a bake's masks weigh an edit")
     socket = group.interface.new_socket(CACHE_INPUT, in_out="INPUT", socket_type="NodeSocketFloat")
-    socket.default_value, socket.min_value, socket.max_value = 0.0, 0.0, float(CACHE_SLOTS)
+    socket.default_value, socket.min_value, socket.max_value = 0.0, 0.0, float(MASK_SLOT)
     socket.hide_value = True
-    socket.description = ("Set by the add-on: which of the edit group's caches holds this node's Melanin, Blood and "
-                          "Oxygenation precombined (0: none; a cache of other values is never used)")
+    socket.description = ("Set by the add-on: which of the edit group's caches holds this node's edit precombined "
+                          "(0: none; a cache of other values is never used)")
 
 
 @dataclass
@@ -395,17 +440,26 @@ def ensure_edit_group(table: edit_table.EditTable, images: dict[str, bpy.types.I
 def edit_node(b, gin, table: edit_table.EditTable, images: dict[str, bpy.types.Image]) -> EditBranch:
     """A node of the edit group (:func:`ensure_edit_group`) in the live group, fed by its Color and edit inputs."""
     node = b.node("ShaderNodeGroup", 1, node_tree=ensure_edit_group(table, images))
-    for name in ("Color", *(spec[0] for spec in INPUTS), CACHE_INPUT):
+    for name in ("Color", *(spec[0] for spec in INPUTS), MASK_INPUT, CACHE_INPUT):
         b.link(gin.outputs[name], node.inputs[name])
     return EditBranch(colour=node.outputs["Color"], radius_factor=node.outputs["Radius Factor"])
 
 
 def _coordinate(b, gin, j: int, stage: int):
-    """Control coordinate s_j: log2 of the clamped multiplier, or the clamped shift."""
+    """Control coordinate s_j of the control weighed by the Edit Mask: log2 of the clamped multiplier, or the clamped
+    shift.  The mask weighs the control in a Mix node of clamped factor from the neutral value to the input's:
+    Cycles folds it to the input at mask 1 (unlinked: the group without a mask) and to the neutral constant for an
+    unlinked neutral input whatever the mask, so a neutral control's nodes still fold away."""
     name = skin_edits.CONTROLS[j]
     lo, hi = skin_edits.CONTROL_RANGES[name]
-    x = b.math("MINIMUM", stage + 1, b.math("MAXIMUM", stage, gin.outputs[INPUTS[j][0]], lo), hi)
-    return x if name == "oxygenation" else b.math("LOGARITHM", stage + 2, x, 2.0)
+    weighed = b.node("ShaderNodeMix", stage, data_type="FLOAT", clamp_factor=True)
+    sockets = [s for s in weighed.inputs if s.enabled]
+    b.link(gin.outputs[MASK_INPUT], sockets[0])
+    b.link(skin_edits.NEUTRAL[j], sockets[1])
+    b.link(gin.outputs[INPUTS[j][0]], sockets[2])
+    value = next(s for s in weighed.outputs if s.enabled)
+    x = b.math("MINIMUM", stage + 2, b.math("MAXIMUM", stage + 1, value, lo), hi)
+    return x if name == "oxygenation" else b.math("LOGARITHM", stage + 3, x, 2.0)
 
 
 def add_edit_branch(b, gin, table: edit_table.EditTable, images: dict[str, bpy.types.Image]) -> EditBranch:
@@ -428,17 +482,20 @@ def add_edit_branch(b, gin, table: edit_table.EditTable, images: dict[str, bpy.t
     for j, name in enumerate(skin_edits.CONTROLS):
         levels = edit_table.LEVELS[name]
         h = edit_table.SPACING[name]
-        coordinate = _coordinate(b, gin, j, 44)
-        neutral = b.math("COMPARE", 58, coordinate, 0.0, 0.0)
+        coordinate = _coordinate(b, gin, j, 43)
+        neutral = b.math("COMPARE", 58, gin.outputs[INPUTS[j][0]], skin_edits.NEUTRAL[j], 0.0)
         still = neutral if still is None else b.math("MULTIPLY", 59, still, neutral)
         t = b.math("MULTIPLY_ADD", 47, coordinate, 1.0 / h, -levels[0] / h)
-        lower = b.math("MINIMUM", 49, b.math("FLOOR", 48, t), edit_table.STACKED - 2.0)
+        lower = b.math("MINIMUM", 49, b.math("FLOOR", 48, t), edit_table.STACKED - 1.0)  # levels lower, lower + 1
         fraction = b.math("SUBTRACT", 50, t, lower)
-        zero = float(edit_table.STACKED // 2)  # the neutral level's place in the stack (edit_table.stacked_levels)
+        zero = float(edit_table.STACKED // 2)  # the neutral level's place among the levels (not in the image)
         at_zero = (b.math("COMPARE", 50, lower, zero, 0.5), b.math("COMPARE", 50, lower, zero - 1.0, 0.5))
-        corner = b.node("ShaderNodeCombineColor", 51)  # (slice, level): their offsets in the image, scaled below
+        # the image's row of level ``lower``: the levels above neutral lie one lower (no zero atlas); at the neutral
+        # level the row below is read instead, its value replaced by 0 (_unless_zero), so row + 1 is level lower + 1
+        row = b.math("SUBTRACT", 51, lower, b.math("GREATER_THAN", 50, lower, zero - 0.5))
+        corner = b.node("ShaderNodeCombineColor", 52)  # (slice, row): their offsets in the image, scaled below
         b.link(s, corner.inputs[0])
-        b.link(lower, corner.inputs[1])
+        b.link(row, corner.inputs[1])
         uv = b.vec("MULTIPLY_ADD", 52, corner.outputs[0], (tile_u, 1.0 / edit_table.STACKED, 0.0), base)
         up = 1.0 / edit_table.STACKED
         offsets = [[(0.0, 0.0), (tile_u, 0.0)], [(0.0, up), (tile_u, up)]]  # (slice, level) from the corner's texel
@@ -451,6 +508,7 @@ def add_edit_branch(b, gin, table: edit_table.EditTable, images: dict[str, bpy.t
     cache_uv = b.vec("MULTIPLY_ADD", 52, s, (tile_u, 0.0, 0.0), base)  # slice s of a cache's one atlas
     for slot in range(1, CACHE_SLOTS + 1):
         shifts = _cached(b, gin, slot, images, cache_uv, frac, tile_u, shifts)
+    shifts = _mask_cached(b, gin, images, base, s, frac, tile_u, shifts)
     active = b.math("SUBTRACT", 60, 1.0, still)
     bounds = table.shift_bounds()
     factor = {kind: _exp(b, shifts[kind], active, bounds[kind], 61) for kind in edit_table.KINDS}
@@ -458,18 +516,32 @@ def add_edit_branch(b, gin, table: edit_table.EditTable, images: dict[str, bpy.t
     return EditBranch(colour=edited, radius_factor=factor["radius"])
 
 
+def _match(b, gin, slot: int) -> bpy.types.NodeSocket:
+    """1 where the node's cache input is ``slot`` and its inputs equal the values cache ``slot`` holds (Compare
+    nodes, named :func:`_cache_node_name`, whose second value the add-on sets: :data:`_EMPTY_CACHE` while empty),
+    else 0.  The cache input's Compare comes first: where it is another cache the product folds to 0 even when the
+    inputs are linked (Cycles folds X x 0)."""
+    match = b.math("COMPARE", 56, gin.outputs[CACHE_INPUT], float(slot), 0.0)
+    for name in _cache_inputs(slot):
+        test = b.math("COMPARE", 56, gin.outputs[name], _EMPTY_CACHE, 0.0)
+        test.node.name = _cache_node_name(slot, name)
+        match = b.math("MULTIPLY", 57, match, test)
+    return match
+
+
+def _cache_inputs(slot: int) -> tuple[str, ...]:
+    """The inputs whose values cache ``slot`` holds: the controls, and the Edit Mask's value for a constant edit."""
+    controls = tuple(spec[0] for spec in INPUTS)
+    return controls if slot == MASK_SLOT else (*controls, MASK_INPUT)
+
+
 def _cached(b, gin, slot: int, images: dict[str, bpy.types.Image], uv, frac, tile_u: float,
             shifts: dict) -> dict:
     """``shifts`` where cache ``slot`` holds the node's edit, the cache's shifts where it does (module docstring,
-    "Edit caches"): a Mix per kind from the table's shift to the cache's, of factor 1 exactly where the node's cache
-    input is ``slot`` and its three controls equal the values the cache was made for (Compare nodes holding them),
-    else 0.  The cache holds one atlas (the shift of that edit at the grid's nodes): each kind's image read at
-    slices s and s + 1, its v scaled from the stacked images' (the images' texture mapping)."""
-    match = b.math("COMPARE", 56, gin.outputs[CACHE_INPUT], float(slot), 0.0)
-    for name, value in zip((spec[0] for spec in INPUTS), _EMPTY_CACHE, strict=True):
-        test = b.math("COMPARE", 56, gin.outputs[name], value, 0.0)
-        test.node.name = _cache_node_name(slot, name)
-        match = b.math("MULTIPLY", 57, match, test)
+    "Edit caches"): a Mix per kind from the table's shift to the cache's, of factor :func:`_match`.  The cache holds
+    one atlas (the shift of that edit at the grid's nodes): each kind's image read at slices s and s + 1, its v
+    scaled from the stacked images' (the images' texture mapping)."""
+    match = _match(b, gin, slot)
     out = {}
     for kind in edit_table.KINDS:
         image = images[cache_image_name(slot, kind)]
@@ -479,8 +551,38 @@ def _cached(b, gin, slot: int, images: dict[str, bpy.types.Image], uv, frac, til
     return out
 
 
-#: The values an unused cache's Compare nodes hold: never an input's (a Compare with NaN gives 0).
-_EMPTY_CACHE = (float("nan"),) * 3
+def _mask_cached(b, gin, images: dict[str, bpy.types.Image], base, s, frac, tile_u: float, shifts: dict) -> dict:
+    """``shifts``, or where the mask cache holds the node's edit (:func:`_match` of :data:`MASK_SLOT`) the shift it
+    holds at the node's Edit Mask: the mask's position u on the cache's line (a Float Curve through
+    exporters.edit_table.MaskLine.position, set with the cache), the points floor(u) and floor(u) + 1 read at slices
+    s and s + 1 and interpolated linearly.  Point p is the image's atlas p - 1; point 0 (mask 0, no shift) lies below
+    the image, where the lookups' Clip extension reads 0."""
+    match = _match(b, gin, MASK_SLOT)
+    curve = b.node("ShaderNodeFloatCurve", 53)
+    curve.name = curve.label = MASK_CURVE
+    b.link(gin.outputs[MASK_INPUT], curve.inputs["Value"])
+    curves.set_float_curve(curve, np.array([0.0, 1.0]), np.array([0.0, 1.0]))
+    position = curve.outputs["Value"]
+    lower = b.math("MINIMUM", 54, b.math("FLOOR", 53, position), MASK_POINTS - 1.0)
+    fraction = b.math("SUBTRACT", 54, position, lower)
+    corner = b.node("ShaderNodeCombineColor", 54)
+    b.link(s, corner.inputs[0])
+    b.link(lower, corner.inputs[1])
+    uv = b.vec("MULTIPLY_ADD", 55, corner.outputs[0], (tile_u, 1.0 / edit_table.STACKED, 0.0), base)
+    scale = (1.0, edit_table.STACKED / MASK_POINTS, 1.0)
+    step = 1.0 / MASK_POINTS
+    out = {}
+    for kind in edit_table.KINDS:
+        image = images[cache_image_name(MASK_SLOT, kind)]
+        found = [_bilinear_pair(b, image, uv, [(0.0, dv), (tile_u, dv)], frac, 55, scale=scale, extension="CLIP")
+                 for dv in (-step, 0.0)]  # points lower, lower + 1
+        value = b.mix("VECTOR", 58, fraction, found[0], found[1])
+        out[kind] = b.mix("VECTOR", 59, match, shifts[kind], value)
+    return out
+
+
+#: The value an unused cache's Compare nodes hold: never an input's (a Compare with NaN gives 0).
+_EMPTY_CACHE = float("nan")
 
 
 def _cache_node_name(slot: int, control: str) -> str:
@@ -502,15 +604,15 @@ def _unless_zero(b, zero_level, value, stage: int) -> bpy.types.NodeSocket:
     return b.mix("RGBA", stage, zero_level, value, (0.0, 0.0, 0.0, 1.0))
 
 
-def _bilinear_pair(b, image: bpy.types.Image, uv: bpy.types.NodeSocket, offsets, frac,
-                   stage: int, scale: tuple[float, float, float] | None = None) -> bpy.types.NodeSocket:
+def _bilinear_pair(b, image: bpy.types.Image, uv: bpy.types.NodeSocket, offsets, frac, stage: int,
+                   scale: tuple[float, float, float] | None = None, extension: str = "EXTEND") -> bpy.types.NodeSocket:
     """Trilinear RGB of one level: bilinear lookups at ``uv`` plus each of ``offsets`` (two (du, dv): slices s, s + 1)
     mixed by ``frac``.  The offsets are the image nodes' own texture mapping (a translation, which Cycles applies as
     x 1 + t, exactly the sum a vector node would form): one small SVM node per lookup where an Add shared by the two
     kinds' lookups ran a Vector Math node and wrote its two constants at each shading point."""
     colours = []
     for du, dv in offsets:
-        tex = b.node("ShaderNodeTexImage", stage, image=image, interpolation="Linear", extension="EXTEND")
+        tex = b.node("ShaderNodeTexImage", stage, image=image, interpolation="Linear", extension=extension)
         tex.label = image.name
         tex.texture_mapping.translation = (du, dv, 0.0)
         if scale is not None:
@@ -587,24 +689,30 @@ def cache_status(node: bpy.types.Node) -> str | None:
     neutral."""
     edit = constant_edit(node)
     if edit is None:
-        return "Read from the edit table: an input is fed by a node"
-    if skin_edits.neutral_rows(np.array([edit]))[0]:
+        return "Read from the edit table: a control is fed by a node"
+    masked = MASK_INPUT in node.inputs and node.inputs[MASK_INPUT].is_linked
+    if cache_key(node) is None:
+        if masked and not skin_edits.neutral_rows(np.array([edit]))[0]:
+            return f"Read from the edit table: the mask cache holds edits within {MASK_POINTS} levels of neutral"
         return None
-    slot = int(node.inputs[CACHE_INPUT].default_value) if CACHE_INPUT in node.inputs else 0
+    slot = int(node.inputs[CACHE_INPUT].default_value)
     if slot and cache_is_current(node):
-        return f"Rendered from edit cache {slot}"
+        return "Rendered from the mask cache" if slot == MASK_SLOT else f"Rendered from edit cache {slot}"
     return "Read from the edit table (not cached)"
 
 
 def draw_controls(layout, context) -> None:
-    """The selected material's Melanin, Blood and Oxygenation (its live group node's inputs) and the presets."""
+    """The selected material's Melanin, Blood, Oxygenation and Edit Mask (its live group node's inputs), how the
+    edit renders and the presets."""
     node = live_node(getattr(context, "material", None))
     if node is None:
         return
     box = layout.box()
     box.label(text="Skin edits (live)")
-    for name, *_ in INPUTS:
-        socket = node.inputs[name]
+    for name in (*(spec[0] for spec in INPUTS), MASK_INPUT):
+        socket = node.inputs.get(name)
+        if socket is None:
+            continue
         if socket.is_linked:
             box.label(text=f"{name}: from node '{socket.links[0].from_node.name}'", icon="LINKED")
         else:

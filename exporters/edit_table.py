@@ -24,6 +24,10 @@ The controls combine additively in log space (step 3): measured against the exac
 ``python -m training edit-table --check`` (docs/research/skin_model.md).  At neutral the shift is exactly 0 and
 c' = c bit for bit.
 
+The live group's caches hold an edit's shift precombined: a constant edit's at the grid's nodes
+(:func:`combined_values`, :func:`combined_atlas`), an edit painted by a mask at a few masks along its line
+(:func:`mask_line`, :func:`line_atlas`; the nodes' reading of it: :func:`masked_shift`).
+
 File (``.npz``): ``steps`` int16 (n0, n1, n2, 3 controls, levels, 6), the values (:func:`encode_values`; NaN-free:
 nodes outside the RGB cube filled by exporters.live_table.fill_outside_cube), the grid, and a JSON header with the
 SHA-256 of the model, decoder and texel table it was made from.
@@ -100,30 +104,23 @@ class EditTable:
 
     def atlases(self) -> dict[str, np.ndarray]:
         """Image name (:func:`image_name`) -> one control's colour or radius channels at its levels, the atlases
-        stacked bottom to top in the order of :func:`stacked_levels` (the neutral level, all zero, in the middle):
+        stacked bottom to top in the order of :data:`LEVELS` (the neutral level's shift is 0 and is not stored):
         (STACKED x height, width, 4) float32, alpha 1."""
         layout = self.layout()
         out = {}
         for j in range(len(skin_edits.CONTROLS)):
             for kind, channels in KINDS.items():
-                grids = stacked_levels(self.values[:, :, :, j, :, channels])
-                rgb = np.concatenate([live_table.atlas_of(g, layout) for g in grids], axis=0)
+                values = self.values[:, :, :, j, :, channels]
+                rgb = np.concatenate([live_table.atlas_of(values[:, :, :, i], layout)
+                                      for i in range(values.shape[3])], axis=0)
                 out[image_name(j, kind)] = np.concatenate([rgb, np.ones_like(rgb[..., :1])], axis=-1)
         return out
 
 
-#: Atlases stacked per control image: the levels below neutral, neutral (zero), the levels above.
-STACKED = len(LEVELS["melanin"]) + 1
+#: Atlases stacked per control image: its levels, bottom to top (:data:`LEVELS`; no neutral level).
+STACKED = len(LEVELS["melanin"])
 #: The two images of each control: which channels of a level each holds.
 KINDS: dict[str, slice] = {"colour": slice(0, 3), "radius": slice(3, 6)}
-
-
-def stacked_levels(values: np.ndarray) -> list[np.ndarray]:
-    """The grids (n0, n1, n2, 4) of one control's levels (``values`` (n0, n1, n2, L, 4)) in stacking order, a zero
-    grid for the neutral level between the negative and the positive ones."""
-    half = values.shape[3] // 2
-    grids = [values[:, :, :, i] for i in range(values.shape[3])]
-    return [*grids[:half], np.zeros_like(grids[0]), *grids[half:]]
 
 
 def image_name(control: int, kind: str) -> str:
@@ -160,11 +157,9 @@ def shift(table: EditTable, rgb: np.ndarray, edits: np.ndarray) -> np.ndarray:
 
 
 def stack_weights(edit) -> np.ndarray:
-    """(3, STACKED): the weight of each control's stacked atlases (:func:`stacked_levels`' order, the neutral one
-    weighing 0) under one edit (Melanin, Blood, Oxygenation): the hat weights of :func:`level_weights`."""
-    w = level_weights(control_coords(np.asarray(edit, np.float64).reshape(1, 3)))[0]
-    half = w.shape[1] // 2
-    return np.concatenate([w[:, :half], np.zeros((w.shape[0], 1)), w[:, half:]], axis=1)
+    """(3, STACKED): the weight of each control's stacked atlases under one edit (Melanin, Blood, Oxygenation): the
+    hat weights of :func:`level_weights`."""
+    return level_weights(control_coords(np.asarray(edit, np.float64).reshape(1, 3)))[0]
 
 
 def combined_values(table: EditTable, edit) -> np.ndarray:
@@ -178,7 +173,8 @@ def combined_values(table: EditTable, edit) -> np.ndarray:
 def combined_atlas(stacked: list[np.ndarray], edit) -> np.ndarray:
     """One atlas (height, width, 4) of one kind: the images of each control (``stacked``: per control (STACKED x
     height, width, 4), as :meth:`EditTable.atlases` makes them and the live group holds them) summed with the edit's
-    weights (:func:`stack_weights`); alpha 1.  Equal to the atlas of :func:`combined_values`' channels of that kind."""
+    weights (:func:`stack_weights`); alpha 1.  Equal to the atlas of :func:`combined_values`' channels of that kind.
+    A neutral ``edit`` gives zeros."""
     weights = stack_weights(edit)
     out = None
     for j, image in enumerate(stacked):
@@ -188,6 +184,89 @@ def combined_atlas(stacked: list[np.ndarray], edit) -> np.ndarray:
     out = out.astype(np.float32)
     out[..., 3] = 1.0
     return out
+
+
+#: Points of the mask cache (blender_addon.live_edits): one edit's shift at up to this many masks along the line from
+#: neutral to its values (:func:`mask_line`), 0.26 MB each for the shipped table; three keep the edit images within
+#: 8 MB and hold every edit whose largest control spans three of its levels' spacings or fewer (the presets).
+MASK_POINTS = 3
+
+
+def masked_edits(edit, masks) -> np.ndarray:
+    """Edit rows (N, 3): ``edit`` (Melanin, Blood, Oxygenation) weighed by masks (N,) in [0, 1] (clipped) as bake
+    masks and the live group's Edit Mask weigh it: control = neutral + mask x (value - neutral)."""
+    neutral = np.array(skin_edits.NEUTRAL)
+    m = np.clip(np.asarray(masks, np.float64).reshape(-1, 1), 0.0, 1.0)
+    return neutral + m * (np.asarray(edit, np.float64).reshape(1, 3) - neutral)
+
+
+@dataclass(frozen=True)
+class MaskLine:
+    """How the mask cache holds an edit painted by a mask: its shift at ``masks`` (the points 1 .. n; point 0, the
+    mask 0, is the zero shift), read linearly in the position :meth:`position` of the mask.  The points lie where the
+    edit's ``control`` (the one spanning the most level spacings) crosses the table's levels, the last at mask 1:
+    between two of them that control's shift is linear in its coordinate and the position is that coordinate (the
+    last stretch rescaled), so the cache gives the table's answer for that control exactly and the other controls'
+    to within their own levels' curvature."""
+
+    edit: tuple[float, float, float]
+    control: int
+    masks: tuple[float, ...]
+
+    def _spacings(self, masks) -> np.ndarray:
+        """|s_control| / h at masks (N,): how many level spacings the control spans there."""
+        name = skin_edits.CONTROLS[self.control]
+        return np.abs(control_coords(masked_edits(self.edit, masks))[:, self.control]) / SPACING[name]
+
+    def position(self, masks) -> np.ndarray:
+        """(N,) position in [0, n] of masks (N,) (clipped to [0, 1]): point i at position i."""
+        n = len(self.masks)
+        a = self._spacings(masks)
+        end = float(self._spacings([1.0])[0])
+        return np.minimum(a, n - 1.0) + np.maximum(0.0, a - (n - 1.0)) / (end - (n - 1.0))
+
+
+def mask_line(edit) -> MaskLine | None:
+    """The :class:`MaskLine` of ``edit`` (Melanin, Blood, Oxygenation), or None where the mask cache cannot hold it:
+    neutral, not finite, outside the controls' ranges, or its largest control spanning more than
+    :data:`MASK_POINTS` level spacings."""
+    e = np.asarray(edit, np.float64).reshape(3)
+    if not np.all(np.isfinite(e)) or np.any(skin_edits.clamp_controls(e) != e) or skin_edits.neutral_rows(e)[0]:
+        return None
+    spans = np.abs(control_coords(e.reshape(1, 3))[0]) / np.array([SPACING[n] for n in skin_edits.CONTROLS])
+    j = int(np.argmax(spans))
+    n = int(np.ceil(spans[j] - 1e-6))
+    if n > MASK_POINTS:
+        return None
+    name = skin_edits.CONTROLS[j]
+    sign = np.sign(control_coords(e.reshape(1, 3))[0, j])
+    crossings = sign * SPACING[name] * np.arange(1, n)  # the control's coordinate at the levels it crosses
+    neutral = skin_edits.NEUTRAL[j]
+    masks = (crossings / (e[j] - neutral) if name == "oxygenation"
+             else (np.exp2(crossings) - neutral) / (e[j] - neutral))
+    return MaskLine(edit=tuple(float(v) for v in e), control=j, masks=(*map(float, masks), 1.0))
+
+
+def line_atlas(stacked: list[np.ndarray], line: MaskLine) -> np.ndarray:
+    """The mask cache's image of one kind: :data:`MASK_POINTS` atlases stacked bottom to top, point i the
+    :func:`combined_atlas` of ``line``'s edit at its i-th mask, points past the line's zero: (MASK_POINTS x height,
+    width, 4) float32."""
+    atlases = [combined_atlas(stacked, row) for row in masked_edits(line.edit, line.masks)]
+    blank = np.zeros_like(atlases[0])
+    return np.concatenate(atlases + [blank] * (MASK_POINTS - len(atlases)), axis=0)
+
+
+def masked_shift(table: EditTable, rgb: np.ndarray, line: MaskLine, masks) -> np.ndarray:
+    """Reference of the nodes reading the mask cache: D (N, 6) at painted colours (N, 3) under masks (N,) of
+    ``line``'s edit (the points' shifts read linearly at :meth:`MaskLine.position`)."""
+    rgb = np.asarray(rgb, np.float64).reshape(-1, 3)
+    points = [np.zeros((len(rgb), CHANNELS))] + [shift(table, rgb, row) for row in masked_edits(line.edit, line.masks)]
+    u = line.position(np.broadcast_to(np.asarray(masks, np.float64).ravel(), (len(rgb),)))
+    k = np.minimum(np.floor(u), len(line.masks) - 1).astype(int)
+    f = (u - k)[:, None]
+    stack = np.stack(points)
+    rows = np.arange(len(rgb))
+    return (1.0 - f) * stack[k, rows] + f * stack[k + 1, rows]
 
 
 def edited_colour(rgb: np.ndarray, d: np.ndarray) -> np.ndarray:

@@ -271,13 +271,27 @@ def main() -> dict:
     with bpy.context.temp_override(object=obj, active_object=obj, material=material):
         out["edit_preset"] = sorted(bpy.ops.spectral_skin.skin_edit_preset(preset="FLUSH"))
     node = live_edits.live_node(material)
-    out["edit_cache"] = live_edits.cache_status(node)
-    out["edit_centre_cached"] = render_centre(bpy.context.scene)
-    live_edits.unregister_handlers()
-    live_edits.set_edit(node, tuple(node.inputs[name].default_value for name in ("Melanin", "Blood", "Oxygenation")),
-                        cache=False)
-    out["edit_centre_table"] = render_centre(bpy.context.scene)
-    live_edits.register_handlers()
+
+    def cached_and_table(prefix: str) -> None:
+        """The node's cache status and render, then its render with the cache input set back to 0."""
+        out[f"{prefix}_cache"] = live_edits.cache_status(node)
+        out[f"{prefix}_centre_cached"] = render_centre(bpy.context.scene)
+        live_edits.unregister_handlers()
+        live_edits.set_edit(node, tuple(node.inputs[name].default_value for name in ("Melanin", "Blood",
+                                                                                       "Oxygenation")), cache=False)
+        out[f"{prefix}_centre_table"] = render_centre(bpy.context.scene)
+        live_edits.register_handlers()
+
+    cached_and_table("edit")
+    # The same edit painted by a mask (the albedo's red into Edit Mask): the add-on's handler caches it in the mask
+    # cache, which renders the table's answer to within the cache's own difference.
+    tree = material.node_tree
+    tex = next(n for n in tree.nodes if n.bl_idname == "ShaderNodeTexImage" and n.image == image)
+    red = tree.nodes.new("ShaderNodeSeparateColor")
+    tree.links.new(tex.outputs["Color"], red.inputs[0])
+    tree.links.new(red.outputs[0], node.inputs["Edit Mask"])
+    bpy.context.view_layer.update()
+    cached_and_table("edit_mask")
 
     # OSL on request: the Script node compiles (Cycles 4.2 has no oslquery) and renders once OSL is turned on.
     obj = skin_scene()

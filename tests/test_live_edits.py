@@ -76,6 +76,18 @@ def _use(tree, gnode, group: bpy.types.NodeTree) -> None:
     tree.links.new(tree.nodes[gnode["colour_source"]].outputs["Color"], gnode.inputs["Color"])
 
 
+def _edit_strip(tmp_path: Path):
+    """The strip (:func:`_strip`) with the group node using a live group with the edit nodes and its media exposed
+    (:func:`_with_checks`): (scene, tree, gnode, emission, table, edit table, layout, images, group, check names)."""
+    scene, tree, gnode, emission = _strip(tmp_path)
+    table, edits = _tables()
+    layout, images = live.ensure_images(table)
+    group = live.build_live_group(table, layout, images, (edits, live_edits.ensure_images(edits)))
+    names = _with_checks(group, table.k)
+    _use(tree, gnode, group)
+    return scene, tree, gnode, emission, table, edits, layout, images, group, names
+
+
 def _render(scene, tree, gnode, emission, name: str) -> np.ndarray:
     tree.links.new(gnode.outputs[name], emission.inputs["Color"])
     return _render_row(scene)
@@ -173,7 +185,7 @@ def test_neutral_controls_read_no_edit_image(tmp_path, addon):
     layout, images = live.ensure_images(table)
     edit_images = live_edits.ensure_images(edits)
     mb_each = next(iter(edit_images.values())).size[0] * next(iter(edit_images.values())).size[1] * 16 / 2**20
-    assert mb_each > 1.0  # each image is visible at Cycles' 1 MB resolution of its memory statistic
+    assert 2 * mb_each > 1.0  # a control's two images are visible at Cycles' 1 MB resolution of its memory statistic
     _use(tree, gnode, live.build_live_group(table, layout, images))
     plain = _cycles_memory_mb(scene, tree, gnode)
     _use(tree, gnode, live.build_live_group(table, layout, images, (edits, edit_images)))
@@ -194,7 +206,7 @@ def test_operator_wires_the_edit_inputs_and_presets_set_them(tmp_path, addon):
     node = live_edits.live_node(mat)
     assert node is not None and [node.inputs[n].default_value for n in EDIT] == [1.0, 1.0, 0.0]
     images = [i for i in bpy.data.images if i.name.startswith(live_edits.IMAGE_PREFIX)]
-    assert len(images) == 6 + 2 * live_edits.CACHE_SLOTS and all(i.packed_file is not None for i in images)
+    assert len(images) == 6 + 2 * live_edits.MASK_SLOT and all(i.packed_file is not None for i in images)
     table_bytes = sum(i.size[0] * i.size[1] * 16 for i in images if " Cache " not in i.name)
     mask = mat.node_tree.nodes.new("ShaderNodeValue")  # an input fed by a node is left as it is
     mat.node_tree.links.new(mask.outputs[0], node.inputs["Oxygenation"])
@@ -205,7 +217,7 @@ def test_operator_wires_the_edit_inputs_and_presets_set_them(tmp_path, addon):
     assert node.inputs["Blood"].default_value == pytest.approx(flush.blood)
     assert node.inputs["Oxygenation"].default_value == 0.0
     assert node.inputs[live_edits.CACHE_INPUT].default_value == 0  # an input fed by a node: not cached
-    assert live_edits.cache_status(node) == "Read from the edit table: an input is fed by a node"
+    assert live_edits.cache_status(node) == "Read from the edit table: a control is fed by a node"
     mat.node_tree.nodes.remove(mask)
     with bpy.context.temp_override(material=mat, object=obj, active_object=obj):
         assert bpy.ops.spectral_skin.skin_edit_preset(preset="FLUSH") == {"FINISHED"}
@@ -213,7 +225,8 @@ def test_operator_wires_the_edit_inputs_and_presets_set_them(tmp_path, addon):
     assert live_edits.cache_status(node) == "Rendered from edit cache 1"
     cache = bpy.data.images[f"{live_edits.IMAGE_PREFIX} {live_edits.cache_image_name(1, 'colour')}"]
     assert cache.size[1] * edit_table.STACKED == next(i for i in images if " Cache " not in i.name).size[1]
-    cache_bytes = 2 * live_edits.CACHE_SLOTS * cache.size[0] * cache.size[1] * 16  # every cache filled
+    atlases = live_edits.CACHE_SLOTS + live_edits.MASK_POINTS  # every cache filled: one atlas each, the mask's three
+    cache_bytes = 2 * atlases * cache.size[0] * cache.size[1] * 16
     assert table_bytes + cache_bytes <= 8e6  # the images the edits add: at most 8 MB
     with bpy.context.temp_override(material=mat, object=obj, active_object=obj):
         assert bpy.ops.spectral_skin.skin_edit_preset(preset="NEUTRAL") == {"FINISHED"}
@@ -260,13 +273,7 @@ def test_a_constant_edit_renders_from_its_cache_as_from_the_table(tmp_path, addo
     add-on render through the table again, the caches hold several edits, the oldest given up for a new one, and the
     add-on's handlers cache an edit set on the node and each frame's keyframed values."""
     live_edits.unregister_handlers()  # values set on the node below stay uncached, as without the add-on running
-    scene, tree, gnode, emission = _strip(tmp_path)
-    table, edits = _tables()
-    layout, images = live.ensure_images(table)
-    edit_images = live_edits.ensure_images(edits)
-    group = live.build_live_group(table, layout, images, (edits, edit_images))
-    names = _with_checks(group, table.k)
-    _use(tree, gnode, group)
+    scene, tree, gnode, emission, table, edits, layout, images, group, names = _edit_strip(tmp_path)
     grids = live_table.grid_values(table)
     row = (1.5, 2.5, -0.2)  # every control between two levels
     live_edits.set_edit(gnode, row)
@@ -305,7 +312,7 @@ def test_a_constant_edit_renders_from_its_cache_as_from_the_table(tmp_path, addo
         slots.append(int(node.inputs[live_edits.CACHE_INPUT].default_value))
     assert slots == [2, 3, 1]
     assert gnode.inputs[live_edits.CACHE_INPUT].default_value == 0  # its cache was given up: it reads the table
-    assert live_edits._cached_values(edit_group, 1) == tuple(float(np.float32(v)) for v in (1.0, 0.4, 0.0))
+    assert live_edits._cached_values(edit_group, 1) == tuple(float(np.float32(v)) for v in (1.0, 0.4, 0.0, 1.0))
     # a cache image gone from the group (an artist's edit of it): the edit is not cached, and nothing fails
     readers = [n for n in edit_group.nodes if n.bl_idname == "ShaderNodeTexImage" and n.image is not None
                and n.image.get(live_edits.IMAGE_KEY_PROP) == live_edits.cache_image_name(2, "radius")]
@@ -333,3 +340,62 @@ def test_a_constant_edit_renders_from_its_cache_as_from_the_table(tmp_path, addo
     assert _cycles_memory_mb(scene, tree, gnode) - plain <= 1.0
     live_edits.set_edit(gnode, skin_edits.NEUTRAL)
     assert gnode.inputs[live_edits.CACHE_INPUT].default_value == 0
+
+
+def test_an_edit_painted_by_the_edit_mask_renders_from_the_mask_cache(tmp_path, addon):
+    """An edit weighed by a linked Edit Mask (control = neutral + mask x (value - neutral), bake masks' convention):
+    through the table the media equal the table's answer at each texel's weighed edit and the fast bake's with that
+    mask; cached (live_edits.cache_edit: the mask cache) they equal the cache's reference (edit_table.masked_shift),
+    which stays within a few thousandths of the table's, and the compiled shader reads the cache's small images
+    instead of the table's.  An edit spanning more levels than the cache holds reads the table."""
+    live_edits.unregister_handlers()
+    scene, tree, gnode, emission, table, edits, layout, images, group, names = _edit_strip(tmp_path)
+    red = tree.nodes.new("ShaderNodeSeparateColor")  # the mask: the colours' red, 1.2 clamped to 1
+    tree.links.new(tree.nodes[gnode["colour_source"]].outputs["Color"], red.inputs[0])
+    tree.links.new(red.outputs[0], gnode.inputs[live_edits.MASK_INPUT])
+    masks = np.clip(COLOURS[:, 0], 0.0, 1.0)
+    flush = skin_edits.PRESETS["flush"]
+    live_edits.set_edit(gnode, tuple(flush.row()), cache=False)
+    grids = live_table.grid_values(table)
+    rtol = np.where(np.arange(len(COLOURS))[:, None] == len(COLOURS) - 1, 2e-3, 5e-4)  # above 1: as without a mask
+
+    def check(d: np.ndarray, label: str) -> dict[str, np.ndarray]:
+        reference = live_table.group_media(table, edit_table.edited_colour(COLOURS, d), grids)
+        rendered = {}
+        for name in names:
+            k, kind = name.split()[1], name.split()[2]
+            ref = reference[f"{k} {kind}"] * (np.exp(d[:, 3:6]) if kind == "Radius" else 1.0)
+            rendered[name] = _render(scene, tree, gnode, emission, name)
+            assert np.all(np.abs(rendered[name] - ref) <= rtol * np.abs(ref) + 1e-7), f"{label} {name}"
+        return rendered
+
+    table_d = edit_table.shift(edits, COLOURS, edit_table.masked_edits(flush.row(), masks))
+    assert np.abs(table_d).max() > 0.05
+    through_table = check(table_d, "table")
+    albedo = write_image(tmp_path / "masked.exr", COLOURS[None].astype(np.float32), "float")
+    (tmp_path / "bake").mkdir()
+    bake.bake(albedo, tmp_path / "bake", preferences.DEFAULT_MODEL,
+              bake.BakeOptions(threads=1, prune_share=0.0, half_maps=False, mantissa_bits=23, edit=flush,
+                               edit_masks={"blood": masks[None], "oxygenation": masks[None]}), colorspace="linear")
+    for name, rendered in through_table.items():
+        k, kind = name.split()[1], name.split()[2]
+        baked = maps.read_exr(tmp_path / "bake" / f"masked_{k}_{kind.lower()}.exr")[0][0].astype(np.float64)
+        assert np.all(np.abs(baked - rendered) <= rtol * np.abs(rendered) + 1e-7), f"bake {name}"  # bake = live
+    assert live_edits.cache_edit(gnode) == live_edits.MASK_SLOT
+    assert live_edits.cache_status(gnode) == "Rendered from the mask cache"
+    line = edit_table.mask_line(flush.row())
+    cached_d = edit_table.masked_shift(edits, COLOURS, line, masks)
+    assert np.abs(cached_d - table_d).max() < 5e-3  # the cache's points lie on blood's levels
+    check(cached_d, "cached")
+    # memory (renders the group's Cycles output): the cache's images only, not the two controls' four
+    cached = _cycles_memory_mb(scene, tree, gnode)
+    gnode.inputs[live_edits.CACHE_INPUT].default_value = 0
+    full = _cycles_memory_mb(scene, tree, gnode)
+    _use(tree, gnode, live.build_live_group(table, layout, images))
+    plain = _cycles_memory_mb(scene, tree, gnode)
+    assert cached - plain <= 1.0 and full - plain >= 3.0, (plain, cached, full)
+    _use(tree, gnode, group)
+    tree.links.new(red.outputs[0], gnode.inputs[live_edits.MASK_INPUT])
+    live_edits.set_edit(gnode, (4.0, 1.0, 0.0))  # melanin x4 spans four levels: more than the cache's points
+    assert gnode.inputs[live_edits.CACHE_INPUT].default_value == 0
+    assert live_edits.cache_status(gnode).startswith("Read from the edit table: the mask cache holds")

@@ -199,6 +199,45 @@ def test_a_cache_of_one_edit_gives_the_tables_shift():
     assert not np.any(edit_table.combined_values(table, skin_edits.NEUTRAL))
 
 
+def test_the_mask_cache_gives_the_tables_shift_along_an_edits_line():
+    """The mask cache (exporters.edit_table.mask_line, masked_shift: what the live group reads for an edit painted by
+    its Edit Mask) against the table's own answer at each mask's weighed edit (edit_table.shift of masked_edits):
+    equal at the cache's points, equal at every mask for an edit of one control (the points lie on its levels), and
+    close for the presets and combinations (ΔE76 of the edited colour, ratio of the radius correction) on the nine
+    tones' colours and others; edits the cache cannot hold have no line."""
+    from exporters import edit_table
+    from training.commands.edit_table import check_colours
+
+    table = edit_table.load(edit_table.default_path(MODEL))
+    rgb = np.concatenate([check_colours(DECODER), np.random.default_rng(0).uniform(0.03, 0.7, (200, 3))])
+    masks = np.linspace(0.0, 1.0, 81)
+
+    def worst(edit) -> tuple[float, float]:
+        line = edit_table.mask_line(edit)
+        de = radius = 0.0
+        for m in masks:
+            exact = edit_table.shift(table, rgb, edit_table.masked_edits(edit, [m])[0])
+            cached = edit_table.masked_shift(table, rgb, line, m)
+            lab = [linear_srgb_to_lab(np.clip(edit_table.edited_colour(rgb, d), 0.0, 1.0)) for d in (exact, cached)]
+            de = max(de, float(delta_e76(*lab).max()))
+            radius = max(radius, float(np.abs(np.exp(cached[:, 3:] - exact[:, 3:]) - 1.0).max()))
+        return de, radius
+
+    for edit in ((1.0, 2.5, 0.0), (0.4, 1.0, 0.0), (1.0, 1.0, -0.3), (2.8, 1.0, 0.0)):  # one control each
+        line = edit_table.mask_line(edit)
+        assert line is not None and line.masks[-1] == 1.0, edit
+        for m in (*line.masks, *masks[::8]):
+            np.testing.assert_allclose(edit_table.masked_shift(table, rgb, line, m),
+                                       edit_table.shift(table, rgb, edit_table.masked_edits(edit, [m])[0]),
+                                       atol=2e-6, err_msg=f"{edit} at mask {m}")
+    for edit, limits in (*((p.row(), (0.05, 0.005)) for p in skin_edits.PRESETS.values()),
+                         ((1.5, 2.5, -0.2), (0.25, 0.03)), ((2.5, 0.5, 0.3), (0.8, 0.045))):
+        de, radius = worst(edit)
+        assert de <= limits[0] and radius <= limits[1], (edit, de, radius)
+    for edit in ((4.0, 1.0, 0.0), (1.0, 0.3, 0.0), (1.0, 1.0, 0.0), (1.0, 5.0, 0.0), (np.nan, 2.0, 0.0)):
+        assert edit_table.mask_line(edit) is None, edit
+
+
 def test_shipped_edit_table_meets_the_colour_and_radius_limits(model):
     """The live group's answer (exporters.edit_table, whose nodes tests/test_live_edits.py matches in Cycles) against
     the exact one on the nine representative tones: each control across its range within ΔE76 1.0 mean / 2.0 max

@@ -8,8 +8,9 @@ edit nodes (blender_addon.live.build_live_group without an edit table: the unedi
 inputs at neutral, under the presets tan, flush and pallor (exporters.skin_edits.PRESETS) and every control between
 two of its table's levels (:data:`EDITS`, "three"), each set as the add-on sets it (read from the edit group's cache),
 and that edit read from the table ("three_table": the most lookups an edit makes; a node whose edit is not cached),
-swapping the material's group between renders; each round starts one material later than the one before, so that no
-material always follows the swap from the other group.
+and edits painted by a mask (:data:`MASKED`: through the Edit Mask, from the mask cache; fed to each control,
+from the table), swapping the material's group between renders; each round starts one material later than the one
+before, so that no material always follows the swap from the other group.
 Each render's CPU time (training.bench.render_clock, scene sync included) is kept. The ratio is paired: each render
 against the unedited group's render of the same round, the median of the rounds' ratios with a 95 % bootstrap interval
 (training.bench.render_clock.paired_ratio; the ratio of the medians of all renders moved by 10 % between runs). Equal
@@ -43,25 +44,33 @@ PRESETS = ("tan", "flush", "pallor")
 EDITS: dict[str, tuple[float, float, float]] = {
     **{p: tuple(float(v) for v in skin_edits.PRESETS[p].row()) for p in PRESETS},
     "three": (1.5, 2.5, -0.2), "three_table": (1.5, 2.5, -0.2),
-    "flush_masked": tuple(float(v) for v in skin_edits.PRESETS["flush"].row())}
+    **{mode: tuple(float(v) for v in skin_edits.PRESETS["flush"].row()) for mode in ("flush_mask", "flush_linked")},
+    "blood_linked": (1.0, 2.5, 0.0)}
 #: The edits read from the table (their node's cache input left at 0).
 UNCACHED = ("three_table",)
-#: The edits painted by a mask (:data:`MASK_CODE`): read from the table, as every edit fed by a node.
-MASKED = ("flush_masked",)
+#: The edits painted by a mask (:data:`MASK_CODE`): through the group's Edit Mask (read from the mask cache), or
+#: fed to each control the edit moves (read from the table, as every control fed by a node).
+MASKED = {"flush_mask": False, "flush_linked": True, "blood_linked": True}
 #: What the edits besides the presets are, in the rows' labels.
 DESCRIPTIONS = {"three": "every control between two levels, from its cache",
                 "three_table": "every control between two levels, read from the table (not cached)",
-                "flush_masked": "flush painted by a mask (the albedo's red), read from the table"}
+                "flush_mask": "flush painted by the Edit Mask (the albedo's red), from the mask cache",
+                "flush_linked": "flush painted by a mask fed to each control (the albedo's red), read from the table",
+                "blood_linked": "Blood alone painted by a mask fed to it (the albedo's red), read from the table"}
 #: Blender code (in a bench child with the material ``mat``, its albedo image ``image`` and exporters.skin_edits'
-#: NEUTRAL imported): ``mask_edit(node, edit)`` feeds each control the edit moves with neutral + mask x (value -
-#: neutral), the mask the albedo's red channel (a per-texel value, as a painted mask is: bake.py's mask
-#: convention), through Math nodes of the material; ``unmask(node)`` removes the links again.
+#: NEUTRAL imported): ``mask_edit(node, edit, each)`` paints the edit with a mask, the albedo's red channel (a
+#: per-texel value, as a painted mask is): linked to the group's Edit Mask, or (``each``) feeding each control the
+#: edit moves neutral + mask x (value - neutral) through Math nodes of the material (bake.py's mask convention);
+#: ``unmask(node)`` removes the links again.
 MASK_CODE = """
-def mask_edit(node, edit):
+def mask_edit(node, edit, each):
     tree = mat.node_tree
     tex = next(n for n in tree.nodes if n.bl_idname == "ShaderNodeTexImage" and n.image == image)
     sep = tree.nodes.new("ShaderNodeSeparateColor")
     tree.links.new(tex.outputs["Color"], sep.inputs[0])
+    if not each:
+        tree.links.new(sep.outputs[0], node.inputs["Edit Mask"])
+        return
     for name, value, neutral in zip(("Melanin", "Blood", "Oxygenation"), edit, NEUTRAL):
         if value != neutral:
             math = tree.nodes.new("ShaderNodeMath")
@@ -73,7 +82,7 @@ def mask_edit(node, edit):
 
 def unmask(node):
     for link in list(mat.node_tree.links):
-        if link.to_node == node and link.to_socket.name in ("Melanin", "Blood", "Oxygenation"):
+        if link.to_node == node and link.to_socket.name in ("Melanin", "Blood", "Oxygenation", "Edit Mask"):
             mat.node_tree.links.remove(link)
 """
 MODES = ("plain", "neutral", *EDITS)
@@ -116,7 +125,7 @@ for r in range({rounds}):
         if mode != "plain":
             unmask(node)
         if mode in {masked!r}:
-            mask_edit(node, values[mode])
+            mask_edit(node, values[mode], {masked!r}[mode])
         live_edits.set_edit(node, values.get(mode, NEUTRAL), cache=mode not in {uncached!r})  # plain: nothing
         clock = RenderClock()
         bpy.ops.render.render(write_still=False)
@@ -141,8 +150,9 @@ def image_megabytes() -> float:
 
     atlases = edit_table.load(SHIPPED_EDIT_TABLE).atlases()
     table = sum(a.shape[0] * a.shape[1] * FLOAT_RGBA_BYTES for a in atlases.values())
-    one = next(iter(atlases.values()))  # a cache: one atlas of each kind
-    caches = edit_table.CACHE_SLOTS * len(edit_table.KINDS) * one.shape[0] // edit_table.STACKED * one.shape[1]
+    one = next(iter(atlases.values()))  # a constant edit's cache: one atlas of each kind; the mask cache's: three
+    atlas = one.shape[0] // edit_table.STACKED * one.shape[1]
+    caches = (edit_table.CACHE_SLOTS + edit_table.MASK_POINTS) * len(edit_table.KINDS) * atlas
     return (table + caches * FLOAT_RGBA_BYTES) / 1e6
 
 

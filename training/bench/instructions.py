@@ -60,14 +60,18 @@ EDITS = edit_cost.EDITS
 
 
 def _variant(name: str, edit: tuple[float, float, float]) -> str:
-    """The child's code setting the edit ``name`` (masked ones through edit_cost.MASK_CODE)."""
+    """The child's code setting the edit ``name``; a masked one's mask (edit_cost.MASK_CODE) linked first, so that
+    set_edit caches it as the add-on does."""
     code = _EDIT.format(edit=edit, cache=name not in edit_cost.UNCACHED)
     if name in edit_cost.MASKED:
         image = ("image = next(n.image for n in mat.node_tree.nodes if n.bl_idname == 'ShaderNodeTexImage' "
                  "and n.image is not None and not n.image.name.startswith('Spectral Skin SSS'))\n")
-        code += ("from exporters.skin_edits import NEUTRAL\n" + image + edit_cost.MASK_CODE
-                 + f"mask_edit(live_edits.live_node(mat), {edit!r})\n")
+        code = ("from blender_addon import live_edits\nfrom exporters.skin_edits import NEUTRAL\n" + image
+                + edit_cost.MASK_CODE + f"mask_edit(live_edits.live_node(mat), {edit!r}, "
+                f"{edit_cost.MASKED[name]!r})\n" + code)
     return code
+
+
 #: Materials: (name, render_cost mode, variant code or None for the mode's own).
 MATERIALS = (("principled", "principled", None), ("bake", "bake", None), ("live", "live", None),
              *((f"live_{name}", f"live_{name}", _variant(name, edit)) for name, edit in EDITS.items()))

@@ -120,7 +120,8 @@ FIGURES: dict[str, Figure] = {
        for mode, label in (("neutral", "at neutral"), ("tan", "at preset tan"), ("flush", "at preset flush"),
                            ("pallor", "at preset pallor"), ("three", "between two levels, from its cache"),
                            ("three_table", "read from the table (not cached)"),
-                           ("flush_masked", "painted by a mask"))},
+                           ("flush_mask", "painted by the Edit Mask"), ("flush_linked", "fed to each control"),
+                           ("blood_linked", "Blood alone painted by a mask"))},
     "edit_images_mb": Figure("edit_cost", "edit table in Blender", "ours", r"images ([\d.]+) MB"),
     "edit_operator_s": Figure("edit_cost", "edit table in Blender", "ours", r"operator ([\d.]+) s"),
     "edit_operator_cpu_s": Figure("edit_cost", "edit table in Blender", "ours", r"\(([\d.]+) CPU-s\)"),
@@ -128,7 +129,9 @@ FIGURES: dict[str, Figure] = {
        for name, row in (("live", "live group (default) vs Principled"), ("bake", "baked maps"),
                          ("tan", "tan preset"), ("flush", "flush preset"), ("pallor", "pallor preset"),
                          ("three", "between two levels, from its cache"),
-                         ("three_table", "read from the table (not cached)"), ("flush_masked", "painted by a mask"))
+                         ("three_table", "read from the table (not cached)"),
+                         ("flush_mask", "painted by the Edit Mask"), ("flush_linked", "fed to each control"),
+                         ("blood_linked", "Blood alone painted by a mask"))
        for part, label in (("instructions", "instructions"), ("shading", "shading"), ("walks", "walks"))},
     **{f"counted_{name}_dispatches": Figure("instructions", row, column, r"([\d.]+) SVM dispatches")
        for name, row, column in (("live", "live group (default) vs Principled", "ours"),
@@ -137,7 +140,9 @@ FIGURES: dict[str, Figure] = {
                                  ("flush", "flush preset", "ours"), ("pallor", "pallor preset", "ours"),
                                  ("three", "between two levels, from its cache", "ours"),
                                  ("three_table", "read from the table (not cached)", "ours"),
-                                 ("flush_masked", "painted by a mask", "ours"))},
+                                 ("flush_mask", "painted by the Edit Mask", "ours"),
+                                 ("flush_linked", "fed to each control", "ours"),
+                                 ("blood_linked", "Blood alone painted by a mask", "ours"))},
     "grazing_cost": Figure("oblique", "grazing-light correction vs without", "ratio", r"time ([\d.]+)x"),
     "eevee_first_render_vs_principled": Figure("eevee", "EEVEE first render", "ratio", r"first render ([\d.]+)x"),
     "onnx_vs_torch_inference": Figure("train", "skin_inversion.onnx inference", "ratio", r"([\d.]+)x"),
