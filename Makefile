@@ -79,6 +79,7 @@ demo: $(STAMP)
 	$(PY) -m training.demo_render --edits-row --out demo/out/edits --render-size 160 --samples 16 \
 		--texture-size 256 --figure docs/figures/skin_edits_row.png
 	$(PY) -m training.demo_render --flush-strip --out demo/out/flush --figure docs/figures/skin_edits_flush_strip.png
+	$(PY) -m training.demo_render --mask-row --out demo/out/mask --figure docs/figures/skin_edits_mask_row.png
 
 # Blender extension zip (dist/) for linux-x64 (onnxruntime wheels for Python 3.11 and 3.13: one zip for Blender
 # 4.2 to 5.3), built and validated by Blender's own extension tool from the bpy wheel;

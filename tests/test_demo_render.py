@@ -119,3 +119,14 @@ def test_edits_row_shows_the_ear_glow_follow_melanin_and_blood(tmp_path):
     assert ear["tan"] @ LUMINANCE < ear["as painted"] @ LUMINANCE < ear["pallor"] @ LUMINANCE
     assert ear["flush"][1] < ear["as painted"][1]
     assert (tmp_path / "skin_edits_row.png").is_file()
+
+
+def test_mask_row_paints_the_flush_on_the_cheek_only(tmp_path):
+    """The masked-edit row at a tiny size: the flush painted through the Edit Mask renders from the mask cache and
+    changes a patch of the image (the cheek), far fewer pixels than the flush everywhere, which renders from an edit
+    cache; the row figure is written."""
+    info = demo_render.mask_row(tmp_path, texture_size=64, render_size=64, samples=8)
+    assert info["caches"] == {"cheek": "Rendered from the mask cache", "flush": "Rendered from edit cache 1"}
+    share = info["changed_share"]
+    assert 0.005 < share["cheek"] < share["flush"] / 3, share
+    assert (tmp_path / "skin_edits_mask_row.png").is_file()

@@ -459,6 +459,60 @@ def flush_strip(out: Path, texture_size: int = 256, render_size: int = 80, sampl
     return {"blood": values, "ear_mean_srgb": ear_means}
 
 
+#: The mask row's panels: (key, header).
+MASK_ROW: tuple[tuple[str, str], ...] = (("as painted", "as painted"),
+                                         ("cheek", "flush painted by\na mask (Edit Mask)"),
+                                         ("flush", "flush everywhere\n(no mask)"))
+#: A pixel's change (sum over its display RGB, 0-3) that the mask row counts as changed by an edit.
+CHANGED = 0.03
+#: The mask row's cheek patch, in the head's object space (metres): a spherical gradient's centre and radius.
+CHEEK_M: tuple[tuple[float, float, float], float] = ((-0.056, -0.064, -0.028), 0.045)
+
+
+def mask_row(out: Path, texture_size: int = 256, render_size: int = 160, samples: int = 16, tone: str = "light",
+             figure: Path | None = None) -> dict:
+    """The ``tone`` head as painted, with the flush preset painted by a soft patch on the cheek through the live
+    group's Edit Mask (the patch a spherical gradient in object space, :data:`CHEEK_M`), and with the flush
+    everywhere; writes the row (``out``/skin_edits_mask_row.png, and ``figure`` when given) and returns the cache
+    each edit rendered from and the share of the image's pixels each edit changes (more than :data:`CHANGED`)."""
+    import bpy
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+    from blender_addon import live_edits
+    from exporters import skin_edits
+
+    scene, _, material = _live_head(out, texture_size, render_size, samples, tone, "masked", "ear_mask_row.png")
+    node = live_edits.live_node(material)
+    tree = material.node_tree
+    coords = tree.nodes.new("ShaderNodeTexCoord")
+    mapping = tree.nodes.new("ShaderNodeMapping")  # the patch's centre to the origin, its radius to 1
+    centre, radius = CHEEK_M
+    mapping.inputs["Location"].default_value = tuple(-c / radius for c in centre)
+    mapping.inputs["Scale"].default_value = (1.0 / radius,) * 3
+    patch = tree.nodes.new("ShaderNodeTexGradient")
+    patch.gradient_type = "SPHERICAL"
+    tree.links.new(coords.outputs["Object"], mapping.inputs["Vector"])
+    tree.links.new(mapping.outputs["Vector"], patch.inputs["Vector"])
+    flush = tuple(skin_edits.PRESETS["flush"].row())
+    panels, caches = {}, {}
+    panels[tone, "as painted"] = _render(scene, out / f"render_{tone}_painted.png")
+    tree.links.new(patch.outputs["Fac"], node.inputs[live_edits.MASK_INPUT])
+    live_edits.set_edit(node, flush)
+    caches["cheek"] = live_edits.cache_status(node)
+    panels[tone, "cheek"] = _render(scene, out / f"render_{tone}_cheek.png")
+    tree.links.remove(node.inputs[live_edits.MASK_INPUT].links[0])
+    live_edits.set_edit(node, flush)
+    caches["flush"] = live_edits.cache_status(node)
+    panels[tone, "flush"] = _render(scene, out / f"render_{tone}_flush.png")
+    footer = (f"Cycles {bpy.app.version_string}, {render_size} px, {samples} spp + OpenImageDenoise; live group, flush "
+              "preset (blood x2.5, oxygenation +0.05).")
+    comparison_figure(panels, [tone], [out / "skin_edits_mask_row.png", *([figure] if figure else [])], footer,
+                      MASK_ROW)
+    painted = panels[tone, "as painted"]
+    changed = {key: float(np.mean(np.abs(panels[tone, key] - painted).sum(axis=-1) > CHANGED)) for key in caches}
+    return {"caches": caches, "changed_share": changed}
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m training.demo_render", description=__doc__.splitlines()[0])
     parser.add_argument("--out", type=Path, default=Path("demo/out"))
@@ -470,7 +524,13 @@ def main(argv: list[str] | None = None) -> int:
                         help="only the skin-edits row: the medium head as painted, tanned, flushed and pale")
     parser.add_argument("--flush-strip", action="store_true",
                         help="only the animated flush: Blood keyframed 1 -> 2.5 -> 1 over 24 frames, as a strip")
+    parser.add_argument("--mask-row", action="store_true",
+                        help="only the masked edit: the flush painted on the cheek through the Edit Mask")
     args = parser.parse_args(argv)
+    if args.mask_row:
+        info = mask_row(args.out, figure=args.figure)
+        print(json.dumps(info))
+        return 0
     if args.flush_strip:
         info = flush_strip(args.out, figure=args.figure)
         print(json.dumps(info))
