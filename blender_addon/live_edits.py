@@ -74,6 +74,8 @@ INPUTS = tuple(
         ("melanin", "Multiplies the epidermis's melanin fraction (1 = as painted): tan above 1, lighter below"),
         ("blood", "Multiplies the dermis's blood fraction (1 = as painted): flush above 1, pallor below"),
         ("oxygenation", "Shifts the blood's oxygen saturation (0 = as painted): below 0 cold, bluish skin"))))
+#: The names of the control inputs (:data:`INPUTS`), in order.
+CONTROL_NAMES = tuple(spec[0] for spec in INPUTS)
 
 
 def table_for_model(model_path: str, texel_sha256: str) -> edit_table.EditTable | None:
@@ -163,7 +165,7 @@ def set_edit(node: bpy.types.Node, edit: tuple[float, float, float] | None, cach
     node's cache input at 0, the edit read from the table, as a node renders whose cache is not current)."""
     if edit is None or "Melanin" not in node.inputs:
         return
-    for (name, *_), value in zip(INPUTS, edit, strict=True):
+    for name, value in zip(CONTROL_NAMES, edit, strict=True):
         if not node.inputs[name].is_linked:
             node.inputs[name].default_value = float(value)
     if cache:
@@ -174,9 +176,9 @@ def set_edit(node: bpy.types.Node, edit: tuple[float, float, float] | None, cach
 
 def constant_edit(node: bpy.types.Node) -> tuple[float, float, float] | None:
     """The live group node's (Melanin, Blood, Oxygenation) where none of the three is fed by a node, else None."""
-    if any(node.inputs[name].is_linked for name, *_ in INPUTS):
+    if any(node.inputs[name].is_linked for name in CONTROL_NAMES):
         return None
-    return tuple(float(node.inputs[name].default_value) for name, *_ in INPUTS)
+    return tuple(float(node.inputs[name].default_value) for name in CONTROL_NAMES)
 
 
 def cache_key(node: bpy.types.Node) -> tuple[float, ...] | None:
@@ -199,7 +201,7 @@ def cache_key(node: bpy.types.Node) -> tuple[float, ...] | None:
 
 def _slots(key: tuple[float, ...]) -> range:
     """The caches that can hold an edit of cache key ``key`` (:func:`cache_key`)."""
-    return range(MASK_SLOT, MASK_SLOT + 1) if len(key) == len(INPUTS) else range(1, CACHE_SLOTS + 1)
+    return range(MASK_SLOT, MASK_SLOT + 1) if len(key) == len(CONTROL_NAMES) else range(1, CACHE_SLOTS + 1)
 
 
 def cache_edit(node: bpy.types.Node) -> int:
@@ -230,7 +232,7 @@ def _edit_group(live_group: bpy.types.NodeTree) -> bpy.types.NodeTree | None:
     for n in live_group.nodes:
         tree = getattr(n, "node_tree", None)
         if n.bl_idname == "ShaderNodeGroup" and tree is not None and tree.get(EDIT_TABLE_PROP) \
-                and _cache_node_name(MASK_SLOT, INPUTS[0][0]) in tree.nodes:
+                and _cache_node_name(MASK_SLOT, CONTROL_NAMES[0]) in tree.nodes:
             return tree
     return None
 
@@ -440,7 +442,7 @@ def ensure_edit_group(table: edit_table.EditTable, images: dict[str, bpy.types.I
 def edit_node(b, gin, table: edit_table.EditTable, images: dict[str, bpy.types.Image]) -> EditBranch:
     """A node of the edit group (:func:`ensure_edit_group`) in the live group, fed by its Color and edit inputs."""
     node = b.node("ShaderNodeGroup", 1, node_tree=ensure_edit_group(table, images))
-    for name in ("Color", *(spec[0] for spec in INPUTS), MASK_INPUT, CACHE_INPUT):
+    for name in ("Color", *CONTROL_NAMES, MASK_INPUT, CACHE_INPUT):
         b.link(gin.outputs[name], node.inputs[name])
     return EditBranch(colour=node.outputs["Color"], radius_factor=node.outputs["Radius Factor"])
 
@@ -456,7 +458,7 @@ def _coordinate(b, gin, j: int, stage: int):
     sockets = [s for s in weighed.inputs if s.enabled]
     b.link(gin.outputs[MASK_INPUT], sockets[0])
     b.link(skin_edits.NEUTRAL[j], sockets[1])
-    b.link(gin.outputs[INPUTS[j][0]], sockets[2])
+    b.link(gin.outputs[CONTROL_NAMES[j]], sockets[2])
     value = next(s for s in weighed.outputs if s.enabled)
     x = b.math("MINIMUM", stage + 2, b.math("MAXIMUM", stage + 1, value, lo), hi)
     return x if name == "oxygenation" else b.math("LOGARITHM", stage + 3, x, 2.0)
@@ -483,7 +485,7 @@ def add_edit_branch(b, gin, table: edit_table.EditTable, images: dict[str, bpy.t
         levels = edit_table.LEVELS[name]
         h = edit_table.SPACING[name]
         coordinate = _coordinate(b, gin, j, 43)
-        neutral = b.math("COMPARE", 58, gin.outputs[INPUTS[j][0]], skin_edits.NEUTRAL[j], 0.0)
+        neutral = b.math("COMPARE", 58, gin.outputs[CONTROL_NAMES[j]], skin_edits.NEUTRAL[j], 0.0)
         still = neutral if still is None else b.math("MULTIPLY", 59, still, neutral)
         t = b.math("MULTIPLY_ADD", 47, coordinate, 1.0 / h, -levels[0] / h)
         lower = b.math("MINIMUM", 49, b.math("FLOOR", 48, t), edit_table.STACKED - 1.0)  # levels lower, lower + 1
@@ -531,8 +533,7 @@ def _match(b, gin, slot: int) -> bpy.types.NodeSocket:
 
 def _cache_inputs(slot: int) -> tuple[str, ...]:
     """The inputs whose values cache ``slot`` holds: the controls, and the Edit Mask's value for a constant edit."""
-    controls = tuple(spec[0] for spec in INPUTS)
-    return controls if slot == MASK_SLOT else (*controls, MASK_INPUT)
+    return CONTROL_NAMES if slot == MASK_SLOT else (*CONTROL_NAMES, MASK_INPUT)
 
 
 def _cached(b, gin, slot: int, images: dict[str, bpy.types.Image], uv, frac, tile_u: float,
@@ -709,7 +710,7 @@ def draw_controls(layout, context) -> None:
         return
     box = layout.box()
     box.label(text="Skin edits (live)")
-    for name in (*(spec[0] for spec in INPUTS), MASK_INPUT):
+    for name in (*CONTROL_NAMES, MASK_INPUT):
         socket = node.inputs.get(name)
         if socket is None:
             continue

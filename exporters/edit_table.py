@@ -166,8 +166,7 @@ def combined_values(table: EditTable, edit) -> np.ndarray:
     """(n0, n1, n2, 6): the shift D of one edit (Melanin, Blood, Oxygenation) at the grid's nodes, its levels and
     controls summed with their weights.  The lookups are linear in the table, so its trilinear lookup at a colour is
     :func:`shift` at that colour: what the live group's edit cache holds (blender_addon.live_edits)."""
-    weights = level_weights(control_coords(np.asarray(edit, np.float64).reshape(1, 3)))[0]
-    return np.einsum("abcjlk,jl->abck", table.values.astype(np.float64), weights)
+    return np.einsum("abcjlk,jl->abck", table.values.astype(np.float64), stack_weights(edit))
 
 
 def combined_atlas(stacked: list[np.ndarray], edit) -> np.ndarray:
@@ -233,13 +232,14 @@ def mask_line(edit) -> MaskLine | None:
     e = np.asarray(edit, np.float64).reshape(3)
     if not np.all(np.isfinite(e)) or np.any(skin_edits.clamp_controls(e) != e) or skin_edits.neutral_rows(e)[0]:
         return None
-    spans = np.abs(control_coords(e.reshape(1, 3))[0]) / np.array([SPACING[n] for n in skin_edits.CONTROLS])
+    coords = control_coords(e.reshape(1, 3))[0]
+    spans = np.abs(coords) / np.array([SPACING[n] for n in skin_edits.CONTROLS])
     j = int(np.argmax(spans))
     n = int(np.ceil(spans[j] - 1e-6))
     if n > MASK_POINTS:
         return None
     name = skin_edits.CONTROLS[j]
-    sign = np.sign(control_coords(e.reshape(1, 3))[0, j])
+    sign = np.sign(coords[j])
     crossings = sign * SPACING[name] * np.arange(1, n)  # the control's coordinate at the levels it crosses
     neutral = skin_edits.NEUTRAL[j]
     masks = (crossings / (e[j] - neutral) if name == "oxygenation"
