@@ -2,9 +2,9 @@
 weighed by **Edit Mask**.
 
 The edit table (exporters.edit_table) is packed into six small float images (per control, one of the colour shift
-and one of the radius correction: its levels' slice atlases, every slice in one row, stacked; the neutral level's
-shift is 0 and not stored).  For the painted colour c the nodes compute, as exporters.edit_table.shift and
-edited_colour:
+and one of the radius correction: its levels' slice atlases, every slice in one row, stacked in the order of
+exporters.edit_table.BLOCK_LEVELS; the neutral level's shift is 0 and not stored: it lies outside the image).
+For the painted colour c the nodes compute, as exporters.edit_table.shift and edited_colour:
 
 * each control weighed by the Edit Mask m (clamped to [0, 1]): neutral + m (value - neutral), bake masks'
   convention (exporters.bake.edits);
@@ -18,9 +18,9 @@ edited_colour:
   neutral.
 
 At neutral inputs the Mixes give exactly 1: c 1 = c and r 1 = r, the group renders its unedited result bit for bit.
-Each control's shift is also switched to exactly 0 where its coordinate is neutral: an unlinked control at its
-neutral value (whatever the mask) then folds to a constant 0 when Cycles compiles the shader, which drops that
-control's texture lookups (a neutral group evaluates none of the edit nodes).  Each input takes a value or any node
+Each control's shift is also switched to exactly 0 where its input is neutral: an unlinked control at its neutral
+value (whatever the mask) then folds to a constant 0 when Cycles compiles the shader, which drops that control's
+texture lookups (a neutral group evaluates none of the edit nodes).  Each input takes a value or any node
 (a painted mask, an attribute, a driver); its keyframes animate it.
 
 **Edit caches.**  An edit of constant controls needs D at the painted colour only, for one set of level weights
@@ -36,7 +36,9 @@ folds when Cycles compiles the shader, to 1 (the table's nodes and images drop o
 test reads values, so a cache never gives another edit's answer: changed values, keyframes and controls fed by
 nodes render through the table, as without caches.  :func:`cache_edit` fills a cache (:func:`set_edit`: the
 operator, the presets, the API); the add-on's handlers cache an edit set on the node or the panel's sliders
-(:func:`refresh_caches`) and each frame's keyframed values (:func:`refresh_frame_caches`).
+(:func:`refresh_caches`) and each frame's keyframed values (:func:`refresh_frame_caches`).  For an edit not
+cached they set the cache input to minus the controls fed by nodes (:func:`linked_flags`), which folds those
+controls' neutral tests away (:func:`_unfed`).
 """
 
 from __future__ import annotations
@@ -105,10 +107,19 @@ def has_images(table: edit_table.EditTable) -> bool:
     """Whether the file holds every image of the edit table ``table``."""
     for j in range(len(skin_edits.CONTROLS)):
         for kind in edit_table.KINDS:
-            image = bpy.data.images.get(f"{IMAGE_PREFIX} {edit_table.image_name(j, kind)}")
-            if image is None or image.get(EDIT_TABLE_PROP) != table.sha256:
+            if not _image_of(bpy.data.images.get(f"{IMAGE_PREFIX} {edit_table.image_name(j, kind)}"), table):
                 return False
     return True
+
+
+#: Custom property on the edit images: the layout they were made in (exporters.edit_table.IMAGE_LAYOUT).
+IMAGE_LAYOUT_PROP = "spectral_skin_sss_edit_layout"
+
+
+def _image_of(image: bpy.types.Image | None, table: edit_table.EditTable) -> bool:
+    """Whether ``image`` was made from ``table`` in today's layout (an image of an older add-on is made again)."""
+    return image is not None and image.get(EDIT_TABLE_PROP) == table.sha256 \
+        and image.get(IMAGE_LAYOUT_PROP) == edit_table.IMAGE_LAYOUT
 
 
 _TABLES: dict[tuple, edit_table.EditTable] = {}
@@ -131,8 +142,9 @@ def ensure_images(table: edit_table.EditTable, atlases: Callable[[], dict[str, n
     def ensure(name: str, pixels: Callable[[], np.ndarray]) -> None:
         full = f"{IMAGE_PREFIX} {name}"
         image = bpy.data.images.get(full)
-        if image is None or image.get(EDIT_TABLE_PROP) != table.sha256:
+        if not _image_of(image, table):
             image = wiring.packed_table_image(full, pixels(), EDIT_TABLE_PROP, table.sha256)
+            image[IMAGE_LAYOUT_PROP] = edit_table.IMAGE_LAYOUT
         if image.get(IMAGE_KEY_PROP) != name:
             image[IMAGE_KEY_PROP] = name
         images[name] = image
@@ -219,7 +231,7 @@ def cache_edit(node: bpy.types.Node) -> int:
     if group is not None and key is not None:
         images = _group_images(group)
         slot = _slot_for(group, images, key, node) if images is not None else 0
-    _point(node, slot)
+    _point(node, slot if slot else _uncached(node))
     return slot
 
 
@@ -247,6 +259,24 @@ def _point(node: bpy.types.Node, slot: int) -> None:
     socket = node.inputs[CACHE_INPUT]
     if socket.default_value != slot:
         socket.default_value = float(slot)
+
+
+#: The flags of every control fed by a node (:func:`linked_flags`).
+_ALL_LINKED = 2 ** len(CONTROL_NAMES) - 1
+
+
+def linked_flags(node: bpy.types.Node) -> int:
+    """Sum of 2^j over the controls j (Melanin, Blood, Oxygenation) of the live group node fed by a node; 0 where its
+    group predates the flags (its cache input takes no negative value)."""
+    socket = node.node_tree.interface.items_tree.get(CACHE_INPUT) if node.node_tree is not None else None
+    if socket is None or socket.min_value > -_ALL_LINKED:
+        return 0
+    return sum(2 ** j for j, name in enumerate(CONTROL_NAMES) if node.inputs[name].is_linked)
+
+
+def _uncached(node: bpy.types.Node) -> int:
+    """The cache input of a node whose edit is not cached: minus its :func:`linked_flags` (module docstring)."""
+    return -linked_flags(node)
 
 
 def _group_images(group: bpy.types.NodeTree) -> dict[str, bpy.types.Image] | None:
@@ -314,7 +344,7 @@ def cache_is_current(node: bpy.types.Node) -> bool:
     group = _edit_group(node.node_tree)
     key = cache_key(node)
     if group is None or key is None:
-        return slot == 0
+        return slot == _uncached(node)
     return slot in _slots(key) and _cached_values(group, slot) == key
 
 
@@ -393,10 +423,10 @@ def add_inputs(group: bpy.types.NodeTree) -> None:
     socket.description = ("Where the edit applies (link a painted mask, 0 to 1): each control becomes neutral + mask x "
                           "(its value - neutral), as a bake's masks weigh an edit")
     socket = group.interface.new_socket(CACHE_INPUT, in_out="INPUT", socket_type="NodeSocketFloat")
-    socket.default_value, socket.min_value, socket.max_value = 0.0, 0.0, float(MASK_SLOT)
+    socket.default_value, socket.min_value, socket.max_value = 0.0, -float(_ALL_LINKED), float(MASK_SLOT)
     socket.hide_value = True
     socket.description = ("Set by the add-on: which of the edit group's caches holds this node's edit precombined "
-                          "(0: none; a cache of other values is never used)")
+                          "(0: none; a cache of other values is never used), or minus the controls fed by nodes")
 
 
 @dataclass
@@ -447,75 +477,112 @@ def edit_node(b, gin, table: edit_table.EditTable, images: dict[str, bpy.types.I
     return EditBranch(colour=node.outputs["Color"], radius_factor=node.outputs["Radius Factor"])
 
 
-def _coordinate(b, gin, j: int, stage: int):
-    """Control coordinate s_j of the control weighed by the Edit Mask: log2 of the clamped multiplier, or the clamped
-    shift.  The mask weighs the control in a Mix node of clamped factor from the neutral value to the input's:
-    Cycles folds it to the input at mask 1 (unlinked: the group without a mask) and to the neutral constant for an
-    unlinked neutral input whatever the mask, so a neutral control's nodes still fold away."""
+def _steps(b, gin, j: int, stage: int):
+    """Control ``j``'s coordinate weighed by the Edit Mask, in level steps from neutral (exporters.edit_table.LEVELS:
+    -4 .. 4 for eight levels): log2 of the clamped multiplier, or the clamped shift, over the levels' spacing.  The
+    mask weighs the control in a Mix node of clamped factor from the neutral value to the input's: Cycles folds it to
+    the input at mask 1 (unlinked: the group without a mask).  The clamp is a Map Range's (one node where Maximum
+    and Minimum nodes each write two constants at every shading point); the multipliers' logarithm takes base
+    2^spacing, which gives the steps in one node."""
     name = skin_edits.CONTROLS[j]
     lo, hi = skin_edits.CONTROL_RANGES[name]
+    h = edit_table.SPACING[name]
     weighed = b.node("ShaderNodeMix", stage, data_type="FLOAT", clamp_factor=True)
     sockets = [s for s in weighed.inputs if s.enabled]
     b.link(gin.outputs[MASK_INPUT], sockets[0])
     b.link(skin_edits.NEUTRAL[j], sockets[1])
     b.link(gin.outputs[CONTROL_NAMES[j]], sockets[2])
     value = next(s for s in weighed.outputs if s.enabled)
-    x = b.math("MINIMUM", stage + 2, b.math("MAXIMUM", stage + 1, value, lo), hi)
-    return x if name == "oxygenation" else b.math("LOGARITHM", stage + 3, x, 2.0)
+    if name == "oxygenation":
+        return _clamp(b, stage + 1, value, (lo, hi), (lo / h, hi / h))
+    return b.math("LOGARITHM", stage + 2, _clamp(b, stage + 1, value, (lo, hi), (lo, hi)), 2.0 ** h)
+
+
+def _clamp(b, stage: int, value, bounds: tuple[float, float], to: tuple[float, float]) -> bpy.types.NodeSocket:
+    """A float Map Range (linear, clamped) of ``value`` from ``bounds`` to ``to``."""
+    node = b.node("ShaderNodeMapRange", stage, data_type="FLOAT", clamp=True)
+    b.link(value, node.inputs["Value"])
+    for name, bound in zip(("From Min", "From Max", "To Min", "To Max"), (*bounds, *to), strict=True):
+        b.link(float(bound), next(s for s in node.inputs if s.name == name and s.enabled))
+    return next(s for s in node.outputs if s.enabled)
 
 
 def add_edit_branch(b, gin, table: edit_table.EditTable, images: dict[str, bpy.types.Image]) -> EditBranch:
     """The edit nodes (module docstring) on the group's Color input; ``b`` the group's builder (blender_addon.live).
-    Every control image has one row of slice tiles (:func:`exporters.edit_table.EditTable.layout`), its levels
-    stacked bottom to top: the four texels a control reads (slices s, s + 1; levels l, l + 1) lie at fixed offsets
-    from one UV."""
+    Every control image has one row of slice tiles (:func:`exporters.edit_table.EditTable.layout`) and its levels'
+    atlases stacked in the blocks of :data:`exporters.edit_table.BLOCK_LEVELS`: at a coordinate of k level steps,
+    w = k mod (STACKED + 1) (a Wrap node) puts the lower level at block floor(w) - 1 and the upper one at floor(w),
+    neutral outside the image (read as 0 by the lookups' Clip extension), so the four texels a control reads (slices
+    s, s + 1; the two levels) lie at fixed offsets from one UV, and the upper level's weight is w - floor(w)."""
     layout = table.layout()
     width, height = layout.size
     tall = float(edit_table.STACKED * height)
     tile_u = layout.tile[0] / width
+    up = 1.0 / edit_table.STACKED
     from . import live
 
     colour = gin.outputs["Color"]
     base, x0 = live.grid_vector(b, colour, layout, (width, tall))[:2]
     s = b.math("FLOOR", 41, x0)  # up to n0 - 1 (x0 is clamped): the image's copy of the last slice follows
     frac = b.math("SUBTRACT", 43, x0, s)
+    slice_uv = b.vec("MULTIPLY_ADD", 52, s, (tile_u, 0.0, 0.0), base)  # slice s, the images' first block
     shifts = {kind: None for kind in edit_table.KINDS}
     still = None  # 1 where every control is neutral, else 0
-    for j, name in enumerate(skin_edits.CONTROLS):
-        levels = edit_table.LEVELS[name]
-        h = edit_table.SPACING[name]
-        coordinate = _coordinate(b, gin, j, 43)
-        neutral = b.math("COMPARE", 58, gin.outputs[CONTROL_NAMES[j]], skin_edits.NEUTRAL[j], 0.0)
+    flags = b.math("MAXIMUM", 55, b.math("MULTIPLY", 54, gin.outputs[CACHE_INPUT], -1.0), 0.0)
+    for j in range(len(skin_edits.CONTROLS)):
+        unfed = _unfed(b, flags, j)
+        neutral = b.math("MULTIPLY", 59, b.math("COMPARE", 58, gin.outputs[CONTROL_NAMES[j]],
+                                                 skin_edits.NEUTRAL[j], 0.0), unfed)
         still = neutral if still is None else b.math("MULTIPLY", 59, still, neutral)
-        t = b.math("MULTIPLY_ADD", 47, coordinate, 1.0 / h, -levels[0] / h)
-        lower = b.math("MINIMUM", 49, b.math("FLOOR", 48, t), edit_table.STACKED - 1.0)  # levels lower, lower + 1
-        fraction = b.math("SUBTRACT", 50, t, lower)
-        zero = float(edit_table.STACKED // 2)  # the neutral level's place among the levels (not in the image)
-        at_zero = (b.math("COMPARE", 50, lower, zero, 0.5), b.math("COMPARE", 50, lower, zero - 1.0, 0.5))
-        # the image's row of level ``lower``: the levels above neutral lie one lower (no zero atlas); at the neutral
-        # level the row below is read instead, its value replaced by 0 (_unless_zero), so row + 1 is level lower + 1
-        row = b.math("SUBTRACT", 51, lower, b.math("GREATER_THAN", 50, lower, zero - 0.5))
-        corner = b.node("ShaderNodeCombineColor", 52)  # (slice, row): their offsets in the image, scaled below
-        b.link(s, corner.inputs[0])
-        b.link(row, corner.inputs[1])
-        uv = b.vec("MULTIPLY_ADD", 52, corner.outputs[0], (tile_u, 1.0 / edit_table.STACKED, 0.0), base)
-        up = 1.0 / edit_table.STACKED
-        offsets = [[(0.0, 0.0), (tile_u, 0.0)], [(0.0, up), (tile_u, up)]]  # (slice, level) from the corner's texel
+        wrapped = b.math("WRAP", 47, _steps(b, gin, j, 43), edit_table.STACKED + 1.0, 0.0)
+        block = b.math("FLOOR", 48, wrapped)  # the upper level's block
+        fraction = b.math("SUBTRACT", 49, wrapped, block)
+        uv = b.vec("MULTIPLY_ADD", 52, block, (0.0, up, 0.0), slice_uv)
+        outside = [b.math("MULTIPLY", 51, b.math("COMPARE", 50, block, edge, 0.5), unfed)
+                   for edge in (0.0, float(edit_table.STACKED))]  # 1 where the lower / the upper level is neutral
         for kind in edit_table.KINDS:
             image = images[edit_table.image_name(j, kind)]
-            found = [_unless_zero(b, zero_level, _bilinear_pair(b, image, uv, pair, frac, 55), 57)
-                     for pair, zero_level in zip(offsets, at_zero, strict=True)]  # levels l and l + 1
+            found = [_unless_zero(b, zero, _bilinear_pair(b, image, uv, [(0.0, dv), (tile_u, dv)], frac, 55,
+                                                          extension="CLIP"), 57)
+                     for dv, zero in zip((-up, 0.0), outside, strict=True)]  # the lower level, the upper one
             value = b.mix("VECTOR", 58, fraction, found[0], found[1])
-            shifts[kind] = value if shifts[kind] is None else b.vec("ADD", 58, shifts[kind], value)
-    cache_uv = b.vec("MULTIPLY_ADD", 52, s, (tile_u, 0.0, 0.0), base)  # slice s of a cache's one atlas
+            shifts[kind] = _gated_sum(b, neutral, shifts[kind], value)
     for slot in range(1, CACHE_SLOTS + 1):
-        shifts = _cached(b, gin, slot, images, cache_uv, frac, tile_u, shifts)
+        shifts = _cached(b, gin, slot, images, slice_uv, frac, tile_u, shifts)
     shifts = _mask_cached(b, gin, images, base, s, frac, tile_u, shifts)
     active = b.math("SUBTRACT", 60, 1.0, still)
     bounds = table.shift_bounds()
     factor = {kind: _exp(b, shifts[kind], active, bounds[kind], 61) for kind in edit_table.KINDS}
     edited = b.vec("MULTIPLY", 63, colour, factor["colour"])
     return EditBranch(colour=edited, radius_factor=factor["radius"])
+
+
+def _unfed(b, flags, j: int) -> bpy.types.NodeSocket:
+    """0 where ``flags`` (max(0, -Edit Cache): :func:`linked_flags`) flag control ``j`` as fed by a node, else 1: a
+    constant when Cycles compiles the shader (the cache input is never linked).  The tests that let Cycles fold a
+    neutral control's nodes (its input neutral, a level at neutral) are multiplied by it, so a control fed by a node
+    evaluates none of them: they fold to 0 whatever the control's value.  A stale flag costs time or, for a neutral
+    group flagged as fed, bit-for-bit exactness (the exp curves' 1e-4 at 0), never the edit."""
+    flag = b.math("FLOORED_MODULO", 57, b.math("FLOOR", 56, b.math("MULTIPLY", 56, flags, 0.5 ** j)), 2.0)
+    return b.math("SUBTRACT", 58, 1.0, flag)
+
+
+def _unless_zero(b, zero, value, stage: int) -> bpy.types.NodeSocket:
+    """``value`` (a level's shift, read from the control's image), or exactly 0 where ``zero`` is 1 (the level is the
+    neutral one, outside the image: the lookup reads 0 there anyway): a Mix of that factor.  For an unlinked control
+    Cycles folds the factor to a constant and the Mix to one of its inputs, so a constant edit within one level of
+    neutral drops the neutral level's lookups from the compiled shader."""
+    return b.mix("VECTOR", stage, zero, value, (0.0, 0.0, 0.0))
+
+
+def _gated_sum(b, neutral, total, value) -> bpy.types.NodeSocket:
+    """``total`` + ``value`` (``total`` None: 0), or ``total`` where the control is neutral (``neutral`` 1): a Mix of
+    that factor.  The sum is the same everywhere (a neutral control's levels read 0); but when the control's input is
+    unlinked Cycles folds the factor to a constant and the Mix to one of its inputs, so a neutral control's lookups
+    are dropped from the compiled shader."""
+    if total is None:
+        return b.mix("VECTOR", 59, neutral, value, (0.0, 0.0, 0.0))
+    return b.mix("VECTOR", 59, neutral, b.vec("ADD", 59, total, value), total)
 
 
 def _match(b, gin, slot: int) -> bpy.types.NodeSocket:
@@ -593,16 +660,6 @@ def _cache_node_name(slot: int, control: str) -> str:
 def cache_image_name(slot: int, kind: str) -> str:
     """``"Cache 1 Colour"``, ...: the image of one kind (:data:`exporters.edit_table.KINDS`) of cache ``slot``."""
     return f"Cache {slot} {kind.title()}"
-
-
-def _unless_zero(b, zero_level, value, stage: int) -> bpy.types.NodeSocket:
-    """``value`` (a level's shift, read from the control's image) where the level is not the neutral one, exactly 0
-    where it is (``zero_level``: 1 there, else 0): a Mix of that factor from ``value`` to 0.  The neutral level's
-    atlas holds zeros, so the result is the same everywhere; but when the control's input is unlinked Cycles folds
-    the factor to a constant and the Mix to one of its inputs, so the lookups of the neutral level are dropped from
-    the compiled shader: a neutral control keeps none of its lookups (the other level has weight 0 there, a Mix of
-    constant factor 0), and a control within one level of neutral keeps those of one level."""
-    return b.mix("RGBA", stage, zero_level, value, (0.0, 0.0, 0.0, 1.0))
 
 
 def _bilinear_pair(b, image: bpy.types.Image, uv: bpy.types.NodeSocket, offsets, frac, stage: int,

@@ -104,21 +104,29 @@ class EditTable:
 
     def atlases(self) -> dict[str, np.ndarray]:
         """Image name (:func:`image_name`) -> one control's colour or radius channels at its levels, the atlases
-        stacked bottom to top in the order of :data:`LEVELS` (the neutral level's shift is 0 and is not stored):
-        (STACKED x height, width, 4) float32, alpha 1."""
+        stacked bottom to top in the order of :data:`BLOCK_LEVELS` (the neutral level's shift is 0 and is not
+        stored): (STACKED x height, width, 4) float32, alpha 1."""
         layout = self.layout()
         out = {}
         for j in range(len(skin_edits.CONTROLS)):
             for kind, channels in KINDS.items():
                 values = self.values[:, :, :, j, :, channels]
-                rgb = np.concatenate([live_table.atlas_of(values[:, :, :, i], layout)
-                                      for i in range(values.shape[3])], axis=0)
+                rgb = np.concatenate([live_table.atlas_of(values[:, :, :, i], layout) for i in BLOCK_LEVELS],
+                                     axis=0)
                 out[image_name(j, kind)] = np.concatenate([rgb, np.ones_like(rgb[..., :1])], axis=-1)
         return out
 
 
-#: Atlases stacked per control image: its levels, bottom to top (:data:`LEVELS`; no neutral level).
+#: Atlases stacked per control image: its levels (:data:`LEVELS`; no neutral level).
 STACKED = len(LEVELS["melanin"])
+#: The level (index into :data:`LEVELS`) of each stacked atlas, bottom to top: the levels above neutral, then those
+#: below, each in increasing order.  With the control coordinate in level steps k (-4 .. 4 for eight levels), the
+#: atlas of step k lies at block (k - 1) mod (STACKED + 1): so the two levels around any coordinate are two adjacent
+#: blocks, and neutral (step 0) is block -1 below the image or block STACKED above it, where a lookup with Clip
+#: extension reads 0 (blender_addon.live_edits).
+BLOCK_LEVELS: tuple[int, ...] = (*range(STACKED // 2, STACKED), *range(STACKED // 2))
+#: Tag of the control images' layout (:data:`BLOCK_LEVELS`): images of another layout are made again.
+IMAGE_LAYOUT = "levels above neutral, then below"
 #: The two images of each control: which channels of a level each holds.
 KINDS: dict[str, slice] = {"colour": slice(0, 3), "radius": slice(3, 6)}
 
@@ -172,9 +180,9 @@ def combined_values(table: EditTable, edit) -> np.ndarray:
 def combined_atlas(stacked: list[np.ndarray], edit) -> np.ndarray:
     """One atlas (height, width, 4) of one kind: the images of each control (``stacked``: per control (STACKED x
     height, width, 4), as :meth:`EditTable.atlases` makes them and the live group holds them) summed with the edit's
-    weights (:func:`stack_weights`); alpha 1.  Equal to the atlas of :func:`combined_values`' channels of that kind.
-    A neutral ``edit`` gives zeros."""
-    weights = stack_weights(edit)
+    weights (:func:`stack_weights`, in the images' order :data:`BLOCK_LEVELS`); alpha 1.  Equal to the atlas of
+    :func:`combined_values`' channels of that kind.  A neutral ``edit`` gives zeros."""
+    weights = stack_weights(edit)[:, BLOCK_LEVELS]
     out = None
     for j, image in enumerate(stacked):
         blocks = np.asarray(image, np.float64).reshape(STACKED, -1, *image.shape[1:])

@@ -216,7 +216,7 @@ def test_operator_wires_the_edit_inputs_and_presets_set_them(tmp_path, addon):
     assert node.inputs["Melanin"].default_value == pytest.approx(flush.melanin)
     assert node.inputs["Blood"].default_value == pytest.approx(flush.blood)
     assert node.inputs["Oxygenation"].default_value == 0.0
-    assert node.inputs[live_edits.CACHE_INPUT].default_value == 0  # an input fed by a node: not cached
+    assert node.inputs[live_edits.CACHE_INPUT].default_value == -4  # not cached; Oxygenation (2^2) flagged as fed
     assert live_edits.cache_status(node) == "Read from the edit table: a control is fed by a node"
     mat.node_tree.nodes.remove(mask)
     with bpy.context.temp_override(material=mat, object=obj, active_object=obj):
@@ -399,3 +399,74 @@ def test_an_edit_painted_by_the_edit_mask_renders_from_the_mask_cache(tmp_path, 
     live_edits.set_edit(gnode, (4.0, 1.0, 0.0))  # melanin x4 spans four levels: more than the cache's points
     assert gnode.inputs[live_edits.CACHE_INPUT].default_value == 0
     assert live_edits.cache_status(gnode).startswith("Read from the edit table: the mask cache holds")
+
+
+def test_controls_fed_by_nodes_render_the_tables_answer_flagged_or_not(tmp_path, addon):
+    """Controls fed by nodes of their own (Blood = 1 + 1.5 x the colours' red, Oxygenation from a Value node) read the
+    table: the media equal its answer at each texel's edit.  cache_edit flags them on the cache input (minus 2^j per
+    fed control j, which drops their neutral tests from the compiled shader); the render is the same with the flags
+    gone (cache input 0, the tests evaluated) and with a neutral unlinked control wrongly flagged as fed (its levels
+    read 0).  A neutral group flagged so (a stale flag) renders its unedited colours to the exp curve's accuracy at 0
+    (1e-4 in the colour, 2e-4 in the media it gives), not bit for bit."""
+    live_edits.unregister_handlers()
+    scene, tree, gnode, emission, table, edits, layout, images, group, names = _edit_strip(tmp_path)
+    red = tree.nodes.new("ShaderNodeSeparateColor")
+    tree.links.new(tree.nodes[gnode["colour_source"]].outputs["Color"], red.inputs[0])
+    blood = tree.nodes.new("ShaderNodeMath")
+    blood.operation = "MULTIPLY_ADD"
+    tree.links.new(red.outputs[0], blood.inputs[0])
+    blood.inputs[1].default_value, blood.inputs[2].default_value = 1.5, 1.0
+    oxygen = tree.nodes.new("ShaderNodeValue")
+    oxygen.outputs[0].default_value = -0.1
+    tree.links.new(blood.outputs[0], gnode.inputs["Blood"])
+    tree.links.new(oxygen.outputs[0], gnode.inputs["Oxygenation"])
+    assert live_edits.cache_edit(gnode) == 0 and gnode.inputs[live_edits.CACHE_INPUT].default_value == -6
+    assert live_edits.cache_is_current(gnode)
+    rows = np.column_stack([np.ones(len(COLOURS)), 1.0 + 1.5 * COLOURS[:, 0], np.full(len(COLOURS), -0.1)])
+    d = edit_table.shift(edits, COLOURS, rows)
+    reference = live_table.group_media(table, edit_table.edited_colour(COLOURS, d), live_table.grid_values(table))
+    rtol = np.where(np.arange(len(COLOURS))[:, None] == len(COLOURS) - 1, 2e-3, 5e-4)  # above 1: as for constants
+    flagged = {}
+    for name in names:
+        k, kind = name.split()[1], name.split()[2]
+        ref = reference[f"{k} {kind}"] * (np.exp(d[:, 3:6]) if kind == "Radius" else 1.0)
+        flagged[name] = _render(scene, tree, gnode, emission, name)
+        assert np.all(np.abs(flagged[name] - ref) <= rtol * np.abs(ref) + 1e-7), name
+    for value in (0.0, -7.0):  # no flags: the tests run; Melanin (unlinked, neutral) flagged too: its levels read 0
+        gnode.inputs[live_edits.CACHE_INPUT].default_value = value
+        for name in names:
+            np.testing.assert_allclose(_render(scene, tree, gnode, emission, name), flagged[name], rtol=1e-6,
+                                       atol=1e-9, err_msg=f"{value} {name}")
+    for link in [lk for lk in tree.links if lk.to_node == gnode and lk.to_socket.name in ("Blood", "Oxygenation")]:
+        tree.links.remove(link)
+    gnode.inputs["Blood"].default_value, gnode.inputs["Oxygenation"].default_value = 1.0, 0.0
+    gnode.inputs[live_edits.CACHE_INPUT].default_value = 0.0
+    plain = {name: _render(scene, tree, gnode, emission, name) for name in names}
+    gnode.inputs[live_edits.CACHE_INPUT].default_value = -7.0
+    assert not live_edits.cache_is_current(gnode)
+    for name in names:
+        np.testing.assert_allclose(_render(scene, tree, gnode, emission, name), plain[name], rtol=5e-4, atol=1e-9,
+                                   err_msg=name)
+
+
+def test_edit_images_of_another_layout_are_made_again(addon):
+    """The control images stack their levels in exporters.edit_table.BLOCK_LEVELS' order (above neutral, then below)
+    and say so: an image of the same table without that tag (an earlier add-on's layout) is made again, not read in
+    the wrong order."""
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    _, edits = _tables()
+    name = edit_table.image_name(1, "colour")
+    image = live_edits.ensure_images(edits)[name]
+    blocks = live_edits._pixels(image).reshape(edit_table.STACKED, -1, image.size[0], 4)
+    layout = edits.layout()
+    for block, level in enumerate((0.5, 1.0, 1.5, 2.0, -2.0, -1.5, -1.0, -0.5)):  # Blood's log2 levels
+        i = edit_table.LEVELS["blood"].index(level)
+        np.testing.assert_allclose(blocks[block, ..., :3], live_table.atlas_of(edits.values[:, :, :, 1, i, :3], layout),
+                                   rtol=0, atol=1e-6, err_msg=f"block {block}")
+    image["marker"] = 1
+    assert live_edits.has_images(edits) and live_edits.ensure_images(edits)[name].get("marker") == 1  # reused
+    del image[live_edits.IMAGE_LAYOUT_PROP]  # as an earlier add-on made it
+    assert not live_edits.has_images(edits)
+    again = live_edits.ensure_images(edits)[name]
+    assert again.get("marker") is None and again[live_edits.IMAGE_LAYOUT_PROP] == edit_table.IMAGE_LAYOUT
+    np.testing.assert_array_equal(live_edits._pixels(again), blocks.reshape(live_edits._pixels(again).shape))
