@@ -581,7 +581,7 @@ def _gated_sum(b, neutral, total, value) -> bpy.types.NodeSocket:
     unlinked Cycles folds the factor to a constant and the Mix to one of its inputs, so a neutral control's lookups
     are dropped from the compiled shader."""
     if total is None:
-        return b.mix("VECTOR", 59, neutral, value, (0.0, 0.0, 0.0))
+        return _unless_zero(b, neutral, value, 59)
     return b.mix("VECTOR", 59, neutral, b.vec("ADD", 59, total, value), total)
 
 
