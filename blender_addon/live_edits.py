@@ -759,6 +759,19 @@ def cache_status(node: bpy.types.Node) -> str | None:
     return "Read from the edit table (not cached)"
 
 
+#: The panel's hint for an edit whose controls are fed by nodes while the Edit Mask is not: one mask painting the
+#: whole edit renders from the mask cache (8 lookups) where each control fed by a node reads the table (8 each).
+EDIT_MASK_HINT = "One mask for the whole edit? Plug it into Edit Mask: faster"
+
+
+def edit_mask_hint(node: bpy.types.Node) -> str | None:
+    """:data:`EDIT_MASK_HINT` where a control of the live node is fed by a node and its Edit Mask is not, else None."""
+    mask = node.inputs.get(MASK_INPUT)
+    if mask is None or mask.is_linked or constant_edit(node) is not None:
+        return None
+    return EDIT_MASK_HINT
+
+
 def draw_controls(layout, context) -> None:
     """The selected material's Melanin, Blood, Oxygenation and Edit Mask (its live group node's inputs), how the
     edit renders and the presets."""
@@ -778,6 +791,9 @@ def draw_controls(layout, context) -> None:
     status = cache_status(node)
     if status is not None:
         box.label(text=status, icon="INFO")
+    hint = edit_mask_hint(node)
+    if hint is not None:
+        box.label(text=hint)
     row = box.row(align=True)
     for key, label, _ in PRESET_ITEMS:
         row.operator(SPECTRAL_SKIN_OT_skin_edit_preset.bl_idname, text=label).preset = key

@@ -218,11 +218,15 @@ def test_operator_wires_the_edit_inputs_and_presets_set_them(tmp_path, addon):
     assert node.inputs["Oxygenation"].default_value == 0.0
     assert node.inputs[live_edits.CACHE_INPUT].default_value == -4  # not cached; Oxygenation (2^2) flagged as fed
     assert live_edits.cache_status(node) == "Read from the edit table: a control is fed by a node"
+    assert live_edits.edit_mask_hint(node) == live_edits.EDIT_MASK_HINT
+    mat.node_tree.links.new(mask.outputs[0], node.inputs[live_edits.MASK_INPUT])
+    assert live_edits.edit_mask_hint(node) is None  # the Edit Mask is fed already
     mat.node_tree.nodes.remove(mask)
     with bpy.context.temp_override(material=mat, object=obj, active_object=obj):
         assert bpy.ops.spectral_skin.skin_edit_preset(preset="FLUSH") == {"FINISHED"}
     assert node.inputs[live_edits.CACHE_INPUT].default_value == 1
     assert live_edits.cache_status(node) == "Rendered from edit cache 1"
+    assert live_edits.edit_mask_hint(node) is None
     cache = bpy.data.images[f"{live_edits.IMAGE_PREFIX} {live_edits.cache_image_name(1, 'colour')}"]
     assert cache.size[1] * edit_table.STACKED == next(i for i in images if " Cache " not in i.name).size[1]
     atlases = live_edits.CACHE_SLOTS + live_edits.MASK_POINTS  # every cache filled: one atlas each, the mask's three
