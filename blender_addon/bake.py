@@ -35,6 +35,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import functools
 import importlib
 import importlib.util
 import os
@@ -60,26 +61,41 @@ def _script_argv(argv: list[str] | None) -> list[str]:
 
 def _package_holding(folder: Path) -> str | None:
     """Name of the imported package that ``folder`` is (its ``__init__.py``) or is a subpackage of (a package whose
-    ``__path__`` holds ``folder.parent``): ``bl_ext.user_default.spectral_skin_sss`` for an installed extension."""
-    init = folder / "__init__.py"
-    for name, module in list(sys.modules.items()):
-        file = getattr(module, "__file__", None)
-        if file and Path(file).resolve() == init and "." in name:
-            return name
-    if not init.is_file():
+    ``__path__`` holds ``folder.parent``): ``bl_ext.user_default.spectral_skin_sss`` for an installed extension.
+    Files are compared by identity (:func:`_file_id`, links followed): one stat per package, where resolving every
+    module's path walks each of its folders (seconds in a process that has imported thousands of modules)."""
+    target = _file_id(folder / "__init__.py")
+    if target is None:
         return None
     for name, module in list(sys.modules.items()):
+        file = getattr(module, "__file__", None)
+        if "." in name and isinstance(file, str) and os.path.basename(file) == "__init__.py" \
+                and _file_id(file) == target:
+            return name
+    parent = _file_id(folder.parent)
+    for name, module in list(sys.modules.items()):
         try:
-            paths = [Path(p).resolve() for p in list(getattr(module, "__path__", None) or [])]
-        except (TypeError, ValueError, OSError):  # a module with an unusual __path__ is not a package of files
+            paths = list(getattr(module, "__path__", None) or [])
+        except TypeError:  # a module with an unusual __path__ is not a package of files
             continue
-        if folder.parent in paths:
+        if any(isinstance(p, str) and _file_id(p) == parent for p in paths):
             return f"{name}.{folder.name}"
     return None
 
 
+def _file_id(path: str | os.PathLike) -> tuple[int, int] | None:
+    """(device, inode) of ``path`` after links, what os.path.samefile compares; None where it cannot be read."""
+    try:
+        st = os.stat(path)
+    except (OSError, ValueError):
+        return None
+    return st.st_dev, st.st_ino
+
+
+@functools.cache
 def core_package() -> str:
-    """The full name of the ``exporters`` package beside this file, imported (see the module docstring)."""
+    """The full name of the ``exporters`` package beside this file, imported (see the module docstring); found once
+    per process."""
     if __package__:  # imported as a module: blender_addon.bake or <extension>.blender_addon.bake
         home = __package__.rpartition(".")[0]
         name = f"{home}.exporters" if home else "exporters"
