@@ -213,15 +213,13 @@ def test_the_mask_cache_gives_the_tables_shift_along_an_edits_line():
     masks = np.linspace(0.0, 1.0, 81)
 
     def worst(edit) -> tuple[float, float]:
+        """Largest ΔE76 and radius ratio - 1 over the colours x masks (one row per pair)."""
         line = edit_table.mask_line(edit)
-        de = radius = 0.0
-        for m in masks:
-            exact = edit_table.shift(table, rgb, edit_table.masked_edits(edit, [m])[0])
-            cached = edit_table.masked_shift(table, rgb, line, m)
-            lab = [linear_srgb_to_lab(np.clip(edit_table.edited_colour(rgb, d), 0.0, 1.0)) for d in (exact, cached)]
-            de = max(de, float(delta_e76(*lab).max()))
-            radius = max(radius, float(np.abs(np.exp(cached[:, 3:] - exact[:, 3:]) - 1.0).max()))
-        return de, radius
+        colours, per_row = np.tile(rgb, (len(masks), 1)), np.repeat(masks, len(rgb))
+        exact = edit_table.shift(table, colours, edit_table.masked_edits(edit, per_row))
+        cached = edit_table.masked_shift(table, colours, line, per_row)
+        lab = [linear_srgb_to_lab(np.clip(edit_table.edited_colour(colours, d), 0.0, 1.0)) for d in (exact, cached)]
+        return float(delta_e76(*lab).max()), float(np.abs(np.exp(cached[:, 3:] - exact[:, 3:]) - 1.0).max())
 
     for edit in ((1.0, 2.5, 0.0), (0.4, 1.0, 0.0), (1.0, 1.0, -0.3), (2.8, 1.0, 0.0)):  # one control each
         line = edit_table.mask_line(edit)
