@@ -22,7 +22,6 @@ exactly at its stored thickness, and tones of one level share scattering traject
 from __future__ import annotations
 
 import numpy as np
-from scipy.stats import qmc
 
 from exporters.constants import PARAM_NAMES, PARAM_RANGES
 
@@ -79,6 +78,9 @@ def training_tones(n: int, seed: int, skin_weighted: bool = True) -> np.ndarray:
     """``n`` training tones (n, 5): scrambled Halton through ``unit_to_tones``."""
     if n < 1:
         raise ValueError(f"need at least one tone, got n={n}")
+    from scipy.stats import qmc  # here, not at the top: scipy.stats takes ~1.5 s to import, and every command that
+    # builds a model imports this module
+
     return unit_to_tones(qmc.Halton(d=N_UNIT, scramble=True, seed=seed).random(n), skin_weighted)
 
 
