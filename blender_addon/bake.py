@@ -69,7 +69,7 @@ def _package_holding(folder: Path) -> str | None:
         return None
     for name, module in list(sys.modules.items()):
         file = getattr(module, "__file__", None)
-        if "." in name and isinstance(file, str) and os.path.basename(file) == "__init__.py" \
+        if "." in name and isinstance(file, (str, os.PathLike)) and os.path.basename(file) == "__init__.py" \
                 and _file_id(file) == target:
             return name
     parent = _file_id(folder.parent)
@@ -78,16 +78,17 @@ def _package_holding(folder: Path) -> str | None:
             paths = list(getattr(module, "__path__", None) or [])
         except TypeError:  # a module with an unusual __path__ is not a package of files
             continue
-        if any(isinstance(p, str) and _file_id(p) == parent for p in paths):
+        if any(_file_id(p) == parent for p in paths):
             return f"{name}.{folder.name}"
     return None
 
 
-def _file_id(path: str | os.PathLike) -> tuple[int, int] | None:
-    """(device, inode) of ``path`` after links, what os.path.samefile compares; None where it cannot be read."""
+def _file_id(path) -> tuple[int, int] | None:
+    """(device, inode) of ``path`` after links, what os.path.samefile compares; None where it is not a path or cannot
+    be read."""
     try:
         st = os.stat(path)
-    except (OSError, ValueError):
+    except (OSError, ValueError, TypeError):
         return None
     return st.st_dev, st.st_ino
 

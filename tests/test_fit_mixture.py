@@ -251,7 +251,7 @@ def test_mixture_profile_is_the_rendered_one_and_the_lm_jacobian_is_its_derivati
             def f(th, k=k, shape_only=shape_only):
                 return prob.residuals_jacobian(th, k, shape_only, t)[0]
 
-            # vectorize: the 513 residual rows' backward passes batched in one (the same numbers, 5x faster)
+            # vectorize: the residual rows' backward passes batched in one (the same numbers as one per row)
             auto = torch.stack([torch.autograd.functional.jacobian(f, theta[i : i + 1], vectorize=True)[0, :, 0]
                                 for i in range(2)])
             if not shape_only:  # the IRLS weight of the R row is held fixed in LM: compare the shape rows
