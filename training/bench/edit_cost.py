@@ -22,6 +22,7 @@ Operator: Invert Skin Albedo on a 4096² albedo with the edit table shipped (tra
 
 from __future__ import annotations
 
+import argparse
 import statistics
 import tempfile
 from pathlib import Path
@@ -134,12 +135,25 @@ print("RESULT" + json.dumps(times))
 """
 
 
-def measure(rounds: int = ROUNDS, samples: int = SAMPLES, resolution: int = RESOLUTION) -> dict[str, list[float]]:
-    """CPU seconds of each render, per mode (:data:`MODES`), the modes in turn in one process."""
+def selected_modes(wanted: tuple[str, ...] = ()) -> tuple[str, ...]:
+    """The modes to render for ``wanted`` (names from :data:`MODES`; empty: all), in :data:`MODES`' order, the
+    unedited group ("plain", the anchor of every ratio) always first.  ValueError naming an unknown mode."""
+    unknown = [mode for mode in wanted if mode not in MODES]
+    if unknown:
+        raise ValueError(f"unknown edit-cost mode(s) {', '.join(unknown)}: choose from {', '.join(MODES[1:])}")
+    return tuple(mode for mode in MODES if mode == "plain" or not wanted or mode in wanted)
+
+
+def measure(rounds: int = ROUNDS, samples: int = SAMPLES, resolution: int = RESOLUTION,
+            modes: tuple[str, ...] = ()) -> dict[str, list[float]]:
+    """CPU seconds of each render, per mode (:func:`selected_modes` of ``modes``: by default all of :data:`MODES`),
+    the modes in turn in one process."""
+    modes = selected_modes(modes)
+    edits = {mode: EDITS[mode] for mode in modes if mode in EDITS}
     with tempfile.TemporaryDirectory(prefix="bench_edit_") as tmp:
         return live_bench.run_script(_CHILD.format(root=str(ROOT), resolution=resolution, samples=samples,
                                                    texture=TEXTURE, texture_path=str(Path(tmp) / "skin.png"),
-                                                   edits=EDITS, modes=MODES, rounds=rounds,
+                                                   edits=edits, modes=modes, rounds=rounds,
                                                    uncached=UNCACHED, masked=MASKED, mask_code=MASK_CODE))
 
 
@@ -196,3 +210,31 @@ def benchmarks(quick: bool) -> list[dict]:
                  "notes": "float RGBA images, 16 bytes a pixel; operator wall and process CPU time in a fresh "
                           "process (training.bench.live; CPU time counts every thread, the inference's too)"})
     return rows
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Time some of the edit modes over more rounds than the bench's, without writing bench/results.md: e.g. the
+    masked rows over sixty rounds (``python -m training.bench.edit_cost --rounds 60 neutral flush_linked
+    blood_linked flush_mask``).  Prints each mode's paired ratio to the unedited group with its 95 % interval."""
+    parser = argparse.ArgumentParser(prog="python -m training.bench.edit_cost", description=main.__doc__)
+    parser.add_argument("modes", nargs="*", metavar="MODE", help=f"modes to time (default all): {', '.join(MODES[1:])}")
+    parser.add_argument("--rounds", type=int, default=ROUNDS, help=f"rounds of every mode in turn (default {ROUNDS})")
+    args = parser.parse_args(argv)
+    if args.rounds < 1:
+        parser.error(f"--rounds must be at least 1, not {args.rounds}")
+    try:
+        modes = selected_modes(tuple(args.modes))
+    except ValueError as err:
+        parser.error(str(err))
+    times = measure(args.rounds, modes=modes)
+    anchor = times["plain"]
+    print(f"unedited group: median {statistics.median(anchor):.2f} CPU-s per render, {args.rounds} round(s)")
+    for mode in modes[1:]:
+        ratio, low, high = paired_ratio(times[mode], anchor)
+        print(f"{mode}: {ratio:.3f}x (95 % interval {low:.3f}-{high:.3f}), median {statistics.median(times[mode]):.2f}"
+              f" CPU-s; {_label(mode)}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
