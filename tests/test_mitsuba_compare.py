@@ -3,7 +3,8 @@
 
 The check itself (its tolerance, and why it can tell a 5 % error) is tests/mitsuba_agreement.py.  ``make test`` runs
 it at the dark tone R10 (tests/test_mitsuba_compare_dark.py); ``make validate`` (pytest marker ``validation``) adds
-the light tone R01 here (~220 CPU-s: two components of albedo 0.998-0.999 at 650 nm) and the medium tone R05.
+the light tone R01 here (~90 s on two cores: two components of albedo 0.998-0.999 at 650 nm) and the medium tone
+R05.
 """
 
 from __future__ import annotations

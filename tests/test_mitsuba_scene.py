@@ -28,6 +28,19 @@ def _iad_rd(alpha: float, g: float) -> float:
     return uru(alpha) - uru(0.0)
 
 
+def test_paths_go_where_the_mixture_needs_them():
+    # two wavelengths; the second component weighs nothing at the first, little at the second
+    one = np.ones((2, 2))
+    mix = em.MitsubaMixture(np.array([500.0, 600.0]), np.array([[0.9, 0.9], [0.5, 0.5]]), 10 * one, 0.5 * one,
+                            np.array([[1.0, 0.9], [0.0, 0.1]]), np.array([0.3, 0.3]))
+    spp = em.paths_for_precision(mix, 0.02, variant="scalar_rgb", batches=8, pilot_spp=2048, pilot_batches=4, seed=2)
+    assert spp[1, 0] == 0 and spp[1, 1] < spp[0, 1] and np.all(spp % 8 == 0)
+    est = em.mixture_reflectance(mix, spp=spp, variant="scalar_rgb", batches=8, seed=1)
+    np.testing.assert_array_equal(est.spp, spp)
+    assert est.R_k[1, 0] == 0 and np.all(est.R_k[:, 1] > 0)
+    assert np.all(est.R_d_stderr / est.R_d < 0.04), est.R_d_stderr / est.R_d
+
+
 def test_diffuse_specular_matches_quadrature():
     ref = quad(lambda m: 2 * _fresnel(m) * m, 0.0, 1.0, epsabs=1e-14, epsrel=1e-13)[0]
     assert em.diffuse_specular() == pytest.approx(ref, abs=1e-12)

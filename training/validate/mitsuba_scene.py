@@ -61,6 +61,7 @@ from exporters.constants import N_TISSUE, WAVELENGTHS_NM
 from exporters.inference import run_decoder
 from training.paths import SHIPPED_DECODER
 from training.sim.physics import diffuse_specular
+from training.validate.mixture import neyman_allocation
 
 #: The decoder graph shipped with the add-on (docs/contracts.md §3).
 DEFAULT_DECODER = SHIPPED_DECODER
@@ -390,38 +391,65 @@ class MixtureEstimate:
     R_d_stderr: np.ndarray
     R_k: np.ndarray
     R_k_stderr: np.ndarray
-    spp: int
+    spp: np.ndarray
     variant: str
     seconds: float
 
+    @property
+    def per_path_sd(self) -> np.ndarray:
+        """(K, W): the standard deviation of one path's estimate of R_k (stderr x sqrt(paths))."""
+        return self.R_k_stderr * np.sqrt(self.spp)
 
-def mixture_reflectance(mixture: MitsubaMixture, *, spp: int, variant: str = "scalar_rgb", batches: int = 8,
-                        seed: int = 0, specular: str = "auto", progress=None) -> MixtureEstimate:
+
+def mixture_reflectance(mixture: MitsubaMixture, *, spp: int | np.ndarray, variant: str = "scalar_rgb",
+                        batches: int = 8, seed: int = 0, specular: str = "auto", progress=None) -> MixtureEstimate:
     """R_d of the mixture at each of its wavelengths: sum_k w_k R_k, one slab render per (k, lambda).
 
-    Exact by linearity (see the module docstring); stderr = sqrt(sum_k w_k^2 se_k^2).  ``spp`` paths per
-    component and wavelength.  ``progress``: optional callable(done, total).
+    Exact by linearity (see the module docstring); stderr = sqrt(sum_k w_k^2 se_k^2).  ``spp``: paths per
+    component and wavelength, one number or a (K, W) array (:func:`paths_for_precision`); components of zero
+    weight are not rendered.  ``progress``: optional callable(done, total).
     """
     import time
 
     t0 = time.perf_counter()
     k, w = mixture.alpha.shape
+    paths = np.broadcast_to(np.asarray(spp, dtype=np.int64), (k, w))
     r = np.zeros((k, w))
     se = np.zeros((k, w))
     spectral = is_spectral(variant)
     full = decode_grid_alpha(mixture) if spectral else None
     for j, lam in enumerate(mixture.wavelength_nm):
         for c in range(k):
-            alpha = full[c] if spectral else float(mixture.alpha[c, j])
-            est = slab_reflectance(alpha, float(mixture.g[c, j]), spp=spp, variant=variant,
-                                   wavelength_nm=float(lam) if spectral else None, batches=batches,
-                                   seed=seed * 7919 + j * 31 + c, specular=specular)
-            r[c, j], se[c, j] = est.value, est.stderr
+            if mixture.weight[c, j] > 0:
+                alpha = full[c] if spectral else float(mixture.alpha[c, j])
+                est = slab_reflectance(alpha, float(mixture.g[c, j]), spp=int(paths[c, j]), variant=variant,
+                                       wavelength_nm=float(lam) if spectral else None, batches=batches,
+                                       seed=seed * 7919 + j * 31 + c, specular=specular)
+                r[c, j], se[c, j] = est.value, est.stderr
             if progress:
                 progress(j * k + c + 1, k * w)
     total = np.sum(mixture.weight * r, axis=0)
     total_se = np.sqrt(np.sum((mixture.weight * se) ** 2, axis=0))
-    return MixtureEstimate(mixture.wavelength_nm, total, total_se, r, se, int(spp), variant, time.perf_counter() - t0)
+    return MixtureEstimate(mixture.wavelength_nm, total, total_se, r, se, (paths // batches) * batches, variant,
+                           time.perf_counter() - t0)
+
+
+def paths_for_precision(mixture: MitsubaMixture, rel_stderr: float, *, variant: str = "scalar_rgb",
+                        batches: int = 16, pilot_spp: int = 65536, pilot_batches: int = 8, seed: int = 0,
+                        specular: str = "auto") -> np.ndarray:
+    """Paths per component and wavelength (K, W) for :func:`mixture_reflectance` (with ``batches``) to reach a
+    standard error of about ``rel_stderr`` x R_d at every wavelength: a pilot render of ``pilot_spp`` paths per
+    component, in ``pilot_batches`` renders, measures each component's spread; then
+    training.validate.mixture.neyman_allocation (floor: pilot_spp / 4).  The pilot's spread is itself noisy
+    (about 1 / sqrt(2 (pilot_batches - 1)), 27 % at 8 batches), but its cost is mostly per render (a render of
+    10^5 paths costs little more than one of 256), hence few batches.  Give the real render another ``seed``
+    than the pilot's, so that its estimate and standard error do not reuse the pilot's paths."""
+    pilot = mixture_reflectance(mixture, spp=pilot_spp, variant=variant, batches=pilot_batches, seed=seed,
+                                specular=specular)
+    target = rel_stderr * np.abs(pilot.R_d)
+    target = np.where(target > 0, target, np.inf)
+    return neyman_allocation(mixture.weight, pilot.per_path_sd, target, multiple=batches,
+                             floor=max(pilot_spp // 4, batches))
 
 
 def decode_grid_alpha(mixture: MitsubaMixture) -> np.ndarray:

@@ -10,7 +10,9 @@ origin; ``"normal"`` selectable).  R_d never includes the specular reflection (d
 reflectance ``sum_k w_k R_k``, so we walk every component with the same photons in one batched run of
 ``training.sim.transport.simulate`` (K x W channels) and combine the per-component tallies with w_k:
 exact by linearity, and with lower variance than a per-photon choice (each component gets all the
-photons; stderr = sqrt(sum_k w_k^2 se_k^2), the components being independent walks).
+photons; stderr = sqrt(sum_k w_k^2 se_k^2), the components being independent walks).  Where one precision is
+wanted at least cost, :func:`photons_for_precision` gives each component its own photons (Neyman's allocation:
+by its weight and its spread), and the walk runs once per distinct count.
 """
 
 from __future__ import annotations
@@ -39,10 +41,15 @@ class MixtureResult:
     R_d_stderr: np.ndarray
     R_k: np.ndarray
     R_k_stderr: np.ndarray
-    photons: int
+    photons: int | np.ndarray
     seconds: float
     profile: np.ndarray | None = None
     profile_stderr: np.ndarray | None = None
+
+    @property
+    def per_photon_sd(self) -> np.ndarray:
+        """(K, W): the standard deviation of one photon's estimate of R_k (stderr x sqrt(photons))."""
+        return self.R_k_stderr * np.sqrt(self.photons)
 
 
 def _as_kw(name: str, x, shape: tuple[int, ...] | None = None) -> np.ndarray:
@@ -95,31 +102,76 @@ def combine(weight: np.ndarray, values: np.ndarray, stderr: np.ndarray) -> tuple
     return np.sum(w * values, axis=0), np.sqrt(np.sum((w * stderr) ** 2, axis=0))
 
 
-def mixture_reflectance(alpha, sigma_t, g, weight, *, photons: int, seed: int = 0,
+def mixture_reflectance(alpha, sigma_t, g, weight, *, photons: int | np.ndarray, seed: int = 0,
                         illumination: str = "diffuse", device: str = "cpu", progress: bool = False,
                         r_edges_cm: np.ndarray | None = None, compile: bool | str = "auto") -> MixtureResult:
     """Total diffuse reflectance of the mixture at each of its W wavelengths.
 
     Args:
         alpha, sigma_t (cm^-1), g, weight: (K, W) arrays (or (W,) for K = 1); weights sum to 1 over K.
-        photons: photons per component and wavelength.
+        photons: photons per component and wavelength: one number (one batched walk of all K x W media) or a
+            (K, W) array (:func:`photons_for_precision`; one walk per distinct count, none for a count of 0,
+            whose component must have zero weight).
         illumination: "diffuse" (the dataset's) or "normal".
         r_edges_cm: radial bin edges (NB + 1,) to tally the mixture's profile too (None: R_d only).
     Returns: MixtureResult; R_d = sum_k w_k R_k (exact by linearity, see the module docstring).
     """
     a, s, gg, w = check_mixture(alpha, sigma_t, g, weight)
     k, n_w = a.shape
-    res = render_media(a, s, gg, photons=photons, seed=seed, illumination=illumination, r_edges_cm=r_edges_cm,
-                       device=device, compile=compile, progress=progress)
-    r_k = res.R_d.reshape(k, n_w)
-    se_k = res.R_d_stderr.reshape(k, n_w)
+    counts = np.broadcast_to(np.asarray(photons, dtype=np.int64), (k, n_w))
+    if np.any((counts <= 0) & (w > 0)):
+        raise ValueError("photons must be > 0 for every component of non-zero weight.")
+    nb = 0 if r_edges_cm is None else np.asarray(r_edges_cm).size - 1
+    r_k, se_k = np.zeros((k, n_w)), np.zeros((k, n_w))
+    p_k, pse_k = np.zeros((k, n_w, nb)), np.zeros((k, n_w, nb))
+    seconds = 0.0
+    groups = [int(photons)] if np.ndim(photons) == 0 else [int(n) for n in np.unique(counts) if n > 0]
+    for i, n in enumerate(groups):
+        sel = counts == n
+        res = render_media(a[sel], s[sel], gg[sel], photons=n, seed=seed + 104729 * i, illumination=illumination,
+                           r_edges_cm=r_edges_cm, device=device, compile=compile, progress=progress)
+        r_k[sel], se_k[sel], seconds = res.R_d, res.R_d_stderr, seconds + res.seconds
+        if nb:
+            p_k[sel], pse_k[sel] = res.profile, res.profile_stderr
     r_d, r_se = combine(w, r_k, se_k)
     prof = prof_se = None
-    if r_edges_cm is not None:
-        nb = res.profile.shape[-1]
-        prof, prof_se = combine(w, res.profile.reshape(k, n_w, nb), res.profile_stderr.reshape(k, n_w, nb))
-    return MixtureResult(R_d=r_d, R_d_stderr=r_se, R_k=r_k, R_k_stderr=se_k, photons=int(photons),
-                         seconds=res.seconds, profile=prof, profile_stderr=prof_se)
+    if nb:
+        prof, prof_se = combine(w, p_k, pse_k)
+    return MixtureResult(R_d=r_d, R_d_stderr=r_se, R_k=r_k, R_k_stderr=se_k,
+                         photons=int(photons) if np.ndim(photons) == 0 else counts.copy(), seconds=seconds,
+                         profile=prof, profile_stderr=prof_se)
+
+
+def neyman_allocation(weight: np.ndarray, per_sample_sd: np.ndarray, target_stderr: np.ndarray, *,
+                      multiple: int = 1, floor: int = 1) -> np.ndarray:
+    """Samples per component and wavelength (K, W) that give a mixture's estimate sum_k w_k R_k the standard
+    error ``target_stderr`` (W,) at each wavelength for the fewest samples in all: Neyman's allocation of a
+    stratified estimate, n_k = w_k s_k (sum_j w_j s_j) / target^2, with ``per_sample_sd`` s (K, W) (a pilot
+    run's spread of one sample, e.g. :attr:`MixtureResult.per_photon_sd`).  Rounded up to a multiple of
+    ``multiple``, at least ``floor`` for every component of non-zero weight (a pilot's spread is itself
+    noisy), 0 for those of zero weight."""
+    w, s = np.asarray(weight, np.float64), np.asarray(per_sample_sd, np.float64)
+    target = np.asarray(target_stderr, np.float64)
+    if w.ndim != 2 or w.shape != s.shape or target.shape != w.shape[1:] or not np.all(target > 0):
+        raise ValueError(f"need weight and per_sample_sd of one shape (K, W) and a positive target (W,), got "
+                         f"{w.shape}, {s.shape}, {target.shape}.")
+    ws = w * np.nan_to_num(s, nan=0.0, posinf=0.0)
+    n = np.nan_to_num(ws * ws.sum(axis=0) / target**2, nan=0.0, posinf=0.0)
+    n = np.ceil(np.maximum(n, floor) / multiple) * multiple
+    return np.where(w > 0, n, 0).astype(np.int64)
+
+
+def photons_for_precision(alpha, sigma_t, g, weight, rel_stderr: float, *, pilot_photons: int = 20_000,
+                          seed: int = 0, illumination: str = "diffuse") -> np.ndarray:
+    """Photons per component and wavelength (K, W) for :func:`mixture_reflectance` to reach a standard error of
+    about ``rel_stderr`` x R_d at every wavelength: a pilot walk of ``pilot_photons`` per component measures each
+    component's spread, then :func:`neyman_allocation` (floor: pilot_photons / 4).  Give the real walk another
+    ``seed`` than the pilot's, so that it does not reuse the pilot's photons."""
+    pilot = mixture_reflectance(alpha, sigma_t, g, weight, photons=pilot_photons, seed=seed,
+                                illumination=illumination)
+    target = rel_stderr * np.abs(pilot.R_d)
+    return neyman_allocation(np.atleast_2d(np.asarray(weight, np.float64)), pilot.per_photon_sd,
+                             np.where(target > 0, target, np.inf), floor=max(pilot_photons // 4, 1))
 
 
 def _full_grid(reflectance) -> np.ndarray:
