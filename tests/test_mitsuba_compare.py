@@ -40,6 +40,25 @@ def test_cli_json(capsys):
     assert rec["ground_truth"][1] > 2 * rec["ground_truth"][0]
 
 
+def test_cli_samples_for_a_relative_standard_error(capsys):
+    rc = compare.main(["--tone", "0.035", "0.025", "0.012", "0.75", "0.78", "--wavelengths", "300,950",
+                       "--spp", "1024", "--photons", "2000", "--variant", "scalar_rgb", "--rel-stderr", "0.03",
+                       "--json", "--no-progress"])
+    assert rc == 0
+    rec = json.loads(capsys.readouterr().out)
+    weight = np.array(rec["components"]["weight"])
+    for key, renderer in (("mitsuba_paths", "mitsuba"), ("our_photons", "ours")):
+        samples = np.array(rec["samples"][key])
+        assert samples.shape == weight.shape and np.all((samples > 0) == (weight > 0))
+        # a pilot's spread sets the samples: each renderer lands near the asked 3 %, not at the pilot's noise
+        rel = np.array(rec["stderr"][renderer]) / np.array(rec[renderer])
+        assert np.all(rel < 0.045), (renderer, rel)
+    assert rec["rel_stderr"] == 0.03 and rec["seconds"]["pilots"] > 0
+    assert compare.main(["--tone", "0.035", "0.025", "0.012", "0.75", "0.78", "--rel-stderr", "0",
+                         "--no-progress"]) == 2
+    assert "--rel-stderr must lie in (0, 1)" in capsys.readouterr().err
+
+
 def test_cli_refuses_bad_wavelengths(capsys):
     rc = compare.main(["--tone", "0.035", "0.025", "0.012", "0.75", "0.78", "--wavelengths", "200,950",
                        "--spp", "64", "--photons", "64", "--variant", "scalar_rgb", "--json", "--no-progress"])

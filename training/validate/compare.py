@@ -34,7 +34,7 @@ from training.sim.medium import LayeredMedium
 from training.sim.tissue import skin_medium
 from training.sim.transport import simulate
 from training.validate import mitsuba_scene as em
-from training.validate.mixture import mixture_reflectance
+from training.validate.mixture import mixture_reflectance, photons_for_precision
 
 
 def ground_truth(tone, wavelengths_nm, photons: int, seed: int = 0, device: str = "cpu") -> tuple[np.ndarray, ...]:
@@ -52,23 +52,36 @@ def ground_truth(tone, wavelengths_nm, photons: int, seed: int = 0, device: str 
 
 def compare(tone, wavelengths_nm, *, spp: int, photons: int, gt_photons: int | None = None,
             variant: str | None = None, batches: int = 8, seed: int = 0, decoder=em.DEFAULT_DECODER,
-            device: str = "cpu", progress: bool = False) -> dict:
-    """The JSON record of the command (see the module docstring); every list has one value per wavelength."""
+            device: str = "cpu", progress: bool = False, rel_stderr: float | None = None) -> dict:
+    """The JSON record of the command (see the module docstring); every list has one value per wavelength.
+
+    ``rel_stderr``: when given, Mitsuba's paths and our photons per component and wavelength are allocated from a
+    pilot run of ``spp`` paths and ``photons`` photons per component (em.paths_for_precision,
+    photons_for_precision) for that relative standard error of R_d at every wavelength; ``samples`` in the record
+    says how many each component got."""
     tone = np.asarray(tone, dtype=np.float64)
     variant = variant or em.default_variant()
     mix = em.decode(tone, decoder).at(wavelengths_nm)
+    mit_paths, our_photons = spp, photons
+    t_pilot = time.perf_counter()
+    if rel_stderr is not None:
+        mit_paths = em.paths_for_precision(mix, rel_stderr, variant=variant, batches=batches, pilot_spp=spp,
+                                           seed=seed + 1)
+        our_photons = photons_for_precision(mix.alpha, mix.sigma_t, mix.g, mix.weight, rel_stderr,
+                                            pilot_photons=photons, seed=seed + 1)
+    t_pilot = time.perf_counter() - t_pilot
     bar = None
     if progress:
         from tqdm import tqdm
 
         bar = tqdm(total=mix.k * mix.wavelength_nm.size, desc="mitsuba renders", file=sys.stderr)
     t0 = time.perf_counter()
-    mit = em.mixture_reflectance(mix, spp=spp, variant=variant, batches=batches, seed=seed,
+    mit = em.mixture_reflectance(mix, spp=mit_paths, variant=variant, batches=batches, seed=seed,
                                  progress=(lambda done, total: bar.update(1)) if bar else None)
     if bar:
         bar.close()
     t1 = time.perf_counter()
-    ours = mixture_reflectance(mix.alpha, mix.sigma_t, mix.g, mix.weight, photons=photons, seed=seed,
+    ours = mixture_reflectance(mix.alpha, mix.sigma_t, mix.g, mix.weight, photons=our_photons, seed=seed,
                                device=device, progress=progress)
     t2 = time.perf_counter()
     gt, gt_se = ground_truth(tone, mix.wavelength_nm, gt_photons or photons, seed=seed, device=device)
@@ -88,8 +101,11 @@ def compare(tone, wavelengths_nm, *, spp: int, photons: int, gt_photons: int | N
         "tone": lst(tone),
         "illumination": "diffuse (cosine-weighted), n = 1.4, specular excluded",
         "variant": variant, "spp": int(spp), "batches": int(batches), "photons": int(photons),
+        "rel_stderr": rel_stderr,
+        "samples": {"mitsuba_paths": mit.spp.tolist(),
+                    "our_photons": np.broadcast_to(np.asarray(ours.photons), mix.alpha.shape).tolist()},
         "ground_truth_photons": int(gt_photons or photons),
-        "seconds": {"mitsuba": t1 - t0, "ours": t2 - t1, "ground_truth": t3 - t2},
+        "seconds": {"pilots": t_pilot, "mitsuba": t1 - t0, "ours": t2 - t1, "ground_truth": t3 - t2},
     }
 
 
@@ -110,9 +126,14 @@ def build_parser() -> argparse.ArgumentParser:
                    metavar=("F_MEL", "F_BLOOD", "T_EPI", "SO2", "B_MEL"), help="biophysical vector (t_epi in cm)")
     p.add_argument("--wavelengths", type=_wavelengths, default=[300.0, 450.0, 550.0, 650.0, 950.0],
                    help="comma-separated, nm, within 250-1000 (default 300,450,550,650,950)")
-    p.add_argument("--spp", type=count, default=65536, help="Mitsuba paths per component and wavelength")
+    p.add_argument("--spp", type=count, default=65536,
+                   help="Mitsuba paths per component and wavelength (with --rel-stderr: the pilot's)")
     p.add_argument("--batches", type=count, default=8, help="independent Mitsuba renders for the standard error")
-    p.add_argument("--photons", type=count, default=100_000, help="our photons per component and wavelength")
+    p.add_argument("--photons", type=count, default=100_000,
+                   help="our photons per component and wavelength (with --rel-stderr: the pilot's)")
+    p.add_argument("--rel-stderr", type=finite_float, default=None, metavar="R",
+                   help="sample each component and wavelength for a relative standard error R of R_d at every "
+                        "wavelength (e.g. 0.005), from a pilot run of --spp paths and --photons photons")
     p.add_argument("--gt-photons", type=count, default=None,
                    help="ground-truth photons per wavelength (default --photons)")
     p.add_argument("--variant", default="auto",
@@ -127,7 +148,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _table(rec: dict) -> str:
-    lines = [f"tone {rec['tone']}  variant {rec['variant']}  spp {rec['spp']}  photons {rec['photons']}",
+    paths, photons = (int(np.sum(rec["samples"][k])) for k in ("mitsuba_paths", "our_photons"))
+    lines = [f"tone {rec['tone']}  variant {rec['variant']}  Mitsuba {paths:,} paths  ours {photons:,} photons",
              f"{'nm':>6} {'mitsuba':>16} {'ours':>16} {'ground truth':>16} {'network':>8} {'rel diff':>9} {'z':>6}"]
     se = rec["stderr"]
     for i, wl in enumerate(rec["wavelength_nm"]):
@@ -150,11 +172,13 @@ def main(argv: list[str]) -> int:
                 raise ValueError(f"--{name} must be >= 2.")
         if args.threads < 1:
             raise ValueError("--threads must be >= 1.")
+        if args.rel_stderr is not None and not 0 < args.rel_stderr < 1:
+            raise ValueError(f"--rel-stderr must lie in (0, 1), e.g. 0.005; got {args.rel_stderr:g}.")
         torch.set_num_threads(args.threads)
         variant = None if args.variant == "auto" else args.variant
         rec = compare(args.tone, args.wavelengths, spp=args.spp, photons=args.photons, gt_photons=args.gt_photons,
                       variant=variant, batches=args.batches, seed=args.seed, decoder=args.decoder,
-                      device=args.device, progress=not args.no_progress)
+                      device=args.device, progress=not args.no_progress, rel_stderr=args.rel_stderr)
     except (ValueError, em.MitsubaUnavailable) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
