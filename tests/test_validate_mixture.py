@@ -68,7 +68,7 @@ def test_photons_per_component_reach_the_asked_precision():
     res = mixture_reflectance(alpha, sigma_t, g, weight, photons=photons, seed=4)
     np.testing.assert_array_equal(res.photons, photons)
     np.testing.assert_allclose(res.R_d_stderr / res.R_d, 0.01, rtol=0.15)
-    # a single count walks every component as before
+    # one count for all components is the one batched walk of a single number
     same = mixture_reflectance(alpha, sigma_t, g, weight, photons=np.full((2, 2), 3000), seed=4)
     np.testing.assert_array_equal(same.R_k, mixture_reflectance(alpha, sigma_t, g, weight, photons=3000,
                                                                 seed=4).R_k)
