@@ -61,7 +61,7 @@ from exporters.constants import N_TISSUE, WAVELENGTHS_NM
 from exporters.inference import run_decoder
 from training.paths import SHIPPED_DECODER
 from training.sim.physics import diffuse_specular
-from training.validate.mixture import neyman_allocation
+from training.validate.mixture import combine, neyman_allocation, precision_target
 
 #: The decoder graph shipped with the add-on (docs/contracts.md §3).
 DEFAULT_DECODER = SHIPPED_DECODER
@@ -428,8 +428,7 @@ def mixture_reflectance(mixture: MitsubaMixture, *, spp: int | np.ndarray, varia
                 r[c, j], se[c, j] = est.value, est.stderr
             if progress:
                 progress(j * k + c + 1, k * w)
-    total = np.sum(mixture.weight * r, axis=0)
-    total_se = np.sqrt(np.sum((mixture.weight * se) ** 2, axis=0))
+    total, total_se = combine(mixture.weight, r, se)
     return MixtureEstimate(mixture.wavelength_nm, total, total_se, r, se, (paths // batches) * batches, variant,
                            time.perf_counter() - t0)
 
@@ -446,10 +445,8 @@ def paths_for_precision(mixture: MitsubaMixture, rel_stderr: float, *, variant: 
     than the pilot's, so that its estimate and standard error do not reuse the pilot's paths."""
     pilot = mixture_reflectance(mixture, spp=pilot_spp, variant=variant, batches=pilot_batches, seed=seed,
                                 specular=specular)
-    target = rel_stderr * np.abs(pilot.R_d)
-    target = np.where(target > 0, target, np.inf)
-    return neyman_allocation(mixture.weight, pilot.per_path_sd, target, multiple=batches,
-                             floor=max(pilot_spp // 4, batches))
+    return neyman_allocation(mixture.weight, pilot.per_path_sd, precision_target(pilot.R_d, rel_stderr),
+                             multiple=batches, floor=max(pilot_spp // 4, batches))
 
 
 def decode_grid_alpha(mixture: MitsubaMixture) -> np.ndarray:

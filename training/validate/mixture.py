@@ -125,8 +125,7 @@ def mixture_reflectance(alpha, sigma_t, g, weight, *, photons: int | np.ndarray,
     r_k, se_k = np.zeros((k, n_w)), np.zeros((k, n_w))
     p_k, pse_k = np.zeros((k, n_w, nb)), np.zeros((k, n_w, nb))
     seconds = 0.0
-    groups = [int(photons)] if np.ndim(photons) == 0 else [int(n) for n in np.unique(counts) if n > 0]
-    for i, n in enumerate(groups):
+    for i, n in enumerate(int(n) for n in np.unique(counts) if n > 0):
         sel = counts == n
         res = render_media(a[sel], s[sel], gg[sel], photons=n, seed=seed + 104729 * i, illumination=illumination,
                            r_edges_cm=r_edges_cm, device=device, compile=compile, progress=progress)
@@ -161,6 +160,13 @@ def neyman_allocation(weight: np.ndarray, per_sample_sd: np.ndarray, target_stde
     return np.where(w > 0, n, 0).astype(np.int64)
 
 
+def precision_target(r_d: np.ndarray, rel_stderr: float) -> np.ndarray:
+    """The standard error (W,) that is ``rel_stderr`` x |R_d| at each wavelength, for :func:`neyman_allocation`;
+    inf where R_d is 0 (nothing to resolve: the allocation's floor)."""
+    target = rel_stderr * np.abs(np.asarray(r_d, np.float64))
+    return np.where(target > 0, target, np.inf)
+
+
 def photons_for_precision(alpha, sigma_t, g, weight, rel_stderr: float, *, pilot_photons: int = 20_000,
                           seed: int = 0, illumination: str = "diffuse") -> np.ndarray:
     """Photons per component and wavelength (K, W) for :func:`mixture_reflectance` to reach a standard error of
@@ -169,9 +175,8 @@ def photons_for_precision(alpha, sigma_t, g, weight, rel_stderr: float, *, pilot
     ``seed`` than the pilot's, so that it does not reuse the pilot's photons."""
     pilot = mixture_reflectance(alpha, sigma_t, g, weight, photons=pilot_photons, seed=seed,
                                 illumination=illumination)
-    target = rel_stderr * np.abs(pilot.R_d)
     return neyman_allocation(np.atleast_2d(np.asarray(weight, np.float64)), pilot.per_photon_sd,
-                             np.where(target > 0, target, np.inf), floor=max(pilot_photons // 4, 1))
+                             precision_target(pilot.R_d, rel_stderr), floor=max(pilot_photons // 4, 1))
 
 
 def _full_grid(reflectance) -> np.ndarray:

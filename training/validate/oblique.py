@@ -34,6 +34,7 @@ import numpy as np
 from exporters.colorimetry import spectrum_to_lab
 from exporters.constants import N_TISSUE, R_EDGES_CM, WAVELENGTHS_NM
 from training.paths import SHIPPED_MODEL_DIR
+from training.validate.mixture import combine
 
 #: Beam angles, degrees from the normal.
 THETAS_DEG: tuple[float, ...] = (0.0, 45.0, 70.0, 85.0)
@@ -96,8 +97,7 @@ def walk_tone(tone: np.ndarray, theta: float, decoder: Path, photons: int, seed:
     for name, res in (("truth", truth), ("mix", None)):
         if res is None:
             r_k = per(comp["R_d"])
-            r = np.sum(w * r_k, axis=0)
-            se = np.sqrt(np.sum((w * per(comp["R_d_stderr"])) ** 2, axis=0))
+            r, se = combine(w, r_k, per(comp["R_d_stderr"]))
             hr = np.einsum("kw,kwb->wb", w, per(comp["profile"]) * (np.pi * np.diff(R_EDGES_CM**2)))
             hx = np.einsum("kw,kwb->wb", w, per(comp["profile_plane"]) * np.diff(X_EDGES_CM))
             xm = np.sum(w * r_k * per(comp["shift_cm"]), axis=0) / np.maximum(r, 1e-300)
