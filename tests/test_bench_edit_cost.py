@@ -23,7 +23,8 @@ def test_bad_arguments_exit_2_with_one_line(argv, message, capsys):
     with pytest.raises(SystemExit) as done:
         edit_cost.main(argv)
     assert done.value.code == 2
-    assert message in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert message in err and err.strip().count("\n") == 0, err
 
 
 def test_one_round_of_a_masked_mode_renders_and_prints_its_ratio(capsys):

@@ -22,12 +22,12 @@ Operator: Invert Skin Albedo on a 4096² albedo with the edit table shipped (tra
 
 from __future__ import annotations
 
-import argparse
 import statistics
 import tempfile
 from pathlib import Path
 
 from exporters import skin_edits
+from exporters.cli_io import OneLineParser
 from training.bench import live as live_bench
 from training.bench.render_clock import paired_ratio
 
@@ -216,7 +216,7 @@ def main(argv: list[str] | None = None) -> int:
     """Time some of the edit modes over more rounds than the bench's, without writing bench/results.md: e.g. the
     masked rows over sixty rounds (``python -m training.bench.edit_cost --rounds 60 neutral flush_linked
     blood_linked flush_mask``).  Prints each mode's paired ratio to the unedited group with its 95 % interval."""
-    parser = argparse.ArgumentParser(prog="python -m training.bench.edit_cost", description=main.__doc__)
+    parser = OneLineParser(prog="python -m training.bench.edit_cost", description=main.__doc__)
     parser.add_argument("modes", nargs="*", metavar="MODE", help=f"modes to time (default all): {', '.join(MODES[1:])}")
     parser.add_argument("--rounds", type=int, default=ROUNDS, help=f"rounds of every mode in turn (default {ROUNDS})")
     args = parser.parse_args(argv)
