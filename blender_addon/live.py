@@ -53,7 +53,7 @@ GROUP_NAME = "Spectral Skin SSS Live"
 #: Custom properties: on the group and the images, the SHA-256 of the table they were made from.
 TABLE_PROP = "spectral_skin_sss_table"
 #: Layout version of the live group (bump when the generated nodes change).
-LIVE_VERSION = 20
+LIVE_VERSION = 21
 IMAGE_PREFIX = "Spectral Skin SSS Table"
 #: Custom property on the group: whether it holds the grazing-light correction (blender_addon.oblique).
 GRAZING_PROP = "spectral_skin_sss_grazing"
@@ -189,6 +189,7 @@ class _Builder:
         self.locations: list[tuple[int, float, float]] = []
         #: A zero vector computed at each shading point (blender_addon.nodes.computed_zero), once the group has one.
         self.zero: bpy.types.NodeSocket | None = None
+        self._directions: dict[tuple, object] = {}  # the Environment Textures' direction nodes (direction)
 
     def node(self, kind: str, stage: int, **props) -> bpy.types.Node:
         self._locate(len(self.group.nodes), stage)
@@ -247,6 +248,62 @@ class _Builder:
         Vector Math Multiply by a constant 1 is folded away by Cycles, a Mix is not)."""
         self._locate(len(self.group.nodes), stage)
         return nodes.product(self.group, factor, value, self.zero)
+
+    def direction(self, uv: bpy.types.NodeSocket, stage: int, offset: tuple[float, float] = (0.0, 0.0),
+                  scale: tuple[float, float] = (1.0, 1.0)) -> bpy.types.NodeSocket:
+        """The direction an equirectangular Environment Texture maps to the image point (u', v') = ``uv`` x
+        ``scale`` + ``offset``: longitude phi = pi - 2 pi u', latitude lam = pi (v' - 1/2), the vector
+        (1, 0, tan lam) turned by phi about Z (the texture normalises it).  Each part is made once per group: the
+        lookups of one point at other offsets share its components, longitudes and latitudes."""
+        (du, dv), (su, sv) = offset, scale
+        key = uv.as_pointer()
+        parts = self._made(("parts", key), lambda: self._separate(uv, stage))
+        phi = self._made(("phi", key, su, du), lambda: self.math(
+            "MULTIPLY_ADD", stage, parts.outputs[0], -2.0 * np.pi * su, np.pi * (1.0 - 2.0 * du)))
+
+        def base() -> bpy.types.Node:
+            node = self.node("ShaderNodeCombineXYZ", stage + 1)
+            set_default(node.inputs[0], 1.0)
+            lam = self.math("MULTIPLY_ADD", stage, parts.outputs[1], np.pi * sv, np.pi * (dv - 0.5))
+            self.group.links.new(self.math("TANGENT", stage + 1, lam), node.inputs[2])
+            return node
+
+        meridian = self._made(("base", key, sv, dv), base)
+
+        def turn() -> bpy.types.NodeSocket:
+            node = self.node("ShaderNodeVectorRotate", stage + 1, rotation_type="Z_AXIS")
+            self.group.links.new(meridian.outputs[0], node.inputs["Vector"])
+            self.group.links.new(phi, node.inputs["Angle"])
+            return node.outputs[0]
+
+        return self._made(("turn", key, tuple(offset), tuple(scale)), turn)
+
+    def _separate(self, vector: bpy.types.NodeSocket, stage: int) -> bpy.types.Node:
+        node = self.node("ShaderNodeSeparateXYZ", stage)
+        self.group.links.new(vector, node.inputs[0])
+        return node
+
+    def _made(self, key: tuple, make: Callable):
+        """What ``make()`` made for ``key`` in this group (made on the first call)."""
+        if key not in self._directions:
+            self._directions[key] = make()
+        return self._directions[key]
+
+    def environment(self, image: bpy.types.Image, uv: bpy.types.NodeSocket, stage: int,
+                    offset: tuple[float, float] = (0.0, 0.0),
+                    scale: tuple[float, float] = (1.0, 1.0)) -> bpy.types.NodeSocket:
+        """``image`` (RGB) interpolated bilinearly at ``uv`` x ``scale`` + ``offset`` through an Environment Texture,
+        for the EEVEE output.  EEVEE reads an Image Texture's Linear lookups from the mipmap level that the screen-space
+        derivatives of its coordinates select; a table's coordinates, computed from a textured colour, jump between
+        neighbouring pixels (from one slice to the next), so its lookups there read blurred levels: on the demo's skin
+        texture the effective radius came out 35 % off in the median.  An equirectangular Environment Texture with
+        Linear interpolation reads the full-resolution level in EEVEE (Cycles, which reads no mipmaps, never runs these
+        nodes: they feed the EEVEE output only)."""
+        tex = self.node("ShaderNodeTexEnvironment", stage + 2, image=image, interpolation="Linear",
+                        projection="EQUIRECTANGULAR")
+        tex.label = image.name
+        self.group.links.new(self.direction(uv, stage, offset, scale), tex.inputs["Vector"])
+        return tex.outputs["Color"]
 
     def mix(self, data_type: str, stage: int, fac, a, b) -> bpy.types.NodeSocket:
         node = self.node("ShaderNodeMix", stage, data_type=data_type, clamp_factor=False)
@@ -406,6 +463,13 @@ def _lookup(b: _Builder, image: bpy.types.Image, uvs, frac, stage: int):
             b.mix("FLOAT", stage + 1, frac, alphas[0], alphas[1]))
 
 
+def _environment_pair(b: _Builder, image: bpy.types.Image, uv, tile_u: float, frac, stage: int) -> bpy.types.NodeSocket:
+    """:func:`_lookup`'s RGB for the EEVEE output: slices s (at ``uv``) and s + 1 (``tile_u`` further) read through
+    Environment Textures (:meth:`_Builder.environment`), mixed by ``frac``."""
+    found = [b.environment(image, uv, stage, (du, 0.0)) for du in (0.0, tile_u)]
+    return b.mix("VECTOR", stage + 3, frac, found[0], found[1])
+
+
 def _metres(b: _Builder, log_radius, log_range: tuple[float, float], stage: int) -> bpy.types.NodeSocket:
     """exp(log r) per channel: the radius in metres, a curve through exp over ``log_range`` (the table's log radii:
     blender_addon.curves, within 2e-4 relative)."""
@@ -470,6 +534,7 @@ def build_live_group(table: texel_table.TexelTable, layout: live_table.AtlasLayo
         group[live_edits.EDIT_TABLE_PROP] = edits[0].sha256
         branch = live_edits.edit_node(b, gin, *edits)
     edited = branch.colour if branch is not None else None
+    eevee_edited = branch.eevee_colour if branch is not None else None
     colour = _convention(b, gin, 1.0, PRINCIPLED_BASE_SHARE_CYCLES, edited)
     factors = clamped = None
     if grazing:
@@ -489,8 +554,14 @@ def build_live_group(table: texel_table.TexelTable, layout: live_table.AtlasLayo
     media, effective = [], None
     ranges = live_table.atlas_ranges(table)
     edit_factor = branch.radius_factor if branch is not None else None
-    per_unit = _per_unit(b, unit, edit_factor)  # the radius' scale: the EEVEE output's
+    per_unit = _per_unit(b, unit, branch.eevee_radius_factor if branch is not None else None)  # the EEVEE output's
     per_unit_cycles = _per_unit(b, unit, edit_factor, factors.outputs["Radius"] if factors is not None else None)
+    eevee_uvs, eevee_frac = uvs, frac  # the EEVEE output's grid point: the Cycles output's unless an edit moves it
+    if branch is not None:
+        eevee_point = grid_vector(b, _convention(b, gin, 1.0, PRINCIPLED_BASE_SHARE_CYCLES, eevee_edited), layout,
+                                  layout.size)
+        eevee_uvs, eevee_frac = _slice_uvs(b, layout, eevee_point, 12)
+    tile_u = layout.tile[0] / layout.size[0]
     for k in range(1, table.k + 1):
         # the colour's body reflectance, and the anisotropy from the same reads: linked, it costs one mix per
         # component, where a constant is written to the stack by each of the component's three closures
@@ -502,7 +573,11 @@ def build_live_group(table: texel_table.TexelTable, layout: live_table.AtlasLayo
         radius = b.product(21, per_unit_cycles, metres) if grazing else b.vec("MULTIPLY", 21, metres, per_unit_cycles)
         b.link(radius, mixture.inputs[nodes.socket_name(k, "Radius")])
         b.link(g, mixture.inputs[nodes.socket_name(k, "Anisotropy")])
-        term = b.vec("MULTIPLY", 24, weight, b.vec("MULTIPLY", 21, metres, per_unit))
+        eevee_weight = _environment_pair(b, images[f"k{k} Weight"], eevee_uvs[0], tile_u, eevee_frac, 18)
+        eevee_metres = _metres(b, _environment_pair(b, images[f"k{k} Log Radius"], eevee_uvs[0], tile_u, eevee_frac,
+                                                    18),
+                               ranges.log_radius, 20)
+        term = b.vec("MULTIPLY", 24, eevee_weight, b.vec("MULTIPLY", 21, eevee_metres, per_unit))
         effective = term if effective is None else b.vec("ADD", 25, effective, term)
     fit = painted_gain.body_fit(table.options.ior)
     for k, (colour, weight) in enumerate(_painted_media(b, painted, media, fit, ranges.rho_max, 23), start=1):
@@ -514,7 +589,7 @@ def build_live_group(table: texel_table.TexelTable, layout: live_table.AtlasLayo
     for name in ("Roughness", "Normal", *nodes.SPECULAR_INPUTS):
         b.link(gin.outputs[name], mixture.inputs[name])
     b.link(_alpha_emission(b, gin, mixture.outputs["BSSRDF"]), gout.inputs["Cycles"])
-    b.link(_eevee_surface(b, gin, effective, table.options.ior, edited), gout.inputs["EEVEE"])
+    b.link(_eevee_surface(b, gin, effective, table.options.ior, eevee_edited), gout.inputs["EEVEE"])
     b.link(outside, gout.inputs["Outside"])
     b.place()
     return group
@@ -634,6 +709,7 @@ def ensure_live_group(table: texel_table.TexelTable, edits=None, grazing: bool =
         if edits is not None:  # the edit atlases come first: the edit group is built while the table's are made
             edit_images = (edits, live_edits.ensure_images(edits, atlases.get("edits")))
             live_edits.ensure_edit_group(*edit_images)
+            live_edits.ensure_edit_group(*edit_images, eevee=True)
         layout, images = ensure_images(table, atlases.get("live"))
     return build_live_group(table, layout, images, edit_images, grazing)
 

@@ -432,26 +432,36 @@ def add_inputs(group: bpy.types.NodeTree) -> None:
 @dataclass
 class EditBranch:
     """What the edit nodes give the group: the edited ``colour`` and the ``radius_factor`` exp(D_radius) (a vector:
-    one factor per channel)."""
+    one factor per channel), and the same for the EEVEE output (the group of :func:`ensure_edit_group` with
+    ``eevee``)."""
 
     colour: bpy.types.NodeSocket
     radius_factor: bpy.types.NodeSocket
+    eevee_colour: bpy.types.NodeSocket | None = None
+    eevee_radius_factor: bpy.types.NodeSocket | None = None
 
 
 EDIT_GROUP_NAME = "Spectral Skin SSS Edits"
+#: The edit group of the live group's EEVEE output (:func:`ensure_edit_group`).
+EEVEE_EDIT_GROUP_NAME = "Spectral Skin SSS Edits EEVEE"
 
 
-def ensure_edit_group(table: edit_table.EditTable, images: dict[str, bpy.types.Image]) -> bpy.types.NodeTree:
+def ensure_edit_group(table: edit_table.EditTable, images: dict[str, bpy.types.Image],
+                      eevee: bool = False) -> bpy.types.NodeTree:
     """The edit nodes as their own group (inputs Color, Melanin, Blood, Oxygenation; outputs Color, Radius Factor),
     one per edit table and file: Blender adds nodes to a tree in time growing with its size, so the edit nodes in a
-    group of their own keep the live group's build (the operator) fast."""
+    group of their own keep the live group's build (the operator) fast.  ``eevee``: the EEVEE output's group,
+    :data:`EEVEE_EDIT_GROUP_NAME` (:func:`add_edit_branch`)."""
     from . import live
 
+    name = EEVEE_EDIT_GROUP_NAME if eevee else EDIT_GROUP_NAME
     for group in bpy.data.node_groups:
-        if group.name.startswith(EDIT_GROUP_NAME) and group.get(EDIT_TABLE_PROP) == table.sha256 \
-                and group.get("spectral_skin_sss_version") == live.LIVE_VERSION:
+        if group.name.startswith(name) and group.get(EDIT_TABLE_PROP) == table.sha256 \
+                and group.get("spectral_skin_sss_version") == live.LIVE_VERSION \
+                and group.get("spectral_skin_sss_eevee", False) == eevee:
             return group
-    group = bpy.data.node_groups.new(EDIT_GROUP_NAME, "ShaderNodeTree")
+    group = bpy.data.node_groups.new(name, "ShaderNodeTree")
+    group["spectral_skin_sss_eevee"] = eevee
     group[EDIT_TABLE_PROP] = table.sha256
     group["spectral_skin_sss_version"] = live.LIVE_VERSION
     group.interface.new_socket("Color", in_out="INPUT", socket_type="NodeSocketColor")
@@ -462,7 +472,7 @@ def ensure_edit_group(table: edit_table.EditTable, images: dict[str, bpy.types.I
     gout = group.nodes.new("NodeGroupOutput")
     gin.location, gout.location = (-1900.0, 0.0), (4400.0, 0.0)
     builder = live._Builder(group)
-    branch = add_edit_branch(builder, gin, table, images)
+    branch = add_edit_branch(builder, gin, table, images, eevee)
     builder.place()
     group.links.new(branch.colour, gout.inputs["Color"])
     group.links.new(branch.radius_factor, gout.inputs["Radius Factor"])
@@ -470,11 +480,16 @@ def ensure_edit_group(table: edit_table.EditTable, images: dict[str, bpy.types.I
 
 
 def edit_node(b, gin, table: edit_table.EditTable, images: dict[str, bpy.types.Image]) -> EditBranch:
-    """A node of the edit group (:func:`ensure_edit_group`) in the live group, fed by its Color and edit inputs."""
-    node = b.node("ShaderNodeGroup", 1, node_tree=ensure_edit_group(table, images))
-    for name in ("Color", *CONTROL_NAMES, MASK_INPUT, CACHE_INPUT):
-        b.link(gin.outputs[name], node.inputs[name])
-    return EditBranch(colour=node.outputs["Color"], radius_factor=node.outputs["Radius Factor"])
+    """Nodes of the edit groups (:func:`ensure_edit_group`, Cycles' and EEVEE's) in the live group, fed by its Color
+    and edit inputs."""
+    found = []
+    for eevee in (False, True):
+        node = b.node("ShaderNodeGroup", 1, node_tree=ensure_edit_group(table, images, eevee))
+        for name in ("Color", *CONTROL_NAMES, MASK_INPUT, CACHE_INPUT):
+            b.link(gin.outputs[name], node.inputs[name])
+        found.append(node)
+    return EditBranch(colour=found[0].outputs["Color"], radius_factor=found[0].outputs["Radius Factor"],
+                      eevee_colour=found[1].outputs["Color"], eevee_radius_factor=found[1].outputs["Radius Factor"])
 
 
 def _steps(b, gin, j: int, stage: int):
@@ -507,13 +522,17 @@ def _clamp(b, stage: int, value, bounds: tuple[float, float], to: tuple[float, f
     return next(s for s in node.outputs if s.enabled)
 
 
-def add_edit_branch(b, gin, table: edit_table.EditTable, images: dict[str, bpy.types.Image]) -> EditBranch:
+def add_edit_branch(b, gin, table: edit_table.EditTable, images: dict[str, bpy.types.Image],
+                    eevee: bool = False) -> EditBranch:
     """The edit nodes (module docstring) on the group's Color input; ``b`` the group's builder (blender_addon.live).
     Every control image has one row of slice tiles (:func:`exporters.edit_table.EditTable.layout`) and its levels'
     atlases stacked in the blocks of :data:`exporters.edit_table.BLOCK_LEVELS`: at a coordinate of k level steps,
     w = k mod (STACKED + 1) (a Wrap node) puts the lower level at block floor(w) - 1 and the upper one at floor(w),
     neutral outside the image (read as 0 by the lookups' Clip extension), so the four texels a control reads (slices
-    s, s + 1; the two levels) lie at fixed offsets from one UV, and the upper level's weight is w - floor(w)."""
+    s, s + 1; the two levels) lie at fixed offsets from one UV, and the upper level's weight is w - floor(w).
+    ``eevee``: the nodes of the EEVEE output instead, the table read through Environment Textures
+    (blender_addon.live._Builder.environment, which EEVEE samples at full resolution), with no caches (they are
+    for Cycles' cost) and the neutral levels made 0 explicitly (an Environment Texture has no Clip extension)."""
     layout = table.layout()
     width, height = layout.size
     tall = float(edit_table.STACKED * height)
@@ -528,33 +547,43 @@ def add_edit_branch(b, gin, table: edit_table.EditTable, images: dict[str, bpy.t
     slice_uv = b.vec("MULTIPLY_ADD", 52, s, (tile_u, 0.0, 0.0), base)  # slice s, the images' first block
     shifts = {kind: None for kind in edit_table.KINDS}
     still = None  # 1 where every control is neutral, else 0
-    flags = b.math("MAXIMUM", 55, b.math("MULTIPLY", 54, gin.outputs[CACHE_INPUT], -1.0), 0.0)
+    flags = None if eevee else b.math("MAXIMUM", 55, b.math("MULTIPLY", 54, gin.outputs[CACHE_INPUT], -1.0), 0.0)
     for j in range(len(skin_edits.CONTROLS)):
-        unfed = _unfed(b, flags, j)
-        neutral = b.math("MULTIPLY", 59, b.math("COMPARE", 58, gin.outputs[CONTROL_NAMES[j]],
-                                                 skin_edits.NEUTRAL[j], 0.0), unfed)
+        unfed = 1.0 if eevee else _unfed(b, flags, j)
+        neutral = b.math("COMPARE", 58, gin.outputs[CONTROL_NAMES[j]], skin_edits.NEUTRAL[j], 0.0)
+        neutral = neutral if eevee else b.math("MULTIPLY", 59, neutral, unfed)
         still = neutral if still is None else b.math("MULTIPLY", 59, still, neutral)
         wrapped = b.math("WRAP", 47, _steps(b, gin, j, 43), edit_table.STACKED + 1.0, 0.0)
         block = b.math("FLOOR", 48, wrapped)  # the upper level's block
         fraction = b.math("SUBTRACT", 49, wrapped, block)
         uv = b.vec("MULTIPLY_ADD", 52, block, (0.0, up, 0.0), slice_uv)
-        outside = [b.math("MULTIPLY", 51, b.math("COMPARE", 50, block, edge, 0.5), unfed)
+        outside = [b.math("COMPARE", 50, block, edge, 0.5)
                    for edge in (0.0, float(edit_table.STACKED))]  # 1 where the lower / the upper level is neutral
+        outside = outside if eevee else [b.math("MULTIPLY", 51, zero, unfed) for zero in outside]
         for kind in edit_table.KINDS:
             image = images[edit_table.image_name(j, kind)]
-            found = [_unless_zero(b, zero, _bilinear_pair(b, image, uv, [(0.0, dv), (tile_u, dv)], frac, 55,
-                                                          extension="CLIP"), 57)
+            found = [_unless_zero(b, zero, _level(b, image, uv, dv, tile_u, frac, eevee), 57)
                      for dv, zero in zip((-up, 0.0), outside, strict=True)]  # the lower level, the upper one
             value = b.mix("VECTOR", 58, fraction, found[0], found[1])
-            shifts[kind] = _gated_sum(b, neutral, shifts[kind], value)
-    for slot in range(1, CACHE_SLOTS + 1):
-        shifts = _cached(b, gin, slot, images, slice_uv, frac, tile_u, shifts)
-    shifts = _mask_cached(b, gin, images, base, s, frac, tile_u, shifts)
+            shifts[kind] = (value if shifts[kind] is None else b.vec("ADD", 59, shifts[kind], value)) if eevee \
+                else _gated_sum(b, neutral, shifts[kind], value)
+    if not eevee:
+        for slot in range(1, CACHE_SLOTS + 1):
+            shifts = _cached(b, gin, slot, images, slice_uv, frac, tile_u, shifts)
+        shifts = _mask_cached(b, gin, images, base, s, frac, tile_u, shifts)
     active = b.math("SUBTRACT", 60, 1.0, still)
     bounds = table.shift_bounds()
     factor = {kind: _exp(b, shifts[kind], active, bounds[kind], 61) for kind in edit_table.KINDS}
-    edited = b.vec("MULTIPLY", 63, colour, factor["colour"])
-    return EditBranch(colour=edited, radius_factor=factor["radius"])
+    return EditBranch(colour=b.vec("MULTIPLY", 63, colour, factor["colour"]), radius_factor=factor["radius"])
+
+
+def _level(b, image: bpy.types.Image, uv, dv: float, tile_u: float, frac, eevee: bool) -> bpy.types.NodeSocket:
+    """One level's shift (v offset ``dv`` from ``uv``): slices s and s + 1 mixed by ``frac``, read by Image Textures
+    (Clip extension) or, for ``eevee``, Environment Textures."""
+    if not eevee:
+        return _bilinear_pair(b, image, uv, [(0.0, dv), (tile_u, dv)], frac, 55, extension="CLIP")
+    return b.mix("VECTOR", 56, frac, b.environment(image, uv, 53, (0.0, dv)),
+                 b.environment(image, uv, 53, (tile_u, dv)))
 
 
 def _unfed(b, flags, j: int) -> bpy.types.NodeSocket:

@@ -356,9 +356,10 @@ def test_the_built_groups_lay_their_nodes_out_apart(addon):
     table = live.table_for_model(preferences.DEFAULT_MODEL)
     edits = live_edits.table_for_model(preferences.DEFAULT_MODEL, table.sha256)
     group = live.ensure_live_group(table, edits)
-    edit_group = next(n.node_tree for n in group.nodes if n.bl_idname == "ShaderNodeGroup"
-                      and n.node_tree.name.startswith(live_edits.EDIT_GROUP_NAME))
-    for tree in (group, edit_group):
+    edit_groups = [n.node_tree for n in group.nodes if n.bl_idname == "ShaderNodeGroup"
+                   and n.node_tree.name.startswith(live_edits.EDIT_GROUP_NAME)]
+    assert len(edit_groups) == 2  # Cycles' and EEVEE's
+    for tree in (group, *edit_groups):
         spots = [tuple(n.location) for n in tree.nodes]
         assert len(set(spots)) == len(spots) and (0.0, 0.0) not in spots, tree.name
 
