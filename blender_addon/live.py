@@ -296,7 +296,7 @@ class _Builder:
         for the EEVEE output.  EEVEE reads an Image Texture's Linear lookups from the mipmap level that the screen-space
         derivatives of its coordinates select; a table's coordinates, computed from a textured colour, jump between
         neighbouring pixels (from one slice to the next), so its lookups there read blurred levels: on the demo's skin
-        texture the effective radius came out 35 % off in the median.  An equirectangular Environment Texture with
+        texture the effective radius came out 36 % off in the median.  An equirectangular Environment Texture with
         Linear interpolation reads the full-resolution level in EEVEE (Cycles, which reads no mipmaps, never runs these
         nodes: they feed the EEVEE output only)."""
         tex = self.node("ShaderNodeTexEnvironment", stage + 2, image=image, interpolation="Linear",
@@ -463,7 +463,46 @@ def _lookup(b: _Builder, image: bpy.types.Image, uvs, frac, stage: int):
             b.mix("FLOAT", stage + 1, frac, alphas[0], alphas[1]))
 
 
-def _environment_pair(b: _Builder, image: bpy.types.Image, uv, tile_u: float, frac, stage: int) -> bpy.types.NodeSocket:
+#: The group of the EEVEE output's effective radius (:func:`ensure_eevee_radius_group`).
+EEVEE_RADIUS_GROUP_NAME = "Spectral Skin SSS EEVEE Radius"
+
+
+def ensure_eevee_radius_group(table: texel_table.TexelTable, layout: live_table.AtlasLayout,
+                              images: dict[str, bpy.types.Image]) -> bpy.types.NodeTree:
+    """The group (one per table and file) of the EEVEE output's effective radius: input Color (the colour entering
+    the table), output Radius, sum_k w_k r_k per channel in metres, the table's weights and log radii read through
+    Environment Textures (:meth:`_Builder.environment`).  A group of its own: Blender adds a node in time growing
+    with the tree, and the live group is the largest."""
+    for group in bpy.data.node_groups:
+        if (group.name.startswith(EEVEE_RADIUS_GROUP_NAME) and group.get(TABLE_PROP) == table.sha256
+                and group.get("spectral_skin_sss_version") == LIVE_VERSION):
+            return group
+    group = bpy.data.node_groups.new(EEVEE_RADIUS_GROUP_NAME, "ShaderNodeTree")
+    group[TABLE_PROP] = table.sha256
+    group["spectral_skin_sss_version"] = LIVE_VERSION
+    group["spectral_skin_sss_backend"] = "EEVEE RADIUS"
+    group.interface.new_socket("Color", in_out="INPUT", socket_type="NodeSocketColor")
+    group.interface.new_socket("Radius", in_out="OUTPUT", socket_type="NodeSocketVector")
+    gin, gout = group.nodes.new("NodeGroupInput"), group.nodes.new("NodeGroupOutput")
+    gin.location, gout.location = (-1900.0, 0.0), (4000.0, 0.0)
+    b = _Builder(group)
+    uvs, frac = _slice_uvs(b, layout, grid_vector(b, gin.outputs["Color"], layout, layout.size), 12)
+    tile_u = layout.tile[0] / layout.size[0]
+    ranges = live_table.atlas_ranges(table)
+    total = None
+    for k in range(1, table.k + 1):
+        weight = _environment_pair(b, images[f"k{k} Weight"], uvs[0], tile_u, frac, 14)
+        metres = _metres(b, _environment_pair(b, images[f"k{k} Log Radius"], uvs[0], tile_u, frac, 14),
+                         ranges.log_radius, 18)
+        total = b.vec("MULTIPLY", 19, weight, metres) if total is None \
+            else b.vec("MULTIPLY_ADD", 19, weight, metres, total)
+    b.link(total, gout.inputs["Radius"])
+    b.place()
+    return group
+
+
+def _environment_pair(b: _Builder, image: bpy.types.Image, uv, tile_u: float, frac,
+                      stage: int) -> bpy.types.NodeSocket:
     """:func:`_lookup`'s RGB for the EEVEE output: slices s (at ``uv``) and s + 1 (``tile_u`` further) read through
     Environment Textures (:meth:`_Builder.environment`), mixed by ``frac``."""
     found = [b.environment(image, uv, stage, (du, 0.0)) for du in (0.0, tile_u)]
@@ -551,17 +590,14 @@ def build_live_group(table: texel_table.TexelTable, layout: live_table.AtlasLayo
                   gin.outputs["Unit Scale"])  # Blender units per metre of radius
     unit.node.name = "Translucency"
     weight_share = b.math("ADD", 24, gin.outputs["Subsurface Weight"], 0.0, clamp=True)
-    media, effective = [], None
+    media = []
     ranges = live_table.atlas_ranges(table)
     edit_factor = branch.radius_factor if branch is not None else None
     per_unit = _per_unit(b, unit, branch.eevee_radius_factor if branch is not None else None)  # the EEVEE output's
     per_unit_cycles = _per_unit(b, unit, edit_factor, factors.outputs["Radius"] if factors is not None else None)
-    eevee_uvs, eevee_frac = uvs, frac  # the EEVEE output's grid point: the Cycles output's unless an edit moves it
-    if branch is not None:
-        eevee_point = grid_vector(b, _convention(b, gin, 1.0, PRINCIPLED_BASE_SHARE_CYCLES, eevee_edited), layout,
-                                  layout.size)
-        eevee_uvs, eevee_frac = _slice_uvs(b, layout, eevee_point, 12)
-    tile_u = layout.tile[0] / layout.size[0]
+    eevee_radius = b.node("ShaderNodeGroup", 20, node_tree=ensure_eevee_radius_group(table, layout, images))
+    b.link(colour if branch is None else _convention(b, gin, 1.0, PRINCIPLED_BASE_SHARE_CYCLES, eevee_edited),
+           eevee_radius.inputs["Color"])
     for k in range(1, table.k + 1):
         # the colour's body reflectance, and the anisotropy from the same reads: linked, it costs one mix per
         # component, where a constant is written to the stack by each of the component's three closures
@@ -573,12 +609,6 @@ def build_live_group(table: texel_table.TexelTable, layout: live_table.AtlasLayo
         radius = b.product(21, per_unit_cycles, metres) if grazing else b.vec("MULTIPLY", 21, metres, per_unit_cycles)
         b.link(radius, mixture.inputs[nodes.socket_name(k, "Radius")])
         b.link(g, mixture.inputs[nodes.socket_name(k, "Anisotropy")])
-        eevee_weight = _environment_pair(b, images[f"k{k} Weight"], eevee_uvs[0], tile_u, eevee_frac, 18)
-        eevee_metres = _metres(b, _environment_pair(b, images[f"k{k} Log Radius"], eevee_uvs[0], tile_u, eevee_frac,
-                                                    18),
-                               ranges.log_radius, 20)
-        term = b.vec("MULTIPLY", 24, eevee_weight, b.vec("MULTIPLY", 21, eevee_metres, per_unit))
-        effective = term if effective is None else b.vec("ADD", 25, effective, term)
     fit = painted_gain.body_fit(table.options.ior)
     for k, (colour, weight) in enumerate(_painted_media(b, painted, media, fit, ranges.rho_max, 23), start=1):
         b.link(colour, mixture.inputs[nodes.socket_name(k, "Color")])
@@ -589,6 +619,7 @@ def build_live_group(table: texel_table.TexelTable, layout: live_table.AtlasLayo
     for name in ("Roughness", "Normal", *nodes.SPECULAR_INPUTS):
         b.link(gin.outputs[name], mixture.inputs[name])
     b.link(_alpha_emission(b, gin, mixture.outputs["BSSRDF"]), gout.inputs["Cycles"])
+    effective = b.vec("MULTIPLY", 24, eevee_radius.outputs["Radius"], per_unit)
     b.link(_eevee_surface(b, gin, effective, table.options.ior, eevee_edited), gout.inputs["EEVEE"])
     b.link(outside, gout.inputs["Outside"])
     b.place()
