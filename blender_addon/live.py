@@ -189,7 +189,8 @@ class _Builder:
         self.locations: list[tuple[int, float, float]] = []
         #: A zero vector computed at each shading point (blender_addon.nodes.computed_zero), once the group has one.
         self.zero: bpy.types.NodeSocket | None = None
-        self._directions: dict[tuple, object] = {}  # the Environment Textures' direction nodes (direction)
+        #: The parts of the Environment Textures' directions made so far (:meth:`direction`), by what they depend on.
+        self._direction_parts: dict[tuple, object] = {}
 
     def node(self, kind: str, stage: int, **props) -> bpy.types.Node:
         self._locate(len(self.group.nodes), stage)
@@ -285,9 +286,9 @@ class _Builder:
 
     def _made(self, key: tuple, make: Callable):
         """What ``make()`` made for ``key`` in this group (made on the first call)."""
-        if key not in self._directions:
-            self._directions[key] = make()
-        return self._directions[key]
+        if key not in self._direction_parts:
+            self._direction_parts[key] = make()
+        return self._direction_parts[key]
 
     def environment(self, image: bpy.types.Image, uv: bpy.types.NodeSocket, stage: int,
                     offset: tuple[float, float] = (0.0, 0.0),
@@ -567,13 +568,14 @@ def build_live_group(table: texel_table.TexelTable, layout: live_table.AtlasLayo
     group, gin, gout = _new_group(table.k, table.sha256)
     group[GRAZING_PROP] = grazing
     b = _Builder(group)
-    branch = None
+    branch = eevee_branch = None
     if edits is not None:
         live_edits.add_inputs(group)
         group[live_edits.EDIT_TABLE_PROP] = edits[0].sha256
         branch = live_edits.edit_node(b, gin, *edits)
+        eevee_branch = live_edits.edit_node(b, gin, *edits, eevee=True)
     edited = branch.colour if branch is not None else None
-    eevee_edited = branch.eevee_colour if branch is not None else None
+    eevee_edited = eevee_branch.colour if eevee_branch is not None else None
     colour = _convention(b, gin, 1.0, PRINCIPLED_BASE_SHARE_CYCLES, edited)
     factors = clamped = None
     if grazing:
@@ -593,10 +595,10 @@ def build_live_group(table: texel_table.TexelTable, layout: live_table.AtlasLayo
     media = []
     ranges = live_table.atlas_ranges(table)
     edit_factor = branch.radius_factor if branch is not None else None
-    per_unit = _per_unit(b, unit, branch.eevee_radius_factor if branch is not None else None)  # the EEVEE output's
+    per_unit = _per_unit(b, unit, eevee_branch.radius_factor if eevee_branch is not None else None)  # EEVEE's
     per_unit_cycles = _per_unit(b, unit, edit_factor, factors.outputs["Radius"] if factors is not None else None)
     eevee_radius = b.node("ShaderNodeGroup", 20, node_tree=ensure_eevee_radius_group(table, layout, images))
-    b.link(colour if branch is None else _convention(b, gin, 1.0, PRINCIPLED_BASE_SHARE_CYCLES, eevee_edited),
+    b.link(colour if eevee_edited is None else _convention(b, gin, 1.0, PRINCIPLED_BASE_SHARE_CYCLES, eevee_edited),
            eevee_radius.inputs["Color"])
     for k in range(1, table.k + 1):
         # the colour's body reflectance, and the anisotropy from the same reads: linked, it costs one mix per

@@ -432,13 +432,10 @@ def add_inputs(group: bpy.types.NodeTree) -> None:
 @dataclass
 class EditBranch:
     """What the edit nodes give the group: the edited ``colour`` and the ``radius_factor`` exp(D_radius) (a vector:
-    one factor per channel), and the same for the EEVEE output (the group of :func:`ensure_edit_group` with
-    ``eevee``)."""
+    one factor per channel)."""
 
     colour: bpy.types.NodeSocket
     radius_factor: bpy.types.NodeSocket
-    eevee_colour: bpy.types.NodeSocket | None = None
-    eevee_radius_factor: bpy.types.NodeSocket | None = None
 
 
 EDIT_GROUP_NAME = "Spectral Skin SSS Edits"
@@ -479,17 +476,14 @@ def ensure_edit_group(table: edit_table.EditTable, images: dict[str, bpy.types.I
     return group
 
 
-def edit_node(b, gin, table: edit_table.EditTable, images: dict[str, bpy.types.Image]) -> EditBranch:
-    """Nodes of the edit groups (:func:`ensure_edit_group`, Cycles' and EEVEE's) in the live group, fed by its Color
-    and edit inputs."""
-    found = []
-    for eevee in (False, True):
-        node = b.node("ShaderNodeGroup", 1, node_tree=ensure_edit_group(table, images, eevee))
-        for name in ("Color", *CONTROL_NAMES, MASK_INPUT, CACHE_INPUT):
-            b.link(gin.outputs[name], node.inputs[name])
-        found.append(node)
-    return EditBranch(colour=found[0].outputs["Color"], radius_factor=found[0].outputs["Radius Factor"],
-                      eevee_colour=found[1].outputs["Color"], eevee_radius_factor=found[1].outputs["Radius Factor"])
+def edit_node(b, gin, table: edit_table.EditTable, images: dict[str, bpy.types.Image],
+              eevee: bool = False) -> EditBranch:
+    """A node of the edit group (:func:`ensure_edit_group`; ``eevee``: the EEVEE output's) in the live group, fed by
+    its Color and edit inputs."""
+    node = b.node("ShaderNodeGroup", 1, node_tree=ensure_edit_group(table, images, eevee))
+    for name in ("Color", *CONTROL_NAMES, MASK_INPUT, CACHE_INPUT):
+        b.link(gin.outputs[name], node.inputs[name])
+    return EditBranch(colour=node.outputs["Color"], radius_factor=node.outputs["Radius Factor"])
 
 
 def _steps(b, gin, j: int, stage: int):

@@ -10,9 +10,9 @@ up to ΔE76 8.8 (speckles in Material Preview).  Uniform colours, as the other E
 One EEVEE process per supported Blender (software OpenGL where there is no GPU: Mesa, EGL surfaceless) renders the
 demo's medium skin texture one texel per pixel after Invert Skin Albedo, and emits what the group's EEVEE output
 takes: the effective radius (at neutral inputs and under Blood 2.5) and the edited colour.  The references are
-numpy's (exporters.live_table, exporters.edit_table), at the texels EEVEE read.  Mesa's bilinear weights are coarse
-(a lookup a quarter of the way between two texels lands 0.04 texel off), which leaves up to 0.6 % on the radius:
-the bounds allow 2 % in the median and 3 % anywhere.
+numpy's (exporters.edit_table: table_records, effective_radius, shift), at the texels EEVEE read.  Mesa's bilinear
+weights are coarse (a lookup a quarter of the way between two texels lands 0.04 texel off), which leaves up to
+0.7 % on the radius: the bounds allow 2 % in the median and 3 % anywhere.
 """
 
 from __future__ import annotations
@@ -25,7 +25,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from exporters import edit_table, live_table, painted_gain, texel_table
+from exporters import edit_table, texel_table
 from exporters.bake.table_cache import default_table_path
 from exporters.colorimetry import delta_e76, linear_srgb_to_lab, srgb_decode
 from tests.addon_scene import write_image
@@ -129,12 +129,8 @@ def _tables():
 
 
 def _effective_radius(texels: texel_table.TexelTable, rgb: np.ndarray) -> np.ndarray:
-    """sum_k w_k r_k (N, 3), metres, of the table's K media looked up at ``rgb`` (what the EEVEE output scales)."""
-    grids, layout = live_table.grid_values(texels), live_table.layout_of(texels)
-    rgb = painted_gain.painted_target(rgb)
-    return sum(live_table.lookup(grids[f"k{k} Weight"], layout, rgb)[:, :3]
-               * np.exp(live_table.lookup(grids[f"k{k} Log Radius"], layout, rgb)[:, :3])
-               for k in range(1, texels.k + 1))
+    """sum_k w_k r_k (N, 3), metres, of the table's media at ``rgb`` as the live group looks them up (numpy)."""
+    return edit_table.effective_radius(edit_table.table_records(texels, rgb, ("cycles",)))
 
 
 @pytest.mark.slow
