@@ -15,7 +15,7 @@
     Roughness taken, an EEVEE-target output added; it reports the share of the image outside the domain; a
     material without a Principled BSDF is refused with nothing changed;
 (f) EEVEE (software OpenGL where there is no GPU, one subprocess): the live group's EEVEE output near the painted
-    colour, and PRINCIPLED_BASE_SHARE against a Principled BSDF rendered in EEVEE.
+    colour, skin or not (make-up, ink, paint), and PRINCIPLED_BASE_SHARE against a Principled BSDF rendered in EEVEE.
 """
 
 from __future__ import annotations
@@ -39,6 +39,7 @@ from exporters.colorimetry import delta_e76, linear_srgb_to_lab, srgb_decode, sr
 from tests.addon_scene import run_invert, skin_object, snapshot, write_image  # noqa: E402
 from tests.installed_addon_check import media_probe  # noqa: E402
 from tests.test_bake_painted_colour import _scene, box_material, painted_codes, render_stripes, stripes_texture  # noqa: E402,I001
+from tests.test_painted_gain import NON_SKIN  # noqa: E402
 
 PAINTED_SAMPLES = 256
 #: Medium skin, linear sRGB (tests/test_bake_fidelity.py's medium tone).
@@ -421,14 +422,16 @@ EEVEE_TAA = 4
 @pytest.fixture(scope="module")
 def eevee_renders(tmp_path_factory):
     """One EEVEE process (software OpenGL where there is no GPU: Mesa, EGL surfaceless) rendering the painted
-    stripes and a black one on the probe box, straight above under the white world: first the artist's Principled
-    BSDF (Roughness 0.5, skin's IOR), then the material after Invert Skin Albedo (the live group's EEVEE output).
-    Returns the painted linear colours (3, 3) and the stripes' mean linear RGB of both renders (4, 3)."""
+    skin stripes, a black one and the sixteen colours that are not skin (tests.test_painted_gain.NON_SKIN) on the
+    probe box, straight above under the white world: first the artist's Principled BSDF (Roughness 0.5, skin's
+    IOR), then the material after Invert Skin Albedo (the live group's EEVEE output).  Returns the painted linear
+    colours of the skin stripes (3, 3) and of the others (16, 3), and the stripes' mean linear RGB of both renders
+    (20, 3: skin, black, the others)."""
     import json
     import subprocess
 
     tmp = tmp_path_factory.mktemp("eevee")
-    codes = np.concatenate([painted_codes(), np.zeros((1, 3), np.uint8)])
+    codes = np.concatenate([painted_codes(), np.zeros((1, 3), np.uint8), np.asarray(NON_SKIN, np.uint8)])
     script = EEVEE_SCRIPT.format(root=str(ROOT), codes=codes.tolist(), tmp=str(tmp), taa=EEVEE_TAA)
     env = dict(os.environ, EGL_PLATFORM=os.environ.get("EGL_PLATFORM", "surfaceless"),
                PYTHONPATH=os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")]))
@@ -436,14 +439,15 @@ def eevee_renders(tmp_path_factory):
     line = next((ln for ln in done.stdout.splitlines() if ln.startswith("RESULT")), None)
     assert line is not None, done.stdout[-2000:] + done.stderr[-2000:]
     result = json.loads(line[len("RESULT"):])
-    return _decode(codes[:3].astype(np.float64)), np.array(result["principled"]), np.array(result["live"])
+    return (_decode(codes[:3].astype(np.float64)), _decode(codes[4:].astype(np.float64)),
+            np.array(result["principled"]), np.array(result["live"]))
 
 
 @pytest.mark.slow
 def test_eevee_renders_the_live_material_near_the_painted_colour(eevee_renders):
     """The live group's EEVEE output: each painted stripe within ΔE76 1 of the painted colour plus the coat's F0
     (EEVEE's subsurface is an approximation), never black."""
-    painted, _, eevee = eevee_renders
+    painted, _, _, eevee = eevee_renders
     eevee = eevee[:3]
     f0 = ((1.4 - 1.0) / (1.4 + 1.0)) ** 2
     de = delta_e76(_lab(eevee), _lab(painted + f0))
@@ -454,12 +458,24 @@ def test_eevee_renders_the_live_material_near_the_painted_colour(eevee_renders):
 
 
 @pytest.mark.slow
+def test_eevee_renders_colours_that_are_not_skin_as_painted(eevee_renders):
+    """Make-up, ink and paint through the live group's EEVEE output (Material Preview): the sixteen colours of
+    tests.test_painted_gain.NON_SKIN within ΔE76 1.0 mean / 2.0 max of the painted colour plus the coat's F0, the
+    bounds the Cycles output meets (tests/test_live_colours.py); the nearest skin colour would be up to ΔE76 22 off."""
+    _, painted, _, live_rgb = eevee_renders
+    f0 = ((1.4 - 1.0) / (1.4 + 1.0)) ** 2
+    de = delta_e76(_lab(live_rgb[4:]), _lab(painted + f0))
+    print(f"\nEEVEE, not skin: ΔE76 {np.round(de, 2).tolist()} mean {de.mean():.2f} max {de.max():.2f}")
+    assert de.mean() <= 1.0 and de.max() <= 2.0, de
+
+
+@pytest.mark.slow
 def test_principled_base_share_is_what_eevee_renders(eevee_renders):
     """blender_addon.live.PRINCIPLED_BASE_SHARE (the share of the light a Principled BSDF's specular layer leaves its
     base, by which the EEVEE output divides the colour) against a Principled BSDF rendered in EEVEE: (render of
     the painted base - render of a black base) / painted, weighted by luminance per stripe, within 0.015 of it
     (EEVEE's per-channel shares spread 0.93-0.97 on the dark stripe's blue, 0.96-0.97 elsewhere)."""
-    painted, principled, _ = eevee_renders
+    painted, _, principled, _ = eevee_renders
     share = (principled[:3] - principled[3]) / painted
     luminance = np.array([0.2126, 0.7152, 0.0722])  # linear sRGB -> Y (ITU-R BT.709)
     by_luminance = ((share * painted) @ luminance) / (painted @ luminance)
