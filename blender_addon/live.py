@@ -962,13 +962,13 @@ def _state(material: bpy.types.Material) -> dict:
             "nodes": {n.name for n in tree.nodes},
             "links": [(ln.from_node.name, ln.from_socket.identifier, ln.to_node.name, ln.to_socket.identifier)
                       for ln in tree.links],
-            "props": {p: material[p] for p in (nodes.PREVIOUS_SURFACE_PROP, wiring.REPLACED_LINKS_PROP)
-                      if p in material}}
+            "props": {p: material[p] for p in wiring.MATERIAL_PROPS if p in material},
+            "thickness_from_shadow": material.use_thickness_from_shadow}
 
 
 def _restore(material: bpy.types.Material, state: dict) -> None:
-    """Undo a failed wiring: new nodes, groups and images removed, the links and the add-on's material properties
-    as they were (links to nodes no longer there are skipped)."""
+    """Undo a failed wiring: new nodes, groups and images removed, the links, the add-on's material properties and
+    EEVEE's Thickness From Shadow as they were (links to nodes no longer there are skipped)."""
     tree = material.node_tree
     for node in [n for n in tree.nodes if n.name not in state["nodes"]]:
         tree.nodes.remove(node)
@@ -980,7 +980,9 @@ def _restore(material: bpy.types.Material, state: dict) -> None:
         bpy.data.node_groups.remove(bpy.data.node_groups[name])
     for name in set(bpy.data.images.keys()) - state["images"]:
         bpy.data.images.remove(bpy.data.images[name])
-    for prop in (nodes.PREVIOUS_SURFACE_PROP, wiring.REPLACED_LINKS_PROP):
+    for prop in wiring.MATERIAL_PROPS:
         material.pop(prop, None)
     for prop, value in state["props"].items():
         material[prop] = value
+    if material.use_thickness_from_shadow != state["thickness_from_shadow"]:
+        material.use_thickness_from_shadow = state["thickness_from_shadow"]

@@ -679,7 +679,8 @@ def wire_into_material(material: bpy.types.Material, group: bpy.types.NodeTree,
     renderer renders).  Whatever was wired by the add-on before is removed first.  The name of the node that fed
     the active output is stored in ``material[PREVIOUS_SURFACE_PROP]``.  If that node is a Principled BSDF (or a
     group wired here before), what feeds its Normal (normal map, bump chain) also feeds the group's Normal, and its
-    Roughness (the link, else the value) becomes the coat's; otherwise the coat gets :data:`SKIN_ROUGHNESS`.  New
+    Roughness (the link, else the value) becomes the coat's; otherwise the coat gets :data:`SKIN_ROUGHNESS`.  EEVEE's
+    Thickness From Shadow is turned on (wiring.use_shadow_thickness: back-lit thin parts glow in EEVEE too).  New
     nodes sit in a frame labelled "Spectral Skin SSS" and are tagged (``wiring.ADDED_PROP``) for removal.  Images
     are set to Non-Color.  ``interpolation`` defaults to Closest because the maps hold Cycles' colour A, not the
     albedo alpha = f(A), and f is non-linear (linear filtering gives a small bias at texel edges).
@@ -706,6 +707,7 @@ def wire_into_material(material: bpy.types.Material, group: bpy.types.NodeTree,
         material[PREVIOUS_SURFACE_PROP] = previous.name
     wiring.feed_render_outputs(material, {"CYCLES": gnode.outputs[output],
                                           "EEVEE": gnode.outputs[eevee_output or output]}, gnode)
+    wiring.use_shadow_thickness(material)
     _take_surface_inputs(tree, previous, gnode)
     for i, ((k, kind), image) in enumerate(sorted((images or {}).items())):
         image.colorspace_settings.name = "Non-Color"

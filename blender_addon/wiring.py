@@ -20,6 +20,14 @@ before the tags existed (the group fed the active output; the node it replaced n
 ``material[PREVIOUS_SURFACE_PROP]``) are recognised by the add-on's frame, groups and EEVEE output and restored the
 same way.  :func:`purge_unused` then removes the add-on's node groups and images that no material uses any more.
 
+**EEVEE's thickness.**  EEVEE takes an object's thickness, for the light its subsurface passes through thin parts,
+from the Material Output's Thickness or else from the object's smallest dimension: the whole head for an ear.  At
+the skin's millimetre radii that leaves back-lit ears and nostrils dark in EEVEE where Cycles, which follows the
+light through the real geometry, shows them glowing.  Wiring therefore turns on the material's EEVEE setting
+*Thickness From Shadow* (``use_thickness_from_shadow``: the shadow maps of shadow-casting lights give the thickness
+the light crossed), the artist's value recorded in ``material[THICKNESS_FROM_SHADOW_PROP]`` and put back on
+removal.
+
 **Linked data.**  A material linked from another .blend, or a library override of one, cannot keep node edits
 (they are not saved: the library's material comes back on reload), so :func:`linked_error` says so and what to do.
 """
@@ -51,8 +59,10 @@ EDIT_TABLE_PROP = "spectral_skin_sss_edit_table"
 #: Custom property on the grazing-light group and its images (blender_addon.oblique): the correction's SHA-256.
 OBLIQUE_PROP = "spectral_skin_sss_oblique"
 _IMAGE_TAGS = ("spectral_skin_sss_table", "spectral_skin_sss_bake_key", EDIT_TABLE_PROP, OBLIQUE_PROP)
+#: Custom property on a material: its EEVEE setting Thickness From Shadow before wiring (1 or 0), put back on removal.
+THICKNESS_FROM_SHADOW_PROP = "spectral_skin_sss_thickness_from_shadow"
 #: Material properties the add-on sets (removed by :func:`unwire`).
-_MATERIAL_PROPS = (PREVIOUS_SURFACE_PROP, REPLACED_LINKS_PROP)
+MATERIAL_PROPS = (PREVIOUS_SURFACE_PROP, REPLACED_LINKS_PROP, THICKNESS_FROM_SHADOW_PROP)
 
 
 def linked_error(material: bpy.types.Material) -> str | None:
@@ -175,7 +185,7 @@ def unwire(material: bpy.types.Material) -> int:
     how many nodes and material properties of the add-on's were removed (0: none was there, nothing changed)."""
     tree = material.node_tree
     ours = added_nodes(material)
-    if not ours and not any(p in material for p in _MATERIAL_PROPS):
+    if not ours and not any(p in material for p in MATERIAL_PROPS):
         return 0
     out = active_output(tree)
     legacy_fed = out is not None and any(ln.from_node in ours for ln in out.inputs["Surface"].links)
@@ -187,10 +197,21 @@ def unwire(material: bpy.types.Material) -> int:
         relink(tree, link["from_node"], link["from_socket"], link["to_node"], link["to_socket"])
     if legacy_fed and previous in tree.nodes and not out.inputs["Surface"].is_linked:
         tree.links.new(tree.nodes[previous].outputs[0], out.inputs["Surface"])
-    props = [p for p in _MATERIAL_PROPS if p in material]
+    if THICKNESS_FROM_SHADOW_PROP in material:
+        material.use_thickness_from_shadow = bool(material[THICKNESS_FROM_SHADOW_PROP])
+    props = [p for p in MATERIAL_PROPS if p in material]
     for prop in props:
         del material[prop]
     return len(ours) + len(props)
+
+
+def use_shadow_thickness(material: bpy.types.Material) -> None:
+    """Turn on EEVEE's Thickness From Shadow for ``material`` (module docstring, "EEVEE's thickness"), the artist's
+    value recorded for :func:`unwire` (the first one: wiring again keeps it)."""
+    if THICKNESS_FROM_SHADOW_PROP not in material:
+        material[THICKNESS_FROM_SHADOW_PROP] = int(material.use_thickness_from_shadow)
+    if not material.use_thickness_from_shadow:
+        material.use_thickness_from_shadow = True
 
 
 def relink(tree: bpy.types.NodeTree, from_node: str, from_id: str, to_node: str, to_id: str) -> None:

@@ -133,7 +133,8 @@ def snapshot(folder: Path | None = None) -> dict:
         "groups": sorted(bpy.data.node_groups.keys()),
         "materials": {m.name: (sorted(n.name for n in m.node_tree.nodes),
                                sorted((ln.from_node.name, ln.from_socket.identifier, ln.to_node.name,
-                                       ln.to_socket.identifier) for ln in m.node_tree.links))
+                                       ln.to_socket.identifier) for ln in m.node_tree.links),
+                               sorted(m.keys()), m.use_thickness_from_shadow)
                       for m in bpy.data.materials if m.node_tree is not None},
         "osl": bpy.context.scene.cycles.shading_system,
         "texts": sorted(bpy.data.texts.keys()),
