@@ -3,7 +3,8 @@
 Modules: ``preferences`` (model path, threads), ``operators`` (Invert Skin Albedo, Add Skin SSS
 Mixture, Remove Skin SSS), ``baker`` (the bpy side of a bake: albedo source, images, wiring), ``panels`` (Shader
 Editor tab "Skin SSS", Material properties, per-scene bake settings), ``nodes`` (the node group), ``wiring`` (where
-the add-on's nodes sit in a material, and how they leave it), ``osl`` (Script-node helpers), ``probe``
+the add-on's nodes sit in a material, and how they leave it), ``follow`` (the live group follows the artist's
+Principled BSDF), ``osl`` (Script-node helpers), ``probe``
 (render-fidelity probe used by the tests), ``core`` (``exporters`` beside this package); ``bake.py`` is the headless
 script.
 
@@ -24,7 +25,7 @@ import atexit
 
 import bpy
 
-from . import live_edits, operators, panels, preferences
+from . import follow, live_edits, operators, panels, preferences
 
 _classes = (preferences.SpectralSkinPreferences, *operators.classes, *live_edits.classes, *panels.classes)
 
@@ -38,6 +39,7 @@ def register(addon_name: str | None = None) -> None:
         bpy.utils.register_class(cls)
     panels.register_properties()
     live_edits.register_handlers()
+    follow.register_handlers()
     atexit.unregister(unregister)
     atexit.register(unregister)
 
@@ -46,6 +48,7 @@ def unregister() -> None:
     """Unregister every class and property this add-on registered; safe to call again."""
     atexit.unregister(unregister)
     live_edits.unregister_handlers()
+    follow.unregister_handlers()
     panels.unregister_properties()
     for cls in reversed(_classes):
         if getattr(cls, "is_registered", False):

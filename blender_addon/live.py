@@ -861,6 +861,8 @@ def apply(context: bpy.types.Context, model_path: str, unit_scale_m: float, colo
     as they are, so an edit made on the node stays; LiveInputError when the model has no edit table). Bad input
     raises LiveInputError before anything changes; a failure while wiring removes what was made (call from an
     operator with UNDO for Ctrl+Z)."""
+    from . import follow  # it reads this module's wiring (colour_source)
+
     obj = context.object
     material = obj.active_material if obj is not None else None
     if material is None or material.node_tree is None:
@@ -883,6 +885,7 @@ def apply(context: bpy.types.Context, model_path: str, unit_scale_m: float, colo
         wired.inputs["Unit Scale"].default_value = unit_scale_m
         wired.inputs["Principled Convention"].default_value = float(principled_convention)
         live_edits.set_edit(wired, edit)
+        follow.follow(material)  # what changed on the Principled BSDF while no handler ran (the add-on disabled)
         return (f"up to date: '{material.name}' already renders through the live group (Unit Scale {unit_scale_m:g} m "
                 "per Blender unit)")
     _, colour, _ = colour_source(material)
@@ -896,6 +899,7 @@ def apply(context: bpy.types.Context, model_path: str, unit_scale_m: float, colo
             gnode = wire_live(material, group, unit_scale_m)
             gnode.inputs["Principled Convention"].default_value = float(principled_convention)
             live_edits.set_edit(gnode, edit)
+            follow.record(material)
         except BaseException:
             _restore(material, before)
             raise

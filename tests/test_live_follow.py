@@ -1,0 +1,104 @@
+"""The live group follows what the artist changes on their Principled BSDF after Invert Skin Albedo
+(blender_addon.follow), in real Cycles on the probe box (camera straight above, white world).
+
+* A layer mixed into Base Color afterwards (a lipstick red over the medium skin texture) renders: the render is the
+  new painted colour plus the coat (Blender's own Principled specular layer), within the non-skin colours' bounds,
+  where the group left as wired renders the skin texture.
+* Values and links made later on the Principled BSDF (Roughness, Coat Weight, a normal map) reach the group; a value
+  the artist set on the group node itself stays until the same input changes on the Principled BSDF; Remove Skin
+  SSS leaves no record behind.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+import bpy
+import numpy as np
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+import blender_addon  # noqa: E402
+from blender_addon import live, probe, wiring  # noqa: E402
+from exporters.colorimetry import delta_e76, linear_srgb_to_lab, srgb_decode  # noqa: E402
+from tests.addon_scene import principled_coat_reflectance, render_linear, run_invert, write_image  # noqa: E402
+from tests.test_bake_painted_colour import box_material  # noqa: E402
+
+SKIN = (180, 120, 95)  # medium skin, 8-bit sRGB
+LIPSTICK = (190, 30, 45)
+SIZE = 8  # texels and pixels per side
+ROUGHNESS = 0.5  # the Principled BSDF's default, which the group takes
+
+
+@pytest.fixture
+def wired(tmp_path):
+    """The probe scene with the artist's material (skin texture -> Principled BSDF), wired live; (scene, material,
+    the Principled BSDF, the group node, the texture node)."""
+    bpy.ops.wm.read_homefile(use_empty=True)
+    blender_addon.register()
+    scene = probe.new_scene(samples=64, resolution=SIZE, seed=3)
+    pixels = np.broadcast_to(np.array(SKIN, np.uint8), (SIZE, SIZE, 3))
+    image = bpy.data.images.load(str(write_image(tmp_path / "skin.png", pixels, "uint8")))
+    mat = box_material(image, "principled")
+    assert run_invert(bpy.data.objects["ProbeSlab"], mode="LIVE") == {"FINISHED"}
+    principled = mat.node_tree.nodes["Principled BSDF"]
+    texture = principled.inputs["Base Color"].links[0].from_node
+    yield scene, mat, principled, wiring.wired_group_node(mat), texture
+    blender_addon.unregister()
+
+
+def _render_delta_e(scene, tmp_path: Path, name: str, painted: np.ndarray) -> float:
+    """ΔE76 of the probe's mean render (the coat's reflection taken off) from the ``painted`` linear colour."""
+    rgb = render_linear(scene, tmp_path / f"{name}.exr")[2:-2, 2:-2].reshape(-1, 3).mean(axis=0)
+    coat = principled_coat_reflectance(scene, [1.0], ROUGHNESS, live.nodes.DEFAULT_IOR)[0]
+    return float(delta_e76(linear_srgb_to_lab((rgb - coat)[None]), linear_srgb_to_lab(painted[None]))[0])
+
+
+@pytest.mark.slow
+def test_a_layer_mixed_into_base_color_afterwards_renders(tmp_path, wired):
+    scene, mat, principled, gnode, texture = wired
+    tree = mat.node_tree
+    layer = tree.nodes.new("ShaderNodeMix")  # lipstick over the skin, factor 1 (a painted layer's mask at full)
+    layer.data_type = "RGBA"
+    layer.inputs["Factor"].default_value = 1.0
+    tree.links.new(texture.outputs["Color"], layer.inputs["A"])
+    layer.inputs["B"].default_value = (*srgb_decode(np.array(LIPSTICK) / 255.0), 1.0)
+    tree.links.new(layer.outputs["Result"], principled.inputs["Base Color"])
+    lipstick = srgb_decode(np.array(LIPSTICK, np.float64) / 255.0)
+    blender_addon.unregister()  # no handler: the group still reads the skin texture
+    stale = _render_delta_e(scene, tmp_path, "stale", lipstick)
+    blender_addon.register()
+    bpy.context.view_layer.update()  # the depsgraph update the node editor's link makes
+    assert gnode.inputs["Color"].links[0].from_node == layer
+    followed = _render_delta_e(scene, tmp_path, "followed", lipstick)
+    print(f"\nlipstick layer: ΔE76 {followed:.2f} with the group following, {stale:.2f} without")
+    assert followed <= 2.0 and stale > 10.0
+
+
+def test_values_and_links_follow_and_the_groups_own_values_stay(tmp_path, wired):
+    _, mat, principled, gnode, _ = wired
+    tree = mat.node_tree
+    principled.inputs["Roughness"].default_value = 0.8
+    principled.inputs["Coat Weight"].default_value = 0.4
+    normal = tree.nodes.new("ShaderNodeNormalMap")
+    tree.links.new(normal.outputs["Normal"], principled.inputs["Normal"])
+    bpy.context.view_layer.update()
+    assert gnode.inputs["Roughness"].default_value == pytest.approx(0.8)
+    assert gnode.inputs["Coat Weight"].default_value == pytest.approx(0.4)
+    assert gnode.inputs["Normal"].links[0].from_node == normal
+    gnode.inputs["Roughness"].default_value = 0.3  # the artist's own value on the group node
+    principled.inputs["Coat Weight"].default_value = 0.1
+    tree.links.remove(principled.inputs["Normal"].links[0])
+    bpy.context.view_layer.update()
+    assert gnode.inputs["Roughness"].default_value == pytest.approx(0.3)  # Roughness did not change on the Principled
+    assert gnode.inputs["Coat Weight"].default_value == pytest.approx(0.1)
+    assert not gnode.inputs["Normal"].is_linked
+    taken = json.loads(mat[wiring.TAKEN_INPUTS_PROP])
+    assert taken["Roughness"] == ["value", 0.8] and taken["Normal"][0] == "value"
+    with bpy.context.temp_override(object=bpy.data.objects["ProbeSlab"], active_object=bpy.data.objects["ProbeSlab"]):
+        assert bpy.ops.spectral_skin.remove() == {"FINISHED"}
+    assert wiring.TAKEN_INPUTS_PROP not in mat
