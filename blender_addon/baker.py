@@ -20,7 +20,7 @@ from pathlib import Path
 import bpy
 import numpy as np
 
-from . import nodes, oblique, tiles, wiring
+from . import follow, nodes, oblique, tiles, wiring
 from .core import bake, image_input, inference, maps, skin_edits, uv_coverage
 
 AlbedoImage, IndexedAlbedo = image_input.AlbedoImage, image_input.IndexedAlbedo
@@ -414,6 +414,7 @@ class AddonBake:
                 created_nodes = [n.name for n in self.material.node_tree.nodes if n.name not in before]
                 gnode.inputs["IOR"].default_value = self.options.ior  # the IOR the maps were baked for
                 self._follow_source_uv(gnode)
+                follow.record(self.material)
                 report += f", {self.backend} node group wired into '{self.material.name}'"
             else:
                 report += f", {self.backend} node group '{group.name}' built (no active material to wire)"
@@ -498,6 +499,7 @@ class AddonBake:
                 del self.material[nodes.PREVIOUS_SURFACE_PROP]
             if wiring.THICKNESS_FROM_SHADOW_PROP in self.material:  # set by this wiring (unwire removed the last)
                 self.material.use_thickness_from_shadow = bool(self.material.pop(wiring.THICKNESS_FROM_SHADOW_PROP))
+            self.material.pop(wiring.TAKEN_INPUTS_PROP, None)
         for image in images:
             bpy.data.images.remove(image)
         for name in set(bpy.data.node_groups.keys()) - groups_before:

@@ -7,7 +7,8 @@ group (blender_addon.wiring), so each such change reaches the group as well: the
 same material.
 
 At wiring the group takes the Principled BSDF's inputs (blender_addon.nodes: a link stays a link, a value is
-copied; Base Color feeds the group's Color) and the material records what it took, input by input
+copied; Base Color feeds the live group's Color, baked maps hold it for the mixture group of a bake) and the
+material records what it took, input by input
 (``material[wiring.TAKEN_INPUTS_PROP]``, JSON: the feeding node and socket, or the value).  On each depsgraph
 update of a wired material (:func:`follow_principled`, a handler) the Principled BSDF's inputs are compared with
 that record, and each input that changed there is given to the group the same way, then recorded.  An input the
@@ -38,9 +39,10 @@ def _state(socket: bpy.types.NodeSocket) -> list:
 
 
 def _principled_and_group(material: bpy.types.Material) -> tuple[bpy.types.Node, bpy.types.Node] | None:
-    """The artist's Principled BSDF and the live group node it feeds, or None (not wired live, or either gone)."""
+    """The artist's Principled BSDF and the group node that renders in its place (the live group, or the mixture
+    group of baked maps, which takes the same inputs but Base Color), or None (not wired, or either gone)."""
     gnode = wiring.wired_group_node(material)
-    if gnode is None or live.TABLE_PROP not in gnode.node_tree:
+    if gnode is None or not (live.TABLE_PROP in gnode.node_tree or "spectral_skin_sss_k" in gnode.node_tree):
         return None
     try:
         principled = live.colour_source(material)[0]
@@ -50,7 +52,7 @@ def _principled_and_group(material: bpy.types.Material) -> tuple[bpy.types.Node,
 
 
 def record(material: bpy.types.Material) -> None:
-    """Record what the live group took from the Principled BSDF (called when it is wired)."""
+    """Record what the group took from the Principled BSDF (called when it is wired, live or baked)."""
     found = _principled_and_group(material)
     if found is not None:
         principled, gnode = found
@@ -60,8 +62,8 @@ def record(material: bpy.types.Material) -> None:
 
 
 def follow(material: bpy.types.Material) -> list[str]:
-    """Give the live group of ``material`` every input that changed on the Principled BSDF since it was recorded
-    (module docstring); returns the group inputs changed."""
+    """Give the group of ``material`` every input that changed on the Principled BSDF since it was recorded (module
+    docstring); returns the group inputs changed."""
     found = _principled_and_group(material)
     if found is None or wiring.TAKEN_INPUTS_PROP not in material or not material.is_editable:
         return []

@@ -61,7 +61,7 @@ OBLIQUE_PROP = "spectral_skin_sss_oblique"
 _IMAGE_TAGS = ("spectral_skin_sss_table", "spectral_skin_sss_bake_key", EDIT_TABLE_PROP, OBLIQUE_PROP)
 #: Custom property on a material: its EEVEE setting Thickness From Shadow before wiring (1 or 0), put back on removal.
 THICKNESS_FROM_SHADOW_PROP = "spectral_skin_sss_thickness_from_shadow"
-#: Custom property (JSON) on a material wired live: what the group took from the Principled BSDF (blender_addon.follow).
+#: Custom property (JSON) on a wired material: what the group took from the Principled BSDF (blender_addon.follow).
 TAKEN_INPUTS_PROP = "spectral_skin_sss_taken_inputs"
 #: Material properties the add-on sets (removed by :func:`unwire`).
 MATERIAL_PROPS = (PREVIOUS_SURFACE_PROP, REPLACED_LINKS_PROP, THICKNESS_FROM_SHADOW_PROP, TAKEN_INPUTS_PROP)

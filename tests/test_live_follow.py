@@ -4,7 +4,8 @@
 * A layer mixed into Base Color afterwards (a lipstick red over the medium skin texture) renders: the render is the
   new painted colour plus the coat (Blender's own Principled specular layer), within the non-skin colours' bounds,
   where the group left as wired renders the skin texture.
-* Values and links made later on the Principled BSDF (Roughness, Coat Weight, a normal map) reach the group; a value
+* Values and links made later on the Principled BSDF (Roughness, Coat Weight, a normal map) reach the group (the live
+  group, and the mixture group of baked maps but for Base Color, which the maps hold); a value
   the artist set on the group node itself stays until the same input changes on the Principled BSDF; Remove Skin
   SSS leaves no record behind.
 """
@@ -102,3 +103,18 @@ def test_values_and_links_follow_and_the_groups_own_values_stay(tmp_path, wired)
     with bpy.context.temp_override(object=bpy.data.objects["ProbeSlab"], active_object=bpy.data.objects["ProbeSlab"]):
         assert bpy.ops.spectral_skin.remove() == {"FINISHED"}
     assert wiring.TAKEN_INPUTS_PROP not in mat
+
+
+def test_baked_maps_follow_the_same_inputs_but_base_color(tmp_path, wired):
+    """Mode Bake maps: the mixture group takes Roughness, Normal and the specular inputs, and follows them; Base
+    Color is in the maps (a change there needs a new bake)."""
+    _, mat, principled, _, _ = wired
+    assert run_invert(bpy.data.objects["ProbeSlab"], mode="BAKE") == {"FINISHED"}
+    gnode = wiring.wired_group_node(mat)
+    assert "spectral_skin_sss_k" in gnode.node_tree and "Color" not in gnode.inputs
+    principled.inputs["Roughness"].default_value = 0.65
+    principled.inputs["Sheen Weight"].default_value = 0.2
+    bpy.context.view_layer.update()
+    assert gnode.inputs["Roughness"].default_value == pytest.approx(0.65)
+    assert gnode.inputs["Sheen Weight"].default_value == pytest.approx(0.2)
+    assert "Color" not in json.loads(mat[wiring.TAKEN_INPUTS_PROP])
