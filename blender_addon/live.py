@@ -760,9 +760,10 @@ def _start_atlases(pool: Executor, table: texel_table.TexelTable, edits) -> dict
 
 # -- wiring ----------------------------------------------------------------------------------------------------
 def colour_source(material: bpy.types.Material) -> tuple[bpy.types.Node, bpy.types.NodeSocket | None, tuple]:
-    """The artist's Principled BSDF (the one feeding the active Material Output, or in a material wired before the
-    per-target outputs the one named in ``material[PREVIOUS_SURFACE_PROP]``), the output socket feeding its Base
-    Color (None when unlinked) and its Base Color value."""
+    """The artist's Principled BSDF (the one feeding the active Material Output, straight or under Mix Shader and
+    Add Shader layers: wiring.shader_chain; or in a material wired before the per-target outputs the one named in
+    ``material[PREVIOUS_SURFACE_PROP]``), the output socket feeding its Base Color (None when unlinked) and its Base
+    Color value."""
     tree = material.node_tree
     out = wiring.active_output(tree)
     links = [ln for ln in out.inputs["Surface"].links if not ln.is_muted] if out is not None else []
@@ -770,9 +771,12 @@ def colour_source(material: bpy.types.Material) -> tuple[bpy.types.Node, bpy.typ
     if surface is not None and (wiring.is_added(surface) or (surface.bl_idname == "ShaderNodeGroup"
                                                                and wiring.is_addon_group(surface.node_tree))):
         surface = tree.nodes.get(material.get(nodes.PREVIOUS_SURFACE_PROP, ""))
+    elif surface is not None and surface.bl_idname in wiring.LAYER_NODES:
+        surface = wiring.shader_chain(tree)[0]  # a layered material: the Principled BSDF under its layers
     if surface is None or surface.bl_idname != "ShaderNodeBsdfPrincipled":
-        raise LiveInputError(f"material '{material.name}': no Principled BSDF feeds its Material Output's Surface; "
-                             "connect one (its Base Color is the skin's albedo) or choose Bake")
+        raise LiveInputError(f"material '{material.name}': no Principled BSDF feeds its Material Output's Surface "
+                             "(straight or through Mix Shader and Add Shader nodes); connect one (its Base Color is "
+                             "the skin's albedo) or choose Bake")
     socket = surface.inputs["Base Color"]
     return surface, nodes._feeding_socket(socket), tuple(socket.default_value)
 

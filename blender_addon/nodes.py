@@ -673,17 +673,19 @@ def wire_into_material(material: bpy.types.Material, group: bpy.types.NodeTree,
                        eevee_output: str | None = None) -> bpy.types.Node:
     """Add the group (and Image Texture nodes for ``images[(k, kind)]``) to ``material``.
 
-    Every node and link of the artist's is kept: the active Material Output stays fed by what fed it (the
-    Principled BSDF, which Blender's exporters read), and the group's ``output`` feeds a Material Output of target
-    Cycles, its ``eevee_output`` (default: the same output) one of target EEVEE (blender_addon.wiring: what each
-    renderer renders).  Whatever was wired by the add-on before is removed first.  The name of the node that fed
-    the active output is stored in ``material[PREVIOUS_SURFACE_PROP]``.  If that node is a Principled BSDF (or a
-    group wired here before), what feeds its Normal (normal map, bump chain) also feeds the group's Normal, and its
-    Roughness (the link, else the value) becomes the coat's; otherwise the coat gets :data:`SKIN_ROUGHNESS`.  EEVEE's
-    Thickness From Shadow is turned on (wiring.use_shadow_thickness: back-lit thin parts glow in EEVEE too).  New
-    nodes sit in a frame labelled "Spectral Skin SSS" and are tagged (``wiring.ADDED_PROP``) for removal.  Images
-    are set to Non-Color.  ``interpolation`` defaults to Closest because the maps hold Cycles' colour A, not the
-    albedo alpha = f(A), and f is non-linear (linear filtering gives a small bias at texel edges).
+    Every node and link of the artist's is kept: the active Material Output stays fed by what fed it (the Principled
+    BSDF, which Blender's exporters read), and the group's ``output`` feeds a Material Output of target Cycles, its
+    ``eevee_output`` (default: the same output) one of target EEVEE (blender_addon.wiring: what each renderer
+    renders; where the Principled BSDF reaches the output through Mix Shader or Add Shader layers, through a copy of
+    them: wiring.shader_chain).  Whatever was wired by the add-on before is removed first.  The name of the node
+    that fed the active output is stored in ``material[PREVIOUS_SURFACE_PROP]``.  If that node (or the Principled
+    BSDF under its layers) is a Principled BSDF (or a group wired here before), what feeds its Normal (normal map,
+    bump chain) also feeds the group's Normal, and its Roughness (the link, else the value) becomes the coat's;
+    otherwise the coat gets :data:`SKIN_ROUGHNESS`.  EEVEE's Thickness From Shadow is turned on
+    (wiring.use_shadow_thickness: back-lit thin parts glow in EEVEE too).  New nodes sit in a frame labelled
+    "Spectral Skin SSS" and are tagged (``wiring.ADDED_PROP``) for removal.  Images are set to Non-Color.
+    ``interpolation`` defaults to Closest because the maps hold Cycles' colour A, not the albedo alpha = f(A), and f
+    is non-linear (linear filtering gives a small bias at texel edges).
     Raises ValueError for a linked material (wiring.linked_error).
     Undo: call from an operator with ``bl_options = {'REGISTER', 'UNDO'}``.
     """
@@ -705,10 +707,11 @@ def wire_into_material(material: bpy.types.Material, group: bpy.types.NodeTree,
     previous = next((ln.from_node for ln in links if not ln.is_muted), None)
     if previous is not None:
         material[PREVIOUS_SURFACE_PROP] = previous.name
+    principled, chain = wiring.shader_chain(tree)  # layers between the Principled BSDF and the output, if any
     wiring.feed_render_outputs(material, {"CYCLES": gnode.outputs[output],
-                                          "EEVEE": gnode.outputs[eevee_output or output]}, gnode)
+                                          "EEVEE": gnode.outputs[eevee_output or output]}, gnode, chain)
     wiring.use_shadow_thickness(material)
-    _take_surface_inputs(tree, previous, gnode)
+    _take_surface_inputs(tree, principled if chain else previous, gnode)
     for i, ((k, kind), image) in enumerate(sorted((images or {}).items())):
         image.colorspace_settings.name = "Non-Color"
         tex = wiring.tag(tree.nodes.new("ShaderNodeTexImage"))

@@ -20,6 +20,12 @@ before the tags existed (the group fed the active output; the node it replaced n
 ``material[PREVIOUS_SURFACE_PROP]``) are recognised by the add-on's frame, groups and EEVEE output and restored the
 same way.  :func:`purge_unused` then removes the add-on's node groups and images that no material uses any more.
 
+**Layered materials.**  Where the artist's Principled BSDF reaches the Material Output through Mix Shader and Add
+Shader nodes (a sweat or oil layer, a glow, a second coat), the renderers' outputs are fed by a copy of that chain
+(tagged like every node the add-on adds) with the add-on's group in the Principled BSDF's place: the other layers
+render over the skin as they did over the Principled BSDF, their factors and shaders linked from the artist's own
+nodes (:func:`shader_chain`, :func:`feed_render_outputs`).
+
 **EEVEE's thickness.**  EEVEE takes an object's thickness, for the light its subsurface passes through thin parts,
 from the Material Output's Thickness or else from the object's smallest dimension: the whole head for an ear.  At
 the skin's millimetre radii that leaves back-lit ears and nostrils dark in EEVEE where Cycles, which follows the
@@ -116,14 +122,69 @@ def _record_replaced(material: bpy.types.Material, link: bpy.types.NodeLink) -> 
     material[REPLACED_LINKS_PROP] = json.dumps(links)
 
 
+#: The shader nodes a layered material may pass its Principled BSDF through on the way to the Material Output.
+LAYER_NODES = ("ShaderNodeMixShader", "ShaderNodeAddShader")
+
+
+def shader_chain(tree: bpy.types.NodeTree) -> tuple[bpy.types.Node | None, list[tuple[bpy.types.Node, int]]]:
+    """The Principled BSDF feeding the active Material Output's Surface, straight or through Mix Shader and Add
+    Shader nodes (:data:`LAYER_NODES`), and the chain between them: (layer node, index of its input the Principled
+    BSDF's side comes in), output side first.  Where several Principled BSDFs are reached the one whose Base Color
+    is linked (the albedo) is taken, the first such in input order; (None, []) where there is none."""
+    out = active_output(tree)
+    links = [ln for ln in out.inputs["Surface"].links if not ln.is_muted] if out is not None else []
+    found: list[tuple[bpy.types.Node, list]] = []
+
+    def walk(node: bpy.types.Node, chain: list) -> None:
+        if node.bl_idname == "ShaderNodeBsdfPrincipled":
+            found.append((node, chain))
+        elif node.bl_idname in LAYER_NODES:
+            for i, socket in enumerate(node.inputs):
+                if socket.type == "SHADER":
+                    for link in socket.links:
+                        if not link.is_muted:
+                            walk(link.from_node, [*chain, (node, i)])
+
+    if links:
+        walk(links[0].from_node, [])
+    albedo = [f for f in found if f[0].inputs["Base Color"].is_linked]
+    return (albedo or found or [(None, [])])[0]
+
+
+def _copy_chain(tree: bpy.types.NodeTree, chain: list[tuple[bpy.types.Node, int]], socket: bpy.types.NodeSocket,
+                near: bpy.types.Node, row: int) -> bpy.types.NodeSocket:
+    """A tagged copy of the layer nodes of ``chain`` (:func:`shader_chain`), the Principled BSDF's side fed by
+    ``socket`` and every other input linked from, or set to, what the artist's node has; its top output."""
+    feed = socket
+    for depth, (node, index) in enumerate(reversed(chain)):
+        copy = tag(tree.nodes.new(node.bl_idname))
+        copy.label = f"{node.label or node.name} (Spectral Skin SSS)"
+        copy.location = (near.location.x + 220.0 * (depth + 1), near.location.y - 220.0 * row - 120.0)
+        copy.parent = near.parent
+        for i, (theirs, ours) in enumerate(zip(node.inputs, copy.inputs, strict=True)):
+            source = next((ln.from_socket for ln in theirs.links if not ln.is_muted), None)
+            if i == index:
+                tree.links.new(feed, ours)
+            elif source is not None:
+                tree.links.new(source, ours)
+            elif hasattr(theirs, "default_value"):
+                ours.default_value = theirs.default_value
+        feed = copy.outputs[0]
+    return feed
+
+
 def feed_render_outputs(material: bpy.types.Material, sockets: dict[str, bpy.types.NodeSocket],
-                        near: bpy.types.Node) -> list[bpy.types.Node]:
+                        near: bpy.types.Node, chain: list[tuple[bpy.types.Node, int]] | None = None
+                        ) -> list[bpy.types.Node]:
     """Make ``sockets[target]`` ("CYCLES", "EEVEE") what that renderer renders (module docstring): a new, tagged
     Material Output of that target beside ``near`` (the group node), or the artist's output of that target with its
-    Surface link replaced (and recorded).  Returns the outputs fed."""
+    Surface link replaced (and recorded); through a copy of the layers of ``chain`` (:func:`shader_chain`) where the
+    artist's Principled BSDF reaches the output through some.  Returns the outputs fed."""
     tree = material.node_tree
     fed = []
     for i, (target, socket) in enumerate(sockets.items()):
+        if chain:
+            socket = _copy_chain(tree, chain, socket, near, i)
         exact = [n for n in _outputs(tree) if n.target == target and not is_added(n)]
         if exact:
             out = render_output(tree, target)
@@ -172,11 +233,15 @@ def added_nodes(material: bpy.types.Material) -> list[bpy.types.Node]:
 
 
 def wired_group_node(material: bpy.types.Material) -> bpy.types.Node | None:
-    """The add-on's group node that Cycles renders in ``material`` (through its Cycles output), or None."""
+    """The add-on's group node that Cycles renders in ``material`` (through its Cycles output, straight or through
+    the add-on's copy of the artist's layers), or None."""
     tree = material.node_tree
     out = render_output(tree, "CYCLES") if tree is not None else None
     links = [ln for ln in out.inputs["Surface"].links if not ln.is_muted] if out is not None else []
     node = links[0].from_node if links else None
+    while node is not None and node.bl_idname in LAYER_NODES and is_added(node):
+        node = next((ln.from_node for s in node.inputs if s.type == "SHADER" for ln in s.links
+                     if not ln.is_muted and is_added(ln.from_node)), None)  # the copy's side: the add-on's nodes
     if node is not None and node.bl_idname == "ShaderNodeGroup" and is_addon_group(node.node_tree):
         return node
     return None

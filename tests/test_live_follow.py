@@ -31,7 +31,7 @@ from tests.test_bake_painted_colour import box_material  # noqa: E402
 
 SKIN = (180, 120, 95)  # medium skin, 8-bit sRGB
 LIPSTICK = (190, 30, 45)
-SIZE = 8  # texels and pixels per side
+SIZE = 16  # texels and pixels per side
 ROUGHNESS = 0.5  # the Principled BSDF's default, which the group takes
 
 
