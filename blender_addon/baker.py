@@ -497,8 +497,7 @@ class AddonBake:
                 self.material[nodes.PREVIOUS_SURFACE_PROP] = previous_prop
             elif nodes.PREVIOUS_SURFACE_PROP in self.material:
                 del self.material[nodes.PREVIOUS_SURFACE_PROP]
-            if wiring.THICKNESS_FROM_SHADOW_PROP in self.material:  # set by this wiring (unwire removed the last)
-                self.material.use_thickness_from_shadow = bool(self.material.pop(wiring.THICKNESS_FROM_SHADOW_PROP))
+            wiring.restore_shadow_thickness(self.material)  # recorded by this wiring (unwire removed the last)
             self.material.pop(wiring.TAKEN_INPUTS_PROP, None)
         for image in images:
             bpy.data.images.remove(image)

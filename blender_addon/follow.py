@@ -24,13 +24,12 @@ import bpy
 from . import live, nodes, wiring
 
 #: The Principled BSDF's inputs the live group takes, by the group input each feeds.
-FOLLOWED = {"Color": "Base Color", "Normal": "Normal", "Roughness": "Roughness",
-            **{name: name for name in (*nodes.SPECULAR_INPUTS, *nodes.ARTIST_INPUTS)}}
+FOLLOWED = {"Color": "Base Color", **{name: name for name in nodes.TAKEN_INPUTS}}
 
 
 def _state(socket: bpy.types.NodeSocket) -> list:
     """What an input of the Principled BSDF gives: ["link", node, socket identifier] or ["value", value]."""
-    feed = nodes._feeding_socket(socket)
+    feed = wiring.feeding_socket(socket)
     if feed is not None:
         return ["link", feed.node.name, feed.identifier]
     value = socket.default_value
@@ -77,15 +76,7 @@ def follow(material: bpy.types.Material) -> list[str]:
         now = _state(principled.inputs[theirs])
         if taken.get(ours) == now:
             continue
-        socket = gnode.inputs[ours]
-        feed = nodes._feeding_socket(principled.inputs[theirs])
-        if feed is not None:
-            tree.links.new(feed, socket)
-        else:
-            for link in list(socket.links):
-                tree.links.remove(link)
-            if ours != "Normal":  # an unlinked Normal is the shading normal; its value means nothing
-                socket.default_value = principled.inputs[theirs].default_value
+        wiring.take_input(tree, principled.inputs[theirs], gnode.inputs[ours])
         taken[ours] = now
         changed.append(ours)
     if changed:

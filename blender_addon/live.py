@@ -771,14 +771,14 @@ def colour_source(material: bpy.types.Material) -> tuple[bpy.types.Node, bpy.typ
     if surface is not None and (wiring.is_added(surface) or (surface.bl_idname == "ShaderNodeGroup"
                                                                and wiring.is_addon_group(surface.node_tree))):
         surface = tree.nodes.get(material.get(nodes.PREVIOUS_SURFACE_PROP, ""))
-    elif surface is not None and surface.bl_idname in wiring.LAYER_NODES:
-        surface = wiring.shader_chain(tree)[0]  # a layered material: the Principled BSDF under its layers
+    elif surface is not None:
+        surface = wiring.shader_chain(tree)[0]  # straight, or under Mix Shader and Add Shader layers
     if surface is None or surface.bl_idname != "ShaderNodeBsdfPrincipled":
         raise LiveInputError(f"material '{material.name}': no Principled BSDF feeds its Material Output's Surface "
                              "(straight or through Mix Shader and Add Shader nodes); connect one (its Base Color is "
                              "the skin's albedo) or choose Bake")
     socket = surface.inputs["Base Color"]
-    return surface, nodes._feeding_socket(socket), tuple(socket.default_value)
+    return surface, wiring.feeding_socket(socket), tuple(socket.default_value)
 
 
 def wire_live(material: bpy.types.Material, group: bpy.types.NodeTree, unit_scale_m: float) -> bpy.types.Node:
@@ -786,13 +786,10 @@ def wire_live(material: bpy.types.Material, group: bpy.types.NodeTree, unit_scal
     its Normal and Roughness (nodes.wire_into_material), its Cycles output into a Material Output of target Cycles
     and its EEVEE output into one of target EEVEE; the artist's Principled BSDF keeps feeding the active Material
     Output, which Blender's exporters read (blender_addon.wiring).  Every node of the artist's is kept."""
-    _, colour, value = colour_source(material)
+    principled = colour_source(material)[0]
     gnode = nodes.wire_into_material(material, group, output="Cycles", eevee_output="EEVEE")
     gnode.inputs["Unit Scale"].default_value = unit_scale_m
-    if colour is not None:
-        material.node_tree.links.new(colour, gnode.inputs["Color"])
-    else:
-        gnode.inputs["Color"].default_value = value
+    wiring.take_input(material.node_tree, principled.inputs["Base Color"], gnode.inputs["Color"])
     return gnode
 
 

@@ -185,6 +185,9 @@ ARTIST_INPUTS: dict[str, tuple[str, object]] = {
     "Emission Color": ("NodeSocketColor", (1.0, 1.0, 1.0, 1.0)),
     "Emission Strength": ("NodeSocketFloat", 0.0),
 }
+#: The surface inputs a group takes over from the Principled BSDF it renders for (besides Base Color: the live
+#: group's Color), at wiring and afterwards (blender_addon.follow).
+TAKEN_INPUTS = ("Normal", "Roughness", *SPECULAR_INPUTS, *ARTIST_INPUTS)
 
 
 def socket_name(k: int, kind: str) -> str:
@@ -736,14 +739,6 @@ def _surface_source(node: bpy.types.Node | None) -> bpy.types.Node | None:
     return None
 
 
-def _feeding_socket(socket: bpy.types.NodeSocket) -> bpy.types.NodeSocket | None:
-    """The output socket linked into ``socket`` (muted links ignored), or None."""
-    for link in socket.links:
-        if not link.is_muted:
-            return link.from_socket
-    return None
-
-
 def _take_surface_inputs(tree: bpy.types.NodeTree, previous: bpy.types.Node | None,
                         gnode: bpy.types.Node) -> None:
     """Give the group node ``gnode`` the Normal, Roughness and specular inputs (:data:`SPECULAR_INPUTS`) of the
@@ -754,15 +749,12 @@ def _take_surface_inputs(tree: bpy.types.NodeTree, previous: bpy.types.Node | No
     if source is None:
         gnode.inputs["Roughness"].default_value = SKIN_ROUGHNESS
         return
-    for name in ("Normal", "Roughness", *SPECULAR_INPUTS, *ARTIST_INPUTS):
+    for name in TAKEN_INPUTS:
         theirs, ours = source.inputs.get(name), gnode.inputs.get(name)
         if theirs is None or ours is None:  # a group wired by an older version, or one without these inputs
             continue
-        feed = _feeding_socket(theirs)
-        if feed is not None:
-            tree.links.new(feed, ours)
-        elif name == "Subsurface Weight" and source.bl_idname == "ShaderNodeBsdfPrincipled" \
-                and theirs.default_value == 0.0:
+        if name == "Subsurface Weight" and source.bl_idname == "ShaderNodeBsdfPrincipled" \
+                and wiring.feeding_socket(theirs) is None and theirs.default_value == 0.0:
             ours.default_value = 1.0  # Blender's default: subsurface never switched on; the operator asks for skin
-        elif name != "Normal":
-            ours.default_value = theirs.default_value
+        else:
+            wiring.take_input(tree, theirs, ours)

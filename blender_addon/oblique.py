@@ -149,17 +149,11 @@ def wire_baked(material: bpy.types.Material, gnode: bpy.types.Node) -> bpy.types
     grazing.node_tree = ensure_group()
     grazing.label, grazing.parent = GROUP_NAME, gnode.parent
     grazing.location = (gnode.location.x - 700.0, gnode.location.y + 200.0)
-    colour = nodes._feeding_socket(source.inputs["Base Color"])
-    if colour is not None:
-        tree.links.new(colour, grazing.inputs["Color"])
-    else:
-        grazing.inputs["Color"].default_value = tuple(source.inputs["Base Color"].default_value)
-    normal = nodes._feeding_socket(gnode.inputs["Normal"])
-    if normal is not None:
-        tree.links.new(normal, grazing.inputs["Normal"])
+    wiring.take_input(tree, source.inputs["Base Color"], grazing.inputs["Color"])
+    wiring.take_input(tree, gnode.inputs["Normal"], grazing.inputs["Normal"])
     tree.links.new(grazing.outputs["Weight"], gnode.inputs["Weight Scale"])
     for socket in gnode.inputs:
-        feed = nodes._feeding_socket(socket) if socket.name.startswith("k") and socket.name.endswith(" Radius") \
+        feed = wiring.feeding_socket(socket) if socket.name.startswith("k") and socket.name.endswith(" Radius") \
             else None
         if feed is None:
             continue

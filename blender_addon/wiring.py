@@ -122,6 +122,27 @@ def _record_replaced(material: bpy.types.Material, link: bpy.types.NodeLink) -> 
     material[REPLACED_LINKS_PROP] = json.dumps(links)
 
 
+def feeding_socket(socket: bpy.types.NodeSocket) -> bpy.types.NodeSocket | None:
+    """The output socket linked into ``socket`` (muted links ignored), or None."""
+    for link in socket.links:
+        if not link.is_muted:
+            return link.from_socket
+    return None
+
+
+def take_input(tree: bpy.types.NodeTree, theirs: bpy.types.NodeSocket, ours: bpy.types.NodeSocket) -> None:
+    """Give the add-on's input ``ours`` what the artist's input ``theirs`` has: the same link, or (unlinked) no link
+    and its value; an unlinked Normal's value means nothing (the shading normal) and a shader input has none."""
+    feed = feeding_socket(theirs)
+    if feed is not None:
+        tree.links.new(feed, ours)
+        return
+    for link in list(ours.links):
+        tree.links.remove(link)
+    if theirs.name != "Normal" and hasattr(theirs, "default_value"):
+        ours.default_value = theirs.default_value
+
+
 #: The shader nodes a layered material may pass its Principled BSDF through on the way to the Material Output.
 LAYER_NODES = ("ShaderNodeMixShader", "ShaderNodeAddShader")
 
@@ -132,7 +153,7 @@ def shader_chain(tree: bpy.types.NodeTree) -> tuple[bpy.types.Node | None, list[
     BSDF's side comes in), output side first.  Where several Principled BSDFs are reached the one whose Base Color
     is linked (the albedo) is taken, the first such in input order; (None, []) where there is none."""
     out = active_output(tree)
-    links = [ln for ln in out.inputs["Surface"].links if not ln.is_muted] if out is not None else []
+    surface = feeding_socket(out.inputs["Surface"]) if out is not None else None
     found: list[tuple[bpy.types.Node, list]] = []
 
     def walk(node: bpy.types.Node, chain: list) -> None:
@@ -140,13 +161,12 @@ def shader_chain(tree: bpy.types.NodeTree) -> tuple[bpy.types.Node | None, list[
             found.append((node, chain))
         elif node.bl_idname in LAYER_NODES:
             for i, socket in enumerate(node.inputs):
-                if socket.type == "SHADER":
-                    for link in socket.links:
-                        if not link.is_muted:
-                            walk(link.from_node, [*chain, (node, i)])
+                feed = feeding_socket(socket) if socket.type == "SHADER" else None
+                if feed is not None:
+                    walk(feed.node, [*chain, (node, i)])
 
-    if links:
-        walk(links[0].from_node, [])
+    if surface is not None:
+        walk(surface.node, [])
     albedo = [f for f in found if f[0].inputs["Base Color"].is_linked]
     return (albedo or found or [(None, [])])[0]
 
@@ -162,13 +182,10 @@ def _copy_chain(tree: bpy.types.NodeTree, chain: list[tuple[bpy.types.Node, int]
         copy.location = (near.location.x + 220.0 * (depth + 1), near.location.y - 220.0 * row - 120.0)
         copy.parent = near.parent
         for i, (theirs, ours) in enumerate(zip(node.inputs, copy.inputs, strict=True)):
-            source = next((ln.from_socket for ln in theirs.links if not ln.is_muted), None)
             if i == index:
                 tree.links.new(feed, ours)
-            elif source is not None:
-                tree.links.new(source, ours)
-            elif hasattr(theirs, "default_value"):
-                ours.default_value = theirs.default_value
+            else:
+                take_input(tree, theirs, ours)
         feed = copy.outputs[0]
     return feed
 
@@ -264,8 +281,7 @@ def unwire(material: bpy.types.Material) -> int:
         relink(tree, link["from_node"], link["from_socket"], link["to_node"], link["to_socket"])
     if legacy_fed and previous in tree.nodes and not out.inputs["Surface"].is_linked:
         tree.links.new(tree.nodes[previous].outputs[0], out.inputs["Surface"])
-    if THICKNESS_FROM_SHADOW_PROP in material:
-        material.use_thickness_from_shadow = bool(material[THICKNESS_FROM_SHADOW_PROP])
+    restore_shadow_thickness(material)
     props = [p for p in MATERIAL_PROPS if p in material]
     for prop in props:
         del material[prop]
@@ -279,6 +295,12 @@ def use_shadow_thickness(material: bpy.types.Material) -> None:
         material[THICKNESS_FROM_SHADOW_PROP] = int(material.use_thickness_from_shadow)
     if not material.use_thickness_from_shadow:
         material.use_thickness_from_shadow = True
+
+
+def restore_shadow_thickness(material: bpy.types.Material) -> None:
+    """Put back the artist's Thickness From Shadow that :func:`use_shadow_thickness` recorded, and drop the record."""
+    if THICKNESS_FROM_SHADOW_PROP in material:
+        material.use_thickness_from_shadow = bool(material.pop(THICKNESS_FROM_SHADOW_PROP))
 
 
 def relink(tree: bpy.types.NodeTree, from_node: str, from_id: str, to_node: str, to_id: str) -> None:
