@@ -764,16 +764,8 @@ def colour_source(material: bpy.types.Material) -> tuple[bpy.types.Node, bpy.typ
     Add Shader layers: wiring.shader_chain; or in a material wired before the per-target outputs the one named in
     ``material[PREVIOUS_SURFACE_PROP]``), the output socket feeding its Base Color (None when unlinked) and its Base
     Color value."""
-    tree = material.node_tree
-    out = wiring.active_output(tree)
-    links = [ln for ln in out.inputs["Surface"].links if not ln.is_muted] if out is not None else []
-    surface = links[0].from_node if links else None
-    if surface is not None and (wiring.is_added(surface) or (surface.bl_idname == "ShaderNodeGroup"
-                                                               and wiring.is_addon_group(surface.node_tree))):
-        surface = tree.nodes.get(material.get(nodes.PREVIOUS_SURFACE_PROP, ""))
-    elif surface is not None:
-        surface = wiring.shader_chain(tree)[0]  # straight, or under Mix Shader and Add Shader layers
-    if surface is None or surface.bl_idname != "ShaderNodeBsdfPrincipled":
+    surface = wiring.artist_principled(material)
+    if surface is None:
         raise LiveInputError(f"material '{material.name}': no Principled BSDF feeds its Material Output's Surface "
                              "(straight or through Mix Shader and Add Shader nodes); connect one (its Base Color is "
                              "the skin's albedo) or choose Bake")

@@ -138,12 +138,11 @@ def wire_baked(material: bpy.types.Material, gnode: bpy.types.Node) -> bpy.types
     the Grazing group's weight factors into its Weight Scale (once for every component) and each ``k Radius`` map
     multiplied by its radius factors, the group fed the colour that fed the artist's Principled BSDF's Base Color (the
     baked albedo) and the mixture's Normal.  The new nodes are tagged (Remove Skin SSS removes them).  Returns the
-    Grazing node, or None when the material has no Principled BSDF behind the group (nothing is changed then)."""
-    from . import nodes
-
+    Grazing node, or None when the material has no Principled BSDF behind the group (wiring.artist_principled:
+    straight or under Mix Shader and Add Shader layers; nothing is changed then)."""
     tree = material.node_tree
-    source = tree.nodes.get(material.get(nodes.PREVIOUS_SURFACE_PROP, ""))
-    if source is None or source.bl_idname != "ShaderNodeBsdfPrincipled":
+    source = wiring.artist_principled(material)
+    if source is None:
         return None
     grazing = wiring.tag(tree.nodes.new("ShaderNodeGroup"))
     grazing.node_tree = ensure_group()

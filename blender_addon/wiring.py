@@ -171,6 +171,21 @@ def shader_chain(tree: bpy.types.NodeTree) -> tuple[bpy.types.Node | None, list[
     return (albedo or found or [(None, [])])[0]
 
 
+def artist_principled(material: bpy.types.Material) -> bpy.types.Node | None:
+    """The artist's Principled BSDF that the add-on's group renders for: the one of :func:`shader_chain`, or where
+    the add-on's nodes feed the active output (a material wired before the per-target outputs, or whose active
+    output has the target Cycles or EEVEE the operator fed) the node named in ``material[PREVIOUS_SURFACE_PROP]``
+    when it is one; None where there is none."""
+    tree = material.node_tree
+    out = active_output(tree)
+    feed = feeding_socket(out.inputs["Surface"]) if out is not None else None
+    if feed is not None and (is_added(feed.node) or (feed.node.bl_idname == "ShaderNodeGroup"
+                                                     and is_addon_group(feed.node.node_tree))):
+        node = tree.nodes.get(material.get(PREVIOUS_SURFACE_PROP, ""))
+        return node if node is not None and node.bl_idname == "ShaderNodeBsdfPrincipled" else None
+    return shader_chain(tree)[0]
+
+
 def _copy_chain(tree: bpy.types.NodeTree, chain: list[tuple[bpy.types.Node, int]], socket: bpy.types.NodeSocket,
                 near: bpy.types.Node, row: int) -> bpy.types.NodeSocket:
     """A tagged copy of the layer nodes of ``chain`` (:func:`shader_chain`), the Principled BSDF's side fed by

@@ -66,6 +66,9 @@ def test_a_layer_over_the_principled_bsdf_renders_over_the_skin(tmp_path, mode):
         gnode = wiring.wired_group_node(mat)
         assert gnode is not None and wiring.is_added(gnode)
         assert output.inputs["Surface"].links[0].from_node == layer  # the exporters' view: the artist's layer
+        backends = sorted(n.node_tree.get("spectral_skin_sss_backend", "") for n in tree.nodes
+                          if n.bl_idname == "ShaderNodeGroup" and wiring.is_added(n))
+        assert "GRAZING" in backends or mode == "LIVE"  # baked maps get the grazing-light correction, layered or not
         rgb = render_linear(scene, tmp_path / f"{mode}.exr")[2:-2, 2:-2].reshape(-1, 3).mean(axis=0)
         coat = principled_coat_reflectance(scene, [1.0], ROUGHNESS, live.nodes.DEFAULT_IOR)[0]
         skin = srgb_decode(np.array(SKIN, np.float64) / 255.0) + coat
