@@ -49,9 +49,9 @@ class BakeSettings:
     the maps render the model's own reflectance instead of the painted albedo.  ``exact``: every distinct colour through
     the model instead of the fast-path table; ``uv_coverage``: evaluate only the texels the active mesh's UVs
     cover (the others take the maps of the most common covered colour); ``unit_scale_m``: metres per Blender
-    unit for the radii (None: the scene's, :func:`scene_unit_scale`); ``openpbr``: also the OpenPBR maps, MaterialX
-    document and USD layer of ``--target openpbr`` (storage "FILES" only: other renderers read files); ``edit``: the
-    skin edit (Melanin, Blood, Oxygenation: exporters.skin_edits) every texel's maps carry."""
+    unit for the radii (None: the scene's, :func:`follow.scene_unit_scale`); ``openpbr``: also the OpenPBR maps,
+    MaterialX document and USD layer of ``--target openpbr`` (storage "FILES" only: other renderers read files);
+    ``edit``: the skin edit (Melanin, Blood, Oxygenation: exporters.skin_edits) every texel's maps carry."""
 
     model_path: str
     filepath: str = ""
@@ -69,13 +69,6 @@ class BakeSettings:
     unit_scale_m: float | None = None
     openpbr: bool = False
     edit: tuple[float, float, float] = skin_edits.NEUTRAL
-
-
-def scene_unit_scale(scene: bpy.types.Scene) -> float:
-    """Metres per Blender unit: the scene's Unit Scale (Scene ▸ Units), 1 when the unit system is None (Blender
-    then greys the Unit Scale out and lengths are plain numbers)."""
-    units = scene.unit_settings
-    return float(units.scale_length or 1.0) if units.system != "NONE" else 1.0
 
 
 def active_image_node(material: bpy.types.Material | None) -> bpy.types.Node | None:
@@ -247,7 +240,7 @@ class AddonBake:
             mask, self.uv_note = (mesh_uv_mask(obj, self.source_node, width, height) if settings.uv_coverage
                                   else (None, "off"))
         self.out_dir, self._temp_dir = self._output_folder()
-        scale = scene_unit_scale(self.scene) if settings.unit_scale_m is None else float(settings.unit_scale_m)
+        scale = follow.scene_unit_scale(self.scene) if settings.unit_scale_m is None else float(settings.unit_scale_m)
         self.options = bake.BakeOptions(targets=("cycles", "openpbr") if settings.openpbr else ("cycles",),
                                         unit_scale_m=scale,
                                         threads=settings.threads, chunk=settings.chunk,
@@ -414,7 +407,7 @@ class AddonBake:
                 created_nodes = [n.name for n in self.material.node_tree.nodes if n.name not in before]
                 gnode.inputs["IOR"].default_value = self.options.ior  # the IOR the maps were baked for
                 self._follow_source_uv(gnode)
-                follow.record(self.material)
+                follow.record(self.material, self.options.unit_scale_m)
                 report += f", {self.backend} node group wired into '{self.material.name}'"
             else:
                 report += f", {self.backend} node group '{group.name}' built (no active material to wire)"

@@ -13,6 +13,13 @@ material records what it took, input by input
 update of a wired material (:func:`follow_principled`, a handler) the Principled BSDF's inputs are compared with
 that record, and each input that changed there is given to the group the same way, then recorded.  An input the
 artist set on the group node itself stays as they set it until the same input changes on the Principled BSDF.
+
+The scene's Unit Scale (metres per Blender unit, Scene ▸ Units) is followed the same way: the record holds the one
+the group's radii were given (``record[UNIT_SCALE]``), and where the scene's changes (a model set to centimetres
+after inverting, a skin material appended from a library into a scene of other units) the live group's Unit Scale
+input takes it.  A material used in scenes of different Unit Scales takes that of the scene last changed.  Baked
+maps hold their radii in the units they were baked for: :func:`baked_unit_scale_stale` says when the scene's differs
+(the panel asks for another bake).
 """
 
 from __future__ import annotations
@@ -25,6 +32,20 @@ from . import live, nodes, wiring
 
 #: The Principled BSDF's inputs the live group takes, by the group input each feeds.
 FOLLOWED = {"Color": "Base Color", **{name: name for name in nodes.TAKEN_INPUTS}}
+#: The record's entry for the scene's Unit Scale, and the live group's input that takes it.
+UNIT_SCALE = "Unit Scale"
+
+
+def scene_unit_scale(scene: bpy.types.Scene) -> float:
+    """Metres per Blender unit: the scene's Unit Scale (Scene ▸ Units), 1 when the unit system is None (Blender
+    then greys the Unit Scale out and lengths are plain numbers)."""
+    units = scene.unit_settings
+    return float(units.scale_length or 1.0) if units.system != "NONE" else 1.0
+
+
+def _unit_state(unit_scale_m: float) -> list:
+    """The record's entry for a Unit Scale (metres per Blender unit), rounded like a recorded value."""
+    return ["value", round(float(unit_scale_m), 6)]
 
 
 def _state(socket: bpy.types.NodeSocket) -> list:
@@ -50,19 +71,21 @@ def _principled_and_group(material: bpy.types.Material) -> tuple[bpy.types.Node,
     return principled, gnode
 
 
-def record(material: bpy.types.Material) -> None:
-    """Record what the group took from the Principled BSDF (called when it is wired, live or baked)."""
+def record(material: bpy.types.Material, unit_scale_m: float) -> None:
+    """Record what the group took from the Principled BSDF and the Unit Scale (metres per Blender unit) its radii
+    were given (called when it is wired, live or baked)."""
     found = _principled_and_group(material)
     if found is not None:
         principled, gnode = found
-        material[wiring.TAKEN_INPUTS_PROP] = json.dumps(
-            {ours: _state(principled.inputs[theirs]) for ours, theirs in FOLLOWED.items()
-             if ours in gnode.inputs and theirs in principled.inputs})
+        taken = {ours: _state(principled.inputs[theirs]) for ours, theirs in FOLLOWED.items()
+                 if ours in gnode.inputs and theirs in principled.inputs}
+        material[wiring.TAKEN_INPUTS_PROP] = json.dumps({**taken, UNIT_SCALE: _unit_state(unit_scale_m)})
 
 
-def follow(material: bpy.types.Material) -> list[str]:
-    """Give the group of ``material`` every input that changed on the Principled BSDF since it was recorded (module
-    docstring); returns the group inputs changed."""
+def follow(material: bpy.types.Material, unit_scale_m: float | None = None) -> list[str]:
+    """Give the group of ``material`` every input that changed on the Principled BSDF since it was recorded, and the
+    live group the scene's Unit Scale ``unit_scale_m`` (metres per Blender unit; None: not followed) where it
+    differs from the recorded one (module docstring); returns the group inputs changed."""
     found = _principled_and_group(material)
     if found is None or wiring.TAKEN_INPUTS_PROP not in material or not material.is_editable:
         return []
@@ -70,6 +93,11 @@ def follow(material: bpy.types.Material) -> list[str]:
     taken = json.loads(material[wiring.TAKEN_INPUTS_PROP])
     tree = material.node_tree
     changed = []
+    unit = gnode.inputs.get(UNIT_SCALE)  # the live group's; the maps of a bake hold theirs
+    if unit_scale_m is not None and unit is not None and taken.get(UNIT_SCALE) != _unit_state(unit_scale_m):
+        unit.default_value = unit_scale_m
+        taken[UNIT_SCALE] = _unit_state(unit_scale_m)
+        changed.append(UNIT_SCALE)
     for ours, theirs in FOLLOWED.items():
         if ours not in gnode.inputs or theirs not in principled.inputs:
             continue
@@ -84,21 +112,49 @@ def follow(material: bpy.types.Material) -> list[str]:
     return changed
 
 
+def baked_unit_scale_stale(material: bpy.types.Material | None, scene: bpy.types.Scene) -> float | None:
+    """The Unit Scale (metres per Blender unit) the baked maps of ``material`` hold their radii in, where the
+    scene's differs from it (the radii are then off by their ratio until the next bake); None otherwise (not
+    baked, no record, or the same units)."""
+    if material is None or wiring.TAKEN_INPUTS_PROP not in material:
+        return None
+    found = _principled_and_group(material)
+    if found is None or UNIT_SCALE in found[1].inputs:
+        return None
+    baked = json.loads(material[wiring.TAKEN_INPUTS_PROP]).get(UNIT_SCALE)
+    if baked is None or baked == _unit_state(scene_unit_scale(scene)):
+        return None
+    return float(baked[1])
+
+
 _following = False
+#: The Unit Scale each scene had at the handler's last call (by the scene's full name): a scene update (a selection
+#: makes one) looks at every recorded material only where the units changed.
+_units_seen: dict[str, float] = {}
 
 
 @bpy.app.handlers.persistent
 def follow_principled(scene=None, depsgraph=None) -> None:
-    """depsgraph_update_post handler: :func:`follow` each changed material (its own writes do not call it again)."""
+    """depsgraph_update_post handler: :func:`follow` each changed material, or every recorded one where the
+    scene's Unit Scale changed; its own writes do not call it again."""
     global _following
     if _following or depsgraph is None:
         return
     _following = True
     try:
-        for material in {u.id.original for u in depsgraph.updates if isinstance(u.id, bpy.types.Material)}:
-            follow(material)
+        updated = {u.id.original for u in depsgraph.updates}
+        materials = [update for update in updated if isinstance(update, bpy.types.Material)]
+        unit_scale_m = scene_unit_scale(scene) if scene is not None else None
+        if scene is not None and _units_seen.get(scene.name_full) != unit_scale_m:
+            _units_seen[scene.name_full] = unit_scale_m
+            materials = [m for m in bpy.data.materials if wiring.TAKEN_INPUTS_PROP in m]
+        for material in materials:
+            follow(material, unit_scale_m)
     finally:
         _following = False
+#: The Unit Scale each scene had at the handler's last call (by the scene's full name): a scene update (a selection
+#: makes one) looks at every recorded material only where the units changed.
+_units_seen: dict[str, float] = {}
 
 
 def register_handlers() -> None:

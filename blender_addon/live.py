@@ -878,7 +878,7 @@ def apply(context: bpy.types.Context, model_path: str, unit_scale_m: float, colo
         wired.inputs["Unit Scale"].default_value = unit_scale_m
         wired.inputs["Principled Convention"].default_value = float(principled_convention)
         live_edits.set_edit(wired, edit)
-        follow.follow(material)  # what changed on the Principled BSDF while no handler ran (the add-on disabled)
+        follow.follow(material, unit_scale_m)  # what changed on the Principled BSDF while no handler ran
         return (f"up to date: '{material.name}' already renders through the live group (Unit Scale {unit_scale_m:g} m "
                 "per Blender unit)")
     _, colour, _ = colour_source(material)
@@ -892,7 +892,7 @@ def apply(context: bpy.types.Context, model_path: str, unit_scale_m: float, colo
             gnode = wire_live(material, group, unit_scale_m)
             gnode.inputs["Principled Convention"].default_value = float(principled_convention)
             live_edits.set_edit(gnode, edit)
-            follow.record(material)
+            follow.record(material, unit_scale_m)
         except BaseException:
             _restore(material, before)
             raise

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import bpy
 
-from . import baker, live, live_edits, nodes, preferences, wiring
+from . import baker, follow, live, live_edits, nodes, preferences, wiring
 from .core import bake as _core_bake
 
 one_line = _core_bake.one_line
@@ -110,7 +110,7 @@ class SPECTRAL_SKIN_OT_invert_albedo(bpy.types.Operator):
                                   colorspace=self.colorspace, backend=self.backend, overwrite=self.overwrite,
                                   model_colour=self.model_colour, threads=preferences.threads(context),
                                   exact=self.exact, uv_coverage=self.uv_coverage, openpbr=self.openpbr,
-                                  unit_scale_m=baker.scene_unit_scale(context.scene), edit=self._edit())
+                                  unit_scale_m=follow.scene_unit_scale(context.scene), edit=self._edit())
 
     def _edit(self) -> tuple[float, float, float]:
         """The skin edit asked for: (Melanin, Blood, Oxygenation).  The live mode sets a non-neutral one on the group
@@ -129,7 +129,7 @@ class SPECTRAL_SKIN_OT_invert_albedo(bpy.types.Operator):
                                    f"nodes: {', '.join(asked)} needs mode Bake")
             return {"CANCELLED"}
         try:
-            message = live.apply(context, preferences.model_path(context), baker.scene_unit_scale(context.scene),
+            message = live.apply(context, preferences.model_path(context), follow.scene_unit_scale(context.scene),
                                  self.colorspace, self.principled_convention, self._edit())
         except _EXPECTED as exc:
             self.report({"ERROR"}, one_line(exc))

@@ -7,7 +7,7 @@ import os
 
 import bpy
 
-from . import baker, live_edits, operators, preferences
+from . import baker, follow, live_edits, operators, preferences
 
 
 class SpectralSkinSettings(bpy.types.PropertyGroup):
@@ -54,6 +54,7 @@ def _draw(layout, context) -> None:
         if settings.mode == "LIVE":
             layout.prop(settings, "principled_convention")
     _draw_live_node(layout, getattr(context, "material", None))
+    _draw_stale_units(layout, context)
     if settings is not None and settings.mode == "BAKE":
         col = layout.column()
         col.prop(settings, "image")
@@ -143,6 +144,17 @@ def _draw_live_node(layout: bpy.types.UILayout, material: bpy.types.Material | N
     weight = node.inputs["Subsurface Weight"]
     if not weight.is_linked:
         box.prop(weight, "default_value", text="Subsurface Weight")
+
+
+def _draw_stale_units(layout: bpy.types.UILayout, context) -> None:
+    """Where the active material's baked maps hold their radii in other units than the scene's: say so, and what
+    to do."""
+    baked = follow.baked_unit_scale_stale(getattr(context, "material", None), context.scene)
+    if baked is not None:
+        box = layout.box()
+        box.label(text=f"Maps baked at Unit Scale {baked:g}, the scene's is {follow.scene_unit_scale(context.scene):g}",
+                  icon="ERROR")
+        box.label(text="The radii are off by their ratio: run Invert Skin Albedo again")
 
 
 def shading_of(settings: SpectralSkinSettings) -> str:

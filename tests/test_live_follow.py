@@ -8,6 +8,8 @@
   group, and the mixture group of baked maps but for Base Color, which the maps hold); a value
   the artist set on the group node itself stays until the same input changes on the Principled BSDF; Remove Skin
   SSS leaves no record behind.
+* The scene's Unit Scale reaches the live group's radii when it changes, or when a skin material is appended into a
+  scene of other units; baked maps in other units than the scene's are reported stale.
 """
 
 from __future__ import annotations
@@ -24,7 +26,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 import blender_addon  # noqa: E402
-from blender_addon import live, probe, wiring  # noqa: E402
+from blender_addon import follow, live, probe, wiring  # noqa: E402
 from exporters.colorimetry import delta_e76, linear_srgb_to_lab, srgb_decode  # noqa: E402
 from tests.addon_scene import principled_coat_reflectance, render_linear, run_invert, write_image  # noqa: E402
 from tests.test_bake_painted_colour import box_material  # noqa: E402
@@ -118,3 +120,58 @@ def test_baked_maps_follow_the_same_inputs_but_base_color(tmp_path, wired):
     assert gnode.inputs["Roughness"].default_value == pytest.approx(0.65)
     assert gnode.inputs["Sheen Weight"].default_value == pytest.approx(0.2)
     assert "Color" not in json.loads(mat[wiring.TAKEN_INPUTS_PROP])
+    assert follow.baked_unit_scale_stale(mat, bpy.context.scene) is None
+
+
+def _set_units(scene: bpy.types.Scene, system: str, scale: float = 1.0) -> None:
+    scene.unit_settings.system, scene.unit_settings.scale_length = system, scale
+    bpy.context.view_layer.update()  # the depsgraph update Scene ▸ Units makes in the interface
+
+
+def test_the_live_group_follows_the_scenes_unit_scale(tmp_path, wired):
+    """Radii are in Blender units: a model set to centimetres after inverting (Unit Scale 0.01) has the live
+    group's radii given in centimetres; a value the artist set on the group node stays until the scene's changes;
+    unit system None is 1 metre per unit."""
+    scene, mat, principled, gnode, _ = wired
+    assert gnode.inputs["Unit Scale"].default_value == pytest.approx(follow.scene_unit_scale(scene))
+    _set_units(scene, "METRIC", 0.01)
+    assert gnode.inputs["Unit Scale"].default_value == pytest.approx(0.01)
+    assert json.loads(mat[wiring.TAKEN_INPUTS_PROP])["Unit Scale"] == ["value", 0.01]
+    gnode.inputs["Unit Scale"].default_value = 0.02  # the artist's own value on the group node
+    principled.inputs["Roughness"].default_value = 0.7
+    scene.render.resolution_percentage = 50  # another scene change: the units did not change
+    bpy.context.view_layer.update()
+    assert gnode.inputs["Unit Scale"].default_value == pytest.approx(0.02)
+    _set_units(scene, "NONE", 0.01)
+    assert gnode.inputs["Unit Scale"].default_value == pytest.approx(1.0)
+
+
+def test_a_skin_material_appended_into_a_scene_of_other_units_takes_them(tmp_path, wired):
+    """A skin material wired at Unit Scale 1 and saved to a library, appended into a scene in centimetres and
+    given to an object there, renders with radii in centimetres; the operator on it is up to date."""
+    scene, mat, _, _, _ = wired
+    library = tmp_path / "library.blend"
+    bpy.data.libraries.write(str(library), {mat}, fake_user=True)
+    _set_units(scene, "METRIC", 0.01)
+    with bpy.data.libraries.load(str(library), link=False) as (source, target):
+        target.materials = [mat.name]
+    (appended,) = target.materials
+    assert wiring.wired_group_node(appended).inputs["Unit Scale"].default_value == pytest.approx(1.0)
+    bpy.ops.mesh.primitive_plane_add(size=0.1)
+    plane = bpy.context.object
+    plane.data.materials.append(appended)
+    bpy.context.view_layer.update()
+    assert wiring.wired_group_node(appended).inputs["Unit Scale"].default_value == pytest.approx(0.01)
+
+
+def test_baked_maps_in_other_units_than_the_scenes_are_reported(tmp_path, wired):
+    """Baked radii are in the units of the bake: where the scene's Unit Scale changes afterwards the add-on says the
+    maps are stale (the panel asks for another bake), and a bake in the new units is not."""
+    scene, mat, _, _, _ = wired
+    _set_units(scene, "METRIC", 1.0)
+    assert run_invert(bpy.data.objects["ProbeSlab"], mode="BAKE") == {"FINISHED"}
+    assert follow.baked_unit_scale_stale(mat, scene) is None
+    _set_units(scene, "METRIC", 0.01)
+    assert follow.baked_unit_scale_stale(mat, scene) == pytest.approx(1.0)
+    assert run_invert(bpy.data.objects["ProbeSlab"], mode="BAKE") == {"FINISHED"}
+    assert follow.baked_unit_scale_stale(mat, scene) is None
