@@ -20,6 +20,10 @@ after inverting, a skin material appended from a library into a scene of other u
 input takes it.  A material used in scenes of different Unit Scales takes that of the scene last changed.  Baked
 maps hold their radii in the units they were baked for: :func:`baked_unit_scale_stale` says when the scene's differs
 (the panel asks for another bake).
+
+The metal and glass layers (blender_addon.wiring, "Metal and glass") are copies of the Principled BSDF: the record
+holds what they took (``record[BASE_LAYERS]``, every input), and where that changes, or Metallic or Transmission
+Weight becomes linked, above 0 or 0 again, they are renewed, put in or taken out.
 """
 
 from __future__ import annotations
@@ -34,6 +38,9 @@ from . import live, nodes, wiring
 FOLLOWED = {"Color": "Base Color", **{name: name for name in nodes.TAKEN_INPUTS}}
 #: The record's entry for the scene's Unit Scale, and the live group's input that takes it.
 UNIT_SCALE = "Unit Scale"
+#: The record's entry for what the metal and glass layers' copies of the Principled BSDF took (blender_addon.wiring,
+#: "Metal and glass"): every input of it, by identifier.
+BASE_LAYERS = "Base layers"
 
 
 def scene_unit_scale(scene: bpy.types.Scene) -> float:
@@ -79,7 +86,35 @@ def record(material: bpy.types.Material, unit_scale_m: float) -> None:
         principled, gnode = found
         taken = {ours: _state(principled.inputs[theirs]) for ours, theirs in FOLLOWED.items()
                  if ours in gnode.inputs and theirs in principled.inputs}
-        material[wiring.TAKEN_INPUTS_PROP] = json.dumps({**taken, UNIT_SCALE: _unit_state(unit_scale_m)})
+        taken[UNIT_SCALE] = _unit_state(unit_scale_m)
+        if wiring.base_layer_inputs(principled):
+            taken[BASE_LAYERS] = _base_state(principled)
+        material[wiring.TAKEN_INPUTS_PROP] = json.dumps(taken)
+
+
+def _base_state(principled: bpy.types.Node) -> dict[str, list]:
+    """What every input of the Principled BSDF gives (:func:`_state`), by identifier: what its copies take."""
+    return {socket.identifier: _state(socket) for socket in principled.inputs}
+
+
+def _follow_base_layers(tree: bpy.types.NodeTree, principled: bpy.types.Node, gnode: bpy.types.Node,
+                        taken: dict) -> bool:
+    """Put in, take out or renew the metal and glass layers (blender_addon.wiring) where the Principled BSDF's
+    Metallic or Transmission Weight, or any input their copies take, changed since ``taken`` (updated); whether
+    anything changed."""
+    needed = bool(wiring.base_layer_inputs(principled))
+    present = any(wiring.BASE_LAYER_PROP in node for node in tree.nodes)
+    if not needed and not present:
+        return False
+    state = _base_state(principled)
+    if needed and present and taken.get(BASE_LAYERS) == state:
+        return False
+    wiring.remove_base_layers(tree)
+    taken.pop(BASE_LAYERS, None)
+    if needed:
+        wiring.insert_base_layers(tree, principled, gnode)
+        taken[BASE_LAYERS] = state
+    return True
 
 
 def follow(material: bpy.types.Material, unit_scale_m: float | None = None) -> list[str]:
@@ -107,6 +142,8 @@ def follow(material: bpy.types.Material, unit_scale_m: float | None = None) -> l
         wiring.take_input(tree, principled.inputs[theirs], gnode.inputs[ours])
         taken[ours] = now
         changed.append(ours)
+    if _follow_base_layers(tree, principled, gnode, taken):
+        changed.append(BASE_LAYERS)
     if changed:
         material[wiring.TAKEN_INPUTS_PROP] = json.dumps(taken)
     return changed

@@ -715,6 +715,8 @@ def wire_into_material(material: bpy.types.Material, group: bpy.types.NodeTree,
                                           "EEVEE": gnode.outputs[eevee_output or output]}, gnode, chain)
     wiring.use_shadow_thickness(material)
     _take_surface_inputs(tree, principled if chain else previous, gnode)
+    if principled is not None:
+        wiring.insert_base_layers(tree, principled, gnode)
     for i, ((k, kind), image) in enumerate(sorted((images or {}).items())):
         image.colorspace_settings.name = "Non-Color"
         tex = wiring.tag(tree.nodes.new("ShaderNodeTexImage"))

@@ -26,6 +26,14 @@ Shader nodes (a sweat or oil layer, a glow, a second coat), the renderers' outpu
 render over the skin as they did over the Principled BSDF, their factors and shaders linked from the artist's own
 nodes (:func:`shader_chain`, :func:`feed_render_outputs`).
 
+**Metal and glass.**  The group renders the Principled BSDF's opaque dielectric base (skin, or what is painted over
+it) and its specular, coat and sheen layers.  The Principled BSDF mixes a metal base over all that by Metallic, and
+a glass base under it by Transmission Weight; where either is linked (a character's texture set with a metallic
+map for jewellery or armour) or above 0, each renderer's output gets a tagged copy of the artist's Principled BSDF
+with that input at 1, mixed over the group by the artist's Metallic or Transmission Weight (a Mix Shader, inner
+Transmission, outer Metallic, as the Principled BSDF layers them), so those parts render as the Principled BSDF
+renders them (:func:`insert_base_layers`).  A material with neither gets no such node.
+
 **EEVEE's thickness.**  EEVEE takes an object's thickness, for the light its subsurface passes through thin parts,
 from the Material Output's Thickness or else from the object's smallest dimension: the whole head for an ear.  At
 the skin's millimetre radii that leaves back-lit ears and nostrils dark in EEVEE where Cycles, which follows the
@@ -233,6 +241,78 @@ def feed_render_outputs(material: bpy.types.Material, sockets: dict[str, bpy.typ
         tree.links.new(socket, out.inputs["Surface"])
         fed.append(out)
     return fed
+
+
+#: Custom property on the nodes of a metal or glass layer (module docstring): the Principled BSDF input that mixes it.
+BASE_LAYER_PROP = "spectral_skin_sss_base_layer"
+#: The Principled BSDF's bases the group does not render, innermost first, each with what its copy is given.
+BASE_LAYERS = (("Transmission Weight", {"Metallic": 0.0, "Transmission Weight": 1.0, "Subsurface Weight": 0.0}),
+               ("Metallic", {"Metallic": 1.0, "Transmission Weight": 0.0, "Subsurface Weight": 0.0}))
+
+
+def base_layer_inputs(principled: bpy.types.Node) -> list[str]:
+    """The inputs of :data:`BASE_LAYERS` that are linked or above 0 on ``principled`` (their layers are needed)."""
+    return [name for name, _ in BASE_LAYERS if name in principled.inputs
+            and (feeding_socket(principled.inputs[name]) is not None or principled.inputs[name].default_value > 0.0)]
+
+
+def _base_copy(tree: bpy.types.NodeTree, principled: bpy.types.Node, name: str, near: bpy.types.Node,
+               row: int) -> bpy.types.Node:
+    """A tagged copy of the artist's Principled BSDF with the settings of layer ``name`` (:data:`BASE_LAYERS`), its
+    other inputs linked from, or set to, what the artist's node has."""
+    copy = tag(tree.nodes.new("ShaderNodeBsdfPrincipled"))
+    copy[BASE_LAYER_PROP] = name
+    copy.label = f"{name} (Spectral Skin SSS)"
+    copy.location = (near.location.x, near.location.y - 700.0 - 620.0 * row)
+    copy.parent = near.parent
+    copy.distribution, copy.subsurface_method = principled.distribution, principled.subsurface_method
+    settings = dict(BASE_LAYERS)[name]
+    for theirs, ours in zip(principled.inputs, copy.inputs, strict=True):
+        if ours.name in settings:
+            ours.default_value = settings[ours.name]
+        else:
+            take_input(tree, theirs, ours)
+    return copy
+
+
+def insert_base_layers(tree: bpy.types.NodeTree, principled: bpy.types.Node, gnode: bpy.types.Node) -> int:
+    """Mix a copy of ``principled`` for each of its :func:`base_layer_inputs` over every output link of the group
+    node ``gnode`` (module docstring, "Metal and glass"); returns how many layers were inserted."""
+    names = base_layer_inputs(principled)
+    copies = {name: _base_copy(tree, principled, name, gnode, row) for row, name in enumerate(names)}
+    shader_links = [ln for out in gnode.outputs if out.type == "SHADER" for ln in out.links if not ln.is_muted]
+    for index, link in enumerate(shader_links):
+        feed, target = link.from_socket, link.to_socket
+        tree.links.remove(link)
+        for depth, name in enumerate(names):
+            mix = tag(tree.nodes.new("ShaderNodeMixShader"))
+            mix[BASE_LAYER_PROP] = name
+            mix.label = f"{name} (Spectral Skin SSS)"
+            mix.location = (gnode.location.x + 200.0 * (depth + 1), gnode.location.y - 700.0 - 150.0 * index)
+            mix.parent = gnode.parent
+            take_input(tree, principled.inputs[name], mix.inputs["Fac"])
+            tree.links.new(feed, mix.inputs[1])
+            tree.links.new(copies[name].outputs["BSDF"], mix.inputs[2])
+            feed = mix.outputs["Shader"]
+        tree.links.new(feed, target)
+    return len(names)
+
+
+def remove_base_layers(tree: bpy.types.NodeTree) -> int:
+    """Take the metal and glass layers of :func:`insert_base_layers` out again, each mix's group side linked where
+    the mix fed; returns how many nodes were removed."""
+    ours = [n for n in tree.nodes if BASE_LAYER_PROP in n and is_added(n)]
+    mixes = [n for n in ours if n.bl_idname == "ShaderNodeMixShader"]
+    copies = [n for n in ours if n.bl_idname != "ShaderNodeMixShader"]
+    for mix in mixes:
+        inner = feeding_socket(mix.inputs[1])
+        targets = [ln.to_socket for ln in mix.outputs["Shader"].links]
+        tree.nodes.remove(mix)
+        for target in targets if inner is not None else ():
+            tree.links.new(inner, target)
+    for copy in copies:
+        tree.nodes.remove(copy)
+    return len(ours)
 
 
 # -- finding and removing the add-on's nodes --------------------------------------------------------------------

@@ -409,11 +409,19 @@ def render(name):
     rgb = px.reshape(STRIPE, n * STRIPE, 4)[..., :3]
     return [rgb[:, i * STRIPE + 3:(i + 1) * STRIPE - 3].reshape(-1, 3).mean(axis=0).tolist() for i in range(n)]
 
+principled_bsdf = mat.node_tree.nodes["Principled BSDF"]
+principled_bsdf.inputs["Metallic"].default_value = 1.0
+principled_metal = render("principled_metal.exr")
+principled_bsdf.inputs["Metallic"].default_value = 0.0
 principled = render("principled.exr")
 slab = bpy.data.objects["ProbeSlab"]
 with bpy.context.temp_override(object=slab, active_object=slab):
     assert bpy.ops.spectral_skin.invert_albedo() == {{"FINISHED"}}
-print("RESULT" + json.dumps({{"principled": principled, "live": render("live.exr")}}))
+live_rgb = render("live.exr")
+principled_bsdf.inputs["Metallic"].default_value = 1.0  # the metal layer (blender_addon.wiring) comes in
+bpy.context.view_layer.update()
+print("RESULT" + json.dumps({{"principled": principled, "live": live_rgb, "principled_metal": principled_metal,
+                              "live_metal": render("live_metal.exr")}}))
 """
 #: EEVEE's temporal anti-aliasing samples: the probe is flat and uniformly lit, so a few suffice.
 EEVEE_TAA = 4
@@ -426,7 +434,8 @@ def eevee_renders(tmp_path_factory):
     probe box, straight above under the white world: first the artist's Principled BSDF (Roughness 0.5, skin's
     IOR), then the material after Invert Skin Albedo (the live group's EEVEE output).  Returns the painted linear
     colours of the skin stripes (3, 3) and of the others (16, 3), and the stripes' mean linear RGB of both renders
-    (20, 3: skin, black, the others)."""
+    (20, 3: skin, black, the others); then the same two at Metallic 1 (the Principled BSDF's metal, and the metal
+    layer the add-on mixes over the live group)."""
     import json
     import subprocess
 
@@ -440,14 +449,15 @@ def eevee_renders(tmp_path_factory):
     assert line is not None, done.stdout[-2000:] + done.stderr[-2000:]
     result = json.loads(line[len("RESULT"):])
     return (_decode(codes[:3].astype(np.float64)), _decode(codes[4:].astype(np.float64)),
-            np.array(result["principled"]), np.array(result["live"]))
+            np.array(result["principled"]), np.array(result["live"]),
+            np.array(result["principled_metal"]), np.array(result["live_metal"]))
 
 
 @pytest.mark.slow
 def test_eevee_renders_the_live_material_near_the_painted_colour(eevee_renders):
     """The live group's EEVEE output: each painted stripe within ΔE76 1 of the painted colour plus the coat's F0
     (EEVEE's subsurface is an approximation), never black."""
-    painted, _, _, eevee = eevee_renders
+    painted, _, _, eevee, _, _ = eevee_renders
     eevee = eevee[:3]
     f0 = ((1.4 - 1.0) / (1.4 + 1.0)) ** 2
     de = delta_e76(_lab(eevee), _lab(painted + f0))
@@ -462,7 +472,7 @@ def test_eevee_renders_colours_that_are_not_skin_as_painted(eevee_renders):
     """Make-up, ink and paint through the live group's EEVEE output (Material Preview): the sixteen colours of
     tests.test_painted_gain.NON_SKIN within ΔE76 1.0 mean / 2.0 max of the painted colour plus the coat's F0, the
     bounds the Cycles output meets (tests/test_live_colours.py); the nearest skin colour would be up to ΔE76 22 off."""
-    _, painted, _, live_rgb = eevee_renders
+    _, painted, _, live_rgb, _, _ = eevee_renders
     f0 = ((1.4 - 1.0) / (1.4 + 1.0)) ** 2
     de = delta_e76(_lab(live_rgb[4:]), _lab(painted + f0))
     print(f"\nEEVEE, not skin: ΔE76 {np.round(de, 2).tolist()} mean {de.mean():.2f} max {de.max():.2f}")
@@ -475,13 +485,24 @@ def test_principled_base_share_is_what_eevee_renders(eevee_renders):
     base, by which the EEVEE output divides the colour) against a Principled BSDF rendered in EEVEE: (render of
     the painted base - render of a black base) / painted, weighted by luminance per stripe, within 0.015 of it
     (EEVEE's per-channel shares spread 0.93-0.97 on the dark stripe's blue, 0.96-0.97 elsewhere)."""
-    painted, _, principled, _ = eevee_renders
+    painted, _, principled, _, _, _ = eevee_renders
     share = (principled[:3] - principled[3]) / painted
     luminance = np.array([0.2126, 0.7152, 0.0722])  # linear sRGB -> Y (ITU-R BT.709)
     by_luminance = ((share * painted) @ luminance) / (painted @ luminance)
     print(f"\nEEVEE Principled base share {np.round(share, 4).tolist()}, by luminance "
           f"{np.round(by_luminance, 4).tolist()}; live.PRINCIPLED_BASE_SHARE {live.PRINCIPLED_BASE_SHARE}")
     assert np.all(np.abs(by_luminance - live.PRINCIPLED_BASE_SHARE) <= 0.015), by_luminance
+
+
+@pytest.mark.slow
+def test_eevee_renders_metal_over_the_skin_as_the_principled_bsdf(eevee_renders):
+    """Metallic 1 on the artist's Principled BSDF after Invert Skin Albedo: EEVEE renders each stripe as it renders
+    the Principled BSDF's metal (within 2 % per channel), not the skin group's colour."""
+    _, _, _, live_rgb, principled_metal, live_metal = eevee_renders
+    print(f"\nEEVEE metal: live {np.round(live_metal[:3], 4).tolist()} Principled "
+          f"{np.round(principled_metal[:3], 4).tolist()}")
+    np.testing.assert_allclose(live_metal, principled_metal, rtol=0.02, atol=1e-4)
+    assert np.max(np.abs(live_rgb[:3] - principled_metal[:3])) > 0.02
 
 
 def test_images_of_an_older_layout_still_in_use_are_kept_and_the_new_ones_reused(addon):
