@@ -71,11 +71,8 @@ def _principled_and_group(material: bpy.types.Material) -> tuple[bpy.types.Node,
     gnode = wiring.wired_group_node(material)
     if gnode is None or not (live.TABLE_PROP in gnode.node_tree or "spectral_skin_sss_k" in gnode.node_tree):
         return None
-    try:
-        principled = live.colour_source(material)[0]
-    except live.LiveInputError:
-        return None
-    return principled, gnode
+    principled = wiring.artist_principled(material)
+    return (principled, gnode) if principled is not None else None
 
 
 def record(material: bpy.types.Material, unit_scale_m: float) -> None:

@@ -765,6 +765,11 @@ def colour_source(material: bpy.types.Material) -> tuple[bpy.types.Node, bpy.typ
     ``material[PREVIOUS_SURFACE_PROP]``), the output socket feeding its Base Color (None when unlinked) and its Base
     Color value."""
     surface = wiring.artist_principled(material)
+    grouped = wiring.grouped_principled(material.node_tree) if surface is None else None
+    if grouped is not None:
+        raise LiveInputError(f"material '{material.name}': its Principled BSDF is inside the node group "
+                             f"'{grouped.node_tree.name}', which the live group cannot read or rewire; ungroup it "
+                             "(select the group node, Ctrl+Alt+G) and run this again, or choose Bake")
     if surface is None:
         raise LiveInputError(f"material '{material.name}': no Principled BSDF feeds its Material Output's Surface "
                              "(straight or through Mix Shader and Add Shader nodes); connect one (its Base Color is "

@@ -179,6 +179,33 @@ def shader_chain(tree: bpy.types.NodeTree) -> tuple[bpy.types.Node | None, list[
     return (albedo or found or [(None, [])])[0]
 
 
+def grouped_principled(tree: bpy.types.NodeTree) -> bpy.types.Node | None:
+    """The node group node feeding the active Material Output's Surface (straight or through Mix Shader and Add
+    Shader nodes) that holds a Principled BSDF, at any depth (an asset's skin shader), or None."""
+    out = active_output(tree)
+    feed = feeding_socket(out.inputs["Surface"]) if out is not None else None
+    stack, seen = [feed.node] if feed is not None else [], set()
+    while stack:
+        node = stack.pop()
+        if node.name in seen:
+            continue
+        seen.add(node.name)
+        if node.bl_idname == "ShaderNodeGroup" and _holds_principled(node.node_tree, set()):
+            return node
+        if node.bl_idname in LAYER_NODES:
+            stack += [f.node for s in node.inputs if s.type == "SHADER" and (f := feeding_socket(s)) is not None]
+    return None
+
+
+def _holds_principled(tree: bpy.types.NodeTree | None, seen: set[str]) -> bool:
+    """Whether ``tree`` or a node group inside it (at any depth) has a Principled BSDF."""
+    if tree is None or tree.name in seen:
+        return False
+    seen.add(tree.name)
+    return any(n.bl_idname == "ShaderNodeBsdfPrincipled"
+               or (n.bl_idname == "ShaderNodeGroup" and _holds_principled(n.node_tree, seen)) for n in tree.nodes)
+
+
 def artist_principled(material: bpy.types.Material) -> bpy.types.Node | None:
     """The artist's Principled BSDF that the add-on's group renders for: the one of :func:`shader_chain`, or where
     the add-on's nodes feed the active output (a material wired before the per-target outputs, or whose active

@@ -380,6 +380,34 @@ def test_operator_refuses_a_material_without_principled_and_changes_nothing(addo
     assert snapshot() == state
 
 
+def test_a_principled_bsdf_inside_a_node_group_is_named_and_nothing_changes(addon):
+    """An asset's skin shader: the Principled BSDF sits in a node group (two deep, under a Mix Shader layer) that
+    feeds the Material Output; the operator names the group and says how to ungroup it, and changes nothing."""
+    obj, mat, _ = skin_object(None)
+    tree = mat.node_tree
+    inner = bpy.data.node_groups.new("Skin Core", "ShaderNodeTree")
+    inner.interface.new_socket("BSDF", in_out="OUTPUT", socket_type="NodeSocketShader")
+    bsdf = inner.nodes.new("ShaderNodeBsdfPrincipled")
+    inner.links.new(bsdf.outputs[0], inner.nodes.new("NodeGroupOutput").inputs[0])
+    outer = bpy.data.node_groups.new("Skin Shader", "ShaderNodeTree")
+    outer.interface.new_socket("BSDF", in_out="OUTPUT", socket_type="NodeSocketShader")
+    core = outer.nodes.new("ShaderNodeGroup")
+    core.node_tree = inner
+    outer.links.new(core.outputs[0], outer.nodes.new("NodeGroupOutput").inputs[0])
+    tree.nodes.remove(tree.nodes["Principled BSDF"])
+    shader = tree.nodes.new("ShaderNodeGroup")
+    shader.node_tree = outer
+    layer = tree.nodes.new("ShaderNodeMixShader")
+    tree.links.new(shader.outputs[0], layer.inputs[1])
+    tree.links.new(tree.nodes.new("ShaderNodeBsdfGlossy").outputs[0], layer.inputs[2])
+    tree.links.new(layer.outputs[0], tree.nodes["Material Output"].inputs["Surface"])
+    state = snapshot()
+    with bpy.context.temp_override(object=obj, active_object=obj):
+        with pytest.raises(RuntimeError, match="inside the node group 'Skin Shader'.*Ctrl\\+Alt\\+G"):
+            bpy.ops.spectral_skin.invert_albedo()
+    assert snapshot() == state
+
+
 # -- EEVEE -----------------------------------------------------------------------------------------------------
 EEVEE_SCRIPT = """
 import json, sys
