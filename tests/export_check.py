@@ -5,7 +5,9 @@ baked maps), through the extension zip installed in Blender's extension system.
     python tests/export_check.py ZIP WORKDIR
 
 The material: an albedo PNG in an Image Texture feeding the Principled BSDF's Base Color, a roughness PNG
-(Non-Color) feeding Roughness, a normal-map PNG through a Normal Map node feeding Normal.  For each mode the scene is
+(Non-Color) feeding Roughness, a metallic PNG (Non-Color, 0) feeding Metallic (so the add-on's metal layer, a copy
+of the Principled BSDF, is in the tree the exporters read), a normal-map PNG through a Normal Map node feeding
+Normal.  For each mode the scene is
 exported before and after the operator, each into its own folder; which node each renderer's Material Output takes
 after it, whether Remove Skin SSS then gives back the material's nodes, values and links, and what each exporter
 wrote about the material is
@@ -31,7 +33,8 @@ EXTENSION = "bl_ext.user_default.spectral_skin_sss"
 #: The artist's textures: (file name, RGB 0..1 of a 4 x 4 image, colour space).
 TEXTURES = {"albedo": ("albedo.png", (0.80, 0.55, 0.45), "sRGB"),
             "rough": ("rough.png", (0.45, 0.45, 0.45), "Non-Color"),
-            "normal": ("normal.png", (0.5, 0.5, 1.0), "Non-Color")}
+            "normal": ("normal.png", (0.5, 0.5, 1.0), "Non-Color"),
+            "metal": ("metal.png", (0.0, 0.0, 0.0), "Non-Color")}
 
 
 def write_png(folder: str, name: str, rgb) -> str:
@@ -66,6 +69,7 @@ def artist_scene(folder: str):
         texs[key] = tex
     tree.links.new(texs["albedo"].outputs["Color"], bsdf.inputs["Base Color"])
     tree.links.new(texs["rough"].outputs["Color"], bsdf.inputs["Roughness"])
+    tree.links.new(texs["metal"].outputs["Color"], bsdf.inputs["Metallic"])
     normal_map = tree.nodes.new("ShaderNodeNormalMap")
     tree.links.new(texs["normal"].outputs["Color"], normal_map.inputs["Color"])
     tree.links.new(normal_map.outputs["Normal"], bsdf.inputs["Normal"])
@@ -124,11 +128,14 @@ def tree_state(material) -> tuple:
 
 def renders(tree) -> dict:
     """For each target (All: what exporters read; Cycles; EEVEE) the node feeding the Material Output Blender picks
-    for it (``ShaderNodeTree.get_output_node``): a node group's name, else the node's type."""
+    for it (``ShaderNodeTree.get_output_node``), through the add-on's metal layer (a Mix Shader whose first shader
+    input is the group's side): a node group's name, else the node's type."""
     out = {}
     for target in ("ALL", "CYCLES", "EEVEE"):
         links = tree.get_output_node(target).inputs["Surface"].links
         node = links[0].from_node if links else None
+        while node is not None and node.get("spectral_skin_sss_base_layer"):
+            node = node.inputs[1].links[0].from_node
         out[target] = None if node is None else (node.node_tree.name if node.bl_idname == "ShaderNodeGroup"
                                                  else node.bl_idname)
     return out
