@@ -21,9 +21,10 @@ input takes it.  A material used in scenes of different Unit Scales takes that o
 maps hold their radii in the units they were baked for: :func:`baked_unit_scale_stale` says when the scene's differs
 (the panel asks for another bake).
 
-The metal and glass layers (blender_addon.wiring, "Metal and glass") are copies of the Principled BSDF: the record
-holds what they took (``record[BASE_LAYERS]``, every input), and where that changes, or Metallic or Transmission
-Weight becomes linked, above 0 or 0 again, they are renewed, put in or taken out.
+The layers for what the group does not render (blender_addon.wiring, "Metal and glass": metal and glass, and over
+baked maps the diffuse body, emission and alpha) take the Principled BSDF's inputs: the record holds what they took
+(``record[BASE_LAYERS]``, every input), and where that changes, or an input starts or stops asking for a layer,
+they are renewed, put in or taken out.
 """
 
 from __future__ import annotations
@@ -38,7 +39,7 @@ from . import live, nodes, wiring
 FOLLOWED = {"Color": "Base Color", **{name: name for name in nodes.TAKEN_INPUTS}}
 #: The record's entry for the scene's Unit Scale, and the live group's input that takes it.
 UNIT_SCALE = "Unit Scale"
-#: The record's entry for what the metal and glass layers' copies of the Principled BSDF took (blender_addon.wiring,
+#: The record's entry for what the layers over the group took from the Principled BSDF (blender_addon.wiring,
 #: "Metal and glass"): every input of it, by identifier.
 BASE_LAYERS = "Base layers"
 
@@ -84,7 +85,7 @@ def record(material: bpy.types.Material, unit_scale_m: float) -> None:
         taken = {ours: _state(principled.inputs[theirs]) for ours, theirs in FOLLOWED.items()
                  if ours in gnode.inputs and theirs in principled.inputs}
         taken[UNIT_SCALE] = _unit_state(unit_scale_m)
-        if wiring.base_layer_inputs(principled):
+        if wiring.base_layers(principled, gnode):
             taken[BASE_LAYERS] = _base_state(principled)
         material[wiring.TAKEN_INPUTS_PROP] = json.dumps(taken)
 
@@ -96,10 +97,9 @@ def _base_state(principled: bpy.types.Node) -> dict[str, list]:
 
 def _follow_base_layers(tree: bpy.types.NodeTree, principled: bpy.types.Node, gnode: bpy.types.Node,
                         taken: dict) -> bool:
-    """Put in, take out or renew the metal and glass layers (blender_addon.wiring) where the Principled BSDF's
-    Metallic or Transmission Weight, or any input their copies take, changed since ``taken`` (updated); whether
-    anything changed."""
-    needed = bool(wiring.base_layer_inputs(principled))
+    """Put in, take out or renew the layers over the group (blender_addon.wiring, "Metal and glass") where the
+    Principled BSDF's inputs changed since ``taken`` (updated); whether anything changed."""
+    needed = bool(wiring.base_layers(principled, gnode))
     present = any(wiring.BASE_LAYER_PROP in node for node in tree.nodes)
     if not needed and not present:
         return False

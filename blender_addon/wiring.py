@@ -28,11 +28,14 @@ nodes (:func:`shader_chain`, :func:`feed_render_outputs`).
 
 **Metal and glass.**  The group renders the Principled BSDF's opaque dielectric base (skin, or what is painted over
 it) and its specular, coat and sheen layers.  The Principled BSDF mixes a metal base over all that by Metallic, and
-a glass base under it by Transmission Weight; where either is linked (a character's texture set with a metallic
-map for jewellery or armour) or above 0, each renderer's output gets a tagged copy of the artist's Principled BSDF
-with that input at 1, mixed over the group by the artist's Metallic or Transmission Weight (a Mix Shader, inner
-Transmission, outer Metallic, as the Principled BSDF layers them), so those parts render as the Principled BSDF
-renders them (:func:`insert_base_layers`).  A material with neither gets no such node.
+a glass base by Transmission Weight; where either is linked (a character's texture set with a metallic map for
+jewellery or armour) or above 0, each renderer's output gets a tagged copy of the artist's Principled BSDF with that
+input at 1, mixed over the group by the artist's Metallic or Transmission Weight (a Mix Shader, inner Transmission,
+outer Metallic, as the Principled BSDF layers them), so those parts render as the Principled BSDF renders them
+(:data:`LAYERS`, :func:`insert_base_layers`).  The mixture group of baked maps has no Subsurface Weight, Alpha or
+Emission inputs (the live group has): over it the same way come a copy with Subsurface Weight 0 (the diffuse body
+where a mask lowers the weight), an Emission added and a Transparent BSDF mixed by Alpha, each only where the
+artist's input asks for it.  A material that asks for none gets no such node.
 
 **EEVEE's thickness.**  EEVEE takes an object's thickness, for the light its subsurface passes through thin parts,
 from the Material Output's Thickness or else from the object's smallest dimension: the whole head for an ear.  At
@@ -50,6 +53,7 @@ from __future__ import annotations
 
 import json
 import os
+from typing import NamedTuple
 
 import bpy
 import numpy as np
@@ -270,75 +274,132 @@ def feed_render_outputs(material: bpy.types.Material, sockets: dict[str, bpy.typ
     return fed
 
 
-#: Custom property on the nodes of a metal or glass layer (module docstring): the Principled BSDF input that mixes it.
+#: Custom property on a layer's nodes (module docstring, "Metal and glass"): the Principled BSDF input it is for.
 BASE_LAYER_PROP = "spectral_skin_sss_base_layer"
-#: The Principled BSDF's bases the group does not render, innermost first, each with what its copy is given.
-BASE_LAYERS = (("Transmission Weight", {"Metallic": 0.0, "Transmission Weight": 1.0, "Subsurface Weight": 0.0}),
-               ("Metallic", {"Metallic": 1.0, "Transmission Weight": 0.0, "Subsurface Weight": 0.0}))
+#: Custom property on a layer's Mix or Add Shader: the index of its input that the group's side comes in.
+INNER_PROP = "spectral_skin_sss_inner"
 
 
-def base_layer_inputs(principled: bpy.types.Node) -> list[str]:
-    """The inputs of :data:`BASE_LAYERS` that are linked or above 0 on ``principled`` (their layers are needed)."""
-    return [name for name, _ in BASE_LAYERS if name in principled.inputs
-            and (feeding_socket(principled.inputs[name]) is not None or principled.inputs[name].default_value > 0.0)]
+class Layer(NamedTuple):
+    """A part of the Principled BSDF that a group does not render, put over it in the material: ``name`` the
+    Principled BSDF input that weights it; ``node`` the shader node that mixes it in ("ShaderNodeMixShader" by
+    ``name``, or "ShaderNodeAddShader"); ``inner`` that node's input the group's side comes in; ``shader`` what
+    is mixed in (a copy of the Principled BSDF with ``settings``, a Transparent BSDF or an Emission);
+    ``baked_only``: for the mixture group of baked maps alone (the live group renders it itself)."""
+
+    name: str
+    node: str
+    inner: int
+    shader: str
+    settings: dict
+    baked_only: bool
+
+    def needed(self, principled: bpy.types.Node) -> bool:
+        """Whether ``principled`` asks for this layer: its input linked, or away from where the layer is nothing
+        (Subsurface Weight 0 unlinked is Blender's default, never switched on: the skin, as the operator asks)."""
+        socket = principled.inputs.get(self.name)
+        if socket is None:
+            return False
+        if feeding_socket(socket) is not None:
+            return True
+        value = socket.default_value
+        return {"Subsurface Weight": 0.0 < value < 1.0, "Alpha": value < 1.0}.get(self.name, value > 0.0)
 
 
-def _base_copy(tree: bpy.types.NodeTree, principled: bpy.types.Node, name: str, near: bpy.types.Node,
-               row: int) -> bpy.types.Node:
-    """A tagged copy of the artist's Principled BSDF with the settings of layer ``name`` (:data:`BASE_LAYERS`), its
-    other inputs linked from, or set to, what the artist's node has."""
-    copy = tag(tree.nodes.new("ShaderNodeBsdfPrincipled"))
-    copy[BASE_LAYER_PROP] = name
-    copy.label = f"{name} (Spectral Skin SSS)"
-    copy.location = (near.location.x, near.location.y - 700.0 - 620.0 * row)
-    copy.parent = near.parent
-    copy.distribution, copy.subsurface_method = principled.distribution, principled.subsurface_method
-    settings = dict(BASE_LAYERS)[name]
-    for theirs, ours in zip(principled.inputs, copy.inputs, strict=True):
-        if ours.name in settings:
-            ours.default_value = settings[ours.name]
-        else:
-            take_input(tree, theirs, ours)
-    return copy
+_OPAQUE = {"Metallic": 0.0, "Transmission Weight": 0.0, "Subsurface Weight": 0.0}
+#: The layers, innermost first, in the Principled BSDF's order: its diffuse body (Subsurface Weight below 1), its
+#: glass and metal bases, then its emission and alpha on top.
+LAYERS = (Layer("Subsurface Weight", "ShaderNodeMixShader", 2, "ShaderNodeBsdfPrincipled", _OPAQUE, True),
+          Layer("Transmission Weight", "ShaderNodeMixShader", 1, "ShaderNodeBsdfPrincipled",
+                {**_OPAQUE, "Transmission Weight": 1.0}, False),
+          Layer("Metallic", "ShaderNodeMixShader", 1, "ShaderNodeBsdfPrincipled", {**_OPAQUE, "Metallic": 1.0}, False),
+          Layer("Emission Strength", "ShaderNodeAddShader", 0, "ShaderNodeEmission", {}, True),
+          Layer("Alpha", "ShaderNodeMixShader", 2, "ShaderNodeBsdfTransparent", {}, True))
+
+
+#: The input of a layer's Mix or Add Shader that takes what is mixed in, by the one the group's side comes in.
+_OTHER_SIDE = {0: 1, 1: 2, 2: 1}
+
+
+def base_layers(principled: bpy.types.Node, gnode: bpy.types.Node) -> list[Layer]:
+    """The :data:`LAYERS` that ``principled`` asks for and the group node ``gnode`` does not render itself (the
+    live group has Subsurface Weight, Alpha and Emission inputs; the mixture group of baked maps has none)."""
+    baked = "Alpha" not in gnode.inputs
+    return [layer for layer in LAYERS if (baked or not layer.baked_only) and layer.needed(principled)]
+
+
+def _layer_shader(tree: bpy.types.NodeTree, principled: bpy.types.Node, layer: Layer, baked: bool,
+                  near: bpy.types.Node, row: int) -> bpy.types.Node:
+    """The tagged shader node that ``layer`` mixes in: a copy of the artist's Principled BSDF with the layer's
+    settings (and, over baked maps, no emission and full alpha: their own layers add them once), its other inputs
+    linked from, or set to, what the artist's node has; or a Transparent BSDF; or an Emission of the Principled
+    BSDF's Emission Color and Strength."""
+    node = tag(tree.nodes.new(layer.shader))
+    node[BASE_LAYER_PROP] = layer.name
+    node.label = f"{layer.name} (Spectral Skin SSS)"
+    node.location = (near.location.x, near.location.y - 700.0 - 620.0 * row)
+    node.parent = near.parent
+    if layer.shader == "ShaderNodeEmission":
+        take_input(tree, principled.inputs["Emission Color"], node.inputs["Color"])
+        take_input(tree, principled.inputs["Emission Strength"], node.inputs["Strength"])
+    elif layer.shader == "ShaderNodeBsdfPrincipled":
+        node.distribution, node.subsurface_method = principled.distribution, principled.subsurface_method
+        settings = {**layer.settings, **({"Emission Strength": 0.0, "Alpha": 1.0} if baked else {})}
+        for theirs, ours in zip(principled.inputs, node.inputs, strict=True):
+            if ours.name in settings:
+                ours.default_value = settings[ours.name]
+            else:
+                take_input(tree, theirs, ours)
+    return node
 
 
 def insert_base_layers(tree: bpy.types.NodeTree, principled: bpy.types.Node, gnode: bpy.types.Node) -> int:
-    """Mix a copy of ``principled`` for each of its :func:`base_layer_inputs` over every output link of the group
-    node ``gnode`` (module docstring, "Metal and glass"); returns how many layers were inserted."""
-    names = base_layer_inputs(principled)
-    copies = {name: _base_copy(tree, principled, name, gnode, row) for row, name in enumerate(names)}
+    """Put each of :func:`base_layers` over every shader output link of the group node ``gnode``, innermost first
+    (module docstring, "Metal and glass"); returns how many layers were inserted."""
+    layers = base_layers(principled, gnode)
+    baked = "Alpha" not in gnode.inputs
+    shaders = {layer.name: _layer_shader(tree, principled, layer, baked, gnode, row)
+               for row, layer in enumerate(layers)}
     shader_links = [ln for out in gnode.outputs if out.type == "SHADER" for ln in out.links if not ln.is_muted]
     for index, link in enumerate(shader_links):
         feed, target = link.from_socket, link.to_socket
         tree.links.remove(link)
-        for depth, name in enumerate(names):
-            mix = tag(tree.nodes.new("ShaderNodeMixShader"))
-            mix[BASE_LAYER_PROP] = name
-            mix.label = f"{name} (Spectral Skin SSS)"
-            mix.location = (gnode.location.x + 200.0 * (depth + 1), gnode.location.y - 700.0 - 150.0 * index)
-            mix.parent = gnode.parent
-            take_input(tree, principled.inputs[name], mix.inputs["Fac"])
-            tree.links.new(feed, mix.inputs[1])
-            tree.links.new(copies[name].outputs["BSDF"], mix.inputs[2])
-            feed = mix.outputs["Shader"]
+        for depth, layer in enumerate(layers):
+            node = tag(tree.nodes.new(layer.node))
+            node[BASE_LAYER_PROP], node[INNER_PROP] = layer.name, layer.inner
+            node.label = f"{layer.name} (Spectral Skin SSS)"
+            node.location = (gnode.location.x + 200.0 * (depth + 1), gnode.location.y - 700.0 - 150.0 * index)
+            node.parent = gnode.parent
+            if layer.node == "ShaderNodeMixShader":
+                take_input(tree, principled.inputs[layer.name], node.inputs["Fac"])
+            tree.links.new(feed, node.inputs[layer.inner])
+            tree.links.new(shaders[layer.name].outputs[0], node.inputs[_OTHER_SIDE[layer.inner]])
+            feed = node.outputs[0]
         tree.links.new(feed, target)
-    return len(names)
+    return len(layers)
+
+
+def layer_inner(node: bpy.types.Node) -> bpy.types.NodeSocket | None:
+    """The input of a layer's Mix or Add Shader (:func:`insert_base_layers`) that the group's side comes in, or
+    None for any other node."""
+    index = node.get(INNER_PROP) if is_added(node) else None
+    return node.inputs[index] if index is not None else None
 
 
 def remove_base_layers(tree: bpy.types.NodeTree) -> int:
-    """Take the metal and glass layers of :func:`insert_base_layers` out again, each mix's group side linked where
-    the mix fed; returns how many nodes were removed."""
+    """Take the layers of :func:`insert_base_layers` out again, each Mix or Add Shader's group side linked where it
+    fed; returns how many nodes were removed."""
     ours = [n for n in tree.nodes if BASE_LAYER_PROP in n and is_added(n)]
-    mixes = [n for n in ours if n.bl_idname == "ShaderNodeMixShader"]
-    copies = [n for n in ours if n.bl_idname != "ShaderNodeMixShader"]
-    for mix in mixes:
-        inner = feeding_socket(mix.inputs[1])
-        targets = [ln.to_socket for ln in mix.outputs["Shader"].links]
-        tree.nodes.remove(mix)
+    joins = [n for n in ours if INNER_PROP in n]
+    shaders = [n for n in ours if INNER_PROP not in n]
+    for join in joins:
+        inner = feeding_socket(layer_inner(join))
+        targets = [ln.to_socket for ln in join.outputs[0].links]
+        tree.nodes.remove(join)
         for target in targets if inner is not None else ():
             tree.links.new(inner, target)
-    for copy in copies:
-        tree.nodes.remove(copy)
+    for shader in shaders:
+        tree.nodes.remove(shader)
     return len(ours)
 
 
@@ -379,8 +440,10 @@ def wired_group_node(material: bpy.types.Material) -> bpy.types.Node | None:
     links = [ln for ln in out.inputs["Surface"].links if not ln.is_muted] if out is not None else []
     node = links[0].from_node if links else None
     while node is not None and node.bl_idname in LAYER_NODES and is_added(node):
-        node = next((ln.from_node for s in node.inputs if s.type == "SHADER" for ln in s.links
-                     if not ln.is_muted and is_added(ln.from_node)), None)  # the copy's side: the add-on's nodes
+        inner = layer_inner(node)  # a layer's group side; else the side of the copy of the artist's layers
+        sockets = [inner] if inner is not None else [s for s in node.inputs if s.type == "SHADER"]
+        node = next((ln.from_node for s in sockets for ln in s.links if not ln.is_muted and is_added(ln.from_node)),
+                    None)
     if node is not None and node.bl_idname == "ShaderNodeGroup" and is_addon_group(node.node_tree):
         return node
     return None

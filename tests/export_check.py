@@ -128,14 +128,14 @@ def tree_state(material) -> tuple:
 
 def renders(tree) -> dict:
     """For each target (All: what exporters read; Cycles; EEVEE) the node feeding the Material Output Blender picks
-    for it (``ShaderNodeTree.get_output_node``), through the add-on's metal layer (a Mix Shader whose first shader
-    input is the group's side): a node group's name, else the node's type."""
+    for it (``ShaderNodeTree.get_output_node``), through the add-on's metal layer (a Mix Shader whose input
+    ``spectral_skin_sss_inner`` is the group's side): a node group's name, else the node's type."""
     out = {}
     for target in ("ALL", "CYCLES", "EEVEE"):
         links = tree.get_output_node(target).inputs["Surface"].links
         node = links[0].from_node if links else None
         while node is not None and node.get("spectral_skin_sss_base_layer"):
-            node = node.inputs[1].links[0].from_node
+            node = node.inputs[node["spectral_skin_sss_inner"]].links[0].from_node
         out[target] = None if node is None else (node.node_tree.name if node.bl_idname == "ShaderNodeGroup"
                                                  else node.bl_idname)
     return out

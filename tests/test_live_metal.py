@@ -6,6 +6,7 @@ The reference is Blender's own Principled BSDF of the artist's material, rendere
 Metallic is 1 the group's render is that render within the noise, where the metallic map is 0 it is the skin's,
 and a Transmission Weight of 1 renders Blender's glass.  Layers come and go with the artist's Metallic, follow their
 Principled BSDF's other inputs, and leave with Remove Skin SSS; a material without metal or glass gets none.
+Baked maps, whose mixture group has no Subsurface Weight, Alpha or Emission inputs, get those as layers too.
 """
 
 from __future__ import annotations
@@ -160,3 +161,56 @@ def test_layers_follow_the_principled_bsdf_and_leave_with_remove(tmp_path, scene
         assert bpy.ops.spectral_skin.remove() == {"FINISHED"}
     assert not _base_nodes(mat) and not any(wiring.is_added(n) for n in mat.node_tree.nodes)
     assert wiring.active_output(mat.node_tree).inputs["Surface"].links[0].from_node == principled
+
+
+def _mask(tmp_path: Path, mat: bpy.types.Material, name: str, left: float, right: float) -> bpy.types.Node:
+    """A Non-Color mask texture (``left`` on the left half, ``right`` on the right) through the box's texture
+    coordinates into the Principled BSDF's input ``name``; returns its Image Texture node."""
+    tree = mat.node_tree
+    pixels = np.empty((SIZE, SIZE, 3), np.uint8)
+    pixels[:, : SIZE // 2], pixels[:, SIZE // 2:] = round(255 * left), round(255 * right)
+    image = bpy.data.images.load(str(write_image(tmp_path / f"{name}.png", pixels, "uint8")))
+    image.colorspace_settings.name = "Non-Color"
+    principled = tree.nodes["Principled BSDF"]
+    albedo = principled.inputs["Base Color"].links[0].from_node
+    tex = tree.nodes.new("ShaderNodeTexImage")
+    tex.image, tex.interpolation, tex.extension = image, "Closest", "EXTEND"
+    tree.links.new(albedo.inputs["Vector"].links[0].from_socket, tex.inputs["Vector"])
+    tree.links.new(tex.outputs["Color"], principled.inputs[name])
+    return tex
+
+
+@pytest.mark.slow
+def test_baked_maps_take_subsurface_weight_emission_and_alpha(tmp_path, scene):
+    """Baked maps (whose mixture group has no such inputs) with a Subsurface Weight mask: where it is 0 the render is
+    the artist's Principled BSDF at Subsurface Weight 0 (within 3 %), where it is 1 the skin of the maps; an
+    Emission added afterwards adds its colour x strength to the render (Cycles' emission; within 0.01); Alpha 0
+    renders as the artist's transparent Principled BSDF (within 3 %)."""
+    mat = _material(tmp_path, SKIN, SKIN)
+    principled = mat.node_tree.nodes["Principled BSDF"]
+    _mask(tmp_path, mat, "Subsurface Weight", 0.0, 1.0)
+    mat.node_tree.nodes.active = principled.inputs["Base Color"].links[0].from_node  # the albedo to bake
+    reference = _halves(scene, tmp_path / "principled.exr")
+    principled.inputs["Alpha"].default_value = 0.0
+    transparent = _halves(scene, tmp_path / "transparent.exr")
+    principled.inputs["Alpha"].default_value = 1.0
+    assert run_invert(bpy.data.objects["ProbeSlab"], mode="BAKE") == {"FINISHED"}
+    assert "spectral_skin_sss_k" in wiring.wired_group_node(mat).node_tree
+    assert {n[wiring.BASE_LAYER_PROP] for n in _base_nodes(mat)} == {"Subsurface Weight"}
+    baked = _halves(scene, tmp_path / "baked.exr")
+    glow = np.array([0.2, 0.05, 0.0])
+    principled.inputs["Emission Color"].default_value = (*glow, 1.0)
+    principled.inputs["Emission Strength"].default_value = 1.0
+    bpy.context.view_layer.update()
+    emitting = _halves(scene, tmp_path / "emitting.exr")
+    principled.inputs["Emission Strength"].default_value = 0.0
+    principled.inputs["Alpha"].default_value = 0.0
+    bpy.context.view_layer.update()
+    clear = _halves(scene, tmp_path / "clear.exr")
+    print(f"\ndiffuse body: baked {baked[0].round(4)}, Principled {reference[0].round(4)}; skin: baked "
+          f"{baked[1].round(4)}, Principled {reference[1].round(4)}; emission adds {(emitting - baked).round(4)}; "
+          f"alpha 0: {clear.round(4)} against {transparent.round(4)}")
+    np.testing.assert_allclose(baked[0], reference[0], rtol=0.03)
+    assert np.max(np.abs(baked[1] / reference[1] - 1.0)) > 0.05  # the maps' skin, not the artist's Principled
+    np.testing.assert_allclose(emitting - baked, np.stack([glow, glow]), atol=0.01)
+    np.testing.assert_allclose(clear, transparent, rtol=0.03, atol=1e-3)
