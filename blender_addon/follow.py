@@ -186,16 +186,31 @@ def follow_principled(scene=None, depsgraph=None) -> None:
             follow(material, unit_scale_m)
     finally:
         _following = False
-#: The Unit Scale each scene had at the handler's last call (by the scene's full name): a scene update (a selection
-#: makes one) looks at every recorded material only where the units changed.
-_units_seen: dict[str, float] = {}
+
+
+@bpy.app.handlers.persistent
+def follow_on_load(_filepath=None) -> None:
+    """load_post handler: :func:`follow` every recorded material of the file just opened, in its scene's units, so
+    what changed while the add-on was off (or before this version followed it) renders at once."""
+    _units_seen.clear()
+    scene = bpy.context.scene
+    unit_scale_m = scene_unit_scale(scene) if scene is not None else None
+    for material in [m for m in bpy.data.materials if wiring.TAKEN_INPUTS_PROP in m]:
+        follow(material, unit_scale_m)
+
+
+_HANDLERS = (("depsgraph_update_post", follow_principled), ("load_post", follow_on_load))
 
 
 def register_handlers() -> None:
-    if follow_principled not in bpy.app.handlers.depsgraph_update_post:
-        bpy.app.handlers.depsgraph_update_post.append(follow_principled)
+    for kind, handler in _HANDLERS:
+        handlers = getattr(bpy.app.handlers, kind)
+        if handler not in handlers:
+            handlers.append(handler)
 
 
 def unregister_handlers() -> None:
-    while follow_principled in bpy.app.handlers.depsgraph_update_post:
-        bpy.app.handlers.depsgraph_update_post.remove(follow_principled)
+    for kind, handler in _HANDLERS:
+        handlers = getattr(bpy.app.handlers, kind)
+        while handler in handlers:
+            handlers.remove(handler)

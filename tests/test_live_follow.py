@@ -175,3 +175,19 @@ def test_baked_maps_in_other_units_than_the_scenes_are_reported(tmp_path, wired)
     assert follow.baked_unit_scale_stale(mat, scene) == pytest.approx(1.0)
     assert run_invert(bpy.data.objects["ProbeSlab"], mode="BAKE") == {"FINISHED"}
     assert follow.baked_unit_scale_stale(mat, scene) is None
+
+
+def test_a_file_opened_follows_what_changed_while_the_add_on_was_off(tmp_path, wired):
+    """Changes made to the Principled BSDF with the add-on off (or in a Blender without it) reach the group when
+    the file is opened with it on: a roughness, and a metallic value that brings in the metal layer."""
+    _, mat, principled, _, _ = wired
+    blender_addon.unregister()
+    principled.inputs["Roughness"].default_value = 0.85
+    principled.inputs["Metallic"].default_value = 1.0
+    path, name = tmp_path / "changed.blend", mat.name
+    bpy.ops.wm.save_as_mainfile(filepath=str(path))
+    blender_addon.register()
+    bpy.ops.wm.open_mainfile(filepath=str(path))
+    mat = bpy.data.materials[name]
+    assert wiring.wired_group_node(mat).inputs["Roughness"].default_value == pytest.approx(0.85)
+    assert any(node.get(wiring.BASE_LAYER_PROP) == "Metallic" for node in mat.node_tree.nodes)
