@@ -1,0 +1,127 @@
+"""Make docs/figures/metal_layer.png: a finger with a gold ring, lit from behind and the side, in Cycles.
+
+The artist's material is one Principled BSDF: a medium skin colour, and gold with Metallic 1 on a band (a mask from
+the object's coordinates mixes the colour and feeds Metallic), as a character's texture set paints a ring into the
+skin's material.  Panels, left to right: that Principled BSDF (Blender's default Subsurface Radius and Scale); the
+live group after Invert Skin Albedo, with the add-on's metal layer (blender_addon.wiring, "Metal and glass"); the
+live group without the layer, which rendered the ring as gold-coloured skin.  The finger is 1.6 cm across, the ring
+4 mm wide; Unit Scale 1.  Run from the repository root (about a minute on two cores)::
+
+    .venv/bin/python docs/figures/metal_layer.py
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[2]
+sys.path.insert(0, str(ROOT))
+
+import bpy  # noqa: E402
+from PIL import Image  # noqa: E402
+
+import blender_addon  # noqa: E402
+from blender_addon import wiring  # noqa: E402
+from exporters.colorimetry import srgb_decode, srgb_encode  # noqa: E402
+
+OUT = ROOT / "docs" / "figures" / "metal_layer.png"
+WIDTH, HEIGHT, SAMPLES = 240, 120, 96
+SKIN, GOLD = (198, 140, 112), (255, 196, 90)  # 8-bit sRGB
+RADIUS, RING = 0.008, 0.004  # metres: the finger's radius, the ring's width
+
+
+def scene() -> bpy.types.Object:
+    """The finger (a capped cylinder along x), a camera, a back light and a dim side light; returns the finger."""
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    sc = bpy.context.scene
+    sc.render.engine = "CYCLES"
+    sc.cycles.samples, sc.cycles.use_denoising, sc.cycles.seed = SAMPLES, False, 2
+    sc.render.resolution_x, sc.render.resolution_y = WIDTH, HEIGHT
+    sc.view_settings.view_transform = "Standard"
+    sc.render.image_settings.file_format = "OPEN_EXR"
+    world = bpy.data.worlds.new("World")
+    world.use_nodes = True
+    world.node_tree.nodes["Background"].inputs["Color"].default_value = (0.02, 0.02, 0.025, 1.0)
+    sc.world = world
+    bpy.ops.mesh.primitive_cylinder_add(vertices=64, radius=RADIUS, depth=0.06, rotation=(0.0, math.pi / 2, 0.0))
+    finger = bpy.context.object
+    bpy.ops.object.shade_smooth()
+    bpy.ops.object.camera_add(location=(0.0, -0.09, 0.012), rotation=(math.radians(82), 0.0, 0.0))
+    sc.camera = bpy.context.object
+    sc.camera.data.lens, sc.camera.data.clip_start = 50, 0.001
+    bpy.ops.object.light_add(type="AREA", location=(0.0, 0.05, 0.02))
+    back = bpy.context.object
+    back.data.energy, back.data.size = 0.6, 0.02
+    back.rotation_euler = (math.radians(-70), 0.0, 0.0)
+    bpy.ops.object.light_add(type="AREA", location=(0.06, -0.05, 0.05))
+    side = bpy.context.object
+    side.data.energy, side.data.size = 0.25, 0.05
+    side.rotation_euler = (math.radians(45), math.radians(40), 0.0)
+    return finger
+
+
+def artist_material(obj: bpy.types.Object) -> bpy.types.Material:
+    """Skin with a gold band: a mask (|x| < RING / 2, object coordinates) mixes the Base Color and feeds Metallic."""
+    mat = bpy.data.materials.new("Finger")
+    mat.use_nodes = True
+    obj.data.materials.append(mat)
+    tree = mat.node_tree
+    principled = tree.nodes["Principled BSDF"]
+    principled.inputs["Subsurface Weight"].default_value = 1.0
+    coords, split = tree.nodes.new("ShaderNodeTexCoord"), tree.nodes.new("ShaderNodeSeparateXYZ")
+    tree.links.new(coords.outputs["Object"], split.inputs[0])
+    distance = tree.nodes.new("ShaderNodeMath")
+    distance.operation = "ABSOLUTE"
+    tree.links.new(split.outputs["Z"], distance.inputs[0])  # the cylinder's axis is its local z
+    band = tree.nodes.new("ShaderNodeMath")
+    band.operation = "LESS_THAN"
+    band.inputs[1].default_value = RING / 2
+    tree.links.new(distance.outputs[0], band.inputs[0])
+    colour = tree.nodes.new("ShaderNodeMix")
+    colour.data_type = "RGBA"
+    colour.inputs["A"].default_value = (*srgb_decode(np.array(SKIN) / 255.0), 1.0)
+    colour.inputs["B"].default_value = (*srgb_decode(np.array(GOLD) / 255.0), 1.0)
+    tree.links.new(band.outputs[0], colour.inputs["Factor"])
+    tree.links.new(colour.outputs["Result"], principled.inputs["Base Color"])
+    tree.links.new(band.outputs[0], principled.inputs["Metallic"])
+    principled.inputs["Roughness"].default_value = 0.35
+    return mat
+
+
+def render(path: Path) -> np.ndarray:
+    """The display-referred render (H, W, 3) in [0, 1], row 0 at the top."""
+    sc = bpy.context.scene
+    sc.render.filepath = str(path)
+    bpy.ops.render.render(write_still=True)
+    image = bpy.data.images.load(str(path))
+    pixels = np.empty(WIDTH * HEIGHT * 4, np.float32)
+    image.pixels.foreach_get(pixels)
+    return srgb_encode(np.clip(pixels.reshape(HEIGHT, WIDTH, 4)[::-1, :, :3], 0.0, 1.0))
+
+
+def main() -> None:
+    finger = scene()
+    mat = artist_material(finger)
+    blender_addon.register()
+    with tempfile.TemporaryDirectory() as tmp:
+        principled = render(Path(tmp) / "principled.exr")
+        with bpy.context.temp_override(object=finger, active_object=finger):
+            assert bpy.ops.spectral_skin.invert_albedo(mode="LIVE") == {"FINISHED"}
+        assert any(wiring.BASE_LAYER_PROP in n for n in mat.node_tree.nodes)
+        live = render(Path(tmp) / "live.exr")
+        blender_addon.unregister()  # no handler puts the layer back
+        wiring.remove_base_layers(mat.node_tree)
+        without = render(Path(tmp) / "without.exr")
+    gap = np.ones((HEIGHT, 4, 3))
+    panels = np.concatenate([principled, gap, live, gap, without], axis=1)
+    Image.fromarray(np.round(255 * panels).astype(np.uint8)).save(OUT, optimize=True)
+    print(f"wrote {OUT}")
+
+
+if __name__ == "__main__":
+    main()
