@@ -99,18 +99,23 @@ def _follow_base_layers(tree: bpy.types.NodeTree, principled: bpy.types.Node, gn
                         taken: dict) -> bool:
     """Put in, take out or renew the layers over the group (blender_addon.wiring, "Metal and glass") where the
     Principled BSDF's inputs changed since ``taken`` (updated); whether anything changed."""
-    needed = bool(wiring.base_layers(principled, gnode))
-    present = any(wiring.BASE_LAYER_PROP in node for node in tree.nodes)
+    needed = {layer.name for layer in wiring.base_layers(principled, gnode)}
+    present = wiring.present_layers(tree)
     if not needed and not present:
         return False
     state = _base_state(principled)
-    if needed and present and taken.get(BASE_LAYERS) == state:
-        return False
-    wiring.remove_base_layers(tree)
-    taken.pop(BASE_LAYERS, None)
+    if needed == present:  # the same layers: their inputs follow in place (an animated Metallic makes no nodes)
+        if taken.get(BASE_LAYERS) == state:
+            return False
+        wiring.retake_base_layers(tree, principled, gnode)
+    else:
+        wiring.remove_base_layers(tree)
+        if needed:
+            wiring.insert_base_layers(tree, principled, gnode)
     if needed:
-        wiring.insert_base_layers(tree, principled, gnode)
         taken[BASE_LAYERS] = state
+    else:
+        taken.pop(BASE_LAYERS, None)
     return True
 
 

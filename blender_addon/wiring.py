@@ -330,19 +330,29 @@ def base_layers(principled: bpy.types.Node, gnode: bpy.types.Node) -> list[Layer
 
 def _layer_shader(tree: bpy.types.NodeTree, principled: bpy.types.Node, layer: Layer, baked: bool,
                   near: bpy.types.Node, row: int) -> bpy.types.Node:
-    """The tagged shader node that ``layer`` mixes in: a copy of the artist's Principled BSDF with the layer's
-    settings (and, over baked maps, no emission and full alpha: their own layers add them once), its other inputs
-    linked from, or set to, what the artist's node has; or a Transparent BSDF; or an Emission of the Principled
-    BSDF's Emission Color and Strength."""
+    """The tagged shader node that ``layer`` mixes in (:func:`_take_layer_inputs`)."""
     node = tag(tree.nodes.new(layer.shader))
     node[BASE_LAYER_PROP] = layer.name
     node.label = f"{layer.name} (Spectral Skin SSS)"
     node.location = (near.location.x, near.location.y - 700.0 - 620.0 * row)
     node.parent = near.parent
-    if layer.shader == "ShaderNodeEmission":
+    _take_layer_inputs(tree, principled, node, baked)
+    return node
+
+
+def _take_layer_inputs(tree: bpy.types.NodeTree, principled: bpy.types.Node, node: bpy.types.Node,
+                       baked: bool) -> None:
+    """Give a layer's node what the artist's Principled BSDF has: a copy of it takes its layer's settings (and,
+    over baked maps, no emission and full alpha: their own layers add them once) and every other input, linked
+    from or set to what the artist's node has; an Emission its Emission Color and Strength; a Mix Shader its
+    input's value or link as Fac; a Transparent BSDF or an Add Shader nothing."""
+    layer = next(layer for layer in LAYERS if layer.name == node[BASE_LAYER_PROP])
+    if node.bl_idname == "ShaderNodeEmission":
         take_input(tree, principled.inputs["Emission Color"], node.inputs["Color"])
         take_input(tree, principled.inputs["Emission Strength"], node.inputs["Strength"])
-    elif layer.shader == "ShaderNodeBsdfPrincipled":
+    elif node.bl_idname == "ShaderNodeMixShader":
+        take_input(tree, principled.inputs[layer.name], node.inputs["Fac"])
+    elif node.bl_idname == "ShaderNodeBsdfPrincipled":
         node.distribution, node.subsurface_method = principled.distribution, principled.subsurface_method
         settings = {**layer.settings, **({"Emission Strength": 0.0, "Alpha": 1.0} if baked else {})}
         for theirs, ours in zip(principled.inputs, node.inputs, strict=True):
@@ -350,7 +360,19 @@ def _layer_shader(tree: bpy.types.NodeTree, principled: bpy.types.Node, layer: L
                 ours.default_value = settings[ours.name]
             else:
                 take_input(tree, theirs, ours)
-    return node
+
+
+def present_layers(tree: bpy.types.NodeTree) -> set[str]:
+    """The names of the layers (:data:`LAYERS`) whose nodes are in ``tree``."""
+    return {node[BASE_LAYER_PROP] for node in tree.nodes if BASE_LAYER_PROP in node and is_added(node)}
+
+
+def retake_base_layers(tree: bpy.types.NodeTree, principled: bpy.types.Node, gnode: bpy.types.Node) -> None:
+    """Give the nodes of the layers in ``tree`` what the artist's Principled BSDF has now (an input changed, the
+    same layers still asked for): values and links in place, no node made or removed."""
+    baked = "Alpha" not in gnode.inputs
+    for node in [n for n in tree.nodes if BASE_LAYER_PROP in n and is_added(n)]:
+        _take_layer_inputs(tree, principled, node, baked)
 
 
 def insert_base_layers(tree: bpy.types.NodeTree, principled: bpy.types.Node, gnode: bpy.types.Node) -> int:
@@ -370,8 +392,7 @@ def insert_base_layers(tree: bpy.types.NodeTree, principled: bpy.types.Node, gno
             node.label = f"{layer.name} (Spectral Skin SSS)"
             node.location = (gnode.location.x + 200.0 * (depth + 1), gnode.location.y - 700.0 - 150.0 * index)
             node.parent = gnode.parent
-            if layer.node == "ShaderNodeMixShader":
-                take_input(tree, principled.inputs[layer.name], node.inputs["Fac"])
+            _take_layer_inputs(tree, principled, node, baked)
             tree.links.new(feed, node.inputs[layer.inner])
             tree.links.new(shaders[layer.name].outputs[0], node.inputs[_OTHER_SIDE[layer.inner]])
             feed = node.outputs[0]

@@ -149,6 +149,14 @@ def test_layers_follow_the_principled_bsdf_and_leave_with_remove(tmp_path, scene
         mix = wiring.render_output(mat.node_tree, target).inputs["Surface"].links[0].from_node
         assert mix[wiring.BASE_LAYER_PROP] == "Metallic" and mix.inputs["Fac"].default_value == pytest.approx(1.0)
     assert wiring.wired_group_node(mat) is not None
+    for node in _base_nodes(mat):
+        node.location.x += 1000.0  # moved by the artist
+    moved = sorted((n.name, tuple(n.location)) for n in _base_nodes(mat))
+    principled.inputs["Metallic"].default_value = 0.6  # a new value (a keyframe): the same nodes take it
+    bpy.context.view_layer.update()
+    assert sorted((n.name, tuple(n.location)) for n in _base_nodes(mat)) == moved
+    mix = wiring.render_output(mat.node_tree, "CYCLES").inputs["Surface"].links[0].from_node
+    assert mix.inputs["Fac"].default_value == pytest.approx(0.6)
     principled.inputs["Metallic"].default_value = 0.0
     bpy.context.view_layer.update()
     assert not _base_nodes(mat)
