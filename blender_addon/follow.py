@@ -13,6 +13,9 @@ material records what it took, input by input
 update of a wired material (:func:`follow_principled`, a handler) the Principled BSDF's inputs are compared with
 that record, and each input that changed there is given to the group the same way, then recorded.  An input the
 artist set on the group node itself stays as they set it until the same input changes on the Principled BSDF.
+An input with keyframes or a driver is recorded by a digest of them: the group's input carries a copy
+(blender_addon.wiring.copy_animation), which Blender animates with the frame where no handler runs, and which is
+made again when the keys change.
 
 The scene's Unit Scale (metres per Blender unit, Scene ▸ Units) is followed the same way: the record holds the one
 the group's radii were given (``record[UNIT_SCALE]``), and where the scene's changes (a model set to centimetres
@@ -29,6 +32,7 @@ they are renewed, put in or taken out.
 
 from __future__ import annotations
 
+import hashlib
 import json
 
 import bpy
@@ -57,13 +61,29 @@ def _unit_state(unit_scale_m: float) -> list:
 
 
 def _state(socket: bpy.types.NodeSocket) -> list:
-    """What an input of the Principled BSDF gives: ["link", node, socket identifier] or ["value", value]."""
+    """What an input of the Principled BSDF gives: ["link", node, socket identifier], ["animated", digest of its
+    keyframes and driver] or ["value", value]."""
     feed = wiring.feeding_socket(socket)
     if feed is not None:
         return ["link", feed.node.name, feed.identifier]
+    curves = wiring.animation(socket)
+    if curves:
+        return ["animated", hashlib.sha256(repr([_curve_state(curve) for curve in curves]).encode()).hexdigest()]
     value = socket.default_value
     value = [round(float(v), 6) for v in value] if hasattr(value, "__len__") else round(float(value), 6)
     return ["value", value]
+
+
+def _curve_state(curve: bpy.types.FCurve) -> tuple:
+    """What an F-curve animates a value by: its index, extrapolation and keyframes, or its driver."""
+    if curve.driver is not None:
+        driver = curve.driver
+        return (curve.array_index, driver.type, driver.expression,
+                [(v.name, v.type, [(t.id_type, t.id.name if t.id else "", t.data_path, t.transform_type)
+                                   for t in v.targets]) for v in driver.variables])
+    return (curve.array_index, curve.extrapolation,
+            [(tuple(k.co), tuple(k.handle_left), tuple(k.handle_right), k.interpolation, k.easing)
+             for k in curve.keyframe_points])
 
 
 def _principled_and_group(material: bpy.types.Material) -> tuple[bpy.types.Node, bpy.types.Node] | None:
@@ -141,7 +161,8 @@ def follow(material: bpy.types.Material, unit_scale_m: float | None = None) -> l
         now = _state(principled.inputs[theirs])
         if taken.get(ours) == now:
             continue
-        wiring.take_input(tree, principled.inputs[theirs], gnode.inputs[ours])
+        wiring.take_input(tree, principled.inputs[theirs], gnode.inputs[ours],
+                          animated=taken.get(ours, [None])[0] == "animated")
         taken[ours] = now
         changed.append(ours)
     if _follow_base_layers(tree, principled, gnode, taken):

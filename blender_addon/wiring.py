@@ -142,9 +142,14 @@ def feeding_socket(socket: bpy.types.NodeSocket) -> bpy.types.NodeSocket | None:
     return None
 
 
-def take_input(tree: bpy.types.NodeTree, theirs: bpy.types.NodeSocket, ours: bpy.types.NodeSocket) -> None:
-    """Give the add-on's input ``ours`` what the artist's input ``theirs`` has: the same link, or (unlinked) no link
-    and its value; an unlinked Normal's value means nothing (the shading normal) and a shader input has none."""
+def take_input(tree: bpy.types.NodeTree, theirs: bpy.types.NodeSocket, ours: bpy.types.NodeSocket,
+               animated: bool = False) -> None:
+    """Give the add-on's input ``ours`` what the artist's input ``theirs`` has: the same link, or (unlinked) no link,
+    its value and a copy of its keyframes and driver (:func:`copy_animation`); an unlinked Normal's value means
+    nothing (the shading normal) and a shader input has none.  ``animated``: ``ours`` holds such a copy from an
+    earlier call, removed first (as it is wherever ``theirs`` is animated now)."""
+    if animated or animation(theirs):
+        clear_animation(ours)
     feed = feeding_socket(theirs)
     if feed is not None:
         tree.links.new(feed, ours)
@@ -153,6 +158,77 @@ def take_input(tree: bpy.types.NodeTree, theirs: bpy.types.NodeSocket, ours: bpy
         tree.links.remove(link)
     if theirs.name != "Normal" and hasattr(theirs, "default_value"):
         ours.default_value = theirs.default_value
+        copy_animation(theirs, ours)
+
+
+# -- animated inputs --------------------------------------------------------------------------------------------
+# An input the artist keyframed or drove changes with the frame, where no handler runs: the add-on's input gets a
+# copy of the F-curves (or the driver) in the same node tree, so Blender animates both alike.  A driver reading the
+# artist's input instead would make the node tree depend on itself (Blender reports a dependency cycle).
+def _action_fcurves(tree: bpy.types.NodeTree):
+    """The F-curves of the node tree's action (its slot's, where actions have slots), or None without an action."""
+    anim = tree.animation_data
+    action = anim.action if anim is not None else None
+    if action is None:
+        return None
+    if hasattr(action, "fcurves"):  # Blender 4.2-4.5
+        return action.fcurves
+    from bpy_extras import anim_utils  # Blender 5: slotted actions only
+
+    bag = anim_utils.action_get_channelbag_for_slot(action, anim.action_slot)
+    return bag.fcurves if bag is not None else None
+
+
+def animation(socket: bpy.types.NodeSocket) -> list[bpy.types.FCurve]:
+    """The F-curves (keyframes, then drivers) that animate the value of ``socket`` in its node tree."""
+    tree = socket.id_data
+    anim = tree.animation_data
+    if anim is None or not hasattr(socket, "default_value"):
+        return []
+    path = socket.path_from_id("default_value")
+    keyed = [fc for fc in (_action_fcurves(tree) or ()) if fc.data_path == path]
+    return keyed + [fc for fc in anim.drivers if fc.data_path == path]
+
+
+def copy_animation(theirs: bpy.types.NodeSocket, ours: bpy.types.NodeSocket) -> None:
+    """Give ``ours`` (a socket of the same node tree) a copy of the keyframes and the driver of ``theirs``."""
+    path = ours.path_from_id("default_value")
+    for curve in animation(theirs):
+        if curve.driver is not None:
+            _copy_driver(curve, ours.driver_add("default_value", curve.array_index).driver)
+            continue
+        copy = _action_fcurves(theirs.id_data).new(path, index=curve.array_index)
+        copy.keyframe_points.add(len(curve.keyframe_points))
+        for source, target in zip(curve.keyframe_points, copy.keyframe_points, strict=True):
+            for name in ("co", "handle_left", "handle_right", "interpolation", "handle_left_type",
+                         "handle_right_type", "easing", "back", "amplitude", "period"):
+                setattr(target, name, getattr(source, name))
+        copy.extrapolation = curve.extrapolation
+        copy.update()
+
+
+def _copy_driver(source: bpy.types.Driver, target: bpy.types.Driver) -> None:
+    """Make ``target`` compute what ``source`` does: its type, expression and variables."""
+    target.type, target.expression, target.use_self = source.type, source.expression, source.use_self
+    for variable in source.variables:
+        copy = target.variables.new()
+        copy.name, copy.type = variable.name, variable.type
+        for theirs, ours in zip(variable.targets, copy.targets, strict=False):
+            if variable.type == "SINGLE_PROP":
+                ours.id_type = theirs.id_type
+            ours.id = theirs.id
+            for name in ("data_path", "bone_target", "transform_type", "transform_space", "rotation_mode"):
+                setattr(ours, name, getattr(theirs, name))
+
+
+def clear_animation(socket: bpy.types.NodeSocket) -> None:
+    """Remove the keyframes and the driver of ``socket``'s value."""
+    fcurves = _action_fcurves(socket.id_data)
+    for curve in animation(socket):
+        if curve.driver is not None:
+            socket.driver_remove("default_value", curve.array_index)
+        elif fcurves is not None:
+            fcurves.remove(curve)
 
 
 #: The shader nodes a layered material may pass its Principled BSDF through on the way to the Material Output.
@@ -300,7 +376,7 @@ class Layer(NamedTuple):
         socket = principled.inputs.get(self.name)
         if socket is None:
             return False
-        if feeding_socket(socket) is not None:
+        if feeding_socket(socket) is not None or animation(socket):
             return True
         value = socket.default_value
         return {"Subsurface Weight": 0.0 < value < 1.0, "Alpha": value < 1.0}.get(self.name, value > 0.0)
@@ -348,18 +424,19 @@ def _take_layer_inputs(tree: bpy.types.NodeTree, principled: bpy.types.Node, nod
     input's value or link as Fac; a Transparent BSDF or an Add Shader nothing."""
     layer = next(layer for layer in LAYERS if layer.name == node[BASE_LAYER_PROP])
     if node.bl_idname == "ShaderNodeEmission":
-        take_input(tree, principled.inputs["Emission Color"], node.inputs["Color"])
-        take_input(tree, principled.inputs["Emission Strength"], node.inputs["Strength"])
+        take_input(tree, principled.inputs["Emission Color"], node.inputs["Color"], animated=True)
+        take_input(tree, principled.inputs["Emission Strength"], node.inputs["Strength"], animated=True)
     elif node.bl_idname == "ShaderNodeMixShader":
-        take_input(tree, principled.inputs[layer.name], node.inputs["Fac"])
+        take_input(tree, principled.inputs[layer.name], node.inputs["Fac"], animated=True)
     elif node.bl_idname == "ShaderNodeBsdfPrincipled":
         node.distribution, node.subsurface_method = principled.distribution, principled.subsurface_method
         settings = {**layer.settings, **({"Emission Strength": 0.0, "Alpha": 1.0} if baked else {})}
         for theirs, ours in zip(principled.inputs, node.inputs, strict=True):
             if ours.name in settings:
+                clear_animation(ours)
                 ours.default_value = settings[ours.name]
             else:
-                take_input(tree, theirs, ours)
+                take_input(tree, theirs, ours, animated=True)
 
 
 def present_layers(tree: bpy.types.NodeTree) -> set[str]:

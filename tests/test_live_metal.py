@@ -222,3 +222,43 @@ def test_baked_maps_take_subsurface_weight_emission_and_alpha(tmp_path, scene):
     assert np.max(np.abs(baked[1] / reference[1] - 1.0)) > 0.05  # the maps' skin, not the artist's Principled
     np.testing.assert_allclose(emitting - baked, np.stack([glow, glow]), atol=0.01)
     np.testing.assert_allclose(clear, transparent, rtol=0.03, atol=1e-3)
+
+
+def test_keyframed_inputs_animate_the_group_and_its_layers(tmp_path, scene):
+    """A keyframed Metallic (0 at frame 1, 1 at frame 11) and a keyframed Roughness on the artist's Principled BSDF
+    animate the render: the metal layer's Fac and the live group's Roughness take the Principled BSDF's value at
+    every frame (no handler runs on a frame change: they carry copies of its keyframes); keys moved afterwards
+    follow; Remove Skin SSS leaves only the artist's own keyframes.  At frame 11 the gold renders as the Principled
+    BSDF's metal (within 3 %)."""
+    mat = _material(tmp_path, GOLD, GOLD)
+    principled = mat.node_tree.nodes["Principled BSDF"]
+    principled.inputs["Metallic"].default_value = 1.0
+    metal = _halves(scene, tmp_path / "metal.exr").mean(axis=0)
+    _invert_live()
+    metallic, roughness = principled.inputs["Metallic"], principled.inputs["Roughness"]
+    for frame, value, rough in ((1, 0.0, 0.2), (11, 1.0, 0.5)):  # at frame 11 the reference metal
+        metallic.default_value, roughness.default_value = value, rough
+        metallic.keyframe_insert("default_value", frame=frame)
+        roughness.keyframe_insert("default_value", frame=frame)
+    bpy.context.view_layer.update()
+    gnode = wiring.wired_group_node(mat)
+    mixes = [n for n in _base_nodes(mat) if n.bl_idname == "ShaderNodeMixShader"]
+    assert len(mixes) == 2
+    for frame in (1, 6, 11):
+        scene.frame_set(frame)
+        assert all(m.inputs["Fac"].default_value == pytest.approx(metallic.default_value) for m in mixes)
+        assert gnode.inputs["Roughness"].default_value == pytest.approx(roughness.default_value)
+    assert metallic.default_value == pytest.approx(1.0)
+    animated = _halves(scene, tmp_path / "animated.exr").mean(axis=0)
+    np.testing.assert_allclose(animated, metal, rtol=0.03)
+    curve = wiring.animation(metallic)[0]
+    curve.keyframe_points[1].co.x = 21.0  # the artist moves the last key to frame 21
+    curve.update()
+    bpy.context.view_layer.update()
+    scene.frame_set(11)  # half-way between the keys: 0.5 by the curve's symmetry
+    assert metallic.default_value == pytest.approx(0.5)
+    assert all(m.inputs["Fac"].default_value == pytest.approx(0.5) for m in mixes)
+    with bpy.context.temp_override(object=bpy.data.objects["ProbeSlab"], active_object=bpy.data.objects["ProbeSlab"]):
+        assert bpy.ops.spectral_skin.remove() == {"FINISHED"}
+    paths = sorted(fc.data_path for fc in wiring._action_fcurves(mat.node_tree))
+    assert paths == sorted([metallic.path_from_id("default_value"), roughness.path_from_id("default_value")])
