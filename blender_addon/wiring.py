@@ -195,7 +195,7 @@ def copy_animation(theirs: bpy.types.NodeSocket, ours: bpy.types.NodeSocket) -> 
     path = ours.path_from_id("default_value")
     for curve in animation(theirs):
         if curve.driver is not None:
-            _copy_driver(curve, ours.driver_add("default_value", curve.array_index).driver)
+            _copy_driver(curve.driver, ours.driver_add("default_value", *_index(ours, curve)).driver)
             continue
         copy = _action_fcurves(theirs.id_data).new(path, index=curve.array_index)
         copy.keyframe_points.add(len(curve.keyframe_points))
@@ -205,6 +205,12 @@ def copy_animation(theirs: bpy.types.NodeSocket, ours: bpy.types.NodeSocket) -> 
                 setattr(target, name, getattr(source, name))
         copy.extrapolation = curve.extrapolation
         copy.update()
+
+
+def _index(socket: bpy.types.NodeSocket, curve: bpy.types.FCurve) -> tuple[int, ...]:
+    """The index argument of ``driver_add`` / ``driver_remove`` for ``curve`` on ``socket``: its array index
+    where the value is an array, none for a single value (which refuses one)."""
+    return (curve.array_index,) if hasattr(socket.default_value, "__len__") else ()
 
 
 def _copy_driver(source: bpy.types.Driver, target: bpy.types.Driver) -> None:
@@ -226,7 +232,7 @@ def clear_animation(socket: bpy.types.NodeSocket) -> None:
     fcurves = _action_fcurves(socket.id_data)
     for curve in animation(socket):
         if curve.driver is not None:
-            socket.driver_remove("default_value", curve.array_index)
+            socket.driver_remove("default_value", *_index(socket, curve))
         elif fcurves is not None:
             fcurves.remove(curve)
 

@@ -191,3 +191,23 @@ def test_a_file_opened_follows_what_changed_while_the_add_on_was_off(tmp_path, w
     mat = bpy.data.materials[name]
     assert wiring.wired_group_node(mat).inputs["Roughness"].default_value == pytest.approx(0.85)
     assert any(node.get(wiring.BASE_LAYER_PROP) == "Metallic" for node in mat.node_tree.nodes)
+
+
+def test_a_driven_input_drives_the_group(tmp_path, wired):
+    """A driver on the Principled BSDF's Emission Strength (an empty's height, as a rig's control) drives the live
+    group's Emission Strength the same way: the group's input carries a copy of the driver."""
+    _, mat, principled, gnode, _ = wired
+    control = bpy.data.objects.new("Glow control", None)
+    bpy.context.scene.collection.objects.link(control)
+    driver = principled.inputs["Emission Strength"].driver_add("default_value").driver
+    driver.type = "SUM"
+    variable = driver.variables.new()
+    variable.type, variable.targets[0].id_type = "SINGLE_PROP", "OBJECT"
+    variable.targets[0].id, variable.targets[0].data_path = control, "location.z"
+    bpy.context.view_layer.update()
+    for height in (0.0, 2.5):
+        control.location.z = height
+        bpy.context.view_layer.update()
+        assert principled.inputs["Emission Strength"].default_value == pytest.approx(height)
+        assert gnode.inputs["Emission Strength"].default_value == pytest.approx(height)
+    assert json.loads(mat[wiring.TAKEN_INPUTS_PROP])["Emission Strength"][0] == "animated"
