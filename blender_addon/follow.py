@@ -217,12 +217,18 @@ def follow_principled(scene=None, depsgraph=None) -> None:
 @bpy.app.handlers.persistent
 def follow_on_load(_filepath=None) -> None:
     """load_post handler: :func:`follow` every recorded material of the file just opened, in its scene's units, so
-    what changed while the add-on was off (or before this version followed it) renders at once."""
+    what changed while the add-on was off renders at once.  A material wired by a version that kept no record gets
+    one of its Principled BSDF as it is now (:func:`record`; its group is left as it is, values set on the group
+    node included), so that what changes from now on follows."""
     _units_seen.clear()
     scene = bpy.context.scene
     unit_scale_m = scene_unit_scale(scene) if scene is not None else None
-    for material in [m for m in bpy.data.materials if wiring.TAKEN_INPUTS_PROP in m]:
-        follow(material, unit_scale_m)
+    for material in bpy.data.materials:
+        if wiring.TAKEN_INPUTS_PROP in material:
+            follow(material, unit_scale_m)
+        elif material.node_tree is not None and material.is_editable and _principled_and_group(material):
+            unit = _principled_and_group(material)[1].inputs.get(UNIT_SCALE)
+            record(material, unit.default_value if unit is not None else unit_scale_m or 1.0)
 
 
 _HANDLERS = (("depsgraph_update_post", follow_principled), ("load_post", follow_on_load))

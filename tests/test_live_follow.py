@@ -211,3 +211,22 @@ def test_a_driven_input_drives_the_group(tmp_path, wired):
         assert principled.inputs["Emission Strength"].default_value == pytest.approx(height)
         assert gnode.inputs["Emission Strength"].default_value == pytest.approx(height)
     assert json.loads(mat[wiring.TAKEN_INPUTS_PROP])["Emission Strength"][0] == "animated"
+
+
+def test_a_material_wired_without_a_record_follows_after_the_file_is_opened(tmp_path, wired):
+    """A material wired by a version that kept no record (the record dropped): opening the file records the
+    Principled BSDF as it is, leaving the group as it is (a roughness set on the group node stays), and what
+    changes afterwards follows."""
+    _, mat, principled, gnode, _ = wired
+    del mat[wiring.TAKEN_INPUTS_PROP]
+    gnode.inputs["Roughness"].default_value = 0.3  # set on the group node
+    path, name, principled_name = tmp_path / "older.blend", mat.name, principled.name
+    bpy.ops.wm.save_as_mainfile(filepath=str(path))
+    bpy.ops.wm.open_mainfile(filepath=str(path))
+    mat = bpy.data.materials[name]
+    principled, gnode = mat.node_tree.nodes[principled_name], wiring.wired_group_node(mat)
+    assert wiring.TAKEN_INPUTS_PROP in mat and gnode.inputs["Roughness"].default_value == pytest.approx(0.3)
+    principled.inputs["Coat Weight"].default_value = 0.25
+    bpy.context.view_layer.update()
+    assert gnode.inputs["Coat Weight"].default_value == pytest.approx(0.25)
+    assert gnode.inputs["Roughness"].default_value == pytest.approx(0.3)
