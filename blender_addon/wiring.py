@@ -403,11 +403,15 @@ LAYERS = (Layer("Subsurface Weight", "ShaderNodeMixShader", 2, "ShaderNodeBsdfPr
 _OTHER_SIDE = {0: 1, 1: 2, 2: 1}
 
 
+def _baked(gnode: bpy.types.Node) -> bool:
+    """Whether the group node ``gnode`` is the mixture group of baked maps, which has no Subsurface Weight, Alpha or
+    Emission inputs (the live group has them)."""
+    return "Alpha" not in gnode.inputs
+
+
 def base_layers(principled: bpy.types.Node, gnode: bpy.types.Node) -> list[Layer]:
-    """The :data:`LAYERS` that ``principled`` asks for and the group node ``gnode`` does not render itself (the
-    live group has Subsurface Weight, Alpha and Emission inputs; the mixture group of baked maps has none)."""
-    baked = "Alpha" not in gnode.inputs
-    return [layer for layer in LAYERS if (baked or not layer.baked_only) and layer.needed(principled)]
+    """The :data:`LAYERS` that ``principled`` asks for and the group node ``gnode`` does not render itself."""
+    return [layer for layer in LAYERS if (_baked(gnode) or not layer.baked_only) and layer.needed(principled)]
 
 
 def _layer_shader(tree: bpy.types.NodeTree, principled: bpy.types.Node, layer: Layer, baked: bool,
@@ -453,16 +457,14 @@ def present_layers(tree: bpy.types.NodeTree) -> set[str]:
 def retake_base_layers(tree: bpy.types.NodeTree, principled: bpy.types.Node, gnode: bpy.types.Node) -> None:
     """Give the nodes of the layers in ``tree`` what the artist's Principled BSDF has now (an input changed, the
     same layers still asked for): values and links in place, no node made or removed."""
-    baked = "Alpha" not in gnode.inputs
     for node in [n for n in tree.nodes if BASE_LAYER_PROP in n and is_added(n)]:
-        _take_layer_inputs(tree, principled, node, baked)
+        _take_layer_inputs(tree, principled, node, _baked(gnode))
 
 
 def insert_base_layers(tree: bpy.types.NodeTree, principled: bpy.types.Node, gnode: bpy.types.Node) -> int:
     """Put each of :func:`base_layers` over every shader output link of the group node ``gnode``, innermost first
     (module docstring, "Metal and glass"); returns how many layers were inserted."""
-    layers = base_layers(principled, gnode)
-    baked = "Alpha" not in gnode.inputs
+    layers, baked = base_layers(principled, gnode), _baked(gnode)
     shaders = {layer.name: _layer_shader(tree, principled, layer, baked, gnode, row)
                for row, layer in enumerate(layers)}
     shader_links = [ln for out in gnode.outputs if out.type == "SHADER" for ln in out.links if not ln.is_muted]
