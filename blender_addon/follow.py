@@ -226,8 +226,8 @@ def follow_on_load(_filepath=None) -> None:
     for material in bpy.data.materials:
         if wiring.TAKEN_INPUTS_PROP in material:
             follow(material, unit_scale_m)
-        elif material.node_tree is not None and material.is_editable and _principled_and_group(material):
-            unit = _principled_and_group(material)[1].inputs.get(UNIT_SCALE)
+        elif material.node_tree is not None and material.is_editable and (found := _principled_and_group(material)):
+            unit = found[1].inputs.get(UNIT_SCALE)
             record(material, unit.default_value if unit is not None else unit_scale_m or 1.0)
 
 

@@ -449,15 +449,20 @@ def _take_layer_inputs(tree: bpy.types.NodeTree, principled: bpy.types.Node, nod
                 take_input(tree, theirs, ours, animated=True)
 
 
+def _layer_nodes(tree: bpy.types.NodeTree) -> list[bpy.types.Node]:
+    """The nodes of the layers (:func:`insert_base_layers`) in ``tree``."""
+    return [node for node in tree.nodes if BASE_LAYER_PROP in node and is_added(node)]
+
+
 def present_layers(tree: bpy.types.NodeTree) -> set[str]:
     """The names of the layers (:data:`LAYERS`) whose nodes are in ``tree``."""
-    return {node[BASE_LAYER_PROP] for node in tree.nodes if BASE_LAYER_PROP in node and is_added(node)}
+    return {node[BASE_LAYER_PROP] for node in _layer_nodes(tree)}
 
 
 def retake_base_layers(tree: bpy.types.NodeTree, principled: bpy.types.Node, gnode: bpy.types.Node) -> None:
     """Give the nodes of the layers in ``tree`` what the artist's Principled BSDF has now (an input changed, the
     same layers still asked for): values and links in place, no node made or removed."""
-    for node in [n for n in tree.nodes if BASE_LAYER_PROP in n and is_added(n)]:
+    for node in _layer_nodes(tree):
         _take_layer_inputs(tree, principled, node, _baked(gnode))
 
 
@@ -495,7 +500,7 @@ def layer_inner(node: bpy.types.Node) -> bpy.types.NodeSocket | None:
 def remove_base_layers(tree: bpy.types.NodeTree) -> int:
     """Take the layers of :func:`insert_base_layers` out again, each Mix or Add Shader's group side linked where it
     fed; returns how many nodes were removed."""
-    ours = [n for n in tree.nodes if BASE_LAYER_PROP in n and is_added(n)]
+    ours = _layer_nodes(tree)
     joins = [n for n in ours if INNER_PROP in n]
     shaders = [n for n in ours if INNER_PROP not in n]
     for join in joins:
