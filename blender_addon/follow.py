@@ -28,6 +28,9 @@ The layers for what the group does not render (blender_addon.wiring, "Metal and 
 baked maps the diffuse body, emission and alpha) take the Principled BSDF's inputs: the record holds what they took
 (``record[BASE_LAYERS]``, every input), and where that changes, or an input starts or stops asking for a layer,
 they are renewed, put in or taken out.
+
+The Material Outputs the add-on added for Cycles and EEVEE take the Displacement, Volume and Thickness of the
+artist's output (``record[OUTPUT]``): a displacement map linked, or a Thickness changed, after wiring reaches them.
 """
 
 from __future__ import annotations
@@ -46,6 +49,9 @@ UNIT_SCALE = "Unit Scale"
 #: The record's entry for what the layers over the group took from the Principled BSDF (blender_addon.wiring,
 #: "Metal and glass"): every input of it, by identifier.
 BASE_LAYERS = "Base layers"
+#: The record's entry for what the add-on's Material Outputs took from the artist's (blender_addon.wiring,
+#: OUTPUT_INPUTS: Displacement, Volume, Thickness), by input name.
+OUTPUT = "Material Output"
 
 
 def scene_unit_scale(scene: bpy.types.Scene) -> float:
@@ -66,6 +72,8 @@ def _state(socket: bpy.types.NodeSocket) -> list:
     feed = wiring.feeding_socket(socket)
     if feed is not None:
         return ["link", feed.node.name, feed.identifier]
+    if not hasattr(socket, "default_value"):  # a shader input: linked or nothing
+        return ["value", None]
     curves = wiring.animation(socket)
     if curves:
         return ["animated", hashlib.sha256(repr([_curve_state(curve) for curve in curves]).encode()).hexdigest()]
@@ -107,7 +115,17 @@ def record(material: bpy.types.Material, unit_scale_m: float) -> None:
         taken[UNIT_SCALE] = _unit_state(unit_scale_m)
         if wiring.base_layers(principled, gnode):
             taken[BASE_LAYERS] = _base_state(principled)
+        taken[OUTPUT] = _output_state(material.node_tree)
         material[wiring.TAKEN_INPUTS_PROP] = json.dumps(taken)
+
+
+def _output_state(tree: bpy.types.NodeTree) -> dict[str, list]:
+    """What the artist's Material Output that the add-on's outputs take from (the one of target All) gives at
+    wiring.OUTPUT_INPUTS (:func:`_state`); empty where the add-on added no output or the artist has none."""
+    source = wiring.artist_output(tree, "ALL")
+    if source is None or not any(wiring.is_added(n) for n in tree.nodes if n.bl_idname == "ShaderNodeOutputMaterial"):
+        return {}
+    return {name: _state(source.inputs[name]) for name in wiring.OUTPUT_INPUTS if name in source.inputs}
 
 
 def _base_state(principled: bpy.types.Node) -> dict[str, list]:
@@ -167,6 +185,11 @@ def follow(material: bpy.types.Material, unit_scale_m: float | None = None) -> l
         changed.append(ours)
     if _follow_base_layers(tree, principled, gnode, taken):
         changed.append(BASE_LAYERS)
+    outputs = _output_state(tree)
+    if taken.get(OUTPUT, {}) != outputs:
+        wiring.retake_output_inputs(tree)
+        taken[OUTPUT] = outputs
+        changed.append(OUTPUT)
     if changed:
         material[wiring.TAKEN_INPUTS_PROP] = json.dumps(taken)
     return changed

@@ -6,7 +6,9 @@ node_shader_utils and OBJ the first Principled BSDF linked straight into a Mater
 Principled BSDF of the tree) keep writing its base colour texture, roughness and normal map.  The renderers prefer
 a Material Output whose target is exactly theirs over one of target All (``ShaderNodeTree.get_output_node``), so
 a Material Output of target **Cycles** fed by the add-on's group renders in Cycles and one of target **EEVEE** in
-EEVEE and Material Preview: the render is that of the group, the export that of the artist's Principled.
+EEVEE and Material Preview: the render is that of the group, the export that of the artist's Principled.  An output
+the add-on adds takes the artist's Displacement (a pore or wrinkle map, as bump or true displacement), Volume and
+Thickness from the output the renderer used before, and follows them (blender_addon.follow).
 
 Where the artist already has an output of one of those targets (the active one, or an inactive one the renderer
 would take first), its Surface link is replaced instead of adding a node, and the replaced link is recorded in
@@ -125,6 +127,42 @@ def render_output(tree: bpy.types.NodeTree, target: str) -> bpy.types.Node | Non
     Blender picks it (``ShaderNodeTree.get_output_node``: one of exactly that target, the active one first, else
     one of target All)."""
     return tree.get_output_node(target)
+
+
+#: The Material Output's inputs besides Surface: Volume, Displacement (a displacement or bump map: Cycles displaces or
+#: bumps by it as the material's Displacement setting says, EEVEE bumps) and EEVEE's Thickness.  An output the add-on
+#: adds takes them from the artist's output that renderer used (:func:`take_output_inputs`).
+OUTPUT_INPUTS = ("Volume", "Displacement", "Thickness")
+
+
+def artist_output(tree: bpy.types.NodeTree, target: str) -> bpy.types.Node | None:
+    """The artist's Material Output that renders ``target`` ("CYCLES", "EEVEE", "ALL") with the add-on's outputs
+    left aside, picked as Blender picks (:func:`render_output`): one of exactly that target, the active one first,
+    else one of target All; None where the artist has none."""
+    outputs = [n for n in _outputs(tree) if not is_added(n)]
+    for wanted in dict.fromkeys((target, "ALL")):
+        found = [n for n in outputs if n.target == wanted]
+        if found:
+            return next((n for n in found if n.is_active_output), found[0])
+    return None
+
+
+def take_output_inputs(tree: bpy.types.NodeTree, source: bpy.types.Node, out: bpy.types.Node) -> None:
+    """Give the add-on's Material Output ``out`` what the artist's ``source`` has at :data:`OUTPUT_INPUTS`
+    (:func:`take_input`: a link stays a link, a value and its animation are copied)."""
+    for name in OUTPUT_INPUTS:
+        theirs, ours = source.inputs.get(name), out.inputs.get(name)
+        if theirs is not None and ours is not None:
+            take_input(tree, theirs, ours, animated=bool(animation(ours)))
+
+
+def retake_output_inputs(tree: bpy.types.NodeTree) -> None:
+    """:func:`take_output_inputs` for each Material Output the add-on added, from the artist's output of its target
+    (blender_addon.follow: the artist linked a displacement map, or changed a Thickness, after wiring)."""
+    for out in _outputs(tree):
+        source = artist_output(tree, out.target) if is_added(out) else None
+        if source is not None:
+            take_output_inputs(tree, source, out)
 
 
 def _record_replaced(material: bpy.types.Material, link: bpy.types.NodeLink) -> None:
@@ -330,8 +368,9 @@ def feed_render_outputs(material: bpy.types.Material, sockets: dict[str, bpy.typ
                         near: bpy.types.Node, chain: list[tuple[bpy.types.Node, int]] | None = None
                         ) -> list[bpy.types.Node]:
     """Make ``sockets[target]`` ("CYCLES", "EEVEE") what that renderer renders (module docstring): a new, tagged
-    Material Output of that target beside ``near`` (the group node), or the artist's output of that target with its
-    Surface link replaced (and recorded); through a copy of the layers of ``chain`` (:func:`shader_chain`) where the
+    Material Output of that target beside ``near`` (the group node), taking the Volume, Displacement and Thickness of
+    the artist's output that renderer used (:func:`take_output_inputs`), or the artist's output of that target with
+    its Surface link replaced (and recorded); through a copy of the layers of ``chain`` (:func:`shader_chain`) where the
     artist's Principled BSDF reaches the output through some.  Returns the outputs fed."""
     tree = material.node_tree
     fed = []
@@ -339,6 +378,7 @@ def feed_render_outputs(material: bpy.types.Material, sockets: dict[str, bpy.typ
         if chain:
             socket = _copy_chain(tree, chain, socket, near, i)
         exact = [n for n in _outputs(tree) if n.target == target and not is_added(n)]
+        source = artist_output(tree, target)  # what renders now: its displacement, volume and thickness stay
         if exact:
             out = render_output(tree, target)
             for link in list(out.inputs["Surface"].links):
@@ -351,6 +391,8 @@ def feed_render_outputs(material: bpy.types.Material, sockets: dict[str, bpy.typ
             out.location = (near.location.x + 300.0, near.location.y - 220.0 * i)
             out.parent = near.parent
             out.is_active_output = False
+            if source is not None:
+                take_output_inputs(tree, source, out)
         tree.links.new(socket, out.inputs["Surface"])
         fed.append(out)
     return fed

@@ -448,8 +448,33 @@ with bpy.context.temp_override(object=slab, active_object=slab):
 live_rgb = render("live.exr")
 principled_bsdf.inputs["Metallic"].default_value = 1.0  # the metal layer (blender_addon.wiring) comes in
 bpy.context.view_layer.update()
+live_metal = render("live_metal.exr")
+principled_bsdf.inputs["Metallic"].default_value = 0.0
+# a sun from the side and a height rising along x into the Material Output's Displacement (EEVEE bumps by it)
+sun = bpy.data.objects.new("Sun", bpy.data.lights.new("Sun", "SUN"))
+sun.data.energy, sun.rotation_euler = 3.0, (0.0, 0.8727, 0.0)
+scene.collection.objects.link(sun)
+tree = mat.node_tree
+coords, separate = tree.nodes.new("ShaderNodeTexCoord"), tree.nodes.new("ShaderNodeSeparateXYZ")
+height = tree.nodes.new("ShaderNodeDisplacement")
+height.inputs["Scale"].default_value = 0.7
+tree.links.new(coords.outputs["Object"], separate.inputs[0])
+tree.links.new(separate.outputs["X"], height.inputs["Height"])
+output = tree.get_output_node("ALL")
+bpy.context.view_layer.update()
+sun_flat = render("live_sun.exr")
+tree.links.new(height.outputs[0], output.inputs["Displacement"])
+bpy.context.view_layer.update()
+sun_bumped = render("live_bumped.exr")
+with bpy.context.temp_override(object=slab, active_object=slab):
+    assert bpy.ops.spectral_skin.remove() == {{"FINISHED"}}
+principled_bsdf.inputs["Subsurface Weight"].default_value = 1.0
+principled_bumped = render("principled_bumped.exr")
+tree.links.remove(output.inputs["Displacement"].links[0])
+principled_sun = render("principled_sun.exr")
 print("RESULT" + json.dumps({{"principled": principled, "live": live_rgb, "principled_metal": principled_metal,
-                              "live_metal": render("live_metal.exr")}}))
+                              "live_metal": live_metal, "bump": [sun_flat, sun_bumped, principled_sun,
+                                                                 principled_bumped]}}))
 """
 #: EEVEE's temporal anti-aliasing samples: the probe is flat and uniformly lit, so a few suffice.
 EEVEE_TAA = 4
@@ -463,7 +488,9 @@ def eevee_renders(tmp_path_factory):
     IOR), then the material after Invert Skin Albedo (the live group's EEVEE output).  Returns the painted linear
     colours of the skin stripes (3, 3) and of the others (16, 3), and the stripes' mean linear RGB of both renders
     (20, 3: skin, black, the others); then the same two at Metallic 1 (the Principled BSDF's metal, and the metal
-    layer the add-on mixes over the live group)."""
+    layer the add-on mixes over the live group); then, under a sun from the side, the live material and the artist's
+    Principled BSDF at Subsurface Weight 1 without and with a height rising along x in the Material Output's
+    Displacement (4, 20, 3: live flat, live bumped, Principled flat, Principled bumped)."""
     import json
     import subprocess
 
@@ -478,14 +505,14 @@ def eevee_renders(tmp_path_factory):
     result = json.loads(line[len("RESULT"):])
     return (_decode(codes[:3].astype(np.float64)), _decode(codes[4:].astype(np.float64)),
             np.array(result["principled"]), np.array(result["live"]),
-            np.array(result["principled_metal"]), np.array(result["live_metal"]))
+            np.array(result["principled_metal"]), np.array(result["live_metal"]), np.array(result["bump"]))
 
 
 @pytest.mark.slow
 def test_eevee_renders_the_live_material_near_the_painted_colour(eevee_renders):
     """The live group's EEVEE output: each painted stripe within ΔE76 1 of the painted colour plus the coat's F0
     (EEVEE's subsurface is an approximation), never black."""
-    painted, _, _, eevee, _, _ = eevee_renders
+    painted, _, _, eevee, _, _, _ = eevee_renders
     eevee = eevee[:3]
     f0 = ((1.4 - 1.0) / (1.4 + 1.0)) ** 2
     de = delta_e76(_lab(eevee), _lab(painted + f0))
@@ -500,7 +527,7 @@ def test_eevee_renders_colours_that_are_not_skin_as_painted(eevee_renders):
     """Make-up, ink and paint through the live group's EEVEE output (Material Preview): the sixteen colours of
     tests.test_painted_gain.NON_SKIN within ΔE76 1.0 mean / 2.0 max of the painted colour plus the coat's F0, the
     bounds the Cycles output meets (tests/test_live_colours.py); the nearest skin colour would be up to ΔE76 22 off."""
-    _, painted, _, live_rgb, _, _ = eevee_renders
+    _, painted, _, live_rgb, _, _, _ = eevee_renders
     f0 = ((1.4 - 1.0) / (1.4 + 1.0)) ** 2
     de = delta_e76(_lab(live_rgb[4:]), _lab(painted + f0))
     print(f"\nEEVEE, not skin: ΔE76 {np.round(de, 2).tolist()} mean {de.mean():.2f} max {de.max():.2f}")
@@ -513,7 +540,7 @@ def test_principled_base_share_is_what_eevee_renders(eevee_renders):
     base, by which the EEVEE output divides the colour) against a Principled BSDF rendered in EEVEE: (render of
     the painted base - render of a black base) / painted, weighted by luminance per stripe, within 0.015 of it
     (EEVEE's per-channel shares spread 0.93-0.97 on the dark stripe's blue, 0.96-0.97 elsewhere)."""
-    painted, _, principled, _, _, _ = eevee_renders
+    painted, _, principled, _, _, _, _ = eevee_renders
     share = (principled[:3] - principled[3]) / painted
     luminance = np.array([0.2126, 0.7152, 0.0722])  # linear sRGB -> Y (ITU-R BT.709)
     by_luminance = ((share * painted) @ luminance) / (painted @ luminance)
@@ -526,11 +553,23 @@ def test_principled_base_share_is_what_eevee_renders(eevee_renders):
 def test_eevee_renders_metal_over_the_skin_as_the_principled_bsdf(eevee_renders):
     """Metallic 1 on the artist's Principled BSDF after Invert Skin Albedo: EEVEE renders each stripe as it renders
     the Principled BSDF's metal (within 2 % per channel), not the skin group's colour."""
-    _, _, _, live_rgb, principled_metal, live_metal = eevee_renders
+    _, _, _, live_rgb, principled_metal, live_metal, _ = eevee_renders
     print(f"\nEEVEE metal: live {np.round(live_metal[:3], 4).tolist()} Principled "
           f"{np.round(principled_metal[:3], 4).tolist()}")
     np.testing.assert_allclose(live_metal, principled_metal, rtol=0.02, atol=1e-4)
     assert np.max(np.abs(live_rgb[:3] - principled_metal[:3])) > 0.02
+
+
+@pytest.mark.slow
+def test_eevee_bumps_the_live_material_by_the_artists_displacement(eevee_renders):
+    """The artist's Material Output's Displacement (a height rising along x, the surface tilted away from a side
+    sun) reaches the output the add-on added for EEVEE: each skin stripe darkens by the factor the artist's
+    Principled BSDF darkens by (within 6 % per channel; about 0.7 here)."""
+    live_flat, live_bumped, principled_flat, principled_bumped = eevee_renders[-1][:, :3]
+    live, principled = live_bumped / live_flat, principled_bumped / principled_flat
+    print(f"\nEEVEE bumped / flat: live {np.round(live, 4).tolist()} Principled {np.round(principled, 4).tolist()}")
+    assert np.all(principled < 0.8)
+    np.testing.assert_allclose(live, principled, rtol=0.06)
 
 
 def test_images_of_an_older_layout_still_in_use_are_kept_and_the_new_ones_reused(addon):
