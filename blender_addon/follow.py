@@ -29,6 +29,10 @@ baked maps the diffuse body, emission and alpha) take the Principled BSDF's inpu
 (``record[BASE_LAYERS]``, every input), and where that changes, or an input starts or stops asking for a layer,
 they are renewed, put in or taken out.
 
+The add-on's copies of the artist's Mix Shader and Add Shader layers over the Principled BSDF (a sweat layer, a
+glow) follow the artist's (``record[LAYERS]``): a factor changed or a mask linked goes to the same copies; a layer
+added, removed or reordered is copied again.
+
 The Material Outputs the add-on added for Cycles and EEVEE take the Displacement, Volume and Thickness of the
 artist's output (``record[OUTPUT]``): a displacement map linked, or a Thickness changed, after wiring reaches them.
 """
@@ -52,6 +56,10 @@ BASE_LAYERS = "Base layers"
 #: The record's entry for what the add-on's Material Outputs took from the artist's (blender_addon.wiring,
 #: OUTPUT_INPUTS: Displacement, Volume, Thickness), by input name.
 OUTPUT = "Material Output"
+#: The record's entry for the artist's Mix Shader and Add Shader layers over the Principled BSDF, which the add-on's
+#: copies follow (blender_addon.wiring, "Layered materials"): per layer, output side first, its node's name, the
+#: index of its input the Principled BSDF's side comes in, and what each other input gives.
+LAYERS = "Layers"
 
 
 def scene_unit_scale(scene: bpy.types.Scene) -> float:
@@ -116,7 +124,34 @@ def record(material: bpy.types.Material, unit_scale_m: float) -> None:
         if wiring.base_layers(principled, gnode):
             taken[BASE_LAYERS] = _base_state(principled)
         taken[OUTPUT] = _output_state(material.node_tree)
+        layers = _layers_state(material.node_tree)
+        if layers is not None:
+            taken[LAYERS] = layers
         material[wiring.TAKEN_INPUTS_PROP] = json.dumps(taken)
+
+
+def _layers_state(tree: bpy.types.NodeTree) -> list | None:
+    """The artist's layers over the Principled BSDF (wiring.shader_chain) as the record holds them (:data:`LAYERS`);
+    None where the add-on's nodes feed the active output (the chain there is not the artist's to read)."""
+    if wiring.addon_feeds_active_output(tree):
+        return None
+    return [[node.name, index, [_state(s) for i, s in enumerate(node.inputs) if i != index]]
+            for node, index in wiring.shader_chain(tree)[1]]
+
+
+def _follow_layers(tree: bpy.types.NodeTree, gnode: bpy.types.Node, taken: dict) -> bool:
+    """Give the add-on's copies of the artist's layers what changed on the artist's since ``taken`` (updated): in
+    place where the same layers are there, else copied again; whether anything changed."""
+    now = _layers_state(tree)
+    if now is None or taken.get(LAYERS) == now:
+        return False
+    before = taken.get(LAYERS)
+    if before is not None and [layer[:2] for layer in before] == [layer[:2] for layer in now]:
+        wiring.retake_chain(tree)
+    else:
+        wiring.recopy_chain(tree, wiring.shader_chain(tree)[1], gnode)
+    taken[LAYERS] = now
+    return True
 
 
 def _output_state(tree: bpy.types.NodeTree) -> dict[str, list]:
@@ -185,6 +220,8 @@ def follow(material: bpy.types.Material, unit_scale_m: float | None = None) -> l
         changed.append(ours)
     if _follow_base_layers(tree, principled, gnode, taken):
         changed.append(BASE_LAYERS)
+    if _follow_layers(tree, gnode, taken):
+        changed.append(LAYERS)
     outputs = _output_state(tree)
     if taken.get(OUTPUT, {}) != outputs:
         wiring.retake_output_inputs(tree)

@@ -26,7 +26,9 @@ same way.  :func:`purge_unused` then removes the add-on's node groups and images
 Shader nodes (a sweat or oil layer, a glow, a second coat), the renderers' outputs are fed by a copy of that chain
 (tagged like every node the add-on adds) with the add-on's group in the Principled BSDF's place: the other layers
 render over the skin as they did over the Principled BSDF, their factors and shaders linked from the artist's own
-nodes (:func:`shader_chain`, :func:`feed_render_outputs`).
+nodes (:func:`shader_chain`, :func:`feed_render_outputs`).  The copies follow the artist's nodes: a factor changed
+or a mask linked afterwards goes to the same copies, a layer added, removed or reordered is copied again
+(:func:`retake_chain`, :func:`recopy_chain`; blender_addon.follow).
 
 **Metal and glass.**  The group renders the Principled BSDF's opaque dielectric base (skin, or what is painted over
 it) and its specular, coat and sheen layers.  The Principled BSDF mixes a metal base over all that by Metallic, and
@@ -330,19 +332,30 @@ def _holds_principled(tree: bpy.types.NodeTree | None, seen: set[str]) -> bool:
                or (n.bl_idname == "ShaderNodeGroup" and _holds_principled(n.node_tree, seen)) for n in tree.nodes)
 
 
+def addon_feeds_active_output(tree: bpy.types.NodeTree) -> bool:
+    """Whether the add-on's nodes feed the active Material Output's Surface (a material wired before the per-target
+    outputs, or whose active output has the target Cycles or EEVEE the operator fed)."""
+    out = active_output(tree)
+    feed = feeding_socket(out.inputs["Surface"]) if out is not None else None
+    return feed is not None and (is_added(feed.node) or (feed.node.bl_idname == "ShaderNodeGroup"
+                                                         and is_addon_group(feed.node.node_tree)))
+
+
 def artist_principled(material: bpy.types.Material) -> bpy.types.Node | None:
     """The artist's Principled BSDF that the add-on's group renders for: the one of :func:`shader_chain`, or where
     the add-on's nodes feed the active output (a material wired before the per-target outputs, or whose active
     output has the target Cycles or EEVEE the operator fed) the node named in ``material[PREVIOUS_SURFACE_PROP]``
     when it is one; None where there is none."""
     tree = material.node_tree
-    out = active_output(tree)
-    feed = feeding_socket(out.inputs["Surface"]) if out is not None else None
-    if feed is not None and (is_added(feed.node) or (feed.node.bl_idname == "ShaderNodeGroup"
-                                                     and is_addon_group(feed.node.node_tree))):
+    if addon_feeds_active_output(tree):
         node = tree.nodes.get(material.get(PREVIOUS_SURFACE_PROP, ""))
         return node if node is not None and node.bl_idname == "ShaderNodeBsdfPrincipled" else None
     return shader_chain(tree)[0]
+
+
+#: Custom property on the add-on's copy of an artist's Mix Shader or Add Shader layer (:func:`_copy_chain`): the name
+#: of the artist's node it copies (its Principled BSDF side, the index in ``INNER_PROP``, is the group's).
+LAYER_OF_PROP = "spectral_skin_sss_layer_of"
 
 
 def _copy_chain(tree: bpy.types.NodeTree, chain: list[tuple[bpy.types.Node, int]], socket: bpy.types.NodeSocket,
@@ -352,6 +365,7 @@ def _copy_chain(tree: bpy.types.NodeTree, chain: list[tuple[bpy.types.Node, int]
     feed = socket
     for depth, (node, index) in enumerate(reversed(chain)):
         copy = tag(tree.nodes.new(node.bl_idname))
+        copy[LAYER_OF_PROP], copy[INNER_PROP] = node.name, index
         copy.label = f"{node.label or node.name} (Spectral Skin SSS)"
         copy.location = (near.location.x + 220.0 * (depth + 1), near.location.y - 220.0 * row - 120.0)
         copy.parent = near.parent
@@ -362,6 +376,61 @@ def _copy_chain(tree: bpy.types.NodeTree, chain: list[tuple[bpy.types.Node, int]
                 take_input(tree, theirs, ours)
         feed = copy.outputs[0]
     return feed
+
+
+def _copies_below(socket: bpy.types.NodeSocket) -> tuple[list[bpy.types.Node], bpy.types.NodeSocket | None]:
+    """The add-on's copies of the artist's layers (:func:`_copy_chain`) feeding the render output's input
+    ``socket``, top first, and the socket under the lowest (what the group's side of the chain is: the group, or
+    the layers over it); a copy made before copies were marked is known as a tagged layer node that is none of the
+    add-on's base layers, its group side the input fed by another of the add-on's nodes."""
+    copies, feed = [], feeding_socket(socket)
+    while feed is not None and is_added(feed.node) and feed.node.bl_idname in LAYER_NODES \
+            and BASE_LAYER_PROP not in feed.node:
+        node = feed.node
+        copies.append(node)
+        inner = layer_inner(node) or next(
+            (s for s in node.inputs if s.type == "SHADER" and (f := feeding_socket(s)) is not None
+             and is_added(f.node)), None)
+        feed = feeding_socket(inner) if inner is not None else None
+    return copies, feed
+
+
+def chain_copies(tree: bpy.types.NodeTree) -> list[bpy.types.Node]:
+    """The add-on's copies of the artist's layers (:func:`_copy_chain`) that feed what Cycles and EEVEE render."""
+    copies = []
+    for target in ("CYCLES", "EEVEE"):
+        out = render_output(tree, target)
+        if out is not None and out.target == target:
+            copies += [n for n in _copies_below(out.inputs["Surface"])[0] if n not in copies]
+    return copies
+
+
+def retake_chain(tree: bpy.types.NodeTree) -> None:
+    """Give each copy of the artist's layers what the artist's node has now, but its group side (a Mix Shader's
+    factor changed, a mask linked): values and links in place, no node made or removed."""
+    for copy in chain_copies(tree):
+        original = tree.nodes.get(copy.get(LAYER_OF_PROP, ""))
+        if original is None or original.bl_idname != copy.bl_idname:
+            continue
+        for i, (theirs, ours) in enumerate(zip(original.inputs, copy.inputs, strict=True)):
+            if i != copy.get(INNER_PROP):
+                take_input(tree, theirs, ours, animated=bool(animation(ours)))
+
+
+def recopy_chain(tree: bpy.types.NodeTree, chain: list[tuple[bpy.types.Node, int]], near: bpy.types.Node) -> None:
+    """Replace the copies of the artist's layers over what Cycles and EEVEE render with copies of ``chain``
+    (:func:`shader_chain`: the artist added, removed or reordered a layer over the Principled BSDF since wiring),
+    placed beside ``near`` (the group node)."""
+    for row, target in enumerate(("CYCLES", "EEVEE")):
+        out = render_output(tree, target)
+        if out is None or out.target != target:
+            continue
+        copies, bottom = _copies_below(out.inputs["Surface"])
+        if bottom is None or not is_added(bottom.node):
+            continue  # not the add-on's: nothing of it to put layers over
+        for node in copies:
+            tree.nodes.remove(node)
+        tree.links.new(_copy_chain(tree, chain, bottom, near, row) if chain else bottom, out.inputs["Surface"])
 
 
 def feed_render_outputs(material: bpy.types.Material, sockets: dict[str, bpy.types.NodeSocket],

@@ -11,6 +11,7 @@ Remove Skin SSS takes the copied layer away with the rest and the artist's tree 
 
 from __future__ import annotations
 
+import json
 import sys
 from pathlib import Path
 
@@ -22,7 +23,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 import blender_addon  # noqa: E402
-from blender_addon import live, probe, wiring  # noqa: E402
+from blender_addon import follow, live, probe, wiring  # noqa: E402
 from exporters.colorimetry import delta_e76, linear_srgb_to_lab, srgb_decode  # noqa: E402
 from tests.addon_scene import principled_coat_reflectance, render_linear, run_invert, write_image  # noqa: E402
 from tests.test_bake_painted_colour import box_material  # noqa: E402
@@ -82,5 +83,91 @@ def test_a_layer_over_the_principled_bsdf_renders_over_the_skin(tmp_path, mode):
                                        active_object=bpy.data.objects["ProbeSlab"]):
             assert bpy.ops.spectral_skin.remove() == {"FINISHED"}
         assert _tree_state(mat) == before
+    finally:
+        blender_addon.unregister()
+
+
+def _copies(mat: bpy.types.Material, target: str) -> list[str]:
+    """The names of the artist's nodes whose copies feed the ``target`` render output, output side first."""
+    return [n[wiring.LAYER_OF_PROP] for n in wiring._copies_below(
+        wiring.render_output(mat.node_tree, target).inputs["Surface"])[0]]
+
+
+@pytest.mark.slow
+def test_the_copied_layers_follow_the_artists(tmp_path):
+    """After Invert Skin Albedo the artist's layer keeps working: its factor raised from 0.3 to 0.6 renders 0.4 x the
+    skin plus the coat + 0.6 x the glow (ΔE76 within 2, the same copy nodes), a mask linked to the factor feeds the
+    copies, a layer added on top is copied over the skin (and its factor follows), a layer taken out leaves the
+    copies, and Remove Skin SSS leaves the artist's tree as the artist left it."""
+    bpy.ops.wm.read_homefile(use_empty=True)
+    blender_addon.register()
+    try:
+        scene = probe.new_scene(samples=64, resolution=SIZE, seed=5)
+        pixels = np.broadcast_to(np.array(SKIN, np.uint8), (SIZE, SIZE, 3))
+        mat = box_material(bpy.data.images.load(str(write_image(tmp_path / "skin.png", pixels, "uint8"))),
+                           "principled")
+        tree = mat.node_tree
+        principled = tree.nodes["Principled BSDF"]
+        principled.inputs["Roughness"].default_value = ROUGHNESS
+        output = wiring.active_output(tree)
+        glow, layer = tree.nodes.new("ShaderNodeEmission"), tree.nodes.new("ShaderNodeMixShader")
+        glow.inputs["Color"].default_value = (*GLOW, 1.0)
+        layer.inputs["Fac"].default_value = FACTOR
+        tree.links.new(principled.outputs["BSDF"], layer.inputs[1])
+        tree.links.new(glow.outputs["Emission"], layer.inputs[2])
+        tree.links.new(layer.outputs["Shader"], output.inputs["Surface"])
+        assert run_invert(bpy.data.objects["ProbeSlab"], mode="LIVE") == {"FINISHED"}
+        assert _copies(mat, "CYCLES") == _copies(mat, "EEVEE") == [layer.name]
+        names = sorted(n.name for n in tree.nodes)
+        layer.inputs["Fac"].default_value = 0.6
+        bpy.context.view_layer.update()
+        assert sorted(n.name for n in tree.nodes) == names  # the same copies took the factor
+        rgb = render_linear(scene, tmp_path / "raised.exr")[2:-2, 2:-2].reshape(-1, 3).mean(axis=0)
+        coat = principled_coat_reflectance(scene, [1.0], ROUGHNESS, live.nodes.DEFAULT_IOR)[0]
+        skin = srgb_decode(np.array(SKIN, np.float64) / 255.0) + coat
+        lab = linear_srgb_to_lab
+        de = float(delta_e76(lab(rgb[None]), lab((0.4 * skin + 0.6 * np.array(GLOW))[None]))[0])
+        stale = float(delta_e76(lab(rgb[None]), lab((0.7 * skin + 0.3 * np.array(GLOW))[None]))[0])
+        print(f"\nfactor 0.6: ΔE76 {de:.2f} from 0.4 skin + 0.6 glow ({stale:.1f} from the factor as wired)")
+        assert de <= 2.0 and stale > 10.0
+        mask = tree.nodes.new("ShaderNodeValue")
+        tree.links.new(mask.outputs[0], layer.inputs["Fac"])
+        bpy.context.view_layer.update()
+        for target in ("CYCLES", "EEVEE"):
+            (copy,) = wiring._copies_below(wiring.render_output(tree, target).inputs["Surface"])[0]
+            assert copy.inputs["Fac"].links[0].from_node == mask
+        top, sweat = tree.nodes.new("ShaderNodeMixShader"), tree.nodes.new("ShaderNodeBsdfGlossy")
+        tree.links.new(layer.outputs[0], top.inputs[1])
+        tree.links.new(sweat.outputs[0], top.inputs[2])
+        tree.links.new(top.outputs[0], output.inputs["Surface"])
+        bpy.context.view_layer.update()
+        assert _copies(mat, "CYCLES") == _copies(mat, "EEVEE") == [top.name, layer.name]
+        top.inputs["Fac"].default_value = 0.25
+        bpy.context.view_layer.update()
+        for target in ("CYCLES", "EEVEE"):
+            copy = wiring._copies_below(wiring.render_output(tree, target).inputs["Surface"])[0][0]
+            assert copy.inputs["Fac"].default_value == pytest.approx(0.25)
+            assert copy.inputs[2].links[0].from_node == sweat
+        assert wiring.wired_group_node(mat) is not None
+        tree.links.new(principled.outputs["BSDF"], top.inputs[1])  # the glow taken out: skin, then sweat
+        bpy.context.view_layer.update()
+        assert _copies(mat, "CYCLES") == _copies(mat, "EEVEE") == [top.name]
+        assert wiring.wired_group_node(mat) is not None
+        # a file wired before the copies were marked and followed: opening it copies the layers again, once
+        for node in [n for n in tree.nodes if wiring.LAYER_OF_PROP in n]:
+            del node[wiring.LAYER_OF_PROP], node[wiring.INNER_PROP]
+        record = json.loads(mat[wiring.TAKEN_INPUTS_PROP])
+        del record[follow.LAYERS]
+        mat[wiring.TAKEN_INPUTS_PROP] = json.dumps(record)
+        count = len(tree.nodes)
+        follow.follow_on_load()
+        assert _copies(mat, "CYCLES") == _copies(mat, "EEVEE") == [top.name] and len(tree.nodes) == count
+        ours = {n.name for n in tree.nodes if wiring.is_added(n)}
+        names, links = _tree_state(mat)
+        artists = ([n for n in names if n not in ours], [ln for ln in links if ln[0] not in ours and ln[2] not in ours])
+        with bpy.context.temp_override(object=bpy.data.objects["ProbeSlab"],
+                                       active_object=bpy.data.objects["ProbeSlab"]):
+            assert bpy.ops.spectral_skin.remove() == {"FINISHED"}
+        assert _tree_state(mat) == artists
     finally:
         blender_addon.unregister()
