@@ -118,7 +118,7 @@ def record(material: bpy.types.Material, unit_scale_m: float) -> None:
     found = _principled_and_group(material)
     if found is not None:
         principled, gnode = found
-        taken = {ours: _state(principled.inputs[theirs]) for ours, theirs in FOLLOWED.items()
+        taken = {ours: _state(nodes.taken_socket(principled, theirs)) for ours, theirs in FOLLOWED.items()
                  if ours in gnode.inputs and theirs in principled.inputs}
         taken[UNIT_SCALE] = _unit_state(unit_scale_m)
         if wiring.base_layers(principled, gnode):
@@ -211,10 +211,11 @@ def follow(material: bpy.types.Material, unit_scale_m: float | None = None) -> l
     for ours, theirs in FOLLOWED.items():
         if ours not in gnode.inputs or theirs not in principled.inputs:
             continue
-        now = _state(principled.inputs[theirs])
+        source = nodes.taken_socket(principled, theirs)
+        now = _state(source)
         if taken.get(ours) == now:
             continue
-        wiring.take_input(tree, principled.inputs[theirs], gnode.inputs[ours],
+        wiring.take_input(tree, source, gnode.inputs[ours],
                           animated=taken.get(ours, [None])[0] == "animated")
         taken[ours] = now
         changed.append(ours)

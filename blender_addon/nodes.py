@@ -97,11 +97,12 @@ The Principled BSDF's specular inputs (:data:`SPECULAR_INPUTS`, taken from the a
 group is wired) keep their effect: **Specular IOR Level** scales the coat's F0 by 2 x level (the coat's index
 becomes (1 + sqrt F0) / (1 - sqrt F0); the closures keep the tissue's IOR, which the bake's tables assume) and
 **Specular Tint** colours the coat's lobe (both paths: the coat is the same Principled node, and the body
-weight takes F of the coat's index); over either
-path a **clear coat** (Coat Weight x F(Coat IOR) of a white Multiscatter GGX lobe of Coat Roughness, mixed over
-the skin, which keeps the rest) and a **Sheen** BSDF (colour Sheen Tint, weighted Sheen Weight, added on top) follow the
-Principled BSDF's layering; the coat's tint and the sheen's share of the light below it are not modelled.  At
-their defaults none of them changes the render or adds a closure.
+weight takes F of the coat's index); **Anisotropic** (Rotation, Tangent) and the **Thin Film** (Thickness, IOR)
+shape and colour that lobe as they do the Principled BSDF's (the body weight keeps F without the film); over either
+path a **clear coat** (Coat Weight x F(Coat IOR) of a white Multiscatter GGX lobe of Coat Roughness and Coat
+Normal, mixed over the skin, which keeps the rest) and a **Sheen** BSDF (colour Sheen Tint, weighted Sheen Weight,
+added on top) follow the Principled BSDF's layering; the coat's tint and the sheen's share of the light below it
+are not modelled.  At their defaults none of them changes the render or adds a closure.
 
 Both paths are checked against each other and against single-component renders in
 tests/test_cycles_mixture.py; the coat's highlight, normal map and wiring in tests/test_skin_specular.py.
@@ -173,7 +174,19 @@ SPECULAR_INPUTS: dict[str, tuple[str, object]] = {
     "Sheen Weight": ("NodeSocketFloat", 0.0),
     "Sheen Roughness": ("NodeSocketFloat", 0.5),
     "Sheen Tint": ("NodeSocketColor", (1.0, 1.0, 1.0, 1.0)),
+    "Coat Normal": ("NodeSocketVector", None),
+    "Anisotropic": ("NodeSocketFloat", 0.0),
+    "Anisotropic Rotation": ("NodeSocketFloat", 0.0),
+    "Tangent": ("NodeSocketVector", None),
+    "Thin Film Thickness": ("NodeSocketFloat", 0.0),
+    "Thin Film IOR": ("NodeSocketFloat", 1.33),
 }
+#: The specular coat's inputs taken straight from the group's (:func:`principled_specular`).
+COAT_INPUTS = ("Roughness", "IOR", "Normal", "Specular IOR Level", "Specular Tint", "Anisotropic",
+               "Anisotropic Rotation", "Tangent", "Thin Film Thickness", "Thin Film IOR")
+#: Float inputs' ranges where not [0, 1] (the Principled BSDF's own).
+_RANGES = {"Coat IOR": (1.0, 4.0), "Emission Strength": (0.0, 1e6), "Thin Film Thickness": (0.0, 100000.0),
+           "Thin Film IOR": (1.0, 1000.0)}
 
 
 #: The Principled BSDF's inputs besides the specular ones that the live group takes (name: socket type, its default
@@ -224,10 +237,12 @@ def add_specular_inputs(group: bpy.types.NodeTree, inputs: dict[str, tuple[str, 
     ``group``."""
     for name, (stype, default) in inputs.items():
         sock = group.interface.new_socket(name, in_out="INPUT", socket_type=stype)
+        if stype == "NodeSocketVector":
+            sock.hide_value = True  # like the Principled BSDF's: unlinked means the shading normal or tangent
+            continue
         sock.default_value = default
         if stype == "NodeSocketFloat":
-            high = {"Coat IOR": 4.0, "Emission Strength": 1e6}.get(name, 1.0)
-            sock.min_value, sock.max_value = (1.0 if name == "Coat IOR" else 0.0), high
+            sock.min_value, sock.max_value = _RANGES.get(name, (0.0, 1.0))
 
 
 def _group_io(group: bpy.types.NodeTree) -> tuple[bpy.types.Node, bpy.types.Node]:
@@ -535,13 +550,14 @@ def _diffuse_fresnel(group: bpy.types.NodeTree, ior: bpy.types.NodeSocket) -> bp
 
 def principled_specular(group: bpy.types.NodeTree, gin: bpy.types.Node) -> bpy.types.NodeSocket:
     """The coat: a Principled BSDF with a black base (its dielectric specular layer alone, the diffuse closure
-    has weight 0 and is dropped) fed the group's Roughness, IOR, Normal, Specular IOR Level and Specular Tint;
-    returns its BSDF output."""
+    has weight 0 and is dropped) fed the group's Roughness, IOR, Normal, Specular IOR Level, Specular Tint,
+    anisotropy (Anisotropic, Anisotropic Rotation, Tangent) and thin film (:data:`COAT_INPUTS`); returns its BSDF
+    output."""
     spec = group.nodes.new("ShaderNodeBsdfPrincipled")
     spec.location = (450.0, 1150.0)
     spec.label = "Specular coat"
     spec.inputs["Base Color"].default_value = (0.0, 0.0, 0.0, 1.0)
-    for name in ("Roughness", "IOR", "Normal", "Specular IOR Level", "Specular Tint"):
+    for name in COAT_INPUTS:
         group.links.new(gin.outputs[name], spec.inputs[name])
     return spec.outputs["BSDF"]
 
@@ -589,19 +605,21 @@ def _level_ior(group: bpy.types.NodeTree, ior: bpy.types.NodeSocket,
 def _outer_layers(group: bpy.types.NodeTree, gin: bpy.types.Node,
                   surface: bpy.types.NodeSocket) -> bpy.types.NodeSocket:
     """The Principled BSDF's clear coat and sheen over ``surface``: Coat Weight x F(Coat IOR) of a white
-    Multiscatter GGX lobe (Coat Roughness) mixed over it (the skin below keeps 1 - that), then a Sheen BSDF of
-    colour Sheen Tint weighted Sheen Weight (a Mix Shader: in [0, 1], the Principled BSDF's range) added.  Zero
-    weights add no closure: Cycles folds a Mix Shader of constant factor 0 away with what feeds it."""
+    Multiscatter GGX lobe (Coat Roughness; Coat Normal, which takes the Principled BSDF's Normal where its Coat
+    Normal is unlinked, as the Principled BSDF's coat does: :func:`taken_socket`) mixed over it (the skin below
+    keeps 1 - that), then a Sheen BSDF of colour Sheen Tint weighted Sheen Weight (a Mix Shader: in [0, 1], the
+    Principled BSDF's range) added.  Zero weights add no closure: Cycles folds a Mix Shader of constant factor 0
+    away with what feeds it."""
     fresnel = group.nodes.new("ShaderNodeFresnel")
     fresnel.location = (1150.0, 1300.0)
     group.links.new(gin.outputs["Coat IOR"], fresnel.inputs["IOR"])
-    group.links.new(gin.outputs["Normal"], fresnel.inputs["Normal"])
+    group.links.new(gin.outputs["Coat Normal"], fresnel.inputs["Normal"])
     glossy = group.nodes.new("ShaderNodeBsdfGlossy")
     glossy.location = (1150.0, 1100.0)
     glossy.distribution = "MULTI_GGX"
     glossy.inputs["Color"].default_value = (1.0, 1.0, 1.0, 1.0)
     group.links.new(gin.outputs["Coat Roughness"], glossy.inputs["Roughness"])
-    group.links.new(gin.outputs["Normal"], glossy.inputs["Normal"])
+    group.links.new(gin.outputs["Coat Normal"], glossy.inputs["Normal"])
     coat = group.nodes.new("ShaderNodeMixShader")
     coat.location = (1350.0, 900.0)
     group.links.new(_math(group, "MULTIPLY", gin.outputs["Coat Weight"], fresnel.outputs["Fac"], x=1250.0,
@@ -641,7 +659,7 @@ def build_osl_group(k_count: int = 3, name: str = GROUP_NAME_OSL) -> bpy.types.N
 
 
 #: Custom property marking the group layout version (bump when the generated nodes change).
-GROUP_VERSION = 12
+GROUP_VERSION = 13
 
 
 def ensure_group(k_count: int, backend: str) -> bpy.types.NodeTree:
@@ -729,6 +747,16 @@ def wire_into_material(material: bpy.types.Material, group: bpy.types.NodeTree,
     return gnode
 
 
+def taken_socket(source: bpy.types.Node, name: str) -> bpy.types.NodeSocket | None:
+    """The input of ``source`` (a Principled BSDF, or a group wired before) that a group's input ``name`` takes:
+    its input of that name, but a Principled BSDF's Normal for an unlinked Coat Normal (the Principled BSDF's coat
+    then takes its Normal; the group's unlinked Coat Normal would be the shading normal); None where it has none."""
+    if (name == "Coat Normal" and source.bl_idname == "ShaderNodeBsdfPrincipled"
+            and wiring.feeding_socket(source.inputs[name]) is None):
+        return source.inputs["Normal"]
+    return source.inputs.get(name)
+
+
 def _surface_source(node: bpy.types.Node | None) -> bpy.types.Node | None:
     """``node`` if it is a Principled BSDF or a mixture group of this add-on (a re-wire), else None."""
     if node is None:
@@ -752,7 +780,7 @@ def _take_surface_inputs(tree: bpy.types.NodeTree, previous: bpy.types.Node | No
         gnode.inputs["Roughness"].default_value = SKIN_ROUGHNESS
         return
     for name in TAKEN_INPUTS:
-        theirs, ours = source.inputs.get(name), gnode.inputs.get(name)
+        theirs, ours = taken_socket(source, name), gnode.inputs.get(name)
         if theirs is None or ours is None:  # a group wired by an older version, or one without these inputs
             continue
         if name == "Subsurface Weight" and source.bl_idname == "ShaderNodeBsdfPrincipled" \

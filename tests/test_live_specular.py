@@ -168,3 +168,73 @@ def test_principled_convention_darkens_the_body_as_principled_does(tmp_path, def
             bpy.ops.spectral_skin.invert_albedo(mode="BAKE", principled_convention=True)
     finally:
         blender_addon.unregister()
+
+
+def _principled_black(**inputs) -> np.ndarray:
+    """Mean linear RGB of the probe with a plain Principled BSDF of black base (its specular layer alone) at the
+    test's roughness and the live group's IOR, set to ``inputs``: Blender's own renderer, no add-on."""
+    scene = probe.new_scene(samples=SAMPLES, resolution=16, seed=4)
+    mat = probe.slab_material("Principled")
+    bsdf = mat.node_tree.nodes.new("ShaderNodeBsdfPrincipled")
+    bsdf.inputs["Base Color"].default_value = (0.0, 0.0, 0.0, 1.0)
+    bsdf.inputs["Roughness"].default_value = 0.3
+    bsdf.inputs["IOR"].default_value = nodes.DEFAULT_IOR
+    for name, value in inputs.items():
+        bsdf.inputs[name].default_value = value
+    mat.node_tree.links.new(bsdf.outputs[0], probe.material_output(mat).inputs["Surface"])
+    return probe.render_mean(scene)[0]
+
+
+def test_thin_film(tmp_path, default):
+    """A thin film (300 nm of index 1.6) on the Principled BSDF colours the coat's reflection as it colours the
+    Principled BSDF's specular layer: the render's change equals that of a black-based Principled BSDF (Blender's
+    own, no add-on) within 10 % per channel; the light the film's stronger reflection takes from the skin below
+    is not modelled (the body keeps its weight)."""
+    film = {"Thin Film Thickness": 300.0, "Thin Film IOR": 1.6}
+    mean, gnode = _render(tmp_path, **film)
+    assert gnode.inputs["Thin Film Thickness"].default_value == pytest.approx(300.0)
+    reference = _principled_black(**film) - _principled_black()
+    print(f"\nthin film: change {np.round(mean - default, 4).tolist()} Principled's {np.round(reference, 4).tolist()}")
+    np.testing.assert_allclose(mean - default, reference, rtol=0.1)
+    assert np.ptp(reference) > 0.03  # the film colours the reflection
+
+
+def test_anisotropy_tangent_and_coat_normal_are_taken(tmp_path):
+    """Anisotropic, Anisotropic Rotation, a Tangent and a Coat Normal reach the group (and so its coat, and the
+    EEVEE output's Principled BSDF); an unlinked Coat Normal takes the Principled BSDF's Normal, as the Principled
+    BSDF's coat does; what changes afterwards follows."""
+    probe.new_scene(samples=1, resolution=4, seed=4)
+    codes = np.round(255 * srgb_encode(MEDIUM)).astype(np.uint8)
+    png = write_image(tmp_path / "medium.png", np.broadcast_to(codes, (2, 2, 3)).copy(), "uint8")
+    mat = probe.slab_material("Skin")
+    tree = mat.node_tree
+    bsdf, tex = tree.nodes.new("ShaderNodeBsdfPrincipled"), tree.nodes.new("ShaderNodeTexImage")
+    tex.image = bpy.data.images.load(str(png))
+    tree.links.new(tex.outputs["Color"], bsdf.inputs["Base Color"])
+    tree.links.new(bsdf.outputs[0], probe.material_output(mat).inputs["Surface"])
+    normal_map, tangent = tree.nodes.new("ShaderNodeNormalMap"), tree.nodes.new("ShaderNodeTangent")
+    tree.links.new(normal_map.outputs[0], bsdf.inputs["Normal"])
+    tree.links.new(tangent.outputs[0], bsdf.inputs["Tangent"])
+    bsdf.inputs["Anisotropic"].default_value, bsdf.inputs["Anisotropic Rotation"].default_value = 0.8, 0.25
+    slab = bpy.data.objects["ProbeSlab"]
+    blender_addon.register()
+    try:
+        with bpy.context.temp_override(object=slab, active_object=slab):
+            assert bpy.ops.spectral_skin.invert_albedo() == {"FINISHED"}
+        gnode = next(n for n in tree.nodes if n.bl_idname == "ShaderNodeGroup")
+        assert gnode.inputs["Anisotropic"].default_value == pytest.approx(0.8)
+        assert gnode.inputs["Anisotropic Rotation"].default_value == pytest.approx(0.25)
+        assert gnode.inputs["Tangent"].links[0].from_node == tangent
+        assert gnode.inputs["Coat Normal"].links[0].from_node == normal_map  # the Principled BSDF's Normal
+        coat_map = tree.nodes.new("ShaderNodeNormalMap")
+        tree.links.new(coat_map.outputs[0], bsdf.inputs["Coat Normal"])
+        bpy.context.view_layer.update()
+        assert gnode.inputs["Coat Normal"].links[0].from_node == coat_map
+        tree.links.remove(bsdf.inputs["Coat Normal"].links[0])
+        tree.links.remove(bsdf.inputs["Normal"].links[0])
+        bpy.context.view_layer.update()
+        assert not gnode.inputs["Coat Normal"].is_linked and not gnode.inputs["Normal"].is_linked
+        eevee = next(n for n in gnode.node_tree.nodes if n.bl_idname == "ShaderNodeBsdfPrincipled")
+        assert all(eevee.inputs[name].is_linked for name in ("Coat Normal", "Tangent", "Thin Film Thickness"))
+    finally:
+        blender_addon.unregister()
