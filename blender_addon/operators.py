@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import bpy
 
-from . import baker, follow, live, live_edits, nodes, preferences, wiring
+from . import baker, follow, live, live_edits, nodes, preferences, real_size, wiring
 from .core import bake as _core_bake
 
 one_line = _core_bake.one_line
@@ -134,6 +134,7 @@ class SPECTRAL_SKIN_OT_invert_albedo(bpy.types.Operator):
         except _EXPECTED as exc:
             self.report({"ERROR"}, one_line(exc))
             return {"CANCELLED"}
+        message = _size_checked(context, message)
         self.report(_level(message), message)
         return {"FINISHED"}
 
@@ -164,6 +165,7 @@ class SPECTRAL_SKIN_OT_invert_albedo(bpy.types.Operator):
             bake.cancel()
             self.report({"ERROR"}, one_line(exc))
             return {"CANCELLED"}
+        message = _size_checked(context, message)
         self.report(_level(message), message)
         return {"FINISHED"}
 
@@ -205,6 +207,7 @@ class SPECTRAL_SKIN_OT_invert_albedo(bpy.types.Operator):
             self.report({"ERROR"}, one_line(exc))
             return {"CANCELLED"}
         self._stop(context)
+        message = _size_checked(context, message)
         self.report(_level(message), message)
         return {"FINISHED"}
 
@@ -230,6 +233,13 @@ def _refused_linked(operator: bpy.types.Operator, context) -> bool:
     if error:
         operator.report({"ERROR"}, error)
     return bool(error)
+
+
+def _size_checked(context, message: str) -> str:
+    """The operator's report ``message``, with the warning that the active object is not at skin's real size in the
+    scene's units where it is not (blender_addon.real_size)."""
+    warning = real_size.warning(context.object, follow.scene_unit_scale(context.scene))
+    return f"{message}; warning: {warning}" if warning else message
 
 
 def _level(message: str) -> set[str]:

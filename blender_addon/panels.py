@@ -7,7 +7,7 @@ import os
 
 import bpy
 
-from . import baker, follow, live_edits, operators, preferences
+from . import baker, follow, live_edits, operators, preferences, real_size, wiring
 
 
 class SpectralSkinSettings(bpy.types.PropertyGroup):
@@ -55,6 +55,7 @@ def _draw(layout, context) -> None:
             layout.prop(settings, "principled_convention")
     _draw_live_node(layout, getattr(context, "material", None))
     _draw_stale_units(layout, context)
+    _draw_real_size(layout, context)
     if settings is not None and settings.mode == "BAKE":
         col = layout.column()
         col.prop(settings, "image")
@@ -155,6 +156,20 @@ def _draw_stale_units(layout: bpy.types.UILayout, context) -> None:
         box.label(text=f"Maps baked at Unit Scale {baked:g}, the scene's is {follow.scene_unit_scale(context.scene):g}",
                   icon="ERROR")
         box.label(text="The radii are off by their ratio: run Invert Skin Albedo again")
+
+
+def _draw_real_size(layout: bpy.types.UILayout, context) -> None:
+    """Where the active material renders the add-on's skin and the active object is not at skin's real size in the
+    scene's units (blender_addon.real_size): say so, and what to set."""
+    obj, material = getattr(context, "object", None), getattr(context, "material", None)
+    if obj is None or material is None or material.node_tree is None or wiring.wired_group_node(material) is None:
+        return
+    size = real_size.extent_m(obj, follow.scene_unit_scale(context.scene))
+    if real_size.warning(obj, follow.scene_unit_scale(context.scene)) is not None:
+        box = layout.box()
+        box.label(text=f"'{obj.name}' is {real_size.describe(size)} across: skin will look {real_size.look(size)}",
+                  icon="ERROR")
+        box.label(text="Not that size? Set Scene > Units > Unit Scale (0.01 for centimetres)")
 
 
 def shading_of(settings: SpectralSkinSettings) -> str:
