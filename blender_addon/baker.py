@@ -51,7 +51,8 @@ class BakeSettings:
     cover (the others take the maps of the most common covered colour); ``unit_scale_m``: metres per Blender
     unit for the radii (None: the scene's, :func:`follow.scene_unit_scale`); ``openpbr``: also the OpenPBR maps,
     MaterialX document and USD layer of ``--target openpbr`` (storage "FILES" only: other renderers read files);
-    ``edit``: the skin edit (Melanin, Blood, Oxygenation: exporters.skin_edits) every texel's maps carry."""
+    ``edit``: the skin edit (Melanin, Blood, Oxygenation: exporters.skin_edits) every texel's maps carry;
+    ``material``: the active object's material to wire, by name (empty: its active material)."""
 
     model_path: str
     filepath: str = ""
@@ -69,6 +70,7 @@ class BakeSettings:
     unit_scale_m: float | None = None
     openpbr: bool = False
     edit: tuple[float, float, float] = skin_edits.NEUTRAL
+    material: str = ""
 
 
 def active_image_node(material: bpy.types.Material | None) -> bpy.types.Node | None:
@@ -221,7 +223,10 @@ class AddonBake:
                                  "choose Maps: Files (an output folder) to write them")
         self.scene = context.scene
         obj = context.object
-        self.material = obj.active_material if obj is not None else None
+        try:
+            self.material = wiring.object_material(obj, settings.material)
+        except ValueError as exc:
+            raise BakeInputError(str(exc)) from None
         if self.material is not None and self.material.node_tree is None:
             self.material = None  # a material without nodes: the maps and the group are made, nothing is wired
         self.source_node = None

@@ -853,16 +853,20 @@ def _pixels(image: bpy.types.Image, limit: int) -> np.ndarray:
 
 # -- the operator's live path ----------------------------------------------------------------------------------
 def apply(context: bpy.types.Context, model_path: str, unit_scale_m: float, colorspace: str = "FROM_IMAGE",
-          principled_convention: bool = False, edit: tuple[float, float, float] | None = None) -> str:
-    """Wire the live group into the active object's active material (Invert Skin Albedo's default); returns the
-    one-line report. ``edit``: (Melanin, Blood, Oxygenation) set on the group node's inputs (None or neutral: left
-    as they are, so an edit made on the node stays; LiveInputError when the model has no edit table). Bad input
+          principled_convention: bool = False, edit: tuple[float, float, float] | None = None,
+          material_name: str = "") -> str:
+    """Wire the live group into the active object's active material, or its material ``material_name`` (Invert
+    Skin Albedo's default); returns the one-line report. ``edit``: (Melanin, Blood, Oxygenation) set on the group
+    node's inputs (None or neutral: left as they are, so an edit made on the node stays; LiveInputError when the
+    model has no edit table). Bad input
     raises LiveInputError before anything changes; a failure while wiring removes what was made (call from an
     operator with UNDO for Ctrl+Z)."""
     from . import follow  # it reads this module's wiring (colour_source)
 
-    obj = context.object
-    material = obj.active_material if obj is not None else None
+    try:
+        material = wiring.object_material(context.object, material_name)
+    except ValueError as exc:
+        raise LiveInputError(str(exc)) from None
     if material is None or material.node_tree is None:
         raise LiveInputError("no active material with nodes: select the skin object (its material's Principled "
                              "BSDF gives the albedo)")

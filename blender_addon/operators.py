@@ -51,6 +51,9 @@ MODEL_COLOUR_HELP = ("Render the model's own reflectance (the colour of the biop
 #: The convention option's tooltip (operator and panel).
 PRINCIPLED_CONVENTION_HELP = ("Live group: render the colour as a Principled BSDF renders its Base Color, under its "
                               "specular layer (about 4 % darker), instead of the painted colour with the coat on top")
+#: The material option's tooltip (Invert Skin Albedo, Remove Skin SSS).
+MATERIAL_HELP = ("The active object's material to work on, by name (one of its material slots; empty: the active "
+                 "material): a character's head, body and limbs each in a material of their own")
 #: Exceptions that mean bad input or a failed bake (reported, nothing changed).
 _EXPECTED = (OSError, ValueError, RuntimeError)
 
@@ -64,6 +67,7 @@ class SPECTRAL_SKIN_OT_invert_albedo(bpy.types.Operator):
     bl_options = {"REGISTER", "UNDO"}
 
     mode: bpy.props.EnumProperty(name="Mode", items=MODES, default="AUTO")
+    material: bpy.props.StringProperty(name="Material", default="", description=MATERIAL_HELP)
 
     filepath: bpy.props.StringProperty(name="Albedo file", subtype="FILE_PATH", default="",
                                        description="Read this file instead of an image datablock")
@@ -110,7 +114,8 @@ class SPECTRAL_SKIN_OT_invert_albedo(bpy.types.Operator):
                                   colorspace=self.colorspace, backend=self.backend, overwrite=self.overwrite,
                                   model_colour=self.model_colour, threads=preferences.threads(context),
                                   exact=self.exact, uv_coverage=self.uv_coverage, openpbr=self.openpbr,
-                                  unit_scale_m=follow.scene_unit_scale(context.scene), edit=self._edit())
+                                  unit_scale_m=follow.scene_unit_scale(context.scene), edit=self._edit(),
+                                  material=self.material)
 
     def _edit(self) -> tuple[float, float, float]:
         """The skin edit asked for: (Melanin, Blood, Oxygenation).  The live mode sets a non-neutral one on the group
@@ -130,7 +135,7 @@ class SPECTRAL_SKIN_OT_invert_albedo(bpy.types.Operator):
             return {"CANCELLED"}
         try:
             message = live.apply(context, preferences.model_path(context), follow.scene_unit_scale(context.scene),
-                                 self.colorspace, self.principled_convention, self._edit())
+                                 self.colorspace, self.principled_convention, self._edit(), self.material)
         except _EXPECTED as exc:
             self.report({"ERROR"}, one_line(exc))
             return {"CANCELLED"}
@@ -220,15 +225,19 @@ class SPECTRAL_SKIN_OT_invert_albedo(bpy.types.Operator):
         _set_progress(context, 0.0, running=False)
 
 
-def _active_material(context) -> bpy.types.Material | None:
-    obj = context.object
-    return obj.active_material if obj is not None else None
+def _active_material(context, name: str = "") -> bpy.types.Material | None:
+    """The active object's material ``name`` (empty: its active material; wiring.object_material), or None where
+    there is none or no such material (the operator reports that on its own)."""
+    try:
+        return wiring.object_material(context.object, name)
+    except ValueError:
+        return None
 
 
 def _refused_linked(operator: bpy.types.Operator, context) -> bool:
-    """Report and return True when the active material is linked from a library (its node changes would vanish on
-    reload: blender_addon.wiring.linked_error)."""
-    material = _active_material(context)
+    """Report and return True when the material the operator works on (its ``material`` option, else the active
+    one) is linked from a library (its node changes would vanish on reload: blender_addon.wiring.linked_error)."""
+    material = _active_material(context, getattr(operator, "material", ""))
     error = wiring.linked_error(material) if material is not None else None
     if error:
         operator.report({"ERROR"}, error)
@@ -309,12 +318,21 @@ class SPECTRAL_SKIN_OT_remove(bpy.types.Operator):
     bl_label = "Remove Skin SSS"
     bl_options = {"REGISTER", "UNDO"}
 
+    material: bpy.props.StringProperty(name="Material", default="", description=MATERIAL_HELP)
+
     @classmethod
     def poll(cls, context):
         return _active_material(context) is not None
 
     def execute(self, context):
-        material = _active_material(context)
+        try:
+            material = wiring.object_material(context.object, self.material)
+        except ValueError as exc:
+            self.report({"ERROR"}, one_line(exc))
+            return {"CANCELLED"}
+        if material is None:
+            self.report({"ERROR"}, "no active object with a material: select the skin object")
+            return {"CANCELLED"}
         if _refused_linked(self, context):
             return {"CANCELLED"}
         removed = wiring.unwire(material) if material.node_tree is not None else 0

@@ -76,18 +76,58 @@ def _draw(layout, context) -> None:
         for name in ("melanin", "blood", "oxygenation"):
             edit.prop(settings, name)
     op = layout.operator("spectral_skin.invert_albedo", icon="IMAGE_DATA")
-    if settings is not None:
-        op.mode, op.principled_convention = settings.mode, settings.principled_convention
+    _set_options(op, settings)
     if settings is not None and settings.mode == "BAKE":
         op.image_name = settings.image.name if settings.image is not None else ""
+    _draw_slots(layout, context, settings)
+    layout.operator("spectral_skin.add_mixture", icon="NODETREE")
+    live_edits.draw_controls(layout, context)
+    layout.operator("spectral_skin.remove", icon="TRASH")
+
+
+def _set_options(op, settings: SpectralSkinSettings | None) -> None:
+    """Give an Invert Skin Albedo button the scene's settings (all but the image to bake)."""
+    if settings is None:
+        return
+    op.mode, op.principled_convention = settings.mode, settings.principled_convention
+    if settings.mode == "BAKE":
         op.storage, op.output_dir = settings.storage, settings.output_dir
         op.colorspace, op.backend = settings.colorspace, shading_of(settings)
         op.overwrite, op.model_colour = settings.overwrite, settings.model_colour
         op.exact, op.uv_coverage = settings.exact, settings.uv_coverage
         op.melanin, op.blood, op.oxygenation = settings.melanin, settings.blood, settings.oxygenation
-    layout.operator("spectral_skin.add_mixture", icon="NODETREE")
-    live_edits.draw_controls(layout, context)
-    layout.operator("spectral_skin.remove", icon="TRASH")
+
+
+def slot_materials(obj: bpy.types.Object | None) -> list[tuple[bpy.types.Material, bool]]:
+    """The materials of ``obj``'s slots (each once, in slot order) that hold a Principled BSDF the add-on can render
+    for, and whether it does (wired)."""
+    found: list[tuple[bpy.types.Material, bool]] = []
+    for slot in obj.material_slots if obj is not None else ():
+        material = slot.material
+        if material is None or material.node_tree is None or any(m == material for m, _ in found):
+            continue
+        if wiring.artist_principled(material) is not None:
+            found.append((material, wiring.wired_group_node(material) is not None))
+    return found
+
+
+def _draw_slots(layout: bpy.types.UILayout, context, settings: SpectralSkinSettings | None) -> None:
+    """Where the active object has several materials with a Principled BSDF (a character's head, body and limbs):
+    one row each, with whether the add-on renders it and a button to invert (or update) and to remove it."""
+    obj = getattr(context, "object", None)
+    materials = slot_materials(obj)
+    if len(materials) < 2:
+        return
+    box = layout.box()
+    box.label(text=f"Materials of '{obj.name}'", icon="MATERIAL")
+    for material, wired in materials:
+        row = box.row(align=True)
+        row.label(text=material.name, icon="CHECKMARK" if wired else "BLANK1")
+        op = row.operator("spectral_skin.invert_albedo", text="Update" if wired else "Invert")
+        _set_options(op, settings)
+        op.material = material.name
+        if wired:
+            row.operator("spectral_skin.remove", text="", icon="TRASH").material = material.name
 
 
 class SPECTRAL_SKIN_PT_shader_editor(bpy.types.Panel):

@@ -104,6 +104,23 @@ def linked_error(material: bpy.types.Material) -> str | None:
     return None
 
 
+def object_material(obj: bpy.types.Object | None, name: str = "") -> bpy.types.Material | None:
+    """The material of ``obj`` named ``name`` (one in its material slots), or its active material where ``name``
+    is empty; None without an object.  Raises ValueError (one line: what is there to choose) for a name that is
+    not in its slots."""
+    if obj is None:
+        return None
+    if not name:
+        return obj.active_material
+    slots = [slot.material for slot in obj.material_slots if slot.material is not None]
+    found = next((m for m in slots if m.name == name), None)
+    if found is None:
+        choices = ", ".join(f"'{m.name}'" for m in slots) or "none"
+        raise ValueError(f"material '{name}' is not in the slots of '{obj.name}' (its materials: {choices}): name one "
+                         "of them, or leave Material empty for the active one")
+    return found
+
+
 def tag(node: bpy.types.Node) -> bpy.types.Node:
     """Mark ``node`` as the add-on's (removed by :func:`unwire`)."""
     node[ADDED_PROP] = True
