@@ -8,7 +8,7 @@ correction's weight factors), ``IOR`` (the tissue index: the specular coat's Fre
 which the bake's tables assume), ``Roughness`` (the coat's specular roughness, Blender's perceptual roughness, GGX alpha
 = Roughness^2) and ``Normal`` (normal/bump map; unlinked: the shading normal), which feeds the coat, its Fresnel weight
 and every subsurface closure; then the Principled BSDF's specular inputs (below) and ``Body`` (a shader added beside the
-mixture under the coat's clear coat and sheen: the live group's diffuse body where Subsurface Weight is below 1;
+mixture under the clear coat and sheen: the live group's diffuse body where Subsurface Weight is below 1;
 unlinked, nothing).  Output: ``BSSRDF`` (the whole surface shader: coat plus
 mixture; the name is kept for files wired before the coat existed).
 
@@ -98,11 +98,13 @@ group is wired) keep their effect: **Specular IOR Level** scales the coat's F0 b
 becomes (1 + sqrt F0) / (1 - sqrt F0); the closures keep the tissue's IOR, which the bake's tables assume) and
 **Specular Tint** colours the coat's lobe (both paths: the coat is the same Principled node, and the body
 weight takes F of the coat's index); **Anisotropic** (Rotation, Tangent) and the **Thin Film** (Thickness, IOR)
-shape and colour that lobe as they do the Principled BSDF's (the body weight keeps F without the film); over either
-path a **clear coat** (Coat Weight x F(Coat IOR) of a white Multiscatter GGX lobe of Coat Roughness and Coat
-Normal, mixed over the skin, which keeps the rest) and a **Sheen** BSDF (colour Sheen Tint, weighted Sheen Weight,
-added on top) follow the Principled BSDF's layering; the coat's tint and the sheen's share of the light below it
-are not modelled.  At their defaults none of them changes the render or adds a closure.
+shape and colour that lobe as they do the Principled BSDF's (the body weight keeps F without the film).  The
+**clear coat** (Coat Weight, Roughness, IOR, Tint, Normal) is that Principled node's own coat, which layers the
+coat's lobe over its specular lobe and tints that as Cycles' Principled BSDF does; the mixture and the diffuse
+body under it keep 1 - Coat Weight x F(Coat IOR) of the light, the mixture also the Coat Tint's colour
+(:func:`_under_coat`).  A **Sheen** BSDF (colour Sheen Tint, weighted Sheen Weight) is added on top; the share of
+the light the sheen takes from below, and the Coat Tint over the diffuse body, are not modelled.  At their
+defaults none of them changes the render or adds a closure (Cycles folds their nodes to constants).
 
 Both paths are checked against each other and against single-component renders in
 tests/test_cycles_mixture.py; the coat's highlight, normal map and wiring in tests/test_skin_specular.py.
@@ -174,6 +176,7 @@ SPECULAR_INPUTS: dict[str, tuple[str, object]] = {
     "Sheen Weight": ("NodeSocketFloat", 0.0),
     "Sheen Roughness": ("NodeSocketFloat", 0.5),
     "Sheen Tint": ("NodeSocketColor", (1.0, 1.0, 1.0, 1.0)),
+    "Coat Tint": ("NodeSocketColor", (1.0, 1.0, 1.0, 1.0)),
     "Coat Normal": ("NodeSocketVector", None),
     "Anisotropic": ("NodeSocketFloat", 0.0),
     "Anisotropic Rotation": ("NodeSocketFloat", 0.0),
@@ -183,7 +186,8 @@ SPECULAR_INPUTS: dict[str, tuple[str, object]] = {
 }
 #: The specular coat's inputs taken straight from the group's (:func:`principled_specular`).
 COAT_INPUTS = ("Roughness", "IOR", "Normal", "Specular IOR Level", "Specular Tint", "Anisotropic",
-               "Anisotropic Rotation", "Tangent", "Thin Film Thickness", "Thin Film IOR")
+               "Anisotropic Rotation", "Tangent", "Thin Film Thickness", "Thin Film IOR", "Coat Weight",
+               "Coat Roughness", "Coat IOR", "Coat Tint", "Coat Normal")
 #: Float inputs' ranges where not [0, 1] (the Principled BSDF's own).
 _RANGES = {"Coat IOR": (1.0, 4.0), "Emission Strength": (0.0, 1e6), "Thin Film Thickness": (0.0, 100000.0),
            "Thin Film IOR": (1.0, 1000.0)}
@@ -298,11 +302,14 @@ def build_svm_group(k_count: int = 3, name: str = GROUP_NAME, design: str = "nes
     build = _svm_mixture if design == "nested" else _svm_mixture_per_channel
     body, fresnel = _body_scale(group, gin)
     zero = computed_zero(group, fresnel)
-    scale = product(group, body, gin.outputs["Weight Scale"], zero.vector, x=-1150.0, y=500.0)
+    through, tint = _under_coat(group, gin)
+    scale = product(group, body, _vec(group, "MULTIPLY", gin.outputs["Weight Scale"], tint, x=-1250.0, y=500.0),
+                    zero.vector, x=-1150.0, y=500.0)
     mixture = build(group, gin, k_count, scale, zero)
     surface = _add_shader(group, principled_specular(group, gin), mixture, 1050.0, 700.0)
-    surface = _add_shader(group, surface, gin.outputs["Body"], 1150.0, 700.0)
-    group.links.new(_outer_layers(group, gin, surface), gout.inputs["BSSRDF"])
+    surface = _add_shader(group, surface, _mix_shader(group, through, gin.outputs["Body"], 1050.0, 500.0), 1150.0,
+                          700.0)
+    group.links.new(_sheen(group, gin, surface), gout.inputs["BSSRDF"])
     return group
 
 
@@ -602,37 +609,76 @@ def _level_ior(group: bpy.types.NodeTree, ior: bpy.types.NodeSocket,
                  _math(group, "SUBTRACT", 1.0, root, x=-750.0, y=1100.0), x=-650.0, y=1150.0)
 
 
-def _outer_layers(group: bpy.types.NodeTree, gin: bpy.types.Node,
-                  surface: bpy.types.NodeSocket) -> bpy.types.NodeSocket:
-    """The Principled BSDF's clear coat and sheen over ``surface``: Coat Weight x F(Coat IOR) of a white
-    Multiscatter GGX lobe (Coat Roughness; Coat Normal, which takes the Principled BSDF's Normal where its Coat
-    Normal is unlinked, as the Principled BSDF's coat does: :func:`taken_socket`) mixed over it (the skin below
-    keeps 1 - that), then a Sheen BSDF of colour Sheen Tint weighted Sheen Weight (a Mix Shader: in [0, 1], the
-    Principled BSDF's range) added.  Zero weights add no closure: Cycles folds a Mix Shader of constant factor 0
-    away with what feeds it."""
+def _mix(group: bpy.types.NodeTree, data_type: str, fac: bpy.types.NodeSocket, a, b, x: float,
+         y: float) -> bpy.types.NodeSocket:
+    """A Mix node of ``data_type`` ("FLOAT", "VECTOR"): ``a`` (1 - fac) + ``b`` fac, factor clamped to [0, 1];
+    ``a`` and ``b`` sockets or constants.  Cycles folds it to ``a`` where ``fac`` is a constant 0."""
+    mix = group.nodes.new("ShaderNodeMix")
+    mix.location = (x, y)
+    mix.data_type = data_type
+    mix.clamp_factor = True
+    fac_in, a_in, b_in = (s for s in mix.inputs if s.enabled)
+    group.links.new(fac, fac_in)
+    for value, socket in ((a, a_in), (b, b_in)):
+        if isinstance(value, bpy.types.NodeSocket):
+            group.links.new(value, socket)
+        else:
+            socket.default_value = value
+    return next(s for s in mix.outputs if s.enabled)
+
+
+def _under_coat(group: bpy.types.NodeTree, gin: bpy.types.Node) -> tuple[bpy.types.NodeSocket, bpy.types.NodeSocket]:
+    """What the Principled BSDF's clear coat leaves of the light of the layers under it (the coat itself is the
+    coat's Principled node's, :func:`principled_specular`, which layers its own specular under it): (the share
+    1 - Coat Weight x F(Coat IOR) through the coat, F the Fresnel reflectance at the view direction and Coat Normal:
+    the coat's reflectance, a float; that share times the Coat Tint's colour mix(1, tint^(1/cos t), Coat Weight), per
+    channel, cos t the view direction's cosine refracted into the coat, as Cycles' Principled BSDF tints what is
+    under its coat).  At Coat Weight 0 both are constant 1 (Cycles folds the Mix nodes to their first input)."""
+    weight = gin.outputs["Coat Weight"]
     fresnel = group.nodes.new("ShaderNodeFresnel")
-    fresnel.location = (1150.0, 1300.0)
+    fresnel.location = (-1650.0, 1500.0)
     group.links.new(gin.outputs["Coat IOR"], fresnel.inputs["IOR"])
     group.links.new(gin.outputs["Coat Normal"], fresnel.inputs["Normal"])
-    glossy = group.nodes.new("ShaderNodeBsdfGlossy")
-    glossy.location = (1150.0, 1100.0)
-    glossy.distribution = "MULTI_GGX"
-    glossy.inputs["Color"].default_value = (1.0, 1.0, 1.0, 1.0)
-    group.links.new(gin.outputs["Coat Roughness"], glossy.inputs["Roughness"])
-    group.links.new(gin.outputs["Coat Normal"], glossy.inputs["Normal"])
-    coat = group.nodes.new("ShaderNodeMixShader")
-    coat.location = (1350.0, 900.0)
-    group.links.new(_math(group, "MULTIPLY", gin.outputs["Coat Weight"], fresnel.outputs["Fac"], x=1250.0,
-                          y=1300.0), coat.inputs["Fac"])
-    group.links.new(surface, coat.inputs[1])
-    group.links.new(glossy.outputs[0], coat.inputs[2])
+    through = _mix(group, "FLOAT", weight, 1.0, _math(group, "SUBTRACT", 1.0, fresnel.outputs["Fac"], x=-1500.0,
+                                                      y=1500.0), -1350.0, 1500.0)
+    facing = group.nodes.new("ShaderNodeLayerWeight")  # Facing = 1 - |cos i| at Blend 0.5
+    facing.location = (-1650.0, 1300.0)
+    facing.inputs["Blend"].default_value = 0.5
+    group.links.new(gin.outputs["Coat Normal"], facing.inputs["Normal"])
+    cos_i = _math(group, "SUBTRACT", 1.0, facing.outputs["Facing"], x=-1500.0, y=1300.0)
+    n = _math(group, "MAXIMUM", gin.outputs["Coat IOR"], 1.0, x=-1500.0, y=1200.0)
+    sin_t2 = _math(group, "DIVIDE", _math(group, "SUBTRACT", 1.0, _math(group, "MULTIPLY", cos_i, cos_i, x=-1400.0,
+                                                                        y=1300.0), x=-1300.0, y=1300.0),
+                   _math(group, "MULTIPLY", n, n, x=-1400.0, y=1200.0), x=-1200.0, y=1300.0)
+    depth = _math(group, "DIVIDE", 1.0, _math(group, "SQRT", _math(group, "SUBTRACT", 1.0, sin_t2, x=-1100.0,
+                                                                   y=1300.0), x=-1000.0, y=1300.0), x=-900.0, y=1300.0)
+    separate = group.nodes.new("ShaderNodeSeparateColor")
+    separate.location = (-900.0, 1450.0)
+    group.links.new(gin.outputs["Coat Tint"], separate.inputs["Color"])
+    combine = group.nodes.new("ShaderNodeCombineXYZ")
+    combine.location = (-700.0, 1450.0)
+    for i, channel in enumerate(CHANNELS):
+        group.links.new(_math(group, "POWER", separate.outputs[channel], depth, x=-800.0, y=1500.0 - 50.0 * i),
+                        combine.inputs[i])
+    tinted = _mix(group, "VECTOR", weight, (1.0, 1.0, 1.0), combine.outputs["Vector"], -600.0, 1450.0)
+    scale = group.nodes.new("ShaderNodeVectorMath")
+    scale.operation, scale.location = "SCALE", (-500.0, 1450.0)
+    group.links.new(tinted, scale.inputs[0])
+    group.links.new(through, scale.inputs["Scale"])
+    return through, scale.outputs["Vector"]
+
+
+def _sheen(group: bpy.types.NodeTree, gin: bpy.types.Node, surface: bpy.types.NodeSocket) -> bpy.types.NodeSocket:
+    """The Principled BSDF's sheen over ``surface``: a Sheen BSDF of colour Sheen Tint weighted Sheen Weight (a Mix
+    Shader: in [0, 1], the Principled BSDF's range) added.  Sheen Weight 0 adds no closure: Cycles folds a Mix
+    Shader of constant factor 0 away with what feeds it."""
     sheen = group.nodes.new("ShaderNodeBsdfSheen")
     sheen.location = (1250.0, 1100.0)
     group.links.new(gin.outputs["Sheen Tint"], sheen.inputs["Color"])
     group.links.new(gin.outputs["Sheen Roughness"], sheen.inputs["Roughness"])
     group.links.new(gin.outputs["Normal"], sheen.inputs["Normal"])
     weighted = _mix_shader(group, gin.outputs["Sheen Weight"], sheen.outputs[0], 1400.0, 1100.0)
-    return _add_shader(group, coat.outputs[0], weighted, 1550.0, 900.0)
+    return _add_shader(group, surface, weighted, 1550.0, 900.0)
 
 
 def build_osl_group(k_count: int = 3, name: str = GROUP_NAME_OSL) -> bpy.types.NodeTree:
@@ -649,17 +695,21 @@ def build_osl_group(k_count: int = 3, name: str = GROUP_NAME_OSL) -> bpy.types.N
     for k in range(1, k_count + 1):
         for kind in KINDS:
             group.links.new(gin.outputs[socket_name(k, kind)], script.inputs[osl.param_name(k, kind)])
-    for name, param in (("Weight Scale", "weight_scale"), ("IOR", "ior"), ("Normal", "Normal")):
+    for name, param in (("IOR", "ior"), ("Normal", "Normal")):
         group.links.new(gin.outputs[name], script.inputs[param])
+    through, tint = _under_coat(group, gin)
+    group.links.new(_vec(group, "MULTIPLY", gin.outputs["Weight Scale"], tint, x=-250.0, y=500.0),
+                    script.inputs["weight_scale"])
     group.links.new(_level_ior(group, gin.outputs["IOR"], gin.outputs["Specular IOR Level"]), script.inputs["coat_ior"])
     surface = _add_shader(group, principled_specular(group, gin), script.outputs["BSSRDF"], 1050.0, 700.0)
-    surface = _add_shader(group, surface, gin.outputs["Body"], 1150.0, 700.0)
-    group.links.new(_outer_layers(group, gin, surface), gout.inputs["BSSRDF"])
+    surface = _add_shader(group, surface, _mix_shader(group, through, gin.outputs["Body"], 1050.0, 500.0), 1150.0,
+                          700.0)
+    group.links.new(_sheen(group, gin, surface), gout.inputs["BSSRDF"])
     return group
 
 
 #: Custom property marking the group layout version (bump when the generated nodes change).
-GROUP_VERSION = 13
+GROUP_VERSION = 14
 
 
 def ensure_group(k_count: int, backend: str) -> bpy.types.NodeTree:
