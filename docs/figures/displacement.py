@@ -1,0 +1,131 @@
+"""Make docs/figures/displacement.png: a patch of skin whose pores and fine lines come from the Material Output's
+Displacement, under a grazing light, in Cycles.
+
+The artist's material is one Principled BSDF (a medium skin colour, Subsurface Weight 1) and a Displacement node
+(pores: a Voronoi texture's distance; fine lines: a stretched noise) linked to the Material Output's Displacement,
+which Cycles renders as a bump (the material's default Displacement setting).  Panels, left to right: that Principled
+BSDF (Blender's default Subsurface Radius and Scale); the live group after Invert Skin Albedo, whose Cycles output
+takes the artist's Displacement (blender_addon.wiring.take_output_inputs); the same without it, as the live group
+rendered it before its outputs took the Displacement: flat.  The patch is 3 cm wide; Unit Scale 1.  Run from the
+repository root (about half a minute on two cores)::
+
+    .venv/bin/python docs/figures/displacement.py
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[2]
+sys.path.insert(0, str(ROOT))
+
+import bpy  # noqa: E402
+from PIL import Image  # noqa: E402
+
+import blender_addon  # noqa: E402
+from blender_addon import wiring  # noqa: E402
+from exporters.colorimetry import srgb_decode, srgb_encode  # noqa: E402
+
+OUT = ROOT / "docs" / "figures" / "displacement.png"
+WIDTH, HEIGHT, SAMPLES = 200, 140, 64
+SKIN = (198, 140, 112)  # 8-bit sRGB
+SIDE = 0.03  # metres: the patch's width
+DEPTH = 0.00015  # metres: the displacement's scale (pores a tenth of a millimetre deep)
+
+
+def scene() -> bpy.types.Object:
+    """The patch (a plane), a camera looking down at it obliquely and a grazing area light; returns the patch."""
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    sc = bpy.context.scene
+    sc.render.engine = "CYCLES"
+    sc.cycles.samples, sc.cycles.use_denoising, sc.cycles.seed = SAMPLES, False, 3
+    sc.render.resolution_x, sc.render.resolution_y = WIDTH, HEIGHT
+    sc.view_settings.view_transform = "Standard"
+    sc.render.image_settings.file_format = "OPEN_EXR"
+    world = bpy.data.worlds.new("World")
+    world.use_nodes = True
+    world.node_tree.nodes["Background"].inputs["Color"].default_value = (0.03, 0.03, 0.035, 1.0)
+    sc.world = world
+    bpy.ops.mesh.primitive_cube_add(size=1.0, scale=(SIDE, SIDE, 0.01), location=(0.0, 0.0, -0.005))
+    patch = bpy.context.object
+    bpy.ops.object.camera_add(location=(0.0, -0.028, 0.022), rotation=(math.radians(52), 0.0, 0.0))
+    sc.camera = bpy.context.object
+    sc.camera.data.lens, sc.camera.data.clip_start = 50, 0.001
+    bpy.ops.object.light_add(type="AREA", location=(0.06, 0.01, 0.006))
+    light = bpy.context.object
+    light.data.energy, light.data.size = 0.4, 0.01
+    light.rotation_euler = (0.0, math.radians(84), 0.0)
+    return patch
+
+
+def artist_material(obj: bpy.types.Object) -> bpy.types.Material:
+    """Skin with pores and fine lines in the Material Output's Displacement."""
+    mat = bpy.data.materials.new("Skin")
+    mat.use_nodes = True
+    obj.data.materials.append(mat)
+    tree = mat.node_tree
+    principled = tree.nodes["Principled BSDF"]
+    principled.inputs["Subsurface Weight"].default_value = 1.0
+    principled.inputs["Base Color"].default_value = (*srgb_decode(np.array(SKIN) / 255.0), 1.0)
+    principled.inputs["Roughness"].default_value = 0.45
+    pores = tree.nodes.new("ShaderNodeTexVoronoi")
+    pores.feature = "F1"
+    pores.inputs["Scale"].default_value = 900.0
+    lines = tree.nodes.new("ShaderNodeTexNoise")
+    lines.inputs["Scale"].default_value = 120.0
+    stretch = tree.nodes.new("ShaderNodeMapping")
+    stretch.inputs["Scale"].default_value = (1.0, 8.0, 1.0)
+    coords = tree.nodes.new("ShaderNodeTexCoord")
+    tree.links.new(coords.outputs["Object"], pores.inputs["Vector"])
+    tree.links.new(coords.outputs["Object"], stretch.inputs["Vector"])
+    tree.links.new(stretch.outputs["Vector"], lines.inputs["Vector"])
+    height = tree.nodes.new("ShaderNodeMath")
+    height.operation = "MULTIPLY_ADD"
+    height.inputs[1].default_value = 0.5
+    tree.links.new(lines.outputs["Fac"], height.inputs[0])
+    tree.links.new(pores.outputs["Distance"], height.inputs[2])
+    displacement = tree.nodes.new("ShaderNodeDisplacement")
+    displacement.inputs["Scale"].default_value = DEPTH
+    tree.links.new(height.outputs[0], displacement.inputs["Height"])
+    tree.links.new(displacement.outputs[0], tree.nodes["Material Output"].inputs["Displacement"])
+    return mat
+
+
+def render(path: Path) -> np.ndarray:
+    """The display-referred render (H, W, 3) in [0, 1], row 0 at the top."""
+    sc = bpy.context.scene
+    sc.render.filepath = str(path)
+    bpy.ops.render.render(write_still=True)
+    image = bpy.data.images.load(str(path))
+    pixels = np.empty(WIDTH * HEIGHT * 4, np.float32)
+    image.pixels.foreach_get(pixels)
+    return srgb_encode(np.clip(pixels.reshape(HEIGHT, WIDTH, 4)[::-1, :, :3], 0.0, 1.0))
+
+
+def main() -> None:
+    patch = scene()
+    mat = artist_material(patch)
+    blender_addon.register()
+    with tempfile.TemporaryDirectory() as tmp:
+        principled = render(Path(tmp) / "principled.exr")
+        with bpy.context.temp_override(object=patch, active_object=patch):
+            assert bpy.ops.spectral_skin.invert_albedo(mode="LIVE") == {"FINISHED"}
+        cycles = wiring.render_output(mat.node_tree, "CYCLES")
+        assert cycles.inputs["Displacement"].is_linked
+        live = render(Path(tmp) / "live.exr")
+        blender_addon.unregister()  # no handler links it again
+        mat.node_tree.links.remove(cycles.inputs["Displacement"].links[0])
+        flat = render(Path(tmp) / "flat.exr")
+    gap = np.ones((HEIGHT, 4, 3))
+    panels = np.concatenate([principled, gap, live, gap, flat], axis=1)
+    Image.fromarray(np.round(255 * panels).astype(np.uint8)).save(OUT, optimize=True)
+    print(f"wrote {OUT}")
+
+
+if __name__ == "__main__":
+    main()
