@@ -71,8 +71,6 @@ PRINCIPLED_BASE_SHARE = 0.957
 #: Cycles by tests/test_live_specular.py).  With ``Principled Convention`` 1 the colour is multiplied by it before
 #: the table, so the Cycles body is as much darker than the painted colour as a Principled BSDF's base.
 PRINCIPLED_BASE_SHARE_CYCLES = 0.972
-#: Smallest Translucency the group takes (the mean free paths scaled by it; 0 would make them 0).
-TRANSLUCENCY_MIN = 1e-3
 #: Texels read (at most) to count the share of a texture outside the table's domain.
 OUTSIDE_SAMPLE = 1 << 18
 
@@ -548,7 +546,7 @@ def _new_group(k_count: int, table_sha: str) -> tuple[bpy.types.NodeTree, bpy.ty
     convention = iface.new_socket("Principled Convention", in_out="INPUT", socket_type="NodeSocketFloat")
     convention.default_value, convention.min_value, convention.max_value = 0.0, 0.0, 1.0
     translucency = iface.new_socket("Translucency", in_out="INPUT", socket_type="NodeSocketFloat")
-    translucency.default_value, translucency.min_value, translucency.max_value = 1.0, TRANSLUCENCY_MIN, 100.0
+    translucency.default_value, translucency.min_value, translucency.max_value = 1.0, nodes.TRANSLUCENCY_MIN, 100.0
     nodes.add_specular_inputs(group, nodes.ARTIST_INPUTS)
     iface.new_socket("Cycles", in_out="OUTPUT", socket_type="NodeSocketShader")
     iface.new_socket("EEVEE", in_out="OUTPUT", socket_type="NodeSocketShader")
@@ -588,7 +586,7 @@ def build_live_group(table: texel_table.TexelTable, layout: live_table.AtlasLayo
     painted = point.painted
     uvs, frac = _slice_uvs(b, layout, point, 12)
     mixture = b.node("ShaderNodeGroup", 34, node_tree=nodes.ensure_group(table.k, "SVM"))
-    unit = b.math("DIVIDE", 19, b.math("MAXIMUM", 18, gin.outputs["Translucency"], TRANSLUCENCY_MIN),
+    unit = b.math("DIVIDE", 19, b.math("MAXIMUM", 18, gin.outputs["Translucency"], nodes.TRANSLUCENCY_MIN),
                   gin.outputs["Unit Scale"])  # Blender units per metre of radius
     unit.node.name = "Translucency"
     weight_share = b.math("ADD", 24, gin.outputs["Subsurface Weight"], 0.0, clamp=True)

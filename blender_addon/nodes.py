@@ -4,13 +4,14 @@ Inputs, for each component k = 1..K (the baked maps of docs/contracts.md §4, ``
 (Subsurface Color, RGB), ``k{k} Radius`` (RANDOM_WALK radius in Blender units, RGB), ``k{k} Weight`` (RGB, summing to 1
 over k per channel), ``k{k} Anisotropy`` (one g in [0, 0.9]); then ``Weight Scale`` (RGB, default 1: a factor on every
 component's weight, per channel, computed once for all of them: the live group's Subsurface Weight and the grazing-light
-correction's weight factors), ``IOR`` (the tissue index: the specular coat's Fresnel and the closures' refractive entry,
-which the bake's tables assume), ``Roughness`` (the coat's specular roughness, Blender's perceptual roughness, GGX alpha
-= Roughness^2) and ``Normal`` (normal/bump map; unlinked: the shading normal), which feeds the coat, its Fresnel weight
-and every subsurface closure; then the Principled BSDF's specular inputs (below) and ``Body`` (a shader added beside the
-mixture under the clear coat and sheen: the live group's diffuse body where Subsurface Weight is below 1;
-unlinked, nothing).  Output: ``BSSRDF`` (the whole surface shader: coat plus
-mixture; the name is kept for files wired before the coat existed).
+correction's weight factors), ``Translucency`` (default 1: a factor on every component's radius, each closure's Scale;
+the artist's control over baked maps, where the live group scales its radii itself), ``IOR`` (the tissue index: the
+specular coat's Fresnel and the closures' refractive entry, which the bake's tables assume), ``Roughness`` (the coat's
+specular roughness, Blender's perceptual roughness, GGX alpha = Roughness^2) and ``Normal`` (normal/bump map; unlinked:
+the shading normal), which feeds the coat, its Fresnel weight and every subsurface closure; then the Principled BSDF's
+specular inputs (below) and ``Body`` (a shader added beside the mixture under the clear coat and sheen: the live group's
+diffuse body where Subsurface Weight is below 1; unlinked, nothing). Output: ``BSSRDF`` (the whole surface shader: coat
+plus mixture; the name is kept for files wired before the coat existed).
 
 Why a sum of closures weighted by w_k *is* "pick component k with probability w_k, then walk in medium k"
 (Cycles 5.0.1 kernel): shader nodes never choose a closure; Mix/Add Shader only scale and collect closure
@@ -165,6 +166,10 @@ def random_walk_method() -> str:
     return LEGACY_RANDOM_WALK if LEGACY_RANDOM_WALK in items else "RANDOM_WALK"
 
 
+#: Smallest Translucency a group takes (the mean free paths scaled by it; 0 would make them 0).
+TRANSLUCENCY_MIN = 1e-3
+
+
 #: The Principled BSDF's specular inputs the mixture takes (name: socket type, Blender's default).  The defaults
 #: leave the coat exactly as without them: Specular IOR Level 0.5 keeps F0 of the IOR, white tint, no coat or sheen.
 SPECULAR_INPUTS: dict[str, tuple[str, object]] = {
@@ -225,6 +230,8 @@ def _new_interface(group: bpy.types.NodeTree, k_count: int) -> None:
             else:
                 sock.default_value = (0.0, 0.0, 0.0, 1.0)
     iface.new_socket("Weight Scale", in_out="INPUT", socket_type="NodeSocketColor").default_value = (1.0,) * 4
+    translucency = iface.new_socket("Translucency", in_out="INPUT", socket_type="NodeSocketFloat")
+    translucency.default_value, translucency.min_value, translucency.max_value = 1.0, TRANSLUCENCY_MIN, 100.0
     ior = iface.new_socket("IOR", in_out="INPUT", socket_type="NodeSocketFloat")
     ior.min_value, ior.max_value, ior.default_value = GROUP_IOR_MIN, reflectance_tables.IOR_MAX, DEFAULT_IOR
     rough = iface.new_socket("Roughness", in_out="INPUT", socket_type="NodeSocketFloat")
@@ -479,7 +486,7 @@ def _closure(group: bpy.types.NodeTree, gin: bpy.types.Node, colour: bpy.types.N
     sss = group.nodes.new("ShaderNodeSubsurfaceScattering")
     sss.location = (-450.0, y)
     sss.falloff = random_walk_method()
-    sss.inputs["Scale"].default_value = 1.0
+    group.links.new(gin.outputs["Translucency"], sss.inputs["Scale"])  # 1 (unlinked): the radius as it is
     sss.inputs["Roughness"].default_value = roughness
     if smooth is not None:
         group.links.new(smooth, sss.inputs["Roughness"])
@@ -694,7 +701,14 @@ def build_osl_group(k_count: int = 3, name: str = GROUP_NAME_OSL) -> bpy.types.N
     script = osl.script_node(group.nodes, source, f"spectral_skin_sss_k{k_count}.osl")
     for k in range(1, k_count + 1):
         for kind in KINDS:
-            group.links.new(gin.outputs[socket_name(k, kind)], script.inputs[osl.param_name(k, kind)])
+            source = gin.outputs[socket_name(k, kind)]
+            if kind == "Radius":
+                scaled = group.nodes.new("ShaderNodeVectorMath")
+                scaled.operation, scaled.location = "SCALE", (-450.0, -300.0 * k)
+                group.links.new(source, scaled.inputs[0])
+                group.links.new(gin.outputs["Translucency"], scaled.inputs["Scale"])
+                source = scaled.outputs["Vector"]
+            group.links.new(source, script.inputs[osl.param_name(k, kind)])
     for name, param in (("IOR", "ior"), ("Normal", "Normal")):
         group.links.new(gin.outputs[name], script.inputs[param])
     through, tint = _under_coat(group, gin)
@@ -709,7 +723,7 @@ def build_osl_group(k_count: int = 3, name: str = GROUP_NAME_OSL) -> bpy.types.N
 
 
 #: Custom property marking the group layout version (bump when the generated nodes change).
-GROUP_VERSION = 14
+GROUP_VERSION = 15
 
 
 def ensure_group(k_count: int, backend: str) -> bpy.types.NodeTree:

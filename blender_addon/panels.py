@@ -174,9 +174,15 @@ def live_node(material: bpy.types.Material | None) -> bpy.types.Node | None:
 
 
 def _draw_live_node(layout: bpy.types.UILayout, material: bpy.types.Material | None) -> None:
-    """The active material's live group inputs an artist tunes: Translucency (and its Subsurface Weight when it is
-    a value, not a mask)."""
+    """The active material's group inputs an artist tunes: the live group's Translucency (and its Subsurface Weight
+    when it is a value, not a mask), or the Translucency of the mixture group of baked maps."""
     node = live_node(material)
+    baked = None if node is not None or material is None or material.node_tree is None \
+        else wiring.wired_group_node(material)
+    if baked is not None and "Translucency" in baked.inputs and not baked.inputs["Translucency"].is_linked:
+        box = layout.box()
+        box.label(text="Baked maps", icon="NODETREE")
+        box.prop(baked.inputs["Translucency"], "default_value", text="Translucency")
     if node is None:
         return
     box = layout.box()
