@@ -42,6 +42,24 @@ def _tree_state(material: bpy.types.Material) -> tuple:
                    for ln in tree.links))
 
 
+def _glow_material(tmp_path: Path) -> tuple[bpy.types.Material, bpy.types.Node]:
+    """The probe box's artist material: the medium skin texture into a Principled BSDF (Roughness 0.5), reaching
+    the Material Output through a Mix Shader that mixes the blue glow in at :data:`FACTOR`; returns it and that
+    Mix Shader."""
+    pixels = np.broadcast_to(np.array(SKIN, np.uint8), (SIZE, SIZE, 3))
+    mat = box_material(bpy.data.images.load(str(write_image(tmp_path / "skin.png", pixels, "uint8"))), "principled")
+    tree = mat.node_tree
+    principled = tree.nodes["Principled BSDF"]
+    principled.inputs["Roughness"].default_value = ROUGHNESS
+    glow, layer = tree.nodes.new("ShaderNodeEmission"), tree.nodes.new("ShaderNodeMixShader")
+    glow.inputs["Color"].default_value = (*GLOW, 1.0)
+    layer.inputs["Fac"].default_value = FACTOR
+    tree.links.new(principled.outputs["BSDF"], layer.inputs[1])
+    tree.links.new(glow.outputs["Emission"], layer.inputs[2])
+    tree.links.new(layer.outputs["Shader"], wiring.active_output(tree).inputs["Surface"])
+    return mat, layer
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("mode", ["LIVE", "BAKE"])
 def test_a_layer_over_the_principled_bsdf_renders_over_the_skin(tmp_path, mode):
@@ -49,18 +67,10 @@ def test_a_layer_over_the_principled_bsdf_renders_over_the_skin(tmp_path, mode):
     blender_addon.register()
     try:
         scene = probe.new_scene(samples=64, resolution=SIZE, seed=5)
-        pixels = np.broadcast_to(np.array(SKIN, np.uint8), (SIZE, SIZE, 3))
-        image = bpy.data.images.load(str(write_image(tmp_path / "skin.png", pixels, "uint8")))
-        mat = box_material(image, "principled")
+        mat, layer = _glow_material(tmp_path)
         tree = mat.node_tree
         principled = tree.nodes["Principled BSDF"]
         output = wiring.active_output(tree)
-        glow, layer = tree.nodes.new("ShaderNodeEmission"), tree.nodes.new("ShaderNodeMixShader")
-        glow.inputs["Color"].default_value = (*GLOW, 1.0)
-        layer.inputs["Fac"].default_value = FACTOR
-        tree.links.new(principled.outputs["BSDF"], layer.inputs[1])
-        tree.links.new(glow.outputs["Emission"], layer.inputs[2])
-        tree.links.new(layer.outputs["Shader"], output.inputs["Surface"])
         tree.nodes.active = principled.inputs["Base Color"].links[0].from_node  # the albedo image, for the bake
         before = _tree_state(mat)
         assert run_invert(bpy.data.objects["ProbeSlab"], mode=mode) == {"FINISHED"}
@@ -103,19 +113,10 @@ def test_the_copied_layers_follow_the_artists(tmp_path):
     blender_addon.register()
     try:
         scene = probe.new_scene(samples=64, resolution=SIZE, seed=5)
-        pixels = np.broadcast_to(np.array(SKIN, np.uint8), (SIZE, SIZE, 3))
-        mat = box_material(bpy.data.images.load(str(write_image(tmp_path / "skin.png", pixels, "uint8"))),
-                           "principled")
+        mat, layer = _glow_material(tmp_path)
         tree = mat.node_tree
         principled = tree.nodes["Principled BSDF"]
-        principled.inputs["Roughness"].default_value = ROUGHNESS
         output = wiring.active_output(tree)
-        glow, layer = tree.nodes.new("ShaderNodeEmission"), tree.nodes.new("ShaderNodeMixShader")
-        glow.inputs["Color"].default_value = (*GLOW, 1.0)
-        layer.inputs["Fac"].default_value = FACTOR
-        tree.links.new(principled.outputs["BSDF"], layer.inputs[1])
-        tree.links.new(glow.outputs["Emission"], layer.inputs[2])
-        tree.links.new(layer.outputs["Shader"], output.inputs["Surface"])
         assert run_invert(bpy.data.objects["ProbeSlab"], mode="LIVE") == {"FINISHED"}
         assert _copies(mat, "CYCLES") == _copies(mat, "EEVEE") == [layer.name]
         names = sorted(n.name for n in tree.nodes)

@@ -131,15 +131,18 @@ def test_sheen_and_linked_inputs(tmp_path, default):
     assert gnode.inputs["Coat Weight"].links[0].from_node == value
 
 
-def _principled(color) -> tuple[np.ndarray, np.ndarray]:
+def _principled(color, **inputs) -> tuple[np.ndarray, np.ndarray]:
     """Mean linear RGB and its standard error of the probe with a plain Principled BSDF (no subsurface) at the
-    test's roughness and the live group's IOR, Base Color ``color``: Blender's own renderer, no add-on."""
+    test's roughness and the live group's IOR, Base Color ``color``, set to ``inputs``: Blender's own renderer, no
+    add-on."""
     scene = probe.new_scene(samples=SAMPLES, resolution=16, seed=4)
     mat = probe.slab_material("Principled")
     bsdf = mat.node_tree.nodes.new("ShaderNodeBsdfPrincipled")
     bsdf.inputs["Base Color"].default_value = (*map(float, color), 1.0)
     bsdf.inputs["Roughness"].default_value = 0.3
     bsdf.inputs["IOR"].default_value = nodes.DEFAULT_IOR
+    for name, value in inputs.items():
+        bsdf.inputs[name].default_value = value
     mat.node_tree.links.new(bsdf.outputs[0], probe.material_output(mat).inputs["Surface"])
     mean, err, _ = probe.render_mean(scene)
     return mean, err
@@ -170,21 +173,6 @@ def test_principled_convention_darkens_the_body_as_principled_does(tmp_path, def
         blender_addon.unregister()
 
 
-def _principled_black(**inputs) -> np.ndarray:
-    """Mean linear RGB of the probe with a plain Principled BSDF of black base (its specular layer alone) at the
-    test's roughness and the live group's IOR, set to ``inputs``: Blender's own renderer, no add-on."""
-    scene = probe.new_scene(samples=SAMPLES, resolution=16, seed=4)
-    mat = probe.slab_material("Principled")
-    bsdf = mat.node_tree.nodes.new("ShaderNodeBsdfPrincipled")
-    bsdf.inputs["Base Color"].default_value = (0.0, 0.0, 0.0, 1.0)
-    bsdf.inputs["Roughness"].default_value = 0.3
-    bsdf.inputs["IOR"].default_value = nodes.DEFAULT_IOR
-    for name, value in inputs.items():
-        bsdf.inputs[name].default_value = value
-    mat.node_tree.links.new(bsdf.outputs[0], probe.material_output(mat).inputs["Surface"])
-    return probe.render_mean(scene)[0]
-
-
 def test_thin_film(tmp_path, default):
     """A thin film (300 nm of index 1.6) on the Principled BSDF colours the coat's reflection as it colours the
     Principled BSDF's specular layer: the render's change equals that of a black-based Principled BSDF (Blender's
@@ -193,7 +181,7 @@ def test_thin_film(tmp_path, default):
     film = {"Thin Film Thickness": 300.0, "Thin Film IOR": 1.6}
     mean, gnode = _render(tmp_path, **film)
     assert gnode.inputs["Thin Film Thickness"].default_value == pytest.approx(300.0)
-    reference = _principled_black(**film) - _principled_black()
+    reference = _principled((0.0, 0.0, 0.0), **film)[0] - _principled((0.0, 0.0, 0.0))[0]
     print(f"\nthin film: change {np.round(mean - default, 4).tolist()} Principled's {np.round(reference, 4).tolist()}")
     np.testing.assert_allclose(mean - default, reference, rtol=0.1)
     assert np.ptp(reference) > 0.03  # the film colours the reflection
@@ -249,23 +237,8 @@ def test_coat_tint(tmp_path):
     clear, _ = _render(tmp_path, **coat)
     tinted, gnode = _render(tmp_path, **coat, **{"Coat Tint": tint})
     assert tuple(gnode.inputs["Coat Tint"].default_value) == pytest.approx(tint)
-    reference = _principled_base(_painted(), **coat, **{"Coat Tint": tint}) / _principled_base(_painted(), **coat)
+    reference = _principled(_painted(), **coat, **{"Coat Tint": tint})[0] / _principled(_painted(), **coat)[0]
     ratio = tinted / clear
     print(f"\ncoat tint: {np.round(ratio, 4).tolist()} Principled's {np.round(reference, 4).tolist()}")
     np.testing.assert_allclose(ratio, reference, rtol=0.03)
     assert abs(ratio[0] - 1.0) < 0.01 and np.all(ratio[1:] < 0.7)
-
-
-def _principled_base(colour, **inputs) -> np.ndarray:
-    """Mean linear RGB of the probe with a plain Principled BSDF (no subsurface) of Base Color ``colour`` at the test's
-    roughness and the live group's IOR, set to ``inputs``: Blender's own renderer, no add-on."""
-    scene = probe.new_scene(samples=SAMPLES, resolution=16, seed=4)
-    mat = probe.slab_material("Principled")
-    bsdf = mat.node_tree.nodes.new("ShaderNodeBsdfPrincipled")
-    bsdf.inputs["Base Color"].default_value = (*map(float, colour), 1.0)
-    bsdf.inputs["Roughness"].default_value = 0.3
-    bsdf.inputs["IOR"].default_value = nodes.DEFAULT_IOR
-    for name, value in inputs.items():
-        bsdf.inputs[name].default_value = value
-    mat.node_tree.links.new(bsdf.outputs[0], probe.material_output(mat).inputs["Surface"])
-    return probe.render_mean(scene)[0]

@@ -25,11 +25,11 @@ ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT))
 
 import bpy  # noqa: E402
-from PIL import Image  # noqa: E402
+from figure_cycles import cycles_scene, render, save_panels  # noqa: E402
 
 import blender_addon  # noqa: E402
 from blender_addon import wiring  # noqa: E402
-from exporters.colorimetry import srgb_decode, srgb_encode  # noqa: E402
+from exporters.colorimetry import srgb_decode  # noqa: E402
 
 OUT = ROOT / "docs" / "figures" / "displacement.png"
 WIDTH, HEIGHT, SAMPLES = 200, 140, 64
@@ -40,17 +40,7 @@ DEPTH = 0.00015  # metres: the displacement's scale (pores a tenth of a millimet
 
 def scene() -> bpy.types.Object:
     """The patch (a plane), a camera looking down at it obliquely and a grazing area light; returns the patch."""
-    bpy.ops.wm.read_factory_settings(use_empty=True)
-    sc = bpy.context.scene
-    sc.render.engine = "CYCLES"
-    sc.cycles.samples, sc.cycles.use_denoising, sc.cycles.seed = SAMPLES, False, 3
-    sc.render.resolution_x, sc.render.resolution_y = WIDTH, HEIGHT
-    sc.view_settings.view_transform = "Standard"
-    sc.render.image_settings.file_format = "OPEN_EXR"
-    world = bpy.data.worlds.new("World")
-    world.use_nodes = True
-    world.node_tree.nodes["Background"].inputs["Color"].default_value = (0.03, 0.03, 0.035, 1.0)
-    sc.world = world
+    sc = cycles_scene(WIDTH, HEIGHT, SAMPLES, 3, (0.03, 0.03, 0.035))
     bpy.ops.mesh.primitive_cube_add(size=1.0, scale=(SIDE, SIDE, 0.01), location=(0.0, 0.0, -0.005))
     patch = bpy.context.object
     bpy.ops.object.camera_add(location=(0.0, -0.028, 0.022), rotation=(math.radians(52), 0.0, 0.0))
@@ -96,17 +86,6 @@ def artist_material(obj: bpy.types.Object) -> bpy.types.Material:
     return mat
 
 
-def render(path: Path) -> np.ndarray:
-    """The display-referred render (H, W, 3) in [0, 1], row 0 at the top."""
-    sc = bpy.context.scene
-    sc.render.filepath = str(path)
-    bpy.ops.render.render(write_still=True)
-    image = bpy.data.images.load(str(path))
-    pixels = np.empty(WIDTH * HEIGHT * 4, np.float32)
-    image.pixels.foreach_get(pixels)
-    return srgb_encode(np.clip(pixels.reshape(HEIGHT, WIDTH, 4)[::-1, :, :3], 0.0, 1.0))
-
-
 def main() -> None:
     patch = scene()
     mat = artist_material(patch)
@@ -121,10 +100,7 @@ def main() -> None:
         blender_addon.unregister()  # no handler links it again
         mat.node_tree.links.remove(cycles.inputs["Displacement"].links[0])
         flat = render(Path(tmp) / "flat.exr")
-    gap = np.ones((HEIGHT, 4, 3))
-    panels = np.concatenate([principled, gap, live, gap, flat], axis=1)
-    Image.fromarray(np.round(255 * panels).astype(np.uint8)).save(OUT, optimize=True)
-    print(f"wrote {OUT}")
+    save_panels([principled, live, flat], OUT)
 
 
 if __name__ == "__main__":

@@ -23,11 +23,11 @@ ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT))
 
 import bpy  # noqa: E402
-from PIL import Image  # noqa: E402
+from figure_cycles import cycles_scene, render, save_panels  # noqa: E402
 
 import blender_addon  # noqa: E402
 from blender_addon import wiring  # noqa: E402
-from exporters.colorimetry import srgb_decode, srgb_encode  # noqa: E402
+from exporters.colorimetry import srgb_decode  # noqa: E402
 
 OUT = ROOT / "docs" / "figures" / "metal_layer.png"
 WIDTH, HEIGHT, SAMPLES = 240, 120, 96
@@ -37,17 +37,7 @@ RADIUS, RING = 0.008, 0.004  # metres: the finger's radius, the ring's width
 
 def scene() -> bpy.types.Object:
     """The finger (a capped cylinder along x), a camera, a back light and a dim side light; returns the finger."""
-    bpy.ops.wm.read_factory_settings(use_empty=True)
-    sc = bpy.context.scene
-    sc.render.engine = "CYCLES"
-    sc.cycles.samples, sc.cycles.use_denoising, sc.cycles.seed = SAMPLES, False, 2
-    sc.render.resolution_x, sc.render.resolution_y = WIDTH, HEIGHT
-    sc.view_settings.view_transform = "Standard"
-    sc.render.image_settings.file_format = "OPEN_EXR"
-    world = bpy.data.worlds.new("World")
-    world.use_nodes = True
-    world.node_tree.nodes["Background"].inputs["Color"].default_value = (0.02, 0.02, 0.025, 1.0)
-    sc.world = world
+    sc = cycles_scene(WIDTH, HEIGHT, SAMPLES, 2, (0.02, 0.02, 0.025))
     bpy.ops.mesh.primitive_cylinder_add(vertices=64, radius=RADIUS, depth=0.06, rotation=(0.0, math.pi / 2, 0.0))
     finger = bpy.context.object
     bpy.ops.object.shade_smooth()
@@ -93,17 +83,6 @@ def artist_material(obj: bpy.types.Object) -> bpy.types.Material:
     return mat
 
 
-def render(path: Path) -> np.ndarray:
-    """The display-referred render (H, W, 3) in [0, 1], row 0 at the top."""
-    sc = bpy.context.scene
-    sc.render.filepath = str(path)
-    bpy.ops.render.render(write_still=True)
-    image = bpy.data.images.load(str(path))
-    pixels = np.empty(WIDTH * HEIGHT * 4, np.float32)
-    image.pixels.foreach_get(pixels)
-    return srgb_encode(np.clip(pixels.reshape(HEIGHT, WIDTH, 4)[::-1, :, :3], 0.0, 1.0))
-
-
 def main() -> None:
     finger = scene()
     mat = artist_material(finger)
@@ -117,10 +96,7 @@ def main() -> None:
         blender_addon.unregister()  # no handler puts the layer back
         wiring.remove_base_layers(mat.node_tree)
         without = render(Path(tmp) / "without.exr")
-    gap = np.ones((HEIGHT, 4, 3))
-    panels = np.concatenate([principled, gap, live, gap, without], axis=1)
-    Image.fromarray(np.round(255 * panels).astype(np.uint8)).save(OUT, optimize=True)
-    print(f"wrote {OUT}")
+    save_panels([principled, live, without], OUT)
 
 
 if __name__ == "__main__":

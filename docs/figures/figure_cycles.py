@@ -1,0 +1,51 @@
+"""What the Cycles figure scripts of this folder share (metal_layer.py, displacement.py): an empty Cycles scene, a
+render read back display-referred, and panels saved side by side.  Imported by those scripts, which run from the
+repository root with the project's venv (``.venv/bin/python docs/figures/displacement.py``, for one)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import bpy
+import numpy as np
+from PIL import Image
+
+from exporters.colorimetry import srgb_encode
+
+
+def cycles_scene(width: int, height: int, samples: int, seed: int, world_rgb: tuple[float, float, float]
+                 ) -> bpy.types.Scene:
+    """An empty factory scene set to render in Cycles at ``width`` x ``height`` px, ``samples`` without denoising,
+    view transform Standard, into OpenEXR, under a uniform world of linear colour ``world_rgb``."""
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    scene = bpy.context.scene
+    scene.render.engine = "CYCLES"
+    scene.cycles.samples, scene.cycles.use_denoising, scene.cycles.seed = samples, False, seed
+    scene.render.resolution_x, scene.render.resolution_y = width, height
+    scene.view_settings.view_transform = "Standard"
+    scene.render.image_settings.file_format = "OPEN_EXR"
+    world = bpy.data.worlds.new("World")
+    world.use_nodes = True
+    world.node_tree.nodes["Background"].inputs["Color"].default_value = (*world_rgb, 1.0)
+    scene.world = world
+    return scene
+
+
+def render(path: Path) -> np.ndarray:
+    """Render the scene to ``path`` and read it back display-referred: (H, W, 3) sRGB in [0, 1], row 0 at the top."""
+    scene = bpy.context.scene
+    width, height = scene.render.resolution_x, scene.render.resolution_y
+    scene.render.filepath = str(path)
+    bpy.ops.render.render(write_still=True)
+    image = bpy.data.images.load(str(path))
+    pixels = np.empty(width * height * 4, np.float32)
+    image.pixels.foreach_get(pixels)
+    return srgb_encode(np.clip(pixels.reshape(height, width, 4)[::-1, :, :3], 0.0, 1.0))
+
+
+def save_panels(panels: list[np.ndarray], out: Path) -> None:
+    """``panels`` (each (H, W, 3) in [0, 1]) side by side, 4 white pixels apart, as an 8-bit PNG at ``out``."""
+    gap = np.ones((panels[0].shape[0], 4, 3))
+    row = np.concatenate([part for panel in panels for part in (gap, panel)][1:], axis=1)
+    Image.fromarray(np.round(255 * row).astype(np.uint8)).save(out, optimize=True)
+    print(f"wrote {out}")
