@@ -42,6 +42,16 @@ def _tree_state(material: bpy.types.Material) -> tuple:
                    for ln in tree.links))
 
 
+@pytest.fixture
+def glow(tmp_path):
+    """The probe scene with the add-on registered and :func:`_glow_material`: (scene, material, its Mix Shader)."""
+    bpy.ops.wm.read_homefile(use_empty=True)
+    blender_addon.register()
+    scene = probe.new_scene(samples=64, resolution=SIZE, seed=5)
+    yield (scene, *_glow_material(tmp_path))
+    blender_addon.unregister()
+
+
 def _glow_material(tmp_path: Path) -> tuple[bpy.types.Material, bpy.types.Node]:
     """The probe box's artist material: the medium skin texture into a Principled BSDF (Roughness 0.5), reaching
     the Material Output through a Mix Shader that mixes the blue glow in at :data:`FACTOR`; returns it and that
@@ -62,39 +72,33 @@ def _glow_material(tmp_path: Path) -> tuple[bpy.types.Material, bpy.types.Node]:
 
 @pytest.mark.slow
 @pytest.mark.parametrize("mode", ["LIVE", "BAKE"])
-def test_a_layer_over_the_principled_bsdf_renders_over_the_skin(tmp_path, mode):
-    bpy.ops.wm.read_homefile(use_empty=True)
-    blender_addon.register()
-    try:
-        scene = probe.new_scene(samples=64, resolution=SIZE, seed=5)
-        mat, layer = _glow_material(tmp_path)
-        tree = mat.node_tree
-        principled = tree.nodes["Principled BSDF"]
-        output = wiring.active_output(tree)
-        tree.nodes.active = principled.inputs["Base Color"].links[0].from_node  # the albedo image, for the bake
-        before = _tree_state(mat)
-        assert run_invert(bpy.data.objects["ProbeSlab"], mode=mode) == {"FINISHED"}
-        gnode = wiring.wired_group_node(mat)
-        assert gnode is not None and wiring.is_added(gnode)
-        assert output.inputs["Surface"].links[0].from_node == layer  # the exporters' view: the artist's layer
-        backends = sorted(n.node_tree.get("spectral_skin_sss_backend", "") for n in tree.nodes
-                          if n.bl_idname == "ShaderNodeGroup" and wiring.is_added(n))
-        assert "GRAZING" in backends or mode == "LIVE"  # baked maps get the grazing-light correction, layered or not
-        rgb = render_linear(scene, tmp_path / f"{mode}.exr")[2:-2, 2:-2].reshape(-1, 3).mean(axis=0)
-        coat = principled_coat_reflectance(scene, [1.0], ROUGHNESS, live.nodes.DEFAULT_IOR)[0]
-        skin = srgb_decode(np.array(SKIN, np.float64) / 255.0) + coat
-        expected = (1.0 - FACTOR) * skin + FACTOR * np.array(GLOW)
-        lab = linear_srgb_to_lab
-        de = float(delta_e76(lab(rgb[None]), lab(expected[None]))[0])
-        dropped = float(delta_e76(lab(skin[None]), lab(expected[None]))[0])
-        print(f"\n{mode}: ΔE76 {de:.2f} from 0.7 skin + 0.3 glow (the skin alone is {dropped:.1f} from it)")
-        assert de <= 2.0 and dropped > 20.0
-        with bpy.context.temp_override(object=bpy.data.objects["ProbeSlab"],
-                                       active_object=bpy.data.objects["ProbeSlab"]):
-            assert bpy.ops.spectral_skin.remove() == {"FINISHED"}
-        assert _tree_state(mat) == before
-    finally:
-        blender_addon.unregister()
+def test_a_layer_over_the_principled_bsdf_renders_over_the_skin(tmp_path, glow, mode):
+    scene, mat, layer = glow
+    tree = mat.node_tree
+    principled = tree.nodes["Principled BSDF"]
+    output = wiring.active_output(tree)
+    tree.nodes.active = principled.inputs["Base Color"].links[0].from_node  # the albedo image, for the bake
+    before = _tree_state(mat)
+    assert run_invert(bpy.data.objects["ProbeSlab"], mode=mode) == {"FINISHED"}
+    gnode = wiring.wired_group_node(mat)
+    assert gnode is not None and wiring.is_added(gnode)
+    assert output.inputs["Surface"].links[0].from_node == layer  # the exporters' view: the artist's layer
+    backends = sorted(n.node_tree.get("spectral_skin_sss_backend", "") for n in tree.nodes
+                      if n.bl_idname == "ShaderNodeGroup" and wiring.is_added(n))
+    assert "GRAZING" in backends or mode == "LIVE"  # baked maps get the grazing-light correction, layered or not
+    rgb = render_linear(scene, tmp_path / f"{mode}.exr")[2:-2, 2:-2].reshape(-1, 3).mean(axis=0)
+    coat = principled_coat_reflectance(scene, [1.0], ROUGHNESS, live.nodes.DEFAULT_IOR)[0]
+    skin = srgb_decode(np.array(SKIN, np.float64) / 255.0) + coat
+    expected = (1.0 - FACTOR) * skin + FACTOR * np.array(GLOW)
+    lab = linear_srgb_to_lab
+    de = float(delta_e76(lab(rgb[None]), lab(expected[None]))[0])
+    dropped = float(delta_e76(lab(skin[None]), lab(expected[None]))[0])
+    print(f"\n{mode}: ΔE76 {de:.2f} from 0.7 skin + 0.3 glow (the skin alone is {dropped:.1f} from it)")
+    assert de <= 2.0 and dropped > 20.0
+    with bpy.context.temp_override(object=bpy.data.objects["ProbeSlab"],
+                                   active_object=bpy.data.objects["ProbeSlab"]):
+        assert bpy.ops.spectral_skin.remove() == {"FINISHED"}
+    assert _tree_state(mat) == before
 
 
 def _copies(mat: bpy.types.Material, target: str) -> list[str]:
@@ -104,71 +108,65 @@ def _copies(mat: bpy.types.Material, target: str) -> list[str]:
 
 
 @pytest.mark.slow
-def test_the_copied_layers_follow_the_artists(tmp_path):
+def test_the_copied_layers_follow_the_artists(tmp_path, glow):
     """After Invert Skin Albedo the artist's layer keeps working: its factor raised from 0.3 to 0.6 renders 0.4 x the
     skin plus the coat + 0.6 x the glow (ΔE76 within 2, the same copy nodes), a mask linked to the factor feeds the
     copies, a layer added on top is copied over the skin (and its factor follows), a layer taken out leaves the
     copies, and Remove Skin SSS leaves the artist's tree as the artist left it."""
-    bpy.ops.wm.read_homefile(use_empty=True)
-    blender_addon.register()
-    try:
-        scene = probe.new_scene(samples=64, resolution=SIZE, seed=5)
-        mat, layer = _glow_material(tmp_path)
-        tree = mat.node_tree
-        principled = tree.nodes["Principled BSDF"]
-        output = wiring.active_output(tree)
-        assert run_invert(bpy.data.objects["ProbeSlab"], mode="LIVE") == {"FINISHED"}
-        assert _copies(mat, "CYCLES") == _copies(mat, "EEVEE") == [layer.name]
-        names = sorted(n.name for n in tree.nodes)
-        layer.inputs["Fac"].default_value = 0.6
-        bpy.context.view_layer.update()
-        assert sorted(n.name for n in tree.nodes) == names  # the same copies took the factor
-        rgb = render_linear(scene, tmp_path / "raised.exr")[2:-2, 2:-2].reshape(-1, 3).mean(axis=0)
-        coat = principled_coat_reflectance(scene, [1.0], ROUGHNESS, live.nodes.DEFAULT_IOR)[0]
-        skin = srgb_decode(np.array(SKIN, np.float64) / 255.0) + coat
-        lab = linear_srgb_to_lab
-        de = float(delta_e76(lab(rgb[None]), lab((0.4 * skin + 0.6 * np.array(GLOW))[None]))[0])
-        stale = float(delta_e76(lab(rgb[None]), lab((0.7 * skin + 0.3 * np.array(GLOW))[None]))[0])
-        print(f"\nfactor 0.6: ΔE76 {de:.2f} from 0.4 skin + 0.6 glow ({stale:.1f} from the factor as wired)")
-        assert de <= 2.0 and stale > 10.0
-        mask = tree.nodes.new("ShaderNodeValue")
-        tree.links.new(mask.outputs[0], layer.inputs["Fac"])
-        bpy.context.view_layer.update()
-        for target in ("CYCLES", "EEVEE"):
-            (copy,) = wiring._copies_below(wiring.render_output(tree, target).inputs["Surface"])[0]
-            assert copy.inputs["Fac"].links[0].from_node == mask
-        top, sweat = tree.nodes.new("ShaderNodeMixShader"), tree.nodes.new("ShaderNodeBsdfGlossy")
-        tree.links.new(layer.outputs[0], top.inputs[1])
-        tree.links.new(sweat.outputs[0], top.inputs[2])
-        tree.links.new(top.outputs[0], output.inputs["Surface"])
-        bpy.context.view_layer.update()
-        assert _copies(mat, "CYCLES") == _copies(mat, "EEVEE") == [top.name, layer.name]
-        top.inputs["Fac"].default_value = 0.25
-        bpy.context.view_layer.update()
-        for target in ("CYCLES", "EEVEE"):
-            copy = wiring._copies_below(wiring.render_output(tree, target).inputs["Surface"])[0][0]
-            assert copy.inputs["Fac"].default_value == pytest.approx(0.25)
-            assert copy.inputs[2].links[0].from_node == sweat
-        assert wiring.wired_group_node(mat) is not None
-        tree.links.new(principled.outputs["BSDF"], top.inputs[1])  # the glow taken out: skin, then sweat
-        bpy.context.view_layer.update()
-        assert _copies(mat, "CYCLES") == _copies(mat, "EEVEE") == [top.name]
-        assert wiring.wired_group_node(mat) is not None
-        # a file wired before the copies were marked and followed: opening it copies the layers again, once
-        for node in [n for n in tree.nodes if wiring.LAYER_OF_PROP in n]:
-            del node[wiring.LAYER_OF_PROP], node[wiring.INNER_PROP]
-        record = json.loads(mat[wiring.TAKEN_INPUTS_PROP])
-        del record[follow.LAYERS]
-        mat[wiring.TAKEN_INPUTS_PROP] = json.dumps(record)
-        count = len(tree.nodes)
-        follow.follow_on_load()
-        assert _copies(mat, "CYCLES") == _copies(mat, "EEVEE") == [top.name] and len(tree.nodes) == count
-        ours = {n.name for n in tree.nodes if wiring.is_added(n)}
-        names, links = _tree_state(mat)
-        artists = ([n for n in names if n not in ours], [ln for ln in links if ln[0] not in ours and ln[2] not in ours])
-        with bpy.context.temp_override(object=bpy.data.objects["ProbeSlab"],
-                                       active_object=bpy.data.objects["ProbeSlab"]):
-            assert bpy.ops.spectral_skin.remove() == {"FINISHED"}
-        assert _tree_state(mat) == artists
-    finally:
-        blender_addon.unregister()
+    scene, mat, layer = glow
+    tree = mat.node_tree
+    principled = tree.nodes["Principled BSDF"]
+    output = wiring.active_output(tree)
+    assert run_invert(bpy.data.objects["ProbeSlab"], mode="LIVE") == {"FINISHED"}
+    assert _copies(mat, "CYCLES") == _copies(mat, "EEVEE") == [layer.name]
+    names = sorted(n.name for n in tree.nodes)
+    layer.inputs["Fac"].default_value = 0.6
+    bpy.context.view_layer.update()
+    assert sorted(n.name for n in tree.nodes) == names  # the same copies took the factor
+    rgb = render_linear(scene, tmp_path / "raised.exr")[2:-2, 2:-2].reshape(-1, 3).mean(axis=0)
+    coat = principled_coat_reflectance(scene, [1.0], ROUGHNESS, live.nodes.DEFAULT_IOR)[0]
+    skin = srgb_decode(np.array(SKIN, np.float64) / 255.0) + coat
+    lab = linear_srgb_to_lab
+    de = float(delta_e76(lab(rgb[None]), lab((0.4 * skin + 0.6 * np.array(GLOW))[None]))[0])
+    stale = float(delta_e76(lab(rgb[None]), lab((0.7 * skin + 0.3 * np.array(GLOW))[None]))[0])
+    print(f"\nfactor 0.6: ΔE76 {de:.2f} from 0.4 skin + 0.6 glow ({stale:.1f} from the factor as wired)")
+    assert de <= 2.0 and stale > 10.0
+    mask = tree.nodes.new("ShaderNodeValue")
+    tree.links.new(mask.outputs[0], layer.inputs["Fac"])
+    bpy.context.view_layer.update()
+    for target in ("CYCLES", "EEVEE"):
+        (copy,) = wiring._copies_below(wiring.render_output(tree, target).inputs["Surface"])[0]
+        assert copy.inputs["Fac"].links[0].from_node == mask
+    top, sweat = tree.nodes.new("ShaderNodeMixShader"), tree.nodes.new("ShaderNodeBsdfGlossy")
+    tree.links.new(layer.outputs[0], top.inputs[1])
+    tree.links.new(sweat.outputs[0], top.inputs[2])
+    tree.links.new(top.outputs[0], output.inputs["Surface"])
+    bpy.context.view_layer.update()
+    assert _copies(mat, "CYCLES") == _copies(mat, "EEVEE") == [top.name, layer.name]
+    top.inputs["Fac"].default_value = 0.25
+    bpy.context.view_layer.update()
+    for target in ("CYCLES", "EEVEE"):
+        copy = wiring._copies_below(wiring.render_output(tree, target).inputs["Surface"])[0][0]
+        assert copy.inputs["Fac"].default_value == pytest.approx(0.25)
+        assert copy.inputs[2].links[0].from_node == sweat
+    assert wiring.wired_group_node(mat) is not None
+    tree.links.new(principled.outputs["BSDF"], top.inputs[1])  # the glow taken out: skin, then sweat
+    bpy.context.view_layer.update()
+    assert _copies(mat, "CYCLES") == _copies(mat, "EEVEE") == [top.name]
+    assert wiring.wired_group_node(mat) is not None
+    # a file wired before the copies were marked and followed: opening it copies the layers again, once
+    for node in [n for n in tree.nodes if wiring.LAYER_OF_PROP in n]:
+        del node[wiring.LAYER_OF_PROP], node[wiring.INNER_PROP]
+    record = json.loads(mat[wiring.TAKEN_INPUTS_PROP])
+    del record[follow.LAYERS]
+    mat[wiring.TAKEN_INPUTS_PROP] = json.dumps(record)
+    count = len(tree.nodes)
+    follow.follow_on_load()
+    assert _copies(mat, "CYCLES") == _copies(mat, "EEVEE") == [top.name] and len(tree.nodes) == count
+    ours = {n.name for n in tree.nodes if wiring.is_added(n)}
+    names, links = _tree_state(mat)
+    artists = ([n for n in names if n not in ours], [ln for ln in links if ln[0] not in ours and ln[2] not in ours])
+    with bpy.context.temp_override(object=bpy.data.objects["ProbeSlab"],
+                                   active_object=bpy.data.objects["ProbeSlab"]):
+        assert bpy.ops.spectral_skin.remove() == {"FINISHED"}
+    assert _tree_state(mat) == artists

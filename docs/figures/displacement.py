@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import math
 import sys
-import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -25,9 +24,8 @@ ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT))
 
 import bpy  # noqa: E402
-from figure_cycles import cycles_scene, render, save_panels  # noqa: E402
+from figure_cycles import before_after_without, cycles_scene, skin_material  # noqa: E402
 
-import blender_addon  # noqa: E402
 from blender_addon import wiring  # noqa: E402
 from exporters.colorimetry import srgb_decode  # noqa: E402
 
@@ -55,12 +53,9 @@ def scene() -> bpy.types.Object:
 
 def artist_material(obj: bpy.types.Object) -> bpy.types.Material:
     """Skin with pores and fine lines in the Material Output's Displacement."""
-    mat = bpy.data.materials.new("Skin")
-    mat.use_nodes = True
-    obj.data.materials.append(mat)
+    mat = skin_material(obj, "Skin")
     tree = mat.node_tree
     principled = tree.nodes["Principled BSDF"]
-    principled.inputs["Subsurface Weight"].default_value = 1.0
     principled.inputs["Base Color"].default_value = (*srgb_decode(np.array(SKIN) / 255.0), 1.0)
     principled.inputs["Roughness"].default_value = 0.45
     pores = tree.nodes.new("ShaderNodeTexVoronoi")
@@ -86,21 +81,20 @@ def artist_material(obj: bpy.types.Object) -> bpy.types.Material:
     return mat
 
 
+def _output(mat: bpy.types.Material) -> bpy.types.Node:
+    """The Material Output Cycles renders (the add-on's, after Invert Skin Albedo)."""
+    return wiring.render_output(mat.node_tree, "CYCLES")
+
+
+def _takes_displacement(mat: bpy.types.Material) -> None:
+    assert _output(mat).inputs["Displacement"].is_linked
+
+
 def main() -> None:
     patch = scene()
-    mat = artist_material(patch)
-    blender_addon.register()
-    with tempfile.TemporaryDirectory() as tmp:
-        principled = render(Path(tmp) / "principled.exr")
-        with bpy.context.temp_override(object=patch, active_object=patch):
-            assert bpy.ops.spectral_skin.invert_albedo(mode="LIVE") == {"FINISHED"}
-        cycles = wiring.render_output(mat.node_tree, "CYCLES")
-        assert cycles.inputs["Displacement"].is_linked
-        live = render(Path(tmp) / "live.exr")
-        blender_addon.unregister()  # no handler links it again
-        mat.node_tree.links.remove(cycles.inputs["Displacement"].links[0])
-        flat = render(Path(tmp) / "flat.exr")
-    save_panels([principled, live, flat], OUT)
+    artist_material(patch)
+    before_after_without(patch, OUT, _takes_displacement,
+                         lambda mat: mat.node_tree.links.remove(_output(mat).inputs["Displacement"].links[0]))
 
 
 if __name__ == "__main__":

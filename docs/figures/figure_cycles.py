@@ -4,12 +4,15 @@ repository root with the project's venv (``.venv/bin/python docs/figures/displac
 
 from __future__ import annotations
 
+import tempfile
+from collections.abc import Callable
 from pathlib import Path
 
 import bpy
 import numpy as np
 from PIL import Image
 
+import blender_addon
 from exporters.colorimetry import srgb_encode
 
 
@@ -49,3 +52,31 @@ def save_panels(panels: list[np.ndarray], out: Path) -> None:
     row = np.concatenate([part for panel in panels for part in (gap, panel)][1:], axis=1)
     Image.fromarray(np.round(255 * row).astype(np.uint8)).save(out, optimize=True)
     print(f"wrote {out}")
+
+
+def skin_material(obj: bpy.types.Object, name: str) -> bpy.types.Material:
+    """A new material ``name`` on ``obj`` with nodes: Blender's default Principled BSDF at Subsurface Weight 1."""
+    mat = bpy.data.materials.new(name)
+    mat.use_nodes = True
+    obj.data.materials.append(mat)
+    mat.node_tree.nodes["Principled BSDF"].inputs["Subsurface Weight"].default_value = 1.0
+    return mat
+
+
+def before_after_without(obj: bpy.types.Object, out: Path, check: Callable[[bpy.types.Material], None],
+                         take_out: Callable[[bpy.types.Material], None]) -> None:
+    """Render ``obj`` with its material as the artist made it (their Principled BSDF), after Invert Skin Albedo (the
+    live group; ``check`` asserts what the add-on made), and after ``take_out`` removed a part of what it made (the
+    add-on unregistered first, so that no handler puts it back); save the three panels at ``out``."""
+    mat = obj.active_material
+    blender_addon.register()
+    with tempfile.TemporaryDirectory() as tmp:
+        principled = render(Path(tmp) / "principled.exr")
+        with bpy.context.temp_override(object=obj, active_object=obj):
+            assert bpy.ops.spectral_skin.invert_albedo(mode="LIVE") == {"FINISHED"}
+        check(mat)
+        live = render(Path(tmp) / "live.exr")
+        blender_addon.unregister()
+        take_out(mat)
+        without = render(Path(tmp) / "without.exr")
+    save_panels([principled, live, without], out)

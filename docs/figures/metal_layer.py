@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import math
 import sys
-import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -23,9 +22,8 @@ ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT))
 
 import bpy  # noqa: E402
-from figure_cycles import cycles_scene, render, save_panels  # noqa: E402
+from figure_cycles import before_after_without, cycles_scene, skin_material  # noqa: E402
 
-import blender_addon  # noqa: E402
 from blender_addon import wiring  # noqa: E402
 from exporters.colorimetry import srgb_decode  # noqa: E402
 
@@ -57,12 +55,9 @@ def scene() -> bpy.types.Object:
 
 def artist_material(obj: bpy.types.Object) -> bpy.types.Material:
     """Skin with a gold band: a mask (|x| < RING / 2, object coordinates) mixes the Base Color and feeds Metallic."""
-    mat = bpy.data.materials.new("Finger")
-    mat.use_nodes = True
-    obj.data.materials.append(mat)
+    mat = skin_material(obj, "Finger")
     tree = mat.node_tree
     principled = tree.nodes["Principled BSDF"]
-    principled.inputs["Subsurface Weight"].default_value = 1.0
     coords, split = tree.nodes.new("ShaderNodeTexCoord"), tree.nodes.new("ShaderNodeSeparateXYZ")
     tree.links.new(coords.outputs["Object"], split.inputs[0])
     distance = tree.nodes.new("ShaderNodeMath")
@@ -83,20 +78,14 @@ def artist_material(obj: bpy.types.Object) -> bpy.types.Material:
     return mat
 
 
+def _has_layer(mat: bpy.types.Material) -> None:
+    assert any(wiring.BASE_LAYER_PROP in n for n in mat.node_tree.nodes)
+
+
 def main() -> None:
     finger = scene()
-    mat = artist_material(finger)
-    blender_addon.register()
-    with tempfile.TemporaryDirectory() as tmp:
-        principled = render(Path(tmp) / "principled.exr")
-        with bpy.context.temp_override(object=finger, active_object=finger):
-            assert bpy.ops.spectral_skin.invert_albedo(mode="LIVE") == {"FINISHED"}
-        assert any(wiring.BASE_LAYER_PROP in n for n in mat.node_tree.nodes)
-        live = render(Path(tmp) / "live.exr")
-        blender_addon.unregister()  # no handler puts the layer back
-        wiring.remove_base_layers(mat.node_tree)
-        without = render(Path(tmp) / "without.exr")
-    save_panels([principled, live, without], OUT)
+    artist_material(finger)
+    before_after_without(finger, OUT, _has_layer, lambda mat: wiring.remove_base_layers(mat.node_tree))
 
 
 if __name__ == "__main__":
