@@ -2,6 +2,8 @@
 OUTPUT_INPUTS): the Material Outputs the add-on adds for Cycles and EEVEE take what the artist's Material Output has
 at Displacement (a pore or wrinkle map, bump or true displacement), Volume and Thickness, and follow it.
 
+A Coat Normal of the artist's turns the clear coat as it turns the Principled BSDF's (the same scene).
+
 The render check is real Cycles on the probe box (camera straight above, white world) with a sun from the side and
 a height that rises along x (a bump tilting the shading normal away from the sun): the reference is the artist's own
 Principled BSDF at Subsurface Weight 1, rendered with and without the height before the operator.
@@ -142,3 +144,33 @@ def test_outputs_take_and_follow_displacement_volume_and_thickness(tmp_path, sce
     assert wiring.render_output(tree, "CYCLES") == own
     assert [n.target for n in _added_outputs(mat)] == ["EEVEE"]
     assert _added_outputs(mat)[0].inputs["Displacement"].links[0].from_socket == height
+
+
+@pytest.mark.slow
+def test_a_coat_normal_turns_the_coat_as_the_principled_bsdfs(tmp_path, scene):
+    """A clear coat (Coat Weight 1, Roughness 0.1) whose Coat Normal is tilted 25 degrees towards the side sun
+    mirrors the sun into the camera straight above: the render gains what the artist's Principled BSDF gains with the
+    same Coat Normal (within 10 % per channel, and that gain is large), where the coat took the base Normal before."""
+    mat = _material(tmp_path)
+    tree = mat.node_tree
+    principled = tree.nodes["Principled BSDF"]
+    principled.inputs["Coat Weight"].default_value, principled.inputs["Coat Roughness"].default_value = 1.0, 0.1
+    tilted = tree.nodes.new("ShaderNodeCombineXYZ")
+    tilted.inputs[0].default_value, tilted.inputs[2].default_value = math.sin(math.radians(25.0)), \
+        math.cos(math.radians(25.0))
+
+    def gain(name: str) -> np.ndarray:
+        """The render with the tilted Coat Normal less the render without it."""
+        tree.links.new(tilted.outputs[0], principled.inputs["Coat Normal"])
+        bpy.context.view_layer.update()
+        turned = _mean(scene, tmp_path / f"{name}_turned.exr")
+        tree.links.remove(principled.inputs["Coat Normal"].links[0])
+        bpy.context.view_layer.update()
+        return turned - _mean(scene, tmp_path / f"{name}.exr")
+
+    reference = gain("principled")
+    assert run_invert(bpy.data.objects["ProbeSlab"], mode="LIVE") == {"FINISHED"}
+    group = gain("group")
+    print(f"\ncoat normal: the group gains {group.round(4)}, the Principled BSDF {reference.round(4)}")
+    assert np.all(reference > 0.1)
+    np.testing.assert_allclose(group, reference, rtol=0.1)
