@@ -865,7 +865,10 @@ def apply(context: bpy.types.Context, model_path: str, unit_scale_m: float, colo
         material = wiring.object_material(context.object, material_name)
     except ValueError as exc:
         raise LiveInputError(str(exc)) from None
-    if material is None or material.node_tree is None:
+    if material is not None and material.node_tree is None:
+        raise LiveInputError(f"material '{material.name}' uses no nodes: turn on Use Nodes and give it a Principled "
+                             "BSDF fed by the albedo, then run this again")
+    if material is None:
         raise LiveInputError("no active material with nodes: select the skin object (its material's Principled "
                              "BSDF gives the albedo)")
     error = wiring.linked_error(material)
