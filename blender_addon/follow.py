@@ -54,7 +54,7 @@ UNIT_SCALE = "Unit Scale"
 #: "Metal and glass"): every input of it, by identifier.
 BASE_LAYERS = "Base layers"
 #: The record's entry for what the add-on's Material Outputs took from the artist's (blender_addon.wiring,
-#: OUTPUT_INPUTS: Displacement, Volume, Thickness), by input name.
+#: OUTPUT_INPUTS: Displacement, Volume, Thickness), by the output's target and input name.
 OUTPUT = "Material Output"
 #: The record's entry for the artist's Mix Shader and Add Shader layers over the Principled BSDF, which the add-on's
 #: copies follow (blender_addon.wiring, "Layered materials"): per layer, output side first, its node's name, the
@@ -154,13 +154,11 @@ def _follow_layers(tree: bpy.types.NodeTree, gnode: bpy.types.Node, taken: dict)
     return True
 
 
-def _output_state(tree: bpy.types.NodeTree) -> dict[str, list]:
-    """What the artist's Material Output that the add-on's outputs take from (the one of target All) gives at
-    wiring.OUTPUT_INPUTS (:func:`_state`); empty where the add-on added no output or the artist has none."""
-    source = wiring.artist_output(tree, "ALL")
-    if source is None or not any(wiring.is_added(n) for n in tree.nodes if n.bl_idname == "ShaderNodeOutputMaterial"):
-        return {}
-    return {name: _state(source.inputs[name]) for name in wiring.OUTPUT_INPUTS if name in source.inputs}
+def _output_state(tree: bpy.types.NodeTree) -> dict[str, dict[str, list]]:
+    """What the artist's Material Outputs that the add-on's take from give at wiring.OUTPUT_INPUTS (:func:`_state`),
+    by the target of the add-on's output (wiring.output_sources); empty where the add-on added none."""
+    return {out.target: {name: _state(source.inputs[name]) for name in wiring.OUTPUT_INPUTS if name in source.inputs}
+            for out, source in wiring.output_sources(tree)}
 
 
 def _base_state(principled: bpy.types.Node) -> dict[str, list]:

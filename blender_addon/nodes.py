@@ -445,16 +445,16 @@ def _separated(group: bpy.types.NodeTree, gin: bpy.types.Node, k: int, y0: float
 
 
 def _vec(group: bpy.types.NodeTree, operation: str, a, b=None, x: float = 0.0, y: float = 0.0) -> bpy.types.NodeSocket:
-    """A Vector Math node ``operation`` of inputs a, b (sockets, or numbers for all three components); returns its
-    vector output."""
+    """A Vector Math node ``operation`` of inputs a, b (sockets, or numbers for all three components; for SCALE, b is
+    the Scale, a float socket or number); returns its vector output."""
     node = group.nodes.new("ShaderNodeVectorMath")
     node.operation = operation
     node.location = (x, y)
-    for i, value in enumerate((a, b)):
+    for socket, value in ((node.inputs[0], a), (node.inputs["Scale" if operation == "SCALE" else 1], b)):
         if isinstance(value, bpy.types.NodeSocket):
-            group.links.new(value, node.inputs[i])
+            group.links.new(value, socket)
         elif value is not None:
-            node.inputs[i].default_value = (float(value),) * 3
+            socket.default_value = float(value) if socket.name == "Scale" else (float(value),) * 3
     return node.outputs["Vector"]
 
 
@@ -668,11 +668,7 @@ def _under_coat(group: bpy.types.NodeTree, gin: bpy.types.Node) -> tuple[bpy.typ
         group.links.new(_math(group, "POWER", separate.outputs[channel], depth, x=-800.0, y=1500.0 - 50.0 * i),
                         combine.inputs[i])
     tinted = _mix(group, "VECTOR", weight, (1.0, 1.0, 1.0), combine.outputs["Vector"], -600.0, 1450.0)
-    scale = group.nodes.new("ShaderNodeVectorMath")
-    scale.operation, scale.location = "SCALE", (-500.0, 1450.0)
-    group.links.new(tinted, scale.inputs[0])
-    group.links.new(through, scale.inputs["Scale"])
-    return through, scale.outputs["Vector"]
+    return through, _vec(group, "SCALE", tinted, through, x=-500.0, y=1450.0)
 
 
 def _sheen(group: bpy.types.NodeTree, gin: bpy.types.Node, surface: bpy.types.NodeSocket) -> bpy.types.NodeSocket:
@@ -703,11 +699,7 @@ def build_osl_group(k_count: int = 3, name: str = GROUP_NAME_OSL) -> bpy.types.N
         for kind in KINDS:
             source = gin.outputs[socket_name(k, kind)]
             if kind == "Radius":
-                scaled = group.nodes.new("ShaderNodeVectorMath")
-                scaled.operation, scaled.location = "SCALE", (-450.0, -300.0 * k)
-                group.links.new(source, scaled.inputs[0])
-                group.links.new(gin.outputs["Translucency"], scaled.inputs["Scale"])
-                source = scaled.outputs["Vector"]
+                source = _vec(group, "SCALE", source, gin.outputs["Translucency"], x=-450.0, y=-300.0 * k)
             group.links.new(source, script.inputs[osl.param_name(k, kind)])
     for name, param in (("IOR", "ior"), ("Normal", "Normal")):
         group.links.new(gin.outputs[name], script.inputs[param])

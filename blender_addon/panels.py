@@ -211,7 +211,7 @@ def _draw_real_size(layout: bpy.types.UILayout, context) -> None:
     if obj is None or material is None or material.node_tree is None or wiring.wired_group_node(material) is None:
         return
     size = real_size.extent_m(obj, follow.scene_unit_scale(context.scene))
-    if real_size.warning(obj, follow.scene_unit_scale(context.scene)) is not None:
+    if not real_size.plausible(size):
         box = layout.box()
         box.label(text=f"'{obj.name}' is {real_size.describe(size)} across: skin will look {real_size.look(size)}",
                   icon="ERROR")

@@ -36,6 +36,12 @@ def describe(metres: float) -> str:
     return f"{metres / size:.3g} {unit}"
 
 
+def plausible(metres: float) -> bool:
+    """Whether an object ``metres`` across (:func:`extent_m`) is taken as skin at its real size: within
+    :data:`SMALLEST_M` and :data:`LARGEST_M`, or without an extent (nothing to say)."""
+    return metres <= 0.0 or SMALLEST_M <= metres <= LARGEST_M
+
+
 def look(metres: float) -> str:
     """What skin looks like on an object ``metres`` across outside the real sizes: nearly opaque where larger,
     like wax where smaller."""
@@ -49,7 +55,7 @@ def warning(obj: bpy.types.Object | None, unit_scale_m: float) -> str | None:
     if obj is None:
         return None
     size = extent_m(obj, unit_scale_m)
-    if size <= 0.0 or SMALLEST_M <= size <= LARGEST_M:
+    if plausible(size):
         return None
     return (f"'{obj.name}' is {describe(size)} across at Unit Scale {unit_scale_m:g} m per Blender unit, and skin "
             f"scatters light over millimetres, so it will look {look(size)}; if the model is not that size, set "

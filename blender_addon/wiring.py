@@ -166,6 +166,13 @@ def artist_output(tree: bpy.types.NodeTree, target: str) -> bpy.types.Node | Non
     return None
 
 
+def output_sources(tree: bpy.types.NodeTree) -> list[tuple[bpy.types.Node, bpy.types.Node]]:
+    """Each Material Output the add-on added, with the artist's output of its target (:func:`artist_output`) that it
+    takes :data:`OUTPUT_INPUTS` from; the pairs without such an output of the artist's left out."""
+    pairs = [(out, artist_output(tree, out.target)) for out in _outputs(tree) if is_added(out)]
+    return [(out, source) for out, source in pairs if source is not None]
+
+
 def take_output_inputs(tree: bpy.types.NodeTree, source: bpy.types.Node, out: bpy.types.Node) -> None:
     """Give the add-on's Material Output ``out`` what the artist's ``source`` has at :data:`OUTPUT_INPUTS`
     (:func:`take_input`: a link stays a link, a value and its animation are copied)."""
@@ -178,10 +185,8 @@ def take_output_inputs(tree: bpy.types.NodeTree, source: bpy.types.Node, out: bp
 def retake_output_inputs(tree: bpy.types.NodeTree) -> None:
     """:func:`take_output_inputs` for each Material Output the add-on added, from the artist's output of its target
     (blender_addon.follow: the artist linked a displacement map, or changed a Thickness, after wiring)."""
-    for out in _outputs(tree):
-        source = artist_output(tree, out.target) if is_added(out) else None
-        if source is not None:
-            take_output_inputs(tree, source, out)
+    for out, source in output_sources(tree):
+        take_output_inputs(tree, source, out)
 
 
 def _record_replaced(material: bpy.types.Material, link: bpy.types.NodeLink) -> None:
@@ -398,17 +403,13 @@ def _copy_chain(tree: bpy.types.NodeTree, chain: list[tuple[bpy.types.Node, int]
 def _copies_below(socket: bpy.types.NodeSocket) -> tuple[list[bpy.types.Node], bpy.types.NodeSocket | None]:
     """The add-on's copies of the artist's layers (:func:`_copy_chain`) feeding the render output's input
     ``socket``, top first, and the socket under the lowest (what the group's side of the chain is: the group, or
-    the layers over it); a copy made before copies were marked is known as a tagged layer node that is none of the
-    add-on's base layers, its group side the input fed by another of the add-on's nodes."""
+    the layers over it; :func:`_group_side`), a copy being any of the add-on's Mix or Add Shaders there but its base
+    layers'."""
     copies, feed = [], feeding_socket(socket)
     while feed is not None and is_added(feed.node) and feed.node.bl_idname in LAYER_NODES \
             and BASE_LAYER_PROP not in feed.node:
-        node = feed.node
-        copies.append(node)
-        inner = layer_inner(node) or next(
-            (s for s in node.inputs if s.type == "SHADER" and (f := feeding_socket(s)) is not None
-             and is_added(f.node)), None)
-        feed = feeding_socket(inner) if inner is not None else None
+        copies.append(feed.node)
+        feed = _group_side(feed.node)
     return copies, feed
 
 
@@ -625,6 +626,17 @@ def layer_inner(node: bpy.types.Node) -> bpy.types.NodeSocket | None:
     return node.inputs[index] if index is not None else None
 
 
+def _group_side(node: bpy.types.Node) -> bpy.types.NodeSocket | None:
+    """What feeds the group's side of one of the add-on's Mix or Add Shaders (a layer's, :func:`insert_base_layers`,
+    or a copy of the artist's layers, :func:`_copy_chain`): the input its ``INNER_PROP`` names, else (a copy made
+    before copies were marked) its shader input fed by another of the add-on's nodes; None where no node of the
+    add-on's feeds it."""
+    inner = layer_inner(node)
+    sockets = [inner] if inner is not None else [s for s in node.inputs if s.type == "SHADER"]
+    return next((feed for socket in sockets if (feed := feeding_socket(socket)) is not None and is_added(feed.node)),
+                None)
+
+
 def remove_base_layers(tree: bpy.types.NodeTree) -> int:
     """Take the layers of :func:`insert_base_layers` out again, each Mix or Add Shader's group side linked where it
     fed; returns how many nodes were removed."""
@@ -679,10 +691,8 @@ def wired_group_node(material: bpy.types.Material) -> bpy.types.Node | None:
     links = [ln for ln in out.inputs["Surface"].links if not ln.is_muted] if out is not None else []
     node = links[0].from_node if links else None
     while node is not None and node.bl_idname in LAYER_NODES and is_added(node):
-        inner = layer_inner(node)  # a layer's group side; else the side of the copy of the artist's layers
-        sockets = [inner] if inner is not None else [s for s in node.inputs if s.type == "SHADER"]
-        node = next((ln.from_node for s in sockets for ln in s.links if not ln.is_muted and is_added(ln.from_node)),
-                    None)
+        feed = _group_side(node)
+        node = feed.node if feed is not None else None
     if node is not None and node.bl_idname == "ShaderNodeGroup" and is_addon_group(node.node_tree):
         return node
     return None

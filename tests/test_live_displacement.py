@@ -147,6 +147,31 @@ def test_outputs_take_and_follow_displacement_volume_and_thickness(tmp_path, sce
     assert _added_outputs(mat)[0].inputs["Displacement"].links[0].from_socket == height
 
 
+def _tilted(tree: bpy.types.NodeTree, degrees: float) -> bpy.types.Node:
+    """A Combine XYZ node giving the unit vector ``degrees`` off the vertical towards the sun (+x)."""
+    node = tree.nodes.new("ShaderNodeCombineXYZ")
+    node.inputs[0].default_value = math.sin(math.radians(degrees))
+    node.inputs[2].default_value = math.cos(math.radians(degrees))
+    return node
+
+
+def _principled_then_group(scene: bpy.types.Scene, tmp_path: Path, on, off) -> tuple[np.ndarray, np.ndarray]:
+    """The change of the render between ``on()`` and ``off()`` (each changing the artist's material) with the
+    artist's Principled BSDF, then after Invert Skin Albedo: (the Principled BSDF's, the live group's)."""
+
+    def change(name: str) -> np.ndarray:
+        on()
+        bpy.context.view_layer.update()
+        changed = _mean(scene, tmp_path / f"{name}_on.exr")
+        off()
+        bpy.context.view_layer.update()
+        return changed - _mean(scene, tmp_path / f"{name}_off.exr")
+
+    reference = change("principled")
+    assert run_invert(bpy.data.objects["ProbeSlab"], mode="LIVE") == {"FINISHED"}
+    return reference, change("group")
+
+
 @pytest.mark.slow
 def test_a_coat_normal_turns_the_coat_as_the_principled_bsdfs(tmp_path, scene):
     """A clear coat (Coat Weight 1, Roughness 0.1) whose Coat Normal is tilted 25 degrees towards the side sun
@@ -156,22 +181,10 @@ def test_a_coat_normal_turns_the_coat_as_the_principled_bsdfs(tmp_path, scene):
     tree = mat.node_tree
     principled = tree.nodes["Principled BSDF"]
     principled.inputs["Coat Weight"].default_value, principled.inputs["Coat Roughness"].default_value = 1.0, 0.1
-    tilted = tree.nodes.new("ShaderNodeCombineXYZ")
-    tilted.inputs[0].default_value, tilted.inputs[2].default_value = math.sin(math.radians(25.0)), \
-        math.cos(math.radians(25.0))
-
-    def gain(name: str) -> np.ndarray:
-        """The render with the tilted Coat Normal less the render without it."""
-        tree.links.new(tilted.outputs[0], principled.inputs["Coat Normal"])
-        bpy.context.view_layer.update()
-        turned = _mean(scene, tmp_path / f"{name}_turned.exr")
-        tree.links.remove(principled.inputs["Coat Normal"].links[0])
-        bpy.context.view_layer.update()
-        return turned - _mean(scene, tmp_path / f"{name}.exr")
-
-    reference = gain("principled")
-    assert run_invert(bpy.data.objects["ProbeSlab"], mode="LIVE") == {"FINISHED"}
-    group = gain("group")
+    tilted = _tilted(tree, 25.0)
+    reference, group = _principled_then_group(
+        scene, tmp_path, lambda: tree.links.new(tilted.outputs[0], principled.inputs["Coat Normal"]),
+        lambda: tree.links.remove(principled.inputs["Coat Normal"].links[0]))
     print(f"\ncoat normal: the group gains {group.round(4)}, the Principled BSDF {reference.round(4)}")
     assert np.all(reference > 0.1)
     np.testing.assert_allclose(group, reference, rtol=0.1)
@@ -188,25 +201,11 @@ def test_anisotropy_shapes_the_highlight_as_the_principled_bsdfs(tmp_path, scene
     principled = tree.nodes["Principled BSDF"]
     principled.inputs["Roughness"].default_value = 0.3
     principled.inputs["IOR"].default_value = nodes.DEFAULT_IOR  # the skin's, which the group's specular keeps
-    tilted, tangent = tree.nodes.new("ShaderNodeCombineXYZ"), tree.nodes.new("ShaderNodeCombineXYZ")
-    tilted.inputs[0].default_value, tilted.inputs[2].default_value = math.sin(math.radians(15.0)), \
-        math.cos(math.radians(15.0))
-    tangent.inputs[0].default_value = 1.0
-    tree.links.new(tilted.outputs[0], principled.inputs["Normal"])
-    tree.links.new(tangent.outputs[0], principled.inputs["Tangent"])
-
-    def change(name: str) -> np.ndarray:
-        """The render at Anisotropic 0.9 less the render at 0."""
-        principled.inputs["Anisotropic"].default_value = 0.9
-        bpy.context.view_layer.update()
-        stretched = _mean(scene, tmp_path / f"{name}_stretched.exr")
-        principled.inputs["Anisotropic"].default_value = 0.0
-        bpy.context.view_layer.update()
-        return stretched - _mean(scene, tmp_path / f"{name}.exr")
-
-    reference = change("principled")
-    assert run_invert(bpy.data.objects["ProbeSlab"], mode="LIVE") == {"FINISHED"}
-    group = change("group")
+    tree.links.new(_tilted(tree, 15.0).outputs[0], principled.inputs["Normal"])
+    tree.links.new(_tilted(tree, 90.0).outputs[0], principled.inputs["Tangent"])  # along x, towards the sun
+    anisotropic = principled.inputs["Anisotropic"]
+    reference, group = _principled_then_group(scene, tmp_path, lambda: setattr(anisotropic, "default_value", 0.9),
+                                              lambda: setattr(anisotropic, "default_value", 0.0))
     print(f"\nanisotropy: the group changes by {group.round(4)}, the Principled BSDF by {reference.round(4)}")
     assert np.all(reference > 0.05)
     np.testing.assert_allclose(group, reference, rtol=0.1)
