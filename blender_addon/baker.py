@@ -172,8 +172,9 @@ def mesh_uv_mask(obj, source_node, width: int, height: int) -> tuple[np.ndarray 
         return None, "no mesh with a UV map"
     mesh = obj.data
     name = ""
-    if source_node is not None and source_node.inputs["Vector"].is_linked:
-        src = source_node.inputs["Vector"].links[0].from_node
+    feed = wiring.feeding_socket(source_node.inputs["Vector"]) if source_node is not None else None
+    if feed is not None:
+        src = feed.node
         if src.bl_idname != "ShaderNodeUVMap":
             return None, "the albedo is not mapped by UVs"
         name = src.uv_map

@@ -780,8 +780,8 @@ def wire_into_material(material: bpy.types.Material, group: bpy.types.NodeTree,
     gnode.label = group.name
     gnode.location = (x - 300.0, y - 400.0)
     gnode.parent = frame
-    links = out.inputs["Surface"].links if out is not None else []
-    previous = next((ln.from_node for ln in links if not ln.is_muted), None)
+    feed = wiring.feeding_socket(out.inputs["Surface"]) if out is not None else None
+    previous = feed.node if feed is not None else None
     if previous is not None:
         material[PREVIOUS_SURFACE_PROP] = previous.name
     principled, chain = wiring.shader_chain(tree)  # layers between the Principled BSDF and the output, if any

@@ -197,11 +197,24 @@ def _record_replaced(material: bpy.types.Material, link: bpy.types.NodeLink) -> 
 
 
 def feeding_socket(socket: bpy.types.NodeSocket) -> bpy.types.NodeSocket | None:
-    """The output socket linked into ``socket`` (muted links ignored), or None."""
-    for link in socket.links:
-        if not link.is_muted:
-            return link.from_socket
-    return None
+    """The output socket whose value reaches ``socket``, as the renderers evaluate the tree: the one linked into it,
+    followed back through Reroute nodes and muted nodes (a muted node passes an input through its internal link);
+    muted links ignored; None where nothing reaches it (no link, or a muted node passing nothing to that output)."""
+    seen: set[int] = set()
+    while True:
+        source = next((link.from_socket for link in socket.links if not link.is_muted), None)
+        if source is None or source.as_pointer() in seen:
+            return None
+        seen.add(source.as_pointer())
+        node = source.node
+        if node.bl_idname == "NodeReroute":
+            socket = node.inputs[0]
+        elif node.mute:
+            socket = next((link.from_socket for link in node.internal_links if link.to_socket == source), None)
+            if socket is None:
+                return None
+        else:
+            return source
 
 
 def take_input(tree: bpy.types.NodeTree, theirs: bpy.types.NodeSocket, ours: bpy.types.NodeSocket,

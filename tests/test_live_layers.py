@@ -170,3 +170,43 @@ def test_the_copied_layers_follow_the_artists(tmp_path, glow):
                                    active_object=bpy.data.objects["ProbeSlab"]):
         assert bpy.ops.spectral_skin.remove() == {"FINISHED"}
     assert _tree_state(mat) == artists
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("mode", ["LIVE", "BAKE"])
+def test_reroutes_and_muted_nodes_are_seen_through(tmp_path, glow, mode):
+    """A tidy artist's tree: Reroute nodes between the Principled BSDF, its layer and the Material Output and on the
+    albedo's link, and a muted Add Shader (it passes its first input through) under the output.  Invert Skin Albedo
+    finds the Principled BSDF through them (the live group refused the material before, and baked maps left its
+    inputs out), and the render is bit for bit that of the same material without them; Remove Skin SSS leaves them
+    as they were."""
+    scene, mat, layer = glow
+    tree = mat.node_tree
+    principled = tree.nodes["Principled BSDF"]
+    output = wiring.active_output(tree)
+    albedo = principled.inputs["Base Color"].links[0].from_node
+    tree.nodes.active = albedo  # the albedo image, for the bake
+    slab = bpy.data.objects["ProbeSlab"]
+
+    def wired_render(name: str) -> np.ndarray:
+        assert run_invert(slab, mode=mode) == {"FINISHED"}
+        rgb = render_linear(scene, tmp_path / f"{name}.exr")
+        with bpy.context.temp_override(object=slab, active_object=slab):
+            assert bpy.ops.spectral_skin.remove() == {"FINISHED"}
+        return rgb
+
+    plain = wired_render("plain")
+    reroutes = [tree.nodes.new("NodeReroute") for _ in range(3)]
+    muted, red = tree.nodes.new("ShaderNodeAddShader"), tree.nodes.new("ShaderNodeEmission")
+    red.inputs["Color"].default_value = (1.0, 0.0, 0.0, 1.0)
+    muted.mute = True
+    for source, reroute, target in ((principled.outputs["BSDF"], reroutes[0], layer.inputs[1]),
+                                    (layer.outputs["Shader"], reroutes[1], muted.inputs[0]),
+                                    (albedo.outputs["Color"], reroutes[2], principled.inputs["Base Color"])):
+        tree.links.new(source, reroute.inputs[0])
+        tree.links.new(reroute.outputs[0], target)
+    tree.links.new(red.outputs["Emission"], muted.inputs[1])
+    tree.links.new(muted.outputs["Shader"], output.inputs["Surface"])
+    before = _tree_state(mat)
+    assert np.array_equal(wired_render("tidy"), plain)
+    assert _tree_state(mat) == before
