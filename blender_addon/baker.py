@@ -43,7 +43,7 @@ def missing_model_message(path: str) -> str:
 @dataclass
 class BakeSettings:
     """What the operator asks for.  ``filepath`` (a file on disk) wins over ``image_name`` (an image
-    datablock), which wins over the active Image Texture node of the active material.  ``storage``:
+    datablock), which wins over the material's albedo Image Texture node (:func:`albedo_image_node`).  ``storage``:
     "PACK" (images packed into the .blend) or "FILES" (EXR files in ``output_dir``, default a folder
     beside the saved .blend).  ``backend``: "SVM" (the default) or "OSL" (only on request).  ``model_colour``:
     the maps render the model's own reflectance instead of the painted albedo.  ``exact``: every distinct colour through
@@ -73,14 +73,22 @@ class BakeSettings:
     material: str = ""
 
 
-def active_image_node(material: bpy.types.Material | None) -> bpy.types.Node | None:
-    """The material's active node if it is an Image Texture with an image, else None."""
+def _image_node(node: bpy.types.Node | None) -> bpy.types.Node | None:
+    return node if node is not None and node.bl_idname == "ShaderNodeTexImage" and node.image is not None else None
+
+
+def albedo_image_node(material: bpy.types.Material | None) -> bpy.types.Node | None:
+    """The Image Texture node whose image a bake inverts: the material's active node where it is an Image Texture
+    with an image (the artist's choice), else the one feeding the artist's Principled BSDF's Base Color (through
+    Reroute nodes: wiring.feeding_socket; what the live group reads), else None."""
     if material is None or material.node_tree is None:
         return None
-    node = material.node_tree.nodes.active
-    if node is not None and node.bl_idname == "ShaderNodeTexImage" and node.image is not None:
-        return node
-    return None
+    active = _image_node(material.node_tree.nodes.active)
+    if active is not None:
+        return active
+    principled = wiring.artist_principled(material)
+    feed = wiring.feeding_socket(principled.inputs["Base Color"]) if principled is not None else None
+    return _image_node(feed.node if feed is not None else None)
 
 
 def pick_backend(scene: bpy.types.Scene, requested: str) -> str:
@@ -291,10 +299,10 @@ class AddonBake:
             if image is None:
                 raise BakeInputError(f"no image named '{s.image_name}' in this file")
         else:
-            node = active_image_node(self.material)
+            node = albedo_image_node(self.material)
             if node is None:
-                raise BakeInputError("no active image: select an Image Texture node with an image in the active "
-                                     "material, or choose an image")
+                raise BakeInputError("no albedo image: no Image Texture with an image feeds the Principled BSDF's "
+                                     "Base Color and none is the active node; select one, or choose an image")
             self.source_node, image = node, node.image
         cs = _image_colorspace(image, s.colorspace)
         if image.source == "TILED":

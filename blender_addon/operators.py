@@ -60,7 +60,8 @@ _EXPECTED = (OSError, ValueError, RuntimeError)
 
 class SPECTRAL_SKIN_OT_invert_albedo(bpy.types.Operator):
     """Invert an RGB skin albedo texture into spectral subsurface maps and wire the Spectral Skin SSS Mixture
-    into the material (the active Image Texture node's image, or a chosen image or file)"""
+    into the material (the active Image Texture node's image, else that feeding the Principled BSDF's Base Color,
+    or a chosen image or file)"""
 
     bl_idname = "spectral_skin.invert_albedo"
     bl_label = "Invert Skin Albedo"

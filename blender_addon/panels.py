@@ -15,7 +15,8 @@ class SpectralSkinSettings(bpy.types.PropertyGroup):
 
     mode: bpy.props.EnumProperty(name="Mode", items=operators.MODES[1:], default="LIVE")
     image: bpy.props.PointerProperty(name="Image", type=bpy.types.Image,
-                                     description="Albedo to invert (empty: the active Image Texture node)")
+                                     description="Albedo to invert (empty: the active Image Texture node, else "
+                                                 "the one feeding the Principled BSDF's Base Color)")
     storage: bpy.props.EnumProperty(name="Maps", items=operators._STORAGE, default="PACK")
     output_dir: bpy.props.StringProperty(name="Folder", subtype="DIR_PATH", default="",
                                          description="Output folder for saved maps (empty: beside the .blend)")
@@ -60,8 +61,8 @@ def _draw(layout, context) -> None:
         col = layout.column()
         col.prop(settings, "image")
         if settings.image is None:
-            node = baker.active_image_node(getattr(context, "material", None))
-            col.label(text=f"Active node: {node.image.name}" if node else "No active Image Texture node",
+            node = baker.albedo_image_node(getattr(context, "material", None))
+            col.label(text=f"Albedo: {node.image.name}" if node else "No albedo Image Texture node",
                       icon="IMAGE_DATA" if node else "INFO")
         col.prop(settings, "colorspace")
         col.prop(settings, "storage")

@@ -94,7 +94,7 @@ def _fails(obj, match: str, folder: Path | None = None, **kwargs) -> None:
 
 def test_no_active_image(addon):
     obj, mat, _ = skin_object(None)
-    _fails(obj, "no active image: select an Image Texture node")
+    _fails(obj, "no albedo image: no Image Texture with an image feeds the Principled BSDF's Base Color")
     _fails(obj, "no image named 'nope'", image_name="nope")
 
 

@@ -95,6 +95,27 @@ def test_bake_svm_packed_wired_and_renders(addon, albedo_png, reference_maps):
     assert np.all(np.isfinite(px)) and px[16, 16, :3].max() > 0.0
 
 
+def test_without_an_active_image_the_base_colours_image_is_baked(addon, albedo_png, tmp_path):
+    """The active node is whatever the artist clicked last: where it is no Image Texture, the bake inverts the
+    image feeding the Principled BSDF's Base Color (here through a Reroute), as the live group reads it; an active
+    Image Texture stays the artist's choice."""
+    obj, mat, tex = skin_object(albedo_png)
+    tree = mat.node_tree
+    principled = tree.nodes["Principled BSDF"]
+    reroute = tree.nodes.new("NodeReroute")
+    tree.links.new(tex.outputs["Color"], reroute.inputs[0])
+    tree.links.new(reroute.outputs[0], principled.inputs["Base Color"])
+    other = tree.nodes.new("ShaderNodeTexImage")
+    other.image = bpy.data.images.load(str(write_image(tmp_path / "other.png", skin_codes()[::-1].copy(), "uint8")))
+    tree.nodes.active = principled
+    assert baker.albedo_image_node(mat) == tex
+    assert run_invert(obj) == {"FINISHED"}
+    assert oblique.map_node(group_node(mat).inputs[nodes.socket_name(1, "Color")]).image.name == "albedo_k1_color.exr"
+    tree.nodes.active = other
+    assert run_invert(obj) == {"FINISHED"}
+    assert oblique.map_node(group_node(mat).inputs[nodes.socket_name(1, "Color")]).image.name == "other_k1_color.exr"
+
+
 def test_bake_osl_and_files_beside_blend(addon, albedo_png, tmp_path):
     bpy.ops.wm.save_as_mainfile(filepath=str(tmp_path / "scene.blend"))
     obj, mat, _ = skin_object(albedo_png)
