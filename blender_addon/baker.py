@@ -422,7 +422,8 @@ class AddonBake:
                 gnode.inputs["IOR"].default_value = self.options.ior  # the IOR the maps were baked for
                 self._follow_source_uv(gnode)
                 follow.record(self.material, self.options.unit_scale_m)
-                report += f", {self.backend} node group wired into '{self.material.name}'"
+                report += (f", {self.backend} node group wired into '{self.material.name}'"
+                           + wiring.grouped_warning(self.material))
             else:
                 report += f", {self.backend} node group '{group.name}' built (no active material to wire)"
         except BaseException:

@@ -767,7 +767,8 @@ def colour_source(material: bpy.types.Material) -> tuple[bpy.types.Node, bpy.typ
     if grouped is not None:
         raise LiveInputError(f"material '{material.name}': its Principled BSDF is inside the node group "
                              f"'{grouped.node_tree.name}', which the live group cannot read or rewire; ungroup it "
-                             "(select the group node, Ctrl+Alt+G) and run this again, or choose Bake")
+                             "(select the group node, Ctrl+Alt+G) and run this again (baked maps would render "
+                             "without the inputs it has in there)")
     if surface is None:
         raise LiveInputError(f"material '{material.name}': no Principled BSDF feeds its Material Output's Surface "
                              "(straight or through Mix Shader and Add Shader nodes); connect one (its Base Color is "

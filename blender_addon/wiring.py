@@ -358,6 +358,18 @@ def grouped_principled(tree: bpy.types.NodeTree) -> bpy.types.Node | None:
     return None
 
 
+def grouped_warning(material: bpy.types.Material) -> str:
+    """The report's warning where baked maps render in place of a Principled BSDF that sits inside a node group
+    (:func:`grouped_principled`): they render the skin alone, none of the inputs it has in there; else ""."""
+    tree = material.node_tree
+    grouped = grouped_principled(tree) if tree is not None and artist_principled(material) is None else None
+    if grouped is None:
+        return ""
+    return (f"; warning: the Principled BSDF inside node group '{grouped.node_tree.name}' is not read, so the maps "
+            "render without its normal map, roughness, specular, coat, metal or alpha: ungroup it (select the group "
+            "node, Ctrl+Alt+G) and run Invert Skin Albedo again to keep them")
+
+
 def _holds_principled(tree: bpy.types.NodeTree | None, seen: set[str]) -> bool:
     """Whether ``tree`` or a node group inside it (at any depth) has a Principled BSDF."""
     if tree is None or tree.name in seen:
