@@ -33,6 +33,10 @@ The add-on's copies of the artist's Mix Shader and Add Shader layers over the Pr
 glow) follow the artist's (``record[LAYERS]``): a factor changed or a mask linked goes to the same copies; a layer
 added, removed or reordered is copied again.
 
+Where the Principled BSDF sits in an artist's node group (blender_addon.wiring, "Grouped skin shaders"), the group
+node and the layers over it are in that node group, where its inputs are taken; the copies of the artist's layers
+between the Principled BSDF and the node group's output follow the same way (``record[GROUP_LAYERS]``).
+
 The Material Outputs the add-on added for Cycles and EEVEE take the Displacement, Volume and Thickness of the
 artist's output (``record[OUTPUT]``): a displacement map linked, or a Thickness changed, after wiring reaches them.
 """
@@ -60,6 +64,9 @@ OUTPUT = "Material Output"
 #: copies follow (blender_addon.wiring, "Layered materials"): per layer, output side first, its node's name, the
 #: index of its input the Principled BSDF's side comes in, and what each other input gives.
 LAYERS = "Layers"
+#: The record's entry for the artist's layers inside the node group holding the Principled BSDF, between it and the
+#: group's output (blender_addon.wiring, "Grouped skin shaders"), as :data:`LAYERS`.
+GROUP_LAYERS = "Group layers"
 
 
 def scene_unit_scale(scene: bpy.types.Scene) -> float:
@@ -108,8 +115,8 @@ def _principled_and_group(material: bpy.types.Material) -> tuple[bpy.types.Node,
     gnode = wiring.wired_group_node(material)
     if gnode is None or not (live.TABLE_PROP in gnode.node_tree or "spectral_skin_sss_k" in gnode.node_tree):
         return None
-    principled = wiring.artist_principled(material)
-    return (principled, gnode) if principled is not None else None
+    principled = wiring.artist_principled(material)  # in the group node's tree, or maps baked over a node group
+    return (principled, gnode) if principled is not None and principled.id_data == gnode.id_data else None
 
 
 def record(material: bpy.types.Material, unit_scale_m: float) -> None:
@@ -127,30 +134,33 @@ def record(material: bpy.types.Material, unit_scale_m: float) -> None:
         layers = _layers_state(material.node_tree)
         if layers is not None:
             taken[LAYERS] = layers
+        if gnode.id_data != material.node_tree:
+            taken[GROUP_LAYERS] = _layers_state(gnode.id_data)
         material[wiring.TAKEN_INPUTS_PROP] = json.dumps(taken)
 
 
 def _layers_state(tree: bpy.types.NodeTree) -> list | None:
-    """The artist's layers over the Principled BSDF (wiring.shader_chain) as the record holds them (:data:`LAYERS`);
+    """The artist's layers over the skin in ``tree`` (wiring.skin_chain) as the record holds them (:data:`LAYERS`);
     None where the add-on's nodes feed the active output (the chain there is not the artist's to read)."""
-    if wiring.addon_feeds_active_output(tree):
+    if tree.is_embedded_data and wiring.addon_feeds_active_output(tree):
         return None
     return [[node.name, index, [_state(s) for i, s in enumerate(node.inputs) if i != index]]
-            for node, index in wiring.shader_chain(tree)[1]]
+            for node, index in wiring.skin_chain(tree)]
 
 
-def _follow_layers(tree: bpy.types.NodeTree, gnode: bpy.types.Node, taken: dict) -> bool:
-    """Give the add-on's copies of the artist's layers what changed on the artist's since ``taken`` (updated): in
-    place where the same layers are there, else copied again; whether anything changed."""
+def _follow_layers(tree: bpy.types.NodeTree, near: bpy.types.Node, taken: dict, key: str = LAYERS) -> bool:
+    """Give the add-on's copies of the artist's layers in ``tree`` what changed on the artist's since ``taken[key]``
+    (updated): in place where the same layers are there, else copied again beside ``near``; whether anything
+    changed."""
     now = _layers_state(tree)
-    if now is None or taken.get(LAYERS) == now:
+    if now is None or taken.get(key) == now:
         return False
-    before = taken.get(LAYERS)
+    before = taken.get(key)
     if before is not None and [layer[:2] for layer in before] == [layer[:2] for layer in now]:
         wiring.retake_chain(tree)
     else:
-        wiring.recopy_chain(tree, wiring.shader_chain(tree)[1], gnode)
-    taken[LAYERS] = now
+        wiring.recopy_chain(tree, wiring.skin_chain(tree), near)
+    taken[key] = now
     return True
 
 
@@ -200,6 +210,7 @@ def follow(material: bpy.types.Material, unit_scale_m: float | None = None) -> l
     principled, gnode = found
     taken = json.loads(material[wiring.TAKEN_INPUTS_PROP])
     tree = material.node_tree
+    inner = gnode.id_data  # where the group node and the Principled BSDF are: the material's tree or a node group
     changed = []
     unit = gnode.inputs.get(UNIT_SCALE)  # the live group's; the maps of a bake hold theirs
     if unit_scale_m is not None and unit is not None and taken.get(UNIT_SCALE) != _unit_state(unit_scale_m):
@@ -213,14 +224,18 @@ def follow(material: bpy.types.Material, unit_scale_m: float | None = None) -> l
         now = _state(source)
         if taken.get(ours) == now:
             continue
-        wiring.take_input(tree, source, gnode.inputs[ours],
+        wiring.take_input(inner, source, gnode.inputs[ours],
                           animated=taken.get(ours, [None])[0] == "animated")
         taken[ours] = now
         changed.append(ours)
-    if _follow_base_layers(tree, principled, gnode, taken):
+    if _follow_base_layers(inner, principled, gnode, taken):
         changed.append(BASE_LAYERS)
-    if _follow_layers(tree, gnode, taken):
+    skin = wiring.grouped_skin(tree) if inner != tree else None  # the material's copies sit beside its group node
+    near = gnode if inner == tree else skin.node if skin is not None else None
+    if near is not None and _follow_layers(tree, near, taken):
         changed.append(LAYERS)
+    if inner != tree and _follow_layers(inner, gnode, taken, GROUP_LAYERS):
+        changed.append(GROUP_LAYERS)
     outputs = _output_state(tree)
     if taken.get(OUTPUT, {}) != outputs:
         wiring.retake_output_inputs(tree)

@@ -765,10 +765,10 @@ def colour_source(material: bpy.types.Material) -> tuple[bpy.types.Node, bpy.typ
     surface = wiring.artist_principled(material)
     grouped = wiring.grouped_principled(material.node_tree) if surface is None else None
     if grouped is not None:
-        raise LiveInputError(f"material '{material.name}': its Principled BSDF is inside the node group "
-                             f"'{grouped.node_tree.name}', which the live group cannot read or rewire; ungroup it "
-                             "(select the group node, Ctrl+Alt+G) and run this again (baked maps would render "
-                             "without the inputs it has in there)")
+        raise LiveInputError(f"material '{material.name}': its Principled BSDF sits in the node group "
+                             f"'{grouped.node_tree.name}' where the live group cannot reach it (in a group inside "
+                             "that group, or not feeding the group output the material renders); ungroup the group "
+                             "that holds it (Tab into the group, select its node, Ctrl+Alt+G) and run this again")
     if surface is None:
         raise LiveInputError(f"material '{material.name}': no Principled BSDF feeds its Material Output's Surface "
                              "(straight or through Mix Shader and Add Shader nodes); connect one (its Base Color is "
@@ -785,7 +785,7 @@ def wire_live(material: bpy.types.Material, group: bpy.types.NodeTree, unit_scal
     principled = colour_source(material)[0]
     gnode = nodes.wire_into_material(material, group, output="Cycles", eevee_output="EEVEE")
     gnode.inputs["Unit Scale"].default_value = unit_scale_m
-    wiring.take_input(material.node_tree, principled.inputs["Base Color"], gnode.inputs["Color"])
+    wiring.take_input(gnode.id_data, principled.inputs["Base Color"], gnode.inputs["Color"])
     return gnode
 
 
@@ -976,7 +976,8 @@ def _state(material: bpy.types.Material) -> dict:
 
 def _restore(material: bpy.types.Material, state: dict) -> None:
     """Undo a failed wiring: new nodes, groups and images removed, the links, the add-on's material properties and
-    EEVEE's Thickness From Shadow as they were (links to nodes no longer there are skipped)."""
+    EEVEE's Thickness From Shadow as they were (links to nodes no longer there are skipped), the add-on's nodes
+    taken out of an artist's node group that no material renders through."""
     tree = material.node_tree
     for node in [n for n in tree.nodes if n.name not in state["nodes"]]:
         tree.nodes.remove(node)
@@ -994,3 +995,4 @@ def _restore(material: bpy.types.Material, state: dict) -> None:
         material[prop] = value
     if material.use_thickness_from_shadow != state["thickness_from_shadow"]:
         material.use_thickness_from_shadow = state["thickness_from_shadow"]
+    wiring.unwire_unused_groups()  # an artist's node group wired for this material alone

@@ -717,7 +717,7 @@ def live_node(material: bpy.types.Material) -> bpy.types.Node | None:
     """The live group node feeding ``material``'s output that has the edit inputs, or None."""
     if material is None or material.node_tree is None:
         return None
-    for node in material.node_tree.nodes:
+    for node in wiring.material_nodes(material):
         if (node.bl_idname == "ShaderNodeGroup" and node.node_tree is not None
                 and node.node_tree.get("spectral_skin_sss_backend") == "LIVE" and "Melanin" in node.inputs):
             return node

@@ -769,6 +769,14 @@ def wire_into_material(material: bpy.types.Material, group: bpy.types.NodeTree,
     error = wiring.linked_error(material)
     if error:
         raise ValueError(error)
+    skin = wiring.grouped_skin(material.node_tree) if not images and wiring.shader_chain(
+        material.node_tree)[0] is None else None
+    if skin is not None:
+        error = wiring.group_linked_error(skin.node.node_tree)
+        if error:
+            raise ValueError(error)
+        wiring.unwire(material)
+        return _wire_grouped(material, group, skin, output, eevee_output or output)
     wiring.unwire(material)
     tree = material.node_tree
     out = wiring.active_output(tree)
@@ -800,6 +808,37 @@ def wire_into_material(material: bpy.types.Material, group: bpy.types.NodeTree,
         tex.location = (gnode.location.x - 400.0, gnode.location.y - 60.0 * i)
         tex.parent = frame
         tree.links.new(tex.outputs["Color"], gnode.inputs[socket_name(k, kind)])
+    return gnode
+
+
+def _wire_grouped(material: bpy.types.Material, group: bpy.types.NodeTree, skin: wiring.GroupedSkin, output: str,
+                  eevee_output: str) -> bpy.types.Node:
+    """:func:`wire_into_material` where the artist's Principled BSDF sits in a node group (wiring.grouped_skin): the
+    group node goes into that node group beside it, taking its inputs there, and feeds two outputs added to the node
+    group's interface (wiring.feed_group_outputs); the material's Material Outputs of target Cycles and EEVEE are fed
+    by those outputs of the artist's group node.  Another material already wired through the same node group keeps
+    its group node there (one for every material using it)."""
+    inner = skin.node.node_tree
+    gnode = wiring.grouped_group_node(inner)
+    if gnode is None or gnode.node_tree != group:
+        wiring.unwire_group(inner)
+        principled = skin.principled
+        frame = wiring.tag(inner.nodes.new("NodeFrame"))
+        frame.label = FRAME_LABEL
+        gnode = wiring.tag(inner.nodes.new("ShaderNodeGroup"))
+        gnode.node_tree = group
+        gnode.label = group.name
+        gnode.location = (principled.location.x, principled.location.y - 700.0)
+        gnode.parent = frame
+        gnode[wiring.SKIN_OUTPUT_PROP] = skin.output.identifier
+        wiring.feed_group_outputs(inner, {"CYCLES": gnode.outputs[output], "EEVEE": gnode.outputs[eevee_output]},
+                                  gnode, skin.inner)
+        _take_surface_inputs(inner, principled, gnode)
+        wiring.insert_base_layers(inner, principled, gnode)
+    material[PREVIOUS_SURFACE_PROP] = skin.node.name
+    wiring.feed_render_outputs(material, {target: skin.node.outputs[name]
+                                          for target, name in wiring.GROUP_OUTPUTS.items()}, skin.node, skin.outer)
+    wiring.use_shadow_thickness(material)
     return gnode
 
 

@@ -166,7 +166,7 @@ def live_node(material: bpy.types.Material | None) -> bpy.types.Node | None:
     """The live group node (blender_addon.live) of ``material`` with a Translucency input, or None."""
     if material is None or material.node_tree is None:
         return None
-    for node in material.node_tree.nodes:
+    for node in wiring.material_nodes(material):
         tree = getattr(node, "node_tree", None)
         if (node.bl_idname == "ShaderNodeGroup" and tree is not None and tree.get("spectral_skin_sss_backend") == "LIVE"
                 and "Translucency" in node.inputs):

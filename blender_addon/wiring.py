@@ -49,6 +49,19 @@ light through the real geometry, shows them glowing.  Wiring therefore turns on 
 the light crossed), the artist's value recorded in ``material[THICKNESS_FROM_SHADOW_PROP]`` and put back on
 removal.
 
+**Grouped skin shaders.**  Where the Principled BSDF sits in an artist's node group (an asset's or a character
+pipeline's skin shader) that reaches the active Material Output, straight or through layers, and reaches that node
+group's Group Output itself, straight or through layers there (:func:`grouped_skin`), the add-on's group node goes
+inside that node group, beside the Principled BSDF, taking its inputs there (:func:`take_input` links within one
+tree only); the layers inside the node group are copied there, and two shader outputs are added to its interface
+(:data:`GROUP_OUTPUTS`, :func:`feed_group_outputs`) that the material's Cycles and EEVEE outputs take (through copies
+of the material's layers over the group node).  The node group's own output, and the material's, still give the
+artist's Principled BSDF to the exporters; a material that does not use the added outputs renders as before (the
+renderers compile only what reaches an output).  Every material using the node group renders through the one group
+node in it.  :func:`unwire` takes the add-on's nodes and outputs out of a node group once no material renders
+through it (:func:`unwire_unused_groups`).  A Principled BSDF deeper down is refused (:func:`grouped_principled`
+names the group).
+
 **Linked data.**  A material linked from another .blend, or a library override of one, cannot keep node edits
 (they are not saved: the library's material comes back on reload), so :func:`linked_error` says so and what to do.
 """
@@ -102,6 +115,15 @@ def linked_error(material: bpy.types.Material) -> str | None:
         return (f"material '{material.name}' is a library override, whose nodes are not saved: make it local "
                 "(Object > Relations > Make Local > Selected Objects, Data and Materials) and run this again")
     return None
+
+
+def group_linked_error(tree: bpy.types.NodeTree) -> str | None:
+    """A one-line message when the artist's node group ``tree`` (holding the skin's Principled BSDF) cannot keep
+    the add-on's nodes (linked from a library), else None."""
+    if tree.library is None and tree.override_library is None:
+        return None
+    return (f"node group '{tree.name}' is linked from a library and read-only: make it local (Object > Relations > "
+            "Make Local > All) and run this again")
 
 
 def object_material(obj: bpy.types.Object | None, name: str = "") -> bpy.types.Material | None:
@@ -316,28 +338,94 @@ def clear_animation(socket: bpy.types.NodeSocket) -> None:
 LAYER_NODES = ("ShaderNodeMixShader", "ShaderNodeAddShader")
 
 
-def shader_chain(tree: bpy.types.NodeTree) -> tuple[bpy.types.Node | None, list[tuple[bpy.types.Node, int]]]:
+Chain = list[tuple[bpy.types.Node, int]]
+
+
+def _chains_to(socket: bpy.types.NodeSocket | None, accept) -> list[tuple[bpy.types.NodeSocket, Chain]]:
+    """Each output socket that ``accept`` takes, reaching the input ``socket`` straight or through Mix Shader and
+    Add Shader nodes (:data:`LAYER_NODES`), with the chain between: (layer node, index of its input that side comes
+    in), ``socket``'s side first; in input order."""
+    found: list[tuple[bpy.types.NodeSocket, Chain]] = []
+
+    def walk(feed: bpy.types.NodeSocket, chain: Chain) -> None:
+        if accept(feed):
+            found.append((feed, chain))
+        elif feed.node.bl_idname in LAYER_NODES:
+            for i, input_socket in enumerate(feed.node.inputs):
+                below = feeding_socket(input_socket) if input_socket.type == "SHADER" else None
+                if below is not None:
+                    walk(below, [*chain, (feed.node, i)])
+
+    top = feeding_socket(socket) if socket is not None else None
+    if top is not None:
+        walk(top, [])
+    return found
+
+
+def _principled_chain(socket: bpy.types.NodeSocket | None) -> tuple[bpy.types.Node | None, Chain]:
+    """The Principled BSDF reaching ``socket`` (:func:`_chains_to`) and the chain between; where several do, the one
+    whose Base Color is linked (the albedo), the first such in input order; (None, []) where none does."""
+    found = [(feed.node, chain) for feed, chain in _chains_to(
+        socket, lambda feed: feed.node.bl_idname == "ShaderNodeBsdfPrincipled")]
+    albedo = [f for f in found if f[0].inputs["Base Color"].is_linked]
+    return (albedo or found or [(None, [])])[0]
+
+
+def shader_chain(tree: bpy.types.NodeTree) -> tuple[bpy.types.Node | None, Chain]:
     """The Principled BSDF feeding the active Material Output's Surface, straight or through Mix Shader and Add
     Shader nodes (:data:`LAYER_NODES`), and the chain between them: (layer node, index of its input the Principled
     BSDF's side comes in), output side first.  Where several Principled BSDFs are reached the one whose Base Color
     is linked (the albedo) is taken, the first such in input order; (None, []) where there is none."""
     out = active_output(tree)
-    surface = feeding_socket(out.inputs["Surface"]) if out is not None else None
-    found: list[tuple[bpy.types.Node, list]] = []
+    return _principled_chain(out.inputs["Surface"] if out is not None else None)
 
-    def walk(node: bpy.types.Node, chain: list) -> None:
-        if node.bl_idname == "ShaderNodeBsdfPrincipled":
-            found.append((node, chain))
-        elif node.bl_idname in LAYER_NODES:
-            for i, socket in enumerate(node.inputs):
-                feed = feeding_socket(socket) if socket.type == "SHADER" else None
-                if feed is not None:
-                    walk(feed.node, [*chain, (node, i)])
 
-    if surface is not None:
-        walk(surface.node, [])
-    albedo = [f for f in found if f[0].inputs["Base Color"].is_linked]
-    return (albedo or found or [(None, [])])[0]
+#: The shader outputs the add-on adds to the interface of an artist's node group that holds the skin's Principled
+#: BSDF (module docstring, "Grouped skin shaders"), by the renderer whose Material Output they feed.
+GROUP_OUTPUTS = {"CYCLES": "Cycles (Spectral Skin SSS)", "EEVEE": "EEVEE (Spectral Skin SSS)"}
+
+
+class GroupedSkin(NamedTuple):
+    """An artist's node group node ``node`` whose output ``output`` reaches the active Material Output through the
+    layers ``outer`` (:func:`shader_chain`'s form), its node group holding the Principled BSDF ``principled`` that
+    reaches the group's Group Output there through the layers ``inner``."""
+    node: bpy.types.Node
+    output: bpy.types.NodeSocket
+    principled: bpy.types.Node
+    inner: Chain
+    outer: Chain
+
+
+def group_output(tree: bpy.types.NodeTree) -> bpy.types.Node | None:
+    """The node group's active Group Output node (the first one when none is flagged), or None."""
+    found = [n for n in tree.nodes if n.bl_idname == "NodeGroupOutput"]
+    return next((n for n in found if n.is_active_output), found[0] if found else None)
+
+
+def _inside(feed: bpy.types.NodeSocket) -> tuple[bpy.types.Node | None, Chain]:
+    """The Principled BSDF (and the layers between) reaching the Group Output's input behind the group node output
+    ``feed`` inside its own node group; (None, []) for anything else (a Principled BSDF deeper down included)."""
+    node = feed.node
+    tree = node.node_tree if node.bl_idname == "ShaderNodeGroup" else None
+    if tree is None or is_addon_group(tree) or feed.name in GROUP_OUTPUTS.values():
+        return None, []
+    gout = group_output(tree)
+    inner = next((s for s in gout.inputs if s.identifier == feed.identifier), None) if gout is not None else None
+    return _principled_chain(inner)
+
+
+def grouped_skin(tree: bpy.types.NodeTree) -> GroupedSkin | None:
+    """Where no Principled BSDF reaches the active Material Output at the material's level (:func:`shader_chain`):
+    the artist's node group node that does (an asset's skin shader), its Principled BSDF inside its own group
+    (straight or under layers there); the first in input order.  None where there is none, or where the Principled
+    BSDF sits deeper (in a group inside the group)."""
+    out = active_output(tree)
+    found = _chains_to(out.inputs["Surface"] if out is not None else None, lambda feed: _inside(feed)[0] is not None)
+    if not found:
+        return None
+    feed, outer = found[0]
+    principled, inner = _inside(feed)
+    return GroupedSkin(feed.node, feed, principled, inner, outer)
 
 
 def grouped_principled(tree: bpy.types.NodeTree) -> bpy.types.Node | None:
@@ -362,12 +450,12 @@ def grouped_warning(material: bpy.types.Material) -> str:
     """The report's warning where baked maps render in place of a Principled BSDF that sits inside a node group
     (:func:`grouped_principled`): they render the skin alone, none of the inputs it has in there; else ""."""
     tree = material.node_tree
-    grouped = grouped_principled(tree) if tree is not None and artist_principled(material) is None else None
+    grouped = grouped_principled(tree) if tree is not None and shader_chain(tree)[0] is None else None
     if grouped is None:
         return ""
     return (f"; warning: the Principled BSDF inside node group '{grouped.node_tree.name}' is not read, so the maps "
-            "render without its normal map, roughness, specular, coat, metal or alpha: ungroup it (select the group "
-            "node, Ctrl+Alt+G) and run Invert Skin Albedo again to keep them")
+            "render without its normal map, roughness, specular, coat, metal or alpha: choose the live group, which "
+            "reads it there, or ungroup it (select the group node, Ctrl+Alt+G) and bake again")
 
 
 def _holds_principled(tree: bpy.types.NodeTree | None, seen: set[str]) -> bool:
@@ -397,7 +485,41 @@ def artist_principled(material: bpy.types.Material) -> bpy.types.Node | None:
     if addon_feeds_active_output(tree):
         node = tree.nodes.get(material.get(PREVIOUS_SURFACE_PROP, ""))
         return node if node is not None and node.bl_idname == "ShaderNodeBsdfPrincipled" else None
-    return shader_chain(tree)[0]
+    principled = shader_chain(tree)[0]
+    skin = grouped_skin(tree) if principled is None else None
+    return skin.principled if skin is not None else principled
+
+
+def skin_chain(tree: bpy.types.NodeTree) -> Chain:
+    """The artist's layers over the skin in ``tree`` (:func:`shader_chain`'s form): in a material's tree those over
+    its Principled BSDF, or over the node group node holding it (:func:`grouped_skin`); in such a node group those
+    between the Principled BSDF and the Group Output."""
+    if not tree.is_embedded_data:
+        gout = group_output(tree)
+        users = [s for s in gout.inputs if s.name in GROUP_OUTPUTS.values()] if gout is not None else []
+        skin = _grouped_inside(tree)
+        return skin[1] if skin is not None and users else []
+    principled, chain = shader_chain(tree)
+    skin = grouped_skin(tree) if principled is None else None
+    return skin.outer if skin is not None else chain
+
+
+def _grouped_inside(tree: bpy.types.NodeTree) -> tuple[bpy.types.Node, Chain] | None:
+    """The Principled BSDF of the node group ``tree`` that the add-on renders for, and the layers between it and the
+    Group Output, found from the add-on's group node there (its record of the Group Output's input,
+    :data:`SKIN_OUTPUT_PROP`); None where the add-on wired nothing there."""
+    marker = grouped_group_node(tree)
+    gout = group_output(tree)
+    if marker is None or gout is None:
+        return None
+    socket = next((s for s in gout.inputs if s.identifier == marker[SKIN_OUTPUT_PROP]), None)
+    principled, chain = _principled_chain(socket)
+    return (principled, chain) if principled is not None else None
+
+
+#: Custom property on the add-on's group node inside an artist's node group: the identifier of the Group Output's
+#: input that the artist's Principled BSDF reaches (what the add-on's outputs there render instead).
+SKIN_OUTPUT_PROP = "spectral_skin_sss_skin_output"
 
 
 #: Custom property on the add-on's copy of an artist's Mix Shader or Add Shader layer (:func:`_copy_chain`): the name
@@ -438,13 +560,23 @@ def _copies_below(socket: bpy.types.NodeSocket) -> tuple[list[bpy.types.Node], b
     return copies, feed
 
 
+def render_sockets(tree: bpy.types.NodeTree) -> list[bpy.types.NodeSocket]:
+    """What Cycles and EEVEE render in ``tree``: in a material's tree the Surface of the Material Output of each
+    target (those of exactly that target), in an artist's node group the Group Output's inputs the add-on added
+    (:data:`GROUP_OUTPUTS`)."""
+    if not tree.is_embedded_data:
+        gout = group_output(tree)
+        return [s for s in gout.inputs if s.name in GROUP_OUTPUTS.values()] if gout is not None else []
+    outputs = [render_output(tree, target) for target in ("CYCLES", "EEVEE")]
+    return [out.inputs["Surface"] for out, target in zip(outputs, ("CYCLES", "EEVEE"), strict=True)
+            if out is not None and out.target == target]
+
+
 def chain_copies(tree: bpy.types.NodeTree) -> list[bpy.types.Node]:
     """The add-on's copies of the artist's layers (:func:`_copy_chain`) that feed what Cycles and EEVEE render."""
     copies = []
-    for target in ("CYCLES", "EEVEE"):
-        out = render_output(tree, target)
-        if out is not None and out.target == target:
-            copies += [n for n in _copies_below(out.inputs["Surface"])[0] if n not in copies]
+    for socket in render_sockets(tree):
+        copies += [n for n in _copies_below(socket)[0] if n not in copies]
     return copies
 
 
@@ -460,20 +592,24 @@ def retake_chain(tree: bpy.types.NodeTree) -> None:
                 take_input(tree, theirs, ours, animated=bool(animation(ours)))
 
 
-def recopy_chain(tree: bpy.types.NodeTree, chain: list[tuple[bpy.types.Node, int]], near: bpy.types.Node) -> None:
-    """Replace the copies of the artist's layers over what Cycles and EEVEE render with copies of ``chain``
-    (:func:`shader_chain`: the artist added, removed or reordered a layer over the Principled BSDF since wiring),
-    placed beside ``near`` (the group node)."""
-    for row, target in enumerate(("CYCLES", "EEVEE")):
-        out = render_output(tree, target)
-        if out is None or out.target != target:
-            continue
-        copies, bottom = _copies_below(out.inputs["Surface"])
-        if bottom is None or not is_added(bottom.node):
+def _ours(socket: bpy.types.NodeSocket) -> bool:
+    """Whether ``socket`` is an output of the add-on's: of a node it added, or one it added to an artist's node
+    group (:data:`GROUP_OUTPUTS`)."""
+    return is_added(socket.node) or (socket.node.bl_idname == "ShaderNodeGroup"
+                                     and socket.name in GROUP_OUTPUTS.values())
+
+
+def recopy_chain(tree: bpy.types.NodeTree, chain: Chain, near: bpy.types.Node) -> None:
+    """Replace the copies of the artist's layers over what Cycles and EEVEE render (:func:`render_sockets`) with
+    copies of ``chain`` (:func:`skin_chain`: the artist added, removed or reordered a layer over the skin since
+    wiring), placed beside ``near``."""
+    for row, socket in enumerate(render_sockets(tree)):
+        copies, bottom = _copies_below(socket)
+        if bottom is None or not _ours(bottom):
             continue  # not the add-on's: nothing of it to put layers over
         for node in copies:
             tree.nodes.remove(node)
-        tree.links.new(_copy_chain(tree, chain, bottom, near, row) if chain else bottom, out.inputs["Surface"])
+        tree.links.new(_copy_chain(tree, chain, bottom, near, row) if chain else bottom, socket)
 
 
 def feed_render_outputs(material: bpy.types.Material, sockets: dict[str, bpy.types.NodeSocket],
@@ -508,6 +644,58 @@ def feed_render_outputs(material: bpy.types.Material, sockets: dict[str, bpy.typ
         tree.links.new(socket, out.inputs["Surface"])
         fed.append(out)
     return fed
+
+
+def feed_group_outputs(tree: bpy.types.NodeTree, sockets: dict[str, bpy.types.NodeSocket], near: bpy.types.Node,
+                       chain: Chain | None = None) -> None:
+    """Make ``sockets[target]`` ("CYCLES", "EEVEE") what the artist's node group ``tree`` gives at its output
+    :data:`GROUP_OUTPUTS` ``[target]`` (added to its interface where it has none), through a copy of the layers of
+    ``chain`` (its layers between the Principled BSDF and the Group Output) placed beside ``near``."""
+    gout = group_output(tree)
+    for i, (target, socket) in enumerate(sockets.items()):
+        if chain:
+            socket = _copy_chain(tree, chain, socket, near, i)
+        name = GROUP_OUTPUTS[target]
+        if gout.inputs.get(name) is None:
+            tree.interface.new_socket(name, in_out="OUTPUT", socket_type="NodeSocketShader")
+        tree.links.new(socket, gout.inputs[name])
+
+
+def _added_outputs(tree: bpy.types.NodeTree) -> list:
+    """The interface outputs of the node group ``tree`` that the add-on added (:data:`GROUP_OUTPUTS`)."""
+    return [item for item in tree.interface.items_tree if item.item_type == "SOCKET" and item.in_out == "OUTPUT"
+            and item.name in GROUP_OUTPUTS.values()]
+
+
+def _group_in_use(tree: bpy.types.NodeTree) -> bool:
+    """Whether a material renders an output the add-on added to the node group ``tree`` (a link from it)."""
+    return any(node.bl_idname == "ShaderNodeGroup" and node.node_tree == tree
+               and any(out.is_linked for out in node.outputs if out.name in GROUP_OUTPUTS.values())
+               for material in bpy.data.materials if material.node_tree is not None
+               for node in material.node_tree.nodes)
+
+
+def grouped_group_node(tree: bpy.types.NodeTree) -> bpy.types.Node | None:
+    """The add-on's group node inside the artist's node group ``tree`` (:func:`feed_group_outputs`), or None."""
+    return next((n for n in tree.nodes if is_added(n) and SKIN_OUTPUT_PROP in n), None)
+
+
+def unwire_group(tree: bpy.types.NodeTree) -> int:
+    """Take the add-on's nodes and outputs out of the artist's node group ``tree`` (the group is then exactly the
+    artist's again); returns how many nodes were removed."""
+    ours = [n for n in tree.nodes if is_added(n)]
+    for node in ours:
+        tree.nodes.remove(node)
+    for item in _added_outputs(tree):
+        tree.interface.remove(item)
+    return len(ours)
+
+
+def unwire_unused_groups() -> int:
+    """:func:`unwire_group` for each artist's node group that the add-on wired and no material renders through any
+    more (its last material's add-on nodes removed, or its group node deleted); returns the nodes removed."""
+    return sum(unwire_group(tree) for tree in bpy.data.node_groups
+               if tree.is_editable and _added_outputs(tree) and not _group_in_use(tree))
 
 
 #: Custom property on a layer's nodes (module docstring, "Metal and glass"): the Principled BSDF input it is for.
@@ -654,12 +842,11 @@ def layer_inner(node: bpy.types.Node) -> bpy.types.NodeSocket | None:
 def _group_side(node: bpy.types.Node) -> bpy.types.NodeSocket | None:
     """What feeds the group's side of one of the add-on's Mix or Add Shaders (a layer's, :func:`insert_base_layers`,
     or a copy of the artist's layers, :func:`_copy_chain`): the input its ``INNER_PROP`` names, else (a copy made
-    before copies were marked) its shader input fed by another of the add-on's nodes; None where no node of the
-    add-on's feeds it."""
+    before copies were marked) its shader input fed by another of the add-on's nodes; None where no output of the
+    add-on's (:func:`_ours`) feeds it."""
     inner = layer_inner(node)
     sockets = [inner] if inner is not None else [s for s in node.inputs if s.type == "SHADER"]
-    return next((feed for socket in sockets if (feed := feeding_socket(socket)) is not None and is_added(feed.node)),
-                None)
+    return next((feed for socket in sockets if (feed := feeding_socket(socket)) is not None and _ours(feed)), None)
 
 
 def remove_base_layers(tree: bpy.types.NodeTree) -> int:
@@ -710,16 +897,40 @@ def added_nodes(material: bpy.types.Material) -> list[bpy.types.Node]:
 
 def wired_group_node(material: bpy.types.Material) -> bpy.types.Node | None:
     """The add-on's group node that Cycles renders in ``material`` (through its Cycles output, straight or through
-    the add-on's copy of the artist's layers), or None."""
+    the add-on's copy of the artist's layers, or inside the artist's node group holding the skin through the output
+    the add-on added there: :data:`GROUP_OUTPUTS`), or None."""
     tree = material.node_tree
     out = render_output(tree, "CYCLES") if tree is not None else None
-    links = [ln for ln in out.inputs["Surface"].links if not ln.is_muted] if out is not None else []
-    node = links[0].from_node if links else None
-    while node is not None and node.bl_idname in LAYER_NODES and is_added(node):
-        feed = _group_side(node)
-        node = feed.node if feed is not None else None
-    if node is not None and node.bl_idname == "ShaderNodeGroup" and is_addon_group(node.node_tree):
-        return node
+    return _group_below(out.inputs["Surface"]) if out is not None else None
+
+
+def material_nodes(material: bpy.types.Material) -> list[bpy.types.Node]:
+    """The nodes of ``material``'s tree, and the add-on's group node that renders it from inside an artist's node
+    group (:func:`wired_group_node`), where it is there."""
+    found = list(material.node_tree.nodes)
+    wired = wired_group_node(material)
+    if wired is not None and wired.id_data != material.node_tree:
+        found.append(wired)
+    return found
+
+
+def _group_below(socket: bpy.types.NodeSocket) -> bpy.types.Node | None:
+    """The add-on's group node feeding ``socket`` through the add-on's Mix and Add Shaders (:func:`_group_side`), and
+    into an artist's node group through an output the add-on added there; None where there is none."""
+    links = [ln for ln in socket.links if not ln.is_muted]
+    feed = links[0].from_socket if links else None
+    while feed is not None:
+        node = feed.node
+        if node.bl_idname in LAYER_NODES and is_added(node):
+            feed = _group_side(node)
+        elif node.bl_idname == "ShaderNodeGroup" and is_addon_group(node.node_tree):
+            return node
+        elif node.bl_idname == "ShaderNodeGroup" and feed.name in GROUP_OUTPUTS.values() and node.node_tree:
+            gout = group_output(node.node_tree)
+            inner = gout.inputs.get(feed.name) if gout is not None else None
+            feed = feeding_socket(inner) if inner is not None else None
+        else:
+            return None
     return None
 
 
@@ -744,7 +955,7 @@ def unwire(material: bpy.types.Material) -> int:
     props = [p for p in MATERIAL_PROPS if p in material]
     for prop in props:
         del material[prop]
-    return len(ours) + len(props)
+    return len(ours) + len(props) + unwire_unused_groups()
 
 
 def use_shadow_thickness(material: bpy.types.Material) -> None:

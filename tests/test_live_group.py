@@ -33,7 +33,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 import blender_addon  # noqa: E402
-from blender_addon import live, live_edits, preferences, probe, wiring  # noqa: E402
+from blender_addon import follow, live, live_edits, preferences, probe, wiring  # noqa: E402
 from exporters import live_table  # noqa: E402
 from exporters.colorimetry import delta_e76, linear_srgb_to_lab, srgb_decode, srgb_encode  # noqa: E402
 from tests.addon_scene import run_invert, skin_codes, skin_object, snapshot, write_image  # noqa: E402
@@ -381,8 +381,9 @@ def test_operator_refuses_a_material_without_principled_and_changes_nothing(addo
 
 
 def test_a_principled_bsdf_inside_a_node_group_is_named_and_nothing_changes(addon):
-    """An asset's skin shader: the Principled BSDF sits in a node group (two deep, under a Mix Shader layer) that
-    feeds the Material Output; the operator names the group and says how to ungroup it, and changes nothing."""
+    """An asset's skin shader with its Principled BSDF two node groups deep (under a Mix Shader layer), deeper than
+    the live group reaches (one deep: tests/test_live_grouped.py); the operator names the group and says how to
+    ungroup it, and changes nothing."""
     obj, mat, _ = skin_object(None)
     tree = mat.node_tree
     inner = bpy.data.node_groups.new("Skin Core", "ShaderNodeTree")
@@ -403,7 +404,7 @@ def test_a_principled_bsdf_inside_a_node_group_is_named_and_nothing_changes(addo
     tree.links.new(layer.outputs[0], tree.nodes["Material Output"].inputs["Surface"])
     state = snapshot()
     with bpy.context.temp_override(object=obj, active_object=obj):
-        with pytest.raises(RuntimeError, match="inside the node group 'Skin Shader'.*Ctrl\\+Alt\\+G"):
+        with pytest.raises(RuntimeError, match="sits in the node group 'Skin Shader'.*Ctrl\\+Alt\\+G"):
             bpy.ops.spectral_skin.invert_albedo()
     assert snapshot() == state
 
@@ -429,6 +430,8 @@ def test_baked_maps_over_a_grouped_principled_bsdf_warn(addon, tmp_path, capfd):
     assert run_invert(obj, mode="BAKE") == {"FINISHED"}
     assert wiring.wired_group_node(mat) is not None
     assert "Principled BSDF inside node group 'Skin Shader' is not read" in capfd.readouterr().out
+    bsdf.inputs["Roughness"].default_value = 0.2
+    assert follow.follow(mat) == []  # nothing of the node group is taken over baked maps (nor across node trees)
     tree.links.new(tex.outputs["Color"], tree.nodes.new("ShaderNodeBsdfPrincipled").inputs["Base Color"])
     tree.links.new(tree.nodes["Principled BSDF"].outputs[0], tree.nodes["Material Output"].inputs["Surface"])
     assert run_invert(obj, mode="BAKE") == {"FINISHED"}  # the skin's own Principled BSDF: no warning
