@@ -280,3 +280,38 @@ def test_exporters_write_the_grouped_material_as_before(tmp_path, scene):
     assert before["gltf"]["materials"][0]["pbrMetallicRoughness"]["baseColorTexture"] is not None
     _invert(mat)
     assert export_all(str(tmp_path / "after")) == before
+
+
+def test_a_saved_file_and_a_single_user_copy_of_the_node_group(tmp_path, scene):
+    """The wiring inside the node group lasts through save and reopen (what changes there afterwards still
+    follows), and a material given its own copy of the node group (Blender's user-count button copies the group with
+    the add-on's nodes in it) renders through the copy's group node; removing it gives back that copy as the
+    artist's, the other material keeping the original."""
+    image = _skin_image(tmp_path)
+    group, _ = skin_group()
+    first, second = grouped_material(image, group), grouped_material(image, group)
+    before_group = _state(group)
+    _invert(first)
+    _invert(second)
+    first.use_fake_user = second.use_fake_user = True  # the probe box shows one of them: keep both in the file
+    path, names = tmp_path / "grouped.blend", (first.name, second.name)
+    bpy.ops.wm.save_as_mainfile(filepath=str(path))
+    bpy.ops.wm.open_mainfile(filepath=str(path))
+    first, second = (bpy.data.materials[name] for name in names)
+    group = bpy.data.node_groups["Skin Shader"]
+    principled = next(n for n in group.nodes if n.bl_idname == "ShaderNodeBsdfPrincipled" and not wiring.is_added(n))
+    gnode = wiring.wired_group_node(first)
+    assert gnode is not None and gnode.id_data == group and wiring.wired_group_node(second) == gnode
+    principled.inputs["Specular Tint"].default_value = (1.0, 0.5, 0.5, 1.0)
+    bpy.context.view_layer.update()
+    assert tuple(gnode.inputs["Specular Tint"].default_value) == (1.0, 0.5, 0.5, 1.0)
+
+    node = next(n for n in first.node_tree.nodes if n.bl_idname == "ShaderNodeGroup" and n.node_tree == group)
+    node.node_tree = group.copy()
+    own = wiring.wired_group_node(first)
+    assert own is not None and own.id_data == node.node_tree and wiring.wired_group_node(second) == gnode
+    _remove(first)
+    assert _state(node.node_tree) == before_group  # the copy is the artist's node group again
+    assert wiring.wired_group_node(second) == gnode
+    _remove(second)
+    assert _state(group) == before_group
