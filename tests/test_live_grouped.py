@@ -4,9 +4,9 @@ shader), in real Cycles on the probe box.
 The same material is built twice, flat and grouped: the albedo texture and a roughness value fed in, a Metallic of
 0.3 (a layer of the artist's Principled BSDF over the group), an emission added over the Principled BSDF inside the
 group and a glow mixed over its output in the material.  Cycles flattens node groups, so the live group wired into
-the grouped material must render bit for bit what it renders in the flat one.  The group node goes inside the
-artist's node group and feeds two outputs added to its interface; Remove Skin SSS gives back the node group as the
-artist made it, once no material renders through it."""
+the grouped material must render bit for bit what it renders in the flat one, with a skin edit too.  The group
+node goes inside the artist's node group and feeds two outputs added to its interface; Remove Skin SSS gives back
+the node group as the artist made it, once no material renders through it."""
 
 from __future__ import annotations
 
@@ -22,7 +22,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 import blender_addon  # noqa: E402
-from blender_addon import follow, probe, wiring  # noqa: E402
+from blender_addon import follow, live_edits, probe, wiring  # noqa: E402
 from tests.addon_scene import render_linear, write_image  # noqa: E402
 from tests.test_bake_painted_colour import box_material  # noqa: E402
 
@@ -157,6 +157,14 @@ def test_a_grouped_principled_bsdf_renders_as_a_flat_one(tmp_path, scene):
     rgb = render_linear(scene, tmp_path / "grouped.exr")
     assert rgb.mean() > 0.05
     np.testing.assert_array_equal(rgb, expected)
+    edited = []  # a skin edit (tan and flush) on each: the same again
+    for material in (mat, flat):
+        bpy.data.objects["ProbeSlab"].active_material = material
+        live_edits.set_edit(wiring.wired_group_node(material), (1.5, 2.0, 0.0))
+        bpy.context.view_layer.update()
+        edited.append(render_linear(scene, tmp_path / f"edited_{material.name}.exr"))
+    assert np.abs(edited[0] - rgb).mean() > 0.01
+    np.testing.assert_array_equal(edited[0], edited[1])
 
     _remove(mat)
     assert _state(group) == before_group and _state(mat.node_tree) == before_material
