@@ -316,9 +316,41 @@ def main() -> dict:
     for backend in ("SVM", "OSL"):
         out[f"thin_{backend.lower()}"] = thin_disk_centre(backend, _wire_by_operator)
 
+    # The live material again, its Principled BSDF inside a node group: the live group goes in there and renders the
+    # sphere as it rendered the flat material; Remove Skin SSS gives back the node group as it was.
+    obj = skin_scene()
+    material = textured_material(obj, "SkinGrouped", image)
+    group = group_the_principled(material)
+    before = sorted(n.name for n in group.nodes), len(group.interface.items_tree)
+    with bpy.context.temp_override(object=obj, active_object=obj):
+        out["grouped_invert"] = sorted(bpy.ops.spectral_skin.invert_albedo())
+        out["grouped_outputs"] = sorted(i.name for i in group.interface.items_tree if i.in_out == "OUTPUT")
+        out["grouped_centre"] = render_centre(bpy.context.scene)
+        bpy.ops.spectral_skin.remove()
+    out["grouped_restored"] = (sorted(n.name for n in group.nodes), len(group.interface.items_tree)) == before
+
     # The live group's node math: its media for colours in and out of the skin box (the caller compares with 5.0's).
     out["live_media"] = live_media(f"{EXTENSION}.blender_addon")
     return out
+
+
+def group_the_principled(material):
+    """Put ``material``'s Principled BSDF into a node group (a new one inside, fed through a Base Color input of the
+    group node by what fed it), as an asset's skin shader has it; returns the node group."""
+    tree = material.node_tree
+    principled = tree.nodes["Principled BSDF"]
+    group = bpy.data.node_groups.new("Skin Shader", "ShaderNodeTree")
+    group.interface.new_socket("Base Color", in_out="INPUT", socket_type="NodeSocketColor")
+    group.interface.new_socket("BSDF", in_out="OUTPUT", socket_type="NodeSocketShader")
+    inner = group.nodes.new("ShaderNodeBsdfPrincipled")
+    group.links.new(group.nodes.new("NodeGroupInput").outputs[0], inner.inputs["Base Color"])
+    group.links.new(inner.outputs[0], group.nodes.new("NodeGroupOutput").inputs[0])
+    node = tree.nodes.new("ShaderNodeGroup")
+    node.node_tree = group
+    tree.links.new(principled.inputs["Base Color"].links[0].from_socket, node.inputs[0])
+    tree.links.new(node.outputs[0], principled.outputs[0].links[0].to_socket)
+    tree.nodes.remove(principled)
+    return group
 
 
 def register_only() -> dict:

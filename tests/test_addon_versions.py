@@ -92,6 +92,10 @@ def test_installs_bakes_renders_and_exits_cleanly(case, python, version, py_vers
     # 5 % (two renders' noise: about 3 % at 3 sigma).  Blender 5.3's plain "Random Walk" takes radii 4 pi times longer.
     for backend, reference in blender_50["thin"].items():
         np.testing.assert_allclose(out[f"thin_{backend.lower()}"], reference, rtol=0.05, err_msg=backend)
+    # The Principled BSDF inside a node group: the live group goes in there and renders what it renders flat.
+    assert out["grouped_invert"] == ["FINISHED"] and out["grouped_restored"], out
+    assert out["grouped_outputs"] == ["BSDF", "Cycles (Spectral Skin SSS)", "EEVEE (Spectral Skin SSS)"]
+    np.testing.assert_allclose(out["grouped_centre"], out["live_centre"], rtol=1e-6)
     # The live group's nodes compute the same media in every version (its curves, Map Ranges, clamps and mixes).
     for name, reference in blender_50["live_media"].items():
         np.testing.assert_allclose(out["live_media"][name], reference, rtol=2e-4, atol=1e-6, err_msg=name)
