@@ -495,10 +495,8 @@ def skin_chain(tree: bpy.types.NodeTree) -> Chain:
     its Principled BSDF, or over the node group node holding it (:func:`grouped_skin`); in such a node group those
     between the Principled BSDF and the Group Output."""
     if not tree.is_embedded_data:
-        gout = group_output(tree)
-        users = [s for s in gout.inputs if s.name in GROUP_OUTPUTS.values()] if gout is not None else []
-        skin = _grouped_inside(tree)
-        return skin[1] if skin is not None and users else []
+        inside = _grouped_inside(tree)
+        return inside[1] if inside is not None else []
     principled, chain = shader_chain(tree)
     skin = grouped_skin(tree) if principled is None else None
     return skin.outer if skin is not None else chain

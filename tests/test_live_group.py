@@ -37,7 +37,7 @@ from blender_addon import follow, live, live_edits, preferences, probe, wiring  
 from exporters import live_table  # noqa: E402
 from exporters.colorimetry import delta_e76, linear_srgb_to_lab, srgb_decode, srgb_encode  # noqa: E402
 from tests.addon_scene import run_invert, skin_codes, skin_object, snapshot, write_image  # noqa: E402
-from tests.installed_addon_check import media_probe  # noqa: E402
+from tests.installed_addon_check import group_the_principled, media_probe  # noqa: E402
 from tests.test_bake_painted_colour import _scene, box_material, painted_codes, render_stripes, stripes_texture  # noqa: E402,I001
 from tests.test_painted_gain import NON_SKIN  # noqa: E402
 
@@ -411,20 +411,11 @@ def test_a_principled_bsdf_inside_a_node_group_is_named_and_nothing_changes(addo
 
 def test_baked_maps_over_a_grouped_principled_bsdf_warn(addon, tmp_path, capfd):
     """Bake maps wires where the Principled BSDF sits in a node group, and its report warns, naming the group, that
-    the maps render without the inputs the group holds (the live group refuses the material)."""
+    the maps render without the inputs the group holds (the live group reads it there: tests/test_live_grouped.py)."""
     obj, mat, tex = skin_object(write_image(tmp_path / "skin.png", skin_codes(), "uint8"))
     tree = mat.node_tree
-    group = bpy.data.node_groups.new("Skin Shader", "ShaderNodeTree")
-    group.interface.new_socket("Albedo", in_out="INPUT", socket_type="NodeSocketColor")
-    group.interface.new_socket("BSDF", in_out="OUTPUT", socket_type="NodeSocketShader")
-    bsdf = group.nodes.new("ShaderNodeBsdfPrincipled")
-    group.links.new(group.nodes.new("NodeGroupInput").outputs[0], bsdf.inputs["Base Color"])
-    group.links.new(bsdf.outputs[0], group.nodes.new("NodeGroupOutput").inputs[0])
-    tree.nodes.remove(tree.nodes["Principled BSDF"])
-    shader = tree.nodes.new("ShaderNodeGroup")
-    shader.node_tree = group
-    tree.links.new(tex.outputs["Color"], shader.inputs[0])
-    tree.links.new(shader.outputs[0], tree.nodes["Material Output"].inputs["Surface"])
+    group = group_the_principled(mat)
+    bsdf = next(n for n in group.nodes if n.bl_idname == "ShaderNodeBsdfPrincipled")
     tree.nodes.active = tex
     capfd.readouterr()
     assert run_invert(obj, mode="BAKE") == {"FINISHED"}
