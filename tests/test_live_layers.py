@@ -210,3 +210,17 @@ def test_reroutes_and_muted_nodes_are_seen_through(tmp_path, glow, mode):
     before = _tree_state(mat)
     assert np.array_equal(wired_render("tidy"), plain)
     assert _tree_state(mat) == before
+
+
+def test_a_layer_muted_after_wiring_leaves_the_render_and_comes_back(glow):
+    """Muting the artist's layer (M) takes its copy out of what the renderers render, as it takes the layer out of
+    the artist's material; unmuting puts it back."""
+    _, mat, layer = glow
+    assert run_invert(bpy.data.objects["ProbeSlab"], mode="LIVE") == {"FINISHED"}
+    assert _copies(mat, "CYCLES") == _copies(mat, "EEVEE") == [layer.name]
+    layer.mute = True
+    bpy.context.view_layer.update()
+    assert _copies(mat, "CYCLES") == _copies(mat, "EEVEE") == [] and wiring.wired_group_node(mat) is not None
+    layer.mute = False
+    bpy.context.view_layer.update()
+    assert _copies(mat, "CYCLES") == _copies(mat, "EEVEE") == [layer.name]
