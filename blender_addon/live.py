@@ -53,7 +53,7 @@ GROUP_NAME = "Spectral Skin SSS Live"
 #: Custom properties: on the group and the images, the SHA-256 of the table they were made from.
 TABLE_PROP = "spectral_skin_sss_table"
 #: Layout version of the live group (bump when the generated nodes change).
-LIVE_VERSION = 22
+LIVE_VERSION = 23
 IMAGE_PREFIX = "Spectral Skin SSS Table"
 #: Custom property on the group: whether it holds the grazing-light correction (blender_addon.oblique).
 GRAZING_PROP = "spectral_skin_sss_grazing"
@@ -669,9 +669,11 @@ def _painted_media(b: _Builder, painted, media: list, fit: painted_gain.BodyFit,
 
 
 def _diffuse_body(b: _Builder, gin: bpy.types.Node, painted, weight_share) -> bpy.types.NodeSocket:
-    """A Diffuse BSDF of the painted colour weighted 1 - Subsurface Weight (the mixture's Body: under its coat)."""
+    """A Diffuse BSDF of the painted colour weighted 1 - Subsurface Weight (the mixture's Body: under its coat, which
+    takes 1 - Coat Weight x F of its light; tinted here by the coat's Coat Tint, nodes.coat_tint, as the mixture is
+    tinted inside its group: at Coat Weight 0 the factor is constant 1 and Cycles folds the product away)."""
     diffuse = b.node("ShaderNodeBsdfDiffuse", 32)
-    b.link(painted, diffuse.inputs["Color"])
+    b.link(b.vec("MULTIPLY", 31, painted, nodes.coat_tint(b.group, gin)), diffuse.inputs["Color"])
     diffuse.inputs["Roughness"].default_value = 0.0
     b.link(gin.outputs["Normal"], diffuse.inputs["Normal"])
     mix = b.node("ShaderNodeMixShader", 33, name="Diffuse body")

@@ -104,7 +104,8 @@ shape and colour that lobe as they do the Principled BSDF's (the body weight kee
 coat's lobe over its specular lobe and tints that as Cycles' Principled BSDF does; the mixture and the diffuse
 body under it keep 1 - Coat Weight x F(Coat IOR) of the light, the mixture also the Coat Tint's colour
 (:func:`_under_coat`).  A **Sheen** BSDF (colour Sheen Tint, weighted Sheen Weight) is added on top; the share of
-the light the sheen takes from below, and the Coat Tint over the diffuse body, are not modelled.  At their
+the light the sheen takes from below is not modelled (the live group tints its diffuse body by the Coat Tint
+with :func:`coat_tint`).  At their
 defaults none of them changes the render or adds a closure (Cycles folds their nodes to constants).
 
 Both paths are checked against each other and against single-component renders in
@@ -648,6 +649,14 @@ def _under_coat(group: bpy.types.NodeTree, gin: bpy.types.Node) -> tuple[bpy.typ
     group.links.new(gin.outputs["Coat Normal"], fresnel.inputs["Normal"])
     through = _mix(group, "FLOAT", weight, 1.0, _math(group, "SUBTRACT", 1.0, fresnel.outputs["Fac"], x=-1500.0,
                                                       y=1500.0), -1350.0, 1500.0)
+    return through, _vec(group, "SCALE", coat_tint(group, gin), through, x=-500.0, y=1450.0)
+
+
+def coat_tint(group: bpy.types.NodeTree, gin: bpy.types.Node) -> bpy.types.NodeSocket:
+    """The colour the Principled BSDF's clear coat gives what is under it: mix(1, tint^(1/cos t), Coat Weight) per
+    channel, cos t the view direction's cosine (at the Coat Normal) refracted into the coat of index Coat IOR, as
+    Cycles' Principled BSDF tints the layers under its coat; ``gin`` a node with outputs Coat Weight, Coat IOR, Coat
+    Normal and Coat Tint.  At Coat Weight 0 it is constant 1 (Cycles folds the Mix node to its first input)."""
     facing = group.nodes.new("ShaderNodeLayerWeight")  # Facing = 1 - |cos i| at Blend 0.5
     facing.location = (-1650.0, 1300.0)
     facing.inputs["Blend"].default_value = 0.5
@@ -667,8 +676,8 @@ def _under_coat(group: bpy.types.NodeTree, gin: bpy.types.Node) -> tuple[bpy.typ
     for i, channel in enumerate(CHANNELS):
         group.links.new(_math(group, "POWER", separate.outputs[channel], depth, x=-800.0, y=1500.0 - 50.0 * i),
                         combine.inputs[i])
-    tinted = _mix(group, "VECTOR", weight, (1.0, 1.0, 1.0), combine.outputs["Vector"], -600.0, 1450.0)
-    return through, _vec(group, "SCALE", tinted, through, x=-500.0, y=1450.0)
+    return _mix(group, "VECTOR", gin.outputs["Coat Weight"], (1.0, 1.0, 1.0), combine.outputs["Vector"], -600.0,
+                1450.0)
 
 
 def _sheen(group: bpy.types.NodeTree, gin: bpy.types.Node, surface: bpy.types.NodeSocket) -> bpy.types.NodeSocket:

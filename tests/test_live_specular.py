@@ -228,14 +228,16 @@ def test_anisotropy_tangent_and_coat_normal_are_taken(tmp_path):
         blender_addon.unregister()
 
 
-def test_coat_tint(tmp_path):
+@pytest.mark.parametrize("weight", [1.0, 0.001])  # an exact 0 is Blender's default, which the operator reads as skin
+def test_coat_tint(tmp_path, weight):
     """Coat Tint (1, 0.5, 0.5) under a Coat Weight 1 colours what is under the coat as it does under the Principled
     BSDF's: the render over the untinted coat's, per channel, equals that of a Principled BSDF of the painted base
-    colour with the same coat (Blender's own, no add-on) within 3 %; red, which the tint leaves, within 1 %."""
+    colour with the same coat (Blender's own, no add-on) within 3 %; red, which the tint leaves, within 1 %.  The
+    same over the skin (Subsurface Weight 1) and over the diffuse body (Subsurface Weight 0.001)."""
     coat = {"Coat Weight": 1.0, "Coat IOR": 1.5, "Coat Roughness": 0.03}
     tint = (1.0, 0.5, 0.5, 1.0)
-    clear, _ = _render(tmp_path, **coat)
-    tinted, gnode = _render(tmp_path, **coat, **{"Coat Tint": tint})
+    clear, _ = _render(tmp_path, **coat, **{"Subsurface Weight": weight})
+    tinted, gnode = _render(tmp_path, **coat, **{"Coat Tint": tint, "Subsurface Weight": weight})
     assert tuple(gnode.inputs["Coat Tint"].default_value) == pytest.approx(tint)
     reference = _principled(_painted(), **coat, **{"Coat Tint": tint})[0] / _principled(_painted(), **coat)[0]
     ratio = tinted / clear
