@@ -170,9 +170,10 @@ def test_a_grouped_principled_bsdf_renders_as_a_flat_one(tmp_path, scene):
     assert _state(group) == before_group and _state(mat.node_tree) == before_material
 
 
-def test_the_grouped_skin_follows_the_artist_and_is_shared(tmp_path, scene):
+def test_the_grouped_skin_follows_the_artist_and_is_shared(tmp_path, scene, capfd):
     """Inputs changed inside the node group reach the group node there (roughness, the emission layer's strength,
-    Metallic up to 0 and back); a second material using the same node group is wired through the same group node;
+    Metallic up to 0 and back); a second material using the same node group is wired through the same group node,
+    and the report says with which material it shares it;
     removing one keeps the other rendering, removing both gives back the node group as it was."""
     image = _skin_image(tmp_path)
     group, principled = skin_group()
@@ -202,8 +203,11 @@ def test_the_grouped_skin_follows_the_artist_and_is_shared(tmp_path, scene):
     record = json.loads(first[wiring.TAKEN_INPUTS_PROP])
     assert record[follow.GROUP_LAYERS][0][0] == add.name
 
+    capfd.readouterr()
     _invert(second)
     assert wiring.wired_group_node(second) == gnode  # one group node for every material using the node group
+    assert f"wired into '{second.name}' inside its node group 'Skin Shader', shared with '{first.name}'" \
+        in capfd.readouterr().out
     alone = render_linear(scene, tmp_path / "second.exr")
     _remove(first)
     assert wiring.wired_group_node(second) == gnode
