@@ -35,7 +35,7 @@ added, removed or reordered is copied again.
 
 Where the Principled BSDF sits in an artist's node group (blender_addon.wiring, "Grouped skin shaders"), the group
 node and the layers over it are in that node group, where its inputs are taken; the copies of the artist's layers
-between the Principled BSDF and the node group's output follow the same way (``record[GROUP_LAYERS]``).
+between the skin and each node group's output follow the same way (``record[GROUP_LAYERS]``).
 
 The Material Outputs the add-on added for Cycles and EEVEE take the Displacement, Volume and Thickness of the
 artist's output (``record[OUTPUT]``): a displacement map linked, or a Thickness changed, after wiring reaches them.
@@ -64,8 +64,8 @@ OUTPUT = "Material Output"
 #: copies follow (blender_addon.wiring, "Layered materials"): per layer, output side first, its node's name, the
 #: index of its input the Principled BSDF's side comes in, and what each other input gives.
 LAYERS = "Layers"
-#: The record's entry for the artist's layers inside the node group holding the Principled BSDF, between it and the
-#: group's output (blender_addon.wiring, "Grouped skin shaders"), as :data:`LAYERS`.
+#: The record's entry for the artist's layers inside the node groups holding the Principled BSDF, between the skin and
+#: each group's output (blender_addon.wiring, "Grouped skin shaders"): by node group name, as :data:`LAYERS`.
 GROUP_LAYERS = "Group layers"
 
 
@@ -134,9 +134,22 @@ def record(material: bpy.types.Material, unit_scale_m: float) -> None:
         layers = _layers_state(material.node_tree)
         if layers is not None:
             taken[LAYERS] = layers
-        if gnode.id_data != material.node_tree:
-            taken[GROUP_LAYERS] = _layers_state(gnode.id_data)
+        groups = _wired_groups(material, gnode)
+        if groups:
+            taken[GROUP_LAYERS] = {tree.name: _layers_state(tree) for tree, _ in groups}
         material[wiring.TAKEN_INPUTS_PROP] = json.dumps(taken)
+
+
+def _wired_groups(material: bpy.types.Material,
+                  gnode: bpy.types.Node) -> list[tuple[bpy.types.NodeTree, bpy.types.Node]]:
+    """The artist's node groups the add-on wired for ``material`` (blender_addon.wiring, "Grouped skin shaders"),
+    outermost first, each with the node beside which its copies of the artist's layers go (the nested node group
+    node holding the skin, or in the innermost ``gnode``, the add-on's group node); empty for a flat material."""
+    skin = wiring.grouped_skin(material.node_tree) if gnode.id_data != material.node_tree else None
+    if skin is None:
+        return []
+    trees = [skin.node.node_tree, *(level.node.node_tree for level in skin.levels)]
+    return list(zip(trees, [*(level.node for level in skin.levels), gnode], strict=True))
 
 
 def _layers_state(tree: bpy.types.NodeTree) -> list | None:
@@ -234,8 +247,11 @@ def follow(material: bpy.types.Material, unit_scale_m: float | None = None) -> l
     near = gnode if inner == tree else skin.node if skin is not None else None
     if near is not None and _follow_layers(tree, near, taken):
         changed.append(LAYERS)
-    if inner != tree and _follow_layers(inner, gnode, taken, GROUP_LAYERS):
+    inside = taken.setdefault(GROUP_LAYERS, {})
+    if any([_follow_layers(group, beside, inside, group.name) for group, beside in _wired_groups(material, gnode)]):
         changed.append(GROUP_LAYERS)
+    if not inside:
+        del taken[GROUP_LAYERS]
     outputs = _output_state(tree)
     if taken.get(OUTPUT, {}) != outputs:
         wiring.retake_output_inputs(tree)

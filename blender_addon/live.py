@@ -768,9 +768,10 @@ def colour_source(material: bpy.types.Material) -> tuple[bpy.types.Node, bpy.typ
     grouped = wiring.grouped_principled(material.node_tree) if surface is None else None
     if grouped is not None:
         raise LiveInputError(f"material '{material.name}': its Principled BSDF sits in the node group "
-                             f"'{grouped.node_tree.name}' where the live group cannot reach it (in a group inside "
-                             "that group, or not feeding the group output the material renders); ungroup the group "
-                             "that holds it (Tab into the group, select its node, Ctrl+Alt+G) and run this again")
+                             f"'{grouped.node_tree.name}' where the live group cannot reach it (it follows group "
+                             "outputs and Mix and Add Shader layers, not other nodes such as Shader to RGB); link "
+                             "the Principled BSDF to the group's output that way, or ungroup the group that holds "
+                             "it (Tab into the group, select its node, Ctrl+Alt+G), and run this again")
     if surface is None:
         raise LiveInputError(f"material '{material.name}': no Principled BSDF feeds its Material Output's Surface "
                              "(straight or through Mix Shader and Add Shader nodes); connect one (its Base Color is "
@@ -923,9 +924,16 @@ def _grouped_text(material: bpy.types.Material, gnode: bpy.types.Node) -> str:
     if tree == material.node_tree:
         return ""
     others = sorted(m.name for m in bpy.data.materials if m != material and m.node_tree is not None
-                    and any(n.bl_idname == "ShaderNodeGroup" and n.node_tree == tree for n in m.node_tree.nodes))
+                    and _holds(m.node_tree, tree))
     shared = f", shared with {', '.join(repr(name) for name in others)}" if others else ""
     return f" inside its node group '{tree.name}'{shared}"
+
+
+def _holds(tree: bpy.types.NodeTree, group: bpy.types.NodeTree, depth: int = 1) -> bool:
+    """Whether ``tree`` uses the node group ``group``, in a group node of its own or of the node groups it uses."""
+    return depth <= wiring.MAX_GROUP_DEPTH and any(
+        node.bl_idname == "ShaderNodeGroup" and node.node_tree is not None
+        and (node.node_tree == group or _holds(node.node_tree, group, depth + 1)) for node in tree.nodes)
 
 
 def outside_report(table: texel_table.TexelTable, image: bpy.types.Image, colorspace: str) -> str:

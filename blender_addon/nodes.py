@@ -781,7 +781,8 @@ def wire_into_material(material: bpy.types.Material, group: bpy.types.NodeTree,
     skin = wiring.grouped_skin(material.node_tree) if not images and wiring.shader_chain(
         material.node_tree)[0] is None else None
     if skin is not None:
-        error = wiring.group_linked_error(skin.node.node_tree)
+        error = next(filter(None, (wiring.group_linked_error(node.node_tree)
+                                   for node in (skin.node, *(level.node for level in skin.levels)))), None)
         if error:
             raise ValueError(error)
         wiring.unwire(material)
@@ -827,7 +828,7 @@ def _wire_grouped(material: bpy.types.Material, group: bpy.types.NodeTree, skin:
     group's interface (wiring.feed_group_outputs); the material's Material Outputs of target Cycles and EEVEE are fed
     by those outputs of the artist's group node.  Another material already wired through the same node group keeps
     its group node there (one for every material using it)."""
-    inner = skin.node.node_tree
+    inner = (skin.levels[-1].node if skin.levels else skin.node).node_tree  # the node group the skin is in
     gnode = wiring.grouped_group_node(inner)
     if gnode is None or gnode.node_tree != group:
         wiring.unwire_group(inner)
@@ -844,6 +845,10 @@ def _wire_grouped(material: bpy.types.Material, group: bpy.types.NodeTree, skin:
                                   gnode, skin.inner)
         _take_surface_inputs(inner, principled, gnode)
         wiring.insert_base_layers(inner, principled, gnode)
+    for level in reversed(skin.levels):  # the node groups around it pass the outputs up
+        wiring.feed_group_outputs(level.node.id_data, {target: level.node.outputs[name]
+                                                       for target, name in wiring.GROUP_OUTPUTS.items()},
+                                  level.node, level.chain)
     material[PREVIOUS_SURFACE_PROP] = skin.node.name
     wiring.feed_render_outputs(material, {target: skin.node.outputs[name]
                                           for target, name in wiring.GROUP_OUTPUTS.items()}, skin.node, skin.outer)

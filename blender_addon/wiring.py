@@ -51,16 +51,17 @@ removal.
 
 **Grouped skin shaders.**  Where the Principled BSDF sits in an artist's node group (an asset's or a character
 pipeline's skin shader) that reaches the active Material Output, straight or through layers, and reaches that node
-group's Group Output itself, straight or through layers there (:func:`grouped_skin`), the add-on's group node goes
-inside that node group, beside the Principled BSDF, taking its inputs there (:func:`take_input` links within one
-tree only); the layers inside the node group are copied there, and two shader outputs are added to its interface
-(:data:`GROUP_OUTPUTS`, :func:`feed_group_outputs`) that the material's Cycles and EEVEE outputs take (through copies
-of the material's layers over the group node).  The node group's own output, and the material's, still give the
+group's Group Output itself, straight or through layers there, or through a node group nested there that holds it
+the same way (:func:`grouped_skin`), the add-on's group node goes inside the node group the Principled BSDF sits
+in, beside it, taking its inputs there (:func:`take_input` links within one tree only); the layers inside each node
+group are copied there, and two shader outputs are added to each one's interface (:data:`GROUP_OUTPUTS`,
+:func:`feed_group_outputs`), passed up to the material's Cycles and EEVEE outputs (through copies of the material's
+layers over the group node).  The node group's own output, and the material's, still give the
 artist's Principled BSDF to the exporters; a material that does not use the added outputs renders as before (the
 renderers compile only what reaches an output).  Every material using the node group renders through the one group
 node in it.  :func:`unwire` takes the add-on's nodes and outputs out of a node group once no material renders
-through it (:func:`unwire_unused_groups`).  A Principled BSDF deeper down is refused (:func:`grouped_principled`
-names the group).
+through it (:func:`unwire_unused_groups`).  A Principled BSDF that reaches its group's output through other
+nodes is refused (:func:`grouped_principled` names the group).
 
 **Linked data.**  A material linked from another .blend, or a library override of one, cannot keep node edits
 (they are not saved: the library's material comes back on reload), so :func:`linked_error` says so and what to do.
@@ -385,15 +386,25 @@ def shader_chain(tree: bpy.types.NodeTree) -> tuple[bpy.types.Node | None, Chain
 GROUP_OUTPUTS = {"CYCLES": "Cycles (Spectral Skin SSS)", "EEVEE": "EEVEE (Spectral Skin SSS)"}
 
 
+class GroupLevel(NamedTuple):
+    """A node group node ``node`` inside an artist's node group, whose output ``output`` reaches that node group's
+    Group Output through the layers ``chain`` there, and whose own node group holds the skin, at some depth."""
+    node: bpy.types.Node
+    output: bpy.types.NodeSocket
+    chain: Chain
+
+
 class GroupedSkin(NamedTuple):
     """An artist's node group node ``node`` whose output ``output`` reaches the active Material Output through the
-    layers ``outer`` (:func:`shader_chain`'s form), its node group holding the Principled BSDF ``principled`` that
-    reaches the group's Group Output there through the layers ``inner``."""
+    layers ``outer`` (:func:`shader_chain`'s form); its node group holds the Principled BSDF ``principled`` straight
+    (``levels`` empty) or in node groups nested there, each a :class:`GroupLevel` of ``levels``, outermost first;
+    ``principled`` reaches the Group Output of the node group it sits in through the layers ``inner``."""
     node: bpy.types.Node
     output: bpy.types.NodeSocket
     principled: bpy.types.Node
     inner: Chain
     outer: Chain
+    levels: list[GroupLevel]
 
 
 def group_output(tree: bpy.types.NodeTree) -> bpy.types.Node | None:
@@ -402,30 +413,45 @@ def group_output(tree: bpy.types.NodeTree) -> bpy.types.Node | None:
     return next((n for n in found if n.is_active_output), found[0] if found else None)
 
 
-def _inside(feed: bpy.types.NodeSocket) -> tuple[bpy.types.Node | None, Chain]:
-    """The Principled BSDF (and the layers between) reaching the Group Output's input behind the group node output
-    ``feed`` inside its own node group; (None, []) for anything else (a Principled BSDF deeper down included)."""
+#: How deep in nested node groups the skin's Principled BSDF is looked for (Blender forbids a group in itself, so
+#: the search ends anyway; this bounds it for trees nested absurdly deep).
+MAX_GROUP_DEPTH = 8
+
+
+def _inside(feed: bpy.types.NodeSocket, depth: int = 1) -> tuple[bpy.types.Node | None, Chain, list[GroupLevel]]:
+    """The Principled BSDF reaching the Group Output's input behind the group node output ``feed`` inside its own
+    node group, straight or through layers or through node groups nested there (at most :data:`MAX_GROUP_DEPTH`
+    deep), with the layers between it and the Group Output of the node group it sits in and the nested levels
+    (:class:`GroupedSkin`); (None, [], []) where there is none."""
     node = feed.node
     tree = node.node_tree if node.bl_idname == "ShaderNodeGroup" else None
-    if tree is None or is_addon_group(tree) or feed.name in GROUP_OUTPUTS.values():
-        return None, []
+    if tree is None or is_addon_group(tree) or feed.name in GROUP_OUTPUTS.values() or depth > MAX_GROUP_DEPTH:
+        return None, [], []
     gout = group_output(tree)
-    inner = next((s for s in gout.inputs if s.identifier == feed.identifier), None) if gout is not None else None
-    return _principled_chain(inner)
+    socket = next((s for s in gout.inputs if s.identifier == feed.identifier), None) if gout is not None else None
+    principled, inner = _principled_chain(socket)
+    if principled is not None:
+        return principled, inner, []
+    found = _chains_to(socket, lambda below: _inside(below, depth + 1)[0] is not None)
+    if not found:
+        return None, [], []
+    below, chain = found[0]
+    principled, inner, levels = _inside(below, depth + 1)
+    return principled, inner, [GroupLevel(below.node, below, chain), *levels]
 
 
 def grouped_skin(tree: bpy.types.NodeTree) -> GroupedSkin | None:
     """Where no Principled BSDF reaches the active Material Output at the material's level (:func:`shader_chain`):
-    the artist's node group node that does (an asset's skin shader), its Principled BSDF inside its own group
-    (straight or under layers there); the first in input order.  None where there is none, or where the Principled
-    BSDF sits deeper (in a group inside the group)."""
+    the artist's node group node that does (an asset's skin shader), its Principled BSDF inside its own group or in
+    node groups nested there (straight or under layers at each level); the first in input order.  None where there
+    is none."""
     out = active_output(tree)
     found = _chains_to(out.inputs["Surface"] if out is not None else None, lambda feed: _inside(feed)[0] is not None)
     if not found:
         return None
     feed, outer = found[0]
-    principled, inner = _inside(feed)
-    return GroupedSkin(feed.node, feed, principled, inner, outer)
+    principled, inner, levels = _inside(feed)
+    return GroupedSkin(feed.node, feed, principled, inner, outer, levels)
 
 
 def grouped_principled(tree: bpy.types.NodeTree) -> bpy.types.Node | None:
@@ -492,27 +518,42 @@ def artist_principled(material: bpy.types.Material) -> bpy.types.Node | None:
 
 def skin_chain(tree: bpy.types.NodeTree) -> Chain:
     """The artist's layers over the skin in ``tree`` (:func:`shader_chain`'s form): in a material's tree those over
-    its Principled BSDF, or over the node group node holding it (:func:`grouped_skin`); in such a node group those
-    between the Principled BSDF and the Group Output."""
+    its Principled BSDF, or over the node group node holding it (:func:`grouped_skin`); in such a node group, wired,
+    those between its Group Output and the Principled BSDF, or the node group node nested there that holds it
+    (:func:`_skin_output`)."""
     if not tree.is_embedded_data:
-        inside = _grouped_inside(tree)
-        return inside[1] if inside is not None else []
+        found = _skin_output(tree)
+        return found[1] if found is not None else []
     principled, chain = shader_chain(tree)
     skin = grouped_skin(tree) if principled is None else None
     return skin.outer if skin is not None else chain
 
 
-def _grouped_inside(tree: bpy.types.NodeTree) -> tuple[bpy.types.Node, Chain] | None:
-    """The Principled BSDF of the node group ``tree`` that the add-on renders for, and the layers between it and the
-    Group Output, found from the add-on's group node there (its record of the Group Output's input,
-    :data:`SKIN_OUTPUT_PROP`); None where the add-on wired nothing there."""
-    marker = grouped_group_node(tree)
+def _skin_output(tree: bpy.types.NodeTree, depth: int = 1) -> tuple[bpy.types.NodeSocket, Chain] | None:
+    """The Group Output input of the artist's node group ``tree`` through which the skin leaves it (what the add-on's
+    outputs there render instead) and the layers between it and the skin: the input that the add-on's group node
+    there records (:data:`SKIN_OUTPUT_PROP`), else the one reaching the nested node group node whose added outputs
+    feed this group's (found the same way inside it); None where the add-on wired nothing there."""
     gout = group_output(tree)
-    if marker is None or gout is None:
+    if gout is None or depth > MAX_GROUP_DEPTH:
         return None
-    socket = next((s for s in gout.inputs if s.identifier == marker[SKIN_OUTPUT_PROP]), None)
-    principled, chain = _principled_chain(socket)
-    return (principled, chain) if principled is not None else None
+    marker = grouped_group_node(tree)
+    if marker is not None:
+        socket = next((s for s in gout.inputs if s.identifier == marker[SKIN_OUTPUT_PROP]), None)
+        principled, chain = _principled_chain(socket)
+        return (socket, chain) if principled is not None else None
+    sockets = render_sockets(tree)
+    bottom = _copies_below(sockets[0])[1] if sockets else None
+    nested = bottom.node.node_tree if bottom is not None and bottom.node.bl_idname == "ShaderNodeGroup" else None
+    below = _skin_output(nested, depth + 1) if nested is not None else None
+    if below is None:
+        return None
+    artists = next((o for o in bottom.node.outputs if o.identifier == below[0].identifier), None)
+    for socket in gout.inputs:
+        found = _chains_to(socket, lambda feed: artists is not None and feed.as_pointer() == artists.as_pointer())
+        if socket.name not in GROUP_OUTPUTS.values() and found:
+            return socket, found[0][1]
+    return None
 
 
 #: Custom property on the add-on's group node inside an artist's node group: the identifier of the Group Output's
@@ -648,15 +689,16 @@ def feed_group_outputs(tree: bpy.types.NodeTree, sockets: dict[str, bpy.types.No
                        chain: Chain | None = None) -> None:
     """Make ``sockets[target]`` ("CYCLES", "EEVEE") what the artist's node group ``tree`` gives at its output
     :data:`GROUP_OUTPUTS` ``[target]`` (added to its interface where it has none), through a copy of the layers of
-    ``chain`` (its layers between the Principled BSDF and the Group Output) placed beside ``near``."""
+    ``chain`` (its layers between the skin and the Group Output) placed beside ``near``.  An output already fed
+    (the node group wired for another material) is left as it is."""
     gout = group_output(tree)
     for i, (target, socket) in enumerate(sockets.items()):
-        if chain:
-            socket = _copy_chain(tree, chain, socket, near, i)
         name = GROUP_OUTPUTS[target]
         if gout.inputs.get(name) is None:
             tree.interface.new_socket(name, in_out="OUTPUT", socket_type="NodeSocketShader")
-        tree.links.new(socket, gout.inputs[name])
+        elif gout.inputs[name].is_linked:
+            continue
+        tree.links.new(_copy_chain(tree, chain, socket, near, i) if chain else socket, gout.inputs[name])
 
 
 def _added_outputs(tree: bpy.types.NodeTree) -> list:
@@ -666,11 +708,12 @@ def _added_outputs(tree: bpy.types.NodeTree) -> list:
 
 
 def _group_in_use(tree: bpy.types.NodeTree) -> bool:
-    """Whether a material renders an output the add-on added to the node group ``tree`` (a link from it)."""
+    """Whether a material, or a node group holding it, renders an output the add-on added to the node group
+    ``tree`` (a link from it)."""
+    trees = [m.node_tree for m in bpy.data.materials if m.node_tree is not None] + list(bpy.data.node_groups)
     return any(node.bl_idname == "ShaderNodeGroup" and node.node_tree == tree
                and any(out.is_linked for out in node.outputs if out.name in GROUP_OUTPUTS.values())
-               for material in bpy.data.materials if material.node_tree is not None
-               for node in material.node_tree.nodes)
+               for holder in trees for node in holder.nodes)
 
 
 def grouped_group_node(tree: bpy.types.NodeTree) -> bpy.types.Node | None:
@@ -690,10 +733,14 @@ def unwire_group(tree: bpy.types.NodeTree) -> int:
 
 
 def unwire_unused_groups() -> int:
-    """:func:`unwire_group` for each artist's node group that the add-on wired and no material renders through any
-    more (its last material's add-on nodes removed, or its group node deleted); returns the nodes removed."""
-    return sum(unwire_group(tree) for tree in bpy.data.node_groups
-               if tree.is_editable and _added_outputs(tree) and not _group_in_use(tree))
+    """:func:`unwire_group` for each artist's node group that the add-on wired and nothing renders through any more
+    (its last material's add-on nodes removed, its group node deleted, or the node group around it unwired: until
+    none is left); returns the nodes removed."""
+    removed = 0
+    while unused := [tree for tree in bpy.data.node_groups
+                     if tree.is_editable and _added_outputs(tree) and not _group_in_use(tree)]:
+        removed += sum(unwire_group(tree) for tree in unused)
+    return removed
 
 
 #: Custom property on a layer's nodes (module docstring, "Metal and glass"): the Principled BSDF input it is for.

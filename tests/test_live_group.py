@@ -381,15 +381,19 @@ def test_operator_refuses_a_material_without_principled_and_changes_nothing(addo
 
 
 def test_a_principled_bsdf_inside_a_node_group_is_named_and_nothing_changes(addon):
-    """An asset's skin shader with its Principled BSDF two node groups deep (under a Mix Shader layer), deeper than
-    the live group reaches (one deep: tests/test_live_grouped.py); the operator names the group and says how to
-    ungroup it, and changes nothing."""
+    """An asset's skin shader with its Principled BSDF two node groups deep (under a Mix Shader layer) reaching the
+    inner group's output only through a Shader to RGB and an Emission (a toon set-up), which the live group cannot
+    render through (it goes through node groups and layers: tests/test_live_grouped.py); the operator names the
+    group and says how to ungroup it, and changes nothing."""
     obj, mat, _ = skin_object(None)
     tree = mat.node_tree
     inner = bpy.data.node_groups.new("Skin Core", "ShaderNodeTree")
     inner.interface.new_socket("BSDF", in_out="OUTPUT", socket_type="NodeSocketShader")
     bsdf = inner.nodes.new("ShaderNodeBsdfPrincipled")
-    inner.links.new(bsdf.outputs[0], inner.nodes.new("NodeGroupOutput").inputs[0])
+    toon, emission = inner.nodes.new("ShaderNodeShaderToRGB"), inner.nodes.new("ShaderNodeEmission")
+    inner.links.new(bsdf.outputs[0], toon.inputs[0])
+    inner.links.new(toon.outputs["Color"], emission.inputs["Color"])
+    inner.links.new(emission.outputs[0], inner.nodes.new("NodeGroupOutput").inputs[0])
     outer = bpy.data.node_groups.new("Skin Shader", "ShaderNodeTree")
     outer.interface.new_socket("BSDF", in_out="OUTPUT", socket_type="NodeSocketShader")
     core = outer.nodes.new("ShaderNodeGroup")

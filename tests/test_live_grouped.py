@@ -170,6 +170,58 @@ def test_a_grouped_principled_bsdf_renders_as_a_flat_one(tmp_path, scene):
     assert _state(group) == before_group and _state(mat.node_tree) == before_material
 
 
+def test_a_principled_bsdf_two_node_groups_deep_renders_as_a_flat_one(tmp_path, scene):
+    """The artist's node group inside another (a character pipeline's skin shader wrapping an asset's), the glow
+    mixed over it inside the outer one: the group node goes in the inner one, the outer one passes its outputs up,
+    and the render is bit for bit the flat material's; the layers in both groups follow; Remove Skin SSS gives back
+    both node groups as they were."""
+    image = _skin_image(tmp_path)
+    flat = _flat(image)
+    _invert(flat)
+    expected = render_linear(scene, tmp_path / "flat.exr")
+
+    group, principled = skin_group()
+    outer = bpy.data.node_groups.new("Character Skin", "ShaderNodeTree")
+    for name, kind in (("Albedo", "NodeSocketColor"), ("Roughness", "NodeSocketFloat")):
+        outer.interface.new_socket(name, in_out="INPUT", socket_type=kind)
+    outer.interface.new_socket("Shader", in_out="OUTPUT", socket_type="NodeSocketShader")
+    gin, gout, core = (outer.nodes.new(kind) for kind in ("NodeGroupInput", "NodeGroupOutput", "ShaderNodeGroup"))
+    core.node_tree = group
+    for name in ("Albedo", "Roughness"):
+        outer.links.new(gin.outputs[name], core.inputs[name])
+    glow, mix = outer.nodes.new("ShaderNodeEmission"), outer.nodes.new("ShaderNodeMixShader")
+    glow.inputs["Color"].default_value = (0.1, 1.0, 0.2, 1.0)
+    mix.inputs["Fac"].default_value = 0.3
+    outer.links.new(core.outputs["BSDF"], mix.inputs[1])
+    outer.links.new(glow.outputs[0], mix.inputs[2])
+    outer.links.new(mix.outputs[0], gout.inputs["Shader"])
+    mat = box_material(image, "principled")
+    tree = mat.node_tree
+    tex = tree.nodes.active
+    tree.nodes.remove(next(n for n in tree.nodes if n.bl_idname == "ShaderNodeBsdfPrincipled"))
+    node, rough = tree.nodes.new("ShaderNodeGroup"), tree.nodes.new("ShaderNodeValue")
+    node.node_tree = outer
+    rough.outputs[0].default_value = ROUGHNESS
+    tree.links.new(tex.outputs["Color"], node.inputs["Albedo"])
+    tree.links.new(rough.outputs[0], node.inputs["Roughness"])
+    tree.links.new(node.outputs["Shader"], wiring.active_output(tree).inputs["Surface"])
+    before = _state(group), _state(outer), _state(tree)
+    _invert(mat)
+    gnode = wiring.wired_group_node(mat)
+    assert gnode is not None and gnode.id_data == group and wiring.artist_principled(mat) == principled
+    assert len(wiring.chain_copies(outer)) == 2  # the glow's copies over what each renderer renders
+    np.testing.assert_array_equal(render_linear(scene, tmp_path / "nested.exr"), expected)
+    mix.inputs["Fac"].default_value = 0.6  # the outer group's layer, and the inner group's, follow
+    emission = next(n for n in group.nodes if n.bl_idname == "ShaderNodeEmission")
+    emission.inputs["Strength"].default_value = 0.7
+    bpy.context.view_layer.update()
+    assert [c.inputs["Fac"].default_value for c in wiring.chain_copies(outer)] == pytest.approx([0.6, 0.6])
+    assert all(c.inputs[1].links[0].from_node == emission for c in wiring.chain_copies(group))
+    assert set(json.loads(mat[wiring.TAKEN_INPUTS_PROP])[follow.GROUP_LAYERS]) == {group.name, outer.name}
+    _remove(mat)
+    assert (_state(group), _state(outer), _state(tree)) == before
+
+
 def test_the_grouped_skin_follows_the_artist_and_is_shared(tmp_path, scene, capfd):
     """Inputs changed inside the node group reach the group node there (roughness, the emission layer's strength,
     Metallic up to 0 and back); a second material using the same node group is wired through the same group node,
@@ -201,7 +253,7 @@ def test_the_grouped_skin_follows_the_artist_and_is_shared(tmp_path, scene, capf
     bpy.context.view_layer.update()
     assert wiring.present_layers(group) == {"Metallic"}
     record = json.loads(first[wiring.TAKEN_INPUTS_PROP])
-    assert record[follow.GROUP_LAYERS][0][0] == add.name
+    assert record[follow.GROUP_LAYERS][group.name][0][0] == add.name
 
     capfd.readouterr()
     _invert(second)
