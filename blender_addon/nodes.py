@@ -824,11 +824,13 @@ def wire_into_material(material: bpy.types.Material, group: bpy.types.NodeTree,
 def _wire_grouped(material: bpy.types.Material, group: bpy.types.NodeTree, skin: wiring.GroupedSkin, output: str,
                   eevee_output: str) -> bpy.types.Node:
     """:func:`wire_into_material` where the artist's Principled BSDF sits in a node group (wiring.grouped_skin): the
-    group node goes into that node group beside it, taking its inputs there, and feeds two outputs added to the node
-    group's interface (wiring.feed_group_outputs); the material's Material Outputs of target Cycles and EEVEE are fed
+    group node goes into the node group it sits in (the innermost, where groups are nested) beside it, taking its
+    inputs there, and feeds two outputs added to that node group's interface (wiring.feed_group_outputs), which each
+    node group around it passes up the same way; the material's Material Outputs of target Cycles and EEVEE are fed
     by those outputs of the artist's group node.  Another material already wired through the same node group keeps
     its group node there (one for every material using it)."""
-    inner = (skin.levels[-1].node if skin.levels else skin.node).node_tree  # the node group the skin is in
+    holder = skin.levels[-1] if skin.levels else skin  # the group node whose node group the skin is in
+    inner = holder.node.node_tree
     gnode = wiring.grouped_group_node(inner)
     if gnode is None or gnode.node_tree != group:
         wiring.unwire_group(inner)
@@ -840,7 +842,7 @@ def _wire_grouped(material: bpy.types.Material, group: bpy.types.NodeTree, skin:
         gnode.label = group.name
         gnode.location = (principled.location.x, principled.location.y - 700.0)
         gnode.parent = frame
-        gnode[wiring.SKIN_OUTPUT_PROP] = skin.output.identifier
+        gnode[wiring.SKIN_OUTPUT_PROP] = holder.output.identifier
         wiring.feed_group_outputs(inner, {"CYCLES": gnode.outputs[output], "EEVEE": gnode.outputs[eevee_output]},
                                   gnode, skin.inner)
         _take_surface_inputs(inner, principled, gnode)

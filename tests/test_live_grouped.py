@@ -182,9 +182,9 @@ def test_a_principled_bsdf_two_node_groups_deep_renders_as_a_flat_one(tmp_path, 
 
     group, principled = skin_group()
     outer = bpy.data.node_groups.new("Character Skin", "ShaderNodeTree")
-    for name, kind in (("Albedo", "NodeSocketColor"), ("Roughness", "NodeSocketFloat")):
+    outer.interface.new_socket("Shader", in_out="OUTPUT", socket_type="NodeSocketShader")  # first: its identifier
+    for name, kind in (("Albedo", "NodeSocketColor"), ("Roughness", "NodeSocketFloat")):  # is not the inner one's
         outer.interface.new_socket(name, in_out="INPUT", socket_type=kind)
-    outer.interface.new_socket("Shader", in_out="OUTPUT", socket_type="NodeSocketShader")
     gin, gout, core = (outer.nodes.new(kind) for kind in ("NodeGroupInput", "NodeGroupOutput", "ShaderNodeGroup"))
     core.node_tree = group
     for name in ("Albedo", "Roughness"):
