@@ -416,14 +416,16 @@ class AddonBake:
                 out_links = [ln for ln in self.material.node_tree.links
                              if ln.to_node.bl_idname == "ShaderNodeOutputMaterial" and ln.to_socket.name == "Surface"]
                 previous_surface = [(ln.from_socket, ln.to_socket) for ln in out_links]
-                gnode = nodes.wire_into_material(self.material, group, images)
+                skin, why_not = wiring.bake_into_group(self.material, self.source_node)
+                gnode = nodes.wire_into_material(self.material, group, images, into_group=skin is not None)
                 oblique.wire_baked(self.material, gnode)
                 created_nodes = [n.name for n in self.material.node_tree.nodes if n.name not in before]
                 gnode.inputs["IOR"].default_value = self.options.ior  # the IOR the maps were baked for
                 self._follow_source_uv(gnode)
                 follow.record(self.material, self.options.unit_scale_m)
-                report += (f", {self.backend} node group wired into '{self.material.name}'"
-                           + wiring.grouped_warning(self.material))
+                inside = f" inside its node group '{gnode.id_data.name}'" if skin is not None else ""
+                report += (f", {self.backend} node group wired into '{self.material.name}'{inside}"
+                           + wiring.grouped_warning(why_not))
             else:
                 report += f", {self.backend} node group '{group.name}' built (no active material to wire)"
         except BaseException:
@@ -482,15 +484,20 @@ class AddonBake:
         src = self.source_node
         if src is None or self.material is None:
             return
-        tree = self.material.node_tree
-        vec = src.inputs["Vector"]
+        tree = gnode.id_data
+        feed = wiring.feeding_socket(src.inputs["Vector"])
+        if feed is not None and tree != src.id_data:  # inside the artist's node group: a UV Map node of its own
+            uv = wiring.tag(tree.nodes.new("ShaderNodeUVMap"))  # (wiring.bake_into_group: the albedo reads a UV map)
+            uv.uv_map, uv.parent = feed.node.uv_map, gnode.parent
+            uv.location = (gnode.location.x - 700.0, gnode.location.y - 300.0)
+            feed = uv.outputs["UV"]
         for sock in gnode.inputs:
             tex = oblique.map_node(sock)  # a map, also behind the grazing-light correction's Multiply
             if tex is None or tex.bl_idname != "ShaderNodeTexImage":
                 continue
             tex.projection, tex.extension = src.projection, src.extension
-            if vec.is_linked:
-                tree.links.new(vec.links[0].from_socket, tex.inputs["Vector"])
+            if feed is not None:
+                tree.links.new(feed, tex.inputs["Vector"])
 
     def _undo_apply(self, images, node_names, groups_before, osl_before, previous_surface, previous_prop) -> None:
         if self.material is not None:
@@ -507,6 +514,7 @@ class AddonBake:
                 del self.material[nodes.PREVIOUS_SURFACE_PROP]
             wiring.restore_shadow_thickness(self.material)  # recorded by this wiring (unwire removed the last)
             self.material.pop(wiring.TAKEN_INPUTS_PROP, None)
+            wiring.unwire_unused_groups()  # a node group the maps went into, its material's nodes gone
         for image in images:
             bpy.data.images.remove(image)
         for name in set(bpy.data.node_groups.keys()) - groups_before:

@@ -923,17 +923,9 @@ def _grouped_text(material: bpy.types.Material, gnode: bpy.types.Node) -> str:
     tree = gnode.id_data
     if tree == material.node_tree:
         return ""
-    others = sorted(m.name for m in bpy.data.materials if m != material and m.node_tree is not None
-                    and _holds(m.node_tree, tree))
+    others = sorted(m.name for m in wiring.group_users(tree) if m != material)
     shared = f", shared with {', '.join(repr(name) for name in others)}" if others else ""
     return f" inside its node group '{tree.name}'{shared}"
-
-
-def _holds(tree: bpy.types.NodeTree, group: bpy.types.NodeTree, depth: int = 1) -> bool:
-    """Whether ``tree`` uses the node group ``group``, in a group node of its own or of the node groups it uses."""
-    return depth <= wiring.MAX_GROUP_DEPTH and any(
-        node.bl_idname == "ShaderNodeGroup" and node.node_tree is not None
-        and (node.node_tree == group or _holds(node.node_tree, group, depth + 1)) for node in tree.nodes)
 
 
 def outside_report(table: texel_table.TexelTable, image: bpy.types.Image, colorspace: str) -> str:

@@ -756,7 +756,7 @@ def set_constant_inputs(node: bpy.types.Node, components: list[dict]) -> None:
 def wire_into_material(material: bpy.types.Material, group: bpy.types.NodeTree,
                        images: dict[tuple[int, str], bpy.types.Image] | None = None,
                        interpolation: str = "Closest", output: str = "BSSRDF",
-                       eevee_output: str | None = None) -> bpy.types.Node:
+                       eevee_output: str | None = None, into_group: bool = False) -> bpy.types.Node:
     """Add the group (and Image Texture nodes for ``images[(k, kind)]``) to ``material``.
 
     Every node and link of the artist's is kept: the active Material Output stays fed by what fed it (the Principled
@@ -771,14 +771,16 @@ def wire_into_material(material: bpy.types.Material, group: bpy.types.NodeTree,
     (wiring.use_shadow_thickness: back-lit thin parts glow in EEVEE too).  New nodes sit in a frame labelled
     "Spectral Skin SSS" and are tagged (``wiring.ADDED_PROP``) for removal.  Images are set to Non-Color.
     ``interpolation`` defaults to Closest because the maps hold Cycles' colour A, not the albedo alpha = f(A), and f
-    is non-linear (linear filtering gives a small bias at texel edges).
+    is non-linear (linear filtering gives a small bias at texel edges).  Where the Principled BSDF sits in a node
+    group (wiring.grouped_skin) the group goes inside it (:func:`_wire_grouped`): always without ``images`` (the live
+    group), with them where ``into_group`` (wiring.bake_into_group).
     Raises ValueError for a linked material (wiring.linked_error).
     Undo: call from an operator with ``bl_options = {'REGISTER', 'UNDO'}``.
     """
     error = wiring.linked_error(material)
     if error:
         raise ValueError(error)
-    skin = wiring.grouped_skin(material.node_tree) if not images and wiring.shader_chain(
+    skin = wiring.grouped_skin(material.node_tree) if (into_group or not images) and wiring.shader_chain(
         material.node_tree)[0] is None else None
     if skin is not None:
         error = next(filter(None, (wiring.group_linked_error(node.node_tree)
@@ -786,7 +788,9 @@ def wire_into_material(material: bpy.types.Material, group: bpy.types.NodeTree,
         if error:
             raise ValueError(error)
         wiring.unwire(material)
-        return _wire_grouped(material, group, skin, output, eevee_output or output)
+        gnode = _wire_grouped(material, group, skin, output, eevee_output or output)
+        _add_maps(gnode, images or {}, interpolation)
+        return gnode
     wiring.unwire(material)
     tree = material.node_tree
     out = wiring.active_output(tree)
@@ -809,16 +813,23 @@ def wire_into_material(material: bpy.types.Material, group: bpy.types.NodeTree,
     _take_surface_inputs(tree, principled if chain else previous, gnode)
     if principled is not None:
         wiring.insert_base_layers(tree, principled, gnode)
-    for i, ((k, kind), image) in enumerate(sorted((images or {}).items())):
+    _add_maps(gnode, images or {}, interpolation)
+    return gnode
+
+
+def _add_maps(gnode: bpy.types.Node, images: dict[tuple[int, str], bpy.types.Image], interpolation: str) -> None:
+    """Image Texture nodes (tagged, Non-Color, in the group node's frame) for ``images[(k, kind)]``, each feeding
+    the mixture group node ``gnode``'s input of that map."""
+    tree = gnode.id_data
+    for i, ((k, kind), image) in enumerate(sorted(images.items())):
         image.colorspace_settings.name = "Non-Color"
         tex = wiring.tag(tree.nodes.new("ShaderNodeTexImage"))
         tex.image = image
         tex.interpolation = interpolation
         tex.label = socket_name(k, kind)
         tex.location = (gnode.location.x - 400.0, gnode.location.y - 60.0 * i)
-        tex.parent = frame
+        tex.parent = gnode.parent
         tree.links.new(tex.outputs["Color"], gnode.inputs[socket_name(k, kind)])
-    return gnode
 
 
 def _wire_grouped(material: bpy.types.Material, group: bpy.types.NodeTree, skin: wiring.GroupedSkin, output: str,

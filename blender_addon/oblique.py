@@ -140,9 +140,9 @@ def wire_baked(material: bpy.types.Material, gnode: bpy.types.Node) -> bpy.types
     baked albedo) and the mixture's Normal.  The new nodes are tagged (Remove Skin SSS removes them).  Returns the
     Grazing node, or None when the material has no Principled BSDF behind the group (wiring.artist_principled:
     straight or under Mix Shader and Add Shader layers; nothing is changed then)."""
-    tree = material.node_tree
+    tree = gnode.id_data  # the material's tree, or the artist's node group it went into
     source = wiring.artist_principled(material)
-    if source is None:
+    if source is None or source.id_data != tree:
         return None
     grazing = wiring.tag(tree.nodes.new("ShaderNodeGroup"))
     grazing.node_tree = ensure_group()

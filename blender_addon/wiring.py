@@ -61,7 +61,9 @@ artist's Principled BSDF to the exporters; a material that does not use the adde
 renderers compile only what reaches an output).  Every material using the node group renders through the one group
 node in it.  :func:`unwire` takes the add-on's nodes and outputs out of a node group once no material renders
 through it (:func:`unwire_unused_groups`).  A Principled BSDF that reaches its group's output through other
-nodes is refused (:func:`grouped_principled` names the group).
+nodes is refused (:func:`grouped_principled` names the group).  Baked maps go in the same way where the node group
+is the material's alone and the albedo reads a UV map (:func:`bake_into_group`), else over the group node, with a
+warning (:func:`grouped_warning`).
 
 **Linked data.**  A material linked from another .blend, or a library override of one, cannot keep node edits
 (they are not saved: the library's material comes back on reload), so :func:`linked_error` says so and what to do.
@@ -472,16 +474,53 @@ def grouped_principled(tree: bpy.types.NodeTree) -> bpy.types.Node | None:
     return None
 
 
-def grouped_warning(material: bpy.types.Material) -> str:
-    """The report's warning where baked maps render in place of a Principled BSDF that sits inside a node group
-    (:func:`grouped_principled`): they render the skin alone, none of the inputs it has in there; else ""."""
+def uses_group(tree: bpy.types.NodeTree, group: bpy.types.NodeTree, depth: int = 1) -> bool:
+    """Whether ``tree`` uses the node group ``group``, in a group node of its own or of the node groups it uses."""
+    return depth <= MAX_GROUP_DEPTH and any(
+        node.bl_idname == "ShaderNodeGroup" and node.node_tree is not None
+        and (node.node_tree == group or uses_group(node.node_tree, group, depth + 1)) for node in tree.nodes)
+
+
+def group_users(group: bpy.types.NodeTree) -> list[bpy.types.Material]:
+    """The materials using the node group ``group`` (:func:`uses_group`)."""
+    return [m for m in bpy.data.materials if m.node_tree is not None and uses_group(m.node_tree, group)]
+
+
+def bake_into_group(material: bpy.types.Material,
+                    albedo: bpy.types.Node | None) -> tuple[GroupedSkin | None, str]:
+    """Whether baked maps can render inside the artist's node group that holds the Principled BSDF
+    (:func:`grouped_skin`), as the live group does: (the grouped skin, "") where they can, (None, why not) where the
+    Principled BSDF sits in a node group they cannot go into, (None, "") where it sits in none.  They cannot where
+    that node group is also another material's (the maps are this material's) or where the albedo's Image Texture
+    ``albedo`` reads other coordinates than a UV map (the maps must read the same ones, from inside the group)."""
     tree = material.node_tree
-    grouped = grouped_principled(tree) if tree is not None and shader_chain(tree)[0] is None else None
+    if shader_chain(tree)[0] is not None:
+        return None, ""
+    skin = grouped_skin(tree)
+    grouped = skin.levels[-1].node.node_tree if skin is not None and skin.levels else \
+        skin.node.node_tree if skin is not None else None
     if grouped is None:
+        found = grouped_principled(tree)
+        return None, (f"the Principled BSDF inside node group '{found.node_tree.name}' is not reached"
+                      if found is not None else "")
+    others = [m.name for m in group_users(grouped) if m != material]
+    if others:
+        names = ", ".join(f"'{name}'" for name in sorted(others))
+        return None, f"node group '{grouped.name}', which holds the Principled BSDF, is also used by {names}"
+    feed = feeding_socket(albedo.inputs["Vector"]) if albedo is not None else None
+    if feed is not None and feed.node.bl_idname != "ShaderNodeUVMap":
+        return None, f"the albedo's Image Texture reads other coordinates than a UV map (from '{feed.node.name}')"
+    return skin, ""
+
+
+def grouped_warning(why: str) -> str:
+    """The report's warning where baked maps render over a node group holding the Principled BSDF instead of inside
+    it (``why``, :func:`bake_into_group`): they render the skin alone, none of the inputs it has in there; "" where
+    ``why`` is empty."""
+    if not why:
         return ""
-    return (f"; warning: the Principled BSDF inside node group '{grouped.node_tree.name}' is not read, so the maps "
-            "render without its normal map, roughness, specular, coat, metal or alpha: choose the live group, which "
-            "reads it there, or ungroup it (select the group node, Ctrl+Alt+G) and bake again")
+    return (f"; warning: {why}, so the maps render over the group, without its normal map, roughness, specular, "
+            "coat, metal or alpha: choose the live group, which reads it there")
 
 
 def _holds_principled(tree: bpy.types.NodeTree | None, seen: set[str]) -> bool:

@@ -413,24 +413,31 @@ def test_a_principled_bsdf_inside_a_node_group_is_named_and_nothing_changes(addo
     assert snapshot() == state
 
 
-def test_baked_maps_over_a_grouped_principled_bsdf_warn(addon, tmp_path, capfd):
-    """Bake maps wires where the Principled BSDF sits in a node group, and its report warns, naming the group, that
-    the maps render without the inputs the group holds (the live group reads it there: tests/test_live_grouped.py)."""
+def test_baked_maps_over_a_shared_grouped_principled_bsdf_warn(addon, tmp_path, capfd):
+    """Bake maps goes into the node group holding the Principled BSDF (tests/test_live_grouped.py) only where that
+    node group is this material's alone (the maps are one material's): where another material uses it too, the maps
+    are wired over the group node and the report warns, naming the node group and the other material, that they
+    render without the inputs the group holds."""
     obj, mat, tex = skin_object(write_image(tmp_path / "skin.png", skin_codes(), "uint8"))
     tree = mat.node_tree
     group = group_the_principled(mat)
+    other = bpy.data.materials.new("Other")
+    other.node_tree.nodes.new("ShaderNodeGroup").node_tree = group
     bsdf = next(n for n in group.nodes if n.bl_idname == "ShaderNodeBsdfPrincipled")
     tree.nodes.active = tex
     capfd.readouterr()
     assert run_invert(obj, mode="BAKE") == {"FINISHED"}
-    assert wiring.wired_group_node(mat) is not None
-    assert "Principled BSDF inside node group 'Skin Shader' is not read" in capfd.readouterr().out
+    gnode = wiring.wired_group_node(mat)
+    assert gnode is not None and gnode.id_data == tree
+    assert ("node group 'Skin Shader', which holds the Principled BSDF, is also used by 'Other', so the maps render "
+            "over the group") in capfd.readouterr().out
     bsdf.inputs["Roughness"].default_value = 0.2
     assert follow.follow(mat) == []  # nothing of the node group is taken over baked maps (nor across node trees)
-    tree.links.new(tex.outputs["Color"], tree.nodes.new("ShaderNodeBsdfPrincipled").inputs["Base Color"])
-    tree.links.new(tree.nodes["Principled BSDF"].outputs[0], tree.nodes["Material Output"].inputs["Surface"])
-    assert run_invert(obj, mode="BAKE") == {"FINISHED"}  # the skin's own Principled BSDF: no warning
-    assert "warning" not in capfd.readouterr().out.lower()
+    bpy.data.materials.remove(other)
+    with bpy.context.temp_override(object=obj, active_object=obj):
+        assert bpy.ops.spectral_skin.remove() == {"FINISHED"}
+    assert run_invert(obj, mode="BAKE") == {"FINISHED"}  # the node group is the material's alone: inside, no warning
+    assert wiring.wired_group_node(mat).id_data == group and "warning" not in capfd.readouterr().out.lower()
 
 
 # -- EEVEE -----------------------------------------------------------------------------------------------------

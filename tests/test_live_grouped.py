@@ -22,7 +22,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 import blender_addon  # noqa: E402
-from blender_addon import follow, live_edits, probe, wiring  # noqa: E402
+from blender_addon import follow, live_edits, oblique, probe, wiring  # noqa: E402
 from tests.addon_scene import render_linear, write_image  # noqa: E402
 from tests.test_bake_painted_colour import box_material  # noqa: E402
 
@@ -379,3 +379,44 @@ def test_a_saved_file_and_a_single_user_copy_of_the_node_group(tmp_path, scene):
     assert wiring.wired_group_node(second) == gnode
     _remove(second)
     assert _state(group) == before_group
+
+
+def _uv_mapped(material: bpy.types.Material) -> None:
+    """The albedo's Image Texture read through a UV Map node (the probe box's object coordinates taken out; the
+    texture is one colour, so the render is the same)."""
+    tree = material.node_tree
+    tex = next(n for n in tree.nodes if n.bl_idname == "ShaderNodeTexImage")
+    tree.links.new(tree.nodes.new("ShaderNodeUVMap").outputs["UV"], tex.inputs["Vector"])
+    tree.nodes.active = tex
+
+
+def test_baked_maps_go_inside_a_grouped_skin_and_render_as_flat(tmp_path, scene):
+    """Bake maps on a grouped material whose node group is its own and whose albedo reads a UV map: the mixture group,
+    its maps (reading the same UV map through a UV Map node of their own), the grazing-light correction and the
+    metal layer go inside the node group, and the render is bit for bit that of the same material built flat and
+    baked; Remove Skin SSS gives back the node group and the material as they were."""
+    image = _skin_image(tmp_path)
+    flat = _flat(image)
+    _uv_mapped(flat)
+    slab = bpy.data.objects["ProbeSlab"]
+    slab.active_material = flat
+    with bpy.context.temp_override(object=slab, active_object=slab):
+        assert bpy.ops.spectral_skin.invert_albedo(mode="BAKE") == {"FINISHED"}
+    expected = render_linear(scene, tmp_path / "flat_baked.exr")
+
+    group, principled = skin_group()
+    mat = grouped_material(image, group)
+    _uv_mapped(mat)
+    before = _state(group), _state(mat.node_tree)
+    slab.active_material = mat
+    with bpy.context.temp_override(object=slab, active_object=slab):
+        assert bpy.ops.spectral_skin.invert_albedo(mode="BAKE") == {"FINISHED"}
+    gnode = wiring.wired_group_node(mat)
+    assert gnode is not None and gnode.id_data == group and "k1 Color" in gnode.inputs
+    uv = next(n for n in group.nodes if n.bl_idname == "ShaderNodeUVMap")
+    maps = [oblique.map_node(s) for s in gnode.inputs if s.name.startswith("k")]
+    assert maps and all(m.id_data == group and m.inputs["Vector"].links[0].from_node == uv for m in maps)
+    assert wiring.present_layers(group) == {"Metallic"}
+    np.testing.assert_array_equal(render_linear(scene, tmp_path / "grouped_baked.exr"), expected)
+    _remove(mat)
+    assert (_state(group), _state(mat.node_tree)) == before
