@@ -319,6 +319,7 @@ def main() -> dict:
     # The live material again, its Principled BSDF inside a node group: the live group goes in there and renders the
     # sphere as it rendered the flat material; Remove Skin SSS gives back the node group as it was.
     obj = skin_scene()
+    bpy.context.scene.cycles.shading_system = False  # SVM, as the flat renders it is compared with (OSL is on above)
     material = textured_material(obj, "SkinGrouped", image)
     group = group_the_principled(material)
     before = sorted(n.name for n in group.nodes), len(group.interface.items_tree)
@@ -328,6 +329,21 @@ def main() -> dict:
         out["grouped_centre"] = render_centre(bpy.context.scene)
         bpy.ops.spectral_skin.remove()
     out["grouped_restored"] = (sorted(n.name for n in group.nodes), len(group.interface.items_tree)) == before
+    # Baked maps go into the same node group (the material's alone, the albedo on the default UVs) and render the
+    # sphere as the flat material's baked maps do (rendered here, in the same scene state).
+    flat_obj = skin_scene()
+    textured_material(flat_obj, "SkinFlatBake", image)
+    with bpy.context.temp_override(object=flat_obj, active_object=flat_obj):
+        bpy.ops.spectral_skin.invert_albedo(mode="BAKE", exact=True)
+    out["flat_bake_centre"] = render_centre(bpy.context.scene)
+    obj = skin_scene()
+    obj.data.materials.append(material)
+    with bpy.context.temp_override(object=obj, active_object=obj):
+        out["grouped_bake"] = sorted(bpy.ops.spectral_skin.invert_albedo(mode="BAKE", exact=True))
+        out["grouped_bake_inside"] = sum(n.bl_idname == "ShaderNodeTexImage" for n in group.nodes)
+        out["grouped_bake_centre"] = render_centre(bpy.context.scene)
+        bpy.ops.spectral_skin.remove()
+    out["grouped_bake_restored"] = (sorted(n.name for n in group.nodes), len(group.interface.items_tree)) == before
 
     # The live group's node math: its media for colours in and out of the skin box (the caller compares with 5.0's).
     out["live_media"] = live_media(f"{EXTENSION}.blender_addon")

@@ -96,6 +96,9 @@ def test_installs_bakes_renders_and_exits_cleanly(case, python, version, py_vers
     assert out["grouped_invert"] == ["FINISHED"] and out["grouped_restored"], out
     assert out["grouped_outputs"] == ["BSDF", "Cycles (Spectral Skin SSS)", "EEVEE (Spectral Skin SSS)"]
     np.testing.assert_allclose(out["grouped_centre"], out["live_centre"], rtol=1e-6)
+    assert out["grouped_bake"] == ["FINISHED"] and out["grouped_bake_restored"], out
+    assert out["grouped_bake_inside"] == 12  # K = 3: the twelve maps, in the node group
+    np.testing.assert_allclose(out["grouped_bake_centre"], out["flat_bake_centre"], rtol=1e-6)
     # The live group's nodes compute the same media in every version (its curves, Map Ranges, clamps and mixes).
     for name, reference in blender_50["live_media"].items():
         np.testing.assert_allclose(out["live_media"][name], reference, rtol=2e-4, atol=1e-6, err_msg=name)
