@@ -26,8 +26,10 @@ import errno
 import functools
 import math
 import os
+import signal
 import sys
 import tempfile
+import threading
 import zipfile
 from collections.abc import Iterator
 from pathlib import Path
@@ -443,30 +445,78 @@ BAD_INPUT = (InputError, ValueError, FileNotFoundError, FileExistsError, Permiss
 
 def guarded(prog: str, kept: str = NOTHING_KEPT, failed: tuple[type[BaseException], ...] = ()):
     """Decorator of a command's ``main(argv) -> int``: bad input (``BAD_INPUT``) -> one line, exit 2; a failed
-    task (``failed``) -> one line, exit 1; Ctrl-C -> one line saying what was ``kept``, exit 130."""
+    task (``failed``) -> one line, exit 1; Ctrl-C -> one line saying what was ``kept``, exit 130.
+
+    Ctrl-C raises KeyboardInterrupt where Python is running; one that lands in a callback from C (numba's compiler
+    calls back into Python while it compiles a kernel) is swallowed there, and the compiler then fails on its own
+    half-built state.  So a Ctrl-C is also remembered (:func:`_watch_ctrl_c`): whatever error follows it, or a
+    command finishing after it, ends the same way as the KeyboardInterrupt would have."""
     def wrap(main):
         @functools.wraps(main)
         def run(argv):
+            interrupted, restore = _watch_ctrl_c()
             try:
-                return int(main(argv) or 0)
+                code = int(main(argv) or 0)
+                return _interrupted(prog, kept) if interrupted() else code
             except SystemExit as exc:  # argparse: --help (0) or a one-line usage error (2), already printed
                 return exc.code if isinstance(exc.code, int) else EXIT_BAD_INPUT
             except KeyboardInterrupt:
-                print(f"\n{prog}: interrupted: {kept}", file=sys.stderr)
-                # Objects the interrupt cut short (a numba compilation, say) may fail in __del__ when the
-                # interpreter tears them down; Python prints those as "Exception ignored" after the one line.
-                sys.unraisablehook = _ignore_unraisable
-                return EXIT_INTERRUPTED
-            except failed as exc:
-                print(f"error: {one_line(exc)}", file=sys.stderr)
-                return EXIT_FAILED
-            except BAD_INPUT as exc:
-                print(f"error: {one_line(exc)}", file=sys.stderr)
-                return EXIT_BAD_INPUT
+                return _interrupted(prog, kept)
+            except Exception as exc:
+                if interrupted():
+                    return _interrupted(prog, kept)
+                if isinstance(exc, failed):
+                    print(f"error: {one_line(exc)}", file=sys.stderr)
+                    return EXIT_FAILED
+                if isinstance(exc, BAD_INPUT):
+                    print(f"error: {one_line(exc)}", file=sys.stderr)
+                    return EXIT_BAD_INPUT
+                raise
+            finally:
+                restore()
 
         return run
 
     return wrap
+
+
+def _interrupted(prog: str, kept: str) -> int:
+    """Say that ``prog`` was interrupted and what was ``kept`` (one line); the exit status of Ctrl-C."""
+    print(f"\n{prog}: interrupted: {kept}", file=sys.stderr)
+    # Objects the interrupt cut short (a numba compilation, say) may fail in __del__ when the interpreter tears
+    # them down; Python prints those as "Exception ignored" after the one line.
+    sys.unraisablehook = _ignore_unraisable
+    return EXIT_INTERRUPTED
+
+
+def _watch_ctrl_c():
+    """Where Ctrl-C raises KeyboardInterrupt (Python's own handler, in the main thread: not where the process was
+    started with it ignored), remember each Ctrl-C as well, and drop Python's report of one swallowed in a callback
+    from C; returns (the function that says whether one arrived, the function that puts Python's handler and report
+    back: the report stays dropped once one arrived, see :func:`_interrupted`)."""
+    arrived = threading.Event()
+    if threading.current_thread() is not threading.main_thread() \
+            or signal.getsignal(signal.SIGINT) is not signal.default_int_handler:
+        return arrived.is_set, lambda: None
+
+    def on_ctrl_c(signum, frame):
+        arrived.set()
+        signal.default_int_handler(signum, frame)
+
+    hook = sys.unraisablehook
+
+    def quiet_ctrl_c(unraisable) -> None:
+        if not isinstance(unraisable.exc_value, KeyboardInterrupt):
+            hook(unraisable)
+
+    def restore() -> None:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+        if sys.unraisablehook is quiet_ctrl_c:
+            sys.unraisablehook = hook
+
+    signal.signal(signal.SIGINT, on_ctrl_c)
+    sys.unraisablehook = quiet_ctrl_c
+    return arrived.is_set, restore
 
 
 def _ignore_unraisable(unraisable) -> None:

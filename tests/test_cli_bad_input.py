@@ -440,6 +440,41 @@ def test_second_process_then_ctrl_c(tmp_path):
     assert not (out / ".lock").exists()
 
 
+#: A guarded command whose Ctrl-C lands in a callback from C, as one does while numba compiles a kernel (its
+#: compiler calls back into Python): Python swallows the KeyboardInterrupt there, and the command then fails on the
+#: state the interrupt left ("fail") or runs on to its end ("finish").
+_CTRL_C_IN_A_CALLBACK = """
+import ctypes, os, signal, sys
+from exporters.cli_io import RESUME_KEPT, guarded
+
+@guarded("python -m training dataset", RESUME_KEPT)
+def main(argv):
+    @ctypes.CFUNCTYPE(None)
+    def callback():
+        os.kill(os.getpid(), signal.SIGINT)
+        for _ in range(100000):  # Python runs its Ctrl-C handler here, inside the callback
+            pass
+
+    callback()
+    if argv == ["fail"]:
+        raise RuntimeError("no compiled object yet for <Library '_exponential_slow'>")
+    return 0
+
+sys.exit(main(sys.argv[1:]))
+"""
+
+
+@pytest.mark.parametrize("then", ["fail", "finish"])
+def test_ctrl_c_swallowed_in_a_callback_still_ends_the_command(then):
+    """Ctrl-C during a numba compilation: whether the compiler then fails or the command runs on, it ends as
+    Ctrl-C does, one line and exit 130, without Python's report of the swallowed interrupt or a traceback."""
+    proc = subprocess.run([sys.executable, "-c", _CTRL_C_IN_A_CALLBACK, then], capture_output=True, text=True,
+                          timeout=60, env=_env(), cwd=ROOT)
+    assert proc.returncode == 130, proc.stderr
+    assert "Traceback" not in proc.stderr and "Exception ignored" not in proc.stderr, proc.stderr
+    assert proc.stderr.strip().count("\n") == 0 and "interrupted" in proc.stderr, proc.stderr
+
+
 @pytest.mark.parametrize("scheduler", ["slurm", "tcp://127.0.0.1:9"])
 def test_scheduler_that_cannot_start(tmp_path, scheduler):
     """No sbatch / nothing listening: one line within 30 s, exit 2, nothing written."""
