@@ -423,9 +423,8 @@ class AddonBake:
                 gnode.inputs["IOR"].default_value = self.options.ior  # the IOR the maps were baked for
                 self._follow_source_uv(gnode)
                 follow.record(self.material, self.options.unit_scale_m)
-                inside = f" inside its node group '{gnode.id_data.name}'" if skin is not None else ""
-                report += (f", {self.backend} node group wired into '{self.material.name}'{inside}"
-                           + wiring.grouped_warning(why_not))
+                report += (f", {self.backend} node group wired into '{self.material.name}'"
+                           f"{wiring.grouped_text(self.material, gnode)}" + wiring.grouped_warning(why_not))
             else:
                 report += f", {self.backend} node group '{group.name}' built (no active material to wire)"
         except BaseException:

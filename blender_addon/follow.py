@@ -134,18 +134,23 @@ def record(material: bpy.types.Material, unit_scale_m: float) -> None:
         layers = _layers_state(material.node_tree)
         if layers is not None:
             taken[LAYERS] = layers
-        groups = _wired_groups(material, gnode)
+        groups = _wired_groups(_grouped(material, gnode), gnode)
         if groups:
             taken[GROUP_LAYERS] = {tree.name: _layers_state(tree) for tree, _ in groups}
         material[wiring.TAKEN_INPUTS_PROP] = json.dumps(taken)
 
 
-def _wired_groups(material: bpy.types.Material,
+def _grouped(material: bpy.types.Material, gnode: bpy.types.Node) -> wiring.GroupedSkin | None:
+    """The artist's node group node holding the skin that the add-on's group node ``gnode`` sits in
+    (wiring.grouped_skin), or None where ``gnode`` is in the material's own tree."""
+    return wiring.grouped_skin(material.node_tree) if gnode.id_data != material.node_tree else None
+
+
+def _wired_groups(skin: wiring.GroupedSkin | None,
                   gnode: bpy.types.Node) -> list[tuple[bpy.types.NodeTree, bpy.types.Node]]:
-    """The artist's node groups the add-on wired for ``material`` (blender_addon.wiring, "Grouped skin shaders"),
-    outermost first, each with the node beside which its copies of the artist's layers go (the nested node group
-    node holding the skin, or in the innermost ``gnode``, the add-on's group node); empty for a flat material."""
-    skin = wiring.grouped_skin(material.node_tree) if gnode.id_data != material.node_tree else None
+    """The artist's node groups the add-on wired for the grouped ``skin`` (:func:`_grouped`), outermost first, each
+    with the node beside which its copies of the artist's layers go (the nested node group node holding the skin, or
+    in the innermost ``gnode``, the add-on's group node); empty for a flat material (``skin`` None)."""
     if skin is None:
         return []
     trees = [skin.node.node_tree, *(level.node.node_tree for level in skin.levels)]
@@ -243,12 +248,12 @@ def follow(material: bpy.types.Material, unit_scale_m: float | None = None) -> l
         changed.append(ours)
     if _follow_base_layers(inner, principled, gnode, taken):
         changed.append(BASE_LAYERS)
-    skin = wiring.grouped_skin(tree) if inner != tree else None  # the material's copies sit beside its group node
+    skin = _grouped(material, gnode)  # the material's copies sit beside its group node
     near = gnode if inner == tree else skin.node if skin is not None else None
     if near is not None and _follow_layers(tree, near, taken):
         changed.append(LAYERS)
     inside = taken.setdefault(GROUP_LAYERS, {})
-    if any([_follow_layers(group, beside, inside, group.name) for group, beside in _wired_groups(material, gnode)]):
+    if any([_follow_layers(group, beside, inside, group.name) for group, beside in _wired_groups(skin, gnode)]):
         changed.append(GROUP_LAYERS)
     if not inside:
         del taken[GROUP_LAYERS]

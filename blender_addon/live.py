@@ -910,22 +910,12 @@ def apply(context: bpy.types.Context, model_path: str, unit_scale_m: float, colo
         except BaseException:
             _restore(material, before)
             raise
-        report = f"live group wired into '{material.name}'{_grouped_text(material, gnode)} (K={table.k}; no maps baked)"
+        report = (f"live group wired into '{material.name}'{wiring.grouped_text(material, gnode)} "
+                  f"(K={table.k}; no maps baked)")
         if outside is not None:
             report += "; " + outside()
     gnode.select = True
     return report
-
-
-def _grouped_text(material: bpy.types.Material, gnode: bpy.types.Node) -> str:
-    """Where ``gnode`` sits in the artist's node group (wiring.grouped_skin): which, and the other materials using it
-    (they share its Melanin, Blood, Oxygenation and Translucency); else ""."""
-    tree = gnode.id_data
-    if tree == material.node_tree:
-        return ""
-    others = sorted(m.name for m in wiring.group_users(tree) if m != material)
-    shared = f", shared with {', '.join(repr(name) for name in others)}" if others else ""
-    return f" inside its node group '{tree.name}'{shared}"
 
 
 def outside_report(table: texel_table.TexelTable, image: bpy.types.Image, colorspace: str) -> str:

@@ -713,13 +713,15 @@ def _exp(b, vector, active, bounds: tuple[float, float], stage: int) -> bpy.type
     return b.mix("RGBA", stage + 1, active, (1.0, 1.0, 1.0, 1.0), curve)
 
 
-def live_node(material: bpy.types.Material) -> bpy.types.Node | None:
-    """The live group node feeding ``material``'s output that has the edit inputs, or None."""
+def live_node(material: bpy.types.Material | None, needs: str = "Melanin") -> bpy.types.Node | None:
+    """The live group node of ``material`` (in its tree, or in the artist's node group it renders through:
+    wiring.material_nodes) that has the input ``needs`` (default: the edit inputs, which groups of earlier layouts
+    lack), or None."""
     if material is None or material.node_tree is None:
         return None
     for node in wiring.material_nodes(material):
         if (node.bl_idname == "ShaderNodeGroup" and node.node_tree is not None
-                and node.node_tree.get("spectral_skin_sss_backend") == "LIVE" and "Melanin" in node.inputs):
+                and node.node_tree.get("spectral_skin_sss_backend") == "LIVE" and needs in node.inputs):
             return node
     return None
 

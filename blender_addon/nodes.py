@@ -840,8 +840,7 @@ def _wire_grouped(material: bpy.types.Material, group: bpy.types.NodeTree, skin:
     node group around it passes up the same way; the material's Material Outputs of target Cycles and EEVEE are fed
     by those outputs of the artist's group node.  Another material already wired through the same node group keeps
     its group node there (one for every material using it)."""
-    holder = skin.levels[-1] if skin.levels else skin  # the group node whose node group the skin is in
-    inner = holder.node.node_tree
+    inner = skin.principled.id_data  # the node group the Principled BSDF sits in
     gnode = wiring.grouped_group_node(inner)
     if gnode is None or gnode.node_tree != group:
         wiring.unwire_group(inner)
@@ -853,18 +852,15 @@ def _wire_grouped(material: bpy.types.Material, group: bpy.types.NodeTree, skin:
         gnode.label = group.name
         gnode.location = (principled.location.x, principled.location.y - 700.0)
         gnode.parent = frame
-        gnode[wiring.SKIN_OUTPUT_PROP] = holder.output.identifier
+        gnode[wiring.SKIN_OUTPUT_PROP] = skin.skin_output.identifier
         wiring.feed_group_outputs(inner, {"CYCLES": gnode.outputs[output], "EEVEE": gnode.outputs[eevee_output]},
                                   gnode, skin.inner)
         _take_surface_inputs(inner, principled, gnode)
         wiring.insert_base_layers(inner, principled, gnode)
     for level in reversed(skin.levels):  # the node groups around it pass the outputs up
-        wiring.feed_group_outputs(level.node.id_data, {target: level.node.outputs[name]
-                                                       for target, name in wiring.GROUP_OUTPUTS.items()},
-                                  level.node, level.chain)
+        wiring.feed_group_outputs(level.node.id_data, wiring.added_outputs_of(level.node), level.node, level.chain)
     material[PREVIOUS_SURFACE_PROP] = skin.node.name
-    wiring.feed_render_outputs(material, {target: skin.node.outputs[name]
-                                          for target, name in wiring.GROUP_OUTPUTS.items()}, skin.node, skin.outer)
+    wiring.feed_render_outputs(material, wiring.added_outputs_of(skin.node), skin.node, skin.outer)
     wiring.use_shadow_thickness(material)
     return gnode
 

@@ -164,14 +164,7 @@ classes = (SpectralSkinSettings, SPECTRAL_SKIN_PT_shader_editor, SPECTRAL_SKIN_P
 
 def live_node(material: bpy.types.Material | None) -> bpy.types.Node | None:
     """The live group node (blender_addon.live) of ``material`` with a Translucency input, or None."""
-    if material is None or material.node_tree is None:
-        return None
-    for node in wiring.material_nodes(material):
-        tree = getattr(node, "node_tree", None)
-        if (node.bl_idname == "ShaderNodeGroup" and tree is not None and tree.get("spectral_skin_sss_backend") == "LIVE"
-                and "Translucency" in node.inputs):
-            return node
-    return None
+    return live_edits.live_node(material, "Translucency")
 
 
 def _draw_live_node(layout: bpy.types.UILayout, material: bpy.types.Material | None) -> None:

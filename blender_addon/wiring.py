@@ -408,6 +408,11 @@ class GroupedSkin(NamedTuple):
     outer: Chain
     levels: list[GroupLevel]
 
+    @property
+    def skin_output(self) -> bpy.types.NodeSocket:
+        """The output of the group node whose node group the Principled BSDF sits in (the innermost, nested)."""
+        return self.levels[-1].output if self.levels else self.output
+
 
 def group_output(tree: bpy.types.NodeTree) -> bpy.types.Node | None:
     """The node group's active Group Output node (the first one when none is flagged), or None."""
@@ -434,12 +439,29 @@ def _inside(feed: bpy.types.NodeSocket, depth: int = 1) -> tuple[bpy.types.Node 
     principled, inner = _principled_chain(socket)
     if principled is not None:
         return principled, inner, []
-    found = _chains_to(socket, lambda below: _inside(below, depth + 1)[0] is not None)
-    if not found:
+    found = _group_reaching(socket, depth + 1)
+    if found is None:
         return None, [], []
-    below, chain = found[0]
-    principled, inner, levels = _inside(below, depth + 1)
+    below, chain, (principled, inner, levels) = found
     return principled, inner, [GroupLevel(below.node, below, chain), *levels]
+
+
+def _group_reaching(socket: bpy.types.NodeSocket | None, depth: int
+                    ) -> tuple[bpy.types.NodeSocket, Chain, tuple[bpy.types.Node, Chain, list[GroupLevel]]] | None:
+    """The first group node output reaching ``socket`` (:func:`_chains_to`) whose node group holds the skin
+    (:func:`_inside` at ``depth``): (it, the layers between, what :func:`_inside` found there); None where none
+    does.  Each node group is looked into once."""
+    inside: dict[int, tuple] = {}
+
+    def holds(feed: bpy.types.NodeSocket) -> bool:
+        inside[feed.as_pointer()] = _inside(feed, depth)
+        return inside[feed.as_pointer()][0] is not None
+
+    found = _chains_to(socket, holds)
+    if not found:
+        return None
+    feed, chain = found[0]
+    return feed, chain, inside[feed.as_pointer()]
 
 
 def grouped_skin(tree: bpy.types.NodeTree) -> GroupedSkin | None:
@@ -448,11 +470,10 @@ def grouped_skin(tree: bpy.types.NodeTree) -> GroupedSkin | None:
     node groups nested there (straight or under layers at each level); the first in input order.  None where there
     is none."""
     out = active_output(tree)
-    found = _chains_to(out.inputs["Surface"] if out is not None else None, lambda feed: _inside(feed)[0] is not None)
-    if not found:
+    found = _group_reaching(out.inputs["Surface"] if out is not None else None, 1)
+    if found is None:
         return None
-    feed, outer = found[0]
-    principled, inner, levels = _inside(feed)
+    feed, outer, (principled, inner, levels) = found
     return GroupedSkin(feed.node, feed, principled, inner, outer, levels)
 
 
@@ -486,6 +507,18 @@ def group_users(group: bpy.types.NodeTree) -> list[bpy.types.Material]:
     return [m for m in bpy.data.materials if m.node_tree is not None and uses_group(m.node_tree, group)]
 
 
+def grouped_text(material: bpy.types.Material, gnode: bpy.types.Node) -> str:
+    """For a report: where the add-on's group node ``gnode`` sits in the artist's node group (:func:`grouped_skin`),
+    which, and the other materials using it (they share its inputs: Melanin, Blood, Oxygenation, Translucency); else
+    ""."""
+    tree = gnode.id_data
+    if tree == material.node_tree:
+        return ""
+    others = sorted(m.name for m in group_users(tree) if m != material)
+    shared = f", shared with {', '.join(repr(name) for name in others)}" if others else ""
+    return f" inside its node group '{tree.name}'{shared}"
+
+
 def bake_into_group(material: bpy.types.Material,
                     albedo: bpy.types.Node | None) -> tuple[GroupedSkin | None, str]:
     """Whether baked maps can render inside the artist's node group that holds the Principled BSDF
@@ -497,8 +530,7 @@ def bake_into_group(material: bpy.types.Material,
     if shader_chain(tree)[0] is not None:
         return None, ""
     skin = grouped_skin(tree)
-    grouped = skin.levels[-1].node.node_tree if skin is not None and skin.levels else \
-        skin.node.node_tree if skin is not None else None
+    grouped = skin.principled.id_data if skin is not None else None  # the node group the Principled BSDF sits in
     if grouped is None:
         found = grouped_principled(tree)
         return None, (f"the Principled BSDF inside node group '{found.node_tree.name}' is not reached"
@@ -738,6 +770,12 @@ def feed_group_outputs(tree: bpy.types.NodeTree, sockets: dict[str, bpy.types.No
         elif gout.inputs[name].is_linked:
             continue
         tree.links.new(_copy_chain(tree, chain, socket, near, i) if chain else socket, gout.inputs[name])
+
+
+def added_outputs_of(node: bpy.types.Node) -> dict[str, bpy.types.NodeSocket]:
+    """The outputs the add-on added to the node group of the group node ``node`` (:data:`GROUP_OUTPUTS`), by the
+    renderer whose output each feeds."""
+    return {target: node.outputs[name] for target, name in GROUP_OUTPUTS.items()}
 
 
 def _added_outputs(tree: bpy.types.NodeTree) -> list:

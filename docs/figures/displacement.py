@@ -14,7 +14,6 @@ repository root (about half a minute on two cores)::
 
 from __future__ import annotations
 
-import math
 import sys
 from pathlib import Path
 
@@ -24,7 +23,7 @@ ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT))
 
 import bpy  # noqa: E402
-from figure_cycles import before_after_without, cycles_scene, skin_material  # noqa: E402
+from figure_cycles import area_light, before_after_without, cycles_scene, look_from, skin_material  # noqa: E402
 
 from blender_addon import wiring  # noqa: E402
 from exporters.colorimetry import srgb_decode  # noqa: E402
@@ -41,13 +40,8 @@ def scene() -> bpy.types.Object:
     sc = cycles_scene(WIDTH, HEIGHT, SAMPLES, 3, (0.03, 0.03, 0.035))
     bpy.ops.mesh.primitive_cube_add(size=1.0, scale=(SIDE, SIDE, 0.01), location=(0.0, 0.0, -0.005))
     patch = bpy.context.object
-    bpy.ops.object.camera_add(location=(0.0, -0.028, 0.022), rotation=(math.radians(52), 0.0, 0.0))
-    sc.camera = bpy.context.object
-    sc.camera.data.lens, sc.camera.data.clip_start = 50, 0.001
-    bpy.ops.object.light_add(type="AREA", location=(0.06, 0.01, 0.006))
-    light = bpy.context.object
-    light.data.energy, light.data.size = 0.4, 0.01
-    light.rotation_euler = (0.0, math.radians(84), 0.0)
+    look_from(sc, (0.0, -0.028, 0.022), 52)
+    area_light((0.06, 0.01, 0.006), 0.4, 0.01, (0.0, 84.0, 0.0))
     return patch
 
 

@@ -1,9 +1,11 @@
-"""What the Cycles figure scripts of this folder share (metal_layer.py, displacement.py): an empty Cycles scene, a
-render read back display-referred, and panels saved side by side.  Imported by those scripts, which run from the
-repository root with the project's venv (``.venv/bin/python docs/figures/displacement.py``, for one)."""
+"""What the Cycles figure scripts of this folder share (metal_layer.py, displacement.py): an empty Cycles scene, its
+camera and area lights, a render read back display-referred, and panels saved side by side.  Imported by those
+scripts, which run from the repository root with the project's venv (``.venv/bin/python docs/figures/displacement.py``,
+for one)."""
 
 from __future__ import annotations
 
+import math
 import tempfile
 from collections.abc import Callable
 from pathlib import Path
@@ -32,6 +34,25 @@ def cycles_scene(width: int, height: int, samples: int, seed: int, world_rgb: tu
     world.node_tree.nodes["Background"].inputs["Color"].default_value = (*world_rgb, 1.0)
     scene.world = world
     return scene
+
+
+def look_from(scene: bpy.types.Scene, location: tuple[float, float, float], tilt_deg: float) -> None:
+    """The scene's camera: a 50 mm lens at ``location`` (m), tilted ``tilt_deg`` from looking straight down about x,
+    clipping from 1 mm (the subjects are centimetres across)."""
+    bpy.ops.object.camera_add(location=location, rotation=(math.radians(tilt_deg), 0.0, 0.0))
+    scene.camera = bpy.context.object
+    scene.camera.data.lens, scene.camera.data.clip_start = 50, 0.001
+
+
+def area_light(location: tuple[float, float, float], energy: float, size: float,
+               rotation_deg: tuple[float, float, float]) -> bpy.types.Object:
+    """A square area light of ``energy`` (W) and side ``size`` (m) at ``location`` (m), turned by ``rotation_deg``
+    (Euler XYZ, degrees); returns it."""
+    bpy.ops.object.light_add(type="AREA", location=location)
+    light = bpy.context.object
+    light.data.energy, light.data.size = energy, size
+    light.rotation_euler = tuple(math.radians(angle) for angle in rotation_deg)
+    return light
 
 
 def render(path: Path) -> np.ndarray:

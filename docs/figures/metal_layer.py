@@ -22,7 +22,7 @@ ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT))
 
 import bpy  # noqa: E402
-from figure_cycles import before_after_without, cycles_scene, skin_material  # noqa: E402
+from figure_cycles import area_light, before_after_without, cycles_scene, look_from, skin_material  # noqa: E402
 
 from blender_addon import wiring  # noqa: E402
 from exporters.colorimetry import srgb_decode  # noqa: E402
@@ -39,17 +39,9 @@ def scene() -> bpy.types.Object:
     bpy.ops.mesh.primitive_cylinder_add(vertices=64, radius=RADIUS, depth=0.06, rotation=(0.0, math.pi / 2, 0.0))
     finger = bpy.context.object
     bpy.ops.object.shade_smooth()
-    bpy.ops.object.camera_add(location=(0.0, -0.09, 0.012), rotation=(math.radians(82), 0.0, 0.0))
-    sc.camera = bpy.context.object
-    sc.camera.data.lens, sc.camera.data.clip_start = 50, 0.001
-    bpy.ops.object.light_add(type="AREA", location=(0.0, 0.05, 0.02))
-    back = bpy.context.object
-    back.data.energy, back.data.size = 0.6, 0.02
-    back.rotation_euler = (math.radians(-70), 0.0, 0.0)
-    bpy.ops.object.light_add(type="AREA", location=(0.06, -0.05, 0.05))
-    side = bpy.context.object
-    side.data.energy, side.data.size = 0.25, 0.05
-    side.rotation_euler = (math.radians(45), math.radians(40), 0.0)
+    look_from(sc, (0.0, -0.09, 0.012), 82)
+    area_light((0.0, 0.05, 0.02), 0.6, 0.02, (-70.0, 0.0, 0.0))  # behind
+    area_light((0.06, -0.05, 0.05), 0.25, 0.05, (45.0, 40.0, 0.0))  # a dim side light
     return finger
 
 
