@@ -4,9 +4,9 @@ Modules: ``preferences`` (model path, threads), ``operators`` (Invert Skin Albed
 Mixture, Remove Skin SSS), ``baker`` (the bpy side of a bake: albedo source, images, wiring), ``panels`` (Shader
 Editor tab "Skin SSS", Material properties, per-scene bake settings), ``nodes`` (the node group), ``wiring`` (where
 the add-on's nodes sit in a material, and how they leave it), ``follow`` (the live group follows the artist's
-Principled BSDF), ``osl`` (Script-node helpers), ``probe``
-(render-fidelity probe used by the tests), ``core`` (``exporters`` beside this package); ``bake.py`` is the headless
-script.
+Principled BSDF), ``merge`` (one copy of the add-on's groups and tables per file), ``osl`` (Script-node helpers),
+``probe`` (render-fidelity probe used by the tests), ``core`` (``exporters`` beside this package); ``bake.py`` is the
+headless script.
 
 As an extension the repository-root ``__init__.py`` calls :func:`register` with the extension's module
 name, so that the preferences are found under it; imported directly (tests, scripts) the name is this
@@ -25,7 +25,7 @@ import atexit
 
 import bpy
 
-from . import follow, live_edits, operators, panels, preferences
+from . import follow, live_edits, merge, operators, panels, preferences
 
 _classes = (preferences.SpectralSkinPreferences, *operators.classes, *live_edits.classes, *panels.classes)
 
@@ -38,6 +38,7 @@ def register(addon_name: str | None = None) -> None:
     for cls in _classes:
         bpy.utils.register_class(cls)
     panels.register_properties()
+    merge.register_handlers()
     live_edits.register_handlers()
     follow.register_handlers()
     atexit.unregister(unregister)
@@ -47,6 +48,7 @@ def register(addon_name: str | None = None) -> None:
 def unregister() -> None:
     """Unregister every class and property this add-on registered; safe to call again."""
     atexit.unregister(unregister)
+    merge.unregister_handlers()
     live_edits.unregister_handlers()
     follow.unregister_handlers()
     panels.unregister_properties()

@@ -358,7 +358,7 @@ def refresh_caches(scene=None, depsgraph=None) -> None:
     it.  Rendering never depends on it: a node whose cache is not current renders through the table."""
     if _refreshing or depsgraph is None:
         return
-    _refresh({u.id.original for u in depsgraph.updates if isinstance(u.id, bpy.types.Material)})
+    cache_edits({u.id.original for u in depsgraph.updates if isinstance(u.id, bpy.types.Material)})
 
 
 @bpy.app.handlers.persistent
@@ -368,10 +368,10 @@ def refresh_frame_caches(scene=None, depsgraph=None) -> None:
     from the cache).  Skipped while a render job runs in Blender's interface, whose frames are evaluated outside the
     main thread: those frames read the table."""
     if not _refreshing and not bpy.app.is_job_running("RENDER"):
-        _refresh(bpy.data.materials)
+        cache_edits(bpy.data.materials)
 
 
-def _refresh(materials) -> None:
+def cache_edits(materials) -> None:
     """Cache the edit of each of ``materials``' live nodes whose cache input is not current (the handlers' work; the
     writes it makes do not call it again)."""
     global _refreshing

@@ -96,7 +96,7 @@ _GROUP_TAG = "spectral_skin_sss_backend"
 EDIT_TABLE_PROP = "spectral_skin_sss_edit_table"
 #: Custom property on the grazing-light group and its images (blender_addon.oblique): the correction's SHA-256.
 OBLIQUE_PROP = "spectral_skin_sss_oblique"
-_IMAGE_TAGS = ("spectral_skin_sss_table", "spectral_skin_sss_bake_key", EDIT_TABLE_PROP, OBLIQUE_PROP)
+IMAGE_TAGS = ("spectral_skin_sss_table", "spectral_skin_sss_bake_key", EDIT_TABLE_PROP, OBLIQUE_PROP)
 #: Custom property on a material: its EEVEE setting Thickness From Shadow before wiring (1 or 0), put back on removal.
 THICKNESS_FROM_SHADOW_PROP = "spectral_skin_sss_thickness_from_shadow"
 #: Custom property (JSON) on a wired material: what the group took from the Principled BSDF (blender_addon.follow).
@@ -1117,7 +1117,7 @@ def purge_unused() -> tuple[int, int]:
             bpy.data.node_groups.remove(group)
             groups += 1
             removed = True
-    images = [im for im in bpy.data.images if any(t in im for t in _IMAGE_TAGS) and im.users == 0]
+    images = [im for im in bpy.data.images if any(t in im for t in IMAGE_TAGS) and im.users == 0]
     for image in images:
         bpy.data.images.remove(image)
     return groups, len(images)

@@ -57,6 +57,20 @@ def ext_zip(tmp_path_factory) -> Path:
 
 
 @pytest.fixture()
+def registered():
+    """The add-on registered directly (no preferences entry: its default model) in an empty home file: a test may
+    open, append and unregister files and the add-on freely."""
+    import bpy
+
+    import blender_addon
+
+    bpy.ops.wm.read_homefile(use_empty=True)
+    blender_addon.register()
+    yield
+    blender_addon.unregister()
+
+
+@pytest.fixture()
 def addon():
     """The extension enabled in a fresh factory scene (one bake thread); yields its preferences."""
     import addon_utils

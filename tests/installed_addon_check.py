@@ -292,6 +292,18 @@ def main() -> dict:
     tree.links.new(red.outputs[0], node.inputs["Edit Mask"])
     bpy.context.view_layer.update()
     cached_and_table("edit_mask")
+    # The skin material appended from another file holding the same groups: it renders through this file's, and the
+    # copies it brought are left unused (a timer of the main loop, which a script has not, removes them).
+    first, second = (os.path.join(sys.argv[2], name) for name in ("first.blend", "second.blend"))
+    bpy.ops.wm.save_as_mainfile(filepath=first)
+    bpy.ops.wm.save_as_mainfile(filepath=second)
+    with bpy.data.libraries.load(first, link=False) as (_, target):
+        target.materials = [material.name]
+    obj.data.materials.append(target.materials[0])
+    bpy.context.view_layer.update()
+    out["appended_group"] = live_edits.live_node(target.materials[0]).node_tree.name
+    out["appended_copies_used"] = sorted(g.name for g in bpy.data.node_groups
+                                         if g.name.startswith("Spectral Skin SSS") and g.name[-4:-3] == "." and g.users)
 
     # OSL on request: the Script node compiles (Cycles 4.2 has no oslquery) and renders once OSL is turned on.
     obj = skin_scene()

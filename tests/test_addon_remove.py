@@ -29,7 +29,6 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-import blender_addon  # noqa: E402
 from blender_addon import live, wiring  # noqa: E402
 from tests.addon_scene import render_small, skin_codes, skin_object, write_image  # noqa: E402
 
@@ -78,14 +77,6 @@ def dump(material: bpy.types.Material) -> dict:
             "settings": _rna(material, skip=_BOOKKEEPING)}
 
 
-@pytest.fixture
-def addon():
-    bpy.ops.wm.read_homefile(use_empty=True)
-    blender_addon.register()
-    yield
-    blender_addon.unregister()
-
-
 def artist_material(tmp_path: Path, name: str = "Skin"):
     """A sphere whose material an artist built: albedo texture, a bump chain into Normal, Roughness 0.37, Specular
     IOR Level 0.42, a muted link and a custom property; returns (object, material)."""
@@ -132,7 +123,7 @@ def addon_data() -> tuple[list[str], list[str]]:
 
 # -- (a) what renders ------------------------------------------------------------------------------------------
 @pytest.mark.parametrize("mode", ["LIVE", "BAKE"])
-def test_each_renderer_renders_the_group_and_cycles_renders_as_before(tmp_path, addon, mode):
+def test_each_renderer_renders_the_group_and_cycles_renders_as_before(tmp_path, registered, mode):
     obj, mat = artist_material(tmp_path)
     assert invert(obj, mode=mode, exact=True) == {"FINISHED"}
     tree = mat.node_tree
@@ -218,7 +209,7 @@ def test_eevee_renders_the_groups_eevee_output(tmp_path):
 
 # -- (b) remove ------------------------------------------------------------------------------------------------
 @pytest.mark.parametrize("mode", ["LIVE", "BAKE"])
-def test_remove_returns_exactly_the_artists_material(tmp_path, addon, mode):
+def test_remove_returns_exactly_the_artists_material(tmp_path, registered, mode):
     obj, mat = artist_material(tmp_path)
     obj2, mat2 = artist_material(tmp_path, name="Skin 2")
     mat2.use_thickness_from_shadow = True  # EEVEE's setting, which wiring turns on: this artist had it on already
@@ -255,7 +246,7 @@ def test_remove_returns_exactly_the_artists_material(tmp_path, addon, mode):
     assert remove(bpy.data.objects[name]) == {"CANCELLED"}  # nothing left to remove
 
 
-def test_rewiring_keeps_one_set_of_nodes_and_remove_still_restores(tmp_path, addon):
+def test_rewiring_keeps_one_set_of_nodes_and_remove_still_restores(tmp_path, registered):
     obj, mat = artist_material(tmp_path)
     original = dump(mat)
     assert invert(obj) == {"FINISHED"}
@@ -271,7 +262,7 @@ def test_rewiring_keeps_one_set_of_nodes_and_remove_still_restores(tmp_path, add
     assert dump(mat) == original
 
 
-def test_an_artists_eevee_output_is_fed_and_given_back(tmp_path, addon):
+def test_an_artists_eevee_output_is_fed_and_given_back(tmp_path, registered):
     obj, mat = artist_material(tmp_path)
     tree = mat.node_tree
     viewport = tree.nodes.new("ShaderNodeEmission")  # the artist's own look for EEVEE
@@ -292,7 +283,7 @@ def test_an_artists_eevee_output_is_fed_and_given_back(tmp_path, addon):
 
 
 # -- (c) the earlier layout ------------------------------------------------------------------------------------
-def test_remove_restores_a_material_wired_in_the_earlier_layout(tmp_path, addon):
+def test_remove_restores_a_material_wired_in_the_earlier_layout(tmp_path, registered):
     obj, mat = artist_material(tmp_path)
     original = dump(mat)
     tree = mat.node_tree
@@ -325,7 +316,7 @@ def _library(tmp_path: Path) -> Path:
 
 
 @pytest.mark.parametrize("what", ["material", "object"])
-def test_a_linked_material_is_refused_in_one_line_and_works_once_made_local(tmp_path, addon, what):
+def test_a_linked_material_is_refused_in_one_line_and_works_once_made_local(tmp_path, registered, what):
     library = _library(tmp_path)
     with bpy.data.libraries.load(str(library), link=True) as (src, dst):
         setattr(dst, f"{what}s", ["SkinLib" if what == "material" else "SkinObj"])
