@@ -9,6 +9,10 @@ render's alone (the process's peak, ru_maxrss, and the largest "Mem" of Cycles' 
 render itself).  Operator time is wall time of the operator call, with its CPU time on the calling thread (the
 critical path: the live group's operator reads the albedo and makes the table's atlases on worker threads meanwhile)
 and in all threads.
+
+A further row renders three skins appended into one file from a file each, as an artist appends characters: with
+the add-on's merge (one copy of its groups and tables per file, blender_addon.merge), without it, and as the artists'
+Principled BSDFs.
 """
 
 from __future__ import annotations
@@ -87,6 +91,81 @@ print("RESULT" + json.dumps({{"render_s": seconds, "peak_mb": peak_mb, "cycles_p
 """
 
 
+#: Three skins, each from a file of its own, appended into the first file on spheres beside its own (File > Append as
+#: an artist appends characters): ``merge`` True with the add-on on (it keeps one copy of its groups and tables),
+#: False with its merge handlers off (Blender's own append: a copy per file).
+_APPEND = """
+import json, sys
+sys.path.insert(0, {root!r})
+import bpy
+import blender_addon
+from blender_addon import merge
+blender_addon.register()
+if not {merge!r}:
+    merge.unregister_handlers()
+bpy.ops.wm.open_mainfile(filepath={first!r})
+obj = bpy.data.objects["Sphere"]
+for i, path in enumerate({others!r}):
+    with bpy.data.libraries.load(path) as (_, target):
+        target.materials = ["Skin"]
+    copy = obj.copy()
+    copy.data = obj.data.copy()
+    bpy.context.scene.collection.objects.link(copy)
+    copy.location.x += 2.2 * (i + 1)
+    copy.data.materials.clear()
+    copy.data.materials.append(target.materials[0])
+    bpy.context.view_layer.update()
+merge.remove_merged()  # the timer of Blender's main loop, which this process has not
+bpy.ops.wm.save_as_mainfile(filepath={blend!r})
+print("RESULT" + json.dumps({{"groups": len(bpy.data.node_groups)}}))
+"""
+
+
+def appended(size: int = 1024, skins: int = 3) -> dict[str, dict]:
+    """Cycles' and the process's peak memory rendering ``skins`` skin materials appended from a file each (albedo
+    ``size`` squared): the live group with the add-on's merge (``merged``), without it (``copies``), and the
+    artists' Principled BSDFs (``principled``), each render in a fresh process."""
+    out = {}
+    with tempfile.TemporaryDirectory(prefix="bench_appended_") as tmp:
+        folder = Path(tmp)
+        files: dict[str, list[str]] = {"live": [], "principled": []}
+        for i in range(skins):
+            albedo = skin_albedo(folder / f"albedo{i}.png", size)
+            for mode, paths in files.items():
+                paths.append(str(folder / f"{mode}{i}.blend"))
+                run_script(_SETUP.format(root=str(ROOT), samples=SAMPLES, resolution=RESOLUTION, albedo=str(albedo),
+                                         mode=mode, blend=paths[-1]))
+        for name, mode, merge in (("merged", "live", True), ("copies", "live", False),
+                                  ("principled", "principled", True)):
+            blend = str(folder / f"{name}.blend")
+            setup = run_script(_APPEND.format(root=str(ROOT), merge=merge, first=files[mode][0],
+                                              others=files[mode][1:], blend=blend))
+            render = run_script(_RENDER.format(blend=blend, out=str(folder / f"{name}.png")))
+            out[name] = {**setup, **render, "blend_mb": os.path.getsize(blend) / 2 ** 20}
+    return out
+
+
+def _appended_row() -> dict:
+    size, skins = 1024, 3
+    res = appended(size, skins)
+    merged, copies, anchor = res["merged"], res["copies"], res["principled"]
+
+    def peaks(r: dict) -> str:
+        return f"Cycles' own peak {r['cycles_peak_mb']:.0f} MB"
+
+    return {"workload": f"{skins} skins appended from a file each ({size}² albedo), {RESOLUTION}² px @ {SAMPLES} spp, "
+                        "Cycles CPU: live group, one copy of the add-on's tables per file (merged) vs "
+                        "Principled BSDF",
+            "ours": f"{peaks(merged)}, {merged['groups']} node groups, .blend {merged['blend_mb']:.0f} MB; without "
+                    f"the merge: {peaks(copies)}, {copies['groups']} node groups, .blend {copies['blend_mb']:.0f} MB",
+            "anchor": f"Principled: {peaks(anchor)}",
+            "ratio": f"Cycles memory {merged['cycles_peak_mb'] / anchor['cycles_peak_mb']:.2f}x (without the "
+                     f"merge {copies['cycles_peak_mb'] / anchor['cycles_peak_mb']:.2f}x)",
+            "error": "-",
+            "notes": "the skins appended in one process (bpy.data.libraries.load), rendered in a fresh one; "
+                     "shared 2-core machine"}
+
+
 def skin_albedo(path: Path, size: int) -> Path:
     """A smooth skin-coloured 8-bit sRGB texture (size, size, 3): blends of light and dark skin."""
     import OpenImageIO as oiio
@@ -152,4 +231,5 @@ def benchmarks(quick: bool) -> list[dict]:
                      "error": "-",
                      "notes": "fresh process per setup and per render (ru_maxrss); render time includes scene sync "
                               "and image loading; shared 2-core machine"})
+    rows.append(_appended_row())
     return rows

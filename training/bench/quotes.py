@@ -67,6 +67,10 @@ FIGURES: dict[str, Figure] = {
        for name, row in (("live", "live group (default)"), ("baked", "baked maps"))
        for part, column, what in (("process", "ours", "process peak"), ("cycles", "ours", "Cycles' own peak"),
                                   ("principled_cycles", "anchor", "Cycles' own peak"))},
+    **{f"appended_{name}cycles_peak_mb": Figure("live", "skins appended from a file each", column, pattern)
+       for name, column, pattern in (("", "ours", r"^Cycles' own peak ([\d,]+) MB"),
+                                     ("copies_", "ours", r"without the merge: Cycles' own peak ([\d,]+) MB"),
+                                     ("principled_", "anchor", r"Cycles' own peak ([\d,]+) MB"))},
     "live_operator_s": Figure("live", "live group (default)", "ours", r"operator ([\d.]+) s"),
     "live_operator_thread_s": Figure("live", "live group (default)", "ours", r"CPU ([\d.]+) s on the calling thread"),
     "live_operator_cpu_s": Figure("live", "live group (default)", "ours", r"calling thread, ([\d.]+) s in all"),
