@@ -7,13 +7,15 @@ Browser) brings that file's copies along: Blender suffixes their names (``Spectr
 file then holds, and each render loads, a second set of the same tables for every file a skin came from.
 
 :func:`merge_copies` gives each user of such a copy the file's own group (``ID.user_remap``) and removes the copy,
-and the images only it read.  A group is a copy of another where both are local, carry the same name but for
-Blender's numeric suffix, the same add-on properties (version, table digests, K, backend: what the add-on's own
-reuse compares, ``live.ensure_live_group`` and the others) and the same nodes and links: they render alike.  The
-state a group keeps per file is not compared: the edit caches' values and the order they were filled in
-(blender_addon.live_edits).  A material moved onto the file's group has its edit cached there again; until then it
-renders through the table, which gives the same answer.  A group the artist changed by hand (other nodes or links)
-is left as it is, and so is a group linked from a library (read-only).
+and the images only it read.  A group is a copy of another where it came from another file (Blender keeps a weak
+reference to the file it was appended from: a copy the artist made in the file, to change it for one material, is
+theirs), both are local, and they carry the same name but for Blender's numeric suffix, the same add-on properties
+(version, table digests, K, backend: what the add-on's own reuse compares, ``live.ensure_live_group`` and the
+others) and the same nodes and links: they render alike.  The state a group keeps per file is not compared: the
+edit caches' values and the order they were filled in (blender_addon.live_edits).  A material moved onto the file's
+group has its edit cached there again; until then it renders through the table, which gives the same answer.  A
+group the artist changed by hand (other nodes or links) is left as it is, and so is a group linked from a library
+(read-only).
 
 Run on opening a file and on each depsgraph update where the number of node groups changed (an append makes one;
 :func:`merge_on_update`, :func:`merge_on_load`, registered by the package).  Blender reports a depsgraph update
@@ -74,10 +76,10 @@ def merge_copies() -> list[str]:
         if not group.is_editable or not wiring.is_addon_group(group):
             continue
         build = _build(group)
-        if build in kept:
-            copies.append((group, kept[build]))
-        else:
+        if build not in kept:
             kept[build] = group
+        elif group.library_weak_reference is not None:  # appended: a copy made in the file is the artist's
+            copies.append((group, kept[build]))
     for copy, original in copies:
         copy.user_remap(original)
     if copies:

@@ -110,6 +110,18 @@ def test_copies_changed_by_hand_or_linked_are_kept(tmp_path, registered):
     assert wiring.wired_group_node(linked).node_tree.library is not None
 
 
+def test_a_copy_the_artist_makes_in_the_file_stays_theirs(tmp_path, registered):
+    """A single-user copy of the live group made in the file (to change it for one material) is not an appended copy:
+    it stays, and the material renders through it."""
+    _skin_file(tmp_path, "SkinB", (120, 80, 60), (1.0, 2.0, 0.0))
+    node = wiring.wired_group_node(bpy.data.materials["SkinB"])
+    original = node.node_tree
+    node.node_tree = original.copy()
+    bpy.context.view_layer.update()
+    assert node.node_tree != original and SUFFIXED.search(node.node_tree.name)
+    assert merge.merge_copies() == []
+
+
 def test_a_file_saved_with_copies_is_merged_when_opened(tmp_path, registered):
     """Appended while the add-on was off, the copies are saved with the file; opened with it on, they go."""
     _skin_file(tmp_path, "SkinA", (180, 120, 95), (1.5, 1.0, 0.0))
