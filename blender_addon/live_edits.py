@@ -29,9 +29,13 @@ constant edits, each an image pair of one atlas (the table's shift of that edit 
 exporters.edit_table.combined_atlas of the control images: the lookups are linear, so reading it gives the same
 D), read at two slices (4 lookups where the table takes up to 24), and one **mask cache** (:data:`MASK_SLOT`): an
 edit's shift at :data:`MASK_POINTS` masks on its line (exporters.edit_table.MaskLine), read at two points and two
-slices (8 lookups, however many controls the edit moves).  A cache is used where the node's hidden input **Edit
-Cache** names it and its inputs equal the values the cache holds (Compare nodes in the group: the controls, and the
-mask's value for a constant edit); then a Mix takes its shift instead of the table's.  For constant inputs the test
+slices (8 lookups, however many controls the edit moves).  A constant edit's cache is used where the node's hidden
+input **Edit Cache** names it and its inputs equal the values the cache holds (Compare nodes in the group: the
+controls and the mask's value); the mask cache wherever the node's controls lie on the line from neutral to the edit
+it holds, at the mask times their place on it (:func:`_on_line`): an edit painted by the Edit Mask (the controls at
+the line's end), and each frame of an edit keyframed along that line (:func:`hold_line`), which Blender's interface
+renders outside the main thread, where no frame's edit can be cached.  Then a Mix takes the cache's shift instead of
+the table's (a constant edit's own cache before the mask cache's).  For constant inputs the test
 folds when Cycles compiles the shader, to 1 (the table's nodes and images drop out) or to 0 (the cache's do); the
 test reads values, so a cache never gives another edit's answer: changed values, keyframes and controls fed by
 nodes render through the table, as without caches.  :func:`cache_edit` fills a cache (:func:`set_edit`: the
@@ -371,18 +375,115 @@ def refresh_frame_caches(scene=None, depsgraph=None) -> None:
         cache_edits(bpy.data.materials)
 
 
-def cache_edits(materials) -> None:
-    """Cache the edit of each of ``materials``' live nodes whose cache input is not current (the handlers' work; the
-    writes it makes do not call it again)."""
+def cache_edits(materials, scene: bpy.types.Scene | None = None) -> None:
+    """Cache the edit of each of ``materials``' live nodes whose cache input is not current, and hold the line of each
+    keyframed edit in the mask cache (:func:`hold_line`, over ``scene``'s frames; default: the context's scene): the
+    handlers' work; the writes it makes do not call it again."""
     global _refreshing
     _refreshing = True
+    scene = scene or getattr(bpy.context, "scene", None)
     try:
         for material in materials:
             node = live_node(material)
-            if node is not None and not cache_is_current(node):
+            if node is None:
+                continue
+            if not cache_is_current(node):
                 cache_edit(node)
+            if scene is not None:
+                hold_line(node, scene)
     finally:
         _refreshing = False
+
+
+def _keyframes(node: bpy.types.Node) -> list[list[bpy.types.FCurve]] | None:
+    """Per control, the F-curves keyframing the node's input (none: a constant), where at least one control is
+    keyframed and none is fed by a node or driven, and the Edit Mask is not fed by a node; else None."""
+    if MASK_INPUT not in node.inputs or node.inputs[MASK_INPUT].is_linked:
+        return None
+    found = []
+    for name in CONTROL_NAMES:
+        socket = node.inputs[name]
+        curves_ = wiring.animation(socket)
+        if socket.is_linked or any(c.driver is not None for c in curves_):
+            return None
+        found.append(curves_)
+    return found if any(found) else None
+
+
+#: The line of each keyframed node last found (:func:`animated_line`), by the node's address: (what it was found
+#: from, the line's end or None).
+_LINES: dict[int, tuple[tuple, tuple[float, float, float] | None]] = {}
+
+
+def animated_line(node: bpy.types.Node, scene: bpy.types.Scene) -> tuple[float, float, float] | None:
+    """The edit E at the end of the line from neutral along which the node's keyframed controls move over the scene's
+    frames (every frame's controls V = n + t (E - n), 0 <= t <= 1, within :data:`LINE_TOLERANCE` / 4; E the frame's
+    edit farthest from neutral), where the mask cache can hold it (exporters.edit_table.mask_line); else None: not
+    keyframed (:func:`_keyframes`), or moving otherwise.  A blush keyframed on Blood alone, or a preset faded in on
+    all its controls with the same keys, moves along one line."""
+    keyed = _keyframes(node)
+    if keyed is None:
+        return None
+    frames = np.arange(scene.frame_start, scene.frame_end + 1, max(1, scene.frame_step), dtype=np.float64)
+    state = (scene.frame_start, scene.frame_end, scene.frame_step,
+             tuple(tuple(_curve_key(c) for c in cs) if cs else float(node.inputs[name].default_value)
+                   for name, cs in zip(CONTROL_NAMES, keyed, strict=True)))
+    found = _LINES.get(node.as_pointer())
+    if found is not None and found[0] == state:
+        return found[1]
+    rows = np.empty((len(frames), len(CONTROL_NAMES)))
+    for j, (name, cs) in enumerate(zip(CONTROL_NAMES, keyed, strict=True)):
+        rows[:, j] = [cs[0].evaluate(f) for f in frames] if cs else float(node.inputs[name].default_value)
+    rows = rows.astype(np.float32).astype(np.float64)  # as the node's inputs hold them
+    line = _line_through(rows)
+    _LINES[node.as_pointer()] = (state, line)
+    return line
+
+
+def _curve_key(curve: bpy.types.FCurve) -> tuple:
+    """What an F-curve's values depend on: its extrapolation, modifiers and keyframes."""
+    return (curve.extrapolation, len(curve.modifiers),
+            tuple((tuple(k.co), tuple(k.handle_left), tuple(k.handle_right), k.interpolation, k.easing)
+                  for k in curve.keyframe_points))
+
+
+def _line_through(rows: np.ndarray) -> tuple[float, float, float] | None:
+    """The end E of the line from neutral through every edit of ``rows`` (N, 3) (:func:`animated_line`), or None."""
+    v = rows - np.asarray(skin_edits.NEUTRAL, np.float64)
+    far = int(np.argmax(np.sum((v / np.ptp(np.array(list(skin_edits.CONTROL_RANGES.values())), axis=1)) ** 2,
+                               axis=1)))
+    d = v[far]
+    if not np.any(d):
+        return None
+    t = v @ d / (d @ d)
+    if np.any(t < -1e-6) or np.any(t > 1.0 + 1e-6) or np.abs(v - t[:, None] * d).max() > LINE_TOLERANCE / 4:
+        return None
+    edit = tuple(float(x) for x in rows[far])
+    return edit if edit_table.mask_line(edit) is not None else None
+
+
+def hold_line(node: bpy.types.Node, scene: bpy.types.Scene) -> bool:
+    """Hold the line of the node's keyframed edit (:func:`animated_line`) in its edit group's mask cache, unless that
+    holds the edit of a node painted by its Edit Mask (which renders from it every frame) or another keyframed
+    node's line: the frames Blender's interface renders (outside the main thread, where the handlers cache no
+    frame's edit) then read the mask cache instead of the table (module docstring, "Edit caches").  Returns whether
+    the mask cache holds the line."""
+    line = animated_line(node, scene) if node.node_tree is not None and node.id_data.is_editable else None
+    group = _edit_group(node.node_tree) if line is not None else None
+    images = _group_images(group) if group is not None else None
+    if images is None:
+        return False
+    held = _cached_values(group, MASK_SLOT)
+    if held == line:
+        return True
+    for other in map(live_node, bpy.data.materials):
+        if other is None or other == node or other.node_tree is None or _edit_group(other.node_tree) != group:
+            continue
+        masked = int(other.inputs[CACHE_INPUT].default_value) == MASK_SLOT and cache_key(other) == held
+        if masked or animated_line(other, scene) == held:
+            return False
+    _fill(group, images, MASK_SLOT, line)
+    return True
 
 
 #: The add-on's handlers: (list of bpy.app.handlers, function).
@@ -561,10 +662,10 @@ def add_edit_branch(b, gin, table: edit_table.EditTable, images: dict[str, bpy.t
             value = b.mix("VECTOR", 58, fraction, found[0], found[1])
             shifts[kind] = (value if shifts[kind] is None else b.vec("ADD", 59, shifts[kind], value)) if eevee \
                 else _gated_sum(b, neutral, shifts[kind], value)
-    if not eevee:
+    if not eevee:  # a constant edit's own cache before the mask cache's line
+        shifts = _mask_cached(b, gin, images, base, s, frac, tile_u, shifts)
         for slot in range(1, CACHE_SLOTS + 1):
             shifts = _cached(b, gin, slot, images, slice_uv, frac, tile_u, shifts)
-        shifts = _mask_cached(b, gin, images, base, s, frac, tile_u, shifts)
     active = b.math("SUBTRACT", 60, 1.0, still)
     bounds = table.shift_bounds()
     factor = {kind: _exp(b, shifts[kind], active, bounds[kind], 61) for kind in edit_table.KINDS}
@@ -642,16 +743,52 @@ def _cached(b, gin, slot: int, images: dict[str, bpy.types.Image], uv, frac, til
     return out
 
 
+def _on_line(b, gin) -> tuple[bpy.types.NodeSocket, bpy.types.NodeSocket]:
+    """(match, mask): where the node's controls V lie on the mask cache's line from neutral n to the edit E it holds
+    (Math nodes named :func:`_cache_node_name` of :data:`MASK_SLOT`, whose second value the add-on sets: n while
+    empty), at t = (V - n).(E - n) / |E - n|^2 clamped to [0, 1] (each control within :data:`LINE_TOLERANCE` of
+    n + t (E - n)), match is 1 and mask is the Edit Mask times t; else match is 0.  With the controls at E (an edit
+    painted by the Edit Mask) t is exactly 1 (the two dot products are the same operations on the same values), and
+    Cycles folds the product away.  The cache input's test comes first: for controls fed by nodes (flagged,
+    :func:`linked_flags`) the match folds to 0 even though the controls are linked."""
+    neutral = skin_edits.NEUTRAL
+    held = []
+    for name, n in zip(CONTROL_NAMES, neutral, strict=True):
+        node = b.node("ShaderNodeMath", 53, operation="ADD")
+        node.name = _cache_node_name(MASK_SLOT, name)
+        b.link(0.0, node.inputs[0])
+        b.link(float(n), node.inputs[1])
+        held.append(node.outputs[0])
+    d = [b.math("SUBTRACT", 54, e, n) for e, n in zip(held, neutral, strict=True)]
+    v = [b.math("SUBTRACT", 54, gin.outputs[name], n) for name, n in zip(CONTROL_NAMES, neutral, strict=True)]
+
+    def dot(a: list, c: list) -> bpy.types.NodeSocket:
+        return b.math("MULTIPLY_ADD", 55, a[2], c[2], b.math("MULTIPLY_ADD", 55, a[1], c[1],
+                                                              b.math("MULTIPLY", 55, a[0], c[0])))
+
+    t = b.math("DIVIDE", 56, dot(v, d), dot(d, d), clamp=True)
+    match = b.math("GREATER_THAN", 56, gin.outputs[CACHE_INPUT], -0.5)
+    for name, dj, n in zip(CONTROL_NAMES, d, neutral, strict=True):
+        on = b.math("COMPARE", 57, gin.outputs[name], b.math("MULTIPLY_ADD", 56, t, dj, n), LINE_TOLERANCE)
+        match = b.math("MULTIPLY", 57, match, on)
+    return match, b.math("MULTIPLY", 57, gin.outputs[MASK_INPUT], t)
+
+
+#: How far a control may lie from the mask cache's line and still read it (the Compare nodes' epsilon of
+#: :func:`_on_line`): keyframed controls moving together differ from the line by float rounding.
+LINE_TOLERANCE = 1e-4
+
+
 def _mask_cached(b, gin, images: dict[str, bpy.types.Image], base, s, frac, tile_u: float, shifts: dict) -> dict:
-    """``shifts``, or where the mask cache holds the node's edit (:func:`_match` of :data:`MASK_SLOT`) the shift it
-    holds at the node's Edit Mask: the mask's position u on the cache's line (a Float Curve through
-    exporters.edit_table.MaskLine.position, set with the cache), the points floor(u) and floor(u) + 1 read at slices
-    s and s + 1 and interpolated linearly.  Point p is the image's atlas p - 1; point 0 (mask 0, no shift) lies below
-    the image, where the lookups' Clip extension reads 0."""
-    match = _match(b, gin, MASK_SLOT)
-    curve = b.node("ShaderNodeFloatCurve", 53)
+    """``shifts``, or where the node's controls lie on the mask cache's line (:func:`_on_line`) the shift it holds at
+    the mask there: the mask's position u on the line (a Float Curve through exporters.edit_table.MaskLine.position,
+    set with the cache), the points floor(u) and floor(u) + 1 read at slices s and s + 1 and interpolated linearly.
+    Point p is the image's atlas p - 1; point 0 (mask 0, no shift) lies below the image, where the lookups' Clip
+    extension reads 0."""
+    match, mask = _on_line(b, gin)
+    curve = b.node("ShaderNodeFloatCurve", 58)
     curve.name = curve.label = MASK_CURVE
-    b.link(gin.outputs[MASK_INPUT], curve.inputs["Value"])
+    b.link(mask, curve.inputs["Value"])
     curves.set_float_curve(curve, np.array([0.0, 1.0]), np.array([0.0, 1.0]))
     position = curve.outputs["Value"]
     lower = b.math("MINIMUM", 54, b.math("FLOOR", 53, position), MASK_POINTS - 1.0)
@@ -784,6 +921,21 @@ def cache_status(node: bpy.types.Node) -> str | None:
     return "Read from the edit table (not cached)"
 
 
+def line_status(node: bpy.types.Node, scene: bpy.types.Scene) -> str | None:
+    """The panel's line on how the frames of a keyframed edit render from Blender's interface (Render Animation,
+    whose frames the handlers do not cache): from the mask cache, or from the table and why; None where no control
+    is keyframed."""
+    if _keyframes(node) is None:
+        return None
+    line = animated_line(node, scene)
+    if line is None:
+        return "Animation render: read from the edit table (the keyframes do not move along one line from neutral)"
+    group = _edit_group(node.node_tree) if node.node_tree is not None else None
+    if group is not None and _cached_values(group, MASK_SLOT) == line:
+        return "Animation render: from the mask cache"
+    return "Animation render: read from the edit table (the mask cache holds another edit)"
+
+
 #: The panel's hint for an edit whose controls are fed by nodes while the Edit Mask is not: one mask painting the
 #: whole edit renders from the mask cache (8 lookups) where each control fed by a node reads the table (8 each).
 EDIT_MASK_HINT = "One mask for the whole edit? Plug it into Edit Mask: faster"
@@ -813,9 +965,9 @@ def draw_controls(layout, context) -> None:
             box.label(text=f"{name}: from node '{socket.links[0].from_node.name}'", icon="LINKED")
         else:
             box.prop(socket, "default_value", text=name)
-    status = cache_status(node)
-    if status is not None:
-        box.label(text=status, icon="INFO")
+    for status in (cache_status(node), line_status(node, context.scene)):
+        if status is not None:
+            box.label(text=status, icon="INFO")
     hint = edit_mask_hint(node)
     if hint is not None:
         box.label(text=hint)

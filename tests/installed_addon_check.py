@@ -273,12 +273,16 @@ def main() -> dict:
     node = live_edits.live_node(material)
 
     def cached_and_table(prefix: str) -> None:
-        """The node's cache status and render, then its render with the cache input set back to 0."""
+        """The node's cache status and render, then its render with the cache input set back to 0 and the mask cache
+        holding no edit (its line's end at neutral)."""
         out[f"{prefix}_cache"] = live_edits.cache_status(node)
         out[f"{prefix}_centre_cached"] = render_centre(bpy.context.scene)
         live_edits.unregister_handlers()
         live_edits.set_edit(node, tuple(node.inputs[name].default_value for name in ("Melanin", "Blood",
                                                                                        "Oxygenation")), cache=False)
+        edit_group = live_edits._edit_group(node.node_tree)
+        for name, value in zip(live_edits.CONTROL_NAMES, (1.0, 1.0, 0.0), strict=True):
+            edit_group.nodes[live_edits._cache_node_name(live_edits.MASK_SLOT, name)].inputs[1].default_value = value
         out[f"{prefix}_centre_table"] = render_centre(bpy.context.scene)
         live_edits.register_handlers()
 

@@ -393,7 +393,9 @@ def test_an_edit_painted_by_the_edit_mask_renders_from_the_mask_cache(tmp_path, 
     check(cached_d, "cached")
     # memory (renders the group's Cycles output): the cache's images only, not the two controls' four
     cached = _cycles_memory_mb(scene, tree, gnode)
-    gnode.inputs[live_edits.CACHE_INPUT].default_value = 0
+    gnode.inputs[live_edits.CACHE_INPUT].default_value = 0  # another cache named: the line still matches
+    assert _cycles_memory_mb(scene, tree, gnode) == cached
+    _empty_mask_cache(group)
     full = _cycles_memory_mb(scene, tree, gnode)
     _use(tree, gnode, live.build_live_group(table, layout, images))
     plain = _cycles_memory_mb(scene, tree, gnode)
@@ -403,6 +405,61 @@ def test_an_edit_painted_by_the_edit_mask_renders_from_the_mask_cache(tmp_path, 
     live_edits.set_edit(gnode, (4.0, 1.0, 0.0))  # melanin x4 spans four levels: more than the cache's points
     assert gnode.inputs[live_edits.CACHE_INPUT].default_value == 0
     assert live_edits.cache_status(gnode).startswith("Read from the edit table: the mask cache holds")
+
+
+def test_a_keyframed_edit_renders_from_the_mask_cache_where_no_frame_is_cached(tmp_path, addon):
+    """A flush keyframed on the node (as painted at frame 1, the Flush preset at frame 21, the same keys on every
+    control): the handlers hold its line in the mask cache (live_edits.hold_line), so a frame whose edit no cache holds
+    (as Blender's interface renders an animation: outside the main thread, where no frame's edit is cached) renders
+    the mask cache's answer at its place on the line (edit_table.masked_shift, within a few thousandths of the
+    table's), reading the cache's small images, not the table's.  Keys that leave the line read the table."""
+    scene, tree, gnode, emission, table, edits, layout, images, group, names = _edit_strip(tmp_path)
+    flush = skin_edits.PRESETS["flush"].row()
+    scene.frame_start, scene.frame_end = 1, 24
+    for frame, row in ((1, skin_edits.NEUTRAL), (21, flush)):
+        for name, value in zip(live_edits.CONTROL_NAMES, row, strict=True):
+            gnode.inputs[name].default_value = value
+            gnode.inputs[name].keyframe_insert("default_value", frame=frame)
+    bpy.context.view_layer.update()
+    line = tuple(float(np.float32(v)) for v in flush)
+    assert live_edits.animated_line(gnode, scene) == line
+    assert live_edits._cached_values(live_edits._edit_group(group), live_edits.MASK_SLOT) == line
+    assert live_edits.line_status(gnode, scene) == "Animation render: from the mask cache"
+    live_edits.unregister_handlers()  # as the interface's render thread: no frame's edit cached
+    scene.frame_set(11)
+    gnode.inputs[live_edits.CACHE_INPUT].default_value = 0
+    blood = gnode.inputs["Blood"].default_value
+    t = (blood - 1.0) / (flush[1] - 1.0)
+    assert 0.2 < t < 0.8 and not live_edits.cache_is_current(gnode)
+    d = edit_table.masked_shift(edits, COLOURS, edit_table.mask_line(line), np.full(len(COLOURS), t))
+    table_d = edit_table.shift(edits, COLOURS, np.array([[1.0, blood, gnode.inputs["Oxygenation"].default_value]]))
+    assert np.abs(d - table_d).max() < 5e-3 and np.abs(table_d).max() > 0.02
+    reference = live_table.group_media(table, edit_table.edited_colour(COLOURS, d), live_table.grid_values(table))
+    rtol = np.where(np.arange(len(COLOURS))[:, None] == len(COLOURS) - 1, 2e-3, 5e-4)  # above 1: as for constants
+    for name in names:
+        k, kind = name.split()[1], name.split()[2]
+        ref = reference[f"{k} {kind}"] * (np.exp(d[:, 3:6]) if kind == "Radius" else 1.0)
+        rendered = _render(scene, tree, gnode, emission, name)
+        assert np.all(np.abs(rendered - ref) <= rtol * np.abs(ref) + 1e-7), name
+    cached = _cycles_memory_mb(scene, tree, gnode)
+    _empty_mask_cache(group)
+    full = _cycles_memory_mb(scene, tree, gnode)
+    _use(tree, gnode, live.build_live_group(table, layout, images))
+    plain = _cycles_memory_mb(scene, tree, gnode)
+    assert cached - plain <= 1.0 and full - plain >= 3.0, (plain, cached, full)
+    _use(tree, gnode, group)
+    oxygenation = live_edits.wiring.animation(gnode.inputs["Oxygenation"])[0]
+    oxygenation.keyframe_points[-1].co.x = 15.0  # the flush's oxygenation ends earlier: off the line
+    oxygenation.update()
+    assert live_edits.animated_line(gnode, scene) is None
+    assert live_edits.line_status(gnode, scene).startswith("Animation render: read from the edit table (the keyframes")
+
+
+def _empty_mask_cache(group: bpy.types.NodeTree) -> None:
+    """Make the live group's mask cache hold no edit (its line's end at neutral), as a new group's."""
+    edit_group = live_edits._edit_group(group)
+    for name, value in zip(live_edits.CONTROL_NAMES, skin_edits.NEUTRAL, strict=True):
+        edit_group.nodes[live_edits._cache_node_name(live_edits.MASK_SLOT, name)].inputs[1].default_value = value
 
 
 def test_controls_fed_by_nodes_render_the_tables_answer_flagged_or_not(tmp_path, addon):

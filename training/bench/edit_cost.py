@@ -9,7 +9,8 @@ inputs at neutral, under the presets tan, flush and pallor (exporters.skin_edits
 two of its table's levels (:data:`EDITS`, "three"), each set as the add-on sets it (read from the edit group's cache),
 and that edit read from the table ("three_table": the most lookups an edit makes; a node whose edit is not cached),
 and edits painted by a mask (:data:`MASKED`: through the Edit Mask, from the mask cache; fed to each control,
-from the table), swapping the material's group between renders; each round starts one material later than the one
+from the table) or keyframed along a line and rendered at a frame no cache holds (:data:`KEYED`: from the mask
+cache), swapping the material's group between renders; each round starts one material later than the one
 before, so that no material always follows the swap from the other group.
 Each render's CPU time (training.bench.render_clock, scene sync included) is kept. The ratio is paired: each render
 against the unedited group's render of the same round, the median of the rounds' ratios with a 95 % bootstrap interval
@@ -45,19 +46,28 @@ PRESETS = ("tan", "flush", "pallor")
 EDITS: dict[str, tuple[float, float, float]] = {
     **{p: tuple(float(v) for v in skin_edits.PRESETS[p].row()) for p in PRESETS},
     "three": (1.5, 2.5, -0.2), "three_table": (1.5, 2.5, -0.2),
-    **{mode: tuple(float(v) for v in skin_edits.PRESETS["flush"].row()) for mode in ("flush_mask", "flush_linked")},
+    **{mode: tuple(float(v) for v in skin_edits.PRESETS["flush"].row())
+       for mode in ("flush_mask", "flush_linked", "flush_frame", "flush_frame_table")},
     "blood_linked": (1.0, 2.5, 0.0)}
 #: The edits read from the table (their node's cache input left at 0).
 UNCACHED = ("three_table",)
 #: The edits painted by a mask (:data:`MASK_CODE`): through the group's Edit Mask (read from the mask cache), or
 #: fed to each control the edit moves (read from the table, as every control fed by a node).
 MASKED = {"flush_mask": False, "flush_linked": True, "blood_linked": True}
+#: The edits keyframed (:data:`KEY_CODE`): from as painted at frame 1 to the edit at frame 21 on every control, the
+#: render at frame 11 with no frame's edit cached, as Blender's interface renders an animation (its frames evaluated
+#: outside the main thread): from the mask cache, which the add-on's handlers make hold the keys' line
+#: (blender_addon.live_edits.hold_line; True), or with the mask cache holding no edit, from the table (False).
+KEYED = {"flush_frame": True, "flush_frame_table": False}
 #: What the edits besides the presets are, in the rows' labels.
 DESCRIPTIONS = {"three": "every control between two levels, from its cache",
                 "three_table": "every control between two levels, read from the table (not cached)",
                 "flush_mask": "flush painted by the Edit Mask (the albedo's red), from the mask cache",
                 "flush_linked": "flush painted by a mask fed to each control (the albedo's red), read from the table",
-                "blood_linked": "Blood alone painted by a mask fed to it (the albedo's red), read from the table"}
+                "blood_linked": "Blood alone painted by a mask fed to it (the albedo's red), read from the table",
+                "flush_frame": "flush keyframed from as painted (frame 1) to the preset (frame 21), frame 11 with no "
+                               "frame cached (as the interface renders an animation), from the mask cache's line",
+                "flush_frame_table": "the same frame with the mask cache holding no edit, read from the table"}
 #: Blender code (in a bench child with the material ``mat``, its albedo image ``image`` and exporters.skin_edits'
 #: NEUTRAL imported): ``mask_edit(node, edit, each)`` paints the edit with a mask, the albedo's red channel (a
 #: per-texel value, as a painted mask is): linked to the group's Edit Mask, or (``each``) feeding each control the
@@ -85,6 +95,29 @@ def unmask(node):
     for link in list(mat.node_tree.links):
         if link.to_node == node and link.to_socket.name in ("Melanin", "Blood", "Oxygenation", "Edit Mask"):
             mat.node_tree.links.remove(link)
+"""
+#: Blender code (as :data:`MASK_CODE`'s, with the bench child's ``scene``): ``key_edit(node, edit)`` keyframes the
+#: node's controls from neutral at frame 1 to ``edit`` at frame 21, holds the keys' line in the mask cache as the
+#: add-on's handlers do (``hold``; else empties the mask cache), and goes to frame 11; ``unkey()`` removes the
+#: material's keyframes again.
+KEY_CODE = """
+def key_edit(node, edit, hold):
+    scene.frame_start, scene.frame_end = 1, 21
+    for frame, row in ((1, NEUTRAL), (21, edit)):
+        for name, value in zip(("Melanin", "Blood", "Oxygenation"), row):
+            node.inputs[name].default_value = value
+            node.inputs[name].keyframe_insert("default_value", frame=frame)
+    if hold:
+        assert live_edits.hold_line(node, scene)
+    else:
+        group = live_edits._edit_group(node.node_tree)
+        for name, value in zip(("Melanin", "Blood", "Oxygenation"), NEUTRAL):
+            group.nodes[live_edits._cache_node_name(live_edits.MASK_SLOT, name)].inputs[1].default_value = value
+    scene.frame_set(11)
+
+
+def unkey():
+    mat.node_tree.animation_data_clear()
 """
 MODES = ("plain", "neutral", *EDITS)
 #: Bytes a pixel of a float RGBA image takes in Blender.
@@ -120,14 +153,21 @@ values = {{"neutral": NEUTRAL, **{edits!r}}}
 modes = {modes!r}
 times = {{mode: [] for mode in modes}}
 {mask_code}
+{key_code}
 for r in range({rounds}):
     for mode in modes[r % len(modes):] + modes[:r % len(modes)]:  # each round one material later
         node.node_tree = plain if mode == "plain" else edited
         if mode != "plain":
             unmask(node)
+            unkey()
         if mode in {masked!r}:
             mask_edit(node, values[mode], {masked!r}[mode])
-        live_edits.set_edit(node, values.get(mode, NEUTRAL), cache=mode not in {uncached!r})  # plain: nothing
+        if mode in {keyed!r}:
+            key_edit(node, values[mode], {keyed!r}[mode])
+            live_edits.set_edit(node, tuple(node.inputs[n].default_value for n in ("Melanin", "Blood", "Oxygenation")),
+                                cache=False)
+        else:
+            live_edits.set_edit(node, values.get(mode, NEUTRAL), cache=mode not in {uncached!r})  # plain: nothing
         clock = RenderClock()
         bpy.ops.render.render(write_still=False)
         times[mode].append(clock.seconds())
@@ -154,7 +194,8 @@ def measure(rounds: int = ROUNDS, samples: int = SAMPLES, resolution: int = RESO
         return live_bench.run_script(_CHILD.format(root=str(ROOT), resolution=resolution, samples=samples,
                                                    texture=TEXTURE, texture_path=str(Path(tmp) / "skin.png"),
                                                    edits=edits, modes=modes, rounds=rounds,
-                                                   uncached=UNCACHED, masked=MASKED, mask_code=MASK_CODE))
+                                                   uncached=UNCACHED, masked=MASKED, mask_code=MASK_CODE,
+                                                   keyed=KEYED, key_code=KEY_CODE))
 
 
 def image_megabytes() -> float:

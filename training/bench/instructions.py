@@ -59,9 +59,25 @@ live_edits.set_edit(live_edits.live_node(mat), {edit!r}, cache={cache!r})
 EDITS = edit_cost.EDITS
 
 
+#: A keyframed edit (edit_cost.KEYED) at a frame no cache holds, as the child's variant code: its keys (and the
+#: mask cache's line, or none) by edit_cost.KEY_CODE, the node's cache input then left at 0 as a frame the
+#: interface renders finds it.
+_KEYED = """
+from blender_addon import live_edits
+from exporters.skin_edits import NEUTRAL
+live_edits.unregister_handlers()
+node = live_edits.live_node(mat)
+{key_code}
+key_edit(node, {edit!r}, {hold!r})
+live_edits.set_edit(node, tuple(node.inputs[n].default_value for n in ("Melanin", "Blood", "Oxygenation")), cache=False)
+"""
+
+
 def _variant(name: str, edit: tuple[float, float, float]) -> str:
     """The child's code setting the edit ``name``; a masked one's mask (edit_cost.MASK_CODE) linked first, so that
-    set_edit caches it as the add-on does."""
+    set_edit caches it as the add-on does; a keyframed one's keys (:data:`_KEYED`)."""
+    if name in edit_cost.KEYED:
+        return _KEYED.format(key_code=edit_cost.KEY_CODE, edit=edit, hold=edit_cost.KEYED[name])
     code = _EDIT.format(edit=edit, cache=name not in edit_cost.UNCACHED)
     if name in edit_cost.MASKED:
         image = ("image = next(n.image for n in mat.node_tree.nodes if n.bl_idname == 'ShaderNodeTexImage' "
