@@ -22,7 +22,8 @@ and reads from its output, per material:
 Materials: Principled BSDF Random Walk (Skin) (the anchor of :mod:`training.bench.render_cost`), the Bake mode's
 maps, the live group (Invert Skin Albedo's default, edit inputs at neutral) and the live group under each edit of
 training.bench.edit_cost.EDITS (the presets tan, flush and pallor and every control between two levels, each read from
-its cache as the add-on sets it, and that edit read from the table: an edit's cost against the group at neutral).
+its cache as the add-on sets it, and that edit read from the table; the masked edits of edit_cost.MASKED and a frame of
+a keyframed flush no cache holds, edit_cost.KEYED: an edit's cost against the group at neutral).
 Instructions are not time: a walk's ray casts wait on memory where the node loop does not, so the live group's
 instruction ratio is larger than its time ratio; what the counts give is a change's effect without the machine's
 noise.  Needs ``valgrind`` on the PATH (about 100 s per material, two at a time); without it the rows say so.

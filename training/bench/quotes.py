@@ -137,7 +137,9 @@ FIGURES: dict[str, Figure] = {
                          ("three", "between two levels, from its cache"),
                          ("three_table", "read from the table (not cached)"),
                          ("flush_mask", "painted by the Edit Mask"), ("flush_linked", "fed to each control"),
-                         ("blood_linked", "Blood alone painted by a mask"))
+                         ("blood_linked", "Blood alone painted by a mask"),
+                         ("flush_frame", "from the mask cache's line"),
+                         ("flush_frame_table", "the same frame with the mask cache holding no edit"))
        for part, label in (("instructions", "instructions"), ("shading", "shading"), ("walks", "walks"))},
     **{f"counted_{name}_dispatches": Figure("instructions", row, column, r"([\d.]+) SVM dispatches")
        for name, row, column in (("live", "live group (default) vs Principled", "ours"),
