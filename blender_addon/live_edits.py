@@ -396,18 +396,16 @@ def cache_edits(materials, scene: bpy.types.Scene | None = None) -> None:
 
 
 def _keyframes(node: bpy.types.Node) -> list[list[bpy.types.FCurve]] | None:
-    """Per control, the F-curves keyframing the node's input (none: a constant), where at least one control is
-    keyframed and none is fed by a node or driven, and the Edit Mask is not fed by a node; else None."""
-    if MASK_INPUT not in node.inputs or node.inputs[MASK_INPUT].is_linked:
-        return None
+    """Per control, the F-curves keyframing the node's input (none: a constant), where a control or the Edit Mask is
+    keyframed (a preset's amount animated on the mask), and none of them is fed by a node or driven; else None."""
     found = []
-    for name in CONTROL_NAMES:
-        socket = node.inputs[name]
-        curves_ = wiring.animation(socket)
-        if socket.is_linked or any(c.driver is not None for c in curves_):
+    for name in (*CONTROL_NAMES, MASK_INPUT):
+        socket = node.inputs.get(name)
+        curves_ = wiring.animation(socket) if socket is not None else []
+        if socket is None or socket.is_linked or any(c.driver is not None for c in curves_):
             return None
         found.append(curves_)
-    return found if any(found) else None
+    return found[:-1] if any(found) else None
 
 
 #: The line of each keyframed node last found (:func:`animated_line`), by the node's address: (what it was found
@@ -419,8 +417,9 @@ def animated_line(node: bpy.types.Node, scene: bpy.types.Scene) -> tuple[float, 
     """The edit E at the end of the line from neutral along which the node's keyframed controls move over the scene's
     frames (every frame's controls V = n + t (E - n), 0 <= t <= 1, within :data:`LINE_TOLERANCE` / 4; E the frame's
     edit farthest from neutral), where the mask cache can hold it (exporters.edit_table.mask_line); else None: not
-    keyframed (:func:`_keyframes`), or moving otherwise.  A blush keyframed on Blood alone, or a preset faded in on
-    all its controls with the same keys, moves along one line."""
+    keyframed (:func:`_keyframes`), or moving otherwise.  A blush keyframed on Blood alone, a preset faded in on all
+    its controls with the same keys, or a preset whose Edit Mask is keyframed (its controls at the line's end) moves
+    along one line."""
     keyed = _keyframes(node)
     if keyed is None:
         return None

@@ -455,6 +455,28 @@ def test_a_keyframed_edit_renders_from_the_mask_cache_where_no_frame_is_cached(t
     assert live_edits.line_status(gnode, scene).startswith("Animation render: read from the edit table (the keyframes")
 
 
+def test_a_presets_keyframed_edit_mask_renders_from_the_mask_cache(tmp_path, addon):
+    """The Flush preset set on the node and its Edit Mask keyframed from 0 (frame 1) to 1 (frame 21), a blush's
+    amount animated: the handlers hold the preset's line, and a frame no cache holds reads the mask cache's images,
+    not the table's."""
+    scene, tree, gnode, emission, table, edits, layout, images, group, names = _edit_strip(tmp_path)
+    live_edits.set_edit(gnode, tuple(skin_edits.PRESETS["flush"].row()))
+    mask = gnode.inputs[live_edits.MASK_INPUT]
+    for frame, value in ((1, 0.0), (21, 1.0)):
+        mask.default_value = value
+        mask.keyframe_insert("default_value", frame=frame)
+    bpy.context.view_layer.update()
+    assert live_edits.line_status(gnode, scene) == "Animation render: from the mask cache"
+    live_edits.unregister_handlers()
+    scene.frame_set(11)
+    gnode.inputs[live_edits.CACHE_INPUT].default_value = 0
+    assert 0.2 < mask.default_value < 0.8 and not live_edits.cache_is_current(gnode)
+    cached = _cycles_memory_mb(scene, tree, gnode)
+    _use(tree, gnode, live.build_live_group(table, layout, images))
+    plain = _cycles_memory_mb(scene, tree, gnode)
+    assert cached - plain <= 1.0, (plain, cached)
+
+
 def _empty_mask_cache(group: bpy.types.NodeTree) -> None:
     """Make the live group's mask cache hold no edit (its line's end at neutral), as a new group's."""
     edit_group = live_edits._edit_group(group)
