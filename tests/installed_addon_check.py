@@ -296,6 +296,17 @@ def main() -> dict:
     tree.links.new(red.outputs[0], node.inputs["Edit Mask"])
     bpy.context.view_layer.update()
     cached_and_table("edit_mask")
+    # A blush keyframed on Blood (as painted at frame 1, 2.5 at frame 21; the mask unlinked): the add-on holds its
+    # line in the mask cache, which the frames an animation render from the interface evaluates read.
+    tree.links.remove(node.inputs["Edit Mask"].links[0])
+    node.inputs["Oxygenation"].default_value = 0.0
+    for frame, value in ((1, 1.0), (21, 2.5)):
+        node.inputs["Blood"].default_value = value
+        node.inputs["Blood"].keyframe_insert("default_value", frame=frame)
+    bpy.context.view_layer.update()
+    out["keyed_line"] = live_edits.animated_line(node, bpy.context.scene)
+    out["keyed_status"] = live_edits.line_status(node, bpy.context.scene)
+    tree.animation_data_clear()
     # The skin material appended from another file holding the same groups: it renders through this file's, and the
     # copies it brought are left unused (a timer of the main loop, which a script has not, removes them).
     first, second = (os.path.join(sys.argv[2], name) for name in ("first.blend", "second.blend"))

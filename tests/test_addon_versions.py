@@ -88,6 +88,8 @@ def test_installs_bakes_renders_and_exits_cleanly(case, python, version, py_vers
     assert out["edit_mask_cache"] == "Rendered from the mask cache", out
     np.testing.assert_allclose(out["edit_mask_centre_cached"], out["edit_mask_centre_table"], rtol=5e-3)
     assert not np.allclose(out["edit_mask_centre_cached"], out["edit_centre_cached"], rtol=1e-2)
+    # A blush keyframed on Blood holds its line in the mask cache (the keys read through this version's action API).
+    assert out["keyed_line"] == [1.0, 2.5, 0.0] and out["keyed_status"] == "Animation render: from the mask cache", out
     # A skin material appended from another file renders through this file's groups; the copies it brought are unused.
     assert out["appended_group"] == "Spectral Skin SSS Live" and out["appended_copies_used"] == [], out
     # The same translucency as in Blender 5.0: a thin back-lit disk lets through what it lets through there, within
