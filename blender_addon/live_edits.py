@@ -440,8 +440,9 @@ def animated_line(node: bpy.types.Node, scene: bpy.types.Scene) -> tuple[float, 
 
 
 def _curve_key(curve: bpy.types.FCurve) -> tuple:
-    """What an F-curve's values depend on: its extrapolation, modifiers and keyframes."""
-    return (curve.extrapolation, len(curve.modifiers),
+    """What an F-curve's values depend on: its extrapolation, its modifiers (their types and whether they are on; a
+    modifier's settings changed alone are seen at the next change of these) and its keyframes."""
+    return (curve.extrapolation, tuple((m.type, m.mute, m.active) for m in curve.modifiers),
             tuple((tuple(k.co), tuple(k.handle_left), tuple(k.handle_right), k.interpolation, k.easing)
                   for k in curve.keyframe_points))
 
