@@ -27,10 +27,10 @@ SIZE = 16
 SUFFIXED = re.compile(r"\.\d{3}$")
 
 
-def _skin_file(tmp_path: Path, name: str, rgb: tuple[int, int, int], edit: tuple[float, float, float]
-               ) -> np.ndarray:
-    """A new file: the probe scene with a skin material ``name`` of colour ``rgb`` wired live with ``edit``, saved to
-    ``tmp_path / name.blend``; returns its render."""
+def _skin_file(tmp_path: Path, name: str, rgb: tuple[int, int, int], edit: tuple[float, float, float],
+               mode: str = "LIVE") -> np.ndarray:
+    """A new file: the probe scene with a skin material ``name`` of colour ``rgb`` wired live with ``edit`` (or, mode
+    BAKE, baked maps of that edit), saved to ``tmp_path / name.blend``; returns its render."""
     bpy.ops.wm.read_homefile(use_empty=True)
     scene = probe.new_scene(samples=16, resolution=SIZE, seed=3)
     pixels = np.broadcast_to(np.array(rgb, np.uint8), (SIZE, SIZE, 3))
@@ -39,9 +39,11 @@ def _skin_file(tmp_path: Path, name: str, rgb: tuple[int, int, int], edit: tuple
     material.name = name
     slab = bpy.data.objects["ProbeSlab"]
     slab.active_material = material
+    options = {} if mode == "LIVE" else dict(zip(("melanin", "blood", "oxygenation"), edit, strict=True))
     with bpy.context.temp_override(object=slab, active_object=slab):
-        assert bpy.ops.spectral_skin.invert_albedo(mode="LIVE") == {"FINISHED"}
-    live_edits.set_edit(wiring.wired_group_node(material), edit)
+        assert bpy.ops.spectral_skin.invert_albedo(mode=mode, **options) == {"FINISHED"}
+    if mode == "LIVE":
+        live_edits.set_edit(wiring.wired_group_node(material), edit)
     bpy.context.view_layer.update()
     rgb_render = render_linear(scene, tmp_path / f"{name}.exr")
     bpy.ops.wm.save_as_mainfile(filepath=str(tmp_path / f"{name}.blend"))
@@ -88,6 +90,20 @@ def test_an_appended_skin_shares_the_files_groups_and_renders_as_in_its_own(tmp_
 
     other = bpy.data.materials["SkinB"]  # B's own skin still renders from its own cache
     assert live_edits.cache_is_current(wiring.wired_group_node(other))
+
+
+def test_an_appended_baked_skin_shares_the_files_groups_and_renders_as_in_its_own(tmp_path, registered):
+    """Baked maps: the appended material's mixture and grazing-light groups are the file's; its maps are its own."""
+    expected = _skin_file(tmp_path, "SkinA", (180, 120, 95), (1.5, 1.0, 0.0), mode="BAKE")
+    _skin_file(tmp_path, "SkinB", (120, 80, 60), (1.0, 2.0, 0.0), mode="BAKE")
+    groups, images = _addon_data()
+    appended = _append(tmp_path, "SkinA")
+    merge.remove_merged()
+    groups_now, images_now = _addon_data()
+    assert groups_now == groups and not any(SUFFIXED.search(name) for name in groups_now)
+    assert len(images_now) == len(images) + 12  # the appended material's twelve maps (K = 3), and no table twice
+    assert wiring.wired_group_node(appended).node_tree == wiring.wired_group_node(bpy.data.materials["SkinB"]).node_tree
+    np.testing.assert_array_equal(render_linear(bpy.context.scene, tmp_path / "appended.exr"), expected)
 
 
 def test_copies_changed_by_hand_or_linked_are_kept(tmp_path, registered):
