@@ -98,9 +98,7 @@ def remove_copies(names: list[str]) -> int:
             images |= _images(group)
             bpy.data.node_groups.remove(group)
             removed += 1
-    for image in images:
-        if image.users == 0 and any(tag in image for tag in wiring.IMAGE_TAGS):
-            bpy.data.images.remove(image)
+    wiring.remove_unused_images(images)
     return removed
 
 

@@ -1117,10 +1117,16 @@ def purge_unused() -> tuple[int, int]:
             bpy.data.node_groups.remove(group)
             groups += 1
             removed = True
-    images = [im for im in bpy.data.images if any(t in im for t in IMAGE_TAGS) and im.users == 0]
-    for image in images:
+    return groups, remove_unused_images(bpy.data.images)
+
+
+def remove_unused_images(images) -> int:
+    """Remove those of ``images`` that the add-on made (tagged: :data:`IMAGE_TAGS`) and nothing uses; returns how
+    many."""
+    unused = [im for im in images if any(t in im for t in IMAGE_TAGS) and im.users == 0]
+    for image in unused:
         bpy.data.images.remove(image)
-    return groups, len(images)
+    return len(unused)
 
 
 def packed_table_image(name: str, pixels: np.ndarray, tag_prop: str, tag_value: str) -> bpy.types.Image:

@@ -280,9 +280,7 @@ def main() -> dict:
         live_edits.unregister_handlers()
         live_edits.set_edit(node, tuple(node.inputs[name].default_value for name in ("Melanin", "Blood",
                                                                                        "Oxygenation")), cache=False)
-        edit_group = live_edits._edit_group(node.node_tree)
-        for name, value in zip(live_edits.CONTROL_NAMES, (1.0, 1.0, 0.0), strict=True):
-            edit_group.nodes[live_edits._cache_node_name(live_edits.MASK_SLOT, name)].inputs[1].default_value = value
+        live_edits.empty_mask_cache(node.node_tree)
         out[f"{prefix}_centre_table"] = render_centre(bpy.context.scene)
         live_edits.register_handlers()
 

@@ -468,19 +468,12 @@ def _assert_reads_the_mask_cache(scene, tree, gnode, group, table, layout, image
     memory within 1 MB of the group without edit nodes, and at least 3 MB over it once the mask cache holds no edit
     (which it is left holding)."""
     cached = _cycles_memory_mb(scene, tree, gnode)
-    _empty_mask_cache(group)
+    live_edits.empty_mask_cache(group)
     full = _cycles_memory_mb(scene, tree, gnode)
     _use(tree, gnode, live.build_live_group(table, layout, images))
     plain = _cycles_memory_mb(scene, tree, gnode)
     assert cached - plain <= 1.0 and full - plain >= 3.0, (plain, cached, full)
     _use(tree, gnode, group)
-
-
-def _empty_mask_cache(group: bpy.types.NodeTree) -> None:
-    """Make the live group's mask cache hold no edit (its line's end at neutral), as a new group's."""
-    edit_group = live_edits._edit_group(group)
-    for name, value in zip(live_edits.CONTROL_NAMES, skin_edits.NEUTRAL, strict=True):
-        edit_group.nodes[live_edits._cache_node_name(live_edits.MASK_SLOT, name)].inputs[1].default_value = value
 
 
 def test_controls_fed_by_nodes_render_the_tables_answer_flagged_or_not(tmp_path, addon):

@@ -110,9 +110,7 @@ def key_edit(node, edit, hold):
     if hold:
         assert live_edits.hold_line(node, scene)
     else:
-        group = live_edits._edit_group(node.node_tree)
-        for name, value in zip(("Melanin", "Blood", "Oxygenation"), NEUTRAL):
-            group.nodes[live_edits._cache_node_name(live_edits.MASK_SLOT, name)].inputs[1].default_value = value
+        live_edits.empty_mask_cache(node.node_tree)
     scene.frame_set(11)
 
 
