@@ -29,7 +29,9 @@ constant edits, each an image pair of one atlas (the table's shift of that edit 
 exporters.edit_table.combined_atlas of the control images: the lookups are linear, so reading it gives the same
 D), read at two slices (4 lookups where the table takes up to 24), and one **mask cache** (:data:`MASK_SLOT`): an
 edit's shift at :data:`MASK_POINTS` masks on its line (exporters.edit_table.MaskLine), read at two points and two
-slices (8 lookups, however many controls the edit moves).  A constant edit's cache is used where the node's hidden
+slices (8 lookups, however many controls the edit moves).  While the mask cache holds no line in use, its images'
+atlases serve as :data:`SPARE_SLOTS` more caches of constant edits (six constant edits at once in the same
+memory); a line, when one is needed, takes them back.  A constant edit's cache is used where the node's hidden
 input **Edit Cache** names it and its inputs equal the values the cache holds (Compare nodes in the group: the
 controls and the mask's value); the mask cache wherever the node's controls lie on the line from neutral to the edit
 it holds, at the mask times their place on it (:func:`_on_line`): an edit painted by the Edit Mask (the controls at
@@ -71,6 +73,10 @@ MASK_INPUT = "Edit Mask"
 MASK_SLOT = CACHE_SLOTS + 1
 #: Points of the mask cache along its edit's line (exporters.edit_table.MaskLine).
 MASK_POINTS = edit_table.MASK_POINTS
+#: Caches of constant edits held in the mask cache's images while it holds no line (:func:`_line_in_use`): cache
+#: ``SPARE_SLOTS[a]`` is the images' atlas a, read as a constant edit's cache is (the same memory: six constant
+#: edits at once where no edit needs the mask cache).
+SPARE_SLOTS = tuple(range(MASK_SLOT + 1, MASK_SLOT + 1 + MASK_POINTS))
 #: The Float Curve of the mask cache: the mask's position on its line (exporters.edit_table.MaskLine.position).
 MASK_CURVE = "Mask Cache Position"
 #: The group's inputs, in order: (name, default, soft minimum, soft maximum, tooltip).
@@ -215,18 +221,20 @@ def cache_key(node: bpy.types.Node) -> tuple[float, ...] | None:
     return (*edit, weight)
 
 
-def _slots(key: tuple[float, ...]) -> range:
-    """The caches that can hold an edit of cache key ``key`` (:func:`cache_key`)."""
-    return range(MASK_SLOT, MASK_SLOT + 1) if len(key) == len(CONTROL_NAMES) else range(1, CACHE_SLOTS + 1)
+def _slots(key: tuple[float, ...]) -> tuple[int, ...]:
+    """The caches that can hold an edit of cache key ``key`` (:func:`cache_key`): the mask cache for an edit painted
+    by a linked Edit Mask, else the constant edits' caches and the spare ones (:data:`SPARE_SLOTS`)."""
+    return (MASK_SLOT,) if len(key) == len(CONTROL_NAMES) else (*range(1, CACHE_SLOTS + 1), *SPARE_SLOTS)
 
 
 def cache_edit(node: bpy.types.Node) -> int:
     """Hold the live group node's edit precombined in one of its edit group's caches (module docstring, "Edit
-    caches") and point the node's cache input at it; returns that cache (1 to :data:`CACHE_SLOTS` for a constant
-    edit, :data:`MASK_SLOT` for one painted by a linked Edit Mask), or 0 where the edit is not cached
-    (:func:`cache_key` None), the group has no caches, the material or group is linked from a library (read-only) or
-    the group misses one of its images.  A cache of the same values is reused; else a free one (no other node's edit
-    in it), else the one filled longest ago (the nodes that used it then render through the table, as before)."""
+    caches") and point the node's cache input at it; returns that cache (1 to :data:`CACHE_SLOTS` or one of
+    :data:`SPARE_SLOTS` for a constant edit, :data:`MASK_SLOT` for one painted by a linked Edit Mask), or 0 where
+    the edit is not cached (:func:`cache_key` None), the group has no caches, the material or group is linked from a
+    library (read-only) or the group misses one of its images.  A cache of the same values is reused; else a free one
+    (no other node's edit in it: the three caches first, then the spare ones while the mask cache holds no line in
+    use), else the one filled longest ago (the nodes that used it then render through the table, as before)."""
     if node is None or CACHE_INPUT not in node.inputs or node.node_tree is None or not node.id_data.is_editable:
         return 0
     group = _edit_group(node.node_tree)
@@ -262,9 +270,7 @@ def _cached_values(group: bpy.types.NodeTree, slot: int) -> tuple[float, ...]:
 def empty_mask_cache(live_group: bpy.types.NodeTree) -> None:
     """Make the live group's mask cache hold no edit (its line's end at neutral, as in a new group), so that what it
     served reads the table: how the tests and the benches compare the two paths."""
-    group = _edit_group(live_group)
-    for name, value in zip(CONTROL_NAMES, skin_edits.NEUTRAL, strict=True):
-        group.nodes[_cache_node_name(MASK_SLOT, name)].inputs[1].default_value = value
+    _set_cached_values(_edit_group(live_group), MASK_SLOT, skin_edits.NEUTRAL)
 
 
 def _point(node: bpy.types.Node, slot: int) -> None:
@@ -309,47 +315,126 @@ def _group_images(group: bpy.types.NodeTree) -> dict[str, bpy.types.Image] | Non
 
 def _slot_for(group: bpy.types.NodeTree, images: dict[str, bpy.types.Image], key: tuple[float, ...],
               node: bpy.types.Node) -> int:
-    """The cache of ``group`` holding the edit of cache key ``key``, filled here if none does (:func:`cache_edit`)."""
+    """The cache of ``group`` holding the edit of cache key ``key``, filled here if none does (:func:`cache_edit`).
+    The spare caches (:data:`SPARE_SLOTS`) are free only while the mask cache holds no line in use
+    (:func:`_line_in_use`): an edit painted by the Edit Mask or a keyframed line comes first.  Where every cache is
+    in use and the edit lies on the mask cache's line (:func:`_line_serves`: a frame of the keyframed edit whose line
+    it holds), the mask cache: the frames of an animation then give up no other material's cache."""
     slots = _slots(key)
+    if any(k in SPARE_SLOTS for k in slots) and (not _has_spares(group) or _line_in_use(group)):
+        slots = tuple(k for k in slots if k not in SPARE_SLOTS)
     held = {k: _cached_values(group, k) for k in slots}
     for k, values in held.items():
         if values == key:
             return k
-    others = [n for n in map(live_node, bpy.data.materials) if n is not None and n != node
-              and n.node_tree is not None and _edit_group(n.node_tree) == group]
+    others = [n for n in _group_nodes(group) if n != node]
     used = {int(n.inputs[CACHE_INPUT].default_value) for n in others
             if cache_key(n) == held.get(int(n.inputs[CACHE_INPUT].default_value))}
     order = list(group.get(_CACHE_ORDER_PROP, []))
     free = [k for k in slots if k not in used]
+    if not free and len(key) > len(CONTROL_NAMES) and _line_serves(group, key):
+        return MASK_SLOT  # every cache in use, and the mask cache's line holds the edit: no other edit given up
     slot = free[0] if free else next((k for k in order if k in slots), slots[0])
     _fill(group, images, slot, key)
     group[_CACHE_ORDER_PROP] = [k for k in order if k != slot] + [slot]
-    for n in others:  # nodes that pointed at the cache before: it holds other values now
-        if int(n.inputs[CACHE_INPUT].default_value) == slot and n.id_data.is_editable:
-            _point(n, 0)
+    _unpoint(others, (slot,))  # nodes that pointed at the cache before: it holds other values now
     return slot
+
+
+def _group_nodes(group: bpy.types.NodeTree) -> list[bpy.types.Node]:
+    """The live nodes of every material whose live group holds the edit group ``group``."""
+    return [n for n in map(live_node, bpy.data.materials)
+            if n is not None and n.node_tree is not None and _edit_group(n.node_tree) == group]
+
+
+def _unpoint(nodes, slots) -> None:
+    """Point those of ``nodes`` whose cache input names one of ``slots`` at no cache (they render through the
+    table until their edit is cached again)."""
+    for n in nodes:
+        if int(n.inputs[CACHE_INPUT].default_value) in slots and n.id_data.is_editable:
+            _point(n, 0)
+
+
+def _line_serves(group: bpy.types.NodeTree, key: tuple[float, ...]) -> bool:
+    """Whether the mask cache's line holds the constant edit of cache key ``key``: its controls lie on the line
+    between neutral and the line's end (:func:`_line_through`, within a quarter of the group's tolerance), where the
+    group reads the mask cache at the mask times their place on it (:func:`_on_line`)."""
+    held = _cached_values(group, MASK_SLOT)
+    return _line_through(np.array([held, key[:len(CONTROL_NAMES)]], np.float64)) == held
+
+
+def _has_spares(group: bpy.types.NodeTree) -> bool:
+    """Whether the edit group reads the spare caches (a group of an older add-on does not)."""
+    return _cache_node_name(SPARE_SLOTS[0], CONTROL_NAMES[0]) in group.nodes
+
+
+def _line_in_use(group: bpy.types.NodeTree) -> bool:
+    """Whether the mask cache's line is in use: it holds one (not neutral) that a node of the group renders from,
+    painted by its Edit Mask, a constant edit on it (:func:`_line_serves`) or keyframed along it
+    (:func:`animated_line` over the context's scene)."""
+    held = _cached_values(group, MASK_SLOT)
+    if held == tuple(float(v) for v in skin_edits.NEUTRAL):
+        return False
+    scene = getattr(bpy.context, "scene", None)
+    for n in _group_nodes(group):
+        if int(n.inputs[CACHE_INPUT].default_value) == MASK_SLOT and cache_is_current(n):
+            return True
+        if scene is not None and animated_line(n, scene) == held:
+            return True
+    return False
 
 
 def _fill(group: bpy.types.NodeTree, images: dict[str, bpy.types.Image], slot: int, key: tuple[float, ...]) -> None:
     """Write cache ``slot`` for the edit of cache key ``key``: its images (exporters.edit_table.combined_atlas of the
     group's control images, ``images`` from :func:`_group_images`, for a constant edit; line_atlas for the mask
-    cache, and its curve), then the values its Compare nodes test the inputs against."""
+    cache, and its curve), then the values its Compare nodes test the inputs against.  The mask cache and the spare
+    caches share images: the mask cache's line gives up the spare caches, a spare cache empties the line."""
     line = edit_table.mask_line(key) if slot == MASK_SLOT else None
+    if slot == MASK_SLOT and _has_spares(group):
+        for spare in SPARE_SLOTS:
+            _set_cached_values(group, spare, (_EMPTY_CACHE,) * len(_cache_inputs(spare)))
+        _unpoint(_group_nodes(group), SPARE_SLOTS)
+    elif slot in SPARE_SLOTS:
+        _set_cached_values(group, MASK_SLOT, skin_edits.NEUTRAL)
     for kind in edit_table.KINDS:
         stacked = [_pixels(images[edit_table.image_name(j, kind)]) for j in range(len(skin_edits.CONTROLS))]
         pixels = (edit_table.line_atlas(stacked, line) if line is not None
                   else edit_table.combined_atlas(stacked, edit_table.masked_edits(key[:3], [key[3]])[0]))
-        wiring.rewrite_table_image(images[cache_image_name(slot, kind)], pixels)
+        if slot in SPARE_SLOTS:
+            pixels = _with_atlas(images[cache_image_name(MASK_SLOT, kind)], SPARE_SLOTS.index(slot), pixels)
+        wiring.rewrite_table_image(images[cache_image_name(_image_slot(slot), kind)], pixels)
     if line is not None:
         xs = np.linspace(0.0, 1.0, curves.SMOOTH_POINTS)
         curves.set_float_curve(group.nodes[MASK_CURVE], xs, line.position(xs))
-    for name, value in zip(_cache_inputs(slot), key, strict=True):
+    _set_cached_values(group, slot, key)
+
+
+def _image_slot(slot: int) -> int:
+    """The cache whose images hold cache ``slot``: the mask cache's for a spare one (:data:`SPARE_SLOTS`)."""
+    return MASK_SLOT if slot in SPARE_SLOTS else slot
+
+
+def _set_cached_values(group: bpy.types.NodeTree, slot: int, values) -> None:
+    """Make cache ``slot``'s Compare (Math) nodes test the inputs against ``values`` (:func:`_cached_values`)."""
+    for name, value in zip(_cache_inputs(slot), values, strict=True):
         group.nodes[_cache_node_name(slot, name)].inputs[1].default_value = value
 
 
+def _with_atlas(image: bpy.types.Image, index: int, atlas: np.ndarray) -> np.ndarray:
+    """The mask cache's image's pixels (:data:`MASK_POINTS` atlases stacked bottom to top; zeros where it holds
+    fewer rows, as a new group's) with atlas ``index`` replaced by ``atlas`` (height, width, 4)."""
+    height, width = atlas.shape[:2]
+    current = _pixels(image)
+    if current.shape != (MASK_POINTS * height, width, 4):
+        current = np.zeros((MASK_POINTS * height, width, 4), np.float32)
+    current[index * height:(index + 1) * height] = atlas
+    return current
+
+
 def cache_is_current(node: bpy.types.Node) -> bool:
-    """Whether the node's cache input is what :func:`cache_edit` would set: its edit's cache, or 0 where the edit is
-    not cached (:func:`cache_key` None) or its group has no caches."""
+    """Whether the node's cache input is what :func:`cache_edit` would set: its edit's cache (for a constant edit,
+    the mask cache too where its line holds the edit: :func:`_slot_for`), or 0 where the edit is not cached
+    (:func:`cache_key` None) or its group has no caches."""
     if CACHE_INPUT not in node.inputs or node.node_tree is None:
         return True
     slot = int(node.inputs[CACHE_INPUT].default_value)
@@ -357,6 +442,8 @@ def cache_is_current(node: bpy.types.Node) -> bool:
     key = cache_key(node)
     if group is None or key is None:
         return slot == _uncached(node)
+    if slot == MASK_SLOT and len(key) > len(CONTROL_NAMES):
+        return _line_serves(group, key)
     return slot in _slots(key) and _cached_values(group, slot) == key
 
 
@@ -472,10 +559,11 @@ def _line_through(rows: np.ndarray) -> tuple[float, float, float] | None:
 
 def hold_line(node: bpy.types.Node, scene: bpy.types.Scene) -> bool:
     """Hold the line of the node's keyframed edit (:func:`animated_line`) in its edit group's mask cache, unless that
-    holds the edit of a node painted by its Edit Mask (which renders from it every frame) or another keyframed
-    node's line: the frames Blender's interface renders (outside the main thread, where the handlers cache no
-    frame's edit) then read the mask cache instead of the table (module docstring, "Edit caches").  Returns whether
-    the mask cache holds the line."""
+    holds the edit of another node rendering from it (painted by its Edit Mask, or a constant edit on the line) or
+    another keyframed node's line: the frames Blender's interface renders (outside the main thread, where the
+    handlers cache no frame's edit) then read the mask cache instead of the table (module docstring, "Edit caches").
+    Constant edits held in the spare caches give them up (:func:`_fill`).  Returns whether the mask cache holds the
+    line."""
     line = animated_line(node, scene) if node.node_tree is not None and node.id_data.is_editable else None
     group = _edit_group(node.node_tree) if line is not None else None
     if group is None:
@@ -486,11 +574,11 @@ def hold_line(node: bpy.types.Node, scene: bpy.types.Scene) -> bool:
     images = _group_images(group)
     if images is None:
         return False
-    for other in map(live_node, bpy.data.materials):
-        if other is None or other == node or other.node_tree is None or _edit_group(other.node_tree) != group:
+    for other in _group_nodes(group):
+        if other == node:
             continue
-        masked = int(other.inputs[CACHE_INPUT].default_value) == MASK_SLOT and cache_key(other) == held
-        if masked or animated_line(other, scene) == held:
+        served = int(other.inputs[CACHE_INPUT].default_value) == MASK_SLOT and cache_is_current(other)
+        if served or animated_line(other, scene) == held:
             return False
     _fill(group, images, MASK_SLOT, line)
     return True
@@ -534,7 +622,7 @@ def add_inputs(group: bpy.types.NodeTree) -> None:
     socket.description = ("Where the edit applies (link a painted mask, 0 to 1): each control becomes neutral + mask x "
                           "(its value - neutral), as a bake's masks weigh an edit")
     socket = group.interface.new_socket(CACHE_INPUT, in_out="INPUT", socket_type="NodeSocketFloat")
-    socket.default_value, socket.min_value, socket.max_value = 0.0, -float(_ALL_LINKED), float(MASK_SLOT)
+    socket.default_value, socket.min_value, socket.max_value = 0.0, -float(_ALL_LINKED), float(SPARE_SLOTS[-1])
     socket.hide_value = True
     socket.description = ("Set by the add-on: which of the edit group's caches holds this node's edit precombined "
                           "(0: none; a cache of other values is never used), or minus the controls fed by nodes")
@@ -674,7 +762,7 @@ def add_edit_branch(b, gin, table: edit_table.EditTable, images: dict[str, bpy.t
                 else _gated_sum(b, neutral, shifts[kind], value)
     if not eevee:  # a constant edit's own cache before the mask cache's line
         shifts = _mask_cached(b, gin, images, base, s, frac, tile_u, shifts)
-        for slot in range(1, CACHE_SLOTS + 1):
+        for slot in (*range(1, CACHE_SLOTS + 1), *SPARE_SLOTS):
             shifts = _cached(b, gin, slot, images, slice_uv, frac, tile_u, shifts)
     active = b.math("SUBTRACT", 60, 1.0, still)
     bounds = table.shift_bounds()
@@ -742,13 +830,17 @@ def _cached(b, gin, slot: int, images: dict[str, bpy.types.Image], uv, frac, til
     """``shifts`` where cache ``slot`` holds the node's edit, the cache's shifts where it does (module docstring,
     "Edit caches"): a Mix per kind from the table's shift to the cache's, of factor :func:`_match`.  The cache holds
     one atlas (the shift of that edit at the grid's nodes): each kind's image read at slices s and s + 1, its v
-    scaled from the stacked images' (the images' texture mapping)."""
+    scaled from the stacked images' (the images' texture mapping); a spare cache (:data:`SPARE_SLOTS`) reads its
+    atlas of the mask cache's images, where :func:`_mask_cached` reads that point."""
     match = _match(b, gin, slot)
+    atlases, dv = 1, 0.0
+    if slot in SPARE_SLOTS:
+        atlases, dv = MASK_POINTS, SPARE_SLOTS.index(slot) / MASK_POINTS
     out = {}
     for kind in edit_table.KINDS:
-        image = images[cache_image_name(slot, kind)]
-        found = _bilinear_pair(b, image, uv, [(0.0, 0.0), (tile_u, 0.0)], frac, 55,
-                               scale=(1.0, float(edit_table.STACKED), 1.0))
+        image = images[cache_image_name(_image_slot(slot), kind)]
+        found = _bilinear_pair(b, image, uv, [(0.0, dv), (tile_u, dv)], frac, 55,
+                               scale=(1.0, float(edit_table.STACKED) / atlases, 1.0))
         out[kind] = b.mix("VECTOR", 59, match, shifts[kind], found)
     return out
 

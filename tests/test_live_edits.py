@@ -304,17 +304,13 @@ def test_a_constant_edit_renders_from_its_cache_as_from_the_table(tmp_path, addo
     gnode.inputs["Melanin"].default_value = 1.25
     full = _cycles_memory_mb(scene, tree, gnode)
     assert cached - plain <= 1.0 and full - plain >= 6.0, (plain, cached, full)
-    # more materials with edits than caches: each new edit fills a free cache, then the one filled longest ago
+    # more materials with edits than caches: each new edit fills a free cache (the three, then the spare ones in the
+    # mask cache's images), then the one filled longest ago
     live_edits.set_edit(gnode, row)
     edit_group = live_edits._edit_group(group)
-    slots = []
-    for i, other in enumerate(((2.0, 1.0, 0.0), (0.5, 1.5, 0.1), (1.0, 0.4, 0.0))):
-        mat = bpy.data.materials.new(f"other {i}")  # with a node tree: Blender 5
-        node = mat.node_tree.nodes.new("ShaderNodeGroup")
-        node.node_tree = group
-        live_edits.set_edit(node, other)
-        slots.append(int(node.inputs[live_edits.CACHE_INPUT].default_value))
-    assert slots == [2, 3, 1]
+    others = [(2.0, 1.0, 0.0), (0.5, 1.5, 0.1), (1.3, 1.0, 0.0), (1.0, 1.8, -0.1), (0.8, 1.0, 0.2), (1.0, 0.4, 0.0)]
+    slots = [_slot(_edited_node(group, f"other {i}", other)) for i, other in enumerate(others)]
+    assert slots == [2, 3, *live_edits.SPARE_SLOTS, 1]
     assert gnode.inputs[live_edits.CACHE_INPUT].default_value == 0  # its cache was given up: it reads the table
     assert live_edits._cached_values(edit_group, 1) == tuple(float(np.float32(v)) for v in (1.0, 0.4, 0.0, 1.0))
     # a cache image gone from the group (an artist's edit of it): the edit is not cached, and nothing fails
@@ -344,6 +340,85 @@ def test_a_constant_edit_renders_from_its_cache_as_from_the_table(tmp_path, addo
     assert _cycles_memory_mb(scene, tree, gnode) - plain <= 1.0
     live_edits.set_edit(gnode, skin_edits.NEUTRAL)
     assert gnode.inputs[live_edits.CACHE_INPUT].default_value == 0
+
+
+def _edited_node(group: bpy.types.NodeTree, name: str, edit) -> bpy.types.Node:
+    """A new material's group node using ``group``, its edit set (live_edits.set_edit: cached)."""
+    mat = bpy.data.materials.new(name)  # with a node tree: Blender 5
+    node = mat.node_tree.nodes.new("ShaderNodeGroup")
+    node.node_tree = group
+    live_edits.set_edit(node, edit)
+    return node
+
+
+def _slot(node: bpy.types.Node) -> int:
+    return int(node.inputs[live_edits.CACHE_INPUT].default_value)
+
+
+def test_spare_caches_hold_more_constant_edits_while_the_mask_cache_holds_no_line(tmp_path, addon):
+    """Past the three caches, constant edits take the spare caches: the mask cache's three atlases while it holds no
+    line in use.  Rendered from a spare (its images' top and bottom atlas) the media equal the table's answer, and the
+    shader loads the mask cache's small images, not the table's.  An edit painted by the Edit Mask takes the mask
+    cache back (the spares' nodes read the table, constant edits then take the three caches only); once no node
+    renders from its line, a constant edit takes a spare again, its atlas written among the line's."""
+    live_edits.unregister_handlers()
+    scene, tree, gnode, emission, table, edits, layout, images, group, names = _edit_strip(tmp_path)
+    edit_group = live_edits._edit_group(group)
+    grids = live_table.grid_values(table)
+    others = [_edited_node(group, f"other {i}", edit) for i, edit in
+              enumerate(((2.0, 1.0, 0.0), (0.5, 1.5, 0.1), (1.0, 0.4, 0.0), (1.3, 1.0, 0.0), (1.0, 1.8, -0.1)))]
+    assert [_slot(n) for n in others] == [1, 2, 3, *live_edits.SPARE_SLOTS[:2]]
+
+    def check(edit, label: str, which=None) -> None:
+        d = edit_table.shift(edits, COLOURS, np.array(edit))
+        reference = live_table.group_media(table, edit_table.edited_colour(COLOURS, d), grids)
+        for name in which or names:
+            k, kind = name.split()[1], name.split()[2]
+            ref = reference[f"{k} {kind}"] * (np.exp(d[:, 3:6]) if kind == "Radius" else 1.0)
+            np.testing.assert_allclose(_render(scene, tree, gnode, emission, name), ref, rtol=5e-4, atol=1e-7,
+                                       err_msg=f"{label} {name}")
+
+    row = (1.5, 2.5, -0.2)
+    live_edits.set_edit(gnode, row)
+    assert _slot(gnode) == live_edits.SPARE_SLOTS[-1]  # the images' top atlas
+    assert live_edits.cache_status(gnode) == f"Rendered from edit cache {live_edits.SPARE_SLOTS[-1]}"
+    check(row, "top atlas")
+    live_edits.set_edit(gnode, (1.3, 1.0, 0.0))  # the bottom atlas's edit: found, not filled again
+    assert _slot(gnode) == live_edits.SPARE_SLOTS[0]
+    check((1.3, 1.0, 0.0), "bottom atlas", names[1:2])
+    live_edits.set_edit(gnode, row)
+    cached = _cycles_memory_mb(scene, tree, gnode)
+    _use(tree, gnode, live.build_live_group(table, layout, images))
+    plain = _cycles_memory_mb(scene, tree, gnode)
+    _use(tree, gnode, group)
+    live_edits.set_edit(gnode, row)
+    gnode.inputs["Melanin"].default_value = 1.25  # not cached: the table
+    full = _cycles_memory_mb(scene, tree, gnode)
+    assert cached - plain <= 1.0 and full - plain >= 6.0, (plain, cached, full)
+    output = next(n for n in tree.nodes if n.bl_idname == "ShaderNodeOutputMaterial" and n.is_active_output)
+    tree.links.new(emission.outputs[0], output.inputs["Surface"])  # the probe's emission again
+    # an edit painted by the Edit Mask takes the mask cache: the spares are given up, read from the table
+    live_edits.set_edit(gnode, row)
+    masked = _edited_node(group, "masked", tuple(skin_edits.PRESETS["flush"].row()))
+    value = masked.id_data.nodes.new("ShaderNodeValue")
+    masked.id_data.links.new(value.outputs[0], masked.inputs[live_edits.MASK_INPUT])
+    assert live_edits.cache_edit(masked) == live_edits.MASK_SLOT
+    assert [_slot(n) for n in (*others[3:], gnode)] == [0, 0, 0]
+    assert all(np.isnan(live_edits._cached_values(edit_group, k)).all() for k in live_edits.SPARE_SLOTS)
+    assert live_edits.cache_status(gnode) == "Read from the edit table (not cached)"
+    check(row, "table", names[1:2])
+    assert live_edits.cache_edit(others[3]) == 1  # the three caches only: the one filled longest ago
+    # the mask unlinked: the flush, now constant, lies on the line (its end), and still renders from the mask cache
+    masked.id_data.links.remove(masked.inputs[live_edits.MASK_INPUT].links[0])
+    assert live_edits.cache_is_current(masked) and live_edits.cache_status(masked) == "Rendered from the mask cache"
+    assert live_edits.cache_edit(gnode) == 2  # the line in use: the three caches only
+    # that node back at neutral: no node renders from the line, so a constant edit takes a spare and the line is emptied
+    live_edits.set_edit(masked, skin_edits.NEUTRAL)
+    assert _slot(_edited_node(group, "another", (1.2, 2.0, -0.1))) == live_edits.SPARE_SLOTS[0]  # 1-3 in use
+    assert live_edits._cached_values(edit_group, live_edits.MASK_SLOT) == skin_edits.NEUTRAL
+    live_edits.set_edit(gnode, (1.2, 2.0, -0.1))  # the spare's edit: found there
+    assert _slot(gnode) == live_edits.SPARE_SLOTS[0]
+    check((1.2, 2.0, -0.1), "spare among the line's points", names[1:2])
 
 
 def test_an_edit_painted_by_the_edit_mask_renders_from_the_mask_cache(tmp_path, addon):
@@ -442,6 +517,32 @@ def test_a_keyframed_edit_renders_from_the_mask_cache_where_no_frame_is_cached(t
     oxygenation.update()
     assert live_edits.animated_line(gnode, scene) is None
     assert live_edits.line_status(gnode, scene).startswith("Animation render: read from the edit table (the keyframes")
+
+
+def test_frames_on_the_held_line_give_up_no_other_materials_cache(tmp_path, addon):
+    """Three other materials' constant edits fill the three caches, and a flush keyframed on the node holds its line
+    in the mask cache (the spares are not free then): each frame's edit, cached as the frame changes (viewport
+    playback, command-line renders), lies on that line, so it renders from the mask cache instead of giving up
+    another material's cache, and reads the mask cache's images, not the table's."""
+    scene, tree, gnode, emission, table, edits, layout, images, group, names = _edit_strip(tmp_path)
+    others = [_edited_node(group, f"other {i}", edit)
+              for i, edit in enumerate(((2.0, 1.0, 0.0), (0.5, 1.5, 0.1), (1.0, 0.4, 0.0)))]
+    flush = skin_edits.PRESETS["flush"].row()
+    scene.frame_start, scene.frame_end = 1, 24
+    for frame, row in ((1, skin_edits.NEUTRAL), (21, flush)):
+        for name, value in zip(live_edits.CONTROL_NAMES, row, strict=True):
+            gnode.inputs[name].default_value = value
+            gnode.inputs[name].keyframe_insert("default_value", frame=frame)
+    bpy.context.view_layer.update()
+    assert live_edits.line_status(gnode, scene) == "Animation render: from the mask cache"
+    for frame in (6, 11, 21):
+        scene.frame_set(frame)
+        assert [_slot(n) for n in others] == [1, 2, 3] and all(map(live_edits.cache_is_current, others)), frame
+        assert _slot(gnode) == live_edits.MASK_SLOT and live_edits.cache_is_current(gnode), frame
+        assert live_edits.cache_status(gnode) == "Rendered from the mask cache"
+    scene.frame_set(11)
+    live_edits.unregister_handlers()  # the checks below change the group: no handler caches the frame again
+    _assert_reads_the_mask_cache(scene, tree, gnode, group, table, layout, images)
 
 
 def test_a_presets_keyframed_edit_mask_renders_from_the_mask_cache(tmp_path, addon):

@@ -7,7 +7,8 @@ edit inputs). One Blender process renders, ``ROUNDS`` times in turn, the live gr
 edit nodes (blender_addon.live.build_live_group without an edit table: the unedited group) and the group with the edit
 inputs at neutral, under the presets tan, flush and pallor (exporters.skin_edits.PRESETS) and every control between
 two of its table's levels (:data:`EDITS`, "three"), each set as the add-on sets it (read from the edit group's cache),
-and that edit read from the table ("three_table": the most lookups an edit makes; a node whose edit is not cached),
+and that edit read from the table ("three_table": the most lookups an edit makes; a node whose edit is not cached) and
+from a spare cache ("three_spare": an atlas of the mask cache's images, as a fourth to sixth constant edit of a file),
 and edits painted by a mask (:data:`MASKED`: through the Edit Mask, from the mask cache; fed to each control,
 from the table) or keyframed along a line and rendered at a frame no cache holds (:data:`KEYED`: from the mask
 cache), swapping the material's group between renders; each round starts one material later than the one
@@ -45,12 +46,14 @@ PRESETS = ("tan", "flush", "pallor")
 #: what a node renders whose edit is not cached: inputs fed by a mask, more constant edits than caches).
 EDITS: dict[str, tuple[float, float, float]] = {
     **{p: tuple(float(v) for v in skin_edits.PRESETS[p].row()) for p in PRESETS},
-    "three": (1.5, 2.5, -0.2), "three_table": (1.5, 2.5, -0.2),
+    "three": (1.5, 2.5, -0.2), "three_table": (1.5, 2.5, -0.2), "three_spare": (1.5, 2.5, -0.2),
     **{mode: tuple(float(v) for v in skin_edits.PRESETS["flush"].row())
        for mode in ("flush_mask", "flush_linked", "flush_frame", "flush_frame_table")},
     "blood_linked": (1.0, 2.5, 0.0)}
 #: The edits read from the table (their node's cache input left at 0).
 UNCACHED = ("three_table",)
+#: The edits held in a spare cache (:data:`SPARE_CODE`).
+SPARE = ("three_spare",)
 #: The edits painted by a mask (:data:`MASK_CODE`): through the group's Edit Mask (read from the mask cache), or
 #: fed to each control the edit moves (read from the table, as every control fed by a node).
 MASKED = {"flush_mask": False, "flush_linked": True, "blood_linked": True}
@@ -62,6 +65,7 @@ KEYED = {"flush_frame": True, "flush_frame_table": False}
 #: What the edits besides the presets are, in the rows' labels.
 DESCRIPTIONS = {"three": "every control between two levels, from its cache",
                 "three_table": "every control between two levels, read from the table (not cached)",
+                "three_spare": "every control between two levels, from a spare cache (the mask cache's images)",
                 "flush_mask": "flush painted by the Edit Mask (the albedo's red), from the mask cache",
                 "flush_linked": "flush painted by a mask fed to each control (the albedo's red), read from the table",
                 "blood_linked": "Blood alone painted by a mask fed to it (the albedo's red), read from the table",
@@ -117,6 +121,24 @@ def key_edit(node, edit, hold):
 def unkey():
     mat.node_tree.animation_data_clear()
 """
+#: Blender code (in a bench child, ``live_edits`` imported): ``spare_edit(node, edit)`` sets the edit and holds it in
+#: the last spare cache (blender_addon.live_edits.SPARE_SLOTS), where the add-on puts a file's sixth constant edit
+#: while the mask cache holds no line, and points the node at it; ``unspare(node)`` empties that cache again, so that
+#: the other modes' edits of the same values take their own caches.
+SPARE_CODE = """
+def spare_edit(node, edit):
+    live_edits.set_edit(node, edit, cache=False)
+    group = live_edits._edit_group(node.node_tree)
+    slot = live_edits.SPARE_SLOTS[-1]
+    live_edits._fill(group, live_edits._group_images(group), slot, live_edits.cache_key(node))
+    node.inputs["Edit Cache"].default_value = slot
+
+
+def unspare(node):
+    group = live_edits._edit_group(node.node_tree)
+    slot = live_edits.SPARE_SLOTS[-1]
+    live_edits._set_cached_values(group, slot, (float("nan"),) * len(live_edits._cache_inputs(slot)))
+"""
 MODES = ("plain", "neutral", *EDITS)
 #: Bytes a pixel of a float RGBA image takes in Blender.
 FLOAT_RGBA_BYTES = 16
@@ -152,19 +174,23 @@ modes = {modes!r}
 times = {{mode: [] for mode in modes}}
 {mask_code}
 {key_code}
+{spare_code}
 for r in range({rounds}):
     for mode in modes[r % len(modes):] + modes[:r % len(modes)]:  # each round one material later
         node.node_tree = plain if mode == "plain" else edited
         if mode != "plain":
             unmask(node)
             unkey()
-        if mode in {masked!r}:
-            mask_edit(node, values[mode], {masked!r}[mode])
-        if mode in {keyed!r}:
+            unspare(node)
+        if mode in {spare!r}:
+            spare_edit(node, values[mode])
+        elif mode in {keyed!r}:
             key_edit(node, values[mode], {keyed!r}[mode])
             live_edits.set_edit(node, tuple(node.inputs[n].default_value for n in ("Melanin", "Blood", "Oxygenation")),
                                 cache=False)
         else:
+            if mode in {masked!r}:
+                mask_edit(node, values[mode], {masked!r}[mode])
             live_edits.set_edit(node, values.get(mode, NEUTRAL), cache=mode not in {uncached!r})  # plain: nothing
         clock = RenderClock()
         bpy.ops.render.render(write_still=False)
@@ -193,7 +219,8 @@ def measure(rounds: int = ROUNDS, samples: int = SAMPLES, resolution: int = RESO
                                                    texture=TEXTURE, texture_path=str(Path(tmp) / "skin.png"),
                                                    edits=edits, modes=modes, rounds=rounds,
                                                    uncached=UNCACHED, masked=MASKED, mask_code=MASK_CODE,
-                                                   keyed=KEYED, key_code=KEY_CODE))
+                                                   keyed=KEYED, key_code=KEY_CODE, spare=SPARE,
+                                                   spare_code=SPARE_CODE))
 
 
 def image_megabytes() -> float:

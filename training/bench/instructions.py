@@ -76,9 +76,13 @@ live_edits.set_edit(node, tuple(node.inputs[n].default_value for n in ("Melanin"
 
 def _variant(name: str, edit: tuple[float, float, float]) -> str:
     """The child's code setting the edit ``name``; a masked one's mask (edit_cost.MASK_CODE) linked first, so that
-    set_edit caches it as the add-on does; a keyframed one's keys (:data:`_KEYED`)."""
+    set_edit caches it as the add-on does; a keyframed one's keys (:data:`_KEYED`); one held in a spare cache by
+    edit_cost.SPARE_CODE."""
     if name in edit_cost.KEYED:
         return _KEYED.format(key_code=edit_cost.KEY_CODE, edit=edit, hold=edit_cost.KEYED[name])
+    if name in edit_cost.SPARE:
+        return ("from blender_addon import live_edits\nlive_edits.unregister_handlers()\n" + edit_cost.SPARE_CODE
+                + f"spare_edit(live_edits.live_node(mat), {edit!r})\n")
     code = _EDIT.format(edit=edit, cache=name not in edit_cost.UNCACHED)
     if name in edit_cost.MASKED:
         image = ("image = next(n.image for n in mat.node_tree.nodes if n.bl_idname == 'ShaderNodeTexImage' "
