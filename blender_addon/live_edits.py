@@ -1043,6 +1043,106 @@ def line_status(node: bpy.types.Node, scene: bpy.types.Scene) -> str | None:
 EDIT_MASK_HINT = "One mask for the whole edit? Plug it into Edit Mask: faster"
 
 
+def _source(socket: bpy.types.NodeSocket) -> bpy.types.NodeSocket | None:
+    """The output feeding ``socket`` through any reroutes, or None where it is unlinked or a link on the way is muted
+    or invalid."""
+    while socket.is_linked:
+        link = socket.links[0]
+        if link.is_muted or not link.is_valid:
+            return None
+        socket = link.from_socket
+        if socket.node.bl_idname != "NodeReroute":
+            return socket
+        socket = socket.node.inputs[0]
+    return None
+
+
+def _constant(socket: bpy.types.NodeSocket | None) -> float | None:
+    """The value of an unlinked float input, else None."""
+    return None if socket is None or socket.is_linked else float(socket.default_value)
+
+
+def _masked_control(source: bpy.types.NodeSocket, neutral: float) -> tuple[bpy.types.NodeSocket, float] | None:
+    """(mask, value) where the output ``source`` feeding a control is neutral + mask x (value - neutral) in one node
+    of the material: a Math Multiply Add (mask, value - neutral, neutral), a float Map Range (linear) of the mask
+    from [0, 1] to [neutral, value], or a float Mix of factor mask from neutral to value; else None."""
+    node = source.node
+    enabled = [s for s in node.inputs if s.enabled]
+    if node.bl_idname == "ShaderNodeMath" and node.operation == "MULTIPLY_ADD" and not node.use_clamp:
+        linked = [s for s in enabled[:2] if s.is_linked]
+        slope = [_constant(s) for s in enabled[:2] if not s.is_linked]
+        if len(linked) == 1 and slope[0] is not None and _constant(enabled[2]) == neutral:
+            mask = _source(linked[0])
+            return (mask, neutral + slope[0]) if mask is not None else None
+    if node.bl_idname == "ShaderNodeMapRange" and node.data_type == "FLOAT" and node.interpolation_type == "LINEAR":
+        ends = [_constant(next(s for s in enabled if s.name == name))
+                for name in ("From Min", "From Max", "To Min", "To Max")]
+        mask = _source(next(s for s in enabled if s.name == "Value"))
+        if mask is not None and ends[:3] == [0.0, 1.0, neutral] and ends[3] is not None:
+            return mask, ends[3]
+    if node.bl_idname == "ShaderNodeMix" and node.data_type == "FLOAT" and source == node.outputs[0]:
+        mask = _source(enabled[0])
+        if mask is not None and _constant(enabled[1]) == neutral and _constant(enabled[2]) is not None:
+            return mask, _constant(enabled[2])
+    return None
+
+
+def mask_feeding(node: bpy.types.Node) -> tuple[bpy.types.NodeSocket, tuple[float, float, float]] | None:
+    """(mask, edit) where one mask paints the live node's whole edit through nodes of the material: every control
+    fed by a node is fed neutral + mask x (value - neutral) (:func:`_masked_control`) by the same mask, the others are
+    at neutral, the Edit Mask is unlinked, and the mask cache can hold the edit (exporters.edit_table.mask_line);
+    ``edit`` is the values at mask 1.  Else None.  The same mask through Edit Mask paints the same edit (the group
+    clamps it to [0, 1], as a painted mask is) from the mask cache: :class:`SPECTRAL_SKIN_OT_use_edit_mask`."""
+    mask = node.inputs.get(MASK_INPUT)
+    if mask is None or mask.is_linked or constant_edit(node) is not None:
+        return None
+    masks, edit = {}, []
+    for name, neutral in zip(CONTROL_NAMES, skin_edits.NEUTRAL, strict=True):
+        socket = node.inputs[name]
+        if not socket.is_linked:
+            if float(socket.default_value) != neutral:
+                return None
+            edit.append(neutral)
+            continue
+        source = _source(socket)
+        masked = _masked_control(source, neutral) if source is not None else None
+        if masked is None:
+            return None
+        masks[masked[0].as_pointer()] = masked[0]
+        edit.append(float(np.float32(masked[1])))
+    if len(masks) != 1 or edit_table.mask_line(tuple(edit)) is None:
+        return None
+    return next(iter(masks.values())), tuple(edit)
+
+
+class SPECTRAL_SKIN_OT_use_edit_mask(bpy.types.Operator):
+    """Paint the edit with its mask through the group's Edit Mask instead of nodes feeding each control: the same
+    picture where the mask lies in 0-1 (Edit Mask clamps it there), from the mask cache, faster (the controls' nodes
+    are kept, unlinked)"""
+
+    bl_idname = "spectral_skin.use_edit_mask"
+    bl_label = "Use Edit Mask"
+    bl_options = {"REGISTER", "UNDO"}
+
+    @classmethod
+    def poll(cls, context):
+        node = live_node(getattr(context, "material", None))
+        return node is not None and mask_feeding(node) is not None
+
+    def execute(self, context):
+        node = live_node(context.material)
+        mask, edit = mask_feeding(node)
+        tree = node.id_data
+        for name in CONTROL_NAMES:
+            for link in list(node.inputs[name].links):
+                tree.links.remove(link)
+        tree.links.new(mask, node.inputs[MASK_INPUT])
+        set_edit(node, edit)
+        self.report({"INFO"}, f"'{context.material.name}': the edit is painted by '{mask.node.name}' through "
+                              "Edit Mask")
+        return {"FINISHED"}
+
+
 def edit_mask_hint(node: bpy.types.Node) -> str | None:
     """:data:`EDIT_MASK_HINT` where a control of the live node is fed by a node and its Edit Mask is not, else None."""
     mask = node.inputs.get(MASK_INPUT)
@@ -1070,12 +1170,13 @@ def draw_controls(layout, context) -> None:
     for status in (cache_status(node), line_status(node, context.scene)):
         if status is not None:
             box.label(text=status, icon="INFO")
-    hint = edit_mask_hint(node)
-    if hint is not None:
-        box.label(text=hint)
+    if mask_feeding(node) is not None:
+        box.operator(SPECTRAL_SKIN_OT_use_edit_mask.bl_idname, text="One mask paints the edit: Use Edit Mask (faster)")
+    elif edit_mask_hint(node) is not None:
+        box.label(text=edit_mask_hint(node))
     row = box.row(align=True)
     for key, label, _ in PRESET_ITEMS:
         row.operator(SPECTRAL_SKIN_OT_skin_edit_preset.bl_idname, text=label).preset = key
 
 
-classes = (SPECTRAL_SKIN_OT_skin_edit_preset,)
+classes = (SPECTRAL_SKIN_OT_skin_edit_preset, SPECTRAL_SKIN_OT_use_edit_mask)

@@ -477,13 +477,9 @@ def test_an_edit_painted_by_the_edit_mask_renders_from_the_mask_cache(tmp_path, 
     assert live_edits.cache_status(gnode).startswith("Read from the edit table: the mask cache holds")
 
 
-def test_a_keyframed_edit_renders_from_the_mask_cache_where_no_frame_is_cached(tmp_path, addon):
-    """A flush keyframed on the node (as painted at frame 1, the Flush preset at frame 21, the same keys on every
-    control): the handlers hold its line in the mask cache (live_edits.hold_line), so a frame whose edit no cache holds
-    (as Blender's interface renders an animation: outside the main thread, where no frame's edit is cached) renders
-    the mask cache's answer at its place on the line (edit_table.masked_shift, within a few thousandths of the
-    table's), reading the cache's small images, not the table's.  Keys that leave the line read the table."""
-    scene, tree, gnode, emission, table, edits, layout, images, group, names = _edit_strip(tmp_path)
+def _key_flush(scene, gnode) -> tuple[float, float, float]:
+    """Keyframe the node's controls from as painted (frame 1) to the Flush preset (frame 21), the scene's frames 1-24,
+    and let the handlers see the keys; returns the preset's values."""
     flush = skin_edits.PRESETS["flush"].row()
     scene.frame_start, scene.frame_end = 1, 24
     for frame, row in ((1, skin_edits.NEUTRAL), (21, flush)):
@@ -491,6 +487,17 @@ def test_a_keyframed_edit_renders_from_the_mask_cache_where_no_frame_is_cached(t
             gnode.inputs[name].default_value = value
             gnode.inputs[name].keyframe_insert("default_value", frame=frame)
     bpy.context.view_layer.update()
+    return flush
+
+
+def test_a_keyframed_edit_renders_from_the_mask_cache_where_no_frame_is_cached(tmp_path, addon):
+    """A flush keyframed on the node (as painted at frame 1, the Flush preset at frame 21, the same keys on every
+    control): the handlers hold its line in the mask cache (live_edits.hold_line), so a frame whose edit no cache holds
+    (as Blender's interface renders an animation: outside the main thread, where no frame's edit is cached) renders
+    the mask cache's answer at its place on the line (edit_table.masked_shift, within a few thousandths of the
+    table's), reading the cache's small images, not the table's.  Keys that leave the line read the table."""
+    scene, tree, gnode, emission, table, edits, layout, images, group, names = _edit_strip(tmp_path)
+    flush = _key_flush(scene, gnode)
     line = tuple(float(np.float32(v)) for v in flush)
     assert live_edits.animated_line(gnode, scene) == line
     assert live_edits._cached_values(live_edits._edit_group(group), live_edits.MASK_SLOT) == line
@@ -527,13 +534,7 @@ def test_frames_on_the_held_line_give_up_no_other_materials_cache(tmp_path, addo
     scene, tree, gnode, emission, table, edits, layout, images, group, names = _edit_strip(tmp_path)
     others = [_edited_node(group, f"other {i}", edit)
               for i, edit in enumerate(((2.0, 1.0, 0.0), (0.5, 1.5, 0.1), (1.0, 0.4, 0.0)))]
-    flush = skin_edits.PRESETS["flush"].row()
-    scene.frame_start, scene.frame_end = 1, 24
-    for frame, row in ((1, skin_edits.NEUTRAL), (21, flush)):
-        for name, value in zip(live_edits.CONTROL_NAMES, row, strict=True):
-            gnode.inputs[name].default_value = value
-            gnode.inputs[name].keyframe_insert("default_value", frame=frame)
-    bpy.context.view_layer.update()
+    _key_flush(scene, gnode)
     assert live_edits.line_status(gnode, scene) == "Animation render: from the mask cache"
     for frame in (6, 11, 21):
         scene.frame_set(frame)
@@ -575,6 +576,64 @@ def _assert_reads_the_mask_cache(scene, tree, gnode, group, table, layout, image
     plain = _cycles_memory_mb(scene, tree, gnode)
     assert cached - plain <= 1.0 and full - plain >= 3.0, (plain, cached, full)
     _use(tree, gnode, group)
+
+
+def test_one_mask_fed_to_each_control_becomes_the_edit_mask(tmp_path, addon):
+    """The flush painted by one mask fed to Blood and Oxygenation through Math nodes of the material (neutral + mask x
+    (value - neutral), as the edit-cost bench's fed row): live_edits.mask_feeding finds the mask and the edit, and Use
+    Edit Mask links the mask to Edit Mask instead (the Math nodes kept, unlinked) and caches the edit in the mask
+    cache: the media rendered after equal those before (the table's answer) to within the mask cache's accuracy, where
+    the mask lies in [0, 1].  Map Range and Mix nodes of that form are found too; a second mask, an unlinked control
+    away from neutral or a clamped Math node are not."""
+    live_edits.unregister_handlers()
+    scene, tree, gnode, emission, table, edits, layout, images, group, names = _edit_strip(tmp_path)
+    material = next(m for m in bpy.data.materials if m.node_tree == tree)
+    colour = tree.nodes[gnode["colour_source"]].outputs["Color"]
+    split = tree.nodes.new("ShaderNodeSeparateColor")  # the masks: the colours' red (and green)
+    tree.links.new(colour, split.inputs[0])
+    flush = tuple(float(np.float32(v)) for v in skin_edits.PRESETS["flush"].row())
+    fed = {}
+    for name, value, neutral in zip(live_edits.CONTROL_NAMES, flush, skin_edits.NEUTRAL, strict=True):
+        if value != neutral:
+            fed[name] = tree.nodes.new("ShaderNodeMath")
+            fed[name].operation = "MULTIPLY_ADD"
+            tree.links.new(split.outputs[0], fed[name].inputs[0])
+            fed[name].inputs[1].default_value, fed[name].inputs[2].default_value = value - neutral, neutral
+            tree.links.new(fed[name].outputs[0], gnode.inputs[name])
+    mask, edit = live_edits.mask_feeding(gnode)
+    assert mask == split.outputs[0] and edit == pytest.approx(flush, abs=1e-6)
+    before = {name: _render(scene, tree, gnode, emission, name) for name in names}
+    with bpy.context.temp_override(material=material):
+        assert bpy.ops.spectral_skin.use_edit_mask() == {"FINISHED"}
+        assert not bpy.ops.spectral_skin.use_edit_mask.poll()  # done: nothing left to convert
+    assert gnode.inputs[live_edits.MASK_INPUT].links[0].from_socket == split.outputs[0]
+    assert not any(gnode.inputs[name].is_linked for name in live_edits.CONTROL_NAMES)
+    assert all(node.name in tree.nodes for node in fed.values())  # the artist's nodes kept
+    assert _slot(gnode) == live_edits.MASK_SLOT and live_edits.cache_status(gnode) == "Rendered from the mask cache"
+    for name, rendered in before.items():  # but the colour above 1, whose red (1.2) Edit Mask clamps to 1
+        np.testing.assert_allclose(_render(scene, tree, gnode, emission, name)[:-1], rendered[:-1], rtol=5e-3,
+                                   atol=1e-6, err_msg=name)
+    # Map Range and Mix of the same form; then forms that are not one mask painting the edit
+    tree.links.remove(gnode.inputs[live_edits.MASK_INPUT].links[0])
+    ranged = tree.nodes.new("ShaderNodeMapRange")
+    tree.links.new(split.outputs[0], ranged.inputs["Value"])
+    ranged.inputs["To Min"].default_value, ranged.inputs["To Max"].default_value = 1.0, flush[1]
+    tree.links.new(ranged.outputs[0], gnode.inputs["Blood"])
+    mix = tree.nodes.new("ShaderNodeMix")
+    mix.data_type = "FLOAT"
+    tree.links.new(split.outputs[0], mix.inputs["Factor"])
+    mix.inputs[2].default_value, mix.inputs[3].default_value = 0.0, flush[2]  # A, B of the float mix
+    tree.links.new(mix.outputs[0], gnode.inputs["Oxygenation"])
+    assert live_edits.mask_feeding(gnode) == (split.outputs[0], pytest.approx(flush, abs=1e-6))
+    gnode.inputs["Melanin"].default_value = 1.2  # a constant the mask does not weigh
+    assert live_edits.mask_feeding(gnode) is None
+    gnode.inputs["Melanin"].default_value = 1.0
+    tree.links.new(split.outputs[1], mix.inputs["Factor"])  # a second mask
+    assert live_edits.mask_feeding(gnode) is None
+    tree.links.new(fed["Oxygenation"].outputs[0], gnode.inputs["Oxygenation"])
+    assert live_edits.mask_feeding(gnode) is not None
+    fed["Oxygenation"].use_clamp = True
+    assert live_edits.mask_feeding(gnode) is None
 
 
 def test_controls_fed_by_nodes_render_the_tables_answer_flagged_or_not(tmp_path, addon):
