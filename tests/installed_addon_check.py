@@ -317,6 +317,19 @@ def main() -> dict:
         live_edits.set_edit(other_node, edit)
     live_edits.set_edit(node, (1.5, 2.5, -0.2))
     cached_and_table("edit_spare")
+    # The flush painted by the albedo's red fed to Blood and Oxygenation through Math nodes: Use Edit Mask links that
+    # mask to Edit Mask instead, and the edit renders from the mask cache.
+    live_edits.set_edit(node, (1.0, 1.0, 0.0))
+    for name, slope, neutral in (("Blood", 1.5, 1.0), ("Oxygenation", 0.05, 0.0)):
+        math = tree.nodes.new("ShaderNodeMath")
+        math.operation = "MULTIPLY_ADD"
+        tree.links.new(red.outputs[0], math.inputs[0])
+        math.inputs[1].default_value, math.inputs[2].default_value = slope, neutral
+        tree.links.new(math.outputs[0], node.inputs[name])
+    with bpy.context.temp_override(object=obj, active_object=obj, material=material):
+        out["use_edit_mask"] = sorted(bpy.ops.spectral_skin.use_edit_mask())
+    out["use_edit_mask_cache"] = live_edits.cache_status(node)
+    tree.links.remove(node.inputs["Edit Mask"].links[0])
     # The skin material appended from another file holding the same groups: it renders through this file's, and the
     # copies it brought are left unused (a timer of the main loop, which a script has not, removes them).
     first, second = (os.path.join(sys.argv[2], name) for name in ("first.blend", "second.blend"))

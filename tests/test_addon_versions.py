@@ -93,6 +93,7 @@ def test_installs_bakes_renders_and_exits_cleanly(case, python, version, py_vers
     assert out["edit_spare_cache"] == "Rendered from edit cache 7", out  # a sixth constant edit: the last spare
     np.testing.assert_allclose(out["edit_spare_centre_cached"], out["edit_spare_centre_table"], rtol=1e-3)
     assert not np.allclose(out["edit_spare_centre_cached"], out["edit_centre_cached"], rtol=1e-2)
+    assert out["use_edit_mask"] == ["FINISHED"] and out["use_edit_mask_cache"] == "Rendered from the mask cache", out
     # A skin material appended from another file renders through this file's groups; the copies it brought are unused.
     assert out["appended_group"] == "Spectral Skin SSS Live" and out["appended_copies_used"] == [], out
     # The same translucency as in Blender 5.0: a thin back-lit disk lets through what it lets through there, within
