@@ -31,7 +31,8 @@ D), read at two slices (4 lookups where the table takes up to 24), and one **mas
 edit's shift at :data:`MASK_POINTS` masks on its line (exporters.edit_table.MaskLine), read at two points and two
 slices (8 lookups, however many controls the edit moves).  While the mask cache holds no line in use, its images'
 atlases serve as :data:`SPARE_SLOTS` more caches of constant edits (six constant edits at once in the same
-memory); a line, when one is needed, takes them back.  A constant edit's cache is used where the node's hidden
+memory); a line, when one is needed, takes them back.  The caches' nodes form a group of their own nested in the
+edit group (:data:`CACHES_GROUP_NAME`).  A constant edit's cache is used where the node's hidden
 input **Edit Cache** names it and its inputs equal the values the cache holds (Compare nodes in the group: the
 controls and the mask's value); the mask cache wherever the node's controls lie on the line from neutral to the edit
 it holds, at the mask times their place on it (:func:`_on_line`): an edit painted by the Edit Mask (the controls at
@@ -241,7 +242,7 @@ def cache_edit(node: bpy.types.Node) -> int:
     key = cache_key(node)
     slot = 0
     if group is not None and key is not None:
-        images = _group_images(group)
+        images = _group_images(node.node_tree)
         slot = _slot_for(group, images, key, node) if images is not None else 0
     _point(node, slot if slot else _uncached(node))
     return slot
@@ -252,13 +253,20 @@ _CACHE_ORDER_PROP = "spectral_skin_sss_cache_order"
 
 
 def _edit_group(live_group: bpy.types.NodeTree) -> bpy.types.NodeTree | None:
-    """The edit group (with caches) inside a live group, or None."""
-    for n in live_group.nodes:
-        tree = getattr(n, "node_tree", None)
-        if n.bl_idname == "ShaderNodeGroup" and tree is not None and tree.get(EDIT_TABLE_PROP) \
-                and _cache_node_name(MASK_SLOT, CONTROL_NAMES[0]) in tree.nodes:
-            return tree
+    """The group holding the edit caches' nodes inside a live group (its Compare nodes, the mask cache's curve: the
+    edit group's nested :data:`CACHES_GROUP_NAME`, or the edit group itself as an older add-on built it), or None."""
+    for tree in _nested(live_group):
+        if not tree.get(EDIT_TABLE_PROP):
+            continue
+        for inner in (*_nested(tree), tree):
+            if _cache_node_name(MASK_SLOT, CONTROL_NAMES[0]) in inner.nodes:
+                return inner
     return None
+
+
+def _nested(tree: bpy.types.NodeTree) -> list[bpy.types.NodeTree]:
+    """The node groups the group nodes of ``tree`` use."""
+    return [n.node_tree for n in tree.nodes if n.bl_idname == "ShaderNodeGroup" and n.node_tree is not None]
 
 
 def _cached_values(group: bpy.types.NodeTree, slot: int) -> tuple[float, ...]:
@@ -297,18 +305,22 @@ def _uncached(node: bpy.types.Node) -> int:
     return -linked_flags(node)
 
 
-def _group_images(group: bpy.types.NodeTree) -> dict[str, bpy.types.Image] | None:
-    """The edit group's images by their key (:data:`IMAGE_KEY_PROP`), or None where one is missing or one it would
-    write (a cache's) or the group is not editable (linked from a library): the edit is then not cached."""
+def _group_images(live_group: bpy.types.NodeTree) -> dict[str, bpy.types.Image] | None:
+    """The images of the live group's edit group and its caches group by their key (:data:`IMAGE_KEY_PROP`), or None
+    where one is missing or one it would write (a cache's) or a group is not editable (linked from a library): the
+    edit is then not cached."""
+    caches_group = _edit_group(live_group)
+    trees = [t for t in _nested(live_group) if t.get(EDIT_TABLE_PROP) and caches_group in (t, *_nested(t))]
     images = {}
-    for n in group.nodes:
-        image = getattr(n, "image", None)
-        if n.bl_idname == "ShaderNodeTexImage" and image is not None and image.get(IMAGE_KEY_PROP):
-            images[image[IMAGE_KEY_PROP]] = image
+    for tree in (*trees, caches_group):
+        for n in tree.nodes if tree is not None else ():
+            image = getattr(n, "image", None)
+            if n.bl_idname == "ShaderNodeTexImage" and image is not None and image.get(IMAGE_KEY_PROP):
+                images[image[IMAGE_KEY_PROP]] = image
     wanted = [edit_table.image_name(j, kind) for j in range(len(skin_edits.CONTROLS)) for kind in edit_table.KINDS]
     caches = [cache_image_name(slot, kind) for slot in range(1, MASK_SLOT + 1) for kind in edit_table.KINDS]
-    if not group.is_editable or any(key not in images for key in wanted + caches) \
-            or not all(images[key].is_editable for key in caches):
+    if caches_group is None or not all(t.is_editable for t in (*trees, caches_group)) \
+            or any(key not in images for key in wanted + caches) or not all(images[key].is_editable for key in caches):
         return None
     return images
 
@@ -386,7 +398,7 @@ def _line_in_use(group: bpy.types.NodeTree) -> bool:
 
 def _fill(group: bpy.types.NodeTree, images: dict[str, bpy.types.Image], slot: int, key: tuple[float, ...]) -> None:
     """Write cache ``slot`` for the edit of cache key ``key``: its images (exporters.edit_table.combined_atlas of the
-    group's control images, ``images`` from :func:`_group_images`, for a constant edit; line_atlas for the mask
+    control images, ``images`` from :func:`_group_images`, for a constant edit; line_atlas for the mask
     cache, and its curve), then the values its Compare nodes test the inputs against.  The mask cache and the spare
     caches share images: the mask cache's line gives up the spare caches, a spare cache empties the line."""
     line = edit_table.mask_line(key) if slot == MASK_SLOT else None
@@ -571,7 +583,7 @@ def hold_line(node: bpy.types.Node, scene: bpy.types.Scene) -> bool:
     held = _cached_values(group, MASK_SLOT)
     if held == line:
         return True
-    images = _group_images(group)
+    images = _group_images(node.node_tree)
     if images is None:
         return False
     for other in _group_nodes(group):
@@ -760,14 +772,64 @@ def add_edit_branch(b, gin, table: edit_table.EditTable, images: dict[str, bpy.t
             value = b.mix("VECTOR", 58, fraction, found[0], found[1])
             shifts[kind] = (value if shifts[kind] is None else b.vec("ADD", 59, shifts[kind], value)) if eevee \
                 else _gated_sum(b, neutral, shifts[kind], value)
-    if not eevee:  # a constant edit's own cache before the mask cache's line
-        shifts = _mask_cached(b, gin, images, base, s, frac, tile_u, shifts)
-        for slot in (*range(1, CACHE_SLOTS + 1), *SPARE_SLOTS):
-            shifts = _cached(b, gin, slot, images, slice_uv, frac, tile_u, shifts)
+    if not eevee:
+        shifts = _caches_node(b, gin, table, images, {"Base": base, "Slice": s, "Fraction": frac, "Slice UV": slice_uv},
+                              tile_u, shifts)
     active = b.math("SUBTRACT", 60, 1.0, still)
     bounds = table.shift_bounds()
     factor = {kind: _exp(b, shifts[kind], active, bounds[kind], 61) for kind in edit_table.KINDS}
     return EditBranch(colour=b.vec("MULTIPLY", 63, colour, factor["colour"]), radius_factor=factor["radius"])
+
+
+#: The group holding the edit caches' nodes, nested in the edit group (:func:`_caches_node`).
+CACHES_GROUP_NAME = "Spectral Skin SSS Edit Caches"
+#: The caches group's inputs besides the edit group's (name, socket type): the painted colour's place on the images.
+_PLACE_INPUTS = (("Base", "NodeSocketVector"), ("Slice", "NodeSocketFloat"), ("Fraction", "NodeSocketFloat"),
+                 ("Slice UV", "NodeSocketVector"))
+
+
+def _caches_node(b, gin, table: edit_table.EditTable, images: dict[str, bpy.types.Image], place: dict, tile_u: float,
+                 shifts: dict) -> dict:
+    """``shifts`` (the table's), or the caches' where one holds the node's edit: a node of a new group
+    :data:`CACHES_GROUP_NAME` (a constant edit's own cache before the mask cache's line: :func:`_mask_cached`, then
+    :func:`_cached` for each constant cache and spare), fed by the edit group's inputs, the painted colour's place on
+    the images (``place``, :data:`_PLACE_INPUTS`) and the table's shifts.  In a group of their own because Blender
+    adds each node to a tree in time growing with its size: the edit group builds in about half the time.  Cycles
+    compiles nested groups inline, so the shader is the same."""
+    from . import live
+
+    group = bpy.data.node_groups.new(CACHES_GROUP_NAME, "ShaderNodeTree")
+    group[EDIT_TABLE_PROP] = table.sha256
+    group["spectral_skin_sss_version"] = live.LIVE_VERSION
+    names = (*CONTROL_NAMES, MASK_INPUT, CACHE_INPUT)
+    for name in names:
+        group.interface.new_socket(name, in_out="INPUT", socket_type="NodeSocketFloat")
+    for name, kind in _PLACE_INPUTS:
+        group.interface.new_socket(name, in_out="INPUT", socket_type=kind)
+    for kind in edit_table.KINDS:
+        group.interface.new_socket(f"{kind.title()} Shift", in_out="INPUT", socket_type="NodeSocketVector")
+        group.interface.new_socket(f"{kind.title()} Shift", in_out="OUTPUT", socket_type="NodeSocketVector")
+    inner_in = group.nodes.new("NodeGroupInput")
+    inner_out = group.nodes.new("NodeGroupOutput")
+    inner_in.location, inner_out.location = (-1900.0, 0.0), (2400.0, 0.0)
+    inner = live._Builder(group)
+    out = {kind: inner_in.outputs[f"{kind.title()} Shift"] for kind in edit_table.KINDS}
+    out = _mask_cached(inner, inner_in, images, inner_in.outputs["Base"], inner_in.outputs["Slice"],
+                       inner_in.outputs["Fraction"], tile_u, out)
+    for slot in (*range(1, CACHE_SLOTS + 1), *SPARE_SLOTS):
+        out = _cached(inner, inner_in, slot, images, inner_in.outputs["Slice UV"], inner_in.outputs["Fraction"],
+                      tile_u, out)
+    inner.place()
+    for kind in edit_table.KINDS:
+        group.links.new(out[kind], inner_out.inputs[f"{kind.title()} Shift"])
+    node = b.node("ShaderNodeGroup", 60, node_tree=group)
+    for name in names:
+        b.link(gin.outputs[name], node.inputs[name])
+    for name, _ in _PLACE_INPUTS:
+        b.link(place[name], node.inputs[name])
+    for kind in edit_table.KINDS:
+        b.link(shifts[kind], node.inputs[f"{kind.title()} Shift"])
+    return {kind: node.outputs[f"{kind.title()} Shift"] for kind in edit_table.KINDS}
 
 
 def _level(b, image: bpy.types.Image, uv, dv: float, tile_u: float, frac, eevee: bool) -> bpy.types.NodeSocket:

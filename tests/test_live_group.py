@@ -352,15 +352,18 @@ def test_operator_reports_what_the_file_holds_now(tmp_path, addon):
 
 
 def test_the_built_groups_lay_their_nodes_out_apart(addon):
-    """The builder places the nodes it makes (all at once, after building): no two nodes of the live group or of
-    the edit group share a location, none is left where Blender puts a new node."""
+    """The builder places the nodes it makes (all at once, after building): no two nodes of the live group, of the
+    edit groups or of the caches group nested in Cycles' share a location, none is left where Blender puts a new
+    node."""
     table = live.table_for_model(preferences.DEFAULT_MODEL)
     edits = live_edits.table_for_model(preferences.DEFAULT_MODEL, table.sha256)
     group = live.ensure_live_group(table, edits)
     edit_groups = [n.node_tree for n in group.nodes if n.bl_idname == "ShaderNodeGroup"
                    and n.node_tree.name.startswith(live_edits.EDIT_GROUP_NAME)]
     assert len(edit_groups) == 2  # Cycles' and EEVEE's
-    for tree in (group, *edit_groups):
+    caches = [n.node_tree for tree in edit_groups for n in tree.nodes if n.bl_idname == "ShaderNodeGroup"]
+    assert [tree.name for tree in caches] == [live_edits.CACHES_GROUP_NAME]  # Cycles' edit group only
+    for tree in (group, *edit_groups, *caches):
         spots = [tuple(n.location) for n in tree.nodes]
         assert len(set(spots)) == len(spots) and (0.0, 0.0) not in spots, tree.name
 

@@ -130,7 +130,7 @@ def spare_edit(node, edit):
     live_edits.set_edit(node, edit, cache=False)
     group = live_edits._edit_group(node.node_tree)
     slot = live_edits.SPARE_SLOTS[-1]
-    live_edits._fill(group, live_edits._group_images(group), slot, live_edits.cache_key(node))
+    live_edits._fill(group, live_edits._group_images(node.node_tree), slot, live_edits.cache_key(node))
     node.inputs["Edit Cache"].default_value = slot
 
 
