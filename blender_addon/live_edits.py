@@ -255,12 +255,18 @@ _CACHE_ORDER_PROP = "spectral_skin_sss_cache_order"
 def _edit_group(live_group: bpy.types.NodeTree) -> bpy.types.NodeTree | None:
     """The group holding the edit caches' nodes inside a live group (its Compare nodes, the mask cache's curve: the
     edit group's nested :data:`CACHES_GROUP_NAME`, or the edit group itself as an older add-on built it), or None."""
+    trees = _cache_trees(live_group)
+    return trees[1] if trees is not None else None
+
+
+def _cache_trees(live_group: bpy.types.NodeTree) -> tuple[bpy.types.NodeTree, bpy.types.NodeTree] | None:
+    """(the edit group, the group holding its caches' nodes: :func:`_edit_group`) inside a live group, or None."""
     for tree in _nested(live_group):
         if not tree.get(EDIT_TABLE_PROP):
             continue
         for inner in (*_nested(tree), tree):
             if _cache_node_name(MASK_SLOT, CONTROL_NAMES[0]) in inner.nodes:
-                return inner
+                return tree, inner
     return None
 
 
@@ -309,18 +315,18 @@ def _group_images(live_group: bpy.types.NodeTree) -> dict[str, bpy.types.Image] 
     """The images of the live group's edit group and its caches group by their key (:data:`IMAGE_KEY_PROP`), or None
     where one is missing or one it would write (a cache's) or a group is not editable (linked from a library): the
     edit is then not cached."""
-    caches_group = _edit_group(live_group)
-    trees = [t for t in _nested(live_group) if t.get(EDIT_TABLE_PROP) and caches_group in (t, *_nested(t))]
+    trees = _cache_trees(live_group)
+    if trees is None or not all(t.is_editable for t in trees):
+        return None
     images = {}
-    for tree in (*trees, caches_group):
-        for n in tree.nodes if tree is not None else ():
+    for tree in trees:
+        for n in tree.nodes:
             image = getattr(n, "image", None)
             if n.bl_idname == "ShaderNodeTexImage" and image is not None and image.get(IMAGE_KEY_PROP):
                 images[image[IMAGE_KEY_PROP]] = image
     wanted = [edit_table.image_name(j, kind) for j in range(len(skin_edits.CONTROLS)) for kind in edit_table.KINDS]
     caches = [cache_image_name(slot, kind) for slot in range(1, MASK_SLOT + 1) for kind in edit_table.KINDS]
-    if caches_group is None or not all(t.is_editable for t in (*trees, caches_group)) \
-            or any(key not in images for key in wanted + caches) or not all(images[key].is_editable for key in caches):
+    if any(key not in images for key in wanted + caches) or not all(images[key].is_editable for key in caches):
         return None
     return images
 
@@ -1105,20 +1111,6 @@ def line_status(node: bpy.types.Node, scene: bpy.types.Scene) -> str | None:
 EDIT_MASK_HINT = "One mask for the whole edit? Plug it into Edit Mask: faster"
 
 
-def _source(socket: bpy.types.NodeSocket) -> bpy.types.NodeSocket | None:
-    """The output feeding ``socket`` through any reroutes, or None where it is unlinked or a link on the way is muted
-    or invalid."""
-    while socket.is_linked:
-        link = socket.links[0]
-        if link.is_muted or not link.is_valid:
-            return None
-        socket = link.from_socket
-        if socket.node.bl_idname != "NodeReroute":
-            return socket
-        socket = socket.node.inputs[0]
-    return None
-
-
 def _constant(socket: bpy.types.NodeSocket | None) -> float | None:
     """The value of an unlinked float input, else None."""
     return None if socket is None or socket.is_linked else float(socket.default_value)
@@ -1133,17 +1125,17 @@ def _masked_control(source: bpy.types.NodeSocket, neutral: float) -> tuple[bpy.t
     if node.bl_idname == "ShaderNodeMath" and node.operation == "MULTIPLY_ADD" and not node.use_clamp:
         linked = [s for s in enabled[:2] if s.is_linked]
         slope = [_constant(s) for s in enabled[:2] if not s.is_linked]
-        if len(linked) == 1 and slope[0] is not None and _constant(enabled[2]) == neutral:
-            mask = _source(linked[0])
+        if len(linked) == 1 and _constant(enabled[2]) == neutral:
+            mask = wiring.feeding_socket(linked[0])
             return (mask, neutral + slope[0]) if mask is not None else None
     if node.bl_idname == "ShaderNodeMapRange" and node.data_type == "FLOAT" and node.interpolation_type == "LINEAR":
         ends = [_constant(next(s for s in enabled if s.name == name))
                 for name in ("From Min", "From Max", "To Min", "To Max")]
-        mask = _source(next(s for s in enabled if s.name == "Value"))
+        mask = wiring.feeding_socket(next(s for s in enabled if s.name == "Value"))
         if mask is not None and ends[:3] == [0.0, 1.0, neutral] and ends[3] is not None:
             return mask, ends[3]
     if node.bl_idname == "ShaderNodeMix" and node.data_type == "FLOAT" and source == node.outputs[0]:
-        mask = _source(enabled[0])
+        mask = wiring.feeding_socket(enabled[0])
         if mask is not None and _constant(enabled[1]) == neutral and _constant(enabled[2]) is not None:
             return mask, _constant(enabled[2])
     return None
@@ -1166,7 +1158,7 @@ def mask_feeding(node: bpy.types.Node) -> tuple[bpy.types.NodeSocket, tuple[floa
                 return None
             edit.append(neutral)
             continue
-        source = _source(socket)
+        source = wiring.feeding_socket(socket)
         masked = _masked_control(source, neutral) if source is not None else None
         if masked is None:
             return None
