@@ -53,7 +53,7 @@ GROUP_NAME = "Spectral Skin SSS Live"
 #: Custom properties: on the group and the images, the SHA-256 of the table they were made from.
 TABLE_PROP = "spectral_skin_sss_table"
 #: Layout version of the live group (bump when the generated nodes change).
-LIVE_VERSION = 26
+LIVE_VERSION = 27
 IMAGE_PREFIX = "Spectral Skin SSS Table"
 #: Custom property on the group: whether it holds the grazing-light correction (blender_addon.oblique).
 GRAZING_PROP = "spectral_skin_sss_grazing"
@@ -382,7 +382,7 @@ def grid_vector(b: _Builder, colour: bpy.types.NodeSocket, layout: live_table.At
     """Grid point of ``colour`` (linear RGB): clamped to [0, 1], sRGB encoded piecewise as
     exporters.colorimetry.srgb_encode, in skin space (exporters.texel_table.COORDS), on the grid of ``layout``, and
     its texel in an atlas of ``size`` (width, height) px whose slices of ``layout`` lie in one row from the bottom
-    left, ``live_table.BORDER`` px in.  Every node costs each shading point its time, so: the clamp is a Mix node's
+    left, the layout's border px in.  Every node costs each shading point its time, so: the clamp is a Mix node's
     (factor 0, result clamped: NaN reads as 0, +Inf as 1); the encoding is max(1.055 c^(1/2.4) - 0.055,
     min(12.92 c, 12.92 knee)) (below the knee the line lies above the power curve and under its cap, from the knee up
     the power curve lies above the cap, so this is the piecewise encoding except within 3e-7 above the knee, where
@@ -414,7 +414,7 @@ def grid_vector(b: _Builder, colour: bpy.types.NodeSocket, layout: live_table.At
             total = b.math("ADD" if sign > 0 else "SUBTRACT", 6, total, encoded.outputs[channel])
         b.group.links.new(total, comb.inputs[slot])
     origin, extent = _grid_frame(layout)
-    border = live_table.BORDER + 0.5
+    border = layout.border + 0.5
     width, height = size
     to_low = (border / width, border / height, 0.0)
     to_high = ((extent[0] + border) / width, (extent[1] + border) / height, extent[2])

@@ -23,16 +23,16 @@ value (whatever the mask) then folds to a constant 0 when Cycles compiles the sh
 texture lookups (a neutral group evaluates none of the edit nodes).  Each input takes a value or any node
 (a painted mask, an attribute, a driver); its keyframes animate it.
 
-**Edit caches.**  An edit of constant controls needs D at the painted colour only, for one set of level weights
-(or, painted by a linked Edit Mask, along one line of them): the edit group holds :data:`CACHE_SLOTS` caches of
-constant edits, each an image pair of one atlas (the table's shift of that edit at the grid's nodes,
-exporters.edit_table.combined_atlas of the control images: the lookups are linear, so reading it gives the same
-D), read at two slices (4 lookups where the table takes up to 24), and one **mask cache** (:data:`MASK_SLOT`): an
-edit's shift at :data:`MASK_POINTS` masks on its line (exporters.edit_table.MaskLine), read at two points and two
-slices (8 lookups, however many controls the edit moves).  While the mask cache holds no line in use, its images'
-atlases serve as :data:`SPARE_SLOTS` more caches of constant edits (six constant edits at once in the same
-memory); a line, when one is needed, takes them back.  The caches' nodes form a group of their own nested in the
-edit group (:data:`CACHES_GROUP_NAME`).  A constant edit's cache is used where the node's hidden
+**Edit caches.** An edit of constant controls needs D at the painted colour only, for one set of level weights (or,
+painted by a linked Edit Mask, along one line of them): the edit group holds :data:`CACHE_SLOTS` caches of constant
+edits (:data:`CONSTANT_SLOTS`), each an image pair of one atlas (the table's shift of that edit at the grid's nodes,
+exporters.edit_table.combined_atlas of the control images: the lookups are linear, so reading it gives the same D),
+read at two slices (4 lookups where the table takes up to 24), and one **mask cache** (:data:`MASK_SLOT`): an edit's
+shift at :data:`MASK_POINTS` masks on its line (exporters.edit_table.MaskLine), read at two points and two slices (8
+lookups, however many controls the edit moves). While the mask cache holds no line in use, its images' atlases serve
+as :data:`SPARE_SLOTS` more caches of constant edits (fifteen constant edits at once); a line, when one is needed,
+takes them back. The caches' nodes form groups of their own nested in the edit group
+(:data:`CACHES_GROUP_NAME`).  A constant edit's cache is used where the node's hidden
 input **Edit Cache** names it and its inputs equal the values the cache holds (Compare nodes in the group: the
 controls and the mask's value); the mask cache wherever the node's controls lie on the line from neutral to the edit
 it holds, at the mask times their place on it (:func:`_on_line`): an edit painted by the Edit Mask (the controls at
@@ -71,13 +71,16 @@ CACHE_INPUT = "Edit Cache"
 #: The group input weighing the edit per shading point (a painted mask), as a bake's masks weigh it.
 MASK_INPUT = "Edit Mask"
 #: The cache of an edit painted by a linked Edit Mask: the value of the Edit Cache input naming it.
-MASK_SLOT = CACHE_SLOTS + 1
+MASK_SLOT = 4
 #: Points of the mask cache along its edit's line (exporters.edit_table.MaskLine).
 MASK_POINTS = edit_table.MASK_POINTS
 #: Caches of constant edits held in the mask cache's images while it holds no line (:func:`_line_in_use`): cache
-#: ``SPARE_SLOTS[a]`` is the images' atlas a, read as a constant edit's cache is (the same memory: six constant
-#: edits at once where no edit needs the mask cache).
+#: ``SPARE_SLOTS[a]`` is the images' atlas a, read as a constant edit's cache is (the same memory: three constant
+#: edits more where no edit needs the mask cache).
 SPARE_SLOTS = tuple(range(MASK_SLOT + 1, MASK_SLOT + 1 + MASK_POINTS))
+#: The caches of constant edits with images of their own, in the order they are filled: 1 to 3, then numbered after
+#: the spare caches (the numbers of the mask cache and the spares stay those a group of an earlier add-on uses).
+CONSTANT_SLOTS = (*range(1, MASK_SLOT), *range(SPARE_SLOTS[-1] + 1, SPARE_SLOTS[-1] + 2 + CACHE_SLOTS - MASK_SLOT))
 #: The Float Curve of the mask cache: the mask's position on its line (exporters.edit_table.MaskLine.position).
 MASK_CURVE = "Mask Cache Position"
 #: The group's inputs, in order: (name, default, soft minimum, soft maximum, tooltip).
@@ -164,7 +167,7 @@ def ensure_images(table: edit_table.EditTable, atlases: Callable[[], dict[str, n
         for kind in edit_table.KINDS:
             name = edit_table.image_name(j, kind)
             ensure(name, lambda name=name: table_atlas(name))
-    for slot in range(1, MASK_SLOT + 1):
+    for slot in (*CONSTANT_SLOTS, MASK_SLOT):
         for kind in edit_table.KINDS:  # empty until an edit is cached
             ensure(cache_image_name(slot, kind), lambda: np.zeros((1, 1, 4), np.float32))
     return images
@@ -225,16 +228,16 @@ def cache_key(node: bpy.types.Node) -> tuple[float, ...] | None:
 def _slots(key: tuple[float, ...]) -> tuple[int, ...]:
     """The caches that can hold an edit of cache key ``key`` (:func:`cache_key`): the mask cache for an edit painted
     by a linked Edit Mask, else the constant edits' caches and the spare ones (:data:`SPARE_SLOTS`)."""
-    return (MASK_SLOT,) if len(key) == len(CONTROL_NAMES) else (*range(1, CACHE_SLOTS + 1), *SPARE_SLOTS)
+    return (MASK_SLOT,) if len(key) == len(CONTROL_NAMES) else (*CONSTANT_SLOTS, *SPARE_SLOTS)
 
 
 def cache_edit(node: bpy.types.Node) -> int:
     """Hold the live group node's edit precombined in one of its edit group's caches (module docstring, "Edit
-    caches") and point the node's cache input at it; returns that cache (1 to :data:`CACHE_SLOTS` or one of
+    caches") and point the node's cache input at it; returns that cache (one of :data:`CONSTANT_SLOTS` or
     :data:`SPARE_SLOTS` for a constant edit, :data:`MASK_SLOT` for one painted by a linked Edit Mask), or 0 where
     the edit is not cached (:func:`cache_key` None), the group has no caches, the material or group is linked from a
     library (read-only) or the group misses one of its images.  A cache of the same values is reused; else a free one
-    (no other node's edit in it: the three caches first, then the spare ones while the mask cache holds no line in
+    (no other node's edit in it: the twelve caches first, then the spare ones while the mask cache holds no line in
     use), else the one filled longest ago (the nodes that used it then render through the table, as before)."""
     if node is None or CACHE_INPUT not in node.inputs or node.node_tree is None or not node.id_data.is_editable:
         return 0
@@ -277,8 +280,17 @@ def _nested(tree: bpy.types.NodeTree) -> list[bpy.types.NodeTree]:
 
 def _cached_values(group: bpy.types.NodeTree, slot: int) -> tuple[float, ...]:
     """The values cache ``slot`` of the edit group holds (:func:`cache_key`; NaN: none)."""
-    return tuple(float(group.nodes[_cache_node_name(slot, name)].inputs[1].default_value)
-                 for name in _cache_inputs(slot))
+    nodes = _slot_tree(group, slot).nodes
+    return tuple(float(nodes[_cache_node_name(slot, name)].inputs[1].default_value) for name in _cache_inputs(slot))
+
+
+def _slot_tree(group: bpy.types.NodeTree, slot: int) -> bpy.types.NodeTree | None:
+    """The tree holding cache ``slot``'s nodes: the caches group ``group`` (:func:`_edit_group`) or the one nested in
+    it (:data:`MORE_CACHES_GROUP_NAME`); None where the group has no such cache (one of an earlier add-on)."""
+    for tree in (group, *_nested(group)):
+        if _cache_node_name(slot, CONTROL_NAMES[0]) in tree.nodes:
+            return tree
+    return None
 
 
 def empty_mask_cache(live_group: bpy.types.NodeTree) -> None:
@@ -312,11 +324,12 @@ def _uncached(node: bpy.types.Node) -> int:
 
 
 def _group_images(live_group: bpy.types.NodeTree) -> dict[str, bpy.types.Image] | None:
-    """The images of the live group's edit group and its caches group by their key (:data:`IMAGE_KEY_PROP`), or None
+    """The images of the live group's edit group and its caches groups by their key (:data:`IMAGE_KEY_PROP`), or None
     where one is missing or one it would write (a cache's) or a group is not editable (linked from a library): the
     edit is then not cached."""
-    trees = _cache_trees(live_group)
-    if trees is None or not all(t.is_editable for t in trees):
+    found = _cache_trees(live_group)
+    trees = (*found, *_nested(found[1])) if found is not None else ()
+    if not trees or not all(t.is_editable for t in trees):
         return None
     images = {}
     for tree in trees:
@@ -325,7 +338,8 @@ def _group_images(live_group: bpy.types.NodeTree) -> dict[str, bpy.types.Image] 
             if n.bl_idname == "ShaderNodeTexImage" and image is not None and image.get(IMAGE_KEY_PROP):
                 images[image[IMAGE_KEY_PROP]] = image
     wanted = [edit_table.image_name(j, kind) for j in range(len(skin_edits.CONTROLS)) for kind in edit_table.KINDS]
-    caches = [cache_image_name(slot, kind) for slot in range(1, MASK_SLOT + 1) for kind in edit_table.KINDS]
+    caches = [cache_image_name(slot, kind) for slot in (*CONSTANT_SLOTS, MASK_SLOT) if _has_slot(found[1], slot)
+              for kind in edit_table.KINDS]
     if any(key not in images for key in wanted + caches) or not all(images[key].is_editable for key in caches):
         return None
     return images
@@ -338,8 +352,8 @@ def _slot_for(group: bpy.types.NodeTree, images: dict[str, bpy.types.Image], key
     (:func:`_line_in_use`): an edit painted by the Edit Mask or a keyframed line comes first.  Where every cache is
     in use and the edit lies on the mask cache's line (:func:`_line_serves`: a frame of the keyframed edit whose line
     it holds), the mask cache: the frames of an animation then give up no other material's cache."""
-    slots = _slots(key)
-    if any(k in SPARE_SLOTS for k in slots) and (not _has_spares(group) or _line_in_use(group)):
+    slots = tuple(k for k in _slots(key) if _has_slot(group, k))  # a group of an earlier add-on has fewer
+    if any(k in SPARE_SLOTS for k in slots) and _line_in_use(group):
         slots = tuple(k for k in slots if k not in SPARE_SLOTS)
     held = {k: _cached_values(group, k) for k in slots}
     for k, values in held.items():
@@ -381,9 +395,9 @@ def _line_serves(group: bpy.types.NodeTree, key: tuple[float, ...]) -> bool:
     return _line_through(np.array([held, key[:len(CONTROL_NAMES)]], np.float64)) == held
 
 
-def _has_spares(group: bpy.types.NodeTree) -> bool:
-    """Whether the edit group reads the spare caches (a group of an older add-on does not)."""
-    return _cache_node_name(SPARE_SLOTS[0], CONTROL_NAMES[0]) in group.nodes
+def _has_slot(group: bpy.types.NodeTree, slot: int) -> bool:
+    """Whether the edit group reads cache ``slot`` (a group of an earlier add-on has fewer caches)."""
+    return _slot_tree(group, slot) is not None
 
 
 def _line_in_use(group: bpy.types.NodeTree) -> bool:
@@ -408,7 +422,7 @@ def _fill(group: bpy.types.NodeTree, images: dict[str, bpy.types.Image], slot: i
     cache, and its curve), then the values its Compare nodes test the inputs against.  The mask cache and the spare
     caches share images: the mask cache's line gives up the spare caches, a spare cache empties the line."""
     line = edit_table.mask_line(key) if slot == MASK_SLOT else None
-    if slot == MASK_SLOT and _has_spares(group):
+    if slot == MASK_SLOT and _has_slot(group, SPARE_SLOTS[0]):
         for spare in SPARE_SLOTS:
             _set_cached_values(group, spare, (_EMPTY_CACHE,) * len(_cache_inputs(spare)))
         _unpoint(_group_nodes(group), SPARE_SLOTS)
@@ -434,8 +448,9 @@ def _image_slot(slot: int) -> int:
 
 def _set_cached_values(group: bpy.types.NodeTree, slot: int, values) -> None:
     """Make cache ``slot``'s Compare (Math) nodes test the inputs against ``values`` (:func:`_cached_values`)."""
+    nodes = _slot_tree(group, slot).nodes
     for name, value in zip(_cache_inputs(slot), values, strict=True):
-        group.nodes[_cache_node_name(slot, name)].inputs[1].default_value = value
+        nodes[_cache_node_name(slot, name)].inputs[1].default_value = value
 
 
 def _with_atlas(image: bpy.types.Image, index: int, atlas: np.ndarray) -> np.ndarray:
@@ -640,7 +655,7 @@ def add_inputs(group: bpy.types.NodeTree) -> None:
     socket.description = ("Where the edit applies (link a painted mask, 0 to 1): each control becomes neutral + mask x "
                           "(its value - neutral), as a bake's masks weigh an edit")
     socket = group.interface.new_socket(CACHE_INPUT, in_out="INPUT", socket_type="NodeSocketFloat")
-    socket.default_value, socket.min_value, socket.max_value = 0.0, -float(_ALL_LINKED), float(SPARE_SLOTS[-1])
+    socket.default_value, socket.min_value, socket.max_value = 0.0, -float(_ALL_LINKED), float(CONSTANT_SLOTS[-1])
     socket.hide_value = True
     socket.description = ("Set by the add-on: which of the edit group's caches holds this node's edit precombined "
                           "(0: none; a cache of other values is never used), or minus the controls fed by nodes")
@@ -789,29 +804,51 @@ def add_edit_branch(b, gin, table: edit_table.EditTable, images: dict[str, bpy.t
 
 #: The group holding the edit caches' nodes, nested in the edit group (:func:`_caches_node`).
 CACHES_GROUP_NAME = "Spectral Skin SSS Edit Caches"
+#: The group holding the constant caches past the first three (:data:`CONSTANT_SLOTS`), nested in the caches group.
+MORE_CACHES_GROUP_NAME = "Spectral Skin SSS Edit Caches More"
 #: The caches group's inputs besides the edit group's (name, socket type): the painted colour's place on the images.
 _PLACE_INPUTS = (("Base", "NodeSocketVector"), ("Slice", "NodeSocketFloat"), ("Fraction", "NodeSocketFloat"),
                  ("Slice UV", "NodeSocketVector"))
+#: The inputs the caches groups take from the edit group.
+_EDIT_INPUTS = (*CONTROL_NAMES, MASK_INPUT, CACHE_INPUT)
 
 
 def _caches_node(b, gin, table: edit_table.EditTable, images: dict[str, bpy.types.Image], place: dict, tile_u: float,
                  shifts: dict) -> dict:
     """``shifts`` (the table's), or the caches' where one holds the node's edit: a node of a new group
     :data:`CACHES_GROUP_NAME` (a constant edit's own cache before the mask cache's line: :func:`_mask_cached`, then
-    :func:`_cached` for each constant cache and spare), fed by the edit group's inputs, the painted colour's place on
-    the images (``place``, :data:`_PLACE_INPUTS`) and the table's shifts.  In a group of their own because Blender
-    adds each node to a tree in time growing with its size: the edit group builds in about half the time.  Cycles
-    compiles nested groups inline, so the shader is the same."""
+    :func:`_cached` for caches 1 to 3 and the spares, then the group :data:`MORE_CACHES_GROUP_NAME` nested in it for
+    the other constant caches), fed by the edit group's inputs, the painted colour's place on the images (``place``,
+    :data:`_PLACE_INPUTS`) and the table's shifts.  In groups of their own, at most about 150 nodes each, because
+    Blender adds each node to a tree in time growing with its size: the edit group builds in about a third of the
+    time it takes with every cache in it.  Cycles compiles nested groups inline, so the shader is the same."""
+    first = CONSTANT_SLOTS[:MASK_SLOT - 1]
+    more = _caches_group(MORE_CACHES_GROUP_NAME, table, images, tile_u, CONSTANT_SLOTS[len(first):], None)
+    group = _caches_group(CACHES_GROUP_NAME, table, images, tile_u, (*first, *SPARE_SLOTS), more)
+    node = b.node("ShaderNodeGroup", 60, node_tree=group)
+    for name in _EDIT_INPUTS:
+        b.link(gin.outputs[name], node.inputs[name])
+    for name, _ in _PLACE_INPUTS:
+        b.link(place[name], node.inputs[name])
+    for kind in edit_table.KINDS:
+        b.link(shifts[kind], node.inputs[f"{kind.title()} Shift"])
+    return {kind: node.outputs[f"{kind.title()} Shift"] for kind in edit_table.KINDS}
+
+
+def _caches_group(name: str, table: edit_table.EditTable, images: dict[str, bpy.types.Image], tile_u: float,
+                  slots: tuple[int, ...], more: bpy.types.NodeTree | None) -> bpy.types.NodeTree:
+    """A group of caches (:func:`_caches_node`): inputs the edit group's, the place's and the table's shifts, outputs
+    the shifts; the mask cache first where ``more`` (a group of the same inputs, nested last) is given, then
+    :func:`_cached` for each of ``slots``."""
     from . import live
 
-    group = bpy.data.node_groups.new(CACHES_GROUP_NAME, "ShaderNodeTree")
+    group = bpy.data.node_groups.new(name, "ShaderNodeTree")
     group[EDIT_TABLE_PROP] = table.sha256
     group["spectral_skin_sss_version"] = live.LIVE_VERSION
-    names = (*CONTROL_NAMES, MASK_INPUT, CACHE_INPUT)
-    for name in names:
-        group.interface.new_socket(name, in_out="INPUT", socket_type="NodeSocketFloat")
-    for name, kind in _PLACE_INPUTS:
-        group.interface.new_socket(name, in_out="INPUT", socket_type=kind)
+    for socket in _EDIT_INPUTS:
+        group.interface.new_socket(socket, in_out="INPUT", socket_type="NodeSocketFloat")
+    for socket, kind in _PLACE_INPUTS:
+        group.interface.new_socket(socket, in_out="INPUT", socket_type=kind)
     for kind in edit_table.KINDS:
         group.interface.new_socket(f"{kind.title()} Shift", in_out="INPUT", socket_type="NodeSocketVector")
         group.interface.new_socket(f"{kind.title()} Shift", in_out="OUTPUT", socket_type="NodeSocketVector")
@@ -820,22 +857,23 @@ def _caches_node(b, gin, table: edit_table.EditTable, images: dict[str, bpy.type
     inner_in.location, inner_out.location = (-1900.0, 0.0), (2400.0, 0.0)
     inner = live._Builder(group)
     out = {kind: inner_in.outputs[f"{kind.title()} Shift"] for kind in edit_table.KINDS}
-    out = _mask_cached(inner, inner_in, images, inner_in.outputs["Base"], inner_in.outputs["Slice"],
-                       inner_in.outputs["Fraction"], tile_u, out)
-    for slot in (*range(1, CACHE_SLOTS + 1), *SPARE_SLOTS):
+    if more is not None:
+        out = _mask_cached(inner, inner_in, images, inner_in.outputs["Base"], inner_in.outputs["Slice"],
+                           inner_in.outputs["Fraction"], tile_u, out)
+    for slot in slots:
         out = _cached(inner, inner_in, slot, images, inner_in.outputs["Slice UV"], inner_in.outputs["Fraction"],
                       tile_u, out)
+    if more is not None:
+        node = inner.node("ShaderNodeGroup", 60, node_tree=more)
+        for socket in (*_EDIT_INPUTS, *(p for p, _ in _PLACE_INPUTS)):
+            inner.link(inner_in.outputs[socket], node.inputs[socket])
+        for kind in edit_table.KINDS:
+            inner.link(out[kind], node.inputs[f"{kind.title()} Shift"])
+        out = {kind: node.outputs[f"{kind.title()} Shift"] for kind in edit_table.KINDS}
     inner.place()
     for kind in edit_table.KINDS:
         group.links.new(out[kind], inner_out.inputs[f"{kind.title()} Shift"])
-    node = b.node("ShaderNodeGroup", 60, node_tree=group)
-    for name in names:
-        b.link(gin.outputs[name], node.inputs[name])
-    for name, _ in _PLACE_INPUTS:
-        b.link(place[name], node.inputs[name])
-    for kind in edit_table.KINDS:
-        b.link(shifts[kind], node.inputs[f"{kind.title()} Shift"])
-    return {kind: node.outputs[f"{kind.title()} Shift"] for kind in edit_table.KINDS}
+    return group
 
 
 def _level(b, image: bpy.types.Image, uv, dv: float, tile_u: float, frac, eevee: bool) -> bpy.types.NodeSocket:

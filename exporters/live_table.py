@@ -60,19 +60,24 @@ from .texel_table import TexelTable, channel_names, skin_coords
 
 #: The images of one component, in order: (name suffix, table channels for R, G, B, A or None).
 IMAGE_KINDS = ("Color", "Log Radius", "Weight")
-#: Tile border (pixels) repeating each slice's edge.
+#: Tile border (pixels) repeating each slice's edge, in the texel table's atlases (:func:`layout_of`).
 BORDER = 1
 
 
 @dataclass(frozen=True)
 class AtlasLayout:
     """Where grid node (i0, i1, i2) lies in the atlas: tile i0 at (column, row) = (i0 % columns, i0 // columns),
-    pixel (column * tile_w + BORDER + i1, row * tile_h + BORDER + i2)."""
+    pixel (column * tile_w + border + i1, row * tile_h + border + i2).  ``border``: pixels around each tile repeating
+    its edge.  The nodes clamp a colour's texel to the grid's edge nodes, where a bilinear lookup weighs the texel
+    beyond by 0 (float rounding aside): a tile without a border gives the same answer to about 1e-7 of the
+    difference between neighbouring tiles, in three quarters of the memory of one with a border of 1 on 16 x 11
+    nodes."""
 
     shape: tuple[int, int, int]
     origin: tuple[float, float, float]
     step: float
     columns: int
+    border: int = BORDER
 
     @property
     def rows(self) -> int:
@@ -80,7 +85,7 @@ class AtlasLayout:
 
     @property
     def tile(self) -> tuple[int, int]:
-        return self.shape[1] + 2 * BORDER, self.shape[2] + 2 * BORDER
+        return self.shape[1] + 2 * self.border, self.shape[2] + 2 * self.border
 
     @property
     def size(self) -> tuple[int, int]:
@@ -189,7 +194,7 @@ def atlas_of(grid: np.ndarray, layout: AtlasLayout) -> np.ndarray:
     """The atlas (height, width, C) float32 of one grid (n0, n1, n2, C), rows bottom to top (Blender's order)."""
     n0 = layout.shape[0]
     tw, th = layout.tile
-    b = BORDER
+    b = layout.border
     tiles = np.pad(grid.astype(np.float32), ((0, layout.rows * layout.columns - n0), (b, b), (b, b), (0, 0)),
                    mode="edge")  # (slots, tile_w, tile_h, C); slots past n0 repeat the last slice
     tiles = tiles.reshape(layout.rows, layout.columns, tw, th, grid.shape[3])

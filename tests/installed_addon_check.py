@@ -305,16 +305,25 @@ def main() -> dict:
     out["keyed_line"] = live_edits.animated_line(node, bpy.context.scene)
     out["keyed_status"] = live_edits.line_status(node, bpy.context.scene)
     tree.animation_data_clear()
-    # Six constant edits in the file (five materials not rendered, then this one): the sixth renders from the last
-    # spare cache (an atlas of the mask cache's images, which holds no line in use now), as from the table.
+    # Twelve constant edits in the file (eleven materials not rendered, then this one): the twelfth renders from the
+    # last cache of images of its own; the fifteenth from the last spare cache (an atlas of the mask cache's images,
+    # which holds no line in use now); each as from the table.
     live_edits.set_edit(node, (1.0, 1.0, 0.0))  # as painted: no cache of the file in use
-    for i, edit in enumerate(((2.0, 1.0, 0.0), (0.5, 1.5, 0.1), (1.0, 0.4, 0.0), (1.3, 1.0, 0.0), (1.0, 1.8, -0.1))):
-        other = bpy.data.materials.new(f"Edited {i}")
-        if bpy.app.version < (5, 0):
-            other.use_nodes = True
-        other_node = other.node_tree.nodes.new("ShaderNodeGroup")
-        other_node.node_tree = node.node_tree
-        live_edits.set_edit(other_node, edit)
+
+    def edit_others(first: int, last: int) -> None:
+        for i in range(first, last):
+            other = bpy.data.materials.new(f"Edited {i}")
+            if bpy.app.version < (5, 0):
+                other.use_nodes = True
+            other_node = other.node_tree.nodes.new("ShaderNodeGroup")
+            other_node.node_tree = node.node_tree
+            live_edits.set_edit(other_node, (1.0 + 0.05 * i, 0.9, 0.0))
+
+    edit_others(1, 12)
+    live_edits.set_edit(node, (1.5, 2.5, -0.2))
+    cached_and_table("edit_twelfth")
+    live_edits.set_edit(node, (1.0, 1.0, 0.0))
+    edit_others(12, 15)
     live_edits.set_edit(node, (1.5, 2.5, -0.2))
     cached_and_table("edit_spare")
     # The flush painted by the albedo's red fed to Blood and Oxygenation through Math nodes: Use Edit Mask links that

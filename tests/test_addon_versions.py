@@ -90,7 +90,9 @@ def test_installs_bakes_renders_and_exits_cleanly(case, python, version, py_vers
     assert not np.allclose(out["edit_mask_centre_cached"], out["edit_centre_cached"], rtol=1e-2)
     # A blush keyframed on Blood holds its line in the mask cache (the keys read through this version's action API).
     assert out["keyed_line"] == [1.0, 2.5, 0.0] and out["keyed_status"] == "Animation render: from the mask cache", out
-    assert out["edit_spare_cache"] == "Rendered from edit cache 7", out  # a sixth constant edit: the last spare
+    assert out["edit_twelfth_cache"] == "Rendered from edit cache 16", out  # a twelfth constant edit: the last cache
+    np.testing.assert_allclose(out["edit_twelfth_centre_cached"], out["edit_twelfth_centre_table"], rtol=1e-3)
+    assert out["edit_spare_cache"] == "Rendered from edit cache 7", out  # a fifteenth constant edit: the last spare
     np.testing.assert_allclose(out["edit_spare_centre_cached"], out["edit_spare_centre_table"], rtol=1e-3)
     assert not np.allclose(out["edit_spare_centre_cached"], out["edit_centre_cached"], rtol=1e-2)
     assert out["use_edit_mask"] == ["FINISHED"] and out["use_edit_mask_cache"] == "Rendered from the mask cache", out

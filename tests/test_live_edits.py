@@ -206,7 +206,7 @@ def test_operator_wires_the_edit_inputs_and_presets_set_them(tmp_path, addon):
     node = live_edits.live_node(mat)
     assert node is not None and [node.inputs[n].default_value for n in EDIT] == [1.0, 1.0, 0.0]
     images = [i for i in bpy.data.images if i.name.startswith(live_edits.IMAGE_PREFIX)]
-    assert len(images) == 6 + 2 * live_edits.MASK_SLOT and all(i.packed_file is not None for i in images)
+    assert len(images) == 6 + 2 * (live_edits.CACHE_SLOTS + 1) and all(i.packed_file is not None for i in images)
     table_bytes = sum(i.size[0] * i.size[1] * 16 for i in images if " Cache " not in i.name)
     mask = mat.node_tree.nodes.new("ShaderNodeValue")  # an input fed by a node is left as it is
     mat.node_tree.links.new(mask.outputs[0], node.inputs["Oxygenation"])
@@ -294,7 +294,7 @@ def test_a_constant_edit_renders_from_its_cache_as_from_the_table(tmp_path, addo
     d = edit_table.shift(edits, COLOURS, np.array([1.25, 2.5, -0.2]))
     ref = live_table.group_media(table, edit_table.edited_colour(COLOURS, d), grids)["k1 Radius"] * np.exp(d[:, 3:6])
     np.testing.assert_allclose(_render(scene, tree, gnode, emission, name), ref, rtol=5e-4, atol=1e-7)
-    # memory: the cache's images only (each under Cycles' 1 MB resolution), not the table's six (> 1 MB each)
+    # memory: the cache's images only (each under Cycles' 1 MB resolution), not the table's six (4.7 MB)
     _use(tree, gnode, live.build_live_group(table, layout, images))
     plain = _cycles_memory_mb(scene, tree, gnode)
     _use(tree, gnode, group)  # the node's inputs are new: set the edit again (its cache is found, not refilled)
@@ -303,14 +303,15 @@ def test_a_constant_edit_renders_from_its_cache_as_from_the_table(tmp_path, addo
     cached = _cycles_memory_mb(scene, tree, gnode)
     gnode.inputs["Melanin"].default_value = 1.25
     full = _cycles_memory_mb(scene, tree, gnode)
-    assert cached - plain <= 1.0 and full - plain >= 6.0, (plain, cached, full)
-    # more materials with edits than caches: each new edit fills a free cache (the three, then the spare ones in the
+    assert cached - plain <= 1.0 and full - plain >= 4.0, (plain, cached, full)
+    # more materials with edits than caches: each new edit fills a free cache (the twelve, then the spare ones in the
     # mask cache's images), then the one filled longest ago
     live_edits.set_edit(gnode, row)
     edit_group = live_edits._edit_group(group)
-    others = [(2.0, 1.0, 0.0), (0.5, 1.5, 0.1), (1.3, 1.0, 0.0), (1.0, 1.8, -0.1), (0.8, 1.0, 0.2), (1.0, 0.4, 0.0)]
+    others = [(1.0 + 0.1 * i, 1.0 + 0.05 * i, 0.0) for i in range(1, 15)] + [(1.0, 0.4, 0.0)]
     slots = [_slot(_edited_node(group, f"other {i}", other)) for i, other in enumerate(others)]
-    assert slots == [2, 3, *live_edits.SPARE_SLOTS, 1]
+    assert slots == [*live_edits.CONSTANT_SLOTS[1:], *live_edits.SPARE_SLOTS, 1]
+    assert len(set(slots)) == 15 and live_edits.CONSTANT_SLOTS == (1, 2, 3, *range(8, 17))
     assert gnode.inputs[live_edits.CACHE_INPUT].default_value == 0  # its cache was given up: it reads the table
     assert live_edits._cached_values(edit_group, 1) == tuple(float(np.float32(v)) for v in (1.0, 0.4, 0.0, 1.0))
     # a cache image gone from the group (an artist's edit of it): the edit is not cached, and nothing fails
@@ -356,18 +357,20 @@ def _slot(node: bpy.types.Node) -> int:
 
 
 def test_spare_caches_hold_more_constant_edits_while_the_mask_cache_holds_no_line(tmp_path, addon):
-    """Past the three caches, constant edits take the spare caches: the mask cache's three atlases while it holds no
+    """Past the twelve caches, constant edits take the spare caches: the mask cache's three atlases while it holds no
     line in use.  Rendered from a spare (its images' top and bottom atlas) the media equal the table's answer, and the
     shader loads the mask cache's small images, not the table's.  An edit painted by the Edit Mask takes the mask
-    cache back (the spares' nodes read the table, constant edits then take the three caches only); once no node
+    cache back (the spares' nodes read the table, constant edits then take the twelve caches only); once no node
     renders from its line, a constant edit takes a spare again, its atlas written among the line's."""
     live_edits.unregister_handlers()
     scene, tree, gnode, emission, table, edits, layout, images, group, names = _edit_strip(tmp_path)
     edit_group = live_edits._edit_group(group)
     grids = live_table.grid_values(table)
+    fill = [(1.0 + 0.05 * i, 0.9, 0.0) for i in range(1, live_edits.CACHE_SLOTS + 1)]
     others = [_edited_node(group, f"other {i}", edit) for i, edit in
-              enumerate(((2.0, 1.0, 0.0), (0.5, 1.5, 0.1), (1.0, 0.4, 0.0), (1.3, 1.0, 0.0), (1.0, 1.8, -0.1)))]
-    assert [_slot(n) for n in others] == [1, 2, 3, *live_edits.SPARE_SLOTS[:2]]
+              enumerate((*fill, (1.3, 1.0, 0.0), (1.0, 1.8, -0.1)))]
+    assert [_slot(n) for n in others] == [*live_edits.CONSTANT_SLOTS, *live_edits.SPARE_SLOTS[:2]]
+    spared = others[live_edits.CACHE_SLOTS:]
 
     def check(edit, label: str, which=None) -> None:
         d = edit_table.shift(edits, COLOURS, np.array(edit))
@@ -394,7 +397,7 @@ def test_spare_caches_hold_more_constant_edits_while_the_mask_cache_holds_no_lin
     live_edits.set_edit(gnode, row)
     gnode.inputs["Melanin"].default_value = 1.25  # not cached: the table
     full = _cycles_memory_mb(scene, tree, gnode)
-    assert cached - plain <= 1.0 and full - plain >= 6.0, (plain, cached, full)
+    assert cached - plain <= 1.0 and full - plain >= 4.0, (plain, cached, full)
     output = next(n for n in tree.nodes if n.bl_idname == "ShaderNodeOutputMaterial" and n.is_active_output)
     tree.links.new(emission.outputs[0], output.inputs["Surface"])  # the probe's emission again
     # an edit painted by the Edit Mask takes the mask cache: the spares are given up, read from the table
@@ -403,18 +406,18 @@ def test_spare_caches_hold_more_constant_edits_while_the_mask_cache_holds_no_lin
     value = masked.id_data.nodes.new("ShaderNodeValue")
     masked.id_data.links.new(value.outputs[0], masked.inputs[live_edits.MASK_INPUT])
     assert live_edits.cache_edit(masked) == live_edits.MASK_SLOT
-    assert [_slot(n) for n in (*others[3:], gnode)] == [0, 0, 0]
+    assert [_slot(n) for n in (*spared, gnode)] == [0, 0, 0]
     assert all(np.isnan(live_edits._cached_values(edit_group, k)).all() for k in live_edits.SPARE_SLOTS)
     assert live_edits.cache_status(gnode) == "Read from the edit table (not cached)"
     check(row, "table", names[1:2])
-    assert live_edits.cache_edit(others[3]) == 1  # the three caches only: the one filled longest ago
+    assert live_edits.cache_edit(spared[0]) == 1  # the twelve caches only: the one filled longest ago
     # the mask unlinked: the flush, now constant, lies on the line (its end), and still renders from the mask cache
     masked.id_data.links.remove(masked.inputs[live_edits.MASK_INPUT].links[0])
     assert live_edits.cache_is_current(masked) and live_edits.cache_status(masked) == "Rendered from the mask cache"
-    assert live_edits.cache_edit(gnode) == 2  # the line in use: the three caches only
+    assert live_edits.cache_edit(gnode) == 2  # the line in use: the twelve caches only
     # that node back at neutral: no node renders from the line, so a constant edit takes a spare and the line is emptied
     live_edits.set_edit(masked, skin_edits.NEUTRAL)
-    assert _slot(_edited_node(group, "another", (1.2, 2.0, -0.1))) == live_edits.SPARE_SLOTS[0]  # 1-3 in use
+    assert _slot(_edited_node(group, "another", (1.2, 2.0, -0.1))) == live_edits.SPARE_SLOTS[0]  # the twelve in use
     assert live_edits._cached_values(edit_group, live_edits.MASK_SLOT) == skin_edits.NEUTRAL
     live_edits.set_edit(gnode, (1.2, 2.0, -0.1))  # the spare's edit: found there
     assert _slot(gnode) == live_edits.SPARE_SLOTS[0]
@@ -527,18 +530,19 @@ def test_a_keyframed_edit_renders_from_the_mask_cache_where_no_frame_is_cached(t
 
 
 def test_frames_on_the_held_line_give_up_no_other_materials_cache(tmp_path, addon):
-    """Three other materials' constant edits fill the three caches, and a flush keyframed on the node holds its line
+    """Twelve other materials' constant edits fill the twelve caches, and a flush keyframed on the node holds its line
     in the mask cache (the spares are not free then): each frame's edit, cached as the frame changes (viewport
     playback, command-line renders), lies on that line, so it renders from the mask cache instead of giving up
     another material's cache, and reads the mask cache's images, not the table's."""
     scene, tree, gnode, emission, table, edits, layout, images, group, names = _edit_strip(tmp_path)
-    others = [_edited_node(group, f"other {i}", edit)
-              for i, edit in enumerate(((2.0, 1.0, 0.0), (0.5, 1.5, 0.1), (1.0, 0.4, 0.0)))]
+    others = [_edited_node(group, f"other {i}", (1.0 + 0.05 * i, 0.9, 0.0))
+              for i in range(1, live_edits.CACHE_SLOTS + 1)]
     _key_flush(scene, gnode)
     assert live_edits.line_status(gnode, scene) == "Animation render: from the mask cache"
     for frame in (6, 11, 21):
         scene.frame_set(frame)
-        assert [_slot(n) for n in others] == [1, 2, 3] and all(map(live_edits.cache_is_current, others)), frame
+        assert [_slot(n) for n in others] == list(live_edits.CONSTANT_SLOTS), frame
+        assert all(map(live_edits.cache_is_current, others)), frame
         assert _slot(gnode) == live_edits.MASK_SLOT and live_edits.cache_is_current(gnode), frame
         assert live_edits.cache_status(gnode) == "Rendered from the mask cache"
     scene.frame_set(11)

@@ -8,8 +8,8 @@ edit nodes (blender_addon.live.build_live_group without an edit table: the unedi
 inputs at neutral, under the presets tan, flush and pallor (exporters.skin_edits.PRESETS) and every control between
 two of its table's levels (:data:`EDITS`, "three"), each set as the add-on sets it (read from the edit group's cache),
 and that edit read from the table ("three_table": the most lookups an edit makes; a node whose edit is not cached) and
-from a spare cache ("three_spare": an atlas of the mask cache's images, as a fourth to sixth constant edit of a file),
-and edits painted by a mask (:data:`MASKED`: through the Edit Mask, from the mask cache; fed to each control,
+from a spare cache ("three_spare": an atlas of the mask cache's images, as a thirteenth to fifteenth constant edit of a
+file), and edits painted by a mask (:data:`MASKED`: through the Edit Mask, from the mask cache; fed to each control,
 from the table) or keyframed along a line and rendered at a frame no cache holds (:data:`KEYED`: from the mask
 cache), swapping the material's group between renders; each round starts one material later than the one
 before, so that no material always follows the swap from the other group.
@@ -122,7 +122,7 @@ def unkey():
     mat.node_tree.animation_data_clear()
 """
 #: Blender code (in a bench child, ``live_edits`` imported): ``spare_edit(node, edit)`` sets the edit and holds it in
-#: the last spare cache (blender_addon.live_edits.SPARE_SLOTS), where the add-on puts a file's sixth constant edit
+#: the last spare cache (blender_addon.live_edits.SPARE_SLOTS), where the add-on puts a file's fifteenth constant edit
 #: while the mask cache holds no line, and points the node at it; ``unspare(node)`` empties that cache again, so that
 #: the other modes' edits of the same values take their own caches.
 SPARE_CODE = """
