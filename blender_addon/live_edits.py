@@ -80,7 +80,8 @@ MASK_POINTS = edit_table.MASK_POINTS
 SPARE_SLOTS = tuple(range(MASK_SLOT + 1, MASK_SLOT + 1 + MASK_POINTS))
 #: The caches of constant edits with images of their own, in the order they are filled: 1 to 3, then numbered after
 #: the spare caches (the numbers of the mask cache and the spares stay those a group of an earlier add-on uses).
-CONSTANT_SLOTS = (*range(1, MASK_SLOT), *range(SPARE_SLOTS[-1] + 1, SPARE_SLOTS[-1] + 2 + CACHE_SLOTS - MASK_SLOT))
+CONSTANT_SLOTS = (*range(1, MASK_SLOT),
+                  *range(SPARE_SLOTS[-1] + 1, SPARE_SLOTS[-1] + 1 + CACHE_SLOTS - (MASK_SLOT - 1)))
 #: The Float Curve of the mask cache: the mask's position on its line (exporters.edit_table.MaskLine.position).
 MASK_CURVE = "Mask Cache Position"
 #: The group's inputs, in order: (name, default, soft minimum, soft maximum, tooltip).
@@ -284,13 +285,16 @@ def _cached_values(group: bpy.types.NodeTree, slot: int) -> tuple[float, ...]:
     return tuple(float(nodes[_cache_node_name(slot, name)].inputs[1].default_value) for name in _cache_inputs(slot))
 
 
+def _slot_trees(group: bpy.types.NodeTree) -> tuple[bpy.types.NodeTree, ...]:
+    """The trees holding caches' nodes: the caches group ``group`` (:func:`_edit_group`) and the one nested in it
+    (:data:`MORE_CACHES_GROUP_NAME`; a group of an earlier add-on has none)."""
+    return (group, *_nested(group))
+
+
 def _slot_tree(group: bpy.types.NodeTree, slot: int) -> bpy.types.NodeTree | None:
-    """The tree holding cache ``slot``'s nodes: the caches group ``group`` (:func:`_edit_group`) or the one nested in
-    it (:data:`MORE_CACHES_GROUP_NAME`); None where the group has no such cache (one of an earlier add-on)."""
-    for tree in (group, *_nested(group)):
-        if _cache_node_name(slot, CONTROL_NAMES[0]) in tree.nodes:
-            return tree
-    return None
+    """The tree of :func:`_slot_trees` holding cache ``slot``'s nodes; None where the group has no such cache (one of
+    an earlier add-on)."""
+    return next((t for t in _slot_trees(group) if _cache_node_name(slot, CONTROL_NAMES[0]) in t.nodes), None)
 
 
 def empty_mask_cache(live_group: bpy.types.NodeTree) -> None:
@@ -328,7 +332,7 @@ def _group_images(live_group: bpy.types.NodeTree) -> dict[str, bpy.types.Image] 
     where one is missing or one it would write (a cache's) or a group is not editable (linked from a library): the
     edit is then not cached."""
     found = _cache_trees(live_group)
-    trees = (*found, *_nested(found[1])) if found is not None else ()
+    trees = (found[0], *_slot_trees(found[1])) if found is not None else ()
     if not trees or not all(t.is_editable for t in trees):
         return None
     images = {}
@@ -822,14 +826,18 @@ def _caches_node(b, gin, table: edit_table.EditTable, images: dict[str, bpy.type
     :data:`_PLACE_INPUTS`) and the table's shifts.  In groups of their own, at most about 150 nodes each, because
     Blender adds each node to a tree in time growing with its size: the edit group builds in about a third of the
     time it takes with every cache in it.  Cycles compiles nested groups inline, so the shader is the same."""
-    first = CONSTANT_SLOTS[:MASK_SLOT - 1]
+    first = tuple(k for k in CONSTANT_SLOTS if k < MASK_SLOT)
     more = _caches_group(MORE_CACHES_GROUP_NAME, table, images, tile_u, CONSTANT_SLOTS[len(first):], None)
-    group = _caches_group(CACHES_GROUP_NAME, table, images, tile_u, (*first, *SPARE_SLOTS), more)
+    group = _caches_group(CACHES_GROUP_NAME, table, images, tile_u, (MASK_SLOT, *first, *SPARE_SLOTS), more)
+    return _group_node(b, group, {name: gin.outputs[name] for name in _EDIT_INPUTS} | place, shifts)
+
+
+def _group_node(b, group: bpy.types.NodeTree, sources: dict, shifts: dict) -> dict:
+    """The shifts out of a node of the caches group ``group`` (:func:`_caches_group`) added by builder ``b``, its
+    inputs fed by ``sources`` (input name -> socket: the edit group's inputs and the place's) and ``shifts``."""
     node = b.node("ShaderNodeGroup", 60, node_tree=group)
-    for name in _EDIT_INPUTS:
-        b.link(gin.outputs[name], node.inputs[name])
-    for name, _ in _PLACE_INPUTS:
-        b.link(place[name], node.inputs[name])
+    for name in (*_EDIT_INPUTS, *(p for p, _ in _PLACE_INPUTS)):
+        b.link(sources[name], node.inputs[name])
     for kind in edit_table.KINDS:
         b.link(shifts[kind], node.inputs[f"{kind.title()} Shift"])
     return {kind: node.outputs[f"{kind.title()} Shift"] for kind in edit_table.KINDS}
@@ -838,8 +846,8 @@ def _caches_node(b, gin, table: edit_table.EditTable, images: dict[str, bpy.type
 def _caches_group(name: str, table: edit_table.EditTable, images: dict[str, bpy.types.Image], tile_u: float,
                   slots: tuple[int, ...], more: bpy.types.NodeTree | None) -> bpy.types.NodeTree:
     """A group of caches (:func:`_caches_node`): inputs the edit group's, the place's and the table's shifts, outputs
-    the shifts; the mask cache first where ``more`` (a group of the same inputs, nested last) is given, then
-    :func:`_cached` for each of ``slots``."""
+    the shifts; in turn each of ``slots`` (:func:`_mask_cached` for :data:`MASK_SLOT`, else :func:`_cached`), then a
+    node of ``more`` (a group of the same inputs) where given."""
     from . import live
 
     group = bpy.data.node_groups.new(name, "ShaderNodeTree")
@@ -856,20 +864,15 @@ def _caches_group(name: str, table: edit_table.EditTable, images: dict[str, bpy.
     inner_out = group.nodes.new("NodeGroupOutput")
     inner_in.location, inner_out.location = (-1900.0, 0.0), (2400.0, 0.0)
     inner = live._Builder(group)
+    place = {socket: inner_in.outputs[socket] for socket, _ in _PLACE_INPUTS}
     out = {kind: inner_in.outputs[f"{kind.title()} Shift"] for kind in edit_table.KINDS}
-    if more is not None:
-        out = _mask_cached(inner, inner_in, images, inner_in.outputs["Base"], inner_in.outputs["Slice"],
-                           inner_in.outputs["Fraction"], tile_u, out)
     for slot in slots:
-        out = _cached(inner, inner_in, slot, images, inner_in.outputs["Slice UV"], inner_in.outputs["Fraction"],
-                      tile_u, out)
+        if slot == MASK_SLOT:
+            out = _mask_cached(inner, inner_in, images, place["Base"], place["Slice"], place["Fraction"], tile_u, out)
+        else:
+            out = _cached(inner, inner_in, slot, images, place["Slice UV"], place["Fraction"], tile_u, out)
     if more is not None:
-        node = inner.node("ShaderNodeGroup", 60, node_tree=more)
-        for socket in (*_EDIT_INPUTS, *(p for p, _ in _PLACE_INPUTS)):
-            inner.link(inner_in.outputs[socket], node.inputs[socket])
-        for kind in edit_table.KINDS:
-            inner.link(out[kind], node.inputs[f"{kind.title()} Shift"])
-        out = {kind: node.outputs[f"{kind.title()} Shift"] for kind in edit_table.KINDS}
+        out = _group_node(inner, more, {socket: inner_in.outputs[socket] for socket in _EDIT_INPUTS} | place, out)
     inner.place()
     for kind in edit_table.KINDS:
         group.links.new(out[kind], inner_out.inputs[f"{kind.title()} Shift"])
@@ -1174,8 +1177,9 @@ def _masked_control(source: bpy.types.NodeSocket, neutral: float) -> tuple[bpy.t
             return mask, ends[3]
     if node.bl_idname == "ShaderNodeMix" and node.data_type == "FLOAT" and source == node.outputs[0]:
         mask = wiring.feeding_socket(enabled[0])
-        if mask is not None and _constant(enabled[1]) == neutral and _constant(enabled[2]) is not None:
-            return mask, _constant(enabled[2])
+        value = _constant(enabled[2])
+        if mask is not None and _constant(enabled[1]) == neutral and value is not None:
+            return mask, value
     return None
 
 
@@ -1264,8 +1268,8 @@ def draw_controls(layout, context) -> None:
             box.label(text=status, icon="INFO")
     if mask_feeding(node) is not None:
         box.operator(SPECTRAL_SKIN_OT_use_edit_mask.bl_idname, text="One mask paints the edit: Use Edit Mask (faster)")
-    elif edit_mask_hint(node) is not None:
-        box.label(text=edit_mask_hint(node))
+    elif (hint := edit_mask_hint(node)) is not None:
+        box.label(text=hint)
     row = box.row(align=True)
     for key, label, _ in PRESET_ITEMS:
         row.operator(SPECTRAL_SKIN_OT_skin_edit_preset.bl_idname, text=label).preset = key
