@@ -41,11 +41,12 @@ renders outside the main thread, where no frame's edit can be cached.  Then a Mi
 the table's (a constant edit's own cache before the mask cache's).  For constant inputs the test
 folds when Cycles compiles the shader, to 1 (the table's nodes and images drop out) or to 0 (the cache's do); the
 test reads values, so a cache never gives another edit's answer: changed values, keyframes and controls fed by
-nodes render through the table, as without caches.  :func:`cache_edit` fills a cache (:func:`set_edit`: the
-operator, the presets, the API); the add-on's handlers cache an edit set on the node or the panel's sliders
-(:func:`refresh_caches`) and each frame's keyframed values (:func:`refresh_frame_caches`).  For an edit not
-cached they set the cache input to minus the controls fed by nodes (:func:`linked_flags`), which folds those
-controls' neutral tests away (:func:`_unfed`).
+nodes render through the table, as without caches.  A control fed by a Value node is a value (:func:`input_value`):
+Cycles folds it as it does an unlinked input, so its edit is cached.  :func:`cache_edit` fills a cache
+(:func:`set_edit`: the operator, the presets, the API); the add-on's handlers cache an edit set on the node or the
+panel's sliders (:func:`refresh_caches`) and each frame's keyframed values (:func:`refresh_frame_caches`).  For an
+edit not cached they set the cache input to minus the controls fed by nodes (:func:`linked_flags`), which folds
+those controls' neutral tests away (:func:`_unfed`).
 """
 
 from __future__ import annotations
@@ -201,25 +202,36 @@ def set_edit(node: bpy.types.Node, edit: tuple[float, float, float] | None, cach
         _point(node, 0)
 
 
+def input_value(node: bpy.types.Node, name: str) -> float | None:
+    """The value the live group node's input ``name`` takes at every shading point: its own where nothing reaches it
+    (unlinked, or a muted link: wiring.feeding_socket), a Value node's where one feeds it (through Reroutes and muted
+    nodes); None where another node feeds it (its value may vary).  Cycles folds a Value node into the shader as it
+    does an unlinked input, so a control fed by one is a constant edit: its cache's test folds the same way."""
+    socket = node.inputs[name]
+    source = wiring.feeding_socket(socket) if socket.is_linked else None
+    if source is None:
+        return float(socket.default_value)
+    return float(source.default_value) if source.node.bl_idname == "ShaderNodeValue" else None
+
+
 def constant_edit(node: bpy.types.Node) -> tuple[float, float, float] | None:
-    """The live group node's (Melanin, Blood, Oxygenation) where none of the three is fed by a node, else None."""
-    if any(node.inputs[name].is_linked for name in CONTROL_NAMES):
-        return None
-    return tuple(float(node.inputs[name].default_value) for name in CONTROL_NAMES)
+    """The live group node's (Melanin, Blood, Oxygenation) where each is a value (:func:`input_value`: its own, or a
+    Value node's), else None (a control fed by another node)."""
+    values = tuple(input_value(node, name) for name in CONTROL_NAMES)
+    return None if None in values else values
 
 
 def cache_key(node: bpy.types.Node) -> tuple[float, ...] | None:
     """The values a cache holding the live group node's edit tests (module docstring, "Edit caches"): (Melanin,
-    Blood, Oxygenation, Edit Mask) for a constant edit that is not neutral, (Melanin, Blood, Oxygenation) for one
-    painted by a linked Edit Mask that the mask cache can hold (exporters.edit_table.mask_line); None for any
-    other (a control fed by a node, a neutral edit)."""
+    Blood, Oxygenation, Edit Mask) for a constant edit that is not neutral (each a value: :func:`input_value`),
+    (Melanin, Blood, Oxygenation) for one painted by an Edit Mask fed by a node that the mask cache can hold
+    (exporters.edit_table.mask_line); None for any other (a control fed by a node, a neutral edit)."""
     edit = constant_edit(node)
     if edit is None:
         return None
-    mask = node.inputs.get(MASK_INPUT)
-    if mask is not None and mask.is_linked:
+    weight = input_value(node, MASK_INPUT) if MASK_INPUT in node.inputs else 1.0
+    if weight is None:
         return edit if edit_table.mask_line(edit) is not None else None
-    weight = float(mask.default_value) if mask is not None else 1.0
     effective = edit_table.masked_edits(edit, [weight])[0]
     if not (np.all(np.isfinite(effective)) and np.isfinite(weight)) or skin_edits.neutral_rows(effective[None])[0]:
         return None
@@ -314,12 +326,13 @@ _ALL_LINKED = 2 ** len(CONTROL_NAMES) - 1
 
 
 def linked_flags(node: bpy.types.Node) -> int:
-    """Sum of 2^j over the controls j (Melanin, Blood, Oxygenation) of the live group node fed by a node; 0 where its
-    group predates the flags (its cache input takes no negative value)."""
+    """Sum of 2^j over the controls j (Melanin, Blood, Oxygenation) of the live group node fed by a node (other than
+    a Value node: :func:`input_value`); 0 where its group predates the flags (its cache input takes no negative
+    value)."""
     socket = node.node_tree.interface.items_tree.get(CACHE_INPUT) if node.node_tree is not None else None
     if socket is None or socket.min_value > -_ALL_LINKED:
         return 0
-    return sum(2 ** j for j, name in enumerate(CONTROL_NAMES) if node.inputs[name].is_linked)
+    return sum(2 ** j for j, name in enumerate(CONTROL_NAMES) if input_value(node, name) is None)
 
 
 def _uncached(node: bpy.types.Node) -> int:
@@ -1121,7 +1134,7 @@ def cache_status(node: bpy.types.Node) -> str | None:
     edit = constant_edit(node)
     if edit is None:
         return "Read from the edit table: a control is fed by a node"
-    masked = MASK_INPUT in node.inputs and node.inputs[MASK_INPUT].is_linked
+    masked = MASK_INPUT in node.inputs and input_value(node, MASK_INPUT) is None
     if cache_key(node) is None:
         if masked and not skin_edits.neutral_rows(np.array([edit]))[0]:
             return f"Read from the edit table: the mask cache holds edits within {MASK_POINTS} levels of neutral"
@@ -1186,22 +1199,22 @@ def _masked_control(source: bpy.types.NodeSocket, neutral: float) -> tuple[bpy.t
 def mask_feeding(node: bpy.types.Node) -> tuple[bpy.types.NodeSocket, tuple[float, float, float]] | None:
     """(mask, edit) where one mask paints the live node's whole edit through nodes of the material: every control
     fed by a node is fed neutral + mask x (value - neutral) (:func:`_masked_control`) by the same mask, the others are
-    at neutral, the Edit Mask is unlinked, and the mask cache can hold the edit (exporters.edit_table.mask_line);
-    ``edit`` is the values at mask 1.  Else None.  The same mask through Edit Mask paints the same edit (the group
-    clamps it to [0, 1], as a painted mask is) from the mask cache: :class:`SPECTRAL_SKIN_OT_use_edit_mask`."""
+    at neutral (:func:`input_value`), the Edit Mask is unlinked, and the mask cache can hold the edit
+    (exporters.edit_table.mask_line); ``edit`` is the values at mask 1.  Else None.  The same mask through Edit Mask
+    paints the same edit (the group clamps it to [0, 1], as a painted mask is) from the mask cache:
+    :class:`SPECTRAL_SKIN_OT_use_edit_mask`."""
     mask = node.inputs.get(MASK_INPUT)
     if mask is None or mask.is_linked or constant_edit(node) is not None:
         return None
     masks, edit = {}, []
     for name, neutral in zip(CONTROL_NAMES, skin_edits.NEUTRAL, strict=True):
-        socket = node.inputs[name]
-        if not socket.is_linked:
-            if float(socket.default_value) != neutral:
+        value = input_value(node, name)
+        if value is not None:
+            if value != neutral:
                 return None
             edit.append(neutral)
             continue
-        source = wiring.feeding_socket(socket)
-        masked = _masked_control(source, neutral) if source is not None else None
+        masked = _masked_control(wiring.feeding_socket(node.inputs[name]), neutral)
         if masked is None:
             return None
         masks[masked[0].as_pointer()] = masked[0]

@@ -208,8 +208,8 @@ def test_operator_wires_the_edit_inputs_and_presets_set_them(tmp_path, addon):
     images = [i for i in bpy.data.images if i.name.startswith(live_edits.IMAGE_PREFIX)]
     assert len(images) == 6 + 2 * (live_edits.CACHE_SLOTS + 1) and all(i.packed_file is not None for i in images)
     table_bytes = sum(i.size[0] * i.size[1] * 16 for i in images if " Cache " not in i.name)
-    mask = mat.node_tree.nodes.new("ShaderNodeValue")  # an input fed by a node is left as it is
-    mat.node_tree.links.new(mask.outputs[0], node.inputs["Oxygenation"])
+    mask = mat.node_tree.nodes.new("ShaderNodeAttribute")  # an input fed by a node is left as it is
+    mat.node_tree.links.new(mask.outputs["Fac"], node.inputs["Oxygenation"])
     with bpy.context.temp_override(material=mat, object=obj, active_object=obj):
         assert bpy.ops.spectral_skin.skin_edit_preset(preset="FLUSH") == {"FINISHED"}
     flush = skin_edits.PRESETS["flush"]
@@ -219,7 +219,7 @@ def test_operator_wires_the_edit_inputs_and_presets_set_them(tmp_path, addon):
     assert node.inputs[live_edits.CACHE_INPUT].default_value == -4  # not cached; Oxygenation (2^2) flagged as fed
     assert live_edits.cache_status(node) == "Read from the edit table: a control is fed by a node"
     assert live_edits.edit_mask_hint(node) == live_edits.EDIT_MASK_HINT
-    mat.node_tree.links.new(mask.outputs[0], node.inputs[live_edits.MASK_INPUT])
+    mat.node_tree.links.new(mask.outputs["Fac"], node.inputs[live_edits.MASK_INPUT])
     assert live_edits.edit_mask_hint(node) is None  # the Edit Mask is fed already
     mat.node_tree.nodes.remove(mask)
     with bpy.context.temp_override(material=mat, object=obj, active_object=obj):
@@ -343,6 +343,53 @@ def test_a_constant_edit_renders_from_its_cache_as_from_the_table(tmp_path, addo
     assert gnode.inputs[live_edits.CACHE_INPUT].default_value == 0
 
 
+def test_controls_fed_by_value_nodes_render_from_a_cache(tmp_path, addon):
+    """A control or the Edit Mask fed by a Value node (through a Reroute) is a value: Cycles folds the Value node into
+    the shader as it does an unlinked input, so cache_edit caches the edit (live_edits.input_value) and the compiled
+    shader reads the cache's images, not the table's (Cycles' memory), its media the table's answer and bit for bit
+    those of the same values set on the node; the handler caches the Value node's new value; a muted link gives the
+    input its own value, as the renderers read it."""
+    live_edits.unregister_handlers()
+    scene, tree, gnode, emission, table, edits, layout, images, group, names = _edit_strip(tmp_path)
+    row = (1.5, 2.5, -0.2)
+    live_edits.set_edit(gnode, row)
+    on_node = _render(scene, tree, gnode, emission, names[1])
+    values = {}
+    for name, value in (("Melanin", row[0]), ("Blood", row[1]), (live_edits.MASK_INPUT, 1.0)):
+        values[name] = tree.nodes.new("ShaderNodeValue")
+        values[name].outputs[0].default_value = value
+        reroute = tree.nodes.new("NodeReroute")
+        tree.links.new(values[name].outputs[0], reroute.inputs[0])
+        tree.links.new(reroute.outputs[0], gnode.inputs[name])
+    gnode.inputs["Oxygenation"].default_value = row[2]
+    assert live_edits.constant_edit(gnode) == tuple(float(np.float32(v)) for v in row)
+    assert live_edits.cache_edit(gnode) == 1 and live_edits.linked_flags(gnode) == 0
+    assert live_edits.cache_status(gnode) == "Rendered from edit cache 1"
+    d = edit_table.shift(edits, COLOURS, np.array(row))
+    reference = live_table.group_media(table, edit_table.edited_colour(COLOURS, d), live_table.grid_values(table))
+    for name in names[:2]:  # k1 Color, k1 Radius
+        kind = name.split()[2]
+        ref = reference[f"k1 {kind}"] * (np.exp(d[:, 3:6]) if kind == "Radius" else 1.0)
+        np.testing.assert_allclose(_render(scene, tree, gnode, emission, name), ref, rtol=5e-4, atol=1e-7,
+                                   err_msg=name)
+    np.testing.assert_array_equal(_render(scene, tree, gnode, emission, names[1]), on_node)
+    cached = _cycles_memory_mb(scene, tree, gnode)
+    gnode.inputs[live_edits.CACHE_INPUT].default_value = 0  # the table's path
+    assert _cycles_memory_mb(scene, tree, gnode) - cached >= 4.0
+    live_edits.register_handlers()
+    values["Blood"].outputs[0].default_value = 2.0
+    bpy.context.view_layer.update()
+    slot = int(gnode.inputs[live_edits.CACHE_INPUT].default_value)
+    assert slot > 0 and live_edits.cache_is_current(gnode)
+    assert live_edits._cached_values(live_edits._edit_group(group), slot)[:2] == (1.5, 2.0)
+    assert _cycles_memory_mb(scene, tree, gnode) - cached <= 0.5
+    link = next(lk for lk in tree.links if lk.to_node == gnode and lk.to_socket.name == "Melanin")
+    link.is_muted = True
+    gnode.inputs["Melanin"].default_value = 1.25  # the input's own value, not the Value node's 1.5
+    assert live_edits.constant_edit(gnode)[0] == 1.25 and live_edits.cache_edit(gnode) > 0
+    assert _cycles_memory_mb(scene, tree, gnode) - cached <= 0.5
+
+
 def _edited_node(group: bpy.types.NodeTree, name: str, edit) -> bpy.types.Node:
     """A new material's group node using ``group``, its edit set (live_edits.set_edit: cached)."""
     mat = bpy.data.materials.new(name)  # with a node tree: Blender 5
@@ -403,8 +450,8 @@ def test_spare_caches_hold_more_constant_edits_while_the_mask_cache_holds_no_lin
     # an edit painted by the Edit Mask takes the mask cache: the spares are given up, read from the table
     live_edits.set_edit(gnode, row)
     masked = _edited_node(group, "masked", tuple(skin_edits.PRESETS["flush"].row()))
-    value = masked.id_data.nodes.new("ShaderNodeValue")
-    masked.id_data.links.new(value.outputs[0], masked.inputs[live_edits.MASK_INPUT])
+    painted = masked.id_data.nodes.new("ShaderNodeAttribute")  # a mask (a Value node would be a constant weight)
+    masked.id_data.links.new(painted.outputs["Fac"], masked.inputs[live_edits.MASK_INPUT])
     assert live_edits.cache_edit(masked) == live_edits.MASK_SLOT
     assert [_slot(n) for n in (*spared, gnode)] == [0, 0, 0]
     assert all(np.isnan(live_edits._cached_values(edit_group, k)).all() for k in live_edits.SPARE_SLOTS)
@@ -641,12 +688,12 @@ def test_one_mask_fed_to_each_control_becomes_the_edit_mask(tmp_path, addon):
 
 
 def test_controls_fed_by_nodes_render_the_tables_answer_flagged_or_not(tmp_path, addon):
-    """Controls fed by nodes of their own (Blood = 1 + 1.5 x the colours' red, Oxygenation from a Value node) read the
-    table: the media equal its answer at each texel's edit.  cache_edit flags them on the cache input (minus 2^j per
-    fed control j, which drops their neutral tests from the compiled shader); the render is the same with the flags
-    gone (cache input 0, the tests evaluated) and with a neutral unlinked control wrongly flagged as fed (its levels
-    read 0).  A neutral group flagged so (a stale flag) renders its unedited colours to the exp curve's accuracy at 0
-    (1e-4 in the colour, 2e-4 in the media it gives), not bit for bit."""
+    """Controls fed by nodes of their own (Blood = 1 + 1.5 x the colours' red; Oxygenation from a Value node, a value
+    Cycles folds) read the table: the media equal its answer at each texel's edit.  cache_edit flags the fed one on
+    the cache input (minus 2^j per fed control j, which drops their neutral tests from the compiled shader); the
+    render is the same with the flags gone (cache input 0, the tests evaluated) and with a neutral unlinked control
+    wrongly flagged as fed (its levels read 0).  A neutral group flagged so (a stale flag) renders its unedited
+    colours to the exp curve's accuracy at 0 (1e-4 in the colour, 2e-4 in the media it gives), not bit for bit."""
     live_edits.unregister_handlers()
     scene, tree, gnode, emission, table, edits, layout, images, group, names = _edit_strip(tmp_path)
     red = tree.nodes.new("ShaderNodeSeparateColor")
@@ -659,7 +706,7 @@ def test_controls_fed_by_nodes_render_the_tables_answer_flagged_or_not(tmp_path,
     oxygen.outputs[0].default_value = -0.1
     tree.links.new(blood.outputs[0], gnode.inputs["Blood"])
     tree.links.new(oxygen.outputs[0], gnode.inputs["Oxygenation"])
-    assert live_edits.cache_edit(gnode) == 0 and gnode.inputs[live_edits.CACHE_INPUT].default_value == -6
+    assert live_edits.cache_edit(gnode) == 0 and gnode.inputs[live_edits.CACHE_INPUT].default_value == -2
     assert live_edits.cache_is_current(gnode)
     rows = np.column_stack([np.ones(len(COLOURS)), 1.0 + 1.5 * COLOURS[:, 0], np.full(len(COLOURS), -0.1)])
     d = edit_table.shift(edits, COLOURS, rows)
