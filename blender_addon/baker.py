@@ -20,7 +20,7 @@ from pathlib import Path
 import bpy
 import numpy as np
 
-from . import follow, nodes, oblique, tiles, wiring
+from . import edit_masks, follow, nodes, oblique, tiles, wiring
 from .core import bake, image_input, inference, maps, skin_edits, uv_coverage
 
 AlbedoImage, IndexedAlbedo = image_input.AlbedoImage, image_input.IndexedAlbedo
@@ -52,6 +52,8 @@ class BakeSettings:
     unit for the radii (None: the scene's, :func:`follow.scene_unit_scale`); ``openpbr``: also the OpenPBR maps,
     MaterialX document and USD layer of ``--target openpbr`` (storage "FILES" only: other renderers read files);
     ``edit``: the skin edit (Melanin, Blood, Oxygenation: exporters.skin_edits) every texel's maps carry;
+    ``edit_from_live``: where the material renders through the live group with an edit, the maps carry that edit
+    instead, its masks too (blender_addon.edit_masks.live_bake_edit: what the live group renders);
     ``material``: the active object's material to wire, by name (empty: its active material)."""
 
     model_path: str
@@ -70,6 +72,7 @@ class BakeSettings:
     unit_scale_m: float | None = None
     openpbr: bool = False
     edit: tuple[float, float, float] = skin_edits.NEUTRAL
+    edit_from_live: bool = False
     material: str = ""
 
 
@@ -246,13 +249,15 @@ class AddonBake:
         self.backend = pick_backend(self.scene, settings.backend)
         self.model = inference.ModelFile(settings.model_path, threads=settings.threads)  # loaded if needed
         self.tiled = isinstance(self.albedo, tiles.TiledAlbedo)
+        shape = None
         if self.tiled:
             mask, self.uv_note = None, "UDIM: every texel of every tile"
         else:
-            height, width = (self.albedo.shape if isinstance(self.albedo, IndexedAlbedo) else
-                             self.albedo.rgb.shape[:2])
+            height, width = shape = (self.albedo.shape if isinstance(self.albedo, IndexedAlbedo) else
+                                     self.albedo.rgb.shape[:2])
             mask, self.uv_note = (mesh_uv_mask(obj, self.source_node, width, height) if settings.uv_coverage
                                   else (None, "off"))
+        edit, masks, self.edit_note = self._edit(shape)
         self.out_dir, self._temp_dir = self._output_folder()
         scale = follow.scene_unit_scale(self.scene) if settings.unit_scale_m is None else float(settings.unit_scale_m)
         self.options = bake.BakeOptions(targets=("cycles", "openpbr") if settings.openpbr else ("cycles",),
@@ -260,7 +265,7 @@ class AddonBake:
                                         threads=settings.threads, chunk=settings.chunk,
                                         model_colour=settings.model_colour, overwrite=settings.overwrite,
                                         exact=settings.exact, texel_mask=mask,
-                                        edit=skin_edits.SkinEdit(*settings.edit),
+                                        edit=skin_edits.SkinEdit(*edit), edit_masks=masks,
                                         **({"prune_share": 0.0} if self.tiled else {}))
         try:
             if self.tiled:
@@ -282,6 +287,15 @@ class AddonBake:
         self.result: bake.BakeResult | None = None
 
     # -- inputs --------------------------------------------------------------------------------------------
+    def _edit(self, shape: tuple[int, int] | None) -> tuple[tuple[float, float, float], dict | None, str]:
+        """(edit, masks, the report's note) the maps carry: the live group's (``edit_from_live``, where the material
+        has one with an edit) or the settings' values."""
+        s = self.settings
+        found = edit_masks.live_bake_edit(self.material, self.source_node, shape) if s.edit_from_live else None
+        if found is None:
+            return s.edit, None, ""
+        return found[0], found[1] or None, "; skin edit from the live group: " + edit_masks.describe(*found)
+
     def _read_file(self, path: str, colorspace: str) -> IndexedAlbedo | AlbedoImage:
         if not os.path.isfile(path):
             raise FileNotFoundError(f"albedo image not found: {path}")
@@ -436,7 +450,7 @@ class AddonBake:
                 self._remove_temp_dir()
         if self.settings.storage == "FILES":
             report += f"; files in {self.out_dir}"
-        report += osl_warning(self.scene, self.backend)
+        report += self.edit_note + osl_warning(self.scene, self.backend)
         notes = list(self.result.notes) if self.result is not None else []
         return report + ("; note: " + "; ".join(notes) if notes else "")
 

@@ -1170,7 +1170,7 @@ def _constant(socket: bpy.types.NodeSocket | None) -> float | None:
     return None if socket is None or socket.is_linked else float(socket.default_value)
 
 
-def _masked_control(source: bpy.types.NodeSocket, neutral: float) -> tuple[bpy.types.NodeSocket, float] | None:
+def masked_control(source: bpy.types.NodeSocket, neutral: float) -> tuple[bpy.types.NodeSocket, float] | None:
     """(mask, value) where the output ``source`` feeding a control is neutral + mask x (value - neutral) in one node
     of the material: a Math Multiply Add (mask, value - neutral, neutral), a float Map Range (linear) of the mask
     from [0, 1] to [neutral, value], or a float Mix of factor mask from neutral to value; else None."""
@@ -1198,7 +1198,7 @@ def _masked_control(source: bpy.types.NodeSocket, neutral: float) -> tuple[bpy.t
 
 def mask_feeding(node: bpy.types.Node) -> tuple[bpy.types.NodeSocket, tuple[float, float, float]] | None:
     """(mask, edit) where one mask paints the live node's whole edit through nodes of the material: every control
-    fed by a node is fed neutral + mask x (value - neutral) (:func:`_masked_control`) by the same mask, the others are
+    fed by a node is fed neutral + mask x (value - neutral) (:func:`masked_control`) by the same mask, the others are
     at neutral (:func:`input_value`), the Edit Mask is unlinked, and the mask cache can hold the edit
     (exporters.edit_table.mask_line); ``edit`` is the values at mask 1.  Else None.  The same mask through Edit Mask
     paints the same edit (the group clamps it to [0, 1], as a painted mask is) from the mask cache:
@@ -1214,7 +1214,7 @@ def mask_feeding(node: bpy.types.Node) -> tuple[bpy.types.NodeSocket, tuple[floa
                 return None
             edit.append(neutral)
             continue
-        masked = _masked_control(wiring.feeding_socket(node.inputs[name]), neutral)
+        masked = masked_control(wiring.feeding_socket(node.inputs[name]), neutral)
         if masked is None:
             return None
         masks[masked[0].as_pointer()] = masked[0]

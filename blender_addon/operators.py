@@ -56,6 +56,9 @@ MATERIAL_HELP = ("The active object's material to work on, by name (one of its m
                  "material): a character's head, body and limbs each in a material of their own")
 #: Exceptions that mean bad input or a failed bake (reported, nothing changed).
 _EXPECTED = (OSError, ValueError, RuntimeError)
+#: The tooltip of Bake's Edit from the live group.
+EDIT_FROM_LIVE_HELP = ("Where the material renders through the live group with a skin edit, bake that edit (its "
+                       "values, and masks painted by Image Textures) instead of the values below")
 
 
 class SPECTRAL_SKIN_OT_invert_albedo(bpy.types.Operator):
@@ -104,6 +107,8 @@ class SPECTRAL_SKIN_OT_invert_albedo(bpy.types.Operator):
     melanin: bpy.props.FloatProperty(**live_edits.edit_property("Melanin"))
     blood: bpy.props.FloatProperty(**live_edits.edit_property("Blood"))
     oxygenation: bpy.props.FloatProperty(**live_edits.edit_property("Oxygenation"))
+    edit_from_live: bpy.props.BoolProperty(name="Edit from the live group", default=True,
+                                           description=EDIT_FROM_LIVE_HELP)
 
     _bake = None
     _timer = None
@@ -116,7 +121,7 @@ class SPECTRAL_SKIN_OT_invert_albedo(bpy.types.Operator):
                                   model_colour=self.model_colour, threads=preferences.threads(context),
                                   exact=self.exact, uv_coverage=self.uv_coverage, openpbr=self.openpbr,
                                   unit_scale_m=follow.scene_unit_scale(context.scene), edit=self._edit(),
-                                  material=self.material)
+                                  edit_from_live=self.edit_from_live, material=self.material)
 
     def _edit(self) -> tuple[float, float, float]:
         """The skin edit asked for: (Melanin, Blood, Oxygenation).  The live mode sets a non-neutral one on the group

@@ -7,7 +7,7 @@ import os
 
 import bpy
 
-from . import baker, follow, live_edits, operators, preferences, real_size, wiring
+from . import baker, edit_masks, follow, live_edits, operators, preferences, real_size, wiring
 
 
 class SpectralSkinSettings(bpy.types.PropertyGroup):
@@ -34,6 +34,8 @@ class SpectralSkinSettings(bpy.types.PropertyGroup):
     melanin: bpy.props.FloatProperty(**live_edits.edit_property("Melanin"))
     blood: bpy.props.FloatProperty(**live_edits.edit_property("Blood"))
     oxygenation: bpy.props.FloatProperty(**live_edits.edit_property("Oxygenation"))
+    edit_from_live: bpy.props.BoolProperty(name="Edit from the live group", default=True,
+                                           description=operators.EDIT_FROM_LIVE_HELP)
 
 
 def _draw(layout, context) -> None:
@@ -74,8 +76,11 @@ def _draw(layout, context) -> None:
         col.prop(settings, "exact")
         col.prop(settings, "uv_coverage")
         edit = col.column(heading="Skin edit", align=True)
+        edit.prop(settings, "edit_from_live")
+        values = edit.column(align=True)
+        values.active = not (settings.edit_from_live and edit_masks.has_live_edit(getattr(context, "material", None)))
         for name in ("melanin", "blood", "oxygenation"):
-            edit.prop(settings, name)
+            values.prop(settings, name)
     op = layout.operator("spectral_skin.invert_albedo", icon="IMAGE_DATA")
     _set_options(op, settings)
     if settings is not None and settings.mode == "BAKE":
@@ -97,6 +102,7 @@ def _set_options(op, settings: SpectralSkinSettings | None) -> None:
         op.overwrite, op.model_colour = settings.overwrite, settings.model_colour
         op.exact, op.uv_coverage = settings.exact, settings.uv_coverage
         op.melanin, op.blood, op.oxygenation = settings.melanin, settings.blood, settings.oxygenation
+        op.edit_from_live = settings.edit_from_live
 
 
 def slot_materials(obj: bpy.types.Object | None) -> list[tuple[bpy.types.Material, bool]]:

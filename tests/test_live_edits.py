@@ -19,7 +19,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 import blender_addon  # noqa: E402
-from blender_addon import live, live_edits, preferences, probe  # noqa: E402
+from blender_addon import edit_masks, live, live_edits, preferences, probe  # noqa: E402
 from exporters import bake, edit_table, live_table, maps, skin_edits  # noqa: E402
 from tests.addon_scene import image_pixels, run_invert, skin_codes, skin_object, write_image  # noqa: E402
 from tests.test_live_group import _probe_strip, _render_row  # noqa: E402
@@ -268,6 +268,56 @@ def test_the_operator_takes_an_edit_into_the_live_group_and_into_baked_maps(tmp_
             unedited = maps.read_exr(plain / name)[0]
             change[kind] = max(change.get(kind, 0.0), float(np.abs(ref - unedited).max() / np.abs(unedited).max()))
     assert change["radius"] > 0.01 and change["weight"] > 0.01, change  # the edit changes the translucency
+
+
+def test_bake_mode_carries_the_live_groups_edit_and_its_masks(tmp_path, addon):
+    """Invert Skin Albedo in Bake mode bakes the skin edit the live group renders (blender_addon.edit_masks): Melanin
+    set on the node and Blood painted by a mask image (the green of a Separate Color, into a Math Multiply Add) give
+    the maps exporters.bake writes with that edit and the mask read from its file (rows top down); an sRGB mask is
+    decoded as Cycles reads it; a control fed by another node is a one-line error that changes nothing."""
+    import colour
+
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    png = write_image(tmp_path / "skin.png", skin_codes(), "uint8")
+    grey = (np.arange(12).reshape(3, 4) * 21).astype(np.uint8)  # every texel its own value: orientation shows
+    mask_png = write_image(tmp_path / "mask.png", np.repeat(grey[..., None], 3, axis=-1), "uint8")
+    obj, mat, tex = skin_object(png)
+    assert run_invert(obj, mode="LIVE", melanin=1.5) == {"FINISHED"}
+    node, tree = live_edits.live_node(mat), mat.node_tree
+    mask = tree.nodes.new("ShaderNodeTexImage")
+    mask.image = bpy.data.images.load(str(mask_png))
+    tree.links.new(tex.inputs["Vector"].links[0].from_socket, mask.inputs["Vector"])  # the albedo's UV Map node
+    split = tree.nodes.new("ShaderNodeSeparateColor")
+    tree.links.new(mask.outputs["Color"], split.inputs[0])
+    blood = tree.nodes.new("ShaderNodeMath")
+    blood.operation = "MULTIPLY_ADD"
+    tree.links.new(split.outputs["Green"], blood.inputs[0])
+    blood.inputs[1].default_value, blood.inputs[2].default_value = 1.5, 1.0
+    tree.links.new(blood.outputs[0], node.inputs["Blood"])
+    mask.image.colorspace_settings.name = "sRGB"
+    edit, masks = edit_masks.live_bake_edit(mat, tex, (3, 4))
+    assert edit == (1.5, 2.5, 0.0) and list(masks) == ["blood"]
+    np.testing.assert_allclose(masks["blood"], colour.models.eotf_sRGB(grey / 255.0), rtol=1e-5, atol=1e-7)
+    mask.image.colorspace_settings.name = "Non-Color"
+    attribute = tree.nodes.new("ShaderNodeAttribute")
+    tree.links.new(attribute.outputs["Fac"], node.inputs["Oxygenation"])
+    with pytest.raises(RuntimeError, match="Oxygenation .* cannot read per texel"):
+        run_invert(obj, mode="BAKE")
+    assert live_edits.live_node(mat) == node  # nothing changed
+    tree.links.remove(node.inputs["Oxygenation"].links[0])
+    assert run_invert(obj, mode="BAKE") == {"FINISHED"}
+    assert live_edits.live_node(mat) is None  # the baked maps replace the live group
+    reference = tmp_path / "reference"
+    reference.mkdir()
+    bake.bake(png, reference, preferences.DEFAULT_MODEL,
+              bake.BakeOptions(threads=1, edit=skin_edits.SkinEdit(1.5, 2.5), edit_masks={"blood": grey / 255.0}))
+    table = live.table_for_model(preferences.DEFAULT_MODEL)
+    for k in range(1, table.k + 1):
+        for kind in ("color", "radius", "weight"):
+            name = f"skin_k{k}_{kind}.exr"
+            ref = maps.read_exr(reference / name)[0]
+            got = image_pixels(bpy.data.images[name])[..., : ref.shape[2]]
+            np.testing.assert_allclose(got, ref, rtol=1e-6, atol=1e-7, err_msg=name)
 
 
 def test_a_constant_edit_renders_from_its_cache_as_from_the_table(tmp_path, addon):
