@@ -1163,6 +1163,9 @@ def line_status(node: bpy.types.Node, scene: bpy.types.Scene) -> str | None:
 #: The panel's hint for an edit whose controls are fed by nodes while the Edit Mask is not: one mask painting the
 #: whole edit renders from the mask cache (8 lookups) where each control fed by a node reads the table (8 each).
 EDIT_MASK_HINT = "One mask for the whole edit? Plug it into Edit Mask: faster"
+#: The panel's second line with :data:`EDIT_MASK_HINT`: a bake takes masks of their own per control at a baked
+#: material's cost (blender_addon.edit_masks).
+BAKE_HINT = "Masks of their own? For final renders, Bake takes them"
 
 
 def _constant(socket: bpy.types.NodeSocket | None) -> float | None:
@@ -1283,6 +1286,7 @@ def draw_controls(layout, context) -> None:
         box.operator(SPECTRAL_SKIN_OT_use_edit_mask.bl_idname, text="One mask paints the edit: Use Edit Mask (faster)")
     elif (hint := edit_mask_hint(node)) is not None:
         box.label(text=hint)
+        box.label(text=BAKE_HINT)
     row = box.row(align=True)
     for key, label, _ in PRESET_ITEMS:
         row.operator(SPECTRAL_SKIN_OT_skin_edit_preset.bl_idname, text=label).preset = key
