@@ -352,6 +352,32 @@ def main() -> dict:
     out["appended_copies_used"] = sorted(g.name for g in bpy.data.node_groups
                                          if g.name.startswith("Spectral Skin SSS") and g.name[-4:-3] == "." and g.users)
 
+    # The live material on a sphere of its own, Melanin fed by a Value node (a constant edit: from a cache) and Blood
+    # painted by the albedo's red through a Math node: a bake takes that edit (blender_addon.edit_masks), as the same
+    # values set on the operator bake it for another material.
+    obj = skin_scene()
+    obj.data.materials.append(material)
+    value = tree.nodes.new("ShaderNodeValue")
+    value.outputs[0].default_value = 1.5
+    tree.links.new(value.outputs[0], node.inputs["Melanin"])
+    node.inputs["Oxygenation"].default_value = 0.0
+    bpy.context.view_layer.update()
+    out["value_fed_cache"] = live_edits.cache_status(node)
+    math = tree.nodes.new("ShaderNodeMath")
+    math.operation = "MULTIPLY_ADD"
+    tree.links.new(red.outputs[0], math.inputs[0])
+    math.inputs[1].default_value, math.inputs[2].default_value = 1.5, 1.0
+    tree.links.new(math.outputs[0], node.inputs["Blood"])
+    with bpy.context.temp_override(object=obj, active_object=obj):
+        out["live_edit_bake"] = sorted(bpy.ops.spectral_skin.invert_albedo(mode="BAKE", exact=True))
+    out["live_edit_bake_centre"] = render_centre(bpy.context.scene)
+    obj = skin_scene()
+    textured_material(obj, "SkinValuesBake", image)
+    with bpy.context.temp_override(object=obj, active_object=obj):
+        bpy.ops.spectral_skin.invert_albedo(mode="BAKE", exact=True, edit_from_live=False, melanin=1.5,
+                                            blood=1.0 + 1.5 * image.pixels[0])
+    out["values_bake_centre"] = render_centre(bpy.context.scene)
+
     # OSL on request: the Script node compiles (Cycles 4.2 has no oslquery) and renders once OSL is turned on.
     obj = skin_scene()
     material = bpy.data.materials.new("SkinOSL")

@@ -98,6 +98,11 @@ def test_installs_bakes_renders_and_exits_cleanly(case, python, version, py_vers
     assert out["use_edit_mask"] == ["FINISHED"] and out["use_edit_mask_cache"] == "Rendered from the mask cache", out
     # A skin material appended from another file renders through this file's groups; the copies it brought are unused.
     assert out["appended_group"] == "Spectral Skin SSS Live" and out["appended_copies_used"] == [], out
+    # Melanin fed by a Value node renders from a cache; a bake takes the live group's edit, Blood painted by a mask.
+    assert out["value_fed_cache"].startswith("Rendered from edit cache"), out
+    assert out["live_edit_bake"] == ["FINISHED"], out
+    np.testing.assert_allclose(out["live_edit_bake_centre"], out["values_bake_centre"], rtol=1e-5)
+    assert not np.allclose(out["live_edit_bake_centre"], out["live_centre"], rtol=1e-2)  # the edit shows
     # The same translucency as in Blender 5.0: a thin back-lit disk lets through what it lets through there, within
     # 5 % (two renders' noise: about 3 % at 3 sigma).  Blender 5.3's plain "Random Walk" takes radii 4 pi times longer.
     for backend, reference in blender_50["thin"].items():
