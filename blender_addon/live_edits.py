@@ -41,8 +41,9 @@ renders outside the main thread, where no frame's edit can be cached.  Then a Mi
 the table's (a constant edit's own cache before the mask cache's).  For constant inputs the test
 folds when Cycles compiles the shader, to 1 (the table's nodes and images drop out) or to 0 (the cache's do); the
 test reads values, so a cache never gives another edit's answer: changed values, keyframes and controls fed by
-nodes render through the table, as without caches.  A control fed by a Value node is a value (:func:`input_value`):
-Cycles folds it as it does an unlinked input, so its edit is cached.  :func:`cache_edit` fills a cache
+nodes render through the table, as without caches.  A control fed by a Value node, or by the input of an artist's
+node group that every group node using it sets to one value, is a value (:func:`input_value`): Cycles folds it as
+it does an unlinked input, so its edit is cached.  :func:`cache_edit` fills a cache
 (:func:`set_edit`: the operator, the presets, the API); the add-on's handlers cache an edit set on the node or the
 panel's sliders (:func:`refresh_caches`) and each frame's keyframed values (:func:`refresh_frame_caches`).  For an
 edit not cached they set the cache input to minus the controls fed by nodes (:func:`linked_flags`), which folds
@@ -203,15 +204,30 @@ def set_edit(node: bpy.types.Node, edit: tuple[float, float, float] | None, cach
 
 
 def input_value(node: bpy.types.Node, name: str) -> float | None:
-    """The value the live group node's input ``name`` takes at every shading point: its own where nothing reaches it
-    (unlinked, or a muted link: wiring.feeding_socket), a Value node's where one feeds it (through Reroutes and muted
-    nodes); None where another node feeds it (its value may vary).  Cycles folds a Value node into the shader as it
-    does an unlinked input, so a control fed by one is a constant edit: its cache's test folds the same way."""
-    socket = node.inputs[name]
+    """The value the live group node's input ``name`` takes at every shading point (:func:`socket_value`), or None
+    where it may vary."""
+    return socket_value(node.inputs[name])
+
+
+def socket_value(socket: bpy.types.NodeSocket, depth: int = 1) -> float | None:
+    """The value the float input ``socket`` takes at every shading point: its own where nothing reaches it (unlinked,
+    or a muted link: wiring.feeding_socket), a Value node's where one feeds it (through Reroutes and muted nodes), the
+    value every group node using the node group gives the input where the node group's Group Input feeds it (an
+    artist's skin shader group exposing the control: each group node's input read so in turn); None where another
+    node feeds it, or the group nodes give it different values or none (it may vary).  Cycles folds a Value node
+    and a group node's unlinked input into the shader as it does an unlinked input, so a control fed so is a
+    constant edit: its cache's test folds the same way."""
     source = wiring.feeding_socket(socket) if socket.is_linked else None
     if source is None:
-        return float(socket.default_value)
-    return float(source.default_value) if source.node.bl_idname == "ShaderNodeValue" else None
+        value = socket.default_value
+        return float(value) if isinstance(value, (int, float)) else None
+    if source.node.bl_idname == "ShaderNodeValue":
+        return float(source.default_value)
+    if source.node.bl_idname == "NodeGroupInput" and depth <= wiring.MAX_GROUP_DEPTH:
+        values = {socket_value(s, depth + 1) for gnode in wiring.group_instances(source.id_data)
+                  for s in gnode.inputs if s.identifier == source.identifier}
+        return values.pop() if len(values) == 1 else None
+    return None
 
 
 def constant_edit(node: bpy.types.Node) -> tuple[float, float, float] | None:
@@ -1133,6 +1149,9 @@ def cache_status(node: bpy.types.Node) -> str | None:
     neutral."""
     edit = constant_edit(node)
     if edit is None:
+        fed = [wiring.feeding_socket(node.inputs[name]) for name in CONTROL_NAMES if input_value(node, name) is None]
+        if all(source is not None and source.node.bl_idname == "NodeGroupInput" for source in fed):
+            return "Read from the edit table: the node group's users give a control different values"
         return "Read from the edit table: a control is fed by a node"
     masked = MASK_INPUT in node.inputs and input_value(node, MASK_INPUT) is None
     if cache_key(node) is None:

@@ -502,6 +502,12 @@ def uses_group(tree: bpy.types.NodeTree, group: bpy.types.NodeTree, depth: int =
         and (node.node_tree == group or uses_group(node.node_tree, group, depth + 1)) for node in tree.nodes)
 
 
+def group_instances(group: bpy.types.NodeTree) -> list[bpy.types.Node]:
+    """The group nodes using the node group ``group`` directly, in materials' trees and in node groups."""
+    trees = [m.node_tree for m in bpy.data.materials if m.node_tree is not None] + list(bpy.data.node_groups)
+    return [n for tree in trees for n in tree.nodes if n.bl_idname == "ShaderNodeGroup" and n.node_tree == group]
+
+
 def group_users(group: bpy.types.NodeTree) -> list[bpy.types.Material]:
     """The materials using the node group ``group`` (:func:`uses_group`)."""
     return [m for m in bpy.data.materials if m.node_tree is not None and uses_group(m.node_tree, group)]

@@ -4,7 +4,9 @@ and a snapshot of everything the operator may touch (to check that a failed run 
 from __future__ import annotations
 
 import os
+import re
 import tempfile
+from collections.abc import Callable
 from pathlib import Path
 
 import bpy
@@ -83,6 +85,23 @@ def render_linear(scene: bpy.types.Scene, path: Path) -> np.ndarray:
     rgb = px.reshape(h, w, 4)[..., :3].astype(np.float64)
     assert np.all(np.isfinite(rgb)), f"non-finite pixels in {path}"
     return rgb
+
+
+def cycles_memory_mb(render: Callable[[], object]) -> float:
+    """Run ``render`` (a Cycles render) and return the memory Cycles reports when done (MB: its images, BVH and
+    buffers), read from the render's statistics."""
+    stats: list[str] = []
+
+    def keep(text: str) -> None:
+        stats.append(text)
+
+    bpy.app.handlers.render_stats.append(keep)
+    try:
+        render()
+    finally:
+        bpy.app.handlers.render_stats.remove(keep)
+    found = [re.findall(r"Mem: *([0-9.]+)M", text) for text in stats]
+    return float([f for f in found if f][-1][0])
 
 
 def render_small(size: int = 32, samples: int = 8) -> np.ndarray:

@@ -7,7 +7,6 @@ Invert Skin Albedo wires a group with the inputs and the panel's presets set the
 
 from __future__ import annotations
 
-import re
 import sys
 from pathlib import Path
 
@@ -21,7 +20,14 @@ sys.path.insert(0, str(ROOT))
 import blender_addon  # noqa: E402
 from blender_addon import edit_masks, live, live_edits, preferences, probe  # noqa: E402
 from exporters import bake, edit_table, live_table, maps, skin_edits  # noqa: E402
-from tests.addon_scene import image_pixels, run_invert, skin_codes, skin_object, write_image  # noqa: E402
+from tests.addon_scene import (  # noqa: E402
+    cycles_memory_mb,
+    image_pixels,
+    run_invert,
+    skin_codes,
+    skin_object,
+    write_image,
+)
 from tests.test_live_group import _probe_strip, _render_row  # noqa: E402
 
 #: Skin colours light to dark, a saturated red, a colour outside the box (blue) and one above 1.
@@ -159,18 +165,7 @@ def _cycles_memory_mb(scene, tree, gnode) -> float:
     """Render the group's Cycles output; the memory Cycles reports when done (MB: its images, BVH and buffers)."""
     output = next(n for n in tree.nodes if n.bl_idname == "ShaderNodeOutputMaterial" and n.is_active_output)
     tree.links.new(gnode.outputs["Cycles"], output.inputs["Surface"])
-    stats = []
-
-    def keep(text):
-        stats.append(text)
-
-    bpy.app.handlers.render_stats.append(keep)
-    try:
-        _render_row(scene)
-    finally:
-        bpy.app.handlers.render_stats.remove(keep)
-    found = [re.findall(r"Mem: *([0-9.]+)M", text) for text in stats]
-    return float([f for f in found if f][-1][0])
+    return cycles_memory_mb(lambda: _render_row(scene))
 
 
 def test_neutral_controls_read_no_edit_image(tmp_path, addon):

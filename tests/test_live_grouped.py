@@ -22,8 +22,8 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 import blender_addon  # noqa: E402
-from blender_addon import follow, live_edits, oblique, probe, wiring  # noqa: E402
-from tests.addon_scene import render_linear, write_image  # noqa: E402
+from blender_addon import edit_masks, follow, live_edits, oblique, probe, wiring  # noqa: E402
+from tests.addon_scene import cycles_memory_mb, render_linear, write_image  # noqa: E402
 from tests.test_bake_painted_colour import box_material  # noqa: E402
 
 SKIN = (180, 120, 95)
@@ -420,3 +420,50 @@ def test_baked_maps_go_inside_a_grouped_skin_and_render_as_flat(tmp_path, scene)
     np.testing.assert_array_equal(render_linear(scene, tmp_path / "grouped_baked.exr"), expected)
     _remove(mat)
     assert (_state(group), _state(mat.node_tree)) == before
+
+
+def test_a_control_exposed_on_the_artists_node_group_renders_from_a_cache(tmp_path, scene):
+    """Melanin exposed as an input of the artist's node group (the live group node inside, fed by the Group Input)
+    and set on the material's group node: Cycles folds the group node's unlinked input as it does the live node's
+    own, so the edit is a constant one (live_edits.input_value), cached by the handler and rendered bit for bit as
+    the same value set on the live node, the compiled shader holding the cache's images, not the table's (Cycles'
+    memory); a bake takes it (edit_masks.live_bake_edit).  A second material giving the node group's input another
+    value makes it vary: the edit reads the table, and the panel says why."""
+    image = _skin_image(tmp_path)
+    group, _ = skin_group()
+    mat = grouped_material(image, group)
+    _invert(mat)
+    inner = wiring.wired_group_node(mat)
+    live_edits.set_edit(inner, (1.5, 2.5, -0.2))  # every control on: the table's path reads all six images
+    bpy.context.view_layer.update()
+    assert live_edits.cache_status(inner).startswith("Rendered from edit cache")
+    direct = render_linear(scene, tmp_path / "direct.exr")
+    cached_mb = cycles_memory_mb(lambda: render_linear(scene, tmp_path / "direct.exr"))
+    inner.inputs["Melanin"].default_value = 1.0
+    group.interface.new_socket("Melanin", in_out="INPUT", socket_type="NodeSocketFloat")
+    group.links.new(next(n for n in group.nodes if n.bl_idname == "NodeGroupInput").outputs["Melanin"],
+                    inner.inputs["Melanin"])
+    outer = next(n for n in mat.node_tree.nodes if n.bl_idname == "ShaderNodeGroup" and n.node_tree == group)
+    outer.inputs["Melanin"].default_value = 1.5
+    bpy.context.view_layer.update()  # the handler caches it
+    assert live_edits.input_value(inner, "Melanin") == 1.5 and live_edits.linked_flags(inner) == 0
+    assert live_edits.cache_status(inner).startswith("Rendered from edit cache"), live_edits.cache_status(inner)
+    np.testing.assert_array_equal(render_linear(scene, tmp_path / "exposed.exr"), direct)
+    assert cycles_memory_mb(lambda: render_linear(scene, tmp_path / "exposed.exr")) - cached_mb <= 0.5
+    live_edits.unregister_handlers()  # which would cache it again
+    try:
+        live_edits.set_edit(inner, (1.0, 2.5, -0.2), cache=False)  # the table's path, which the memory tells apart
+        assert cycles_memory_mb(lambda: render_linear(scene, tmp_path / "table.exr")) - cached_mb >= 4.0
+    finally:
+        live_edits.register_handlers()
+    tex = next(n for n in mat.node_tree.nodes if n.bl_idname == "ShaderNodeTexImage")
+    assert edit_masks.live_bake_edit(mat, tex, (SIZE, SIZE)) == ((1.5, 2.5, float(np.float32(-0.2))), {})
+    other = grouped_material(image, group)
+    second = next(n for n in other.node_tree.nodes if n.bl_idname == "ShaderNodeGroup" and n.node_tree == group)
+    second.inputs["Melanin"].default_value = 1.5  # the same value: still one
+    assert live_edits.input_value(inner, "Melanin") == 1.5
+    second.inputs["Melanin"].default_value = 2.0
+    assert live_edits.input_value(inner, "Melanin") is None and live_edits.cache_edit(inner) == 0
+    assert live_edits.linked_flags(inner) == 1
+    assert live_edits.cache_status(inner) == \
+        "Read from the edit table: the node group's users give a control different values"
