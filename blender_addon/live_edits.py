@@ -209,25 +209,38 @@ def input_value(node: bpy.types.Node, name: str) -> float | None:
     return socket_value(node.inputs[name])
 
 
-def socket_value(socket: bpy.types.NodeSocket, depth: int = 1) -> float | None:
-    """The value the float input ``socket`` takes at every shading point: its own where nothing reaches it (unlinked,
-    or a muted link: wiring.feeding_socket), a Value node's where one feeds it (through Reroutes and muted nodes), the
-    value every group node using the node group gives the input where the node group's Group Input feeds it (an
-    artist's skin shader group exposing the control: each group node's input read so in turn); None where another
-    node feeds it, or the group nodes give it different values or none (it may vary).  Cycles folds a Value node
-    and a group node's unlinked input into the shader as it does an unlinked input, so a control fed so is a
-    constant edit: its cache's test folds the same way."""
+def socket_value(socket: bpy.types.NodeSocket) -> float | None:
+    """The value the float input ``socket`` takes at every shading point: the one value of its
+    :func:`value_sockets`; None where a node feeds it (it may vary) or the group nodes give it different values.
+    Cycles folds a Value node and a group node's unlinked input into the shader as it does an unlinked input, so a
+    control fed so is a constant edit: its cache's test folds the same way."""
+    values = [s.default_value for s in value_sockets(socket) or ()]
+    if not values or not all(isinstance(v, float) for v in values) or len(set(values)) != 1:
+        return None
+    return values[0]
+
+
+def value_sockets(socket: bpy.types.NodeSocket, depth: int = 1) -> list[bpy.types.NodeSocket] | None:
+    """The sockets whose own values (and keyframes) reach the input ``socket``: itself where nothing reaches it
+    (unlinked, or a muted link: wiring.feeding_socket), a Value node's output where one feeds it (through Reroutes
+    and muted nodes), and where the Group Input of the node group holding ``socket`` feeds it (an artist's skin
+    shader group exposing a control), those of the matching input of every group node using the group, each read so
+    in turn; None where another node feeds it, or no group node uses the group."""
     source = wiring.feeding_socket(socket) if socket.is_linked else None
     if source is None:
-        value = socket.default_value
-        return float(value) if isinstance(value, (int, float)) else None
+        return [socket]
     if source.node.bl_idname == "ShaderNodeValue":
-        return float(source.default_value)
-    if source.node.bl_idname == "NodeGroupInput" and depth <= wiring.MAX_GROUP_DEPTH:
-        values = {socket_value(s, depth + 1) for gnode in wiring.group_instances(source.id_data)
-                  for s in gnode.inputs if s.identifier == source.identifier}
-        return values.pop() if len(values) == 1 else None
-    return None
+        return [source]
+    if source.node.bl_idname != "NodeGroupInput" or depth > wiring.MAX_GROUP_DEPTH:
+        return None
+    found = []
+    for gnode in wiring.group_instances(source.id_data):
+        for given in (s for s in gnode.inputs if s.identifier == source.identifier):
+            sockets = value_sockets(given, depth + 1)
+            if sockets is None:
+                return None
+            found += sockets
+    return found or None
 
 
 def constant_edit(node: bpy.types.Node) -> tuple[float, float, float] | None:
@@ -557,13 +570,19 @@ def cache_edits(materials, scene: bpy.types.Scene | None = None) -> None:
 
 
 def _keyframes(node: bpy.types.Node) -> list[list[bpy.types.FCurve]] | None:
-    """Per control, the F-curves keyframing the node's input (none: a constant), where a control or the Edit Mask is
-    keyframed (a preset's amount animated on the mask), and none of them is fed by a node or driven; else None."""
+    """Per control, the F-curves keyframing the value reaching the node's input (:func:`value_sockets`: its own, a
+    Value node's, the artist's group node's; none: a constant), where a control or the Edit Mask is keyframed (a
+    preset's amount animated on the mask), and none of them is fed by a node, driven, or given by several group
+    nodes that disagree or are keyframed; else None."""
     found = []
     for name in (*CONTROL_NAMES, MASK_INPUT):
         socket = node.inputs.get(name)
-        curves_ = wiring.animation(socket) if socket is not None else []
-        if socket is None or socket.is_linked or any(c.driver is not None for c in curves_):
+        sockets = value_sockets(socket) if socket is not None else None
+        if sockets is None:
+            return None
+        curves_ = [c for s in sockets for c in wiring.animation(s)]
+        if any(c.driver is not None for c in curves_) or (len(sockets) > 1 and curves_) \
+                or (not curves_ and socket_value(socket) is None):
             return None
         found.append(curves_)
     return found[:-1] if any(found) else None
@@ -585,7 +604,7 @@ def animated_line(node: bpy.types.Node, scene: bpy.types.Scene) -> tuple[float, 
     if keyed is None:
         return None
     state = (scene.frame_start, scene.frame_end, scene.frame_step,
-             tuple(tuple(_curve_key(c) for c in cs) if cs else float(node.inputs[name].default_value)
+             tuple(tuple(_curve_key(c) for c in cs) if cs else input_value(node, name)
                    for name, cs in zip(CONTROL_NAMES, keyed, strict=True)))
     found = _LINES.get(node.as_pointer())
     if found is not None and found[0] == state:
@@ -593,7 +612,7 @@ def animated_line(node: bpy.types.Node, scene: bpy.types.Scene) -> tuple[float, 
     frames = np.arange(scene.frame_start, scene.frame_end + 1, max(1, scene.frame_step), dtype=np.float64)
     rows = np.empty((len(frames), len(CONTROL_NAMES)))
     for j, (name, cs) in enumerate(zip(CONTROL_NAMES, keyed, strict=True)):
-        rows[:, j] = [cs[0].evaluate(f) for f in frames] if cs else float(node.inputs[name].default_value)
+        rows[:, j] = [cs[0].evaluate(f) for f in frames] if cs else input_value(node, name)
     rows = rows.astype(np.float32).astype(np.float64)  # as the node's inputs hold them
     line = _line_through(rows)
     _LINES[node.as_pointer()] = (state, line)

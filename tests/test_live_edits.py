@@ -621,6 +621,30 @@ def test_a_keyframed_edit_renders_from_the_mask_cache_where_no_frame_is_cached(t
     assert live_edits.line_status(gnode, scene).startswith("Animation render: read from the edit table (the keyframes")
 
 
+def test_keys_on_a_value_node_feeding_a_control_hold_their_line(tmp_path, addon):
+    """The flush keyframed on Value nodes feeding Blood and Oxygenation (as painted at frame 1, the preset at frame
+    21): the keys reach the controls as the node's own do (live_edits.value_sockets), so the handlers hold their line
+    in the mask cache and a frame no cache holds (as Blender's interface renders it) reads the mask cache's images,
+    not the table's."""
+    scene, tree, gnode, emission, table, edits, layout, images, group, names = _edit_strip(tmp_path)
+    flush = skin_edits.PRESETS["flush"]
+    scene.frame_start, scene.frame_end = 1, 24
+    for name, end in (("Blood", flush.blood), ("Oxygenation", flush.oxygenation)):
+        value = tree.nodes.new("ShaderNodeValue")
+        tree.links.new(value.outputs[0], gnode.inputs[name])
+        for frame, v in ((1, dict(zip(live_edits.CONTROL_NAMES, skin_edits.NEUTRAL, strict=True))[name]), (21, end)):
+            value.outputs[0].default_value = v
+            value.outputs[0].keyframe_insert("default_value", frame=frame)
+    bpy.context.view_layer.update()
+    assert live_edits.animated_line(gnode, scene) == tuple(float(np.float32(v)) for v in flush.row())
+    assert live_edits.line_status(gnode, scene) == "Animation render: from the mask cache"
+    live_edits.unregister_handlers()  # as the interface's render thread: no frame's edit cached
+    scene.frame_set(11)
+    gnode.inputs[live_edits.CACHE_INPUT].default_value = 0
+    assert 1.2 < live_edits.input_value(gnode, "Blood") < 2.3
+    _assert_reads_the_mask_cache(scene, tree, gnode, group, table, layout, images)
+
+
 def test_frames_on_the_held_line_give_up_no_other_materials_cache(tmp_path, addon):
     """Twelve other materials' constant edits fill the twelve caches, and a flush keyframed on the node holds its line
     in the mask cache (the spares are not free then): each frame's edit, cached as the frame changes (viewport

@@ -427,7 +427,8 @@ def test_a_control_exposed_on_the_artists_node_group_renders_from_a_cache(tmp_pa
     and set on the material's group node: Cycles folds the group node's unlinked input as it does the live node's
     own, so the edit is a constant one (live_edits.input_value), cached by the handler and rendered bit for bit as
     the same value set on the live node, the compiled shader holding the cache's images, not the table's (Cycles'
-    memory); a bake takes it (edit_masks.live_bake_edit).  A second material giving the node group's input another
+    memory); a bake takes it (edit_masks.live_bake_edit); keyed on the group node, it holds its line in the mask
+    cache (live_edits.hold_line).  A second material giving the node group's input another
     value makes it vary: the edit reads the table, and the panel says why."""
     image = _skin_image(tmp_path)
     group, _ = skin_group()
@@ -458,6 +459,16 @@ def test_a_control_exposed_on_the_artists_node_group_renders_from_a_cache(tmp_pa
         live_edits.register_handlers()
     tex = next(n for n in mat.node_tree.nodes if n.bl_idname == "ShaderNodeTexImage")
     assert edit_masks.live_bake_edit(mat, tex, (SIZE, SIZE)) == ((1.5, 2.5, float(np.float32(-0.2))), {})
+    live_edits.set_edit(inner, (1.0, 1.0, 0.0))  # Melanin alone, keyframed on the material's group node: its line
+    scene.frame_start, scene.frame_end = 1, 24
+    for frame, melanin in ((1, 1.0), (21, 1.5)):
+        outer.inputs["Melanin"].default_value = melanin
+        outer.inputs["Melanin"].keyframe_insert("default_value", frame=frame)
+    bpy.context.view_layer.update()
+    assert live_edits.animated_line(inner, scene) == (1.5, 1.0, 0.0)
+    assert live_edits.line_status(inner, scene) == "Animation render: from the mask cache"
+    mat.node_tree.animation_data_clear()
+    outer.inputs["Melanin"].default_value = 1.5
     other = grouped_material(image, group)
     second = next(n for n in other.node_tree.nodes if n.bl_idname == "ShaderNodeGroup" and n.node_tree == group)
     second.inputs["Melanin"].default_value = 1.5  # the same value: still one
