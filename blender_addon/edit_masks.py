@@ -6,7 +6,9 @@ A mask paints the edit through the group's Edit Mask (every control), or paints 
 (value - neutral) by one node of the material (live_edits.masked_control: a Math Multiply Add, a Map Range from
 0-1, a float Mix).  The mask is an Image Texture's Alpha, a channel of its Color split by a Separate Color (RGB), or
 its Color where the image is grey (R = G = B, where any weighting of the channels gives that value), mapped as the
-albedo is (the same vector, the same size).  The group clamps the Edit Mask to [0, 1] and a bake clamps every mask
+albedo is (the same vector, the same size).  Where the live group sits in an artist's node group and a
+mask reaches it through the group's input, it is read where the one group node using the group is fed
+(wiring.source_socket).  The group clamps the Edit Mask to [0, 1] and a bake clamps every mask
 so (exporters.bake.edits), so the two agree wherever the masks lie in [0, 1].  Anything else feeding a control
 (an attribute, a procedural texture, a mask on other UVs) cannot be read per texel: :class:`EditMaskError` says so.
 """
@@ -66,7 +68,7 @@ def live_bake_edit(material: bpy.types.Material | None, albedo_node: bpy.types.N
     if sources and shape is None:
         raise EditMaskError("an albedo of UDIM tiles takes no edit masks: bake the edit's values, or paint it on a "
                             "single image")
-    edit_mask = _mask_texels(wiring.feeding_socket(node.inputs[live_edits.MASK_INPUT]), albedo_node, shape,
+    edit_mask = _mask_texels(wiring.source_socket(node.inputs[live_edits.MASK_INPUT]), albedo_node, shape,
                              live_edits.MASK_INPUT) if painted and sources else None
     masks = {}
     for name, socket in sources.items():
@@ -82,7 +84,7 @@ def _control_mask(node: bpy.types.Node, name: str, neutral: float,
                   material: bpy.types.Material) -> tuple[float, bpy.types.NodeSocket]:
     """(value, mask socket) of control ``name`` fed neutral + mask x (value - neutral)
     (:func:`blender_addon.live_edits.masked_control`); :class:`EditMaskError` where another node feeds it."""
-    feed = wiring.feeding_socket(node.inputs[name])
+    feed = wiring.source_socket(node.inputs[name])
     masked = live_edits.masked_control(feed, neutral)
     if masked is None:
         raise EditMaskError(f"{name} of '{material.name}' is fed by node '{feed.node.name}', which a bake cannot read "
@@ -100,7 +102,7 @@ def _mask_texels(socket: bpy.types.NodeSocket, albedo_node: bpy.types.Node | Non
     node, channel = socket.node, None
     if node.bl_idname == "ShaderNodeSeparateColor" and node.mode == "RGB" and socket.name in _CHANNELS:
         channel = _CHANNELS[socket.name]
-        socket = wiring.feeding_socket(node.inputs[0])
+        socket = wiring.source_socket(node.inputs[0])
         node = socket.node if socket is not None else None
         if node is not None and socket.name != "Color":
             node = None

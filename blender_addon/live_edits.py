@@ -1168,8 +1168,7 @@ def cache_status(node: bpy.types.Node) -> str | None:
     neutral."""
     edit = constant_edit(node)
     if edit is None:
-        fed = [wiring.feeding_socket(node.inputs[name]) for name in CONTROL_NAMES if input_value(node, name) is None]
-        if all(source is not None and source.node.bl_idname == "NodeGroupInput" for source in fed):
+        if all(value_sockets(node.inputs[name]) is not None for name in CONTROL_NAMES):
             return "Read from the edit table: the node group's users give a control different values"
         return "Read from the edit table: a control is fed by a node"
     masked = MASK_INPUT in node.inputs and input_value(node, MASK_INPUT) is None

@@ -242,6 +242,18 @@ def feeding_socket(socket: bpy.types.NodeSocket) -> bpy.types.NodeSocket | None:
             return source
 
 
+def source_socket(socket: bpy.types.NodeSocket, depth: int = 1) -> bpy.types.NodeSocket | None:
+    """:func:`feeding_socket`, followed out of a node group where its Group Input feeds ``socket`` and one group node
+    alone uses the group (through the output linked into that node's matching input, in turn): what reaches
+    ``socket`` from the material.  The Group Input's output where several group nodes use the group, or that one's
+    input is unlinked."""
+    source = feeding_socket(socket)
+    if source is None or source.node.bl_idname != "NodeGroupInput" or depth > MAX_GROUP_DEPTH:
+        return source
+    given = [s for gnode in group_instances(source.id_data) for s in gnode.inputs if s.identifier == source.identifier]
+    return source_socket(given[0], depth + 1) if len(given) == 1 and given[0].is_linked else source
+
+
 def take_input(tree: bpy.types.NodeTree, theirs: bpy.types.NodeSocket, ours: bpy.types.NodeSocket,
                animated: bool = False) -> None:
     """Give the add-on's input ``ours`` what the artist's input ``theirs`` has: the same link, or (unlinked) no link,

@@ -478,3 +478,39 @@ def test_a_control_exposed_on_the_artists_node_group_renders_from_a_cache(tmp_pa
     assert live_edits.linked_flags(inner) == 1
     assert live_edits.cache_status(inner) == \
         "Read from the edit table: the node group's users give a control different values"
+
+
+def test_a_mask_fed_through_the_artists_node_group_is_baked(tmp_path, scene):
+    """Blood exposed as an input of the artist's node group and painted in the material by a mask image (its green,
+    into a Math Multiply Add, into the group node): the edit reads the table, the panel says a node feeds it, and a
+    bake from the live group reads the mask from its image, rows top down (edit_masks.live_bake_edit through
+    wiring.source_socket)."""
+    image = _skin_image(tmp_path)
+    group, _ = skin_group()
+    mat = grouped_material(image, group)
+    _invert(mat)
+    inner = wiring.wired_group_node(mat)
+    group.interface.new_socket("Blush", in_out="INPUT", socket_type="NodeSocketFloat")
+    group.links.new(next(n for n in group.nodes if n.bl_idname == "NodeGroupInput").outputs["Blush"],
+                    inner.inputs["Blood"])
+    tree = mat.node_tree
+    tex = next(n for n in tree.nodes if n.bl_idname == "ShaderNodeTexImage" and n.image == image)
+    grey = (np.arange(SIZE * SIZE).reshape(SIZE, SIZE) % 251).astype(np.uint8)  # every row its own: orientation
+    mask = tree.nodes.new("ShaderNodeTexImage")
+    mask.image = bpy.data.images.load(str(write_image(tmp_path / "mask.png", np.repeat(grey[..., None], 3, -1),
+                                                      "uint8")))
+    mask.image.colorspace_settings.name = "Non-Color"
+    tree.links.new(tex.inputs["Vector"].links[0].from_socket, mask.inputs["Vector"])
+    split, blush = tree.nodes.new("ShaderNodeSeparateColor"), tree.nodes.new("ShaderNodeMath")
+    blush.operation = "MULTIPLY_ADD"
+    blush.inputs[1].default_value, blush.inputs[2].default_value = 1.5, 1.0
+    tree.links.new(mask.outputs["Color"], split.inputs[0])
+    tree.links.new(split.outputs["Green"], blush.inputs[0])
+    outer = next(n for n in tree.nodes if n.bl_idname == "ShaderNodeGroup" and n.node_tree == group)
+    tree.links.new(blush.outputs[0], outer.inputs["Blush"])
+    bpy.context.view_layer.update()
+    assert live_edits.input_value(inner, "Blood") is None
+    assert live_edits.cache_status(inner) == "Read from the edit table: a control is fed by a node"
+    edit, masks = edit_masks.live_bake_edit(mat, tex, (SIZE, SIZE))
+    assert edit == (1.0, 2.5, 0.0) and list(masks) == ["blood"]
+    np.testing.assert_allclose(masks["blood"], grey / 255.0, rtol=1e-6, atol=1e-7)
