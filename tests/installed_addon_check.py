@@ -412,6 +412,16 @@ def main() -> dict:
         out["grouped_invert"] = sorted(bpy.ops.spectral_skin.invert_albedo())
         out["grouped_outputs"] = sorted(i.name for i in group.interface.items_tree if i.in_out == "OUTPUT")
         out["grouped_centre"] = render_centre(bpy.context.scene)
+        # Melanin exposed as the node group's input, set on the material's group node: a constant edit, cached.
+        inner = live_edits.live_node(material)
+        exposed = group.interface.new_socket("Melanin", in_out="INPUT", socket_type="NodeSocketFloat")
+        group.links.new(next(n for n in group.nodes if n.bl_idname == "NodeGroupInput").outputs["Melanin"],
+                        inner.inputs["Melanin"])
+        next(n for n in material.node_tree.nodes if n.bl_idname == "ShaderNodeGroup"
+             and n.node_tree == group).inputs["Melanin"].default_value = 1.5
+        bpy.context.view_layer.update()
+        out["grouped_exposed"] = (live_edits.input_value(inner, "Melanin"), live_edits.cache_status(inner))
+        group.interface.remove(exposed)
         bpy.ops.spectral_skin.remove()
     out["grouped_restored"] = (sorted(n.name for n in group.nodes), len(group.interface.items_tree)) == before
     # Baked maps go into the same node group (the material's alone, the albedo on the default UVs) and render the

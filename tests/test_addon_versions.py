@@ -111,6 +111,7 @@ def test_installs_bakes_renders_and_exits_cleanly(case, python, version, py_vers
     assert out["grouped_invert"] == ["FINISHED"] and out["grouped_restored"], out
     assert out["grouped_outputs"] == ["BSDF", "Cycles (Spectral Skin SSS)", "EEVEE (Spectral Skin SSS)"]
     np.testing.assert_allclose(out["grouped_centre"], out["live_centre"], rtol=1e-6)
+    assert out["grouped_exposed"][0] == 1.5 and out["grouped_exposed"][1].startswith("Rendered from edit cache"), out
     assert out["grouped_bake"] == ["FINISHED"] and out["grouped_bake_restored"], out
     assert out["grouped_bake_inside"] == 12  # K = 3: the twelve maps, in the node group
     np.testing.assert_allclose(out["grouped_bake_centre"], out["flat_bake_centre"], rtol=1e-6)
