@@ -48,6 +48,14 @@ it does an unlinked input, so its edit is cached.  :func:`cache_edit` fills a ca
 panel's sliders (:func:`refresh_caches`) and each frame's keyframed values (:func:`refresh_frame_caches`).  For an
 edit not cached they set the cache input to minus the controls fed by nodes (:func:`linked_flags`), which folds
 those controls' neutral tests away (:func:`_unfed`).
+
+**Controls fed by nodes.** A control flagged as fed by a node (its value varies over the surface: a painted mask, an
+attribute) reads, in Cycles, one texel pair per shading evaluation instead of four: its upper level with probability
+its level fraction, slice s + 1 with probability the slice fraction (:func:`_chances`, numbers drawn from a White
+Noise Texture of the shading point's position, which each sample of a pixel moves), so the samples of a pixel average
+to the interpolated table's answer, the draws' spread adding to the render's own noise (2 lookups per control where
+interpolation reads 8).  A control not flagged (a constant, or a group that predates the flags) interpolates; a Mix
+of the flag's constant factor keeps one of the two in the compiled shader.  EEVEE interpolates always.
 """
 
 from __future__ import annotations
@@ -808,7 +816,8 @@ def add_edit_branch(b, gin, table: edit_table.EditTable, images: dict[str, bpy.t
     w = k mod (STACKED + 1) (a Wrap node) puts the lower level at block floor(w) - 1 and the upper one at floor(w),
     neutral outside the image (read as 0 by the lookups' Clip extension), so the four texels a control reads (slices
     s, s + 1; the two levels) lie at fixed offsets from one UV, and the upper level's weight is w - floor(w).
-    ``eevee``: the nodes of the EEVEE output instead, the table read through Environment Textures
+    A control flagged as fed by a node reads instead the one texel pair its draws pick (module docstring, "Controls
+    fed by nodes").  ``eevee``: the nodes of the EEVEE output instead, the table read through Environment Textures
     (blender_addon.live._Builder.environment, which EEVEE samples at full resolution), with no caches (they are
     for Cycles' cost) and the neutral levels made 0 explicitly (an Environment Texture has no Clip extension)."""
     layout = table.layout()
@@ -826,6 +835,7 @@ def add_edit_branch(b, gin, table: edit_table.EditTable, images: dict[str, bpy.t
     shifts = {kind: None for kind in edit_table.KINDS}
     still = None  # 1 where every control is neutral, else 0
     flags = None if eevee else b.math("MAXIMUM", 55, b.math("MULTIPLY", 54, gin.outputs[CACHE_INPUT], -1.0), 0.0)
+    chance = None if eevee else _chances(b, x0, base, tile_u)
     for j in range(len(skin_edits.CONTROLS)):
         unfed = 1.0 if eevee else _unfed(b, flags, j)
         neutral = b.math("COMPARE", 58, gin.outputs[CONTROL_NAMES[j]], skin_edits.NEUTRAL[j], 0.0)
@@ -838,11 +848,16 @@ def add_edit_branch(b, gin, table: edit_table.EditTable, images: dict[str, bpy.t
         outside = [b.math("COMPARE", 50, block, edge, 0.5)
                    for edge in (0.0, float(edit_table.STACKED))]  # 1 where the lower / the upper level is neutral
         outside = outside if eevee else [b.math("MULTIPLY", 51, zero, unfed) for zero in outside]
+        drawn = None if eevee else b.vec("MULTIPLY_ADD", 52, b.math("FLOOR", 48, b.math("ADD", 47, wrapped,
+                                                                                       chance.levels[j])),
+                                         (0.0, up, 0.0), chance.slice_uv)
         for kind in edit_table.KINDS:
             image = images[edit_table.image_name(j, kind)]
             found = [_unless_zero(b, zero, _level(b, image, uv, dv, tile_u, frac, eevee), 57)
                      for dv, zero in zip((-up, 0.0), outside, strict=True)]  # the lower level, the upper one
             value = b.mix("VECTOR", 58, fraction, found[0], found[1])
+            if not eevee:  # a control fed by a node: the texel drawn (_chances) instead of the four
+                value = b.mix("VECTOR", 58, unfed, _lookup(b, image, drawn, (0.0, -up), 57), value)
             shifts[kind] = (value if shifts[kind] is None else b.vec("ADD", 59, shifts[kind], value)) if eevee \
                 else _gated_sum(b, neutral, shifts[kind], value)
     if not eevee:
@@ -925,6 +940,46 @@ def _caches_group(name: str, table: edit_table.EditTable, images: dict[str, bpy.
     for kind in edit_table.KINDS:
         group.links.new(out[kind], inner_out.inputs[f"{kind.title()} Shift"])
     return group
+
+
+@dataclass
+class Chances:
+    """Where a control fed by a node reads the table in Cycles (:func:`_chances`): ``slice_uv`` the slice drawn (s or
+    s + 1, s + 1 with probability the slice fraction), the images' first block; ``levels`` per control a number drawn
+    uniformly in [0, 1), which draws its upper level with probability its fraction."""
+
+    slice_uv: bpy.types.NodeSocket
+    levels: tuple[bpy.types.NodeSocket, ...]
+
+
+def _chances(b, x0, base, tile_u: float) -> Chances:
+    """The draws of a control fed by a node (module docstring, "Controls fed by nodes"): four numbers uniform in
+    [0, 1) from a White Noise Texture of the shading point's position, which every sample of a pixel moves (its
+    place in the pixel, the random walk's exit), so a pixel's samples average the draws to the trilinear answer; one
+    picks the slice (floor(x0 + u)), one each control's level.  A White Noise's Value and Color outputs hash the
+    position apart: independent draws."""
+    noise = b.node("ShaderNodeTexWhiteNoise", 40, noise_dimensions="3D")
+    b.link(b.node("ShaderNodeNewGeometry", 39).outputs["Position"], noise.inputs["Vector"])
+    split = b.node("ShaderNodeSeparateColor", 41)
+    b.link(noise.outputs["Color"], split.inputs["Color"])
+    drawn = b.math("FLOOR", 42, b.math("ADD", 41, x0, noise.outputs["Value"]))
+    return Chances(slice_uv=b.vec("MULTIPLY_ADD", 52, drawn, (tile_u, 0.0, 0.0), base),
+                   levels=tuple(split.outputs[i] for i in range(len(skin_edits.CONTROLS))))
+
+
+def _lookup(b, image: bpy.types.Image, uv, offset: tuple[float, float], stage: int,
+            scale: tuple[float, float, float] | None = None, extension: str = "CLIP") -> bpy.types.NodeSocket:
+    """One bilinear lookup of ``image`` at ``uv`` + ``offset`` (du, dv), ``scale`` applied first.  The offset is the
+    image node's own texture mapping (a translation, which Cycles applies as x 1 + t, exactly the sum a vector node
+    would form): one small SVM node per lookup where an Add shared by the two kinds' lookups ran a Vector Math node
+    and wrote its two constants at each shading point."""
+    tex = b.node("ShaderNodeTexImage", stage, image=image, interpolation="Linear", extension=extension)
+    tex.label = image.name
+    tex.texture_mapping.translation = (*offset, 0.0)
+    if scale is not None:
+        tex.texture_mapping.scale = scale
+    b.group.links.new(uv, tex.inputs["Vector"])
+    return tex.outputs["Color"]
 
 
 def _level(b, image: bpy.types.Image, uv, dv: float, tile_u: float, frac, eevee: bool) -> bpy.types.NodeSocket:
@@ -1083,19 +1138,9 @@ def cache_image_name(slot: int, kind: str) -> str:
 
 def _bilinear_pair(b, image: bpy.types.Image, uv: bpy.types.NodeSocket, offsets, frac, stage: int,
                    scale: tuple[float, float, float] | None = None, extension: str = "EXTEND") -> bpy.types.NodeSocket:
-    """Trilinear RGB of one level: bilinear lookups at ``uv`` plus each of ``offsets`` (two (du, dv): slices s, s + 1)
-    mixed by ``frac``.  The offsets are the image nodes' own texture mapping (a translation, which Cycles applies as
-    x 1 + t, exactly the sum a vector node would form): one small SVM node per lookup where an Add shared by the two
-    kinds' lookups ran a Vector Math node and wrote its two constants at each shading point."""
-    colours = []
-    for du, dv in offsets:
-        tex = b.node("ShaderNodeTexImage", stage, image=image, interpolation="Linear", extension=extension)
-        tex.label = image.name
-        tex.texture_mapping.translation = (du, dv, 0.0)
-        if scale is not None:
-            tex.texture_mapping.scale = scale
-        b.group.links.new(uv, tex.inputs["Vector"])
-        colours.append(tex.outputs["Color"])
+    """Trilinear RGB of one level: bilinear lookups (:func:`_lookup`) at ``uv`` plus each of ``offsets`` (two (du,
+    dv): slices s, s + 1) mixed by ``frac``."""
+    colours = [_lookup(b, image, uv, offset, stage, scale, extension) for offset in offsets]
     return b.mix("VECTOR", stage + 1, frac, colours[0], colours[1])
 
 
@@ -1198,8 +1243,9 @@ def line_status(node: bpy.types.Node, scene: bpy.types.Scene) -> str | None:
 
 
 #: The panel's hint for an edit whose controls are fed by nodes while the Edit Mask is not: one mask painting the
-#: whole edit renders from the mask cache (8 lookups) where each control fed by a node reads the table (8 each).
-EDIT_MASK_HINT = "One mask for the whole edit? Plug it into Edit Mask: faster"
+#: whole edit renders from the mask cache, its points interpolated at every sample (8 lookups), where each control
+#: fed by a node draws its texels (2 lookups each: module docstring, "Controls fed by nodes"), at about the same cost.
+EDIT_MASK_HINT = "One mask for the whole edit? Plug it into Edit Mask"
 #: The panel's second line with :data:`EDIT_MASK_HINT`: a bake takes masks of their own per control at a baked
 #: material's cost (blender_addon.edit_masks).
 BAKE_HINT = "Masks of their own? For final renders, Bake takes them"
@@ -1320,7 +1366,7 @@ def draw_controls(layout, context) -> None:
         if status is not None:
             box.label(text=status, icon="INFO")
     if mask_feeding(node) is not None:
-        box.operator(SPECTRAL_SKIN_OT_use_edit_mask.bl_idname, text="One mask paints the edit: Use Edit Mask (faster)")
+        box.operator(SPECTRAL_SKIN_OT_use_edit_mask.bl_idname, text="One mask paints the edit: Use Edit Mask")
     elif (hint := edit_mask_hint(node)) is not None:
         box.label(text=hint)
         box.label(text=BAKE_HINT)

@@ -1,0 +1,31 @@
+"""`python -m training.bench.edit_draws` renders the flush painted by a mask fed to each control with the fed
+controls' texels drawn and interpolated, and prints the bias and noise; it refuses counts below 1."""
+
+from __future__ import annotations
+
+import re
+
+import numpy as np
+import pytest
+
+from training.bench import edit_draws
+
+
+def test_a_small_run_prints_the_bias_and_the_noise_of_both_paths(capsys):
+    assert edit_draws.main(["--resolution", "24", "--long", "64", "--short", "2", "--seeds", "2"]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert lines[0] == "flags on the node: -6"  # Blood and Oxygenation flagged as fed
+    assert re.fullmatch(r"bias, drawn against interpolated \(R, G, B\): (?:[+-]\d+\.\d\d %(?:, )?){3}", lines[1])
+    rms = [[float(v) for v in line.split(": ")[1].split(", ")] for line in lines[3:5]]
+    assert [line.split(",")[0] for line in lines[3:5]] == ["RMS error at 2 samples"] * 2
+    assert all(len(r) == 2 and np.all(np.isfinite(r)) and min(r) > 0.0 for r in rms)
+
+
+@pytest.mark.parametrize("argv, message", [(["--seeds", "0"], "--seeds must be at least 1, not 0"),
+                                           (["--long", "-1"], "--long must be at least 1, not -1")])
+def test_bad_counts_exit_2_with_one_line(argv, message, capsys):
+    with pytest.raises(SystemExit) as done:
+        edit_draws.main(argv)
+    assert done.value.code == 2
+    err = capsys.readouterr().err
+    assert message in err and err.strip().count("\n") == 0, err
