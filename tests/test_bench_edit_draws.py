@@ -8,6 +8,7 @@ import re
 import numpy as np
 import pytest
 
+from tests.test_cli_bad_input import assert_one_line
 from training.bench import edit_draws
 
 
@@ -26,6 +27,4 @@ def test_a_small_run_prints_the_bias_and_the_noise_of_both_paths(capsys):
 def test_bad_counts_exit_2_with_one_line(argv, message, capsys):
     with pytest.raises(SystemExit) as done:
         edit_draws.main(argv)
-    assert done.value.code == 2
-    err = capsys.readouterr().err
-    assert message in err and err.strip().count("\n") == 0, err
+    assert_one_line(done.value.code, capsys.readouterr().err, message)
