@@ -222,7 +222,12 @@ def socket_value(socket: bpy.types.NodeSocket) -> float | None:
     :func:`value_sockets`; None where a node feeds it (it may vary) or the group nodes give it different values.
     Cycles folds a Value node and a group node's unlinked input into the shader as it does an unlinked input, so a
     control fed so is a constant edit: its cache's test folds the same way."""
-    values = [s.default_value for s in value_sockets(socket) or ()]
+    return _one_value(value_sockets(socket))
+
+
+def _one_value(sockets: list[bpy.types.NodeSocket] | None) -> float | None:
+    """The float value every one of ``sockets`` holds, or None (none given, not floats, or values apart)."""
+    values = [s.default_value for s in sockets or ()]
     if not values or not all(isinstance(v, float) for v in values) or len(set(values)) != 1:
         return None
     return values[0]
@@ -242,12 +247,11 @@ def value_sockets(socket: bpy.types.NodeSocket, depth: int = 1) -> list[bpy.type
     if source.node.bl_idname != "NodeGroupInput" or depth > wiring.MAX_GROUP_DEPTH:
         return None
     found = []
-    for gnode in wiring.group_instances(source.id_data):
-        for given in (s for s in gnode.inputs if s.identifier == source.identifier):
-            sockets = value_sockets(given, depth + 1)
-            if sockets is None:
-                return None
-            found += sockets
+    for given in wiring.group_node_inputs(source):
+        sockets = value_sockets(given, depth + 1)
+        if sockets is None:
+            return None
+        found += sockets
     return found or None
 
 
@@ -590,7 +594,7 @@ def _keyframes(node: bpy.types.Node) -> list[list[bpy.types.FCurve]] | None:
             return None
         curves_ = [c for s in sockets for c in wiring.animation(s)]
         if any(c.driver is not None for c in curves_) or (len(sockets) > 1 and curves_) \
-                or (not curves_ and socket_value(socket) is None):
+                or (not curves_ and _one_value(sockets) is None):
             return None
         found.append(curves_)
     return found[:-1] if any(found) else None

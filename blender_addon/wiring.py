@@ -250,7 +250,7 @@ def source_socket(socket: bpy.types.NodeSocket, depth: int = 1) -> bpy.types.Nod
     source = feeding_socket(socket)
     if source is None or source.node.bl_idname != "NodeGroupInput" or depth > MAX_GROUP_DEPTH:
         return source
-    given = [s for gnode in group_instances(source.id_data) for s in gnode.inputs if s.identifier == source.identifier]
+    given = group_node_inputs(source)
     return source_socket(given[0], depth + 1) if len(given) == 1 and given[0].is_linked else source
 
 
@@ -518,6 +518,13 @@ def group_instances(group: bpy.types.NodeTree) -> list[bpy.types.Node]:
     """The group nodes using the node group ``group`` directly, in materials' trees and in node groups."""
     trees = [m.node_tree for m in bpy.data.materials if m.node_tree is not None] + list(bpy.data.node_groups)
     return [n for tree in trees for n in tree.nodes if n.bl_idname == "ShaderNodeGroup" and n.node_tree == group]
+
+
+def group_node_inputs(group_input: bpy.types.NodeSocket) -> list[bpy.types.NodeSocket]:
+    """The inputs that the Group Input output ``group_input`` passes on: the matching input of every group node
+    using its node group (:func:`group_instances`)."""
+    return [s for gnode in group_instances(group_input.id_data) for s in gnode.inputs
+            if s.identifier == group_input.identifier]
 
 
 def group_users(group: bpy.types.NodeTree) -> list[bpy.types.Material]:
