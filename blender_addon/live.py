@@ -53,7 +53,7 @@ GROUP_NAME = "Spectral Skin SSS Live"
 #: Custom properties: on the group and the images, the SHA-256 of the table they were made from.
 TABLE_PROP = "spectral_skin_sss_table"
 #: Layout version of the live group (bump when the generated nodes change).
-LIVE_VERSION = 28
+LIVE_VERSION = 29
 IMAGE_PREFIX = "Spectral Skin SSS Table"
 #: Custom property on the group: whether it holds the grazing-light correction (blender_addon.oblique).
 GRAZING_PROP = "spectral_skin_sss_grazing"

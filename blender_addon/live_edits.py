@@ -49,13 +49,12 @@ panel's sliders (:func:`refresh_caches`) and each frame's keyframed values (:fun
 edit not cached they set the cache input to minus the controls fed by nodes (:func:`linked_flags`), which folds
 those controls' neutral tests away (:func:`_unfed`).
 
-**Controls fed by nodes.** A control flagged as fed by a node (its value varies over the surface: a painted mask, an
-attribute) reads, in Cycles, one texel pair per shading evaluation instead of four: its upper level with probability
-its level fraction, slice s + 1 with probability the slice fraction (:func:`_chances`, numbers drawn from a White
-Noise Texture of the shading point's position, which each sample of a pixel moves), so the samples of a pixel average
-to the interpolated table's answer, the draws' spread adding to the render's own noise (2 lookups per control where
-interpolation reads 8).  A control not flagged (a constant, or a group that predates the flags) interpolates; a Mix
-of the flag's constant factor keeps one of the two in the compiled shader.  EEVEE interpolates always.
+**Drawn texels.** Where no cache holds the edit, Cycles reads the table at one texel pair per control and shading
+evaluation instead of four: the control's upper level with probability its level fraction, slice s + 1 with
+probability the slice fraction (:func:`_chances`, numbers drawn from a White Noise Texture of the shading point's
+position, which each sample of a pixel moves), so the samples of a pixel average to the interpolated table's answer,
+the draws' spread adding to the render's own noise (2 lookups per control where interpolation reads 8).  The caches
+interpolate (their answers are exact: a cache is what most edits render from); EEVEE interpolates always.
 """
 
 from __future__ import annotations
@@ -820,10 +819,11 @@ def add_edit_branch(b, gin, table: edit_table.EditTable, images: dict[str, bpy.t
     w = k mod (STACKED + 1) (a Wrap node) puts the lower level at block floor(w) - 1 and the upper one at floor(w),
     neutral outside the image (read as 0 by the lookups' Clip extension), so the four texels a control reads (slices
     s, s + 1; the two levels) lie at fixed offsets from one UV, and the upper level's weight is w - floor(w).
-    A control flagged as fed by a node reads instead the one texel pair its draws pick (module docstring, "Controls
-    fed by nodes").  ``eevee``: the nodes of the EEVEE output instead, the table read through Environment Textures
-    (blender_addon.live._Builder.environment, which EEVEE samples at full resolution), with no caches (they are
-    for Cycles' cost) and the neutral levels made 0 explicitly (an Environment Texture has no Clip extension)."""
+    Cycles reads one texel pair its draws pick (:func:`_drawn`; module docstring, "Drawn texels") where no cache
+    holds the edit.  ``eevee``: the nodes of the EEVEE output instead, the four texels interpolated and read through
+    Environment Textures (blender_addon.live._Builder.environment, which EEVEE samples at full resolution), with no
+    caches (they are for Cycles' cost) and the neutral levels made 0 explicitly (an Environment Texture has no Clip
+    extension)."""
     layout = table.layout()
     width, height = layout.size
     tall = float(edit_table.STACKED * height)
@@ -846,22 +846,10 @@ def add_edit_branch(b, gin, table: edit_table.EditTable, images: dict[str, bpy.t
         neutral = neutral if eevee else b.math("MULTIPLY", 59, neutral, unfed)
         still = neutral if still is None else b.math("MULTIPLY", 59, still, neutral)
         wrapped = b.math("WRAP", 47, _steps(b, gin, j, 43), edit_table.STACKED + 1.0, 0.0)
-        block = b.math("FLOOR", 48, wrapped)  # the upper level's block
-        fraction = b.math("SUBTRACT", 49, wrapped, block)
-        uv = b.vec("MULTIPLY_ADD", 52, block, (0.0, up, 0.0), slice_uv)
-        outside = [b.math("COMPARE", 50, block, edge, 0.5)
-                   for edge in (0.0, float(edit_table.STACKED))]  # 1 where the lower / the upper level is neutral
-        outside = outside if eevee else [b.math("MULTIPLY", 51, zero, unfed) for zero in outside]
-        drawn = None if eevee else b.vec("MULTIPLY_ADD", 52, b.math("FLOOR", 48, b.math("ADD", 47, wrapped,
-                                                                                       chance.levels[j])),
-                                         (0.0, up, 0.0), chance.slice_uv)
+        place = _levels(b, wrapped, slice_uv) if eevee else _drawn(b, wrapped, chance.slice_uv, chance.levels[j])
         for kind in edit_table.KINDS:
             image = images[edit_table.image_name(j, kind)]
-            found = [_unless_zero(b, zero, _level(b, image, uv, dv, tile_u, frac, eevee), 57)
-                     for dv, zero in zip((-up, 0.0), outside, strict=True)]  # the lower level, the upper one
-            value = b.mix("VECTOR", 58, fraction, found[0], found[1])
-            if not eevee:  # a control fed by a node: the texel drawn (_chances) instead of the four
-                value = b.mix("VECTOR", 58, unfed, _lookup(b, image, drawn, (0.0, -up), 57), value)
+            value = _interpolated(b, image, place, frac, tile_u) if eevee else _lookup(b, image, place, (0.0, -up), 57)
             shifts[kind] = (value if shifts[kind] is None else b.vec("ADD", 59, shifts[kind], value)) if eevee \
                 else _gated_sum(b, neutral, shifts[kind], value)
     if not eevee:
@@ -948,7 +936,7 @@ def _caches_group(name: str, table: edit_table.EditTable, images: dict[str, bpy.
 
 @dataclass
 class Chances:
-    """Where a control fed by a node reads the table in Cycles (:func:`_chances`): ``slice_uv`` the slice drawn (s or
+    """Where a control reads the table in Cycles (:func:`_chances`): ``slice_uv`` the slice drawn (s or
     s + 1, s + 1 with probability the slice fraction), the images' first block; ``levels`` per control a number drawn
     uniformly in [0, 1), which draws its upper level with probability its fraction."""
 
@@ -957,16 +945,21 @@ class Chances:
 
 
 def _chances(b, x0, base, tile_u: float) -> Chances:
-    """The draws of a control fed by a node (module docstring, "Controls fed by nodes"): four numbers uniform in
+    """The draws of the table's texels in Cycles (module docstring, "Drawn texels"): four numbers uniform in
     [0, 1) from a White Noise Texture of the shading point's position, which every sample of a pixel moves (its
     place in the pixel, the random walk's exit), so a pixel's samples average the draws to the trilinear answer; one
-    picks the slice (floor(x0 + u)), one each control's level.  A White Noise's Value and Color outputs hash the
-    position apart: independent draws."""
+    picks the slice (floor(x0 + u)), one each control's level.  The levels' are a 3D White Noise's Color, which
+    Cycles hashes from the position and from (position, 1) and (position, 2); its Value is the Color's red, so the
+    slice's is the Value of a 4D White Noise of (position, 3): four independent draws."""
+    position = b.node("ShaderNodeNewGeometry", 39).outputs["Position"]
     noise = b.node("ShaderNodeTexWhiteNoise", 40, noise_dimensions="3D")
-    b.link(b.node("ShaderNodeNewGeometry", 39).outputs["Position"], noise.inputs["Vector"])
+    b.link(position, noise.inputs["Vector"])
     split = b.node("ShaderNodeSeparateColor", 41)
     b.link(noise.outputs["Color"], split.inputs["Color"])
-    drawn = b.math("FLOOR", 42, b.math("ADD", 41, x0, noise.outputs["Value"]))
+    other = b.node("ShaderNodeTexWhiteNoise", 40, noise_dimensions="4D")
+    b.link(position, other.inputs["Vector"])
+    other.inputs["W"].default_value = float(len(skin_edits.CONTROLS))
+    drawn = b.math("FLOOR", 42, b.math("ADD", 41, x0, other.outputs["Value"]))
     return Chances(slice_uv=b.vec("MULTIPLY_ADD", 52, drawn, (tile_u, 0.0, 0.0), base),
                    levels=tuple(split.outputs[i] for i in range(len(skin_edits.CONTROLS))))
 
@@ -986,20 +979,48 @@ def _lookup(b, image: bpy.types.Image, uv, offset: tuple[float, float], stage: i
     return tex.outputs["Color"]
 
 
-def _level(b, image: bpy.types.Image, uv, dv: float, tile_u: float, frac, eevee: bool) -> bpy.types.NodeSocket:
-    """One level's shift (v offset ``dv`` from ``uv``): slices s and s + 1 mixed by ``frac``, read by Image Textures
-    (Clip extension) or, for ``eevee``, Environment Textures."""
-    if not eevee:
-        return _bilinear_pair(b, image, uv, [(0.0, dv), (tile_u, dv)], frac, 55, extension="CLIP")
-    return b.mix("VECTOR", 56, frac, b.environment(image, uv, 53, (0.0, dv)),
-                 b.environment(image, uv, 53, (tile_u, dv)))
+@dataclass
+class Levels:
+    """Where EEVEE reads a control's two levels (:func:`_levels`): ``uv`` the upper level's block at slice s,
+    ``fraction`` the upper level's weight, ``outside`` per level (lower, upper) 1 where it is the neutral one."""
+
+    uv: bpy.types.NodeSocket
+    fraction: bpy.types.NodeSocket
+    outside: tuple[bpy.types.NodeSocket, bpy.types.NodeSocket]
+
+
+def _levels(b, wrapped, slice_uv) -> Levels:
+    """The two levels a control reads in EEVEE at ``wrapped`` level steps (:func:`add_edit_branch`)."""
+    block = b.math("FLOOR", 48, wrapped)  # the upper level's block
+    uv = b.vec("MULTIPLY_ADD", 52, block, (0.0, 1.0 / edit_table.STACKED, 0.0), slice_uv)
+    outside = tuple(b.math("COMPARE", 50, block, edge, 0.5) for edge in (0.0, float(edit_table.STACKED)))
+    return Levels(uv=uv, fraction=b.math("SUBTRACT", 49, wrapped, block), outside=outside)
+
+
+def _interpolated(b, image: bpy.types.Image, levels: Levels, frac, tile_u: float) -> bpy.types.NodeSocket:
+    """A control's shift in EEVEE: its two ``levels`` (the neutral one exactly 0: an Environment Texture has no Clip
+    extension), each slices s and s + 1 mixed by ``frac``, mixed by the level fraction; read through Environment
+    Textures (blender_addon.live._Builder.environment)."""
+    up = 1.0 / edit_table.STACKED
+    found = [_unless_zero(b, zero, b.mix("VECTOR", 56, frac, b.environment(image, levels.uv, 53, (0.0, dv)),
+                                         b.environment(image, levels.uv, 53, (tile_u, dv))), 57)
+             for dv, zero in zip((-up, 0.0), levels.outside, strict=True)]
+    return b.mix("VECTOR", 58, levels.fraction, found[0], found[1])
+
+
+def _drawn(b, wrapped, slice_uv, chance) -> bpy.types.NodeSocket:
+    """Where a control reads its one texel pair in Cycles (module docstring, "Drawn texels"): the upper level's block
+    at ``wrapped`` level steps plus the draw ``chance`` (uniform in [0, 1): the upper level with probability its
+    fraction), at the drawn slice ``slice_uv``; the lookup's offset of one level down reads the level drawn."""
+    block = b.math("FLOOR", 48, b.math("ADD", 47, wrapped, chance))
+    return b.vec("MULTIPLY_ADD", 52, block, (0.0, 1.0 / edit_table.STACKED, 0.0), slice_uv)
 
 
 def _unfed(b, flags, j: int) -> bpy.types.NodeSocket:
     """0 where ``flags`` (max(0, -Edit Cache): :func:`linked_flags`) flag control ``j`` as fed by a node, else 1: a
-    constant when Cycles compiles the shader (the cache input is never linked).  The tests that let Cycles fold a
-    neutral control's nodes (its input neutral, a level at neutral) are multiplied by it, so a control fed by a node
-    evaluates none of them: they fold to 0 whatever the control's value.  A stale flag costs time or, for a neutral
+    constant when Cycles compiles the shader (the cache input is never linked).  The test that lets Cycles fold a
+    neutral control's lookups (its input neutral) is multiplied by it, so a control fed by a node does not evaluate
+    it: it folds to 0 whatever the control's value.  A stale flag costs time or, for a neutral
     group flagged as fed, bit-for-bit exactness (the exp curves' 1e-4 at 0), never the edit."""
     flag = b.math("FLOORED_MODULO", 57, b.math("FLOOR", 56, b.math("MULTIPLY", 56, flags, 0.5 ** j)), 2.0)
     return b.math("SUBTRACT", 58, 1.0, flag)
@@ -1248,7 +1269,7 @@ def line_status(node: bpy.types.Node, scene: bpy.types.Scene) -> str | None:
 
 #: The panel's hint for an edit whose controls are fed by nodes while the Edit Mask is not: one mask painting the
 #: whole edit renders from the mask cache, its points interpolated at every sample (8 lookups), where each control
-#: fed by a node draws its texels (2 lookups each: module docstring, "Controls fed by nodes"), at about the same cost.
+#: fed by a node draws its texels (2 lookups each: module docstring, "Drawn texels"), at about the same cost.
 EDIT_MASK_HINT = "One mask for the whole edit? Plug it into Edit Mask"
 #: The panel's second line with :data:`EDIT_MASK_HINT`: a bake takes masks of their own per control at a baked
 #: material's cost (blender_addon.edit_masks).

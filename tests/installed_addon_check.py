@@ -29,6 +29,11 @@ EXTENSION = "bl_ext.user_default.spectral_skin_sss"
 SKIN_LINEAR = (0.55, 0.32, 0.25)
 
 
+#: Samples of the renders comparing an edit from its cache with the same edit from the table, whose texels are drawn
+#: per sample: the two renders' difference is their noise.
+DRAWN_SAMPLES = 256
+
+
 def render_centre(scene, samples: int = 8, folder: str | None = None) -> list[float]:
     """Render the scene (Cycles CPU, 16 x 16, ``samples`` samples) and return the mean linear RGB of its centre 6 x 6
     pixels (all on the sphere); the render is written in ``folder`` (default: the script's work folder)."""
@@ -274,14 +279,15 @@ def main() -> dict:
 
     def cached_and_table(prefix: str) -> None:
         """The node's cache status and render, then its render with the cache input set back to 0 and the mask cache
-        holding no edit (its line's end at neutral)."""
+        holding no edit (its line's end at neutral), which draws the table's texels per sample: both at
+        :data:`DRAWN_SAMPLES`."""
         out[f"{prefix}_cache"] = live_edits.cache_status(node)
-        out[f"{prefix}_centre_cached"] = render_centre(bpy.context.scene)
+        out[f"{prefix}_centre_cached"] = render_centre(bpy.context.scene, DRAWN_SAMPLES)
         live_edits.unregister_handlers()
         live_edits.set_edit(node, tuple(node.inputs[name].default_value for name in ("Melanin", "Blood",
                                                                                        "Oxygenation")), cache=False)
         live_edits.empty_mask_cache(node.node_tree)
-        out[f"{prefix}_centre_table"] = render_centre(bpy.context.scene)
+        out[f"{prefix}_centre_table"] = render_centre(bpy.context.scene, DRAWN_SAMPLES)
         live_edits.register_handlers()
 
     cached_and_table("edit")

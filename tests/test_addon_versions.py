@@ -80,20 +80,21 @@ def test_installs_bakes_renders_and_exits_cleanly(case, python, version, py_vers
     for key in ("svm_centre", "osl_centre", "live_centre"):  # skin-coloured: red > green > blue > 0, nothing black
         r, g, b = out[key]
         assert r > g > b > 0.05, (key, out[key])
-    # A preset's edit renders from its cache, the same as from the table (media equal to float rounding).
+    # A preset's edit renders from its cache as from the table, whose texels are drawn per sample: the two renders
+    # differ by their noise (under 1 % at 256 samples; the flush changes the colour by 7-20 %).
     assert out["edit_preset"] == ["FINISHED"] and out["edit_cache"] == "Rendered from edit cache 1", out
-    np.testing.assert_allclose(out["edit_centre_cached"], out["edit_centre_table"], rtol=1e-3)
+    np.testing.assert_allclose(out["edit_centre_cached"], out["edit_centre_table"], rtol=2e-2)
     assert not np.allclose(out["edit_centre_cached"], out["live_centre"], rtol=1e-2)  # the edit shows
     # Painted by a mask through Edit Mask: from the mask cache, as from the table, and weaker than the full edit.
     assert out["edit_mask_cache"] == "Rendered from the mask cache", out
-    np.testing.assert_allclose(out["edit_mask_centre_cached"], out["edit_mask_centre_table"], rtol=5e-3)
+    np.testing.assert_allclose(out["edit_mask_centre_cached"], out["edit_mask_centre_table"], rtol=2e-2)
     assert not np.allclose(out["edit_mask_centre_cached"], out["edit_centre_cached"], rtol=1e-2)
     # A blush keyframed on Blood holds its line in the mask cache (the keys read through this version's action API).
     assert out["keyed_line"] == [1.0, 2.5, 0.0] and out["keyed_status"] == "Animation render: from the mask cache", out
     assert out["edit_twelfth_cache"] == "Rendered from edit cache 16", out  # a twelfth constant edit: the last cache
-    np.testing.assert_allclose(out["edit_twelfth_centre_cached"], out["edit_twelfth_centre_table"], rtol=1e-3)
+    np.testing.assert_allclose(out["edit_twelfth_centre_cached"], out["edit_twelfth_centre_table"], rtol=2e-2)
     assert out["edit_spare_cache"] == "Rendered from edit cache 7", out  # a fifteenth constant edit: the last spare
-    np.testing.assert_allclose(out["edit_spare_centre_cached"], out["edit_spare_centre_table"], rtol=1e-3)
+    np.testing.assert_allclose(out["edit_spare_centre_cached"], out["edit_spare_centre_table"], rtol=2e-2)
     assert not np.allclose(out["edit_spare_centre_cached"], out["edit_centre_cached"], rtol=1e-2)
     assert out["use_edit_mask"] == ["FINISHED"] and out["use_edit_mask_cache"] == "Rendered from the mask cache", out
     # A skin material appended from another file renders through this file's groups; the copies it brought are unused.

@@ -1,12 +1,18 @@
-"""What drawing a fed control's texels does to a render (blender_addon.live_edits, "Controls fed by nodes"): the flush
-painted by a mask fed to each control it moves (the albedo's red, training.bench.edit_cost.MASK_CODE), the demo head
-rendered with the controls' texels drawn per sample (the node flagged as the add-on flags it) and interpolated (the
-node unflagged: cache input 0), in one Blender process.
+"""What drawing the table's texels does to a render (blender_addon.live_edits, "Drawn texels"): the demo head
+rendered, in one Blender process, with an edit read from the table (its texels drawn per sample) and with the same
+edit from a cache (interpolated), in two cases:
 
-* **bias**: the mean over the skin's pixels (linear RGB above 0.02) of a long render drawn against one interpolated,
-  per channel, beside the same for two interpolated renders of other seeds (the renders' own noise);
-* **noise**: the RMS error of short renders against the mean of the two long interpolated ones, per seed, drawn and
-  interpolated.
+* **constant**: every control between two levels (:data:`CONSTANT`), from the table (the node's cache input 0, as a
+  file's sixteenth constant edit) against from its own cache, which holds the table's interpolated answer exactly;
+* **fed**: the flush painted by a mask (the albedo's red, training.bench.edit_cost.MASK_CODE) fed to each control it
+  moves, from the table, against the same mask through the Edit Mask, from the mask cache (whose answer lies within
+  a few thousandths of the table's).
+
+Per case:
+
+* **bias**: the mean over the skin's pixels (linear RGB above 0.02) of a long render drawn against one cached, per
+  channel, beside the same for two cached renders of other seeds (the renders' own noise);
+* **noise**: the RMS error of short renders against the mean of the two long cached ones, per seed, cached and drawn.
 
 ``python -m training.bench.edit_draws`` prints them (the skin-edit page quotes a run).
 """
@@ -21,6 +27,12 @@ from training.bench import edit_cost
 from training.bench import live as live_bench
 
 ROOT = Path(__file__).resolve().parents[2]
+
+#: The constant edit of the constant case (Melanin, Blood, Oxygenation): every control between two levels.
+CONSTANT = (1.5, 2.5, -0.2)
+#: The cases (module docstring) and what each compares, as the bench prints them.
+CASES = {"constant": f"every control between two levels {CONSTANT}: drawn from the table, against its cache",
+         "fed": "flush painted by a mask fed to each control: drawn from the table, against Edit Mask's mask cache"}
 
 _CHILD = """
 import json, sys
@@ -45,45 +57,61 @@ live_edits.unregister_handlers()
 demo_render._invert(parts[0], mat)
 node = live_edits.live_node(mat)
 {mask_code}
-edit = tuple(float(v) for v in PRESETS["flush"].row())
-mask_edit(node, edit, True)
-live_edits.set_edit(node, edit)
-flags = node.inputs["Edit Cache"].default_value
+flush = tuple(float(v) for v in PRESETS["flush"].row())
 
 
-def render(cache, samples, seed):
-    node.inputs["Edit Cache"].default_value = cache
+def constant(drawn):
+    live_edits.set_edit(node, {constant!r})
+    if drawn:
+        node.inputs["Edit Cache"].default_value = 0
+
+
+def fed(drawn):
+    unmask(node)
+    live_edits.set_edit(node, NEUTRAL)
+    mask_edit(node, flush, drawn)
+    live_edits.set_edit(node, flush)
+
+
+def render(setup, drawn, samples, seed):
+    setup(drawn)
     scene.cycles.samples, scene.cycles.seed = samples, seed
     scene.render.image_settings.file_format = "OPEN_EXR"
-    scene.render.filepath = {folder!r} + f"/r_{{cache}}_{{samples}}_{{seed}}.exr"
+    scene.render.filepath = {folder!r} + f"/r_{{setup.__name__}}_{{drawn}}_{{samples}}_{{seed}}.exr"
     bpy.ops.render.render(write_still=True)
     return oiio.ImageBuf(scene.render.filepath).get_pixels(oiio.FLOAT)[..., :3].astype(np.float64)
 
 
-first, drawn, second = render(0, {long}, 100), render(flags, {long}, 101), render(0, {long}, 102)
-skin = first.mean(axis=-1) > 0.02
-reference = 0.5 * (first + second)
-out = {{"flags": flags,
-        "bias": (drawn[skin].mean(axis=0) / first[skin].mean(axis=0) - 1).tolist(),
-        "seeds": (second[skin].mean(axis=0) / first[skin].mean(axis=0) - 1).tolist()}}
-for label, cache in (("interpolated", 0), ("drawn", flags)):
-    out[label] = [float(np.sqrt(((render(cache, {short}, s) - reference)[skin] ** 2).mean())) for s in range({seeds})]
+out = {{}}
+for setup in (constant, fed):
+    first, drawn, second = (render(setup, False, {long}, 100), render(setup, True, {long}, 101),
+                            render(setup, False, {long}, 102))
+    setup(True)
+    case = {{"cache input": node.inputs["Edit Cache"].default_value}}
+    skin = first.mean(axis=-1) > 0.02
+    reference = 0.5 * (first + second)
+    case["bias"] = (drawn[skin].mean(axis=0) / first[skin].mean(axis=0) - 1).tolist()
+    case["seeds"] = (second[skin].mean(axis=0) / first[skin].mean(axis=0) - 1).tolist()
+    for label, drawn in (("cached", False), ("drawn", True)):
+        case[label] = [float(np.sqrt(((render(setup, drawn, {short}, s) - reference)[skin] ** 2).mean()))
+                       for s in range({seeds})]
+    out[setup.__name__] = case
 print("RESULT" + json.dumps(out))
 """
 
 
 def measure(resolution: int = 128, long: int = 1024, short: int = 16, seeds: int = 4, texture: int = 256) -> dict:
-    """The bias and noise of drawn texels against interpolated ones (module docstring): ``flags`` (the node's cache
-    input), ``bias`` and ``seeds`` (3 relative differences of the skin's mean), ``interpolated`` and ``drawn`` (RMS
-    errors of ``seeds`` renders of ``short`` samples against the ``long`` ones)."""
+    """The bias and noise of drawn texels against cached ones (module docstring), per case (:data:`CASES`): ``cache
+    input`` (the node's, drawn), ``bias`` and ``seeds`` (3 relative differences of the skin's mean), ``cached`` and
+    ``drawn`` (RMS errors of ``seeds`` renders of ``short`` samples against the ``long`` ones)."""
     with tempfile.TemporaryDirectory(prefix="bench_draws_") as tmp:
         return live_bench.run_script(_CHILD.format(root=str(ROOT), resolution=resolution, long=long, short=short,
                                                    seeds=seeds, texture=texture, folder=tmp,
-                                                   mask_code=edit_cost.MASK_CODE))
+                                                   mask_code=edit_cost.MASK_CODE, constant=CONSTANT))
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Print the bias and noise of drawn texels (module docstring)."""
+    """Print the bias and noise of drawn texels in each case (module docstring)."""
     parser = OneLineParser(prog="python -m training.bench.edit_draws", description=main.__doc__)
     parser.add_argument("--resolution", type=int, default=128, help="square render size in pixels (default 128)")
     parser.add_argument("--long", type=int, default=1024, help="samples of the long renders (default 1024)")
@@ -94,11 +122,12 @@ def main(argv: list[str] | None = None) -> int:
         if getattr(args, name) < 1:
             parser.error(f"--{name} must be at least 1, not {getattr(args, name)}")
     out = measure(args.resolution, args.long, args.short, args.seeds)
-    print(f"flags on the node: {out['flags']:g}")
-    print("bias, drawn against interpolated (R, G, B): " + ", ".join(f"{100 * v:+.2f} %" for v in out["bias"]))
-    print("two interpolated seeds (R, G, B): " + ", ".join(f"{100 * v:+.2f} %" for v in out["seeds"]))
-    for label in ("interpolated", "drawn"):
-        print(f"RMS error at {args.short} samples, {label}: " + ", ".join(f"{v:.4f}" for v in out[label]))
+    for name, case in out.items():
+        print(f"{CASES[name]} (cache input {case['cache input']:g})")
+        print("  bias, drawn against cached (R, G, B): " + ", ".join(f"{100 * v:+.2f} %" for v in case["bias"]))
+        print("  two cached seeds (R, G, B): " + ", ".join(f"{100 * v:+.2f} %" for v in case["seeds"]))
+        for label in ("cached", "drawn"):
+            print(f"  RMS error at {args.short} samples, {label}: " + ", ".join(f"{v:.4f}" for v in case[label]))
     return 0
 
 
