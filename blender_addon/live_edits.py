@@ -1027,10 +1027,11 @@ def _unfed(b, flags, j: int) -> bpy.types.NodeSocket:
 
 
 def _unless_zero(b, zero, value, stage: int) -> bpy.types.NodeSocket:
-    """``value`` (a level's shift, read from the control's image), or exactly 0 where ``zero`` is 1 (the level is the
-    neutral one, outside the image: the lookup reads 0 there anyway): a Mix of that factor.  For an unlinked control
-    Cycles folds the factor to a constant and the Mix to one of its inputs, so a constant edit within one level of
-    neutral drops the neutral level's lookups from the compiled shader."""
+    """``value`` (a shift read from a control's image), or exactly 0 where ``zero`` is 1 (in EEVEE a level that is
+    the neutral one, outside the image, which an Environment Texture, having no Clip extension, does not read as 0;
+    in Cycles a neutral control: :func:`_gated_sum`): a Mix of that factor.  For an unlinked control the factor
+    folds to a constant and the Mix to one of its inputs, so a neutral level's or control's lookups drop from the
+    compiled shader."""
     return b.mix("VECTOR", stage, zero, value, (0.0, 0.0, 0.0))
 
 
