@@ -81,6 +81,9 @@ CACHE_INPUT = "Edit Cache"
 MASK_INPUT = "Edit Mask"
 #: The cache of an edit painted by a linked Edit Mask: the value of the Edit Cache input naming it.
 MASK_SLOT = 4
+#: The height of one level's block in the control images' UV (exporters.edit_table.BLOCK_LEVELS: they stack
+#: exporters.edit_table.STACKED blocks).
+LEVEL_V = 1.0 / edit_table.STACKED
 #: Points of the mask cache along its edit's line (exporters.edit_table.MaskLine).
 MASK_POINTS = edit_table.MASK_POINTS
 #: Caches of constant edits held in the mask cache's images while it holds no line (:func:`_line_in_use`): cache
@@ -828,7 +831,6 @@ def add_edit_branch(b, gin, table: edit_table.EditTable, images: dict[str, bpy.t
     width, height = layout.size
     tall = float(edit_table.STACKED * height)
     tile_u = layout.tile[0] / width
-    up = 1.0 / edit_table.STACKED
     from . import live
 
     colour = gin.outputs["Color"]
@@ -849,7 +851,8 @@ def add_edit_branch(b, gin, table: edit_table.EditTable, images: dict[str, bpy.t
         place = _levels(b, wrapped, slice_uv) if eevee else _drawn(b, wrapped, chance.slice_uv, chance.levels[j])
         for kind in edit_table.KINDS:
             image = images[edit_table.image_name(j, kind)]
-            value = _interpolated(b, image, place, frac, tile_u) if eevee else _lookup(b, image, place, (0.0, -up), 57)
+            value = _interpolated(b, image, place, frac, tile_u) if eevee \
+                else _lookup(b, image, place, (0.0, -LEVEL_V), 57)
             shifts[kind] = (value if shifts[kind] is None else b.vec("ADD", 59, shifts[kind], value)) if eevee \
                 else _gated_sum(b, neutral, shifts[kind], value)
     if not eevee:
@@ -992,19 +995,17 @@ class Levels:
 def _levels(b, wrapped, slice_uv) -> Levels:
     """The two levels a control reads in EEVEE at ``wrapped`` level steps (:func:`add_edit_branch`)."""
     block = b.math("FLOOR", 48, wrapped)  # the upper level's block
-    uv = b.vec("MULTIPLY_ADD", 52, block, (0.0, 1.0 / edit_table.STACKED, 0.0), slice_uv)
     outside = tuple(b.math("COMPARE", 50, block, edge, 0.5) for edge in (0.0, float(edit_table.STACKED)))
-    return Levels(uv=uv, fraction=b.math("SUBTRACT", 49, wrapped, block), outside=outside)
+    return Levels(uv=_block_uv(b, block, slice_uv), fraction=b.math("SUBTRACT", 49, wrapped, block), outside=outside)
 
 
 def _interpolated(b, image: bpy.types.Image, levels: Levels, frac, tile_u: float) -> bpy.types.NodeSocket:
     """A control's shift in EEVEE: its two ``levels`` (the neutral one exactly 0: an Environment Texture has no Clip
     extension), each slices s and s + 1 mixed by ``frac``, mixed by the level fraction; read through Environment
     Textures (blender_addon.live._Builder.environment)."""
-    up = 1.0 / edit_table.STACKED
     found = [_unless_zero(b, zero, b.mix("VECTOR", 56, frac, b.environment(image, levels.uv, 53, (0.0, dv)),
                                          b.environment(image, levels.uv, 53, (tile_u, dv))), 57)
-             for dv, zero in zip((-up, 0.0), levels.outside, strict=True)]
+             for dv, zero in zip((-LEVEL_V, 0.0), levels.outside, strict=True)]
     return b.mix("VECTOR", 58, levels.fraction, found[0], found[1])
 
 
@@ -1012,8 +1013,12 @@ def _drawn(b, wrapped, slice_uv, chance) -> bpy.types.NodeSocket:
     """Where a control reads its one texel pair in Cycles (module docstring, "Drawn texels"): the upper level's block
     at ``wrapped`` level steps plus the draw ``chance`` (uniform in [0, 1): the upper level with probability its
     fraction), at the drawn slice ``slice_uv``; the lookup's offset of one level down reads the level drawn."""
-    block = b.math("FLOOR", 48, b.math("ADD", 47, wrapped, chance))
-    return b.vec("MULTIPLY_ADD", 52, block, (0.0, 1.0 / edit_table.STACKED, 0.0), slice_uv)
+    return _block_uv(b, b.math("FLOOR", 48, b.math("ADD", 47, wrapped, chance)), slice_uv)
+
+
+def _block_uv(b, block, slice_uv) -> bpy.types.NodeSocket:
+    """The UV of level block ``block`` (a whole number) at ``slice_uv`` (a slice in the images' first block)."""
+    return b.vec("MULTIPLY_ADD", 52, block, (0.0, LEVEL_V, 0.0), slice_uv)
 
 
 def _unfed(b, flags, j: int) -> bpy.types.NodeSocket:
@@ -1136,7 +1141,7 @@ def _mask_cached(b, gin, images: dict[str, bpy.types.Image], base, s, frac, tile
     corner = b.node("ShaderNodeCombineColor", 54)
     b.link(s, corner.inputs[0])
     b.link(lower, corner.inputs[1])
-    uv = b.vec("MULTIPLY_ADD", 55, corner.outputs[0], (tile_u, 1.0 / edit_table.STACKED, 0.0), base)
+    uv = b.vec("MULTIPLY_ADD", 55, corner.outputs[0], (tile_u, LEVEL_V, 0.0), base)
     scale = (1.0, edit_table.STACKED / MASK_POINTS, 1.0)
     step = 1.0 / MASK_POINTS
     out = {}

@@ -103,6 +103,15 @@ def _render(scene, tree, gnode, emission, name: str) -> np.ndarray:
 DRAWN_SAMPLES = 16384
 
 
+def _edited_media(table, d: np.ndarray, grids) -> dict[str, np.ndarray]:
+    """Reference of the probe's media (:func:`_with_checks`' names) at :data:`COLOURS` under the shift ``d`` (N, 6):
+    the unedited group's media at the edited colour, each radius times the radius correction exp(d_radius) per
+    channel."""
+    media = live_table.group_media(table, edit_table.edited_colour(COLOURS, d), grids)
+    return {f"Check {name}": value * (np.exp(d[:, 3:6]) if name.endswith("Radius") else 1.0)
+            for name, value in media.items() if name.split()[1] in ("Color", "Radius", "Weight")}
+
+
 def _drawn_media(table, edits, rows, grids) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
     """The media the table's path gives at :data:`COLOURS` under edit rows (N, 3) (or one row) per probe name, their
     mean and standard deviation over the draws (blender_addon.live_edits, "Drawn texels"), reckoned from the table's
@@ -132,14 +141,9 @@ def _drawn_media(table, edits, rows, grids) -> tuple[dict[str, np.ndarray], dict
                 for b1, b2 in np.ndindex(2, 2):
                     w = (inside[:, 0] if b1 else 1.0 - inside[:, 0]) * (inside[:, 1] if b2 else 1.0 - inside[:, 1])
                     d += w[:, None] * values[k, corner[:, 0] + b1, corner[:, 1] + b2, j, level]
-            media = live_table.group_media(table, edit_table.edited_colour(COLOURS, d), grids)
-            for name in [m for m in media if m.split()[1] in ("Color", "Radius", "Weight")]:
-                media[name] = media[name] * (np.exp(d[:, 3:6]) if name.endswith("Radius") else 1.0)
-            outcomes.append((p, media))
-    mean = {f"Check {name}": sum(p[:, None] * media[name] for p, media in outcomes) for name in outcomes[0][1]
-            if name.split()[1] in ("Color", "Radius", "Weight")}
-    sd = {name: np.sqrt(sum(p[:, None] * (media[name.removeprefix("Check ")] - mean[name]) ** 2
-                            for p, media in outcomes)) for name in mean}
+            outcomes.append((p, _edited_media(table, d, grids)))
+    mean = {name: sum(p[:, None] * media[name] for p, media in outcomes) for name in outcomes[0][1]}
+    sd = {name: np.sqrt(sum(p[:, None] * (media[name] - mean[name]) ** 2 for p, media in outcomes)) for name in mean}
     return mean, sd
 
 
@@ -163,21 +167,16 @@ def test_edited_media_equal_the_reference_and_the_fast_bake(tmp_path, addon):
     row = np.array([[EDIT["Melanin"], EDIT["Blood"], EDIT["Oxygenation"]]])
     d = edit_table.shift(edits, COLOURS, row)
     assert np.abs(d).max() > 0.05  # the edit does something
-    edited = edit_table.edited_colour(COLOURS, d)
-    grids = live_table.grid_values(table)
     albedo = write_image(tmp_path / "edited.exr", COLOURS[None].astype(np.float32), "float")
     (tmp_path / "bake").mkdir()
     bake.bake(albedo, tmp_path / "bake", preferences.DEFAULT_MODEL,
               bake.BakeOptions(threads=1, prune_share=0.0, half_maps=False, mantissa_bits=23,
                                edit=skin_edits.SkinEdit(*row[0])), colorspace="linear")
-    reference = live_table.group_media(table, edited, grids)  # the unedited group's media at the edited colour
+    reference = _edited_media(table, d, live_table.grid_values(table))
     for name in names:
         k, kind = name.split()[1], name.split()[2]
-        ref = reference[f"{k} {kind}"]
-        if kind == "Radius":
-            ref = ref * np.exp(d[:, 3:6])  # the radius correction per channel
         rendered = _render(scene, tree, gnode, emission, name)
-        np.testing.assert_allclose(rendered, ref, rtol=5e-4, atol=1e-7, err_msg=name)
+        np.testing.assert_allclose(rendered, reference[name], rtol=5e-4, atol=1e-7, err_msg=name)
         baked = maps.read_exr(tmp_path / "bake" / f"edited_{k}_{kind.lower()}.exr")[0][0].astype(np.float64)
         np.testing.assert_allclose(baked, rendered, rtol=5e-4, atol=1e-7, err_msg=f"bake {name}")  # bake = live
 
@@ -380,11 +379,9 @@ def test_a_constant_edit_renders_from_its_cache_as_from_the_table(tmp_path, addo
     live_edits.set_edit(gnode, row)
     assert gnode.inputs[live_edits.CACHE_INPUT].default_value == 1
     d = edit_table.shift(edits, COLOURS, np.array(row))
-    reference = live_table.group_media(table, edit_table.edited_colour(COLOURS, d), grids)
+    reference = _edited_media(table, d, grids)
     for name in names:
-        k, kind = name.split()[1], name.split()[2]
-        ref = reference[f"{k} {kind}"] * (np.exp(d[:, 3:6]) if kind == "Radius" else 1.0)
-        np.testing.assert_allclose(_render(scene, tree, gnode, emission, name), ref, rtol=5e-4, atol=1e-7,
+        np.testing.assert_allclose(_render(scene, tree, gnode, emission, name), reference[name], rtol=5e-4, atol=1e-7,
                                    err_msg=f"cached {name}")
     gnode.inputs["Melanin"].default_value = 1.25  # changed on the node: not the cache's values, the table's draws
     mean, sd = _drawn_media(table, edits, np.array([1.25, 2.5, -0.2]), grids)
@@ -464,11 +461,9 @@ def test_controls_fed_by_value_nodes_render_from_a_cache(tmp_path, addon):
     assert live_edits.cache_edit(gnode) == 1 and live_edits.linked_flags(gnode) == 0
     assert live_edits.cache_status(gnode) == "Rendered from edit cache 1"
     d = edit_table.shift(edits, COLOURS, np.array(row))
-    reference = live_table.group_media(table, edit_table.edited_colour(COLOURS, d), live_table.grid_values(table))
+    reference = _edited_media(table, d, live_table.grid_values(table))
     for name in names[:2]:  # k1 Color, k1 Radius
-        kind = name.split()[2]
-        ref = reference[f"k1 {kind}"] * (np.exp(d[:, 3:6]) if kind == "Radius" else 1.0)
-        np.testing.assert_allclose(_render(scene, tree, gnode, emission, name), ref, rtol=5e-4, atol=1e-7,
+        np.testing.assert_allclose(_render(scene, tree, gnode, emission, name), reference[name], rtol=5e-4, atol=1e-7,
                                    err_msg=name)
     np.testing.assert_array_equal(_render(scene, tree, gnode, emission, names[1]), on_node)
     cached = _cycles_memory_mb(scene, tree, gnode)
@@ -518,13 +513,10 @@ def test_spare_caches_hold_more_constant_edits_while_the_mask_cache_holds_no_lin
     spared = others[live_edits.CACHE_SLOTS:]
 
     def check(edit, label: str, which=None) -> None:
-        d = edit_table.shift(edits, COLOURS, np.array(edit))
-        reference = live_table.group_media(table, edit_table.edited_colour(COLOURS, d), grids)
+        reference = _edited_media(table, edit_table.shift(edits, COLOURS, np.array(edit)), grids)
         for name in which or names:
-            k, kind = name.split()[1], name.split()[2]
-            ref = reference[f"{k} {kind}"] * (np.exp(d[:, 3:6]) if kind == "Radius" else 1.0)
-            np.testing.assert_allclose(_render(scene, tree, gnode, emission, name), ref, rtol=5e-4, atol=1e-7,
-                                       err_msg=f"{label} {name}")
+            np.testing.assert_allclose(_render(scene, tree, gnode, emission, name), reference[name], rtol=5e-4,
+                                       atol=1e-7, err_msg=f"{label} {name}")
 
     row = (1.5, 2.5, -0.2)
     live_edits.set_edit(gnode, row)
@@ -590,13 +582,10 @@ def test_an_edit_painted_by_the_edit_mask_renders_from_the_mask_cache(tmp_path, 
     grids = live_table.grid_values(table)
     rtol = np.where(np.arange(len(COLOURS))[:, None] == len(COLOURS) - 1, 2e-3, 5e-4)  # above 1: as without a mask
 
-    def references(d: np.ndarray) -> dict[str, np.ndarray]:
-        media = live_table.group_media(table, edit_table.edited_colour(COLOURS, d), grids)
-        return {name: media[" ".join(name.split()[1:])] * (np.exp(d[:, 3:6]) if name.endswith("Radius") else 1.0)
-                for name in names}
-
     def check(d: np.ndarray, label: str) -> None:
-        for name, ref in references(d).items():
+        references = _edited_media(table, d, grids)
+        for name in names:
+            ref = references[name]
             rendered = _render(scene, tree, gnode, emission, name)
             assert np.all(np.abs(rendered - ref) <= rtol * np.abs(ref) + 1e-7), f"{label} {name}"
 
@@ -613,8 +602,9 @@ def test_an_edit_painted_by_the_edit_mask_renders_from_the_mask_cache(tmp_path, 
     bake.bake(albedo, tmp_path / "bake", preferences.DEFAULT_MODEL,
               bake.BakeOptions(threads=1, prune_share=0.0, half_maps=False, mantissa_bits=23, edit=flush,
                                edit_masks={"blood": masks[None], "oxygenation": masks[None]}), colorspace="linear")
-    for name, ref in references(table_d).items():  # the bake: the table's answer at each texel's weighed edit
-        k, kind = name.split()[1], name.split()[2]
+    references = _edited_media(table, table_d, grids)
+    for name in names:  # the bake: the table's answer at each texel's weighed edit
+        ref, (k, kind) = references[name], name.split()[1:]
         baked = maps.read_exr(tmp_path / "bake" / f"masked_{k}_{kind.lower()}.exr")[0][0].astype(np.float64)
         assert np.all(np.abs(baked - ref) <= rtol * np.abs(ref) + 1e-7), f"bake {name}"
     assert live_edits.cache_edit(gnode) == live_edits.MASK_SLOT
@@ -668,11 +658,10 @@ def test_a_keyframed_edit_renders_from_the_mask_cache_where_no_frame_is_cached(t
     d = edit_table.masked_shift(edits, COLOURS, edit_table.mask_line(line), np.full(len(COLOURS), t))
     table_d = edit_table.shift(edits, COLOURS, np.array([[1.0, blood, gnode.inputs["Oxygenation"].default_value]]))
     assert np.abs(d - table_d).max() < 5e-3 and np.abs(table_d).max() > 0.02
-    reference = live_table.group_media(table, edit_table.edited_colour(COLOURS, d), live_table.grid_values(table))
+    reference = _edited_media(table, d, live_table.grid_values(table))
     rtol = np.where(np.arange(len(COLOURS))[:, None] == len(COLOURS) - 1, 2e-3, 5e-4)  # above 1: as for constants
     for name in names:
-        k, kind = name.split()[1], name.split()[2]
-        ref = reference[f"{k} {kind}"] * (np.exp(d[:, 3:6]) if kind == "Radius" else 1.0)
+        ref = reference[name]
         rendered = _render(scene, tree, gnode, emission, name)
         assert np.all(np.abs(rendered - ref) <= rtol * np.abs(ref) + 1e-7), name
     _assert_reads_the_mask_cache(scene, tree, gnode, group, table, layout, images)
@@ -799,11 +788,10 @@ def test_one_mask_fed_to_each_control_becomes_the_edit_mask(tmp_path, addon):
     assert all(node.name in tree.nodes for node in fed.values())  # the artist's nodes kept
     assert _slot(gnode) == live_edits.MASK_SLOT and live_edits.cache_status(gnode) == "Rendered from the mask cache"
     d = edit_table.shift(edits, COLOURS, rows)
-    media = live_table.group_media(table, edit_table.edited_colour(COLOURS, d), grids)
+    reference = _edited_media(table, d, grids)
     for name in names:  # the table's answer, but at the colour above 1, whose red (1.2) Edit Mask clamps to 1
-        ref = media[" ".join(name.split()[1:])] * (np.exp(d[:, 3:6]) if name.endswith("Radius") else 1.0)
-        np.testing.assert_allclose(_render(scene, tree, gnode, emission, name)[:-1], ref[:-1], rtol=5e-3, atol=1e-6,
-                                   err_msg=name)
+        np.testing.assert_allclose(_render(scene, tree, gnode, emission, name)[:-1], reference[name][:-1], rtol=5e-3,
+                                   atol=1e-6, err_msg=name)
     # Map Range and Mix of the same form; then forms that are not one mask painting the edit
     tree.links.remove(gnode.inputs[live_edits.MASK_INPUT].links[0])
     ranged = tree.nodes.new("ShaderNodeMapRange")
@@ -854,9 +842,7 @@ def test_controls_fed_by_nodes_render_the_tables_answer_flagged_or_not(tmp_path,
     rows = np.column_stack([np.ones(len(COLOURS)), 1.0 + 1.5 * COLOURS[:, 0], np.full(len(COLOURS), -0.1)])
     d = edit_table.shift(edits, COLOURS, rows)
     grids = live_table.grid_values(table)
-    media = live_table.group_media(table, edit_table.edited_colour(COLOURS, d), grids)
-    reference = {name: media[" ".join(name.split()[1:])] * (np.exp(d[:, 3:6]) if name.endswith("Radius") else 1.0)
-                 for name in names}
+    reference = _edited_media(table, d, grids)
     mean, sd = _drawn_media(table, edits, rows, grids)
     name = "Check k1 Radius"
     one = _render(scene, tree, gnode, emission, name)
